@@ -1,0 +1,1 @@
+"""Pure-Python GNSS foundations shared by the suite's nodes (never imports rclpy)."""

@@ -1,0 +1,1 @@
+"""Simulators of the suite's inputs: IF samples with jammers, GNSS/UWB measurements, correlator outputs."""

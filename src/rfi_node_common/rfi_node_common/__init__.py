@@ -1,0 +1,1 @@
+"""ROS plumbing shared by the nodes of the suite (the algorithm cores never import it)."""

@@ -1,0 +1,54 @@
+"""The Jazzy ``main()`` pattern for the suite's nodes, with ``--help`` from the parameter docs."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from rfi_node_common.params import describe
+
+
+def help_text(executable: str, summary: str, params_cls: type | None, topics: str) -> str:
+    text = f'usage: ros2 run <package> {executable} [--ros-args -p NAME:=VALUE ... | --params-file FILE]\n\n'
+    text += summary.strip() + '\n\n' + topics.strip() + '\n'
+    if params_cls is not None:
+        text += '\nparameters:\n' + describe(params_cls) + '\n'
+    return text
+
+
+def run_node(node_factory: Callable[[], Any], *, executable: str, summary: str, topics: str,
+             params_cls: type | None = None, argv: Sequence[str] | None = None) -> int:
+    """Create the node, spin it on a SingleThreadedExecutor until shutdown, and clean up.
+
+    ``--help`` / ``-h`` (outside ``--ros-args``) prints the node's topics and parameters and exits.
+    A configuration error (invalid parameter) prints one line and returns 2.
+    """
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.utilities import remove_ros_args
+
+    argv = list(sys.argv if argv is None else argv)
+    user_args = remove_ros_args(argv)[1:]
+    if '--help' in user_args or '-h' in user_args:
+        print(help_text(executable, summary, params_cls, topics))
+        return 0
+    if user_args:
+        print(f'{executable}: error: unrecognised arguments {" ".join(user_args)} (parameters go after --ros-args)',
+              file=sys.stderr)
+        return 2
+    rclpy.init(args=argv)
+    node = None
+    try:
+        node = node_factory()
+        rclpy.spin(node)
+        return 0
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return 0
+    except ValueError as err:
+        print(f'{executable}: error: {err}', file=sys.stderr)
+        return 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
