@@ -7,8 +7,15 @@ import math
 import numpy as np
 
 from rfi_experiments.bag_io import BagWriter
-from rfi_msgs.msg import (Correlator, CorrelatorArray, GnssMeasurement, GnssMeasurementArray, IfSamples,
-                          JammerState, UwbRange)
+from rfi_msgs.msg import (
+    Correlator,
+    CorrelatorArray,
+    GnssMeasurement,
+    GnssMeasurementArray,
+    IfSamples,
+    JammerState,
+    UwbRange,
+)
 from rfi_node_common.stamps import ns_to_stamp
 
 START_NS = 1_700_000_000_000_000_000
@@ -54,7 +61,8 @@ def write_sample_bag(path, *, seconds: float = 2.0, seed: int = 1) -> dict[str, 
                     g = GnssMeasurement(constellation=GnssMeasurement.GPS, svid=svid,
                                         pseudorange_m=2.1e7 + rng.normal(0, 1e5),
                                         pseudorange_rate_mps=float(rng.normal(0, 500)), cn0_dbhz=45.0,
-                                        satellite_clock_bias_m=float(rng.normal(0, 1e4)), satellite_clock_drift_mps=0.01,
+                                        satellite_clock_bias_m=float(rng.normal(0, 1e4)),
+                                        satellite_clock_drift_mps=0.01,
                                         ionosphere_delay_m=3.0, troposphere_delay_m=2.4,
                                         pseudorange_std_m=math.nan, pseudorange_rate_std_mps=math.nan)
                     g.satellite_position_ecef_m = rng.normal(0, 2e7, 3)

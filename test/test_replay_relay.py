@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import pytest
 import rclpy
+from ros_fixtures import RelayNode, make_context
+from sample_bag import write_sample_bag
 
 from rfi_experiments.bag_io import BagReader
 from rfi_experiments.replay import ReplayHarness
-from ros_fixtures import RelayNode, make_context
-from sample_bag import write_sample_bag
 
 
 @pytest.fixture(scope='module')

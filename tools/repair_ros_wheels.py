@@ -24,7 +24,8 @@ import sysconfig
 from pathlib import Path
 
 BUILD_PYTHON_INCLUDE = re.compile(r"/opt/python/cp3\d+-cp3\d+/include/python3\.\d+")
-BUILD_NUMPY_INCLUDE = re.compile(r"/opt/python/cp3\d+-cp3\d+/lib/python3\.\d+/site-packages/numpy/(?:_core|core)/include")
+BUILD_NUMPY_INCLUDE = re.compile(
+    r"/opt/python/cp3\d+-cp3\d+/lib/python3\.\d+/site-packages/numpy/(?:_core|core)/include")
 MAINTAINER_EMAIL = re.compile(r'(<maintainer\b[^>]*\bemail=")([^"]*)(")')
 VALID_EMAIL = re.compile(r"^[^@\s]+@[^@\s]+\.[^@\s]+$")
 
@@ -64,7 +65,8 @@ def repair_maintainer_emails(prefix: Path) -> int:
 def main(argv: list[str]) -> int:
     prefix = Path(argv[1]) if len(argv) > 1 else Path(sys.prefix)
     if not (prefix / "share").is_dir():
-        print(f"repair_ros_wheels: {prefix}/share does not exist: is this the venv with the ROS wheels?", file=sys.stderr)
+        print(f"repair_ros_wheels: {prefix}/share does not exist: is this the venv with the ROS wheels?",
+              file=sys.stderr)
         return 2
     try:
         import numpy

@@ -17,7 +17,7 @@ setup(
     zip_safe=True,
     maintainer='rfi suite maintainers',
     maintainer_email='maintainers@example.com',
-    description='ROS plumbing shared by the nodes: named QoS profiles, parameter declaration, diagnostics, stamps, main().',
+    description='ROS plumbing shared by the nodes: QoS profiles, parameters, diagnostics, stamps, main().',
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

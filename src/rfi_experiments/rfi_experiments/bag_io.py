@@ -28,6 +28,9 @@ from rosbags.typesys.store import Typestore
 class BagError(Exception):
     """A bag cannot be read or written; the message says why, in one line."""
 
+    def __init__(self, message: str) -> None:
+        super().__init__(' '.join(str(message).split()))
+
 
 def msgtype_of(msg_or_class: Any) -> str:
     """Return the ROS type name ('pkg/msg/Name') of an rclpy message instance or class."""

@@ -81,6 +81,7 @@ def declare(node: Any, params_cls: type[T]) -> T:
         ValueError: a value is out of range or fails the dataclass's own validation.
     """
     from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+    from rclpy.exceptions import ParameterException
 
     values = {}
     for field in dataclasses.fields(params_cls):  # type: ignore[arg-type]
@@ -97,12 +98,20 @@ def declare(node: Any, params_cls: type[T]) -> T:
                 descriptor.integer_range = [IntegerRange(
                     from_value=int(doc['minimum']), to_value=int(doc['maximum']), step=0)]
         ros_default = list(default) if isinstance(default, tuple) else default
-        node.declare_parameter(field.name, ros_default, descriptor)
+        try:
+            node.declare_parameter(field.name, ros_default, descriptor)
+        except ParameterException as err:
+            raise ValueError(f'parameter {field.name}: {_first_line(err)}') from None
         value = node.get_parameter(field.name).value
         values[field.name] = tuple(value) if isinstance(default, tuple) else value
     params = params_cls(**values)
     validate_ranges(params)
     return params
+
+
+def _first_line(err: Exception) -> str:
+    text = str(err).strip().splitlines()
+    return text[0] if text else type(err).__name__
 
 
 def describe(params_cls: type) -> str:

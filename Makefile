@@ -1,0 +1,44 @@
+# The two commands of the README:
+#   make demo   set up (first time), then replay the default jamming experiment through the suite
+#   make test   set up (first time), then run every test (unit, node, bag replay, linters)
+# Set-up needs only Python 3.10-3.12, cmake and a C compiler: no ROS install.
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV ?= .venv
+BAG ?= bags/default
+OUT ?= report
+PYTEST_ARGS ?=
+
+# A shell with the venv (the ROS 2 prefix) and the workspace sourced; DDS stays on this host.
+RUN = set -eo pipefail; source $(VENV)/bin/activate; source install/setup.bash; \
+      export ROS_AUTOMATIC_DISCOVERY_RANGE=$${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST};
+
+.PHONY: all setup build test demo lint clean distclean constraints
+
+all: test
+
+setup build:
+	@PYTHON=$(PYTHON) VENV=$(VENV) tools/setup_workspace.sh
+
+test: setup
+	@$(RUN) python -m pytest $(PYTEST_ARGS)
+
+demo: setup
+	@$(RUN) tools/ros2_run rfi_experiments run $(BAG) --out $(OUT)
+
+lint: setup
+	@$(RUN) ruff check src test tools benchmarks && mypy
+
+# Re-pin every version from the current venv (after a deliberate upgrade).
+constraints: setup
+	@v=$$($(VENV)/bin/python -c 'import sys; print(f"{sys.version_info.major}.{sys.version_info.minor}")'); \
+	  { echo "# Exact versions of every package in .venv (pip freeze of a working set-up, Python $$v, x86_64)."; \
+	    echo "# Regenerate with: make constraints"; \
+	    $(VENV)/bin/python -m pip freeze --all --exclude-editable | grep -v -E '^(pip|wheel)==' | sort; } > constraints/py$$v.txt; \
+	  echo "wrote constraints/py$$v.txt"
+
+clean:
+	rm -rf build install log $(OUT)
+
+distclean: clean
+	rm -rf $(VENV)
