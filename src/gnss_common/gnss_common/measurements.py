@@ -1,0 +1,357 @@
+"""Build :class:`gnss_common.observations.GnssEpoch` objects from RINEX observations and navigation.
+
+For every GPS satellite of an epoch: the L1 C/A code pseudorange (``C1C`` / ``C1``), the
+pseudorange rate from the L1 Doppler (``D1C`` / ``D1``) with the sign of
+rfi_msgs/GnssMeasurement.msg (``-wavelength * doppler_hz``, positive when the range grows), C/N0
+from ``S1C`` / ``S1`` (NaN when absent), the satellite state at transmit time from the broadcast
+ephemeris, and Klobuchar / Saastamoinen delays evaluated at a receiver reference position:
+the header APPROX POSITION when present, else a coarse per-epoch single-point fix computed here
+(unweighted Gauss-Newton on the raw pseudoranges with Earth-rotation correction).
+
+Satellites that cannot be modelled are skipped and counted by reason in the result.
+
+Notes
+-----
+Cao et al., eq. 5 (pseudorange) and eq. 6 (pseudorange rate = lambda * Doppler, with the sign
+convention of the message: rate = -lambda * D for a RINEX Doppler that is positive for an
+approaching satellite, RINEX 2.11 sec. 6.4 / RINEX 3.04 sec. 5.2.6).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gnss_common.constants import GPS_L1_WAVELENGTH_M, SPEED_OF_LIGHT_MPS
+from gnss_common.coordinates import azimuth_elevation, ecef_to_geodetic
+from gnss_common.corrections import klobuchar_delay_m, troposphere_delay_m
+from gnss_common.ephemeris import (
+    EphemerisStore,
+    GpsEphemeris,
+    earth_rotation_correction,
+    pack_ephemerides,
+    satellite_states_at_transmit,
+)
+from gnss_common.gps_time import gps_to_stamp_ns
+from gnss_common.observations import GPS, GnssEpoch, SatelliteObservation
+from gnss_common.rinex import RinexNav, RinexObs, RinexObsEpoch
+
+SKIP_REASONS = (
+    "unsupported_constellation",
+    "missing_pseudorange",
+    "pseudorange_out_of_range",
+    "no_ephemeris",
+    "unhealthy",
+    "stale_ephemeris",
+)
+"""Keys of :attr:`EpochBuildResult.skipped` (always all present, zero when nothing skipped)."""
+
+
+@dataclass(frozen=True)
+class MeasurementBuilderParams:
+    """Parameters of :class:`GnssEpochBuilder`.
+
+    Attributes:
+        pseudorange_codes: observable codes tried in order for the L1 C/A pseudorange.
+        doppler_codes: codes tried in order for the L1 Doppler, Hz.
+        cn0_codes: codes tried in order for the L1 C/N0, dB-Hz.
+        min_pseudorange_m: smallest plausible pseudorange, m (GPS ranges are 20000-26000 km plus
+            the receiver clock offset).
+        max_pseudorange_m: largest plausible pseudorange, m.
+        max_ephemeris_age_s: |t - t_oe| limit, s; None uses half of each record's fit interval.
+        apply_ionosphere: compute the Klobuchar delay (else 0).
+        apply_troposphere: compute the Saastamoinen delay (else 0).
+    """
+
+    pseudorange_codes: tuple[str, ...] = ("C1C", "C1")
+    doppler_codes: tuple[str, ...] = ("D1C", "D1")
+    cn0_codes: tuple[str, ...] = ("S1C", "S1")
+    min_pseudorange_m: float = 1.0e7
+    max_pseudorange_m: float = 4.0e7
+    max_ephemeris_age_s: float | None = None
+    apply_ionosphere: bool = True
+    apply_troposphere: bool = True
+
+    def __post_init__(self) -> None:
+        if not self.pseudorange_codes:
+            raise ValueError("pseudorange_codes must name at least one observable")
+        if not (
+            math.isfinite(self.min_pseudorange_m)
+            and math.isfinite(self.max_pseudorange_m)
+            and 0.0 < self.min_pseudorange_m < self.max_pseudorange_m
+        ):
+            raise ValueError(
+                "need 0 < min_pseudorange_m < max_pseudorange_m, both finite; got "
+                f"{self.min_pseudorange_m}, {self.max_pseudorange_m}"
+            )
+        if self.max_ephemeris_age_s is not None and not (
+            math.isfinite(self.max_ephemeris_age_s) and self.max_ephemeris_age_s > 0.0
+        ):
+            raise ValueError(
+                f"max_ephemeris_age_s must be None or finite > 0, got {self.max_ephemeris_age_s}"
+            )
+
+
+@dataclass(frozen=True)
+class EpochBuildResult:
+    """Output of :meth:`GnssEpochBuilder.build`.
+
+    Attributes:
+        epoch: the GnssEpoch (observations sorted by svid).
+        skipped: reason -> number of satellites skipped in this epoch (keys: ``SKIP_REASONS``).
+        skipped_satellites: ``(satellite id, reason)`` for every skipped satellite.
+        reference_position_ecef_m: receiver position used for the delays, m, (3,); NaN if none.
+        reference_source: ``"given"``, ``"coarse_fix"`` or ``"none"`` (delays are NaN then).
+    """
+
+    epoch: GnssEpoch
+    skipped: dict[str, int]
+    skipped_satellites: tuple[tuple[str, str], ...]
+    reference_position_ecef_m: np.ndarray
+    reference_source: str
+    extra: dict[str, float] = field(default_factory=dict)
+
+
+def _first_finite(values: dict[str, float], codes: Sequence[str]) -> float:
+    for code in codes:
+        v = values.get(code, math.nan)
+        if math.isfinite(v):
+            return v
+    return math.nan
+
+
+def coarse_position_fix(
+    satellite_ecef_m: np.ndarray, pseudorange_m: np.ndarray, max_iterations: int = 12
+) -> np.ndarray | None:
+    """Unweighted Gauss-Newton position fix from the Earth's centre, no atmosphere corrections.
+
+    Args:
+        satellite_ecef_m: satellite positions at transmit time (transmit-time ECEF), m, (N, 3).
+        pseudorange_m: pseudoranges with the satellite clock already added back, m, (N,).
+        max_iterations: iteration cap.
+
+    Returns:
+        Receiver ECEF position, m, (3,), or None with fewer than 4 satellites, a singular
+        geometry, or no convergence (< 1 mm step) within the cap.
+
+    Notes
+    -----
+    Linearised Cao et al., eq. 5 with T = I = 0; range with the Earth-rotation correction
+    (:func:`gnss_common.ephemeris.earth_rotation_correction`). Used only to place the receiver
+    for the atmosphere models (tens of metres suffice there).
+    """
+    sat = np.asarray(satellite_ecef_m, dtype=float)
+    rho = np.asarray(pseudorange_m, dtype=float)
+    if sat.shape[0] < 4:
+        return None
+    x = np.zeros(4)
+    for _ in range(max_iterations):
+        rot, _, _ = earth_rotation_correction(sat, x[:3])
+        diff = rot - x[:3]
+        rng = np.linalg.norm(diff, axis=1)
+        h = np.hstack([-diff / rng[:, None], np.ones((sat.shape[0], 1))])
+        resid = rho - (rng + x[3])
+        try:
+            dx, *_ = np.linalg.lstsq(h, resid, rcond=None)
+        except np.linalg.LinAlgError:
+            return None
+        x = x + dx
+        if np.linalg.norm(dx[:3]) < 1.0e-3:
+            if np.linalg.norm(x[:3]) < 6.0e6:
+                return None
+            return x[:3].copy()
+    return None
+
+
+class GnssEpochBuilder:
+    """Turns RINEX observation epochs into GnssEpoch objects (GPS L1 C/A only).
+
+    Usage::
+
+        nav = read_rinex_nav(nav_path); obs = read_rinex_obs(obs_path)
+        builder = GnssEpochBuilder(nav.ephemerides, nav.header.iono_alpha, nav.header.iono_beta,
+                                   obs.header.approx_position_ecef_m)
+        results = [builder.build(e) for e in obs.epochs]
+    """
+
+    def __init__(
+        self,
+        ephemerides: Sequence[GpsEphemeris],
+        iono_alpha: np.ndarray | None,
+        iono_beta: np.ndarray | None,
+        reference_position_ecef_m: np.ndarray | None = None,
+        params: MeasurementBuilderParams | None = None,
+    ) -> None:
+        """Args:
+        ephemerides: GPS broadcast records (any PRNs, any order).
+        iono_alpha: Klobuchar alpha (4,), or None / NaN-filled (ionosphere then 0 and counted
+            in ``extra["ionosphere_unavailable"]``).
+        iono_beta: Klobuchar beta (4,), idem.
+        reference_position_ecef_m: receiver position for the delays, m, (3,); None for a
+            per-epoch coarse fix.
+        params: builder parameters (defaults if None).
+        """
+        self.params = params if params is not None else MeasurementBuilderParams()
+        self._store = EphemerisStore(ephemerides, self.params.max_ephemeris_age_s)
+        alpha = None if iono_alpha is None else np.asarray(iono_alpha, dtype=float).reshape(-1)
+        beta = None if iono_beta is None else np.asarray(iono_beta, dtype=float).reshape(-1)
+        ok = (
+            alpha is not None
+            and beta is not None
+            and alpha.shape == (4,)
+            and beta.shape == (4,)
+            and bool(np.all(np.isfinite(alpha)))
+            and bool(np.all(np.isfinite(beta)))
+        )
+        self._alpha = alpha if ok else None
+        self._beta = beta if ok else None
+        if reference_position_ecef_m is not None:
+            ref = np.asarray(reference_position_ecef_m, dtype=float).reshape(-1)
+            if ref.shape != (3,) or not np.all(np.isfinite(ref)) or not 6.0e6 < np.linalg.norm(ref) < 7.0e6:
+                raise ValueError(
+                    f"reference_position_ecef_m must be a finite near-surface ECEF point, got {ref}"
+                )
+            self._ref: np.ndarray | None = ref
+        else:
+            self._ref = None
+
+    @classmethod
+    def from_rinex(
+        cls, obs: RinexObs, nav: RinexNav, params: MeasurementBuilderParams | None = None
+    ) -> GnssEpochBuilder:
+        """Builder using the nav file's Klobuchar parameters and the obs header APPROX POSITION."""
+        return cls(
+            nav.ephemerides,
+            nav.header.iono_alpha,
+            nav.header.iono_beta,
+            obs.header.approx_position_ecef_m,
+            params,
+        )
+
+    def build(self, obs_epoch: RinexObsEpoch) -> EpochBuildResult:
+        """Build the GnssEpoch of one RINEX observation epoch.
+
+        Args:
+            obs_epoch: one epoch from :func:`gnss_common.rinex.read_rinex_obs`.
+
+        Returns:
+            :class:`EpochBuildResult`; ``epoch.stamp_ns`` is the receiver time tag on the GPS
+            time scale (see :mod:`gnss_common.gps_time`).
+        """
+        p = self.params
+        week, tow = obs_epoch.gps_week, obs_epoch.tow_s
+        skipped = dict.fromkeys(SKIP_REASONS, 0)
+        skipped_sats: list[tuple[str, str]] = []
+
+        def skip(sat_id: str, reason: str) -> None:
+            skipped[reason] += 1
+            skipped_sats.append((sat_id, reason))
+
+        ids: list[str] = []
+        prns: list[int] = []
+        ephs: list[GpsEphemeris] = []
+        prs: list[float] = []
+        dops: list[float] = []
+        cn0s: list[float] = []
+        for sat_id in sorted(obs_epoch.observations):
+            values = obs_epoch.observations[sat_id]
+            if sat_id[0] != "G":
+                skip(sat_id, "unsupported_constellation")
+                continue
+            pr = _first_finite(values, p.pseudorange_codes)
+            if not math.isfinite(pr):
+                skip(sat_id, "missing_pseudorange")
+                continue
+            if not p.min_pseudorange_m <= pr <= p.max_pseudorange_m:
+                skip(sat_id, "pseudorange_out_of_range")
+                continue
+            prn = int(sat_id[1:])
+            eph, reason = self._store.select(prn, week, tow)
+            if eph is None:
+                skip(sat_id, reason)
+                continue
+            cn0 = _first_finite(values, p.cn0_codes)
+            ids.append(sat_id)
+            prns.append(prn)
+            ephs.append(eph)
+            prs.append(pr)
+            dops.append(_first_finite(values, p.doppler_codes))
+            cn0s.append(cn0 if 0.0 < cn0 < 100.0 else math.nan)
+
+        extra: dict[str, float] = {"ionosphere_unavailable": 0.0}
+        ref = np.full(3, math.nan)
+        source = "none"
+        if not ephs:
+            epoch = GnssEpoch(
+                stamp_ns=gps_to_stamp_ns(week, tow), gps_week=week, gps_time_of_week_s=tow, observations=()
+            )
+            return EpochBuildResult(epoch, skipped, tuple(skipped_sats), ref, source, extra)
+
+        pr_arr = np.asarray(prs)
+        states, _ = satellite_states_at_transmit(pack_ephemerides(ephs), week, tow, pr_arr)
+        pos = states.position_ecef_m
+        clk_m = SPEED_OF_LIGHT_MPS * states.clock_bias_s
+        drift_mps = SPEED_OF_LIGHT_MPS * states.clock_drift_s_per_s
+
+        if self._ref is not None:
+            ref, source = self._ref, "given"
+        else:
+            fix = coarse_position_fix(pos, pr_arr + clk_m)
+            if fix is not None:
+                ref, source = fix, "coarse_fix"
+
+        n = len(ephs)
+        iono = np.zeros(n)
+        tropo = np.zeros(n)
+        if source == "none":
+            iono[:] = math.nan
+            tropo[:] = math.nan
+        else:
+            lat, lon, h = ecef_to_geodetic(ref)
+            rot_pos, _, _ = earth_rotation_correction(pos, ref)
+            az, el = azimuth_elevation(ref, rot_pos)
+            if p.apply_ionosphere:
+                if self._alpha is not None and self._beta is not None:
+                    iono = klobuchar_delay_m(self._alpha, self._beta, lat, lon, az, el, tow)
+                else:
+                    extra["ionosphere_unavailable"] = float(n)
+            if p.apply_troposphere:
+                tropo = troposphere_delay_m(lat, h, el)
+
+        rates = -GPS_L1_WAVELENGTH_M * np.asarray(dops)
+        observations = tuple(
+            SatelliteObservation(
+                constellation=GPS,
+                svid=prns[i],
+                pseudorange_m=float(pr_arr[i]),
+                pseudorange_rate_mps=float(rates[i]),
+                cn0_dbhz=float(cn0s[i]),
+                satellite_position_ecef_m=pos[i].copy(),
+                satellite_velocity_ecef_mps=states.velocity_ecef_mps[i].copy(),
+                satellite_clock_bias_m=float(clk_m[i]),
+                satellite_clock_drift_mps=float(drift_mps[i]),
+                ionosphere_delay_m=float(iono[i]),
+                troposphere_delay_m=float(tropo[i]),
+            )
+            for i in range(n)
+        )
+        epoch = GnssEpoch(
+            stamp_ns=gps_to_stamp_ns(week, tow),
+            gps_week=week,
+            gps_time_of_week_s=tow,
+            observations=observations,
+        )
+        return EpochBuildResult(
+            epoch, skipped, tuple(skipped_sats), np.array(ref, dtype=float), source, extra
+        )
+
+
+def build_epochs(
+    obs: RinexObs, nav: RinexNav, params: MeasurementBuilderParams | None = None
+) -> list[EpochBuildResult]:
+    """Build every epoch of an observation file (header APPROX POSITION as reference when present)."""
+    builder = GnssEpochBuilder.from_rinex(obs, nav, params)
+    return [builder.build(e) for e in obs.epochs]

@@ -1,0 +1,121 @@
+"""Oracle tests for gnss_common.coordinates (WGS 84 closed forms and round trips)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from gnss_common.constants import WGS84_ECCENTRICITY_SQUARED, WGS84_SEMI_MAJOR_AXIS_M
+from gnss_common.coordinates import (
+    azimuth_elevation,
+    ecef_to_enu,
+    ecef_to_enu_rotation,
+    ecef_to_geodetic,
+    enu_to_ecef,
+    geodetic_to_ecef,
+    rotate_covariance_ecef_to_enu,
+)
+
+ARL1_ECEF_M = np.array([-740289.918, -5457071.734, 3207245.542])
+
+
+def test_round_trip_below_one_millimetre():
+    rng = np.random.default_rng(20240917)
+    n = 2000
+    lat = rng.uniform(-math.pi / 2, math.pi / 2, n)
+    lon = rng.uniform(-math.pi, math.pi, n)
+    h = rng.uniform(-1000.0, 2.5e7, n)
+    xyz = geodetic_to_ecef(lat, lon, h)
+    back = ecef_to_geodetic(xyz)
+    again = geodetic_to_ecef(back[:, 0], back[:, 1], back[:, 2])
+    assert np.max(np.linalg.norm(again - xyz, axis=1)) < 1.0e-3
+    assert np.max(np.abs(back[:, 2] - h)) < 1.0e-3
+    assert np.max(np.abs(back[:, 0] - lat)) < 1.0e-10
+
+
+def test_closed_form_points():
+    a = WGS84_SEMI_MAJOR_AXIS_M
+    b = a * math.sqrt(1.0 - WGS84_ECCENTRICITY_SQUARED)
+    np.testing.assert_allclose(geodetic_to_ecef(0.0, 0.0, 0.0), [a, 0.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(geodetic_to_ecef(math.pi / 2, 0.3, 100.0), [0.0, 0.0, b + 100.0], atol=1e-6)
+    llh = ecef_to_geodetic(np.array([0.0, a + 10.0, 0.0]))
+    np.testing.assert_allclose(llh, [0.0, math.pi / 2, 10.0], atol=1e-9)
+    pole = ecef_to_geodetic(np.array([0.0, 0.0, -(b + 5.0)]))
+    assert pole[0] == pytest.approx(-math.pi / 2, abs=1e-12)
+    assert pole[2] == pytest.approx(5.0, abs=1e-6)
+
+
+def test_arl1_is_in_austin():
+    lat, lon, h = ecef_to_geodetic(ARL1_ECEF_M)
+    assert math.degrees(lat) == pytest.approx(30.39, abs=0.05)
+    assert math.degrees(lon) == pytest.approx(-97.73, abs=0.05)
+    assert -100.0 < h < 400.0
+
+
+def test_enu_rotation_is_orthonormal_with_up_along_normal():
+    lat, lon = 0.7, -1.9
+    r = ecef_to_enu_rotation(lat, lon)
+    np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-15)
+    assert np.linalg.det(r) == pytest.approx(1.0)
+    # up = normalised derivative of the ECEF point with respect to height
+    d = geodetic_to_ecef(lat, lon, 1.0) - geodetic_to_ecef(lat, lon, 0.0)
+    np.testing.assert_allclose(r[2], d / np.linalg.norm(d), atol=1e-9)
+    # north = direction of increasing latitude
+    dn = geodetic_to_ecef(lat + 1e-7, lon, 0.0) - geodetic_to_ecef(lat, lon, 0.0)
+    np.testing.assert_allclose(r[1], dn / np.linalg.norm(dn), atol=1e-6)
+
+
+def test_enu_round_trip_and_up_offset():
+    enu = np.array([[10.0, -20.0, 30.0], [0.0, 0.0, 0.0], [1e4, 2e4, -5e3]])
+    back = ecef_to_enu(enu_to_ecef(enu, ARL1_ECEF_M), ARL1_ECEF_M)
+    np.testing.assert_allclose(back, enu, atol=1e-8)
+    lat, lon, h = ecef_to_geodetic(ARL1_ECEF_M)
+    above = geodetic_to_ecef(lat, lon, h + 123.0)
+    np.testing.assert_allclose(ecef_to_enu(above, ARL1_ECEF_M), [0.0, 0.0, 123.0], atol=1e-6)
+
+
+def test_azimuth_elevation_cardinal_directions():
+    lat, lon, h = ecef_to_geodetic(ARL1_ECEF_M)
+    zenith = geodetic_to_ecef(lat, lon, h + 2.0e7)
+    az, el = azimuth_elevation(ARL1_ECEF_M, zenith)
+    assert el == pytest.approx(math.pi / 2, abs=1e-9)
+    east = enu_to_ecef(np.array([1000.0, 0.0, 0.0]), ARL1_ECEF_M)
+    north = enu_to_ecef(np.array([0.0, 1000.0, 1000.0]), ARL1_ECEF_M)
+    az_e, el_e = azimuth_elevation(ARL1_ECEF_M, east)
+    az_n, el_n = azimuth_elevation(ARL1_ECEF_M, north)
+    assert az_e == pytest.approx(math.pi / 2, abs=1e-12)
+    assert el_e == pytest.approx(0.0, abs=1e-12)
+    assert math.remainder(az_n, 2.0 * math.pi) == pytest.approx(0.0, abs=1e-12)  # north: 0 == 2 pi
+    assert el_n == pytest.approx(math.pi / 4, abs=1e-12)
+    both = azimuth_elevation(ARL1_ECEF_M, np.vstack([east, north]))
+    np.testing.assert_allclose(both[0], [az_e, az_n], atol=1e-12)
+    assert np.all((both[0] >= 0.0) & (both[0] < 2.0 * math.pi))
+
+
+def test_covariance_rotation_properties():
+    lat, lon = 0.5, 2.0
+    r = ecef_to_enu_rotation(lat, lon)
+    iso = 4.0 * np.eye(3)
+    np.testing.assert_allclose(rotate_covariance_ecef_to_enu(iso, lat, lon), iso, atol=1e-12)
+    up = r[2]
+    vertical = 9.0 * np.outer(up, up)
+    np.testing.assert_allclose(
+        rotate_covariance_ecef_to_enu(vertical, lat, lon), np.diag([0.0, 0.0, 9.0]), atol=1e-12
+    )
+    rng = np.random.default_rng(7)
+    a = rng.normal(size=(3, 3))
+    cov = a @ a.T
+    out = rotate_covariance_ecef_to_enu(cov, lat, lon)
+    assert np.trace(out) == pytest.approx(np.trace(cov))
+    np.testing.assert_allclose(out, out.T, atol=1e-12)
+
+
+def test_bad_shapes_and_values_raise():
+    with pytest.raises(ValueError):
+        ecef_to_geodetic(np.zeros(4))
+    with pytest.raises(ValueError):
+        ecef_to_geodetic(np.array([np.nan, 1.0, 2.0]))
+    with pytest.raises(ValueError):
+        ecef_to_geodetic(np.array([1.0, 2.0, 3.0]))  # at the Earth's centre
+    with pytest.raises(ValueError):
+        rotate_covariance_ecef_to_enu(np.eye(4), 0.0, 0.0)

@@ -1,0 +1,656 @@
+"""Single-point positioning (SPP): weighted least squares per epoch with RAIM-like FDE.
+
+Pure core (no rclpy): :class:`SinglePointPositioner.process` takes a
+:class:`gnss_common.observations.GnssEpoch` (time from ``epoch.stamp_ns``, integer ns, GPS time
+scale) and returns a frozen :class:`SppResult`. It is the GNSS-only baseline of Cao et al.
+(sec. IV, "GNSS SPP") and the initialiser of their tightly coupled filter.
+
+Model (Cao et al., eq. 5 and 6), GPS satellites only, one receiver clock::
+
+    P_i + c dt_i - I_i - T_i = |R3(w tau_i) p_i - p_r| + c dt_r + e_i
+    rate_i + c ddt_i - (R3(w tau_i) v_i) . u_i = -v_r . u_i + c ddt_r + e'_i
+
+with u_i the receiver-to-satellite unit vector and R3(w tau) the Earth-rotation (Sagnac)
+correction over the signal travel time tau (IS-GPS-200, 20.3.3.4.3.3.2).
+
+Weights: sigma_i^2 = [a^2 + b^2 / sin^2(el_i)] k_cn0 + (f_I I_i)^2 + (s_T / (sin el_i + 0.1))^2
++ sigma_eph^2, with k_cn0 = max(1, 10^((cn0_ref - cn0_i) / 10)) when C/N0 is known -- the
+RTKLIB ``varerr`` model (Takasu, RTKLIB 2.4.2 manual, E.6) extended with the C/N0 factor of
+the sigma-epsilon family (Hartinger & Brunner 1999). A finite ``pseudorange_std_m`` in the
+measurement overrides the model.
+
+Fault detection and exclusion: chi-square test of the weighted residual sum of squares with
+n - 4 degrees of freedom at false-alarm probability p_fa; on failure the satellite with the
+largest standardised residual |r_i| / sqrt((R - H (H^T W H)^-1 H^T)_ii) (Baarda's w-test) is
+excluded and the fix recomputed, while at least 5 satellites remain (Kaplan & Hegarty, 3rd ed.,
+sec. 11.5; Brown 1992 "A baseline GPS RAIM scheme").
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.stats import chi2
+
+from gnss_common.constants import (
+    EARTH_ROTATION_RATE_RADPS,
+    SPEED_OF_LIGHT_MPS,
+    WGS84_ECCENTRICITY_SQUARED,
+    WGS84_SEMI_MAJOR_AXIS_M,
+)
+from gnss_common.coordinates import ecef_to_enu_rotation
+from gnss_common.observations import GPS, GnssEpoch
+
+STATUS_OK = "ok"
+STATUS_OK_WITH_EXCLUSIONS = "ok_with_exclusions"
+STATUS_TOO_FEW = "too_few_satellites"
+STATUS_SINGULAR = "singular_geometry"
+STATUS_NOT_CONVERGED = "not_converged"
+STATUS_RAIM_FAILED = "raim_failed"
+
+REJECTION_REASONS = (
+    "unsupported_constellation",
+    "invalid_input",
+    "non_physical",
+    "duplicate_svid",
+    "below_elevation_mask",
+    "outlier",
+)
+"""Keys of :attr:`SppResult.rejection_counts`."""
+
+_MAX_DOF_TABLE = 64
+_NEAR_SURFACE_R_M = 0.9 * WGS84_SEMI_MAJOR_AXIS_M * math.sqrt(1.0 - WGS84_ECCENTRICITY_SQUARED)
+
+
+@dataclass(frozen=True)
+class SppParams:
+    """Validated SPP parameters.
+
+    Attributes:
+        elevation_mask_deg: satellites below this elevation are rejected, deg, in [-10, 60).
+        max_iterations: Gauss-Newton iteration cap, >= 2.
+        convergence_m: stop when the position/clock step is below this, m, > 0.
+        sigma_code_a_m: elevation-independent code sigma a, m, >= 0.
+        sigma_code_b_m: elevation-dependent code sigma b (b / sin el), m, >= 0.
+        cn0_reference_dbhz: C/N0 at or above which no C/N0 inflation applies, dB-Hz.
+        use_cn0_weighting: apply the C/N0 factor when C/N0 is finite.
+        iono_error_fraction: 1-sigma Klobuchar residual as a fraction of the delay (0.5: RTKLIB).
+        sigma_tropo_zenith_m: zenith troposphere model error, m (0.3: RTKLIB).
+        sigma_broadcast_m: broadcast orbit+clock error (SISRE), m.
+        sigma_rate_mps: pseudorange-rate sigma at zenith and reference C/N0, m/s, > 0.
+        raim_false_alarm_probability: chi-square test p_fa in (0, 0.5).
+        max_exclusions: maximum satellites excluded per epoch by FDE, >= 0.
+        min_satellites_for_exclusion: FDE excludes only while at least this many remain
+            after exclusion, >= 5 (5 keeps detection possible).
+    """
+
+    elevation_mask_deg: float = 10.0
+    max_iterations: int = 10
+    convergence_m: float = 1.0e-4
+    sigma_code_a_m: float = 0.3
+    sigma_code_b_m: float = 0.3
+    cn0_reference_dbhz: float = 45.0
+    use_cn0_weighting: bool = True
+    iono_error_fraction: float = 0.5
+    sigma_tropo_zenith_m: float = 0.3
+    sigma_broadcast_m: float = 1.0
+    sigma_rate_mps: float = 0.1
+    raim_false_alarm_probability: float = 1.0e-3
+    max_exclusions: int = 3
+    min_satellites_for_exclusion: int = 5
+
+    def __post_init__(self) -> None:
+        def finite(name: str) -> float:
+            v = getattr(self, name)
+            if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
+                raise ValueError(f"SppParams.{name} must be a finite number, got {v!r}")
+            return float(v)
+
+        if not -10.0 <= finite("elevation_mask_deg") < 60.0:
+            raise ValueError(
+                f"SppParams.elevation_mask_deg must be in [-10, 60), got {self.elevation_mask_deg}"
+            )
+        if not isinstance(self.max_iterations, int) or self.max_iterations < 2:
+            raise ValueError(f"SppParams.max_iterations must be an int >= 2, got {self.max_iterations!r}")
+        if finite("convergence_m") <= 0.0:
+            raise ValueError(f"SppParams.convergence_m must be > 0, got {self.convergence_m}")
+        for name in (
+            "sigma_code_a_m",
+            "sigma_code_b_m",
+            "iono_error_fraction",
+            "sigma_tropo_zenith_m",
+            "sigma_broadcast_m",
+        ):
+            if finite(name) < 0.0:
+                raise ValueError(f"SppParams.{name} must be >= 0, got {getattr(self, name)}")
+        if self.sigma_code_a_m + self.sigma_code_b_m + self.sigma_broadcast_m <= 0.0:
+            raise ValueError(
+                "SppParams: at least one of sigma_code_a_m, sigma_code_b_m, sigma_broadcast_m must be > 0"
+            )
+        if finite("sigma_rate_mps") <= 0.0:
+            raise ValueError(f"SppParams.sigma_rate_mps must be > 0, got {self.sigma_rate_mps}")
+        if not 0.0 <= finite("cn0_reference_dbhz") <= 70.0:
+            raise ValueError(
+                f"SppParams.cn0_reference_dbhz must be in [0, 70], got {self.cn0_reference_dbhz}"
+            )
+        if not 0.0 < finite("raim_false_alarm_probability") < 0.5:
+            raise ValueError(
+                "SppParams.raim_false_alarm_probability must be in (0, 0.5), got "
+                f"{self.raim_false_alarm_probability}"
+            )
+        if not isinstance(self.max_exclusions, int) or self.max_exclusions < 0:
+            raise ValueError(f"SppParams.max_exclusions must be an int >= 0, got {self.max_exclusions!r}")
+        if not isinstance(self.min_satellites_for_exclusion, int) or self.min_satellites_for_exclusion < 5:
+            raise ValueError(
+                "SppParams.min_satellites_for_exclusion must be an int >= 5, got "
+                f"{self.min_satellites_for_exclusion!r}"
+            )
+
+
+@dataclass(frozen=True)
+class Dop:
+    """Dilution of precision (unweighted geometry, ENU at the solution). NaN when undefined."""
+
+    gdop: float
+    pdop: float
+    hdop: float
+    vdop: float
+    tdop: float
+
+
+_NAN_DOP = Dop(math.nan, math.nan, math.nan, math.nan, math.nan)
+
+
+@dataclass(frozen=True)
+class SppResult:
+    """One epoch's SPP output.
+
+    Attributes:
+        stamp_ns: the epoch's stamp, ns (copied from the input).
+        valid: True only for a converged, RAIM-consistent fix; then position, clock and
+            covariance are finite. When False, ``position_ecef_m`` may hold the last iterate
+            (``raim_failed``, ``not_converged``) or NaN (``too_few_satellites``,
+            ``singular_geometry``) and must not be used as a fix.
+        status: one of ``ok``, ``ok_with_exclusions``, ``too_few_satellites``,
+            ``singular_geometry``, ``not_converged``, ``raim_failed``.
+        position_ecef_m: receiver ECEF position, m, (3,).
+        clock_bias_m: receiver clock bias c dt_r, m.
+        velocity_valid: True when a velocity was estimated from >= 4 pseudorange rates.
+        velocity_ecef_mps: receiver ECEF velocity, m/s, (3,) (NaN if not velocity_valid).
+        clock_drift_mps: receiver clock drift c ddt_r, m/s (NaN if not velocity_valid).
+        covariance: (4, 4) covariance of [x, y, z, c dt_r], m^2, row-major, ECEF axes.
+        covariance_enu_m2: (3, 3) position covariance rotated to local ENU, m^2.
+        velocity_covariance: (4, 4) covariance of [vx, vy, vz, c ddt_r], (m/s)^2.
+        dop: :class:`Dop` of the used satellites.
+        used_svids: GPS PRNs in the fix, ascending.
+        rejected: ``(svid, reason)`` pairs, reasons from ``REJECTION_REASONS``.
+        rejection_counts: reason -> count for this epoch (every key present).
+        residuals_m: post-fit pseudorange residuals of ``used_svids``, m.
+        elevations_rad: elevations of ``used_svids`` at the solution, rad.
+        iterations: Gauss-Newton iterations of the final fix.
+        test_statistic: weighted SSE of the final fix (chi-square with n - 4 dof), NaN if n = 4.
+        test_threshold: chi-square threshold used, NaN if n = 4.
+    """
+
+    stamp_ns: int
+    valid: bool
+    status: str
+    position_ecef_m: np.ndarray
+    clock_bias_m: float
+    velocity_valid: bool
+    velocity_ecef_mps: np.ndarray
+    clock_drift_mps: float
+    covariance: np.ndarray
+    covariance_enu_m2: np.ndarray
+    velocity_covariance: np.ndarray
+    dop: Dop
+    used_svids: tuple[int, ...]
+    rejected: tuple[tuple[int, str], ...]
+    rejection_counts: dict[str, int]
+    residuals_m: np.ndarray
+    elevations_rad: np.ndarray
+    iterations: int
+    test_statistic: float
+    test_threshold: float
+    extra: dict[str, float] = field(default_factory=dict)
+
+
+def _geodetic_up_and_rotation(pos: np.ndarray) -> np.ndarray:
+    """ECEF->ENU rotation at a near-surface ECEF point (scalar Bowring, 2 steps: < 1e-10 rad)."""
+    x, y, z = float(pos[0]), float(pos[1]), float(pos[2])
+    a, e2 = WGS84_SEMI_MAJOR_AXIS_M, WGS84_ECCENTRICITY_SQUARED
+    b = a * math.sqrt(1.0 - e2)
+    ep2 = e2 / (1.0 - e2)
+    p = math.hypot(x, y)
+    beta = math.atan2(z * a, p * b)
+    lat = beta
+    for _ in range(2):
+        sb, cb = math.sin(beta), math.cos(beta)
+        lat = math.atan2(z + ep2 * b * sb**3, p - e2 * a * cb**3)
+        beta = math.atan2(math.sqrt(1.0 - e2) * math.sin(lat), math.cos(lat))
+    return ecef_to_enu_rotation(lat, math.atan2(y, x))
+
+
+def _sagnac(sat: np.ndarray, rx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rotate (N, 3) transmit-frame satellite positions to the receive frame; return rotated, cos, sin."""
+    tau = np.sqrt(np.sum((sat - rx) ** 2, axis=1)) / SPEED_OF_LIGHT_MPS
+    ang = EARTH_ROTATION_RATE_RADPS * tau
+    c, s = np.cos(ang), np.sin(ang)
+    out = np.empty_like(sat)
+    out[:, 0] = c * sat[:, 0] + s * sat[:, 1]
+    out[:, 1] = -s * sat[:, 0] + c * sat[:, 1]
+    out[:, 2] = sat[:, 2]
+    return out, c, s
+
+
+class SinglePointPositioner:
+    """Epoch-by-epoch GPS single-point positioning (stateless except for the initial guess).
+
+    The last valid position seeds the next epoch's iteration (this changes only the number of
+    iterations, not the fix beyond ``convergence_m``). ``totals`` accumulates rejection counts.
+    """
+
+    def __init__(self, params: SppParams | None = None) -> None:
+        """Args: params: :class:`SppParams` (defaults if None)."""
+        self.params = params if params is not None else SppParams()
+        dof = np.arange(1, _MAX_DOF_TABLE + 1)
+        self._chi2_threshold = chi2.isf(self.params.raim_false_alarm_probability, dof)
+        self._last_position: np.ndarray | None = None
+        self.totals: dict[str, int] = dict.fromkeys(REJECTION_REASONS, 0)
+        self.totals["epochs"] = 0
+        self.totals["valid_epochs"] = 0
+
+    def reset(self) -> None:
+        """Forget the initial guess and the totals."""
+        self._last_position = None
+        self.totals = dict.fromkeys(self.totals, 0)
+
+    def _threshold(self, dof: int) -> float:
+        if dof <= 0:
+            return math.nan
+        if dof <= _MAX_DOF_TABLE:
+            return float(self._chi2_threshold[dof - 1])
+        return float(chi2.isf(self.params.raim_false_alarm_probability, dof))
+
+    # ------------------------------------------------------------------------------------------
+    def process(self, epoch: GnssEpoch, initial_position_ecef_m: np.ndarray | None = None) -> SppResult:
+        """Solve one epoch.
+
+        Args:
+            epoch: measurements of one receive epoch (GPS satellites are used; others rejected).
+            initial_position_ecef_m: optional starting point, m, (3,); default: last valid fix,
+                else the Earth's centre.
+
+        Returns:
+            :class:`SppResult` (never raises on bad measurement content; see ``status``).
+
+        Raises:
+            TypeError: ``epoch`` is not a GnssEpoch.
+
+        Notes
+        -----
+        Cao et al., eq. 5 (position/clock) and eq. 6 (velocity/drift), linearised and solved by
+        iterated weighted least squares; see the module docstring for weights and FDE.
+        """
+        if not isinstance(epoch, GnssEpoch):
+            raise TypeError(f"epoch must be a GnssEpoch, got {type(epoch).__name__}")
+        p = self.params
+        counts = dict.fromkeys(REJECTION_REASONS, 0)
+        rejected: list[tuple[int, str]] = []
+
+        def reject(svid: int, reason: str) -> None:
+            counts[reason] += 1
+            rejected.append((int(svid), reason))
+
+        # ---- screen inputs ------------------------------------------------------------------
+        obs = list(epoch.observations)
+        svid_count: dict[int, int] = {}
+        for o in obs:
+            if o.constellation == GPS:
+                svid_count[o.svid] = svid_count.get(o.svid, 0) + 1
+        rows = []
+        missing_corrections = 0
+        for o in obs:
+            if o.constellation != GPS:
+                reject(o.svid, "unsupported_constellation")
+                continue
+            if svid_count[o.svid] > 1:
+                reject(o.svid, "duplicate_svid")
+                continue
+            sat = np.asarray(o.satellite_position_ecef_m, dtype=float).reshape(-1)
+            vel = np.asarray(o.satellite_velocity_ecef_mps, dtype=float).reshape(-1)
+            if sat.shape != (3,) or vel.shape != (3,):
+                reject(o.svid, "invalid_input")
+                continue
+            core = (o.pseudorange_m, o.satellite_clock_bias_m, sat[0], sat[1], sat[2])
+            if not all(math.isfinite(v) for v in core):
+                reject(o.svid, "invalid_input")
+                continue
+            r_sat = math.sqrt(sat[0] ** 2 + sat[1] ** 2 + sat[2] ** 2)
+            if not (
+                1.0e7 <= o.pseudorange_m <= 4.0e7
+                and 2.0e7 <= r_sat <= 5.0e7
+                and abs(o.satellite_clock_bias_m) < 3.0e5
+            ):
+                reject(o.svid, "non_physical")
+                continue
+            iono = o.ionosphere_delay_m
+            tropo = o.troposphere_delay_m
+            if not (math.isfinite(iono) and math.isfinite(tropo)):
+                missing_corrections += 1
+                iono = iono if math.isfinite(iono) else 0.0
+                tropo = tropo if math.isfinite(tropo) else 0.0
+            if iono < 0.0 or tropo < 0.0 or iono > 200.0 or tropo > 100.0:
+                reject(o.svid, "non_physical")
+                continue
+            rate_ok = (
+                math.isfinite(o.pseudorange_rate_mps)
+                and math.isfinite(o.satellite_clock_drift_mps)
+                and bool(np.all(np.isfinite(vel)))
+                and abs(o.pseudorange_rate_mps) < 1.0e5
+            )
+            rows.append(
+                (
+                    o.svid,
+                    sat,
+                    vel,
+                    o.pseudorange_m + o.satellite_clock_bias_m - iono - tropo,
+                    (o.pseudorange_rate_mps + o.satellite_clock_drift_mps) if rate_ok else math.nan,
+                    o.cn0_dbhz if math.isfinite(o.cn0_dbhz) else math.nan,
+                    iono,
+                    o.pseudorange_std_m,
+                    o.pseudorange_rate_std_mps,
+                )
+            )
+        rows.sort(key=lambda r: r[0])
+        extra = {"missing_corrections": float(missing_corrections)}
+
+        n = len(rows)
+        svids = np.array([r[0] for r in rows], dtype=int)
+        sat_pos = np.array([r[1] for r in rows], dtype=float).reshape(n, 3)
+        sat_vel = np.array([r[2] for r in rows], dtype=float).reshape(n, 3)
+        y_corr = np.array([r[3] for r in rows], dtype=float)
+        rate_corr = np.array([r[4] for r in rows], dtype=float)
+        cn0 = np.array([r[5] for r in rows], dtype=float)
+        iono_m = np.array([r[6] for r in rows], dtype=float)
+        pr_std = np.array([r[7] for r in rows], dtype=float)
+        rate_std = np.array([r[8] for r in rows], dtype=float)
+
+        if initial_position_ecef_m is not None:
+            x0 = np.asarray(initial_position_ecef_m, dtype=float).reshape(3)
+            if not np.all(np.isfinite(x0)):
+                raise ValueError("initial_position_ecef_m must be finite")
+        elif self._last_position is not None:
+            x0 = self._last_position
+        else:
+            x0 = np.zeros(3)
+
+        active = np.ones(n, dtype=bool)
+        exclusions = 0
+        mask_rad = math.radians(p.elevation_mask_deg)
+        if n > 0 and float(np.linalg.norm(x0)) > _NEAR_SURFACE_R_M:
+            # Elevation mask from the starting point (the previous fix); re-checked at convergence.
+            rs, _, _ = _sagnac(sat_pos, x0)
+            d = rs - x0
+            sin_el0 = (d @ _geodetic_up_and_rotation(x0)[2]) / np.sqrt(np.sum(d * d, axis=1))
+            below0 = sin_el0 < math.sin(mask_rad)
+            for i in np.flatnonzero(below0):
+                reject(int(svids[i]), "below_elevation_mask")
+            active &= ~below0
+        while True:
+            sol = self._solve_position(sat_pos, y_corr, cn0, iono_m, pr_std, active, x0, mask_rad)
+            below = sol["below_mask"]
+            if np.any(below):
+                for i in np.flatnonzero(below):
+                    reject(int(svids[i]), "below_elevation_mask")
+                active &= ~below
+                if sol["status"] == STATUS_OK:
+                    # re-solve without the masked satellites (the mask can only shrink the set)
+                    continue
+            if sol["status"] != STATUS_OK:
+                break
+            used = np.flatnonzero(active)
+            dof = used.size - 4
+            if dof <= 0:
+                break
+            t = sol["sse"]
+            thr = self._threshold(dof)
+            if t <= thr:
+                break
+            # FDE: exclude the largest standardised residual while enough satellites remain
+            if exclusions >= p.max_exclusions or used.size - 1 < p.min_satellites_for_exclusion:
+                sol["status"] = STATUS_RAIM_FAILED
+                break
+            worst = used[int(np.argmax(np.abs(sol["w"])))]
+            reject(int(svids[worst]), "outlier")
+            active[worst] = False
+            exclusions += 1
+            x0 = sol["x"][:3]
+
+        status = sol["status"]
+        used = np.flatnonzero(active)
+        self.totals["epochs"] += 1
+        for reason, count in counts.items():
+            self.totals[reason] += count
+        nan3 = np.full(3, math.nan)
+        nan4 = np.full((4, 4), math.nan)
+        if status in (STATUS_TOO_FEW, STATUS_SINGULAR):
+            return SppResult(
+                epoch.stamp_ns,
+                False,
+                status,
+                nan3,
+                math.nan,
+                False,
+                nan3.copy(),
+                math.nan,
+                nan4,
+                np.full((3, 3), math.nan),
+                nan4.copy(),
+                _NAN_DOP,
+                tuple(int(s) for s in svids[used]),
+                tuple(rejected),
+                counts,
+                np.full(used.size, math.nan),
+                np.full(used.size, math.nan),
+                int(sol["iterations"]),
+                math.nan,
+                math.nan,
+                extra,
+            )
+
+        x = sol["x"]
+        valid = status == STATUS_OK
+        if valid and exclusions > 0:
+            status = STATUS_OK_WITH_EXCLUSIONS
+        if valid:
+            self._last_position = x[:3].copy()
+            self.totals["valid_epochs"] += 1
+        dof = used.size - 4
+        rot = sol["enu_rotation"]
+        cov = sol["cov"]
+        cov_enu = rot @ cov[:3, :3] @ rot.T if rot is not None else np.full((3, 3), math.nan)
+        dop = _NAN_DOP
+        if rot is not None:
+            g = sol["h"].copy()
+            g[:, :3] = g[:, :3] @ rot.T
+            try:
+                q = np.linalg.inv(g.T @ g)
+                dop = Dop(
+                    float(np.sqrt(np.trace(q))),
+                    float(np.sqrt(q[0, 0] + q[1, 1] + q[2, 2])),
+                    float(np.sqrt(q[0, 0] + q[1, 1])),
+                    float(np.sqrt(q[2, 2])),
+                    float(np.sqrt(q[3, 3])),
+                )
+            except np.linalg.LinAlgError:
+                dop = _NAN_DOP
+
+        # ---- velocity and clock drift (eq. 6) -----------------------------------------------
+        vel_valid = False
+        v = np.full(3, math.nan)
+        drift = math.nan
+        vcov = np.full((4, 4), math.nan)
+        if valid:
+            rv = used[np.isfinite(rate_corr[used])]
+            if rv.size >= 4:
+                los = sol["los_all"][rv]
+                _, c, s = _sagnac(sat_pos[rv], x[:3])
+                vs = np.empty((rv.size, 3))
+                vs[:, 0] = c * sat_vel[rv, 0] + s * sat_vel[rv, 1]
+                vs[:, 1] = -s * sat_vel[rv, 0] + c * sat_vel[rv, 1]
+                vs[:, 2] = sat_vel[rv, 2]
+                yv = rate_corr[rv] - np.sum(vs * los, axis=1)
+                hv = np.hstack([-los, np.ones((rv.size, 1))])
+                sig_v = p.sigma_rate_mps * sol["scale_all"][rv]
+                sig_v = np.where(np.isfinite(rate_std[rv]) & (rate_std[rv] > 0), rate_std[rv], sig_v)
+                wv = 1.0 / sig_v**2
+                nmat = hv.T @ (hv * wv[:, None])
+                try:
+                    vcov = np.linalg.inv(nmat)
+                    sv = vcov @ (hv.T @ (wv * yv))
+                    if np.all(np.isfinite(sv)):
+                        v, drift, vel_valid = sv[:3], float(sv[3]), True
+                    else:
+                        vcov = np.full((4, 4), math.nan)
+                except np.linalg.LinAlgError:
+                    vcov = np.full((4, 4), math.nan)
+
+        return SppResult(
+            stamp_ns=epoch.stamp_ns,
+            valid=valid,
+            status=status,
+            position_ecef_m=x[:3].copy(),
+            clock_bias_m=float(x[3]),
+            velocity_valid=vel_valid,
+            velocity_ecef_mps=np.asarray(v, dtype=float),
+            clock_drift_mps=drift,
+            covariance=cov,
+            covariance_enu_m2=cov_enu,
+            velocity_covariance=vcov,
+            dop=dop,
+            used_svids=tuple(int(s) for s in svids[used]),
+            rejected=tuple(rejected),
+            rejection_counts=counts,
+            residuals_m=sol["resid"],
+            elevations_rad=sol["el_all"][used],
+            iterations=int(sol["iterations"]),
+            test_statistic=float(sol["sse"]) if dof > 0 else math.nan,
+            test_threshold=self._threshold(dof) if dof > 0 else math.nan,
+            extra=extra,
+        )
+
+    # ------------------------------------------------------------------------------------------
+    def _solve_position(
+        self,
+        sat_pos: np.ndarray,
+        y_corr: np.ndarray,
+        cn0: np.ndarray,
+        iono_m: np.ndarray,
+        pr_std: np.ndarray,
+        active: np.ndarray,
+        x0: np.ndarray,
+        mask_rad: float,
+    ) -> dict:
+        """Iterated WLS for [x, y, z, c dt] on the active satellites (see module docstring)."""
+        p = self.params
+        n = sat_pos.shape[0]
+        idx = np.flatnonzero(active)
+        out: dict = {"status": STATUS_TOO_FEW, "below_mask": np.zeros(n, dtype=bool), "iterations": 0}
+        if idx.size < 4:
+            return out
+        x = np.zeros(4)
+        x[:3] = x0
+        sp, yc = sat_pos[idx], y_corr[idx]
+        cn0_factor = np.ones(idx.size)
+        if p.use_cn0_weighting:
+            ok = np.isfinite(cn0[idx])
+            cn0_factor[ok] = np.maximum(1.0, 10.0 ** ((p.cn0_reference_dbhz - cn0[idx][ok]) / 10.0))
+        near_surface_r = _NEAR_SURFACE_R_M
+        rot = None
+        converged = False
+        it = 0
+        sin_el = np.ones(idx.size)
+        for it in range(1, p.max_iterations + 1):
+            rs, _, _ = _sagnac(sp, x[:3])
+            diff = rs - x[:3]
+            rng = np.sqrt(np.sum(diff * diff, axis=1))
+            los = diff / rng[:, None]
+            if np.linalg.norm(x[:3]) > near_surface_r:
+                rot = _geodetic_up_and_rotation(x[:3])
+                sin_el = np.clip(los @ rot[2], -1.0, 1.0)
+            else:
+                rot = None
+                sin_el = np.ones(idx.size)
+            s_el = np.maximum(sin_el, 0.05)
+            var = (
+                (p.sigma_code_a_m**2 + (p.sigma_code_b_m / s_el) ** 2) * cn0_factor
+                + (p.iono_error_fraction * iono_m[idx]) ** 2
+                + (p.sigma_tropo_zenith_m / (s_el + 0.1)) ** 2
+                + p.sigma_broadcast_m**2
+            )
+            given = np.isfinite(pr_std[idx]) & (pr_std[idx] > 0)
+            var = np.where(given, pr_std[idx] ** 2, var)
+            w = 1.0 / var
+            h = np.empty((idx.size, 4))
+            h[:, :3] = -los
+            h[:, 3] = 1.0
+            resid = yc - (rng + x[3])
+            nmat = h.T @ (h * w[:, None])
+            try:
+                cov = np.linalg.inv(nmat)
+            except np.linalg.LinAlgError:
+                out.update(status=STATUS_SINGULAR, iterations=it)
+                return out
+            dcov = np.diag(cov)
+            if not (np.all(np.isfinite(dcov)) and np.all(dcov > 0.0)) or float(np.max(dcov)) > 1.0e10:
+                out.update(status=STATUS_SINGULAR, iterations=it)
+                return out
+            dx = cov @ (h.T @ (w * resid))
+            x = x + dx
+            if np.linalg.norm(dx) < p.convergence_m:
+                converged = True
+                break
+        # final linearisation at the converged point
+        rs, _, _ = _sagnac(sp, x[:3])
+        diff = rs - x[:3]
+        rng = np.sqrt(np.sum(diff * diff, axis=1))
+        los = diff / rng[:, None]
+        resid = yc - (rng + x[3])
+        h[:, :3] = -los
+        rot = _geodetic_up_and_rotation(x[:3]) if np.linalg.norm(x[:3]) > near_surface_r else None
+        el_all = np.full(n, math.nan)
+        los_all = np.full((n, 3), math.nan)
+        scale_all = np.full(n, math.nan)
+        if rot is not None:
+            sin_el = np.clip(los @ rot[2], -1.0, 1.0)
+            el_all[idx] = np.arcsin(sin_el)
+        los_all[idx] = los
+        scale_all[idx] = np.sqrt(cn0_factor) / np.maximum(sin_el, 0.05)
+        below = np.zeros(n, dtype=bool)
+        if rot is not None and converged:
+            below[idx] = el_all[idx] < mask_rad
+        sse = float(np.sum(w * resid**2))
+        # standardised residuals: r_i / sqrt(Qr_ii), Qr = W^-1 - H cov H^T
+        qr_diag = 1.0 / w - np.einsum("ij,jk,ik->i", h, cov, h)
+        wstat = resid / np.sqrt(np.maximum(qr_diag, 1e-12))
+        out.update(
+            status=STATUS_OK if converged else STATUS_NOT_CONVERGED,
+            x=x,
+            cov=cov,
+            h=h,
+            resid=resid,
+            sse=sse,
+            w=wstat,
+            below_mask=below,
+            iterations=it,
+            enu_rotation=rot,
+            el_all=el_all,
+            los_all=los_all,
+            scale_all=scale_all,
+        )
+        if converged and rot is None:
+            out["status"] = STATUS_NOT_CONVERGED  # converged far from the Earth's surface: not a fix
+        return out
