@@ -1,0 +1,138 @@
+"""Prompt correlator measurement model and the plain data types of the carrier trackers.
+
+Convention (shared with rfi_experiments.sim.correlators): the correlator's replica is open loop,
+so the angle of the prompt correlator of interval k is the accumulated satellite-motion phase
+``Phi_sm,k = sum_{j<=k} predicted_phase_change_rad_j`` (known to the receiver from ephemeris)
+plus the residual phase ``phi_k`` (receiver clock phase plus the channel's constant initial phase),
+which is what the trackers estimate:
+
+    I_k = d_k A cos(Phi_sm,k + phi_k) + v_I,   Q_k = d_k A sin(Phi_sm,k + phi_k) + v_Q
+
+(Zhao et al., eq. 2-3, with Delta phi_tot = Delta phi_sm + Delta phi_clk). The phase is taken at the
+end of the interval (the stamp); the intra-interval rotation and its sinc amplitude loss are
+neglected (clock frequency errors here are well below 1/T).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+CN0_MIN_DBHZ = 0.0
+"""Lowest C/N0 accepted as physical, dB-Hz."""
+CN0_MAX_DBHZ = 70.0
+"""Highest C/N0 accepted as physical, dB-Hz."""
+
+IQ_SCALINGS = ("unit_amplitude", "unit_noise")
+"""How correlators are normalised: A = 1 (Zhao et al., eq. 5) or noise sigma = 1."""
+
+METHOD_IMM = 1
+METHOD_PLL = 2
+"""Method codes, identical to rfi_msgs/CarrierPhase constants."""
+
+
+def iq_amplitude_and_noise_std(
+    cn0_dbhz: float, integration_time_s: float, iq_scaling: str = "unit_amplitude"
+) -> tuple[float, float]:
+    """Signal amplitude A and per-component noise std sigma_v of the prompt correlators.
+
+    Args:
+        cn0_dbhz: carrier-to-noise density ratio, dB-Hz.
+        integration_time_s: coherent integration time T, s, > 0.
+        iq_scaling: "unit_amplitude" (A = 1, Zhao et al. eq. 5) or "unit_noise" (sigma_v = 1).
+
+    Returns:
+        (A, sigma_v) in correlator units. A^2 / (2 sigma_v^2) = T C/N0.
+
+    Notes:
+        Zhao et al., eq. 4-5: C/N0 = 10^(C/N0_dBHz / 10), sigma_v = 1 / sqrt(0.04 C/N0) for
+        T = 20 ms, i.e. sigma_v = 1 / sqrt(2 T C/N0) with A = 1 (Kaplan & Hegarty: prompt SNR T C/N0
+        per component pair).
+    """
+    if not math.isfinite(integration_time_s) or integration_time_s <= 0.0:
+        raise ValueError(f"integration_time_s must be finite and > 0, got {integration_time_s!r}")
+    if not math.isfinite(cn0_dbhz):
+        raise ValueError(f"cn0_dbhz must be finite, got {cn0_dbhz!r}")
+    ratio = math.sqrt(2.0 * integration_time_s * 10.0 ** (cn0_dbhz / 10.0))  # A / sigma_v
+    if iq_scaling == "unit_amplitude":
+        return 1.0, 1.0 / ratio
+    if iq_scaling == "unit_noise":
+        return ratio, 1.0
+    raise ValueError(f"iq_scaling must be one of {IQ_SCALINGS}, got {iq_scaling!r}")
+
+
+def expected_iq(
+    phase_rad: np.ndarray, data_bit: np.ndarray, amplitude: float | np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Noise-free prompt correlators d A cos(theta), d A sin(theta) (Zhao et al., eq. 2-3).
+
+    Args:
+        phase_rad: total correlator angle theta (satellite motion + residual), rad, any shape.
+        data_bit: navigation data bit, +1 or -1, broadcastable to phase_rad.
+        amplitude: A, correlator units, broadcastable.
+
+    Returns:
+        (I, Q), same shape as the broadcast inputs.
+    """
+    theta = np.asarray(phase_rad, dtype=float)
+    d = np.asarray(data_bit, dtype=float)
+    return d * amplitude * np.cos(theta), d * amplitude * np.sin(theta)
+
+
+@dataclass(frozen=True)
+class CorrelatorSample:
+    """One channel's prompt correlator over one interval (mirrors rfi_msgs/Correlator.msg).
+
+    Attributes:
+        constellation: GnssMeasurement constellation code.
+        svid: satellite number.
+        integration_time_s: coherent integration time T, s (> 0).
+        in_phase: prompt I, correlator units.
+        quadrature: prompt Q, same unit.
+        cn0_dbhz: receiver's C/N0 estimate, dB-Hz (NaN = unknown).
+        predicted_phase_change_rad: satellite-motion phase change over the interval, rad.
+    """
+
+    constellation: int
+    svid: int
+    integration_time_s: float
+    in_phase: float
+    quadrature: float
+    cn0_dbhz: float
+    predicted_phase_change_rad: float
+
+
+@dataclass(frozen=True)
+class CarrierPhaseEstimate:
+    """One channel's carrier-phase estimate at one stamp (mirrors rfi_msgs/CarrierPhase.msg).
+
+    Attributes:
+        stamp_ns: stamp of the correlator interval it answers, ns.
+        constellation, svid: channel identity.
+        method: METHOD_IMM or METHOD_PLL.
+        phase_rad: residual carrier phase (clock part plus constant offset), rad, unwrapped.
+        phase_std_rad: 1-sigma of phase_rad, rad (NaN for the PLL).
+        frequency_hz: residual carrier frequency (clock frequency error), Hz.
+        frequency_std_hz: 1-sigma of frequency_hz, Hz (NaN for the PLL).
+        data_bit: most probable data bit, -1 or +1 (0 if undecided).
+        data_bit_probability: probability of data_bit, 0..1.
+        mode_probabilities: (P(bit=+1), P(bit=-1)) for the IMM; () for single-mode trackers.
+        locked: True only while the estimate is valid and in lock.
+        cycle_slips: slips detected on this channel since it started (see the tracker docs).
+    """
+
+    stamp_ns: int
+    constellation: int
+    svid: int
+    method: int
+    phase_rad: float
+    phase_std_rad: float
+    frequency_hz: float
+    frequency_std_hz: float
+    data_bit: int
+    data_bit_probability: float
+    mode_probabilities: tuple[float, ...]
+    locked: bool
+    cycle_slips: int

@@ -1,0 +1,336 @@
+"""Costas PLL baseline: two-quadrant arctangent discriminator, third-order loop filter, eq. 10 schedule.
+
+The correlators are open loop (measurement_model.py), so the loop is closed digitally: the
+prompt correlator is rotated by the NCO phase (accumulated satellite-motion phase plus the loop's
+own residual phase) before the discriminator. The per-step loop is compiled with numba.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+
+from imm_carrier.measurement_model import CN0_MAX_DBHZ, CN0_MIN_DBHZ, IQ_SCALINGS
+
+TWO_PI = 2.0 * math.pi
+
+# Third-order loop constants (Kaplan & Hegarty, "Understanding GPS", loop filter table):
+# omega0 = Bn / 0.7845, F(s) = b3 w0 + a3 w0^2 / s + w0^3 / s^2.
+THIRD_ORDER_BN_TO_W0 = 0.7845
+THIRD_ORDER_A3 = 1.1
+THIRD_ORDER_B3 = 2.4
+
+_EQ10_COEFFS_MS = (3e-19, -1.3e-13, 1.5e-8, -7e-4, 15.5)  # t^4 .. t^0, t in ms (Zhao et al., eq. 10)
+
+
+def _eq10_poly(t_s: float | np.ndarray) -> float | np.ndarray:
+    t_ms = np.asarray(t_s, dtype=float) * 1e3
+    a4, a3, a2, a1, a0 = _EQ10_COEFFS_MS
+    return (((a4 * t_ms + a3) * t_ms + a2) * t_ms + a1) * t_ms + a0
+
+
+def bandwidth_schedule_hz(
+    elapsed_s: float | np.ndarray, start_hz: float = 15.0, end_hz: float = 1.0, duration_s: float = 70.0
+) -> np.ndarray:
+    """PLL noise bandwidth B_n(t) tightening from start_hz to end_hz over duration_s, then constant.
+
+    Args:
+        elapsed_s: time since the loop started, s, any shape, >= 0.
+        start_hz, end_hz: bandwidths at t = 0 and t >= duration_s, Hz.
+        duration_s: tightening duration, s.
+
+    Returns:
+        B_n, Hz, same shape as elapsed_s.
+
+    Notes:
+        Zhao et al., eq. 10: ``B_n = 3e-19 t^4 - 1.3e-13 t^3 + 1.5e-8 t^2 - 7e-4 t + 15.5``. The text
+        does not give the unit of t; with t in seconds B_n stays at 15.45 Hz after 70 s, with t in
+        milliseconds it falls from 15.5 Hz to 2.6 Hz at 70 s (the printed coefficients are rounded),
+        monotonically. We keep the paper's polynomial shape (t in ms) and map it affinely so that it
+        runs exactly from start_hz at t = 0 to end_hz at t = duration_s (the text: "from 15 to 1 Hz in
+        the first 70 sec"), the shape being stretched to duration_s.
+    """
+    t = np.clip(np.asarray(elapsed_s, dtype=float), 0.0, duration_s)
+    u = t * (70.0 / duration_s)  # map onto the paper's 70 s
+    p0 = _eq10_poly(0.0)
+    p1 = _eq10_poly(70.0)
+    frac = (_eq10_poly(u) - p1) / (p0 - p1)
+    return np.asarray(end_hz + (start_hz - end_hz) * frac, dtype=float)
+
+
+@dataclass(frozen=True)
+class PllParams:
+    """Parameters of the Costas PLL baseline.
+
+    Attributes:
+        start_bandwidth_hz: noise bandwidth at start, Hz, > 0 (paper: 15).
+        end_bandwidth_hz: final noise bandwidth, Hz, > 0 (paper: 1).
+        tightening_duration_s: time to go from start to end bandwidth, s, > 0 (paper: 70).
+        iq_scaling: "unit_amplitude" or "unit_noise" (only for the lock indicator).
+        lock_time_constant_s: time constant of the lock-indicator averages, s, > 0.
+        lock_threshold: lock when the noise-corrected cos(2 dphi) estimate exceeds this, 0..1.
+    """
+
+    start_bandwidth_hz: float = 15.0
+    end_bandwidth_hz: float = 1.0
+    tightening_duration_s: float = 70.0
+    iq_scaling: str = "unit_amplitude"
+    lock_time_constant_s: float = 1.0
+    lock_threshold: float = 0.5
+
+    def __post_init__(self) -> None:
+        for key in (
+            "start_bandwidth_hz",
+            "end_bandwidth_hz",
+            "tightening_duration_s",
+            "lock_time_constant_s",
+        ):
+            v = getattr(self, key)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"PllParams.{key} must be finite and > 0, got {v!r}")
+        if self.end_bandwidth_hz > self.start_bandwidth_hz:
+            raise ValueError("PllParams.end_bandwidth_hz must not exceed start_bandwidth_hz")
+        if self.iq_scaling not in IQ_SCALINGS:
+            raise ValueError(f"iq_scaling must be one of {IQ_SCALINGS}, got {self.iq_scaling!r}")
+        if not (0.0 < self.lock_threshold < 1.0):
+            raise ValueError("PllParams.lock_threshold must be in (0, 1)")
+
+
+# State: 0 residual NCO phase (rad), 1 NCO rate (rad/s), 2 velocity integrator (rad/s),
+# 3 acceleration integrator (rad/s^2), 4 accumulated satellite phase (rad, wrapped),
+# 5 elapsed time (s), 6 EMA of I'^2 - Q'^2, 7 EMA of I'^2 + Q'^2.
+_PLL_ST_LEN = 8
+_PLL_OUT_LEN = 5  # phase estimate, frequency (rad/s), discriminator, bandwidth, lock metric
+
+
+@njit(cache=True)
+def _pll_run(st, zi, zq, t, dphi, bn, amp, alpha, out):
+    """Costas PLL over a batch; NaN I/Q: the NCO free-runs (no discriminator update)."""
+    for k in range(zi.shape[0]):
+        tk = t[k]
+        sat = st[4] + dphi[k]
+        sat = sat - TWO_PI * math.floor((sat + math.pi) / TWO_PI)
+        st[4] = sat
+        st[0] += tk * st[1]
+        st[5] += tk
+        e = 0.0
+        if zi[k] == zi[k] and zq[k] == zq[k] and abs(zi[k]) < math.inf and abs(zq[k]) < math.inf:
+            th = sat + st[0]
+            c = math.cos(th)
+            s = math.sin(th)
+            ir = zi[k] * c + zq[k] * s
+            qr = -zi[k] * s + zq[k] * c
+            if ir != 0.0:
+                e = math.atan(qr / ir)
+            elif qr != 0.0:
+                e = math.copysign(0.5 * math.pi, qr)
+            w0 = bn[k] / THIRD_ORDER_BN_TO_W0
+            st[3] += tk * w0 * w0 * w0 * e
+            st[2] += tk * (st[3] + THIRD_ORDER_A3 * w0 * w0 * e)
+            st[1] = st[2] + THIRD_ORDER_B3 * w0 * e
+            a2 = amp[k] * amp[k]
+            st[6] += alpha[k] * ((ir * ir - qr * qr) / a2 - st[6])
+            st[7] += alpha[k] * ((ir * ir + qr * qr) / a2 - st[7])
+        out[k, 0] = st[0] + e
+        out[k, 1] = st[2]
+        out[k, 2] = e
+        out[k, 3] = bn[k]
+        out[k, 4] = st[6]
+
+
+@dataclass(frozen=True)
+class PllStepResult:
+    """Result of one PLL step: phase_rad (NCO residual phase + discriminator, rad), frequency_hz
+    (velocity integrator, Hz), discriminator_rad, bandwidth_hz, lock_metric (noise-corrected
+    cos 2 dphi estimate), locked."""
+
+    phase_rad: float
+    frequency_hz: float
+    discriminator_rad: float
+    bandwidth_hz: float
+    lock_metric: float
+    locked: bool
+
+
+@dataclass(frozen=True)
+class PllBatchResult:
+    """Per-sample arrays of :meth:`CostasPll.process_batch`, each shape (n,)."""
+
+    phase_rad: np.ndarray
+    frequency_hz: np.ndarray
+    discriminator_rad: np.ndarray
+    bandwidth_hz: np.ndarray
+    lock_metric: np.ndarray
+    accepted: np.ndarray
+    locked: np.ndarray
+    counters: dict[str, int] = field(default_factory=dict)
+
+
+class CostasPll:
+    """Costas PLL with a third-order loop filter and the bandwidth schedule of Zhao et al., eq. 10.
+
+    Notes:
+        Discriminator atan(Q/I) (Kaplan & Hegarty, Costas discriminators), insensitive to the data bit,
+        hence a pi (half-cycle) ambiguity. Loop filter: rectangular-integrator third-order loop with
+        w0 = B_n / 0.7845, a3 = 1.1, b3 = 2.4 (Kaplan & Hegarty). Lock indicator: exponential averages of
+        I'^2 - Q'^2 normalised by A^2 from C/N0 (an unbiased estimate of cos 2 dphi).
+    """
+
+    def __init__(self, params: PllParams) -> None:
+        if not isinstance(params, PllParams):
+            raise ValueError("params must be a PllParams")
+        self.params = params
+        self._st = np.zeros(_PLL_ST_LEN)
+        self._initialized = False
+
+    @property
+    def initialized(self) -> bool:
+        """True once the NCO has been set."""
+        return self._initialized
+
+    @property
+    def elapsed_s(self) -> float:
+        """Time since the loop started (sum of integration times), s."""
+        return float(self._st[5])
+
+    @property
+    def residual_phase_rad(self) -> float:
+        """Current NCO residual phase, rad."""
+        return float(self._st[0])
+
+    @property
+    def satellite_phase_rad(self) -> float:
+        """Accumulated satellite-motion phase (wrapped), rad."""
+        return float(self._st[4])
+
+    def initialize(self, phase_rad: float, frequency_hz: float, satellite_phase_rad: float = 0.0) -> None:
+        """Set the NCO residual phase (rad), frequency (Hz) and the accumulated satellite phase (rad)."""
+        if not all(math.isfinite(v) for v in (phase_rad, frequency_hz, satellite_phase_rad)):
+            raise ValueError("PLL initial values must be finite")
+        self._st[:] = 0.0
+        self._st[0] = phase_rad
+        self._st[1] = self._st[2] = TWO_PI * frequency_hz
+        self._st[4] = satellite_phase_rad
+        self._st[6] = 1.0
+        self._st[7] = 1.0
+        self._initialized = True
+
+    def initialize_from_correlator(
+        self, in_phase: float, quadrature: float, predicted_phase_change_rad: float, frequency_hz: float = 0.0
+    ) -> None:
+        """Start the NCO on atan(Q/I) of one correlator (Costas: modulo pi)."""
+        if not all(math.isfinite(v) for v in (in_phase, quadrature, predicted_phase_change_rad)):
+            raise ValueError("cannot initialise from non-finite correlator values")
+        sat = predicted_phase_change_rad - TWO_PI * math.floor(
+            (predicted_phase_change_rad + math.pi) / TWO_PI
+        )
+        self.initialize(math.atan2(quadrature, in_phase) - sat, frequency_hz, sat)
+
+    def process_batch(
+        self,
+        in_phase: np.ndarray,
+        quadrature: np.ndarray | float,
+        cn0_dbhz: np.ndarray | float,
+        integration_time_s: np.ndarray | float,
+        predicted_phase_change_rad: np.ndarray,
+    ) -> PllBatchResult:
+        """Run the loop over a sequence of correlators of this channel.
+
+        Args:
+            in_phase, quadrature: prompt I, Q, shape (n,) (NaN: NCO free-runs).
+            cn0_dbhz: C/N0 for the lock indicator's amplitude, dB-Hz, scalar or (n,).
+            integration_time_s: T, s, scalar or (n,).
+            predicted_phase_change_rad: satellite-motion phase change, rad, (n,).
+
+        Returns:
+            PllBatchResult; samples with invalid T, C/N0 or phase change are rejected and counted.
+        """
+        if not self._initialized:
+            raise ValueError("PLL not initialised")
+        zi = np.asarray(in_phase, dtype=float)
+        if zi.ndim != 1 or zi.size == 0:
+            raise ValueError("in_phase must be a non-empty 1-D array")
+        n = zi.size
+
+        def as_n(name: str, v: np.ndarray | float) -> np.ndarray:
+            a = np.full(n, float(v)) if np.ndim(v) == 0 else np.asarray(v, dtype=float)
+            if a.shape != (n,):
+                raise ValueError(f"{name} must be a scalar or have shape ({n},)")
+            return np.ascontiguousarray(a)
+
+        zq = as_n("quadrature", quadrature)
+        cn0 = as_n("cn0_dbhz", cn0_dbhz)
+        t = as_n("integration_time_s", integration_time_s)
+        dphi = as_n("predicted_phase_change_rad", predicted_phase_change_rad)
+        ok_t = np.isfinite(t) & (t > 0)
+        ok_cn0 = np.isfinite(cn0) & (cn0 >= CN0_MIN_DBHZ) & (cn0 <= CN0_MAX_DBHZ)
+        ok_d = np.isfinite(dphi)
+        accepted = ok_t & ok_cn0 & ok_d
+        counters = {
+            "rejected_integration_time": int(np.sum(~ok_t)),
+            "rejected_cn0": int(np.sum(ok_t & ~ok_cn0)),
+            "rejected_predicted_phase": int(np.sum(ok_t & ok_cn0 & ~ok_d)),
+            "coasted_nonfinite_iq": int(np.sum(accepted & ~(np.isfinite(zi) & np.isfinite(zq)))),
+        }
+        idx = np.flatnonzero(accepted)
+        raw = np.full((n, _PLL_OUT_LEN), np.nan)
+        if idx.size:
+            ta = t[idx]
+            elapsed = self._st[5] + np.cumsum(ta)
+            bn = bandwidth_schedule_hz(
+                elapsed - ta,
+                self.params.start_bandwidth_hz,
+                self.params.end_bandwidth_hz,
+                self.params.tightening_duration_s,
+            )
+            ratio = np.sqrt(2.0 * ta * 10.0 ** (cn0[idx] / 10.0))
+            amp = ratio if self.params.iq_scaling == "unit_noise" else np.ones_like(ratio)
+            alpha = np.minimum(ta / self.params.lock_time_constant_s, 1.0)
+            sub = np.empty((idx.size, _PLL_OUT_LEN))
+            _pll_run(self._st, np.ascontiguousarray(zi[idx]), zq[idx], ta, dphi[idx], bn, amp, alpha, sub)
+            raw[idx] = sub
+        finite = np.isfinite(raw[:, 0]) & np.isfinite(raw[:, 1])
+        return PllBatchResult(
+            phase_rad=raw[:, 0],
+            frequency_hz=raw[:, 1] / TWO_PI,
+            discriminator_rad=raw[:, 2],
+            bandwidth_hz=raw[:, 3],
+            lock_metric=raw[:, 4],
+            accepted=accepted,
+            locked=accepted & finite & (raw[:, 4] > self.params.lock_threshold),
+            counters=counters,
+        )
+
+    def update(
+        self,
+        in_phase: float,
+        quadrature: float,
+        cn0_dbhz: float,
+        integration_time_s: float,
+        predicted_phase_change_rad: float,
+    ) -> PllStepResult:
+        """One loop step (see :meth:`process_batch`); raises ValueError on invalid T, C/N0 or phase change."""
+        if not (math.isfinite(integration_time_s) and integration_time_s > 0):
+            raise ValueError(f"integration_time_s must be finite and > 0, got {integration_time_s!r}")
+        if not (math.isfinite(cn0_dbhz) and CN0_MIN_DBHZ <= cn0_dbhz <= CN0_MAX_DBHZ):
+            raise ValueError(f"cn0_dbhz must be in [{CN0_MIN_DBHZ}, {CN0_MAX_DBHZ}], got {cn0_dbhz!r}")
+        if not math.isfinite(predicted_phase_change_rad):
+            raise ValueError("predicted_phase_change_rad must be finite")
+        r = self.process_batch(
+            np.array([in_phase], dtype=float),
+            quadrature,
+            cn0_dbhz,
+            integration_time_s,
+            np.array([predicted_phase_change_rad]),
+        )
+        return PllStepResult(
+            float(r.phase_rad[0]),
+            float(r.frequency_hz[0]),
+            float(r.discriminator_rad[0]),
+            float(r.bandwidth_hz[0]),
+            float(r.lock_metric[0]),
+            bool(r.locked[0]),
+        )
