@@ -11,13 +11,16 @@ A scenario is YAML::
       gnss_uwb: {...}
       correlators: {...}
 
-Each builder yields ``(stamp_ns, topic, message)`` in stamp order; the streams are merged by stamp
-and written with :class:`rfi_experiments.bag_io.BagWriter`.
+Each stream has a builder module in :mod:`rfi_experiments.streams` with a function
+``build(scenario, section, seed)`` that validates its section (raising :class:`ScenarioError`)
+and yields ``(stamp_ns, topic, message)`` in stamp order, truth topics included; the streams
+are merged by stamp and written with :class:`rfi_experiments.bag_io.BagWriter`.
 """
 
 from __future__ import annotations
 
 import heapq
+import importlib
 import os
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
@@ -42,15 +45,20 @@ class Scenario:
 
 
 Builder = Callable[[Scenario, Mapping[str, Any], int], Iterator[tuple[int, str, Any]]]
-BUILDERS: dict[str, Builder] = {}
-"""Stream name -> builder(scenario, section, seed) yielding (stamp_ns, topic, message)."""
+
+STREAMS = {
+    'if_snapshots': 'rfi_experiments.streams.if_snapshots',
+    'gnss_uwb': 'rfi_experiments.streams.gnss_uwb',
+    'correlators': 'rfi_experiments.streams.correlators',
+}
+"""Stream name -> module whose ``build(scenario, section, seed)`` yields (stamp_ns, topic, message)."""
 
 
-def builder(name: str) -> Callable[[Builder], Builder]:
-    def register(fn: Builder) -> Builder:
-        BUILDERS[name] = fn
-        return fn
-    return register
+def stream_builder(name: str) -> Builder:
+    """The ``build`` function of stream ``name``."""
+    if name not in STREAMS:
+        raise ScenarioError(f'unknown stream {name!r} (known: {", ".join(sorted(STREAMS))})')
+    return importlib.import_module(STREAMS[name]).build
 
 
 def scenarios_dir() -> Path:
@@ -96,8 +104,8 @@ def load_scenario(path: str | os.PathLike[str]) -> Scenario:
     if not isinstance(streams, dict) or not streams:
         raise ScenarioError(f'{path}: streams must map stream names to their settings')
     for name, section in streams.items():
-        if name not in BUILDERS:
-            raise ScenarioError(f'{path}: unknown stream {name!r} (known: {", ".join(sorted(BUILDERS))})')
+        if name not in STREAMS:
+            raise ScenarioError(f'{path}: unknown stream {name!r} (known: {", ".join(sorted(STREAMS))})')
         if section is not None and not isinstance(section, dict):
             raise ScenarioError(f'{path}: stream {name} must be a mapping of settings')
     return Scenario(name=str(data.get('name', path.stem)), description=str(data.get('description', '')),
@@ -108,7 +116,7 @@ def load_scenario(path: str | os.PathLike[str]) -> Scenario:
 def write_scenario_bag(scenario: Scenario, out: Path, *, overwrite: bool = False,
                        progress: bool = False) -> dict[str, int]:
     """Simulate every stream of ``scenario`` and write them, merged by stamp, to the bag ``out``."""
-    iterators = [BUILDERS[name](scenario, section, scenario.seed + 1000 * i)
+    iterators = [stream_builder(name)(scenario, section, scenario.seed + 1000 * i)
                  for i, (name, section) in enumerate(sorted(scenario.streams.items()))]
     bar = None
     if progress:
