@@ -10,14 +10,13 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass
 
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 
 from rfi_msgs.msg import IfSamples, JammerState
-from diagnostic_msgs.msg import DiagnosticArray
 from rfi_node_common.diagnostics import OK, WARN, StampTimer, diagnostic_array
 from rfi_node_common.main import run_node
-from rfi_node_common.params import parameter
-from rfi_node_common.params import declare
+from rfi_node_common.params import declare, parameter
 from rfi_node_common.qos import DATA_QOS
 from rfi_node_common.stamps import stamp_to_ns
 

@@ -10,17 +10,17 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass
 
-from rclpy.node import Node
-
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
+from rclpy.node import Node
+from sensor_msgs.msg import NavSatFix
+
 from rfi_msgs.msg import FusionStatus, GnssMeasurementArray, JammerState, UwbRange
 from rfi_node_common.diagnostics import OK, StampTimer, diagnostic_array
 from rfi_node_common.main import run_node
 from rfi_node_common.params import declare, parameter
 from rfi_node_common.qos import DATA_QOS
 from rfi_node_common.stamps import stamp_to_ns
-from sensor_msgs.msg import NavSatFix
 
 TOPICS = """topics:
   subscribes /gnss/measurements (rfi_msgs/GnssMeasurementArray), /uwb/ranges (rfi_msgs/UwbRange),
