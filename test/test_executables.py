@@ -19,6 +19,8 @@ EXECUTABLES = [
     ('rfi_experiments', 'record'),
     ('rfi_experiments', 'run'),
     ('rfi_experiments', 'simulate'),
+    ('rfi_experiments', 'rinex_to_bag'),
+    ('rfi_experiments', 'uwb_dataset_to_bag'),
 ]
 NODES = EXECUTABLES[:3]
 

@@ -27,6 +27,8 @@ setup(
             'record = rfi_experiments.record:main',
             'run = rfi_experiments.run:main',
             'simulate = rfi_experiments.simulate:main',
+            'rinex_to_bag = rfi_experiments.rinex_to_bag:main',
+            'uwb_dataset_to_bag = rfi_experiments.uwb_dataset_to_bag:main',
         ],
     },
 )

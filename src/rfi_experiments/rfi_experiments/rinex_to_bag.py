@@ -1,0 +1,236 @@
+"""``rinex_to_bag OBS NAV OUT``: real RINEX GPS observations -> a bag the fusion node can replay.
+
+Each observation epoch of the RINEX 2/3 file becomes one ``rfi_msgs/GnssMeasurementArray`` on
+``/gnss/measurements`` (GPS L1 C/A only, built by :class:`gnss_common.measurements.GnssEpochBuilder`:
+pseudorange, Doppler rate, C/N0, satellite state at transmission, broadcast clock, Klobuchar and
+Saastamoinen delays). When the observation header has an APPROX POSITION XYZ, the same point is
+written on ``/truth/position`` (``geometry_msgs/PointStamped``, frame "earth") at every epoch: it
+is the station's published coordinate, used as truth for a static receiver.
+
+Time base: header stamps and bag log times are GPS time on a Unix-like axis in integer ns, as
+defined in :mod:`gnss_common.gps_time` (no leap seconds; ahead of UTC Unix time by GPS-UTC).
+
+Satellites are skipped, and counted by reason, when they cannot be modelled (reasons of
+:data:`gnss_common.measurements.SKIP_REASONS`) or when they are below the elevation mask seen
+from the builder's reference position (``below_elevation_mask``; the mask cannot be applied
+in an epoch without a reference position, counted as ``epochs_without_reference``).
+
+Notes
+-----
+No new equations: measurement modelling is Cao et al., eq. 5-6 as implemented in
+:mod:`gnss_common.measurements`; the elevation is computed as there (Earth-rotation-corrected
+satellite position, Hofmann-Wellenhof et al. 2008, eq. 10.41-10.43).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from gnss_common.coordinates import azimuth_elevation
+from gnss_common.ephemeris import earth_rotation_correction
+from gnss_common.measurements import SKIP_REASONS, EpochBuildResult, GnssEpochBuilder
+from gnss_common.observations import GnssEpoch
+from gnss_common.rinex import RinexFormatError, read_rinex_nav, read_rinex_obs
+from rfi_experiments.bag_io import BagError, BagWriter
+from uwb_gnss_fusion.conversions import epoch_to_msg, point_to_msg
+
+PROG = "rinex_to_bag"
+EXIT_ERROR = 2
+MEASUREMENTS_TOPIC = "/gnss/measurements"
+TRUTH_TOPIC = "/truth/position"
+EARTH_FRAME_ID = "earth"
+BELOW_MASK = "below_elevation_mask"
+
+
+@dataclass(frozen=True)
+class RinexConversion:
+    """Epochs ready to be written, and what was dropped on the way.
+
+    Attributes:
+        epochs: one GnssEpoch per RINEX epoch (flags 0 and 1), in file order.
+        truth_position_ecef_m: header APPROX POSITION XYZ, m, (3,), or None when absent.
+        skipped: reason -> satellites skipped over the whole file (``SKIP_REASONS`` plus
+            ``below_elevation_mask``).
+        epochs_without_reference: epochs where no reference position existed, so the elevation
+            mask was not applied.
+    """
+
+    epochs: tuple[GnssEpoch, ...]
+    truth_position_ecef_m: np.ndarray | None
+    skipped: dict[str, int] = field(default_factory=dict)
+    epochs_without_reference: int = 0
+
+    @property
+    def measurement_count(self) -> int:
+        """Satellite measurements over all epochs."""
+        return sum(len(e.observations) for e in self.epochs)
+
+
+def apply_elevation_mask(result: EpochBuildResult, mask_rad: float) -> tuple[GnssEpoch, int, bool]:
+    """Drop the satellites of one built epoch whose elevation is below ``mask_rad``.
+
+    Args:
+        result: output of :meth:`GnssEpochBuilder.build`.
+        mask_rad: elevation mask, rad, in [-pi/2, pi/2].
+
+    Returns:
+        ``(epoch, n_dropped, applied)``: the masked epoch, the number of satellites removed, and
+        False when the epoch had no reference position (then nothing is removed).
+
+    Notes
+    -----
+    Elevation of the Earth-rotation-corrected satellite position seen from the builder's
+    reference position (as :mod:`gnss_common.measurements` does for the atmosphere models).
+    """
+    epoch = result.epoch
+    if not epoch.observations:
+        return epoch, 0, True
+    ref = np.asarray(result.reference_position_ecef_m, dtype=float)
+    if result.reference_source == "none" or not np.all(np.isfinite(ref)):
+        return epoch, 0, False
+    sats = np.array([o.satellite_position_ecef_m for o in epoch.observations], dtype=float)
+    rotated, _, _ = earth_rotation_correction(sats, ref)
+    _, el = azimuth_elevation(ref, rotated)
+    keep = tuple(o for o, e in zip(epoch.observations, np.atleast_1d(el), strict=True) if e >= mask_rad)
+    return replace(epoch, observations=keep), len(epoch.observations) - len(keep), True
+
+
+def convert_rinex(
+    obs_path: str | Path, nav_path: str | Path, elevation_mask_deg: float = 0.0
+) -> RinexConversion:
+    """Read a RINEX observation and navigation pair and build every epoch.
+
+    Args:
+        obs_path: RINEX 2.x / 3.x observation file.
+        nav_path: RINEX 2.x / 3.x navigation file (GPS LNAV records are used).
+        elevation_mask_deg: satellites below this elevation, deg, in [-90, 90], are dropped.
+
+    Returns:
+        :class:`RinexConversion`.
+
+    Raises:
+        RinexFormatError: unreadable or malformed file (the message names file and line).
+        ValueError: invalid mask, no epochs in the file, or an unusable header position.
+    """
+    if not (math.isfinite(elevation_mask_deg) and -90.0 <= elevation_mask_deg <= 90.0):
+        raise ValueError(f"--elevation-mask-deg must be in [-90, 90], got {elevation_mask_deg}")
+    obs = read_rinex_obs(obs_path)
+    nav = read_rinex_nav(nav_path)
+    if not obs.epochs:
+        raise ValueError(f"{obs_path}: no observation epochs")
+    builder = GnssEpochBuilder.from_rinex(obs, nav)
+    mask_rad = math.radians(elevation_mask_deg)
+    skipped = dict.fromkeys((*SKIP_REASONS, BELOW_MASK), 0)
+    epochs = []
+    without_ref = 0
+    for rinex_epoch in obs.epochs:
+        result = builder.build(rinex_epoch)
+        for reason, n in result.skipped.items():
+            skipped[reason] = skipped.get(reason, 0) + n
+        epoch, dropped, applied = apply_elevation_mask(result, mask_rad)
+        skipped[BELOW_MASK] += dropped
+        without_ref += 0 if applied else 1
+        epochs.append(epoch)
+    truth = obs.header.approx_position_ecef_m
+    return RinexConversion(
+        epochs=tuple(epochs),
+        truth_position_ecef_m=None if truth is None else np.asarray(truth, dtype=float).copy(),
+        skipped=skipped,
+        epochs_without_reference=without_ref,
+    )
+
+
+def write_bag(conversion: RinexConversion, out: str | Path, *, overwrite: bool = False) -> dict[str, int]:
+    """Write the converted epochs (and truth) to a bag; log time = header stamp.
+
+    Args:
+        conversion: output of :func:`convert_rinex`.
+        out: bag directory to create.
+        overwrite: replace an existing bag.
+
+    Returns:
+        Topic -> number of messages written.
+
+    Raises:
+        BagError: the output exists (without ``overwrite``) or cannot be written.
+    """
+    with BagWriter(out, overwrite=overwrite) as bag:
+        for epoch in conversion.epochs:
+            bag.write(MEASUREMENTS_TOPIC, epoch_to_msg(epoch, EARTH_FRAME_ID), epoch.stamp_ns)
+            if conversion.truth_position_ecef_m is not None:
+                bag.write(TRUTH_TOPIC, point_to_msg(epoch.stamp_ns, conversion.truth_position_ecef_m,
+                                                    EARTH_FRAME_ID), epoch.stamp_ns)
+        return dict(bag.counts)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog=PROG,
+        description=(
+            "Convert a RINEX 2/3 GPS observation file and its broadcast navigation file into a bag: "
+            f"{MEASUREMENTS_TOPIC} (rfi_msgs/GnssMeasurementArray, one per epoch, GPS L1 C/A) and "
+            f"{TRUTH_TOPIC} (geometry_msgs/PointStamped, frame 'earth'). The truth is the header's "
+            "APPROX POSITION XYZ, i.e. the station's published position, repeated at every epoch and "
+            "used as truth for a static receiver; it is omitted when the header has none. Stamps are "
+            "GPS time (no leap seconds) in ns since 1970."
+        ),
+    )
+    parser.add_argument("obs", help="RINEX observation file (2.x or 3.x)")
+    parser.add_argument("nav", help="RINEX navigation file with the GPS broadcast ephemerides")
+    parser.add_argument("out", help="bag directory to write")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing bag")
+    parser.add_argument("--elevation-mask-deg", type=float, default=0.0, metavar="X",
+                        help="drop satellites below X degrees of elevation (default 0: below the horizon)")
+    return parser
+
+
+def _fail(message: str) -> int:
+    print(f"{PROG}: error: {' '.join(str(message).split())}", file=sys.stderr)
+    return EXIT_ERROR
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Console entry point. ``argv`` is a full argument vector (``argv[0]`` is the program name),
+    as ``sys.argv``, like the suite's other tools. Returns 0, or 2 on any input error."""
+    argv = list(sys.argv if argv is None else argv)
+    try:
+        args = build_parser().parse_args(argv[1:])
+    except SystemExit as stop:  # --help (0) or a usage error (2, argparse printed one line)
+        return int(stop.code or 0)
+    out = Path(args.out)
+    if out.exists() and not args.overwrite:
+        return _fail(f"{out} exists already (remove it or pass --overwrite)")
+    try:
+        conversion = convert_rinex(args.obs, args.nav, args.elevation_mask_deg)
+        counts = write_bag(conversion, out, overwrite=args.overwrite)
+    except (RinexFormatError, BagError, ValueError, OSError) as err:
+        return _fail(str(err))
+    print(f"{PROG}: wrote {out}")
+    print(f"  epochs        {len(conversion.epochs)}")
+    print(f"  measurements  {conversion.measurement_count}")
+    empty = sum(1 for e in conversion.epochs if not e.observations)
+    if empty:
+        print(f"  epochs without measurements  {empty}")
+    has_truth = conversion.truth_position_ecef_m is not None
+    truth = "header APPROX POSITION" if has_truth else "none (no APPROX POSITION)"
+    print(f"  truth         {truth}")
+    for topic, n in sorted(counts.items()):
+        print(f"  {topic}  {n}")
+    print("  skipped satellites by reason:")
+    for reason, n in conversion.skipped.items():
+        print(f"    {reason:<26} {n}")
+    if conversion.epochs_without_reference:
+        n_unmasked = conversion.epochs_without_reference
+        print(f"  epochs without reference position (mask not applied): {n_unmasked}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
