@@ -1,0 +1,496 @@
+"""GNSS front-end IF sample simulator: GPS L1 C/A signals, thermal noise and jammers.
+
+Generates what a front end delivers (quantised counts plus the volts-per-count scale) and the truth
+(jammer type, instantaneous frequency per sample, sweep starts and period), seedable and in chunks
+with continuous phase: a stream cut into consecutive blocks equals the same stream made at once.
+
+Power convention: a 1-ohm load, powers in mW, so a real sample ``x`` (sqrt(mW)) has power
+``mean(x**2)`` and a complex sample ``mean(|x|**2)``. A real tone ``sqrt(2 P) cos(.)`` and a complex
+tone ``sqrt(P) exp(j .)`` both have power P. Thermal noise is white over the sampled band with
+density ``noise_density_dbm_per_mhz`` counted over ``noise_bandwidth_hz`` (default: the whole
+sampled band, fs/2 real or fs complex), i.e. the noise power is N = N0 * B_noise spread evenly
+over the sampled band; J/N = J/S + S - N.
+
+Frequencies: a jammer's ``*_hz`` frequency is relative to the RF centre (positive above it). Digital
+frequency (cycles/sample) of a real IF stream: ``(IF + f_rel) / fs`` for IF > 0 and
+``(|IF| - f_rel) / fs`` for IF < 0 (spectral inversion); complex: ``(IF + f_rel) / fs``.
+
+Defaults reproduce Kang et al. (Sec. 2.1, 4): fs 38.192 MHz, IF 9.548 MHz, GPS signal -130 dBm,
+noise -114 dBm/MHz, chirp sweep rate 1e12 Hz/s starting at digital frequency 0.1832, J/S 30 dB.
+The paper leaves the sweep period open; the default here sweeps symmetrically about the IF
+(0.1832 .. 0.3168, 5.10 MHz, period 5.10 us = 195 samples).
+
+Example
+-------
+>>> sim = IfSimulator(FrontEndConfig(), jammers=(ChirpJammer(),), seed=1)
+>>> blk = sim.generate(38192)          # 1 ms
+>>> x = blk.values()                   # float64 volts (sqrt(mW))
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gnss_common.constants import (
+    GPS_CA_CHIP_RATE_HZ,
+    GPS_CA_CODE_LENGTH_CHIPS,
+    GPS_L1_FREQUENCY_HZ,
+    GPS_NAV_BIT_RATE_HZ,
+)
+from rfi_experiments.sim.gps_ca import G2_DELAY_CHIPS, ca_code
+
+PAPER_SAMPLE_RATE_HZ = 38.192e6
+"""Kang et al. front-end sample rate, Hz (Sec. 2.1)."""
+PAPER_IF_HZ = 9.548e6
+"""Kang et al. intermediate frequency, Hz (Sec. 2.1)."""
+PAPER_CHIRP_F0_DIGITAL = 0.1832
+"""Kang et al. chirp initial frequency, cycles/sample (Sec. 2.1)."""
+PAPER_SWEEP_RATE_HZ_PER_S = 1e12
+"""Kang et al. (after Mitch et al. 2011) chirp sweep rate, Hz/s."""
+
+NONE, CW, CHIRP, WIDEBAND = 0, 1, 2, 3
+"""Jammer type codes, identical to rfi_msgs/JammerState."""
+
+
+def _db_to_lin(db: float) -> float:
+    return 10.0 ** (db / 10.0)
+
+
+@dataclass(frozen=True)
+class FrontEndConfig:
+    """Front-end and link-budget parameters.
+
+    Attributes:
+        sample_rate_hz: sample rate, Hz (complex: I/Q pairs per second), > 0.
+        intermediate_frequency_hz: IF, Hz; 0 for complex baseband; < 0 for spectral inversion.
+        is_complex: True for I/Q samples.
+        bits: quantisation per real value, 1..16. 1-3 bits: sign/magnitude odd levels
+            (+-1, +-3, ..., as MAX2769-type front ends); 4-16 bits: two's complement.
+        clip_sigma: AGC full-scale half-range in units of the total input RMS (per real value).
+            None: 2.0 for bits <= 3 (2-bit threshold at 1 sigma), 4.0 otherwise.
+        noise_density_dbm_per_mhz: thermal noise density, dBm/MHz (Kang et al.: -114).
+        noise_bandwidth_hz: bandwidth over which the noise power is counted, Hz; None: the whole
+            sampled band (fs/2 real, fs complex).
+        signal_power_dbm: received power of each GPS signal, dBm (Kang et al.: -130).
+    """
+
+    sample_rate_hz: float = PAPER_SAMPLE_RATE_HZ
+    intermediate_frequency_hz: float = PAPER_IF_HZ
+    is_complex: bool = False
+    bits: int = 8
+    clip_sigma: float | None = None
+    noise_density_dbm_per_mhz: float = -114.0
+    noise_bandwidth_hz: float | None = None
+    signal_power_dbm: float = -130.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.sample_rate_hz) and self.sample_rate_hz > 0):
+            raise ValueError(f"sample_rate_hz must be finite and > 0, got {self.sample_rate_hz}")
+        if not math.isfinite(self.intermediate_frequency_hz):
+            raise ValueError("intermediate_frequency_hz must be finite")
+        nyq = self.sample_rate_hz if self.is_complex else self.sample_rate_hz / 2
+        if abs(self.intermediate_frequency_hz) >= nyq:
+            raise ValueError(f"|IF| must be below {nyq} Hz, got {self.intermediate_frequency_hz}")
+        if not 1 <= int(self.bits) <= 16:
+            raise ValueError(f"bits must be in 1..16, got {self.bits}")
+        if self.clip_sigma is not None and not self.clip_sigma > 0:
+            raise ValueError("clip_sigma must be > 0")
+        if self.noise_bandwidth_hz is not None and not self.noise_bandwidth_hz > 0:
+            raise ValueError("noise_bandwidth_hz must be > 0")
+
+    @property
+    def band_hz(self) -> float:
+        """Sampled (Nyquist) bandwidth, Hz."""
+        return self.sample_rate_hz if self.is_complex else self.sample_rate_hz / 2
+
+    @property
+    def noise_power_mw(self) -> float:
+        """Thermal noise power N, mW."""
+        bw = self.band_hz if self.noise_bandwidth_hz is None else self.noise_bandwidth_hz
+        return _db_to_lin(self.noise_density_dbm_per_mhz) * bw / 1e6
+
+    @property
+    def signal_power_mw(self) -> float:
+        """Nominal GPS signal power S, mW."""
+        return _db_to_lin(self.signal_power_dbm)
+
+    def digital_frequency(self, f_rel_hz: np.ndarray | float) -> np.ndarray | float:
+        """Digital frequency, cycles/sample, of an RF offset (see module docstring)."""
+        fif = self.intermediate_frequency_hz
+        if not self.is_complex and fif < 0:
+            return (-fif - np.asarray(f_rel_hz)) / self.sample_rate_hz
+        return (fif + np.asarray(f_rel_hz)) / self.sample_rate_hz
+
+
+@dataclass(frozen=True)
+class CwJammer:
+    """Single-tone continuous wave jammer (Kang et al., eq. 6).
+
+    Attributes:
+        frequency_hz: tone frequency relative to the RF centre, Hz (paper: 0, i.e. at the IF).
+        js_db: jammer-to-signal ratio, dB.
+        phase_rad: initial phase, rad.
+    """
+
+    frequency_hz: float = 0.0
+    js_db: float = 30.0
+    phase_rad: float = 0.0
+
+
+@dataclass(frozen=True)
+class ChirpJammer:
+    """Saw-tooth chirp jammer (Kang et al., eq. 2-5) with continuous phase across sweeps.
+
+    The instantaneous frequency is ``start_frequency_hz + sweep_rate * tau`` with
+    ``tau = (t + time_offset_s) mod sweep_period_s``.
+
+    Attributes:
+        start_frequency_hz: frequency at each sweep start, relative to the RF centre, Hz.
+            Default: digital 0.1832 at the paper's fs and IF.
+        sweep_rate_hz_per_s: sweep rate, Hz/s (may be negative for a down-chirp).
+        sweep_period_s: sweep period, s. Default: the symmetric sweep 0.1832..0.3168.
+        js_db: jammer-to-signal ratio, dB.
+        phase_rad: initial phase, rad.
+        time_offset_s: position inside the sweep at sample 0, s.
+    """
+
+    start_frequency_hz: float = PAPER_CHIRP_F0_DIGITAL * PAPER_SAMPLE_RATE_HZ - PAPER_IF_HZ
+    sweep_rate_hz_per_s: float = PAPER_SWEEP_RATE_HZ_PER_S
+    sweep_period_s: float = 2 * (PAPER_IF_HZ - PAPER_CHIRP_F0_DIGITAL * PAPER_SAMPLE_RATE_HZ) / 1e12
+    js_db: float = 30.0
+    phase_rad: float = 0.0
+    time_offset_s: float = 0.0
+
+    @property
+    def bandwidth_hz(self) -> float:
+        """Swept bandwidth, Hz."""
+        return abs(self.sweep_rate_hz_per_s) * self.sweep_period_s
+
+
+@dataclass(frozen=True)
+class NoiseJammer:
+    """Band-limited Gaussian noise jammer (flat spectrum, FIR-shaped).
+
+    Attributes:
+        center_frequency_hz: centre relative to the RF centre, Hz.
+        bandwidth_hz: two-sided bandwidth, Hz.
+        js_db: jammer-to-signal ratio, dB.
+    """
+
+    center_frequency_hz: float = 0.0
+    bandwidth_hz: float = 2.0e6
+    js_db: float = 30.0
+
+
+Jammer = CwJammer | ChirpJammer | NoiseJammer
+
+
+@dataclass(frozen=True)
+class GpsSatellite:
+    """One GPS L1 C/A signal.
+
+    Attributes:
+        prn: 1..37.
+        doppler_hz: carrier Doppler, Hz (the code rate is scaled by 1 + doppler/L1).
+        code_phase_chips: code phase at sample 0, chips, [0, 1023).
+        carrier_phase_rad: carrier phase at sample 0, rad.
+        power_dbm: received power, dBm; None: the front end's ``signal_power_dbm``.
+    """
+
+    prn: int = 1
+    doppler_hz: float = 0.0
+    code_phase_chips: float = 0.0
+    carrier_phase_rad: float = 0.0
+    power_dbm: float | None = None
+
+
+@dataclass(frozen=True)
+class IfTruth:
+    """Truth of one generated block.
+
+    Attributes:
+        jammer_type: dominant (strongest) jammer type code (NONE, CW, CHIRP, WIDEBAND).
+        jn_db: J/N of each jammer, dB, shape (n_jammers,).
+        frequency_hz: instantaneous frequency of each CW/chirp jammer relative to the RF centre,
+            Hz, shape (n_jammers, n); NaN for noise jammers.
+        digital_frequency: the same in cycles/sample of the sampled stream, shape (n_jammers, n).
+        sweep_start_indices: absolute sample indices of sweep starts inside the block, per jammer.
+        sweep_period_s: sweep period per jammer, s (NaN unless chirp).
+    """
+
+    jammer_type: int
+    jn_db: np.ndarray
+    frequency_hz: np.ndarray
+    digital_frequency: np.ndarray
+    sweep_start_indices: tuple[np.ndarray, ...]
+    sweep_period_s: np.ndarray
+
+
+@dataclass(frozen=True)
+class IfBlock:
+    """One block as a front end delivers it, plus truth.
+
+    Attributes:
+        counts: quantised values; real: shape (n,); complex: shape (2n,) interleaved I, Q. int8 for
+            bits <= 8, else int16.
+        scale: volts (sqrt(mW) into 1 ohm) per count.
+        first_sample_index: absolute index of the first sample (complex: I/Q pair index).
+        sample_rate_hz, intermediate_frequency_hz, is_complex, bits: as the front end.
+        truth: IfTruth.
+    """
+
+    counts: np.ndarray
+    scale: float
+    first_sample_index: int
+    sample_rate_hz: float
+    intermediate_frequency_hz: float
+    is_complex: bool
+    bits: int
+    truth: IfTruth = field(repr=False)
+
+    def values(self) -> np.ndarray:
+        """Samples in volts: float64 shape (n,) real or complex128 shape (n,)."""
+        v = self.counts.astype(np.float64) * self.scale
+        if self.is_complex:
+            return v[0::2] + 1j * v[1::2]
+        return v
+
+
+def _quantise(x: np.ndarray, bits: int, step: float) -> np.ndarray:
+    """Quantise real values with the given step (volts): odd levels for bits <= 3, else two's complement."""
+    if bits <= 3:
+        top = 2 ** bits - 1
+        c = 2.0 * np.floor(x / step) + 1.0
+        return np.clip(c, -top, top)
+    lo, hi = -(2 ** (bits - 1)), 2 ** (bits - 1) - 1
+    return np.clip(np.round(x / step), lo, hi)
+
+
+class IfSimulator:
+    """Stateful, seedable IF stream generator (chunks are continuous in phase and in noise).
+
+    Args:
+        front_end: FrontEndConfig.
+        jammers: tuple of CwJammer / ChirpJammer / NoiseJammer.
+        satellites: tuple of GpsSatellite (default: PRN 1, 1 kHz Doppler).
+        seed: int seed for all random streams (noise, noise jammers, navigation bits).
+        add_jammer_to: optional float/complex array of real samples (volts) to add the jammers
+            and noise to instead of simulating GPS; see ``generate``.
+
+    Notes:
+        Random streams are split with ``np.random.SeedSequence(seed).spawn`` so that each draws
+        sequentially regardless of the chunk sizes (float draws are split-invariant in numpy's
+        Generator).
+    """
+
+    _NOISE_JAMMER_TAPS = 129
+
+    def __init__(self, front_end: FrontEndConfig = FrontEndConfig(), jammers: tuple[Jammer, ...] = (),
+                 satellites: tuple[GpsSatellite, ...] = (GpsSatellite(prn=1, doppler_hz=1000.0),),
+                 seed: int = 0) -> None:
+        for j in jammers:
+            if not isinstance(j, (CwJammer, ChirpJammer, NoiseJammer)):
+                raise ValueError(f"unknown jammer {j!r}")
+            if isinstance(j, ChirpJammer) and not j.sweep_period_s > 0:
+                raise ValueError("sweep_period_s must be > 0")
+            if isinstance(j, NoiseJammer) and not 0 < j.bandwidth_hz <= front_end.sample_rate_hz:
+                raise ValueError("noise jammer bandwidth must be in (0, fs]")
+        for s in satellites:
+            if s.prn not in G2_DELAY_CHIPS:
+                raise ValueError(f"unknown PRN {s.prn}")
+        self.front_end = front_end
+        self.jammers = tuple(jammers)
+        self.satellites = tuple(satellites)
+        ss = np.random.SeedSequence(seed)
+        children = ss.spawn(2 + len(jammers) + len(satellites))
+        self._rng_noise = np.random.default_rng(children[0])
+        self._rng_jam = [np.random.default_rng(c) for c in children[2:2 + len(jammers)]]
+        self._rng_nav = [np.random.default_rng(c) for c in children[2 + len(jammers):]]
+        self._nav_bits: list[np.ndarray] = [np.zeros(0, dtype=np.float64) for _ in satellites]
+        self._jam_hist = [np.zeros(self._NOISE_JAMMER_TAPS - 1, dtype=np.complex128) for _ in jammers]
+        self._taps = [self._noise_jammer_taps(j) if isinstance(j, NoiseJammer) else None for j in jammers]
+        self._codes = [ca_code(s.prn).astype(np.float64) for s in satellites]
+        self._next_index = 0
+        fe = front_end
+        total = fe.noise_power_mw + sum(self._sat_power(s) for s in satellites)
+        total += sum(self.jammer_power_mw(j) for j in jammers)
+        per_real = total / 2 if fe.is_complex else total
+        clip = fe.clip_sigma if fe.clip_sigma is not None else (2.0 if fe.bits <= 3 else 4.0)
+        levels = 2 ** fe.bits
+        self.step = 2.0 * clip * math.sqrt(per_real) / levels
+        """Quantiser step (volts). Fixed by the configured powers (an ideal AGC), not by the data."""
+        self.scale = self.step / 2 if fe.bits <= 3 else self.step
+        """Volts per count."""
+
+    # ---- powers --------------------------------------------------------------------------
+    def _sat_power(self, s: GpsSatellite) -> float:
+        return _db_to_lin(s.power_dbm) if s.power_dbm is not None else self.front_end.signal_power_mw
+
+    def jammer_power_mw(self, j: Jammer) -> float:
+        """Jammer power J = S * 10^(J/S / 10), mW."""
+        return self.front_end.signal_power_mw * _db_to_lin(j.js_db)
+
+    def jn_db(self, j: Jammer) -> float:
+        """J/N of a jammer, dB."""
+        return 10 * math.log10(self.jammer_power_mw(j) / self.front_end.noise_power_mw)
+
+    def _noise_jammer_taps(self, j: NoiseJammer) -> np.ndarray:
+        from scipy.signal import firwin
+        cutoff = min(j.bandwidth_hz / 2, 0.999 * self.front_end.sample_rate_hz / 2)
+        h = firwin(self._NOISE_JAMMER_TAPS, cutoff, fs=self.front_end.sample_rate_hz)
+        return h / np.sqrt(np.sum(h ** 2))  # unit power gain for white input
+
+    # ---- generation ----------------------------------------------------------------------
+    def _phase_to_signal(self, amp: float, phase: np.ndarray) -> np.ndarray:
+        """Tone of power amp**2 (complex) / amp**2 (real, amplitude sqrt 2 amp) from its phase."""
+        if self.front_end.is_complex:
+            return amp * np.exp(1j * phase)
+        return math.sqrt(2.0) * amp * np.cos(phase)
+
+    def _signed(self, f_rel_hz: np.ndarray | float) -> np.ndarray | float:
+        """Frequency (Hz) that the sampled stream carries for an RF offset (spectral inversion)."""
+        fe = self.front_end
+        if not fe.is_complex and fe.intermediate_frequency_hz < 0:
+            return -fe.intermediate_frequency_hz - np.asarray(f_rel_hz)
+        return fe.intermediate_frequency_hz + np.asarray(f_rel_hz)
+
+    def _gps(self, n_idx: np.ndarray, t: np.ndarray) -> np.ndarray:
+        fe = self.front_end
+        out = np.zeros(n_idx.size, dtype=np.complex128 if fe.is_complex else np.float64)
+        for k, s in enumerate(self.satellites):
+            rate = GPS_CA_CHIP_RATE_HZ * (1.0 + s.doppler_hz / GPS_L1_FREQUENCY_HZ)
+            chips = s.code_phase_chips + rate * t
+            chip_idx = np.floor(chips).astype(np.int64)
+            code = self._codes[k][chip_idx % GPS_CA_CODE_LENGTH_CHIPS]
+            bit_idx = np.floor(chips / (GPS_CA_CHIP_RATE_HZ / GPS_NAV_BIT_RATE_HZ)).astype(np.int64)
+            need = int(bit_idx.max()) + 1 if bit_idx.size else 0
+            have = self._nav_bits[k].size
+            if need > have:
+                new = np.where(self._rng_nav[k].random(need - have) < 0.5, 1.0, -1.0)
+                self._nav_bits[k] = np.concatenate([self._nav_bits[k], new])
+            data = self._nav_bits[k][np.maximum(bit_idx, 0)]
+            phase = 2 * np.pi * (self._signed(s.doppler_hz) * t) + s.carrier_phase_rad
+            out += data * code * self._phase_to_signal(math.sqrt(self._sat_power(s)), phase)
+        return out
+
+    def _chirp(self, j: ChirpJammer, t: np.ndarray,
+               n_idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        T = j.sweep_period_s
+        u = t + j.time_offset_s
+        k = np.floor(u / T)
+        tau = u - k * T
+        f_start = float(self._signed(j.start_frequency_hz))
+        rate = j.sweep_rate_hz_per_s if not (not self.front_end.is_complex
+                                               and self.front_end.intermediate_frequency_hz < 0) \
+            else -j.sweep_rate_hz_per_s
+        # phase accumulated over one whole sweep, reduced mod 1 cycle (exact integer multiples)
+        cyc_sweep = f_start * T + 0.5 * rate * T * T
+        frac_sweep = cyc_sweep - math.floor(cyc_sweep)
+        k0 = math.floor(j.time_offset_s / T)
+        tau0 = j.time_offset_s - k0 * T
+        cyc0 = f_start * tau0 + 0.5 * rate * tau0 * tau0
+        cycles = np.mod((k - k0) * frac_sweep, 1.0) + f_start * tau + 0.5 * rate * tau * tau - cyc0
+        phase = 2 * np.pi * cycles + j.phase_rad
+        f_rel = j.start_frequency_hz + j.sweep_rate_hz_per_s * tau
+        # sweep starts: samples whose sweep counter differs from the previous sample's
+        kprev = np.floor((t - 1.0 / self.front_end.sample_rate_hz + j.time_offset_s) / T)
+        starts = n_idx[(k != kprev)]
+        return phase, f_rel, starts
+
+    def _noise_jammer(self, idx: int, j: NoiseJammer, t: np.ndarray) -> np.ndarray:
+        n = t.size
+        rng = self._rng_jam[idx]
+        g = rng.standard_normal(2 * n)  # interleaved draws keep the stream split-invariant
+        w = (g[0::2] + 1j * g[1::2]) / math.sqrt(2.0)
+        buf = np.concatenate([self._jam_hist[idx], w])
+        self._jam_hist[idx] = buf[buf.size - (self._NOISE_JAMMER_TAPS - 1):]
+        y = np.convolve(buf, self._taps[idx], mode="valid")  # unit power, complex
+        y = y * np.exp(2j * np.pi * self._signed(j.center_frequency_hz) * t)
+        p = self.jammer_power_mw(j)
+        if self.front_end.is_complex:
+            return math.sqrt(p) * y
+        return math.sqrt(2.0 * p) * y.real
+
+    def generate(self, n_samples: int, add_to: np.ndarray | None = None) -> IfBlock:
+        """Generate the next ``n_samples`` samples of the stream.
+
+        Args:
+            n_samples: number of samples (complex: I/Q pairs), >= 0.
+            add_to: optional real recording in volts, shape (n_samples,) (complex for a complex
+                front end). When given, the jammers are added to it and no GPS or thermal noise is
+                simulated (half-simulated data); it is quantised with the same step.
+
+        Returns:
+            IfBlock with counts, scale and truth.
+        """
+        if n_samples < 0:
+            raise ValueError("n_samples must be >= 0")
+        fe = self.front_end
+        fs = fe.sample_rate_hz
+        n_idx = np.arange(self._next_index, self._next_index + n_samples, dtype=np.int64)
+        t = n_idx / fs
+        self._next_index += n_samples
+        if add_to is not None:
+            x = np.asarray(add_to)
+            if x.shape != (n_samples,):
+                raise ValueError("add_to must have shape (n_samples,)")
+            x = x.astype(np.complex128 if fe.is_complex else np.float64)
+        else:
+            x = self._gps(n_idx, t)
+            sig = math.sqrt(fe.noise_power_mw)
+            if fe.is_complex:
+                g = self._rng_noise.standard_normal(2 * n_samples)
+                x = x + sig / math.sqrt(2.0) * (g[0::2] + 1j * g[1::2])
+            else:
+                x = x + sig * self._rng_noise.standard_normal(n_samples)
+        nj = len(self.jammers)
+        f_true = np.full((nj, n_samples), np.nan)
+        starts: list[np.ndarray] = []
+        periods = np.full(nj, np.nan)
+        for i, j in enumerate(self.jammers):
+            amp = math.sqrt(self.jammer_power_mw(j))
+            if isinstance(j, CwJammer):
+                phase = 2 * np.pi * self._signed(j.frequency_hz) * t + j.phase_rad
+                x = x + self._phase_to_signal(amp, phase)
+                f_true[i] = j.frequency_hz
+                starts.append(np.zeros(0, dtype=np.int64))
+            elif isinstance(j, ChirpJammer):
+                phase, f_rel, st = self._chirp(j, t, n_idx)
+                x = x + self._phase_to_signal(amp, phase)
+                f_true[i] = f_rel
+                starts.append(st)
+                periods[i] = j.sweep_period_s
+            else:
+                x = x + self._noise_jammer(i, j, t)
+                starts.append(np.zeros(0, dtype=np.int64))
+        dtype = np.int8 if fe.bits <= 8 else np.int16
+        if fe.is_complex:
+            c = np.empty(2 * n_samples, dtype=dtype)
+            c[0::2] = _quantise(x.real, fe.bits, self.step)
+            c[1::2] = _quantise(x.imag, fe.bits, self.step)
+        else:
+            c = _quantise(x, fe.bits, self.step).astype(dtype)
+        jn = np.array([self.jn_db(j) for j in self.jammers])
+        if nj:
+            strongest = self.jammers[int(np.argmax(jn))]
+            jtype = CW if isinstance(strongest, CwJammer) else CHIRP if isinstance(strongest, ChirpJammer) \
+                else WIDEBAND
+        else:
+            jtype = NONE
+        truth = IfTruth(jammer_type=jtype, jn_db=jn, frequency_hz=f_true,
+                        digital_frequency=np.asarray(fe.digital_frequency(f_true), dtype=np.float64),
+                        sweep_start_indices=tuple(starts), sweep_period_s=periods)
+        first = int(n_idx[0]) if n_samples else self._next_index
+        return IfBlock(counts=c, scale=self.scale, first_sample_index=first, sample_rate_hz=fs,
+                       intermediate_frequency_hz=fe.intermediate_frequency_hz,
+                       is_complex=fe.is_complex, bits=fe.bits, truth=truth)
+
+
+def simulate(n_samples: int, front_end: FrontEndConfig = FrontEndConfig(), jammers: tuple[Jammer, ...] = (),
+             satellites: tuple[GpsSatellite, ...] = (GpsSatellite(prn=1, doppler_hz=1000.0),),
+             seed: int = 0) -> IfBlock:
+    """One-shot convenience wrapper: ``IfSimulator(...).generate(n_samples)``."""
+    return IfSimulator(front_end, jammers, satellites, seed).generate(n_samples)

@@ -1,0 +1,220 @@
+"""Block-level jammer identification: NONE / CW / CHIRP / WIDEBAND / UNKNOWN, with a confidence.
+
+Features of one block (vectorised numpy, no per-sample Python):
+
+* ``jn_power_db``: J/N from the block power P against the calibrated noise floor N,
+  ``10 log10(P / N - 1)`` (NaN until a floor is known).
+* Welch PSD (Hann, ``nfft`` bins, non-overlapping frames) whitened by the front end's noise shape
+  ``template`` (learned during calibration, median-smoothed across frequency so that a tone never
+  enters it; flat before). The noise scale is the median whitened bin; bins whose excess exceeds
+  ``max(sig_sigma / sqrt(frames), min_excess)`` times the scale, and is within ``sidelobe_db``
+  of the strongest excess, are "occupied".
+  ``jn_spectral_db`` = occupied excess power over noise power: a narrowband J/N that needs no
+  absolute calibration and survives an AGC (which hides a jammer from the block power).
+* ``occupancy``: occupied bins / all bins. A CW occupies the Hann main lobe (<= 4 bins); a chirp
+  its swept band; wideband noise most bins (then the median scale itself rises and only the
+  power J/N sees it).
+* The tracker: period lock (Kang et al., Sec. 3.2) and the sweep rate estimate.
+
+Decision (thresholds are parameters of ``ClassifierParams``):
+
+    narrowband = jn_spectral_db >= detect_jn_db
+    CW       if narrowband and occupancy <= cw_max_occupancy
+    CHIRP    if narrowband and occupancy > cw_max_occupancy and the tracker's period is locked
+             with a swept band |df| T that covers at least half the occupied band
+             (or, before lock, |sweep rate| >= min_chirp_rate = 1.5e11 Hz/s at 38 MS/s; the rate
+             estimate of a tracker on band-limited noise stays near 4e10 Hz/s)
+    WIDEBAND if jn_power_db >= detect_jn_db and no CW/CHIRP (noise-like power rise, or a
+             band-limited noise jammer that occupies bins but shows no sweep)
+    NONE     otherwise; UNKNOWN while the floor is still being learned and nothing narrowband is
+             seen.
+
+Confidence: a logistic function of the margin (in dB) of the deciding J/N over its threshold,
+times a structure term (CW: how far occupancy is below the CW limit; CHIRP: 1 when the period is
+locked, 0.6 before). For NONE it is the complement of the detection logistic.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import median_filter
+
+NONE, CW, CHIRP, WIDEBAND, UNKNOWN = 0, 1, 2, 3, 4
+"""Type codes, identical to rfi_msgs/JammerState."""
+
+
+@dataclass(frozen=True)
+class ClassifierParams:
+    """Identification thresholds.
+
+    Attributes:
+        nfft: Welch frame length, samples (power of two, >= 32).
+        max_frames: at most this many frames per block (evenly spaced), >= 8.
+        sig_sigma: significance of an occupied bin, in standard deviations of the Welch average.
+        min_excess: minimum relative excess of an occupied bin over the noise (guards template
+            mismatch between captures), > 0.
+        detect_jn_db: J/N threshold of a jammer, dB. Front-end spurs of real captures are around
+            -11 to -20 dB; a jammer that matters is J/N > 0 dB.
+        cw_max_occupancy: largest occupied fraction of the band of a CW, (0, 1).
+        min_chirp_rate: |sweep rate| that marks a chirp before the period locks, cycles/sample^2.
+        template_smooth_bins: width of the median filter that smooths the learned noise template.
+        sidelobe_db: bins more than this below the strongest excess are not occupied (Hann
+            sidelobes of a strong CW are below -31 dB), dB.
+        confidence_slope_db: dB margin that maps to a logistic confidence of 0.73.
+    """
+
+    nfft: int = 256
+    max_frames: int = 256
+    sig_sigma: float = 6.0
+    min_excess: float = 0.5
+    detect_jn_db: float = -6.0
+    cw_max_occupancy: float = 0.05
+    min_chirp_rate: float = 1e-4
+    template_smooth_bins: int = 15
+    sidelobe_db: float = 30.0
+    confidence_slope_db: float = 2.0
+
+    def __post_init__(self) -> None:
+        if self.nfft < 32 or self.nfft & (self.nfft - 1):
+            raise ValueError("nfft must be a power of two >= 32")
+        if self.max_frames < 8:
+            raise ValueError("max_frames must be >= 8")
+        for name in ("sig_sigma", "min_excess", "min_chirp_rate", "confidence_slope_db"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be finite and > 0")
+        if not math.isfinite(self.detect_jn_db):
+            raise ValueError("detect_jn_db must be finite")
+        if not 0 < self.cw_max_occupancy < 1:
+            raise ValueError("cw_max_occupancy must be in (0, 1)")
+        if self.template_smooth_bins < 1:
+            raise ValueError("template_smooth_bins must be >= 1")
+
+
+@dataclass(frozen=True)
+class BlockFeatures:
+    """Spectral features of one block (see module docstring); powers in sample units^2."""
+
+    power: float
+    psd: np.ndarray          # shape (bins,), Welch PSD normalised so that sum == power
+    frames: int
+    noise_scale: float       # median whitened bin (noise power per bin / template)
+    jn_spectral_db: float
+    occupancy: float
+    peak_bin: int
+    peak_frequency: float    # parabolic-interpolated Welch peak, cycles/sample (complex: signed)
+
+
+def welch_psd(x: np.ndarray, nfft: int, max_frames: int) -> tuple[np.ndarray, int]:
+    """Welch PSD of a block: Hann window, non-overlapping frames, at most max_frames frames.
+
+    Args:
+        x: samples, shape (n,), float or complex, n >= nfft.
+        nfft: frame length.
+        max_frames: frame cap (evenly spaced frames).
+
+    Returns:
+        (psd, frames): psd shape (nfft,) complex input (fftshift order: -fs/2..fs/2) or
+        (nfft // 2 + 1,) real input, normalised so that psd.sum() equals the mean power.
+    """
+    nfr = x.size // nfft
+    if nfr < 1:
+        raise ValueError("block shorter than one frame")
+    sel = np.linspace(0, nfr - 1, min(nfr, max_frames)).astype(np.int64)
+    fr = x[: nfr * nfft].reshape(nfr, nfft)[sel]
+    w = np.hanning(nfft)
+    if np.iscomplexobj(x):
+        p = np.mean(np.abs(np.fft.fft(fr * w, axis=1)) ** 2, axis=0)
+        p = np.fft.fftshift(p)
+    else:
+        p = np.mean(np.abs(np.fft.rfft(fr * w, axis=1)) ** 2, axis=0)
+    pw = float(np.mean(np.abs(fr) ** 2))
+    return p * (pw / p.sum()), int(sel.size)
+
+
+def smooth_template(psd: np.ndarray, width: int) -> np.ndarray:
+    """Noise-shape template from a (clean) PSD: median filter across frequency, sum normalised to 1."""
+    t = median_filter(psd, size=width, mode="nearest")
+    t = np.maximum(t, 1e-6 * np.max(t))
+    return t / t.sum()
+
+
+def block_features(x: np.ndarray, template: np.ndarray | None, par: ClassifierParams) -> BlockFeatures:
+    """Spectral features of one block.
+
+    Args:
+        x: finite samples, shape (n,), n >= par.nfft.
+        template: noise PSD shape (sum 1), shape as welch_psd; None: flat.
+        par: ClassifierParams.
+    """
+    psd, frames = welch_psd(x, par.nfft, par.max_frames)
+    power = float(psd.sum())
+    tpl = np.full(psd.size, 1.0 / psd.size) if template is None else template
+    white = psd / tpl
+    scale = float(np.median(white))
+    k = int(np.argmax(psd / tpl))
+    nb = psd.size
+    if 0 < k < nb - 1:
+        a, b, c = np.log(psd[k - 1:k + 2] + 1e-300)
+        den = a - 2 * b + c
+        dk = 0.5 * (a - c) / den if den < 0 else 0.0
+    else:
+        dk = 0.0
+    if np.iscomplexobj(x):
+        f_pk = (k + dk - nb // 2) / par.nfft
+    else:
+        f_pk = (k + dk) / par.nfft
+    if not scale > 0:
+        return BlockFeatures(power, psd, frames, scale, -math.inf, 0.0, k, f_pk)
+    thr = max(par.sig_sigma / math.sqrt(frames), par.min_excess)
+    excess = white / scale - 1.0
+    # the relative floor keeps a strong CW's Hann sidelobes (< -31 dB) out of its occupancy
+    occ = excess > max(thr, 10 ** (-par.sidelobe_db / 10) * float(np.max(excess)))
+    noise_power = scale * float(tpl.sum())
+    jpow = float(np.sum((white[occ] - scale) * tpl[occ]))
+    jn_spec = 10 * math.log10(jpow / noise_power) if jpow > 0 else -math.inf
+    return BlockFeatures(power, psd, frames, scale, jn_spec, float(np.mean(occ)), k, f_pk)
+
+
+def logistic(margin_db: float, slope_db: float) -> float:
+    """1 / (1 + exp(-margin / slope)), safe for any margin (NaN -> 0.5)."""
+    if not math.isfinite(margin_db):
+        return 1.0 if margin_db > 0 else 0.0 if margin_db < 0 else 0.5
+    return 1.0 / (1.0 + math.exp(-max(-50.0, min(50.0, margin_db / slope_db))))
+
+
+def classify(feat: BlockFeatures, jn_power_db: float, period_locked: bool, sweep_rate: float,
+             calibrated: bool, par: ClassifierParams) -> tuple[int, float]:
+    """Type code and confidence of one block (decision rules in the module docstring).
+
+    Args:
+        feat: BlockFeatures.
+        jn_power_db: J/N from power against the calibrated floor, dB (NaN when not calibrated).
+        period_locked: the tracker's sweep period is locked.
+        sweep_rate: the tracker's sweep rate estimate, cycles/sample^2.
+        calibrated: the noise floor is known.
+        par: ClassifierParams.
+    """
+    thr = par.detect_jn_db
+    s = par.confidence_slope_db
+    nb = feat.jn_spectral_db >= thr
+    if nb:
+        c_det = logistic(feat.jn_spectral_db - thr, s)
+        if feat.occupancy <= par.cw_max_occupancy:
+            structure = 1.0 - 0.5 * feat.occupancy / par.cw_max_occupancy
+            return CW, c_det * structure
+        if period_locked:
+            return CHIRP, c_det
+        if abs(sweep_rate) >= par.min_chirp_rate:
+            return CHIRP, 0.6 * c_det
+    if calibrated and math.isfinite(jn_power_db) and jn_power_db >= thr:
+        return WIDEBAND, logistic(jn_power_db - thr, s)
+    if nb:
+        return WIDEBAND, 0.5 * logistic(feat.jn_spectral_db - thr, s)
+    if not calibrated:
+        return UNKNOWN, 0.5
+    m = max(feat.jn_spectral_db, jn_power_db if math.isfinite(jn_power_db) else -math.inf)
+    return NONE, 1.0 - logistic(m - thr, s)

@@ -1,0 +1,177 @@
+"""Three-sample instantaneous-frequency (IF) measurement of a strong tone or chirp.
+
+Real samples (Kang et al., eq. 7-10): for ``r_n = A cos(theta_n)`` with ``theta_{n+-1} = theta_n
++- w_n + pi df`` (a linear chirp of instantaneous angular frequency ``w_n = 2 pi f_n`` and sweep
+``df`` cycles/sample^2), the sum and difference of the outer samples are
+
+    S = (r_{n+1} + r_{n-1}) / 2 = A cos(theta_n + pi df) cos(w_n)
+    D = (r_{n+1} - r_{n-1}) / 2 = -A sin(theta_n + pi df) sin(w_n)
+
+so ``S / r_n = cos(w_n) [cos(pi df) - tan(theta_n) sin(pi df)]``. With df = 0 this is eq. 8,
+``f_n = arccos(S / r_n) / (2 pi)``; with df != 0 it is eq. 10 (the paper's garbled eq. 9 is
+re-derived here; its "2 pi df/2" is pi df). The phase term ``tan(theta_n)`` is not known to the
+receiver; we take it from the same three samples, ``tan(theta_n) ~= -D / (r_n sin(w0))`` with w0
+from eq. 8 (first order in pi df), and apply eq. 10 once. The measurement is in [0, 0.5]
+cycles/sample (a real signal carries no frequency sign).
+
+Complex samples (derivation in docs/rfi_monitor/complex_baseband.md): for ``x_n = A exp(j theta_n)``
+the same recurrence gives ``x_{n+1} + x_{n-1} = 2 cos(w_n) x_n e^{j pi df}`` and
+``x_{n+1} - x_{n-1} = 2 j sin(w_n) x_n e^{j pi df}``; combining both,
+
+    f_n = arg(x_{n+1} x_n^* + x_n x_{n-1}^*) / (2 pi)        in (-0.5, 0.5]
+
+which is exact for a linear chirp (the two lag products have phases 2 pi (f_n +- df/2) and
+equal moduli), needs no division by a sample and has no arccos domain.
+
+Guards (the paper's Fig. 2 errors): a sample with |r_n| (or |x_n|) below ``min_abs`` is rejected
+(near-zero divisor); a real ratio outside [-1 - margin, 1 + margin] is rejected (arccos domain),
+inside the margin it is clipped to [-1, 1]; a chirp correction whose factor falls below 0.5 is
+rejected; non-finite samples are rejected. Status codes are the ``STATUS_*`` constants.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+STATUS_OK = 0
+STATUS_NEAR_ZERO = 1
+STATUS_DOMAIN = 2
+STATUS_NON_FINITE = 3
+STATUS_CORRECTION = 4
+N_STATUS = 5
+
+_TWO_PI = 2.0 * math.pi
+
+
+@njit(cache=True, inline="always")
+def measure_real(r_prev: float, r_0: float, r_next: float, delta_f: float, chirp_correction: bool,
+                 min_abs: float, domain_margin: float) -> tuple[float, int]:
+    """Digital frequency of a real tone/chirp from three consecutive samples.
+
+    Args:
+        r_prev, r_0, r_next: samples r_{n-1}, r_n, r_{n+1}, any consistent unit.
+        delta_f: sweep, cycles/sample^2 (Kang's Delta f), used by the chirp correction.
+        chirp_correction: apply eq. 10 (else eq. 8).
+        min_abs: reject when |r_n| <= min_abs (same unit as the samples).
+        domain_margin: tolerated excess of |S / r_n| over 1 before rejection, >= 0.
+
+    Returns:
+        (f_n in cycles/sample in [0, 0.5], status code). f_n is NaN unless status == STATUS_OK.
+
+    Notes:
+        Kang et al., eq. 8 and eq. 10 (see the module docstring for the derivation).
+    """
+    if not (math.isfinite(r_prev) and math.isfinite(r_0) and math.isfinite(r_next)):
+        return math.nan, STATUS_NON_FINITE
+    if abs(r_0) <= min_abs:
+        return math.nan, STATUS_NEAR_ZERO
+    s = 0.5 * (r_next + r_prev)
+    ratio = s / r_0
+    if abs(ratio) > 1.0 + domain_margin:
+        return math.nan, STATUS_DOMAIN
+    ratio = min(1.0, max(-1.0, ratio))
+    w = math.acos(ratio)
+    if chirp_correction and delta_f != 0.0:
+        sw = math.sin(w)
+        if sw < 1e-6:
+            return w / _TWO_PI, STATUS_OK
+        d = 0.5 * (r_next - r_prev)
+        tan_theta = -d / (r_0 * sw)
+        e = math.pi * delta_f
+        factor = math.cos(e) - tan_theta * math.sin(e)
+        if factor < 0.5:
+            return math.nan, STATUS_CORRECTION
+        ratio = s / (r_0 * factor)
+        if abs(ratio) > 1.0 + domain_margin:
+            return math.nan, STATUS_DOMAIN
+        ratio = min(1.0, max(-1.0, ratio))
+        w = math.acos(ratio)
+    return w / _TWO_PI, STATUS_OK
+
+
+@njit(cache=True, inline="always")
+def measure_complex(re_prev: float, im_prev: float, re_0: float, im_0: float, re_next: float,
+                    im_next: float, min_abs: float) -> tuple[float, int]:
+    """Signed digital frequency of a complex tone/chirp from three consecutive I/Q samples.
+
+    Args:
+        re_*, im_*: I and Q of x_{n-1}, x_n, x_{n+1}.
+        min_abs: reject when |x_n| <= min_abs.
+
+    Returns:
+        (f_n in cycles/sample in (-0.5, 0.5], status code); NaN unless STATUS_OK.
+
+    Notes:
+        Complex counterpart of Kang et al., eq. 8/10: arg(x_{n+1} x_n^* + x_n x_{n-1}^*) / 2 pi,
+        derived in docs/rfi_monitor/complex_baseband.md.
+    """
+    if not (math.isfinite(re_prev) and math.isfinite(im_prev) and math.isfinite(re_0)
+            and math.isfinite(im_0) and math.isfinite(re_next) and math.isfinite(im_next)):
+        return math.nan, STATUS_NON_FINITE
+    if re_0 * re_0 + im_0 * im_0 <= min_abs * min_abs:
+        return math.nan, STATUS_NEAR_ZERO
+    # x_{n+1} conj(x_n) + x_n conj(x_{n-1})
+    a_re = re_next * re_0 + im_next * im_0 + re_0 * re_prev + im_0 * im_prev
+    a_im = im_next * re_0 - re_next * im_0 + im_0 * re_prev - re_0 * im_prev
+    if a_re == 0.0 and a_im == 0.0:
+        return math.nan, STATUS_NEAR_ZERO
+    return math.atan2(a_im, a_re) / _TWO_PI, STATUS_OK
+
+
+@njit(cache=True)
+def _measure_block_real(x: np.ndarray, delta_f: np.ndarray, chirp_correction: bool, min_abs: float,
+                        domain_margin: float) -> tuple[np.ndarray, np.ndarray]:
+    n = x.size
+    z = np.full(max(n - 2, 0), np.nan)
+    st = np.zeros(max(n - 2, 0), dtype=np.int8)
+    for k in range(1, n - 1):
+        z[k - 1], st[k - 1] = measure_real(x[k - 1], x[k], x[k + 1], delta_f[k - 1], chirp_correction,
+                                           min_abs, domain_margin)
+    return z, st
+
+
+@njit(cache=True)
+def _measure_block_complex(xr: np.ndarray, xi: np.ndarray, min_abs: float) -> tuple[np.ndarray, np.ndarray]:
+    n = xr.size
+    z = np.full(max(n - 2, 0), np.nan)
+    st = np.zeros(max(n - 2, 0), dtype=np.int8)
+    for k in range(1, n - 1):
+        z[k - 1], st[k - 1] = measure_complex(xr[k - 1], xi[k - 1], xr[k], xi[k], xr[k + 1], xi[k + 1],
+                                              min_abs)
+    return z, st
+
+
+def measure_if(x: np.ndarray, delta_f: float | np.ndarray = 0.0, chirp_correction: bool = False,
+               min_abs: float = 0.0, domain_margin: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
+    """Per-sample IF measurements of a whole array (stand-alone; the monitor fuses this in its loop).
+
+    Args:
+        x: samples, shape (n,), real (float/int) or complex.
+        delta_f: sweep per sample, cycles/sample^2, scalar or shape (n - 2,) (real chirp correction).
+        chirp_correction: use eq. 10 instead of eq. 8 (real samples only).
+        min_abs: near-zero guard on |x_n|, sample units, >= 0.
+        domain_margin: arccos domain margin (real samples), >= 0.
+
+    Returns:
+        (z, status): z shape (n - 2,), cycles/sample, measurement for samples 1..n-2 (NaN where
+        rejected); status shape (n - 2,) int8 codes.
+
+    Raises:
+        ValueError: x not 1-D, or negative guards.
+    """
+    x = np.asarray(x)
+    if x.ndim != 1:
+        raise ValueError("x must be 1-D")
+    if min_abs < 0 or domain_margin < 0:
+        raise ValueError("min_abs and domain_margin must be >= 0")
+    if np.iscomplexobj(x):
+        xc = x.astype(np.complex128)
+        return _measure_block_complex(np.ascontiguousarray(xc.real), np.ascontiguousarray(xc.imag),
+                                      float(min_abs))
+    xr = x.astype(np.float64)
+    df = np.broadcast_to(np.asarray(delta_f, dtype=np.float64), (max(xr.size - 2, 0),))
+    return _measure_block_real(xr, np.ascontiguousarray(df), bool(chirp_correction), float(min_abs),
+                               float(domain_margin))

@@ -1,0 +1,461 @@
+"""RFI monitor core: identify and track a jammer in consecutive IF sample blocks (Kang et al.).
+
+Pure module (no ROS). The node converts an ``rfi_msgs/IfSamples`` message to a numpy array and
+calls ``RfiMonitor.process``; the returned ``JammerEstimate`` maps field by field onto
+``rfi_msgs/JammerState``.
+
+Pipeline per block: the fused per-sample loop (``tracker.track_block``: three-sample IF
+measurement, eq. 8/10 or its complex counterpart; adaptive fading KF, eq. 11-20; LPD + AR sweep
+period, eq. 23-27; resets at the predicted sweep starts, eq. 21-22), then block features and the
+identification (``classifier``), J/N from the block power against the calibrated noise floor,
+and J/S = J/N + N - S from the nominal noise and signal powers.
+
+Noise-floor calibration: ``noise_floor_power`` > 0 fixes the floor (sample units^2, i.e. of the
+values passed to ``process``); with 0 (default) it is learned from the first
+``calibration_blocks`` blocks: the front end's noise shape (median over blocks of the normalised
+Welch PSD, median-smoothed across frequency so that a tone never enters it) and the floor
+(median over blocks of the block power minus its narrowband excess above that shape). It is
+therefore robust to a CW present during calibration, but not to a wideband jammer or a chirp
+present from the first block (then set ``noise_floor_power``). Blocks during calibration are
+reported as UNKNOWN. ``reset()`` keeps the calibration unless ``keep_calibration=False``.
+
+Time: ``stamp_ns`` (int, ns) is passed in and copied to the result; no clock is read.
+
+Example
+-------
+>>> import numpy as np
+>>> mon = RfiMonitor(RfiMonitorParams())
+>>> x = np.random.default_rng(0).standard_normal(38192)
+>>> est = mon.process(x, sample_rate_hz=38.192e6, intermediate_frequency_hz=9.548e6,
+...                   first_sample_index=0, stamp_ns=0)
+>>> est.type   # UNKNOWN while calibrating
+4
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+
+import numpy as np
+
+from rfi_monitor import sweep_period as sp
+from rfi_monitor.classifier import (
+    CHIRP,
+    CW,
+    UNKNOWN,
+    ClassifierParams,
+    block_features,
+    classify,
+    smooth_template,
+)
+from rfi_monitor.if_measurement import (
+    STATUS_CORRECTION,
+    STATUS_DOMAIN,
+    STATUS_NEAR_ZERO,
+    STATUS_NON_FINITE,
+    STATUS_OK,
+)
+from rfi_monitor.sweep_period import J_LOCKED, S_PERIOD, SweepPeriodParams
+from rfi_monitor.tracker import (
+    K_LAST_START,
+    K_NRESETS,
+    M_F0,
+    MAX_ABS_RATE,
+    N_MPAR,
+    P_CHIRP_CORR,
+    P_DOMAIN,
+    P_MAX_DF,
+    P_MIN_ABS,
+    P_PHASE_GAIN,
+    P_POW_LAMBDA,
+    P_RESET,
+    P_WRAP,
+    TrackerState,
+    track_block,
+)
+from rfi_monitor.tracking_filters import F_DF, F_F, F_P11, F_P22, MODE_AFKF, TrackingFilterParams
+
+
+@dataclass(frozen=True)
+class RfiMonitorParams:
+    """Validated parameters of the monitor.
+
+    Attributes:
+        tracker: TrackingFilterParams (default: the proposed adaptive fading KF).
+        sweep: SweepPeriodParams.
+        classifier: ClassifierParams.
+        chirp_correction: use eq. 10 (real samples) with the tracker's sweep estimate.
+        reset_at_sweep_start: reset the filter at estimated sweep starts (eq. 21-22).
+        min_abs_ratio: near-zero guard, |x_n| <= ratio * running RMS rejects a sample, >= 0.
+        domain_margin: arccos domain margin, >= 0.
+        power_time_constant: samples of the running RMS used by the guard, >= 1.
+        phase_gain: gain of the sweep-start lattice phase correction, (0, 1].
+        noise_floor_power: fixed noise power (sample units^2); 0: learn it (see module docstring).
+        calibration_blocks: blocks used to learn the noise floor and shape, >= 1.
+        signal_power_dbm: nominal GNSS signal power S for J/S, dBm (Kang et al.: -130).
+        noise_density_dbm_per_mhz: nominal noise density for J/S, dBm/MHz (Kang et al.: -114).
+        noise_bandwidth_hz: bandwidth of the nominal noise power, Hz; 0: the sampled band.
+        max_invalid_fraction: a block with more non-finite or saturated samples than this
+            fraction is rejected (result valid=False, type UNKNOWN), in [0, 1].
+        min_block_samples: shorter blocks raise ValueError (>= the classifier's nfft).
+    """
+
+    tracker: TrackingFilterParams = field(default_factory=lambda: TrackingFilterParams(mode=MODE_AFKF))
+    sweep: SweepPeriodParams = field(default_factory=SweepPeriodParams)
+    classifier: ClassifierParams = field(default_factory=ClassifierParams)
+    chirp_correction: bool = True
+    reset_at_sweep_start: bool = True
+    min_abs_ratio: float = 0.02
+    domain_margin: float = 0.05
+    power_time_constant: float = 1024.0
+    phase_gain: float = 0.3
+    noise_floor_power: float = 0.0
+    calibration_blocks: int = 5
+    signal_power_dbm: float = -130.0
+    noise_density_dbm_per_mhz: float = -114.0
+    noise_bandwidth_hz: float = 0.0
+    max_invalid_fraction: float = 0.05
+    min_block_samples: int = 1024
+
+    def __post_init__(self) -> None:
+        for name in ("min_abs_ratio", "domain_margin", "noise_floor_power", "noise_bandwidth_hz"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be finite and >= 0, got {v}")
+        if not self.power_time_constant >= 1:
+            raise ValueError("power_time_constant must be >= 1")
+        if not 0 < self.phase_gain <= 1:
+            raise ValueError("phase_gain must be in (0, 1]")
+        if int(self.calibration_blocks) < 1:
+            raise ValueError("calibration_blocks must be >= 1")
+        for name in ("signal_power_dbm", "noise_density_dbm_per_mhz"):
+            if not math.isfinite(getattr(self, name)):
+                raise ValueError(f"{name} must be finite")
+        if not 0 <= self.max_invalid_fraction <= 1:
+            raise ValueError("max_invalid_fraction must be in [0, 1]")
+        if self.min_block_samples < self.classifier.nfft:
+            raise ValueError("min_block_samples must be >= classifier.nfft")
+
+
+@dataclass(frozen=True)
+class BlockTraces:
+    """Per-sample estimates of one block (for figures). All shape (n,) with n = estimates made.
+
+    Attributes:
+        sample_index: absolute index of each estimate.
+        z: IF measurement, cycles/sample (NaN where rejected).
+        f: filter frequency, cycles/sample; df: sweep, cycles/sample^2; p11: P(1,1).
+        z_ar: enhanced LPD pattern (eq. 27), held between decimated steps.
+        reset: True where the filter was reset at a sweep start.
+    """
+
+    sample_index: np.ndarray
+    z: np.ndarray
+    f: np.ndarray
+    df: np.ndarray
+    p11: np.ndarray
+    z_ar: np.ndarray
+    reset: np.ndarray
+
+
+@dataclass(frozen=True)
+class JammerEstimate:
+    """Result of one block; maps onto rfi_msgs/JammerState (NaN where unknown).
+
+    Attributes:
+        stamp_ns: time of the block's first sample, ns (copied from the input).
+        type: NONE 0, CW 1, CHIRP 2, WIDEBAND 3, UNKNOWN 4.
+        confidence: 0..1.
+        jammer_to_noise_db, jammer_to_signal_db: dB.
+        frequency_hz: instantaneous jammer frequency at the block end, relative to the RF centre, Hz.
+        frequency_std_hz: 1-sigma of frequency_hz, Hz.
+        sweep_rate_hz_per_s: Hz/s (0 for CW).
+        sweep_period_s: s.
+        sweep_start_frequency_hz: relative to the RF centre, Hz.
+        sweep_bandwidth_hz: Hz.
+        sample_rate_hz: of the analysed block.
+        first_sample_index, n_samples: the block.
+        valid: False when the block was rejected (then type UNKNOWN, confidence 0).
+        counters: cumulative counts (measurement status, rejected blocks, gaps, resets).
+        traces: per-sample estimates when requested, else None.
+    """
+
+    stamp_ns: int
+    type: int
+    confidence: float
+    jammer_to_noise_db: float
+    jammer_to_signal_db: float
+    frequency_hz: float
+    frequency_std_hz: float
+    sweep_rate_hz_per_s: float
+    sweep_period_s: float
+    sweep_start_frequency_hz: float
+    sweep_bandwidth_hz: float
+    sample_rate_hz: float
+    first_sample_index: int
+    n_samples: int
+    valid: bool
+    counters: Mapping[str, int]
+    traces: BlockTraces | None = field(default=None, repr=False)
+
+
+_STATUS_NAMES = {STATUS_OK: "measurements_ok", STATUS_NEAR_ZERO: "rejected_near_zero",
+                 STATUS_DOMAIN: "rejected_arccos_domain", STATUS_NON_FINITE: "rejected_non_finite",
+                 STATUS_CORRECTION: "rejected_chirp_correction"}
+
+
+class RfiMonitor:
+    """Jammer identification and tracking over a stream of IF blocks.
+
+    Args:
+        params: RfiMonitorParams.
+
+    Notes:
+        Kang et al., eq. 8-27; see the module docstrings of if_measurement, tracking_filters,
+        sweep_period, tracker and classifier for each part.
+    """
+
+    def __init__(self, params: RfiMonitorParams = RfiMonitorParams()) -> None:
+        self.params = params
+        self._tpar = params.tracker.as_array()
+        self._block_counters = {"blocks": 0, "blocks_rejected": 0, "gaps": 0, "rate_changes": 0,
+                                "non_finite_samples": 0, "saturated_samples": 0}
+        self._cal_psd: list[np.ndarray] = []
+        self._cal_pow: list[float] = []
+        self._template: np.ndarray | None = None
+        self._floor: float = params.noise_floor_power if params.noise_floor_power > 0 else math.nan
+        self._cal_key: tuple | None = None
+        self.reset()
+
+    # ------------------------------------------------------------------------------------------
+    def reset(self, keep_calibration: bool = True) -> None:
+        """Forget the per-sample state (call on a gap in sample index or a sample-rate change).
+
+        Args:
+            keep_calibration: keep the learned noise floor and shape (False: learn again).
+        """
+        fst, ist, ring = self.params.tracker.initial_state()
+        self._state = TrackerState(fst, ist, ring, sp.initial_state())
+        self._next_index: int | None = None
+        self._rate: float | None = None
+        self._if: float | None = None
+        self._complex: bool | None = None
+        if not keep_calibration:
+            self._cal_psd, self._cal_pow, self._template = [], [], None
+            self._floor = self.params.noise_floor_power if self.params.noise_floor_power > 0 else math.nan
+            self._cal_key = None
+
+    @property
+    def calibrated(self) -> bool:
+        """True once the noise floor (and shape, unless fixed) is known."""
+        return math.isfinite(self._floor) and self._template is not None
+
+    # ------------------------------------------------------------------------------------------
+    def _counters(self) -> Mapping[str, int]:
+        d = dict(self._block_counters)
+        for code, name in _STATUS_NAMES.items():
+            d[name] = int(self._state.counters[code])
+        d["sweep_resets"] = int(self._state.mist[K_NRESETS])
+        return MappingProxyType(d)
+
+    def _to_rel_hz(self, f_dig: float, fs: float, fif: float, cplx: bool) -> float:
+        if not cplx and fif < 0:
+            return -fif - f_dig * fs
+        return f_dig * fs - fif
+
+    def process(self, samples: np.ndarray, sample_rate_hz: float, intermediate_frequency_hz: float,
+                first_sample_index: int, stamp_ns: int, is_complex: bool | None = None,
+                full_scale: float | None = None, return_traces: bool = False) -> JammerEstimate:
+        """Analyse one block.
+
+        Args:
+            samples: shape (n,) real (float or int counts) or complex; or, with is_complex=True
+                and a real dtype, interleaved I, Q of shape (2n,). Any consistent unit (counts or
+                volts; the noise floor is in the same unit squared).
+            sample_rate_hz: samples (complex: I/Q pairs) per second, > 0.
+            intermediate_frequency_hz: IF, Hz; 0 complex baseband; < 0 spectral inversion (real).
+            first_sample_index: running index of samples[0] since the stream started (a jump is a
+                gap: the per-sample state is reset and the gap counted).
+            stamp_ns: time of the first sample, ns (copied to the result).
+            is_complex: see samples; None: complex iff the dtype is complex.
+            full_scale: largest magnitude the quantiser delivers (same unit); values at or beyond it
+                count as saturated. None: no saturation check.
+            return_traces: attach per-sample BlockTraces.
+
+        Returns:
+            JammerEstimate.
+
+        Raises:
+            ValueError: empty/too short block, odd-length interleaved I/Q, non-finite or
+                non-positive sample rate, |IF| beyond the sampled band, bad shapes.
+        """
+        x = np.asarray(samples)
+        if x.ndim != 1:
+            raise ValueError(f"samples must be 1-D, got shape {x.shape}")
+        sample_rate_hz = float(sample_rate_hz)
+        intermediate_frequency_hz = float(intermediate_frequency_hz)
+        if not (math.isfinite(sample_rate_hz) and sample_rate_hz > 0):
+            raise ValueError(f"sample_rate_hz must be finite and > 0, got {sample_rate_hz}")
+        if not math.isfinite(intermediate_frequency_hz):
+            raise ValueError("intermediate_frequency_hz must be finite")
+        cplx = np.iscomplexobj(x) if is_complex is None else bool(is_complex)
+        if cplx and not np.iscomplexobj(x):
+            if x.size % 2:
+                raise ValueError(f"interleaved I/Q needs an even number of values, got {x.size}")
+            xf = x.astype(np.float64)
+            xc = xf[0::2] + 1j * xf[1::2]
+        elif cplx:
+            xc = x.astype(np.complex128)
+        elif np.iscomplexobj(x):
+            raise ValueError("complex samples passed with is_complex=False")
+        else:
+            xc = x.astype(np.float64)
+        n = xc.size
+        if n < self.params.min_block_samples:
+            raise ValueError(f"block of {n} samples is shorter than min_block_samples "
+                             f"{self.params.min_block_samples}")
+        nyq = sample_rate_hz if cplx else sample_rate_hz / 2
+        if abs(intermediate_frequency_hz) >= nyq:
+            raise ValueError(f"|IF| {intermediate_frequency_hz} Hz must be below {nyq} Hz")
+        if full_scale is not None and not (math.isfinite(full_scale) and full_scale > 0):
+            raise ValueError("full_scale must be finite and > 0")
+        # --- stream continuity ---------------------------------------------------------------
+        key = (float(sample_rate_hz), float(intermediate_frequency_hz), cplx)
+        if self._rate is not None and (sample_rate_hz != self._rate or intermediate_frequency_hz != self._if
+                                       or cplx != self._complex):
+            self._block_counters["rate_changes"] += 1
+            self.reset(keep_calibration=False)
+        elif self._next_index is not None and int(first_sample_index) != self._next_index:
+            self._block_counters["gaps"] += 1
+            self.reset(keep_calibration=True)
+        self._rate, self._if, self._complex = float(sample_rate_hz), float(intermediate_frequency_hz), cplx
+        self._next_index = int(first_sample_index) + n
+        self._block_counters["blocks"] += 1
+        if self._cal_key is None:
+            self._cal_key = key
+        # --- bad samples ---------------------------------------------------------------------
+        finite = np.isfinite(xc)
+        n_bad = int(n - np.count_nonzero(finite))
+        n_sat = 0
+        if full_scale is not None:
+            mag = np.maximum(np.abs(xc.real), np.abs(xc.imag)) if cplx else np.abs(xc)
+            n_sat = int(np.count_nonzero(mag[finite] >= full_scale))
+        self._block_counters["non_finite_samples"] += n_bad
+        self._block_counters["saturated_samples"] += n_sat
+        # --- per-sample loop (always run: keeps the state continuous) ---------------------------
+        resets_before = int(self._state.mist[K_NRESETS])
+        traces = self._run_tracker(xc, cplx, int(first_sample_index), return_traces)
+        self._resets_in_block = int(self._state.mist[K_NRESETS]) - resets_before
+        nan = math.nan
+        if n_bad + n_sat > self.params.max_invalid_fraction * n:
+            self._block_counters["blocks_rejected"] += 1
+            return JammerEstimate(int(stamp_ns), UNKNOWN, 0.0, nan, nan, nan, nan, nan, nan, nan, nan,
+                                  float(sample_rate_hz), int(first_sample_index), n, False, self._counters(),
+                                  traces)
+        xs = np.where(finite, xc, 0)
+        return self._identify(xs, cplx, float(sample_rate_hz), float(intermediate_frequency_hz),
+                              int(stamp_ns), int(first_sample_index), traces)
+
+    # ------------------------------------------------------------------------------------------
+    def _run_tracker(self, xc: np.ndarray, cplx: bool, first: int, store: bool) -> BlockTraces | None:
+        p = self.params
+        st = self._state
+        band = 1.0 if cplx else 0.5
+        spar = p.sweep.as_array(band)
+        mpar = np.zeros(N_MPAR)
+        mpar[P_CHIRP_CORR] = 1.0 if (p.chirp_correction and not cplx) else 0.0
+        mpar[P_MIN_ABS] = p.min_abs_ratio
+        mpar[P_DOMAIN] = p.domain_margin
+        mpar[P_POW_LAMBDA] = 1.0 / p.power_time_constant
+        mpar[P_RESET] = 1.0 if p.reset_at_sweep_start else 0.0
+        mpar[P_PHASE_GAIN] = p.phase_gain
+        mpar[P_WRAP] = 1.0 if cplx else 0.0
+        mpar[P_MAX_DF] = MAX_ABS_RATE
+        n = xc.size
+        m = n if store else 1
+        o_idx = np.empty(m, dtype=np.int64)
+        o_z, o_f, o_df, o_p11, o_zar = (np.empty(m) for _ in range(5))
+        o_reset = np.empty(m, dtype=np.bool_)
+        xr = np.ascontiguousarray(xc.real, dtype=np.float64)
+        xi = np.ascontiguousarray(xc.imag, dtype=np.float64) if cplx else xr
+        k = track_block(xr, xi, cplx, first, self._tpar, spar, mpar, st.fst, st.ist, st.ring, st.sf, st.si,
+                        st.zhist, st.gam, st.pmat, st.hist, st.peaks, st.mst, st.mist, st.counters, store,
+                        o_idx, o_z, o_f, o_df, o_p11, o_zar, o_reset)
+        if not store:
+            return None
+        return BlockTraces(o_idx[:k], o_z[:k], o_f[:k], o_df[:k], o_p11[:k], o_zar[:k], o_reset[:k])
+
+    def _identify(self, xs: np.ndarray, cplx: bool, fs: float, fif: float, stamp_ns: int, first: int,
+                  traces: BlockTraces | None) -> JammerEstimate:
+        p = self.params
+        cp = p.classifier
+        st = self._state
+        nan = math.nan
+        if not self.calibrated:
+            feat0 = block_features(xs, None, cp)
+            self._cal_psd.append(feat0.psd / feat0.psd.sum())
+            self._cal_pow.append(feat0.power)
+            if len(self._cal_psd) >= p.calibration_blocks:
+                med = np.median(np.stack(self._cal_psd), axis=0)
+                self._template = smooth_template(med, cp.template_smooth_bins)
+                if not math.isfinite(self._floor):
+                    # floor = median over blocks of (power - narrowband excess above the shape)
+                    resid = []
+                    for psd in self._cal_psd:
+                        white = psd / self._template
+                        s = float(np.median(white))
+                        exc = np.sum(np.maximum(white - s * (1 + cp.min_excess), 0.0) * self._template)
+                        resid.append(max(1.0 - exc, 0.0))
+                    self._floor = float(np.median(np.array(self._cal_pow) * np.array(resid)))
+            return JammerEstimate(stamp_ns, UNKNOWN, 0.5, nan, nan, nan, nan, nan, nan, nan, nan, fs, first,
+                                  xs.size, True, self._counters(), traces)
+        feat = block_features(xs, self._template, cp)
+        jn_pow = 10 * math.log10(feat.power / self._floor - 1.0) if feat.power > self._floor else -math.inf
+        locked = bool(st.si[J_LOCKED] == 1)
+        df = float(st.fst[F_DF])
+        # a chirp's swept band |df| T must explain the occupied band (a lock on noise peaks does not)
+        band = 1.0 if cplx else 0.5
+        per_s = float(st.sf[S_PERIOD])
+        swept = abs(df) * per_s if per_s > 0 else 0.0
+        chirp_ok = (locked or self._resets_in_block > 0) and swept >= 0.5 * feat.occupancy * band
+        jtype, conf = classify(feat, jn_pow, chirp_ok, df, True, cp)
+        jn = max(jn_pow, feat.jn_spectral_db)
+        bw_noise = p.noise_bandwidth_hz if p.noise_bandwidth_hz > 0 else (fs if cplx else fs / 2)
+        n_dbm = p.noise_density_dbm_per_mhz + 10 * math.log10(bw_noise / 1e6)
+        js = jn + n_dbm - p.signal_power_dbm if math.isfinite(jn) else nan
+        freq = fstd = rate = per = f0 = bw = nan
+        if jtype in (CW, CHIRP):
+            freq = self._to_rel_hz(float(st.fst[F_F]), fs, fif, cplx)
+            fstd = math.sqrt(max(float(st.fst[F_P11]), 0.0)) * fs
+            sgn = -1.0 if (not cplx and fif < 0) else 1.0
+            if jtype == CW:
+                # the three-sample measurement is biased towards fs/4 at low J/N (arccos of a
+                # noisy ratio, clipped tails), so a CW's frequency comes from the interpolated
+                # Welch peak; its 1-sigma is taken as one bin / sqrt(12)
+                freq = self._to_rel_hz(feat.peak_frequency, fs, fif, cplx)
+                fstd = fs / cp.nfft / math.sqrt(12.0)
+                rate = 0.0
+            else:
+                rate = sgn * df * fs * fs
+                if locked:
+                    per = float(st.sf[S_PERIOD]) / fs
+                    bw = abs(rate) * per
+                    if math.isfinite(st.mst[M_F0]):
+                        f0 = self._to_rel_hz(float(st.mst[M_F0]), fs, fif, cplx)
+        if not math.isfinite(jn):
+            jn = nan
+        return JammerEstimate(stamp_ns, int(jtype), float(conf), float(jn), float(js), freq, fstd, rate, per,
+                              f0,
+                              bw, fs, first, xs.size, True, self._counters(), traces)
+
+    # ------------------------------------------------------------------------------------------
+    @property
+    def state_summary(self) -> dict[str, float]:
+        """Current tracker state: frequency (cycles/sample), rate, P, period (samples), last start."""
+        st = self._state
+        return {"f": float(st.fst[F_F]), "df": float(st.fst[F_DF]), "p11": float(st.fst[F_P11]),
+                "p22": float(st.fst[F_P22]), "period_samples": float(st.sf[S_PERIOD]),
+                "locked": float(st.si[J_LOCKED]), "last_start": float(st.mist[K_LAST_START])}

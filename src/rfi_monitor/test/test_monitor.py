@@ -1,0 +1,212 @@
+"""Tests of the RfiMonitor core: stream invariance, identification, conversions, bad input, real data."""
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rfi_experiments.sim.if_signal import ChirpJammer, CwJammer, FrontEndConfig, IfSimulator, NoiseJammer
+from rfi_monitor.classifier import CHIRP, CW, NONE, UNKNOWN, WIDEBAND
+from rfi_monitor.monitor import RfiMonitor, RfiMonitorParams
+
+DATA = Path(__file__).parent / "data"
+BLOCK = 38192  # 1 ms at the paper's 38.192 MHz
+
+
+def _feed(mon, x, fe, block, first=0, traces=False):
+    out = []
+    for k in range(0, x.size - block + 1, block):
+        out.append(mon.process(x[k:k + block], fe.sample_rate_hz, fe.intermediate_frequency_hz,
+                               first + k, stamp_ns=1000 * (first + k), return_traces=traces))
+    return out
+
+
+def _calibrated(fe, seed=50, **kw):
+    mon = RfiMonitor(RfiMonitorParams(**kw))
+    clean = IfSimulator(fe, (), seed=seed).generate(5 * BLOCK).values()
+    _feed(mon, clean, fe, BLOCK)
+    assert mon.calibrated
+    mon.reset()          # calibration kept, per-sample state fresh
+    return mon
+
+
+def test_one_block_equals_many_blocks():
+    fe = FrontEndConfig(noise_density_dbm_per_mhz=-124.0)
+    x = IfSimulator(fe, (ChirpJammer(),), seed=1).generate(3 * BLOCK).values()
+    par = RfiMonitorParams(noise_floor_power=fe.noise_power_mw, calibration_blocks=1)
+    a = RfiMonitor(par)
+    ta = a.process(x, fe.sample_rate_hz, fe.intermediate_frequency_hz, 0, 0, return_traces=True).traces
+    b = RfiMonitor(par)
+    fs, fif = fe.sample_rate_hz, fe.intermediate_frequency_hz
+    parts = [b.process(x[i:j], fs, fif, i, 0, return_traces=True).traces
+             for i, j in ((0, 5000), (5000, 40001), (40001, 3 * BLOCK))]
+    for name in ("sample_index", "z", "f", "df", "p11", "z_ar", "reset"):
+        np.testing.assert_array_equal(np.concatenate([getattr(p, name) for p in parts]), getattr(ta, name))
+    assert a.state_summary == b.state_summary
+    assert ta.reset.sum() > 100  # the chirp was tracked with sweep resets
+
+
+def test_chirp_identified_and_tracked_at_11db():
+    fe = FrontEndConfig(noise_density_dbm_per_mhz=-124.0)  # J/S 30 dB, J/N 11.2 dB
+    mon = _calibrated(fe, noise_density_dbm_per_mhz=-124.0)  # nominal N for J/S
+    jam = ChirpJammer()
+    sim = IfSimulator(fe, (jam,), seed=2)
+    ests = _feed(mon, sim.generate(6 * BLOCK).values(), fe, BLOCK)
+    e = ests[-1]
+    assert [x.type for x in ests[1:]] == [CHIRP] * 5
+    assert e.sweep_period_s == pytest.approx(jam.sweep_period_s, rel=0.01)
+    assert e.jammer_to_noise_db == pytest.approx(sim.jn_db(jam), abs=0.5)
+    assert e.jammer_to_signal_db == pytest.approx(30.0, abs=0.5)
+    assert 5e11 < e.sweep_rate_hz_per_s < 1.2e12
+    assert abs(e.sweep_start_frequency_hz - jam.start_frequency_hz) < 1e6
+    assert e.confidence > 0.9 and e.valid
+
+
+def test_cw_identified_with_frequency():
+    fe = FrontEndConfig()
+    mon = _calibrated(fe)
+    jam = CwJammer(frequency_hz=1.3e6)
+    ests = _feed(mon, IfSimulator(fe, (jam,), seed=3).generate(3 * BLOCK).values(), fe, BLOCK)
+    e = ests[-1]
+    assert e.type == CW
+    assert abs(e.frequency_hz - 1.3e6) < 3 * e.frequency_std_hz
+    assert e.sweep_rate_hz_per_s == 0.0 and math.isnan(e.sweep_period_s)
+
+
+def test_strong_cw_is_still_cw():
+    fe = FrontEndConfig()
+    mon = _calibrated(fe)
+    x = IfSimulator(fe, (CwJammer(frequency_hz=-2e6, js_db=50.0),), seed=3).generate(BLOCK).values()
+    e = _feed(mon, x, fe, BLOCK)[-1]
+    assert e.type == CW
+
+
+@pytest.mark.parametrize("jam", [NoiseJammer(bandwidth_hz=30e6), NoiseJammer(bandwidth_hz=2e6)])
+def test_noise_jammer_is_wideband(jam):
+    fe = FrontEndConfig()
+    mon = _calibrated(fe)
+    ests = _feed(mon, IfSimulator(fe, (jam,), seed=4).generate(4 * BLOCK).values(), fe, BLOCK)
+    assert all(e.type == WIDEBAND for e in ests)
+    assert all(math.isnan(e.frequency_hz) for e in ests)
+
+
+def test_clean_is_none_and_calibration_is_unknown():
+    fe = FrontEndConfig()
+    mon = RfiMonitor()
+    ests = _feed(mon, IfSimulator(fe, (), seed=5).generate(10 * BLOCK).values(), fe, BLOCK)
+    assert [e.type for e in ests[:5]] == [UNKNOWN] * 5
+    assert [e.type for e in ests[5:]] == [NONE] * 5
+
+
+def test_spectral_inversion_and_complex_frequency_sign():
+    for fe in (FrontEndConfig(intermediate_frequency_hz=-9.548e6),
+               FrontEndConfig(sample_rate_hz=16.368e6, intermediate_frequency_hz=0.0, is_complex=True)):
+        mon = _calibrated(fe)
+        n = int(fe.sample_rate_hz * 1e-3)
+        x = IfSimulator(fe, (CwJammer(frequency_hz=1.1e6),), seed=6).generate(2 * n).values()
+        e = _feed(mon, x, fe, n)[-1]
+        assert e.type == CW
+        assert e.frequency_hz == pytest.approx(1.1e6, abs=1e5)
+
+
+def test_complex_chirp_tracked():
+    fe = FrontEndConfig(sample_rate_hz=38.192e6, intermediate_frequency_hz=0.0, is_complex=True,
+                        noise_density_dbm_per_mhz=-127.0)
+    mon = _calibrated(fe)
+    jam = ChirpJammer(start_frequency_hz=-4e6, sweep_period_s=8e-6)
+    ests = _feed(mon, IfSimulator(fe, (jam,), seed=7).generate(5 * BLOCK).values(), fe, BLOCK)
+    e = ests[-1]
+    assert e.type == CHIRP
+    assert e.sweep_period_s == pytest.approx(8e-6, rel=0.01)
+
+
+def test_gap_and_rate_change_reset_state():
+    fe = FrontEndConfig()
+    x = IfSimulator(fe, (), seed=8).generate(3 * 4096).values()
+    mon = RfiMonitor(RfiMonitorParams(calibration_blocks=1))
+    mon.process(x[:4096], fe.sample_rate_hz, fe.intermediate_frequency_hz, 0, 0)
+    e = mon.process(x[4096:8192], fe.sample_rate_hz, fe.intermediate_frequency_hz, 9999, 0)
+    assert e.counters["gaps"] == 1
+    e = mon.process(x[8192:], 2 * fe.sample_rate_hz, fe.intermediate_frequency_hz, 0, 0)
+    assert e.counters["rate_changes"] == 1 and e.type == UNKNOWN  # learning again
+
+
+def test_bad_input_raises():
+    mon = RfiMonitor()
+    x = np.zeros(4096)
+    with pytest.raises(ValueError):
+        mon.process(np.zeros(0), 4e6, 0.0, 0, 0)
+    with pytest.raises(ValueError):
+        mon.process(x, 0.0, 0.0, 0, 0)
+    with pytest.raises(ValueError):
+        mon.process(x, -4e6, 0.0, 0, 0)
+    with pytest.raises(ValueError):
+        mon.process(x, float("nan"), 0.0, 0, 0)
+    with pytest.raises(ValueError):
+        mon.process(np.zeros(4097, dtype=np.int8), 4e6, 0.0, 0, 0, is_complex=True)
+    with pytest.raises(ValueError):
+        mon.process(x, 4e6, 2.5e6, 0, 0)
+    with pytest.raises(ValueError):
+        mon.process(np.zeros((2, 2048)), 4e6, 0.0, 0, 0)
+    with pytest.raises(ValueError):
+        RfiMonitorParams(phase_gain=0.0)
+    with pytest.raises(ValueError):
+        RfiMonitorParams(noise_floor_power=-1.0)
+
+
+def test_nan_and_saturated_blocks_are_rejected_not_estimated():
+    fe = FrontEndConfig()
+    mon = _calibrated(fe)
+    x = IfSimulator(fe, (CwJammer(),), seed=9).generate(BLOCK).values()
+    x[::10] = np.nan
+    e = mon.process(x, fe.sample_rate_hz, fe.intermediate_frequency_hz, 0, 0)
+    assert not e.valid and e.type == UNKNOWN and e.confidence == 0.0 and math.isnan(e.frequency_hz)
+    assert e.counters["non_finite_samples"] == x[::10].size and e.counters["blocks_rejected"] == 1
+    c = np.clip(np.round(IfSimulator(fe, (), seed=9).generate(BLOCK).values() / 1e-6), -3, 3)
+    e = mon.process(c, fe.sample_rate_hz, fe.intermediate_frequency_hz, BLOCK, 0, full_scale=3.0)
+    assert not e.valid and e.counters["saturated_samples"] > 0
+
+
+# ---------------------------------------------------------------- real captures (no jammer)
+def _real_captures():
+    iq = np.fromfile(DATA / "pocketsdr_L1_4MHz_IQ_10ms.bin", dtype=np.int8)
+    re = np.fromfile(DATA / "pocketsdr_L1_12MHz_I_10ms.bin", dtype=np.int8)
+    gs = np.fromfile(DATA / "gnsssdr_cttc_4Msps_4ms.dat", dtype=np.complex64)
+    return [("pocketsdr 4 MHz IQ", iq, 4e6, 0.0, True, 4000),
+            ("pocketsdr 12 MHz I", re, 12e6, 3e6, False, 12000),
+            ("gnss-sdr 4 MHz", gs, 4e6, 0.0, None, 2000)]
+
+
+@pytest.mark.parametrize("name,x,fs,fif,cplx,block", _real_captures())
+def test_real_capture_no_false_alarm(name, x, fs, fif, cplx, block):
+    mon = RfiMonitor()
+    step = 2 * block if (cplx and not np.iscomplexobj(x)) else block
+    types = []
+    for k in range(0, x.size - step + 1, step):
+        e = mon.process(x[k:k + step], fs, fif, k // (step // block), 0, is_complex=cplx)
+        types.append(e.type)
+    assert types[:5] == [UNKNOWN] * 5
+    assert all(t == NONE for t in types[5:]), f"{name}: {types}"
+
+
+def test_real_capture_plus_simulated_chirp_detected_and_tracked():
+    raw = np.fromfile(DATA / "pocketsdr_L1_12MHz_I_10ms.bin", dtype=np.int8).astype(np.float64)
+    fs, fif = 12e6, 3e6
+    # scale: treat the 2-bit counts as the noise power reference (noise ~ mean(x^2) counts^2)
+    n_pow = float(np.mean(raw ** 2))
+    fe = FrontEndConfig(sample_rate_hz=fs, intermediate_frequency_hz=fif, bits=16,
+                        noise_density_dbm_per_mhz=10 * math.log10(n_pow / 6.0))  # N over 6 MHz
+    jam = ChirpJammer(start_frequency_hz=-1.5e6, sweep_rate_hz_per_s=2e11, sweep_period_s=15e-6,
+                      js_db=10 * math.log10(n_pow / fe.signal_power_mw) + 10.0)  # J/N = 10 dB
+    block = 12000
+    mon = RfiMonitor()
+    for k in range(5):
+        mon.process(raw[k * block:(k + 1) * block], fs, fif, k * block, 0)
+    sim = IfSimulator(fe, (jam,), satellites=(), seed=0)
+    sim.generate(5 * block, add_to=np.zeros(5 * block))   # advance to the same time
+    x = sim.generate(5 * block, add_to=raw[5 * block:]).values()
+    ests = [mon.process(x[k * block:(k + 1) * block], fs, fif, (5 + k) * block, 0) for k in range(5)]
+    assert ests[-1].type == CHIRP
+    assert ests[-1].sweep_period_s == pytest.approx(15e-6, rel=0.01)
+    assert ests[-1].jammer_to_noise_db == pytest.approx(10.0, abs=1.0)
