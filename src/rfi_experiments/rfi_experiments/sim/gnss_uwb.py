@@ -1,0 +1,468 @@
+"""Half-simulated GNSS + UWB measurements of a static receiver under chirp jamming (Cao et al.).
+
+Satellite geometry comes from a pluggable source (by default a real GPS broadcast ephemeris read
+with ``gnss_common.rinex`` / ``gnss_common.ephemeris``); the receiver is static at a known ECEF
+position with a clock drawn from an h-coefficient model (``gnss_common.clock_model``); GPS L1
+pseudoranges and pseudorange rates come at 5 Hz; three UWB anchors around the tag (the paper's
+reference ranges 11.71, 13.00 and 11.26 m) range at 20 Hz each with centimetre noise; jamming at a
+given J/S lowers each satellite's C/N0 by Cao et al. eq. 4, which sets the code (DLL) and frequency
+(FLL) tracking jitter (Kaplan & Hegarty), drops satellites below a loss-of-lock threshold, and adds
+bursts of gross pseudorange outliers (tens to hundreds of metres) from 6 dB J/S on, as the paper
+observed (Sec. IV-2, Fig. 4).
+
+Everything is seeded; the output is deterministic for a given :class:`GnssUwbScenario`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gnss_common.clock_model import ClockHCoefficients, simulate_clock
+from gnss_common.constants import EARTH_ROTATION_RATE_RADPS, SPEED_OF_LIGHT_MPS
+from gnss_common.coordinates import azimuth_elevation, ecef_to_enu_rotation, ecef_to_geodetic
+from gnss_common.ephemeris import EphemerisArrays, EphemerisStore, pack_ephemerides, satellite_states
+from gnss_common.gps_time import gps_to_stamp_ns
+from gnss_common.observations import GPS, GnssEpoch, SatelliteObservation, UwbRangeMeasurement
+from gnss_common.rinex import read_rinex_nav
+from uwb_gnss_fusion.jamming_weights import TrackingLoopParams, measurement_sigmas
+
+JSR_SCENARIOS_DB = (None, -10.0, -2.0, 6.0, 14.0, 22.0, 30.0)
+"""The paper's scenarios: no jamming, then J/S in dB (Cao et al., Table 1)."""
+
+ARL1_ECEF_M = (-740289.918, -5457071.734, 3207245.542)
+"""Static receiver: ARL1 (NGA station 85408, Austin TX) RINEX header position, ECEF, m."""
+
+PAPER_ANCHOR_RANGES_M = (11.71, 13.00, 11.26)
+"""Reference tag-anchor ranges of the paper's three UWB anchors, m (Cao et al., Sec. IV-1)."""
+
+
+@dataclass(frozen=True)
+class SatelliteSnapshot:
+    """Satellite states at one GPS time (rows = satellites).
+
+    Attributes:
+        prn: PRNs, shape (n,), int.
+        position_ecef_m: ECEF at that time, m, shape (n, 3).
+        velocity_ecef_mps: ECEF velocity, m/s, shape (n, 3).
+        clock_bias_s: satellite clock offset (incl. relativistic term, minus T_GD), s, shape (n,).
+        clock_drift_s_per_s: its rate, s/s, shape (n,).
+    """
+
+    prn: np.ndarray
+    position_ecef_m: np.ndarray
+    velocity_ecef_mps: np.ndarray
+    clock_bias_s: np.ndarray
+    clock_drift_s_per_s: np.ndarray
+
+
+GeometrySource = Callable[[int, float], SatelliteSnapshot]
+"""geometry(week, gps_tow_s) -> states of all satellites with a valid orbit at that GPS time."""
+
+
+class BroadcastGeometry:
+    """Geometry source from a RINEX GPS navigation file (IS-GPS-200 orbits via gnss_common).
+
+    Args:
+        nav_path: RINEX 2/3 GPS navigation file.
+
+    Attributes:
+        iono_alpha, iono_beta: Klobuchar coefficients of the file header (shape (4,)).
+    """
+
+    def __init__(self, nav_path: str | Path) -> None:
+        nav = read_rinex_nav(nav_path)
+        self.iono_alpha = nav.header.iono_alpha
+        self.iono_beta = nav.header.iono_beta
+        self._store = EphemerisStore(nav.ephemerides)
+        self._cache: dict[tuple[int, ...], EphemerisArrays] = {}
+
+    def __call__(self, week: int, tow_s: float) -> SatelliteSnapshot:
+        chosen = []
+        for prn in self._store.prns:
+            eph, _ = self._store.select(prn, week, tow_s)
+            if eph is not None:
+                chosen.append(eph)
+        key = tuple(id(e) for e in chosen)
+        packed = self._cache.get(key)
+        if packed is None:
+            packed = pack_ephemerides(chosen)
+            self._cache[key] = packed
+        st = satellite_states(packed, week, tow_s)
+        return SatelliteSnapshot(
+            np.array([e.prn for e in chosen], dtype=int),
+            st.position_ecef_m,
+            st.velocity_ecef_mps,
+            st.clock_bias_s,
+            st.clock_drift_s_per_s,
+        )
+
+
+@dataclass(frozen=True)
+class JammingEffect:
+    """How a J/S degrades tracking in the simulator.
+
+    Attributes:
+        quality_factor: Q of Cao et al. eq. 4 (1: narrowband/swept jammer).
+        loss_of_lock_dbhz: satellites whose measured effective C/N0 is below are not tracked, dB-Hz.
+        cn0_estimate_std_db: 1-sigma of the receiver's C/N0 estimate, dB.
+        outlier_onset_jsr_db: no gross outliers below this J/S, dB (paper: from 6 dB on).
+        outlier_burst_rate_per_s: burst starts per satellite per second, at the onset J/S.
+        outlier_rate_growth_per_db: the burst rate multiplies by ``10**(growth * (jsr - onset) / 10)``.
+        outlier_burst_duration_s: (min, max) burst length, s (uniform).
+        outlier_magnitude_m: (min, max) |pseudorange error| during a burst, m (log-uniform).
+        doppler_outlier_mps: (min, max) |pseudorange-rate error| during a burst, m/s (log-uniform).
+    """
+
+    quality_factor: float = 1.0
+    loss_of_lock_dbhz: float = 30.0
+    cn0_estimate_std_db: float = 0.7
+    outlier_onset_jsr_db: float = 6.0
+    outlier_burst_rate_per_s: float = 0.002
+    outlier_rate_growth_per_db: float = 1.0
+    outlier_burst_duration_s: tuple[float, float] = (0.2, 2.0)
+    outlier_magnitude_m: tuple[float, float] = (20.0, 300.0)
+    doppler_outlier_mps: tuple[float, float] = (0.5, 10.0)
+
+
+@dataclass(frozen=True)
+class GnssUwbScenario:
+    """One simulated run.
+
+    Attributes:
+        jsr_db: jammer-to-signal ratio at the antenna, dB (None: no jammer).
+        duration_s: length, s.
+        seed: seed of every random draw.
+        start_week: continuous GPS week of the first epoch.
+        start_tow_s: GPS time of week of the first epoch, s.
+        receiver_ecef_m: static antenna (and tag) position, ECEF, m.
+        gnss_rate_hz: GNSS epoch rate, Hz.
+        uwb_rate_hz: ranging rate per anchor, Hz.
+        anchor_ranges_m: true tag-anchor distances, m (one anchor each).
+        anchor_azimuths_deg: anchor azimuths around the tag, deg from north.
+        anchor_up_m: anchor heights above the tag, m.
+        uwb_noise_std_m: UWB range noise 1-sigma, m.
+        uwb_reported_std_m: range_std_m written in the messages, m (NaN: let the filter decide).
+        elevation_mask_deg: satellites below are not tracked, deg.
+        cn0_zenith_dbhz, cn0_horizon_dbhz: jammer-free C/N0 at 90 and 0 deg elevation, dB-Hz
+            (linear in sin(elevation) between).
+        correlated_error_std_m: 1-sigma of a per-satellite first-order Gauss-Markov pseudorange
+            error (residual atmosphere, multipath, orbit), m.
+        correlated_error_tau_s: its correlation time, s.
+        clock: receiver clock h-coefficients (default: compensated crystal, Brown & Hwang).
+        clock_bias0_s, clock_drift0: initial receiver clock offset (s) and frequency offset (s/s).
+        loop: tracking-loop parameters of the jitter model.
+        jamming: :class:`JammingEffect`.
+        report_sigmas: write pseudorange_std_m / pseudorange_rate_std_mps from the receiver's
+            own C/N0 into the messages (False: NaN, the filter decides).
+    """
+
+    jsr_db: float | None = None
+    duration_s: float = 360.0
+    seed: int = 0
+    start_week: int = 1854
+    start_tow_s: float = 3600.0
+    receiver_ecef_m: tuple[float, float, float] = ARL1_ECEF_M
+    gnss_rate_hz: float = 5.0
+    uwb_rate_hz: float = 20.0
+    anchor_ranges_m: tuple[float, ...] = PAPER_ANCHOR_RANGES_M
+    anchor_azimuths_deg: tuple[float, ...] = (20.0, 140.0, 260.0)
+    anchor_up_m: tuple[float, ...] = (1.5, -0.5, 0.8)
+    uwb_noise_std_m: float = 0.03
+    uwb_reported_std_m: float = math.nan
+    elevation_mask_deg: float = 10.0
+    cn0_zenith_dbhz: float = 49.0
+    cn0_horizon_dbhz: float = 34.0
+    correlated_error_std_m: float = 0.7
+    correlated_error_tau_s: float = 60.0
+    clock: ClockHCoefficients = field(default_factory=lambda: ClockHCoefficients(h0=2e-19, h_minus2=2e-20))
+    clock_bias0_s: float = 1.0e-6
+    clock_drift0: float = 5.0e-8
+    loop: TrackingLoopParams = field(default_factory=TrackingLoopParams)
+    jamming: JammingEffect = field(default_factory=JammingEffect)
+    report_sigmas: bool = False
+
+    def __post_init__(self) -> None:
+        if not (self.duration_s > 0 and self.gnss_rate_hz > 0 and self.uwb_rate_hz > 0):
+            raise ValueError("duration_s, gnss_rate_hz and uwb_rate_hz must be > 0")
+        n = len(self.anchor_ranges_m)
+        if len(self.anchor_azimuths_deg) != n or len(self.anchor_up_m) != n:
+            raise ValueError("anchor_ranges_m, anchor_azimuths_deg and anchor_up_m must have equal length")
+        for r, u in zip(self.anchor_ranges_m, self.anchor_up_m, strict=True):
+            if not (r > abs(u)):
+                raise ValueError(f"anchor range {r} must exceed its height offset {u}")
+        if self.jsr_db is not None and not math.isfinite(self.jsr_db):
+            raise ValueError("jsr_db must be finite or None")
+        if not (
+            self.uwb_noise_std_m >= 0 and self.correlated_error_std_m >= 0 and self.correlated_error_tau_s > 0
+        ):
+            raise ValueError("noise standard deviations must be >= 0 and tau > 0")
+
+
+@dataclass(frozen=True)
+class GnssUwbTruth:
+    """Truth of a run.
+
+    Attributes:
+        receiver_ecef_m: static antenna position, ECEF, m, shape (3,).
+        anchor_ecef_m: anchor positions, ECEF, m, shape (k, 3), row j is anchor id ``f"A{j+1}"``.
+        gnss_stamps_ns: stamps of the GNSS epochs, ns, shape (n,).
+        clock_bias_m: true receiver c*dt at the GNSS epochs, m, shape (n,).
+        clock_drift_mps: true receiver c*ddt at the GNSS epochs, m/s, shape (n,).
+        outlier_mask: per GNSS epoch, number of satellites inside an outlier burst, shape (n,).
+        satellites_tracked: per GNSS epoch, satellites in the epoch, shape (n,).
+    """
+
+    receiver_ecef_m: np.ndarray
+    anchor_ecef_m: np.ndarray
+    gnss_stamps_ns: np.ndarray
+    clock_bias_m: np.ndarray
+    clock_drift_mps: np.ndarray
+    outlier_mask: np.ndarray
+    satellites_tracked: np.ndarray
+
+
+@dataclass(frozen=True)
+class GnssUwbRun:
+    """Output of :func:`simulate`: time-ordered GNSS epochs, UWB ranges and the truth."""
+
+    scenario: GnssUwbScenario
+    gnss_epochs: tuple[GnssEpoch, ...]
+    uwb_ranges: tuple[UwbRangeMeasurement, ...]
+    truth: GnssUwbTruth
+
+    def messages(
+        self, anchor_ids: tuple[str, ...] | None = None, gnss: bool = True
+    ) -> list[GnssEpoch | UwbRangeMeasurement]:
+        """All messages merged in stamp order (a GNSS epoch before a UWB range at the same stamp).
+
+        Args:
+            anchor_ids: keep only these anchors (None: all).
+            gnss: include the GNSS epochs.
+        """
+        items: list[tuple[int, int, GnssEpoch | UwbRangeMeasurement]] = []
+        if gnss:
+            items += [(e.stamp_ns, 0, e) for e in self.gnss_epochs]
+        items += [
+            (u.stamp_ns, 1, u) for u in self.uwb_ranges if anchor_ids is None or u.anchor_id in anchor_ids
+        ]
+        items.sort(key=lambda t: (t[0], t[1]))
+        return [t[2] for t in items]
+
+
+def anchor_positions_ecef(receiver_ecef_m: np.ndarray, ranges_m, azimuths_deg, up_m) -> np.ndarray:
+    """Anchors placed around the tag at given ranges, azimuths and heights.
+
+    Args:
+        receiver_ecef_m: tag position, ECEF, m, shape (3,).
+        ranges_m, azimuths_deg, up_m: per anchor, m, deg, m.
+
+    Returns:
+        Anchor ECEF positions, m, shape (k, 3).
+    """
+    lat, lon, _ = ecef_to_geodetic(np.asarray(receiver_ecef_m, float))
+    rot = ecef_to_enu_rotation(lat, lon)
+    out = []
+    for r, az, u in zip(ranges_m, azimuths_deg, up_m, strict=True):
+        horiz = math.sqrt(r * r - u * u)
+        enu = np.array([horiz * math.sin(math.radians(az)), horiz * math.cos(math.radians(az)), u])
+        out.append(np.asarray(receiver_ecef_m, float) + rot.T @ enu)
+    return np.array(out)
+
+
+def _rotate_z(vec: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
+    """Rotate row vectors about the z axis by -angle (ECEF at transmission -> ECEF at reception)."""
+    c = np.cos(angle_rad)
+    s = np.sin(angle_rad)
+    out = np.empty_like(vec)
+    out[:, 0] = c * vec[:, 0] + s * vec[:, 1]
+    out[:, 1] = -s * vec[:, 0] + c * vec[:, 1]
+    out[:, 2] = vec[:, 2]
+    return out
+
+
+def simulate(
+    scenario: GnssUwbScenario,
+    geometry: GeometrySource,
+    iono_alpha: np.ndarray | None = None,
+    iono_beta: np.ndarray | None = None,
+) -> GnssUwbRun:
+    """Simulate one run.
+
+    Args:
+        scenario: :class:`GnssUwbScenario`.
+        geometry: satellite states source, e.g. :class:`BroadcastGeometry`.
+        iono_alpha, iono_beta: Klobuchar coefficients (shape (4,)); None: no ionosphere (and
+            ``ionosphere_delay_m`` = 0 in the messages).
+
+    Returns:
+        :class:`GnssUwbRun`.
+
+    Notes:
+        Pseudorange (Cao et al., eq. 5): ``|R(w tau) p_s(t - tau) - p_r| + c dt_r - c dt_s + I + T
+        + e_corr + e_DLL (+ outlier)``, with the exact light-time iteration and Earth rotation, the
+        DLL jitter of the effective C/N0 (eq. 4; Kaplan & Hegarty 8.53), a Gauss-Markov correlated
+        error; the messages report the same I, T (from ``gnss_common.corrections``) so the only
+        unmodelled errors are e_corr, the jitter and the outliers. Pseudorange rate (eq. 6) with
+        FLL jitter (Kaplan & Hegarty 8.47). UWB (eq. 7) with Gaussian noise.
+    """
+    from gnss_common.corrections import klobuchar_delay_m, troposphere_delay_m
+
+    sc = scenario
+    rng = np.random.default_rng(sc.seed)
+    rx = np.asarray(sc.receiver_ecef_m, dtype=float)
+    lat, lon, h = ecef_to_geodetic(rx)
+    dt_g = 1.0 / sc.gnss_rate_hz
+    n_ep = int(round(sc.duration_s * sc.gnss_rate_hz))
+    x_s, y = simulate_clock(
+        sc.clock,
+        dt_g,
+        n_ep - 1 if n_ep > 1 else 1,
+        seed=sc.seed + 1,
+        x0_s=sc.clock_bias0_s,
+        y0=sc.clock_drift0,
+    )
+    clk_m = SPEED_OF_LIGHT_MPS * x_s[:n_ep]
+    drift_mps = SPEED_OF_LIGHT_MPS * y[:n_ep]
+    jam = sc.jamming
+    jsr = sc.jsr_db
+    burst_rate = 0.0
+    if jsr is not None and jsr >= jam.outlier_onset_jsr_db:
+        burst_rate = jam.outlier_burst_rate_per_s * 10.0 ** (
+            jam.outlier_rate_growth_per_db * (jsr - jam.outlier_onset_jsr_db) / 10.0
+        )
+    phi_gm = math.exp(-dt_g / sc.correlated_error_tau_s)
+    q_gm = sc.correlated_error_std_m * math.sqrt(1.0 - phi_gm**2)
+    gm_state: dict[int, float] = {}
+    burst_until: dict[int, float] = {}
+    burst_err: dict[int, tuple[float, float]] = {}
+    epochs: list[GnssEpoch] = []
+    stamps = np.zeros(n_ep, dtype=np.int64)
+    n_out = np.zeros(n_ep, dtype=int)
+    n_trk = np.zeros(n_ep, dtype=int)
+    for k in range(n_ep):
+        t_rel = k * dt_g
+        week = sc.start_week
+        tow = sc.start_tow_s + t_rel
+        stamp = gps_to_stamp_ns(week, tow)
+        stamps[k] = stamp
+        snap = geometry(week, tow - 0.075)
+        # Light-time iteration with the Earth rotating during the flight (transmit-time ECEF).
+        tau = np.full(snap.prn.size, 0.075)
+        for _ in range(3):
+            p_tx = snap.position_ecef_m + snap.velocity_ecef_mps * (0.075 - tau)[:, None]
+            p_rot = _rotate_z(p_tx, EARTH_ROTATION_RATE_RADPS * tau)
+            tau = np.linalg.norm(p_rot - rx, axis=1) / SPEED_OF_LIGHT_MPS
+        p_tx = snap.position_ecef_m + snap.velocity_ecef_mps * (0.075 - tau)[:, None]
+        p_rot = _rotate_z(p_tx, EARTH_ROTATION_RATE_RADPS * tau)
+        v_rot = _rotate_z(snap.velocity_ecef_mps, EARTH_ROTATION_RATE_RADPS * tau)
+        geom = np.linalg.norm(p_rot - rx, axis=1)
+        los = (p_rot - rx) / geom[:, None]
+        az, el = azimuth_elevation(rx, p_rot)
+        az = np.atleast_1d(az)
+        el = np.atleast_1d(el)
+        sat_clk_m = SPEED_OF_LIGHT_MPS * (snap.clock_bias_s + snap.clock_drift_s_per_s * (0.075 - tau))
+        sat_drift_mps = SPEED_OF_LIGHT_MPS * snap.clock_drift_s_per_s
+        if iono_alpha is not None and iono_beta is not None:
+            iono = klobuchar_delay_m(iono_alpha, iono_beta, lat, lon, az, el, tow)
+        else:
+            iono = np.zeros_like(geom)
+        tropo = troposphere_delay_m(lat, h, el)
+        cn0_clean = sc.cn0_horizon_dbhz + (sc.cn0_zenith_dbhz - sc.cn0_horizon_dbhz) * np.sin(
+            np.clip(el, 0.0, None)
+        )
+        js = -np.inf if jsr is None else jsr
+        s_pr, s_rate, cn0_eff = measurement_sigmas(cn0_clean, js, sc.loop, jam.quality_factor)
+        cn0_meas = cn0_eff + jam.cn0_estimate_std_db * rng.standard_normal(geom.size)
+        # Draw all random numbers for every visible satellite, tracked or not, so the sequence of
+        # one satellite does not depend on another's lock state.
+        n_pr = rng.standard_normal(geom.size)
+        n_rate = rng.standard_normal(geom.size)
+        n_gm = rng.standard_normal(geom.size)
+        u_burst = rng.random((geom.size, 5))
+        obs = []
+        for i, prn in enumerate(snap.prn.tolist()):
+            if math.degrees(el[i]) < sc.elevation_mask_deg:
+                gm_state.pop(prn, None)
+                continue
+            gm = gm_state.get(prn)
+            gm = sc.correlated_error_std_m * n_gm[i] if gm is None else phi_gm * gm + q_gm * n_gm[i]
+            gm_state[prn] = gm
+            if cn0_meas[i] < jam.loss_of_lock_dbhz:
+                continue
+            err_pr = gm + s_pr[i] * n_pr[i]
+            err_rate = s_rate[i] * n_rate[i]
+            if burst_rate > 0.0:
+                if t_rel >= burst_until.get(prn, -1.0) and u_burst[i, 0] < burst_rate * dt_g:
+                    lo, hi = jam.outlier_burst_duration_s
+                    burst_until[prn] = t_rel + lo + (hi - lo) * u_burst[i, 1]
+                    mlo, mhi = jam.outlier_magnitude_m
+                    dlo, dhi = jam.doppler_outlier_mps
+                    sign = 1.0 if u_burst[i, 2] < 0.5 else -1.0
+                    burst_err[prn] = (
+                        sign * mlo * (mhi / mlo) ** u_burst[i, 3],
+                        sign * dlo * (dhi / dlo) ** u_burst[i, 4],
+                    )
+                if t_rel < burst_until.get(prn, -1.0):
+                    err_pr += burst_err[prn][0]
+                    err_rate += burst_err[prn][1]
+                    n_out[k] += 1
+            pr = geom[i] + clk_m[k] - sat_clk_m[i] + iono[i] + tropo[i] + err_pr
+            rate = float(los[i] @ v_rot[i]) + drift_mps[k] - sat_drift_mps[i] + err_rate
+            obs.append(
+                SatelliteObservation(
+                    constellation=GPS,
+                    svid=int(prn),
+                    pseudorange_m=float(pr),
+                    pseudorange_rate_mps=rate,
+                    cn0_dbhz=float(cn0_meas[i]),
+                    satellite_position_ecef_m=p_tx[i].copy(),
+                    satellite_velocity_ecef_mps=snap.velocity_ecef_mps[i].copy(),
+                    satellite_clock_bias_m=float(sat_clk_m[i]),
+                    satellite_clock_drift_mps=float(sat_drift_mps[i]),
+                    ionosphere_delay_m=float(iono[i]),
+                    troposphere_delay_m=float(tropo[i]),
+                    pseudorange_std_m=float(s_pr[i]) if sc.report_sigmas else math.nan,
+                    pseudorange_rate_std_mps=float(s_rate[i]) if sc.report_sigmas else math.nan,
+                )
+            )
+        n_trk[k] = len(obs)
+        epochs.append(
+            GnssEpoch(stamp_ns=int(stamp), gps_week=week, gps_time_of_week_s=tow, observations=tuple(obs))
+        )
+
+    anchors = anchor_positions_ecef(rx, sc.anchor_ranges_m, sc.anchor_azimuths_deg, sc.anchor_up_m)
+    true_r = np.linalg.norm(anchors - rx, axis=1)
+    n_u = int(round(sc.duration_s * sc.uwb_rate_hz))
+    k_a = anchors.shape[0]
+    offsets_ns = [int(round(j / (k_a * sc.uwb_rate_hz) * 1e9)) for j in range(k_a)]
+    t0 = gps_to_stamp_ns(sc.start_week, sc.start_tow_s)
+    noise = sc.uwb_noise_std_m * rng.standard_normal((n_u, k_a))
+    uwb = []
+    for m in range(n_u):
+        base = t0 + int(round(m / sc.uwb_rate_hz * 1e9))
+        for j in range(k_a):
+            uwb.append(
+                UwbRangeMeasurement(
+                    stamp_ns=base + offsets_ns[j],
+                    anchor_id=f"A{j + 1}",
+                    anchor_position_m=anchors[j].copy(),
+                    frame_id="earth",
+                    range_m=float(true_r[j] + noise[m, j]),
+                    range_std_m=sc.uwb_reported_std_m,
+                )
+            )
+    truth = GnssUwbTruth(
+        receiver_ecef_m=rx.copy(),
+        anchor_ecef_m=anchors,
+        gnss_stamps_ns=stamps,
+        clock_bias_m=clk_m,
+        clock_drift_mps=drift_mps,
+        outlier_mask=n_out,
+        satellites_tracked=n_trk,
+    )
+    return GnssUwbRun(scenario=sc, gnss_epochs=tuple(epochs), uwb_ranges=tuple(uwb), truth=truth)

@@ -1,0 +1,133 @@
+"""Tests of the half-simulated GNSS/UWB jamming simulator (seeded, short runs)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gnss_common.constants import EARTH_GM_M3PS2, EARTH_ROTATION_RATE_RADPS, SPEED_OF_LIGHT_MPS
+from gnss_common.observations import GnssEpoch
+from rfi_experiments.sim.gnss_uwb import (
+    PAPER_ANCHOR_RANGES_M,
+    BroadcastGeometry,
+    GnssUwbScenario,
+    SatelliteSnapshot,
+    simulate,
+)
+from uwb_gnss_fusion.jamming_weights import effective_cn0_dbhz
+
+NAV = Path(__file__).resolve().parents[2] / "gnss_common" / "test" / "data" / "arlm2000.15n"
+
+
+def circular_geometry(week: int, tow_s: float) -> SatelliteSnapshot:
+    """24 satellites on circular 55-deg orbits (6 planes x 4), inertial-to-ECEF by Earth rotation."""
+    a = 26_560e3
+    n = math.sqrt(EARTH_GM_M3PS2 / a**3)
+    t = week * 604800.0 + tow_s
+    pos, vel = [], []
+    for plane in range(6):
+        raan = math.radians(60 * plane) - EARTH_ROTATION_RATE_RADPS * t
+        for slot in range(4):
+            u = math.radians(90 * slot + 15 * plane) + n * t
+            inc = math.radians(55.0)
+            r_orb = np.array([math.cos(u), math.sin(u), 0.0]) * a
+            v_orb = np.array([-math.sin(u), math.cos(u), 0.0]) * a * n
+            ci, si, co, so = math.cos(inc), math.sin(inc), math.cos(raan), math.sin(raan)
+            rot = np.array([[co, -so * ci, so * si], [so, co * ci, -co * si], [0.0, si, ci]])
+            p = rot @ r_orb
+            v = rot @ v_orb - np.cross([0.0, 0.0, EARTH_ROTATION_RATE_RADPS], p)  # ECEF = inertial - w x r
+            pos.append(p)
+            vel.append(v)
+    k = len(pos)
+    return SatelliteSnapshot(np.arange(1, k + 1), np.array(pos), np.array(vel), np.full(k, 1e-5), np.zeros(k))
+
+
+def _short(jsr, seed=0, duration=20.0, **kw):
+    return simulate(GnssUwbScenario(jsr_db=jsr, duration_s=duration, seed=seed, **kw), circular_geometry)
+
+
+def test_rates_ordering_and_anchor_geometry():
+    run = _short(None)
+    assert len(run.gnss_epochs) == 100 and len(run.uwb_ranges) == 3 * 400
+    msgs = run.messages()
+    stamps = [m.stamp_ns for m in msgs]
+    assert stamps == sorted(stamps)
+    assert isinstance(msgs[0], GnssEpoch)
+    true_r = np.linalg.norm(run.truth.anchor_ecef_m - run.truth.receiver_ecef_m, axis=1)
+    np.testing.assert_allclose(true_r, PAPER_ANCHOR_RANGES_M, atol=1e-9)
+    ranges = np.array([[u.range_m for u in run.uwb_ranges if u.anchor_id == f"A{j + 1}"] for j in range(3)])
+    np.testing.assert_allclose(ranges.mean(axis=1), PAPER_ANCHOR_RANGES_M, atol=0.01)
+    assert ranges.std(axis=1).max() < 0.05  # centimetre noise
+    assert len(run.messages(anchor_ids=("A1",), gnss=False)) == 400
+
+
+def test_seeded_and_deterministic():
+    a, b, c = _short(14.0, seed=3), _short(14.0, seed=3), _short(14.0, seed=4)
+    pa = [o.pseudorange_m for e in a.gnss_epochs for o in e.observations]
+    pb = [o.pseudorange_m for e in b.gnss_epochs for o in e.observations]
+    pc = [o.pseudorange_m for e in c.gnss_epochs for o in e.observations]
+    assert pa == pb and pa != pc
+
+
+def test_pseudoranges_match_model_without_jamming():
+    run = _short(None)
+    rx = run.truth.receiver_ecef_m
+    res = []
+    for k, ep in enumerate(run.gnss_epochs):
+        for o in ep.observations:
+            sp = o.satellite_position_ecef_m
+            rho = np.linalg.norm(sp - rx) + EARTH_ROTATION_RATE_RADPS / SPEED_OF_LIGHT_MPS * (
+                sp[0] * rx[1] - sp[1] * rx[0]
+            )
+            res.append(
+                o.pseudorange_m
+                - (
+                    rho
+                    + run.truth.clock_bias_m[k]
+                    - o.satellite_clock_bias_m
+                    + o.ionosphere_delay_m
+                    + o.troposphere_delay_m
+                )
+            )
+    res = np.array(res)
+    assert abs(res.mean()) < 1.0 and res.std() < 2.5  # correlated error 0.7 m + DLL jitter, no outliers
+    assert run.truth.outlier_mask.sum() == 0
+
+
+def test_jamming_lowers_cn0_by_eq4_and_drops_satellites_and_adds_outliers():
+    clean = _short(None, duration=60.0)
+    j22 = _short(22.0, duration=60.0)
+    j30 = _short(30.0, duration=60.0)
+    cn_clean = np.mean([o.cn0_dbhz for e in clean.gnss_epochs for o in e.observations])
+    cn_22 = np.mean([o.cn0_dbhz for e in j22.gnss_epochs for o in e.observations])
+    # eq. 4 at the mean clean C/N0 predicts the jammed mean within the estimator noise
+    assert cn_22 == pytest.approx(float(effective_cn0_dbhz(cn_clean, 22.0)), abs=1.0)
+    assert np.mean(j30.truth.satellites_tracked) < 0.5 * np.mean(clean.truth.satellites_tracked)
+    assert j22.truth.outlier_mask.sum() > 0
+    assert _short(-2.0, duration=60.0).truth.outlier_mask.sum() == 0
+
+
+def test_scenario_validation():
+    with pytest.raises(ValueError):
+        GnssUwbScenario(duration_s=0.0)
+    with pytest.raises(ValueError):
+        GnssUwbScenario(anchor_ranges_m=(1.0,), anchor_azimuths_deg=(0.0,), anchor_up_m=(2.0,))
+    with pytest.raises(ValueError):
+        GnssUwbScenario(jsr_db=float("nan"))
+
+
+@pytest.mark.skipif(not NAV.exists(), reason="ARL1 broadcast ephemeris not in gnss_common/test/data")
+def test_broadcast_geometry_run_and_fusion_filter_consume_it():
+    from uwb_gnss_fusion.fusion_filter import FusionFilter, FusionParams
+
+    geo = BroadcastGeometry(NAV)
+    run = simulate(GnssUwbScenario(duration_s=30.0, seed=1), geo, geo.iono_alpha, geo.iono_beta)
+    assert min(run.truth.satellites_tracked) >= 6
+    f = FusionFilter(FusionParams(accel_psd_m2ps3=0.01))
+    for m in run.messages():
+        out = f.process(m)
+    assert out.initialized
+    assert np.linalg.norm(out.position_m - run.truth.receiver_ecef_m) < 2.0

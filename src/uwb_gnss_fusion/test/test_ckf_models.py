@@ -1,0 +1,261 @@
+"""Oracle tests of the CKF, the measurement models and the jamming weights (no ROS)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.linalg import expm
+
+from gnss_common.constants import EARTH_ROTATION_RATE_RADPS, GPS_CA_CHIP_RATE_HZ, SPEED_OF_LIGHT_MPS
+from uwb_gnss_fusion.ckf import CholeskyError, CubatureKalmanFilter, cubature_unit_points, robust_cholesky
+from uwb_gnss_fusion.jamming_weights import (
+    CA_CHIP_LENGTH_M,
+    TrackingLoopParams,
+    dll_jitter_m,
+    effective_cn0_dbhz,
+    fll_jitter_mps,
+    measurement_sigmas,
+)
+from uwb_gnss_fusion.measurement_models import (
+    constant_velocity_transition,
+    pseudorange_model,
+    pseudorange_rate_model,
+    stack_models,
+    uwb_range_model,
+    white_acceleration_noise,
+)
+
+
+def _random_spd(rng, n):
+    a = rng.standard_normal((n, n))
+    return a @ a.T + n * np.eye(n)
+
+
+# ----------------------------------------------------------------------------- CKF
+def test_cubature_points_reproduce_mean_and_covariance():
+    xi = cubature_unit_points(5)
+    assert xi.shape == (10, 5)
+    np.testing.assert_allclose(xi.mean(axis=0), 0.0, atol=1e-15)
+    np.testing.assert_allclose(xi.T @ xi / 10, np.eye(5), atol=1e-14)
+
+
+def test_ckf_equals_linear_kalman_filter_on_linear_model():
+    rng = np.random.default_rng(1)
+    n, k = 8, 5
+    x0 = rng.standard_normal(n)
+    p0 = _random_spd(rng, n)
+    h = rng.standard_normal((k, n))
+    r = _random_spd(rng, k)
+    z = rng.standard_normal(k)
+    phi = constant_velocity_transition(0.2)
+    q = _random_spd(rng, n) * 0.01
+    f = CubatureKalmanFilter(x0, p0)
+    f.predict_linear(phi, q)
+    f.update(z, r, lambda pts: pts @ h.T)
+    # reference linear KF
+    xp = phi @ x0
+    pp = phi @ p0 @ phi.T + q
+    s = h @ pp @ h.T + r
+    gain = pp @ h.T @ np.linalg.inv(s)
+    xr = xp + gain @ (z - h @ xp)
+    pr = (np.eye(n) - gain @ h) @ pp
+    np.testing.assert_allclose(f.x, xr, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(f.p, 0.5 * (pr + pr.T), rtol=1e-9, atol=1e-10)
+
+
+def test_ckf_cubature_time_update_equals_linear_one_for_linear_fx():
+    rng = np.random.default_rng(2)
+    p0 = _random_spd(rng, 8)
+    x0 = rng.standard_normal(8)
+    phi = constant_velocity_transition(0.37)
+    q = np.eye(8) * 1e-3
+    a = CubatureKalmanFilter(x0, p0)
+    b = CubatureKalmanFilter(x0, p0)
+    a.predict_linear(phi, q)
+    b.predict(lambda pts: pts @ phi.T, q)
+    np.testing.assert_allclose(a.x, b.x, atol=1e-12)
+    np.testing.assert_allclose(a.p, b.p, rtol=1e-10, atol=1e-10)
+
+
+def test_ckf_third_degree_rule_is_exact_for_quadratic_measurement():
+    # E[x^2] = mu^2 + sigma^2 exactly under the third-degree rule.
+    f = CubatureKalmanFilter(np.array([2.0, 0.0]), np.diag([0.25, 1.0]))
+    res = f.update(np.array([0.0]), np.array([1.0]), lambda pts: pts[:, :1] ** 2)
+    z_hat = 0.0 - res.innovation[0]
+    assert z_hat == pytest.approx(2.0**2 + 0.25, rel=1e-12)
+
+
+def test_gating_excludes_outlier_and_equals_update_without_it():
+    rng = np.random.default_rng(3)
+    n = 4
+    p0 = _random_spd(rng, n)
+    h = rng.standard_normal((3, n))
+    r = np.diag([1.0, 1.0, 1.0])
+    z = h @ np.zeros(n) + np.array([0.1, -0.2, 1.0e4])
+    gated = CubatureKalmanFilter(np.zeros(n), p0)
+    res = gated.update(z, r, lambda pts: pts @ h.T, gate_nis=15.13)
+    assert res.accepted.tolist() == [True, True, False]
+    ref = CubatureKalmanFilter(np.zeros(n), p0)
+    ref.update(z[:2], r[:2, :2], lambda pts: pts @ h[:2].T)
+    np.testing.assert_allclose(gated.x, ref.x, atol=1e-12)
+    np.testing.assert_allclose(gated.p, ref.p, atol=1e-12)
+    assert math.isfinite(res.nis)
+
+
+def test_all_gated_leaves_state_unchanged():
+    f = CubatureKalmanFilter(np.zeros(2), np.eye(2))
+    res = f.update(np.array([1e6]), np.array([1.0]), lambda pts: pts[:, :1], gate_nis=10.0)
+    assert not res.accepted.any()
+    np.testing.assert_array_equal(f.x, 0.0)
+    np.testing.assert_array_equal(f.p, np.eye(2))
+    assert math.isnan(res.nis)
+
+
+def test_robust_cholesky_rejects_nan_and_indefinite():
+    with pytest.raises(CholeskyError):
+        robust_cholesky(np.array([[np.nan, 0.0], [0.0, 1.0]]))
+    with pytest.raises(CholeskyError):
+        robust_cholesky(np.array([[1.0, 0.0], [0.0, -1.0]]))
+    low = robust_cholesky(np.array([[1.0, 1.0], [1.0, 1.0]]))  # PSD, singular: jitter makes it work
+    np.testing.assert_allclose(low @ low.T, [[1.0, 1.0], [1.0, 1.0]], atol=1e-5)
+
+
+def test_ckf_constructor_validates_shapes():
+    with pytest.raises(ValueError):
+        CubatureKalmanFilter(np.zeros(3), np.eye(2))
+
+
+# ----------------------------------------------------------------------------- models
+def _rot_z(v, ang):
+    c, s = math.cos(ang), math.sin(ang)
+    return np.array([c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2]])
+
+
+def test_pseudorange_sagnac_first_order_matches_exact_rotation():
+    rx = np.array([-740289.918, -5457071.734, 3207245.542])
+    sats = np.array([[-1.2e7, -2.0e7, 1.1e7], [1.5e7, -2.1e7, 0.5e7], [-2.0e7, -1.0e7, 1.6e7]])
+    state = np.zeros((1, 8))
+    state[0, 0:3] = rx
+    pred = pseudorange_model(sats, np.zeros(3), np.zeros(3), np.zeros(3))(state)[0]
+    for i, s in enumerate(sats):
+        tau = np.linalg.norm(s - rx) / SPEED_OF_LIGHT_MPS
+        for _ in range(3):
+            tau = np.linalg.norm(_rot_z(s, EARTH_ROTATION_RATE_RADPS * tau) - rx) / SPEED_OF_LIGHT_MPS
+        exact = np.linalg.norm(_rot_z(s, EARTH_ROTATION_RATE_RADPS * tau) - rx)
+        assert abs(pred[i] - exact) < 1e-3
+        assert abs(pred[i] - np.linalg.norm(s - rx)) > 1.0  # the correction is not negligible
+
+
+def test_pseudorange_clock_and_corrections_enter_additively():
+    sats = np.array([[1.5e7, -2.1e7, 0.5e7]])
+    st = np.zeros((2, 8))
+    st[:, 0:3] = [-740289.9, -5457071.7, 3207245.5]
+    st[1, 6] = 100.0
+    h = pseudorange_model(sats, np.array([5.0]), np.array([3.0]), np.array([2.0]))(st)
+    h0 = pseudorange_model(sats, np.zeros(1), np.zeros(1), np.zeros(1))(st[:1])
+    assert h[0, 0] - h0[0, 0] == pytest.approx(-5.0 + 3.0 + 2.0, abs=1e-6)
+    assert h[1, 0] - h[0, 0] == pytest.approx(100.0, abs=1e-6)
+
+
+def test_pseudorange_rate_is_time_derivative_of_pseudorange():
+    rx = np.array([-740289.9, -5457071.7, 3207245.5])
+    ps = np.array([[-1.2e7, -2.0e7, 1.1e7], [1.5e7, -2.1e7, 0.5e7]])
+    vs = np.array([[1500.0, -2200.0, 900.0], [-800.0, 300.0, 3000.0]])
+    clk = np.array([1.0e4, -3.0e3])
+    drift = np.array([0.4, -0.2])
+    x = np.zeros(8)
+    x[0:3] = rx
+    x[3:6] = [3.0, -4.0, 1.0]
+    x[6:8] = [250.0, 12.0]
+    rate = pseudorange_rate_model(ps, vs, drift)(x[None, :])[0]
+    h = 1e-3
+
+    def pr(t):
+        xt = x.copy()
+        xt[0:3] += x[3:6] * t
+        xt[6] += x[7] * t
+        return pseudorange_model(ps + vs * t, clk + drift * t, np.zeros(2), np.zeros(2))(xt[None, :])[0]
+
+    numeric = (pr(h) - pr(-h)) / (2 * h)
+    np.testing.assert_allclose(rate, numeric, atol=1e-4)
+
+
+def test_uwb_model_with_lever_arm_and_stacking():
+    anchors = np.array([[10.0, 0.0, 0.0], [0.0, 5.0, 0.0]])
+    st = np.zeros((1, 8))
+    hx = uwb_range_model(anchors, np.array([0.0, 0.0, 1.0]))
+    np.testing.assert_allclose(hx(st)[0], [math.sqrt(101.0), math.sqrt(26.0)])
+    both = stack_models([hx, uwb_range_model(anchors)])
+    np.testing.assert_allclose(both(st)[0], [math.sqrt(101.0), math.sqrt(26.0), 10.0, 5.0])
+
+
+def test_transition_is_matrix_exponential_of_paper_F():
+    f = np.zeros((8, 8))
+    f[0:3, 3:6] = np.eye(3)
+    f[6, 7] = 1.0
+    np.testing.assert_allclose(constant_velocity_transition(0.7), expm(f * 0.7), atol=1e-14)
+
+
+def test_white_acceleration_noise_equals_van_loan_discretisation():
+    q, dt = 0.3, 0.45
+    f = np.zeros((6, 6))
+    f[0:3, 3:6] = np.eye(3)
+    g = np.zeros((6, 6))
+    g[3:6, 3:6] = q * np.eye(3)
+    big = np.block([[-f, g], [np.zeros((6, 6)), f.T]]) * dt
+    e = expm(big)
+    phi = e[6:, 6:].T
+    qd = phi @ e[:6, 6:]
+    np.testing.assert_allclose(white_acceleration_noise(q, dt), qd, atol=1e-13)
+
+
+# ----------------------------------------------------------------------------- jamming weights
+def test_effective_cn0_limits_and_monotonicity():
+    assert effective_cn0_dbhz(45.0, -np.inf) == pytest.approx(45.0)
+    # strong jammer: C/N0_eff -> 10 log10(Q f_c) - J/S
+    assert effective_cn0_dbhz(45.0, 80.0, 2.0) == pytest.approx(
+        10 * math.log10(2.0 * GPS_CA_CHIP_RATE_HZ) - 80.0, abs=1e-3
+    )
+    js = np.linspace(-20, 40, 13)
+    ce = effective_cn0_dbhz(45.0, js)
+    assert np.all(np.diff(ce) < 0)
+    # equal contributions: 3.01 dB loss
+    js_equal = -45.0 + 10 * math.log10(GPS_CA_CHIP_RATE_HZ)
+    assert effective_cn0_dbhz(45.0, js_equal) == pytest.approx(45.0 - 10 * math.log10(2.0), abs=1e-9)
+    with pytest.raises(ValueError):
+        effective_cn0_dbhz(45.0, 0.0, quality_factor=0.0)
+
+
+def test_dll_jitter_closed_form_and_scaling():
+    loop = TrackingLoopParams(dll_bandwidth_hz=2.0, correlator_spacing_chips=1.0, integration_time_s=0.02)
+    cn0 = 10**4.5
+    expected = CA_CHIP_LENGTH_M * math.sqrt(2.0 * 1.0 / (2 * cn0) * (1 + 2 / (0.02 * cn0 * 1.0)))
+    assert dll_jitter_m(45.0, loop) == pytest.approx(expected, rel=1e-12)
+    # at high C/N0 the jitter scales as (C/N0)^-1/2: +20 dB -> / 10
+    assert dll_jitter_m(70.0, loop) / dll_jitter_m(50.0, loop) == pytest.approx(0.1, rel=1e-2)
+
+
+def test_fll_jitter_and_sigmas_grow_with_jamming():
+    loop = TrackingLoopParams()
+    assert fll_jitter_mps(34.9, loop) > fll_jitter_mps(35.0, loop) * math.sqrt(2) * 0.99
+    s_pr0, s_r0, c0 = measurement_sigmas(np.array([45.0]), np.nan, loop)
+    s_pr1, s_r1, c1 = measurement_sigmas(np.array([45.0]), 25.0, loop)
+    assert c0[0] == pytest.approx(45.0)
+    assert c1[0] < c0[0] and s_pr1[0] > s_pr0[0] and s_r1[0] > s_r0[0]
+    assert s_pr0[0] >= loop.code_floor_m
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        dict(dll_bandwidth_hz=0.0),
+        dict(correlator_spacing_chips=1.5),
+        dict(integration_time_s=-1.0),
+        dict(code_floor_m=-0.1),
+    ],
+)
+def test_loop_params_validation(kwargs):
+    with pytest.raises(ValueError):
+        TrackingLoopParams(**kwargs)

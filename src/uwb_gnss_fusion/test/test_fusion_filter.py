@@ -1,0 +1,377 @@
+"""Behaviour tests of the GNSS/UWB fusion filter on small synthetic scenarios (seeded, fast)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic, enu_to_ecef
+from gnss_common.observations import GnssEpoch, SatelliteObservation, UwbRangeMeasurement
+from uwb_gnss_fusion.fusion_filter import (
+    MODE_GNSS,
+    MODE_GNSS_UWB,
+    FusionFilter,
+    FusionOutput,
+    FusionParams,
+    ReorderBuffer,
+)
+from uwb_gnss_fusion.jamming_weights import dll_jitter_m
+
+RX = np.array([-740289.918, -5457071.734, 3207245.542])
+LAT, LON, _ = ecef_to_geodetic(RX)
+R_ENU = ecef_to_enu_rotation(LAT, LON)
+NS = 1_000_000_000
+T0 = 1_000 * NS
+# Satellites at fixed azimuth/elevation, 20200 km altitude-ish, expressed in ECEF (static geometry
+# is enough for the filter logic; the orbits come in with the simulator).
+AZ_EL_DEG = [(0, 75), (60, 35), (130, 50), (200, 25), (250, 60), (310, 30), (100, 15), (170, 80)]
+
+
+def _sat_positions():
+    out = []
+    for az, el in AZ_EL_DEG:
+        a, e = math.radians(az), math.radians(el)
+        u = np.array([math.cos(e) * math.sin(a), math.cos(e) * math.cos(a), math.sin(e)])
+        out.append(enu_to_ecef(u * 2.2e7, RX))
+    return np.array(out)
+
+
+SATS = _sat_positions()
+ANCHORS = RX + np.array([[8.0, 9.0, 1.0], [-11.0, 4.0, -0.5], [2.0, -11.0, 0.8]]) @ R_ENU
+
+
+def _epoch(stamp_ns, clock_m=150.0, drift_mps=0.0, rng=None, sigma=0.5, bias=None, svids=None, cn0=45.0):
+    obs = []
+    for i, sp in enumerate(SATS):
+        rho = np.linalg.norm(sp - RX) + 7.2921151467e-5 / 299792458.0 * (sp[0] * RX[1] - sp[1] * RX[0])
+        noise = 0.0 if rng is None else sigma * rng.standard_normal()
+        extra = 0.0 if bias is None else bias.get(i + 1, 0.0)
+        los = (sp - RX) / np.linalg.norm(sp - RX)
+        vs = np.zeros(3)
+        obs.append(
+            SatelliteObservation(
+                constellation=1,
+                svid=(i + 1) if svids is None else svids[i],
+                pseudorange_m=float(rho + clock_m + noise + extra),
+                pseudorange_rate_mps=float(drift_mps + los @ vs),
+                cn0_dbhz=cn0,
+                satellite_position_ecef_m=sp.copy(),
+                satellite_velocity_ecef_mps=vs,
+                satellite_clock_bias_m=0.0,
+                satellite_clock_drift_mps=0.0,
+            )
+        )
+    return GnssEpoch(
+        stamp_ns=int(stamp_ns), gps_week=2000, gps_time_of_week_s=stamp_ns / NS, observations=tuple(obs)
+    )
+
+
+def _uwb(stamp_ns, j, rng=None, sigma=0.03, frame="earth", anchors=ANCHORS, truth=RX, anchor_id=None):
+    r = float(np.linalg.norm(anchors[j] - truth)) + (0.0 if rng is None else sigma * rng.standard_normal())
+    return UwbRangeMeasurement(
+        stamp_ns=int(stamp_ns),
+        anchor_id=anchor_id or f"A{j + 1}",
+        anchor_position_m=anchors[j].copy(),
+        frame_id=frame,
+        range_m=r,
+    )
+
+
+def _horizontal_error(out: FusionOutput) -> float:
+    e = R_ENU @ (out.position_m - RX)
+    return float(math.hypot(e[0], e[1]))
+
+
+def _run_gnss(f, n, rng, start=T0, dt_ns=NS // 5, **kw):
+    out = None
+    for k in range(n):
+        out = f.process_gnss(_epoch(start + k * dt_ns, rng=rng, **kw))
+    return out
+
+
+# ----------------------------------------------------------------------------- params
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        dict(accel_psd_m2ps3=-1.0),
+        dict(accel_psd_m2ps3=float("nan")),
+        dict(gate_probability=0.0),
+        dict(uwb_range_std_m=0.0),
+        dict(min_satellites_init=3),
+        dict(use_gnss=False, use_uwb=False),
+        dict(anchors=(("a", 0.0, 0.0, 0.0), ("a", 1.0, 0.0, 0.0))),
+        dict(uwb_lever_arm_m=(0.0, 0.0)),
+        dict(clock_h_minus2_hz=-1.0),
+    ],
+)
+def test_params_validation(kwargs):
+    with pytest.raises(ValueError):
+        FusionParams(**kwargs)
+
+
+def test_gate_threshold_is_chi2_quantile():
+    assert FusionParams(gate_probability=0.9999).gate_nis == pytest.approx(15.1367, abs=1e-3)
+    assert math.isinf(FusionParams(gate_probability=1.0).gate_nis)
+
+
+# ----------------------------------------------------------------------------- GNSS only
+def test_gnss_only_noise_free_converges_to_truth_and_clock():
+    f = FusionFilter(FusionParams(use_uwb=False))
+    out = _run_gnss(f, 50, None, clock_m=1234.5, drift_mps=0.0)
+    assert out.initialized and out.frame_id == "earth" and out.mode == MODE_GNSS
+    np.testing.assert_allclose(out.position_m, RX, atol=1e-3)
+    assert out.clock_bias_m == pytest.approx(1234.5, abs=1e-3)
+    assert out.satellites_used == len(SATS)
+    lat, lon, h = out.geodetic
+    assert lat == pytest.approx(math.degrees(LAT), abs=1e-8) and lon == pytest.approx(
+        math.degrees(LON), abs=1e-8
+    )
+    cov = out.position_covariance_enu_m2
+    np.testing.assert_allclose(cov, cov.T, atol=1e-12)
+    assert np.all(np.linalg.eigvalsh(cov) > 0)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        out.stamp_ns = 0  # type: ignore[misc]
+
+
+def test_before_initialisation_output_is_flagged_and_nan():
+    f = FusionFilter()
+    out = f.process_gnss(GnssEpoch(stamp_ns=T0, gps_week=2000, gps_time_of_week_s=0.0))
+    assert not out.initialized
+    assert np.all(np.isnan(out.position_m))
+    assert dict(out.rejection_counts)["no_satellites"] == 1
+
+
+def test_nis_is_consistent_with_noise_model():
+    rng = np.random.default_rng(5)
+    f = FusionFilter(FusionParams(use_uwb=False, use_doppler=False, accel_psd_m2ps3=1e-4))
+    nis = []
+    for k in range(300):
+        out = f.process_gnss(_epoch(T0 + k * NS // 5, rng=rng, sigma=0.5, cn0=45.0))
+        if k > 20:
+            nis.append(out.normalized_innovation_squared)
+    # the weights come from the DLL model at 45 dB-Hz with its 0.5 m floor; the noise is 0.5 m
+    sig = math.hypot(f.params.loop.code_floor_m, float(dll_jitter_m(45.0, f.params.loop)))
+    expected = (0.5 / sig) ** 2
+    assert np.mean(nis) == pytest.approx(expected, rel=0.2)
+
+
+# ----------------------------------------------------------------------------- robustness
+def test_outlier_burst_recovery_within_5_s():
+    rng = np.random.default_rng(7)
+    f = FusionFilter(FusionParams(use_uwb=False, accel_psd_m2ps3=0.01))
+    errors = []
+    for k in range(400):  # 80 s at 5 Hz; bursts on sat 2 (+150 m) at 30-32 s and sats 3,5 (-60 m) at 50-51 s
+        t = k / 5
+        bias = {}
+        if 30 <= t < 32:
+            bias = {2: 150.0}
+        if 50 <= t < 51:
+            bias = {3: -60.0, 5: -60.0}
+        out = f.process_gnss(_epoch(T0 + k * NS // 5, rng=rng, bias=bias))
+        errors.append(np.linalg.norm(out.position_m - RX))
+    errors = np.array(errors)
+    counts = dict(out.rejection_counts)
+    assert counts["innovation_gate_pseudorange"] >= 10 + 2 * 5
+    for start in (30, 50):
+        pre = np.sqrt(np.mean(errors[(start - 5) * 5 : start * 5] ** 2))
+        post = errors[(start + 2 + 5) * 5]
+        assert post <= 2 * pre, (start, pre, post)
+        assert errors[start * 5 : (start + 2) * 5].max() <= 2 * pre + 0.5
+
+
+def test_bad_inputs_are_counted_never_crash_never_nan():
+    rng = np.random.default_rng(9)
+    f = FusionFilter(FusionParams(anchors=(("A1", *ANCHORS[0]), ("A2", *ANCHORS[1]), ("A3", *ANCHORS[2]))))
+    _run_gnss(f, 10, rng)
+    t = T0 + 2 * NS
+    good = _epoch(t, rng=rng)
+    o = list(good.observations)
+    o[0] = dataclasses.replace(o[0], pseudorange_m=float("nan"))
+    o[1] = dataclasses.replace(o[1], satellite_position_ecef_m=np.array([np.inf, 0.0, 0.0]))
+    o[2] = dataclasses.replace(o[2], svid=o[3].svid)  # duplicate
+    below = dataclasses.replace(
+        o[4], svid=30, satellite_position_ecef_m=enu_to_ecef(np.array([2.2e7, 0.0, -1e6]), RX)
+    )
+    o.append(below)
+    o[5] = dataclasses.replace(o[5], pseudorange_m=-5.0)
+    outs = [f.process_gnss(dataclasses.replace(good, observations=tuple(o)))]
+    outs.append(f.process_gnss(GnssEpoch(stamp_ns=t + NS // 5, gps_week=2000, gps_time_of_week_s=0.0)))
+    three = _epoch(t + 2 * NS // 5, rng=rng)
+    outs.append(f.process_gnss(dataclasses.replace(three, observations=three.observations[:3])))
+    outs.append(f.process_uwb(dataclasses.replace(_uwb(t + 3 * NS // 5, 0), range_m=-1.0)))
+    outs.append(f.process_uwb(dataclasses.replace(_uwb(t + 3 * NS // 5, 0), range_m=float("nan"))))
+    outs.append(f.process_uwb(_uwb(t + 3 * NS // 5, 0, anchor_id="ghost")))
+    outs.append(
+        f.process_uwb(dataclasses.replace(_uwb(t + 3 * NS // 5, 0), anchor_position_m=np.array([1.0, 2.0])))
+    )
+    outs.append(f.process_gnss(_epoch(t - NS, rng=rng)))  # in the past
+    outs.append(f.process_uwb(_uwb(-5, 1)))
+    counts = dict(outs[-1].rejection_counts)
+    for reason in (
+        "nonfinite_pseudorange",
+        "duplicate_svid",
+        "below_elevation_mask",
+        "nonphysical_pseudorange",
+        "no_satellites",
+        "fewer_than_4_satellites",
+        "negative_range",
+        "nonfinite_range",
+        "unknown_anchor",
+        "out_of_order",
+        "invalid_stamp",
+    ):
+        assert counts.get(reason, 0) >= 1, reason
+    assert counts["duplicate_svid"] == 2
+    for out in outs:
+        assert out.initialized and np.all(np.isfinite(out.position_m))
+    assert outs[0].satellites_used == len(SATS) + 1 - 6  # 9 given: NaN, inf, 2 duplicates, negative, below
+    assert outs[2].satellites_used == 3  # tightly coupled: fewer than 4 satellites still update
+    # a stamp far in the future resets and re-initialises from that epoch
+    out = f.process_gnss(_epoch(t + 100 * NS, rng=rng))
+    assert dict(out.rejection_counts)["time_gap_reset"] == 1 and out.initialized
+    with pytest.raises(TypeError):
+        f.process_gnss(dataclasses.replace(good, stamp_ns=1.5))
+    with pytest.raises(TypeError):
+        f.process("not a measurement")
+
+
+def test_jammer_information_inflates_pseudorange_variance():
+    rng1, rng2 = np.random.default_rng(11), np.random.default_rng(11)
+    a = FusionFilter(FusionParams(use_uwb=False))
+    b = FusionFilter(FusionParams(use_uwb=False))
+    _run_gnss(a, 5, rng1)
+    _run_gnss(b, 5, rng2)
+    a.set_jammer_to_signal(T0 + NS, 35.0)
+    oa = _run_gnss(a, 5, rng1, start=T0 + NS)
+    ob = _run_gnss(b, 5, rng2, start=T0 + NS)
+    assert oa.jammer_to_signal_db == 35.0 and math.isnan(ob.jammer_to_signal_db)
+    assert np.trace(oa.covariance_pv[:3, :3]) > 1.5 * np.trace(ob.covariance_pv[:3, :3])
+    # stale J/S is ignored
+    oc = _run_gnss(a, 1, rng1, start=T0 + 10 * NS)
+    assert math.isnan(oc.jammer_to_signal_db)
+
+
+# ----------------------------------------------------------------------------- UWB
+def test_gnss_plus_uwb_beats_gnss_only_horizontally():
+    rng_a, rng_b = np.random.default_rng(13), np.random.default_rng(13)
+    urng = np.random.default_rng(14)
+    g = FusionFilter(FusionParams(use_uwb=False, accel_psd_m2ps3=0.01))
+    gu = FusionFilter(FusionParams(accel_psd_m2ps3=0.01))
+    err_g, err_gu = [], []
+    for k in range(300):
+        t = T0 + k * NS // 5
+        og = g.process_gnss(_epoch(t, rng=rng_a))
+        ogu = gu.process_gnss(_epoch(t, rng=rng_b))
+        for j in range(3):
+            ogu = gu.process_uwb(_uwb(t + (j + 1) * NS // 20, j, rng=urng))
+        g.process_uwb(_uwb(t + NS // 20, 0))  # ignored by the GNSS-only baseline
+        if k > 50:
+            err_g.append(_horizontal_error(og))
+            err_gu.append(_horizontal_error(ogu))
+    assert ogu.mode == MODE_GNSS_UWB and ogu.uwb_used == 1
+    assert dict(g.rejection_counts)["uwb_disabled"] == 300
+    assert np.sqrt(np.mean(np.square(err_gu))) < 0.1
+    assert np.sqrt(np.mean(np.square(err_gu))) < 0.5 * np.sqrt(np.mean(np.square(err_g)))
+
+
+def test_uwb_only_local_frame_with_four_anchors():
+    anchors = np.array([[0.0, 0.0, 2.0], [10.0, 0.0, 0.5], [10.0, 10.0, 2.5], [0.0, 10.0, 0.3]])
+    truth = np.array([4.0, 6.0, 1.0])
+    rng = np.random.default_rng(17)
+    f = FusionFilter(FusionParams(use_gnss=False, accel_psd_m2ps3=0.01))
+    out = None
+    for k in range(400):
+        out = f.process_uwb(
+            _uwb(T0 + k * NS // 40, k % 4, rng=rng, frame="map", anchors=anchors, truth=truth)
+        )
+    assert out.initialized and out.frame_id == "map" and math.isnan(out.clock_bias_m)
+    err = out.position_m - truth
+    assert math.hypot(err[0], err[1]) < 0.03
+    # the height is weakly observed by near-coplanar anchors: the estimate must be consistent
+    assert np.all(np.abs(err) < 3.0 * np.sqrt(np.diag(out.covariance_pv)[:3]))
+    assert all(math.isnan(v) for v in out.geodetic)
+    # a GNSS epoch cannot be used in the local frame: counted, not crashed
+    out = f.process_gnss(_epoch(T0 + 11 * NS))
+    assert dict(out.rejection_counts)["gnss_disabled"] == 1
+
+
+def test_map_frame_uwb_rejected_by_earth_filter():
+    f = FusionFilter()
+    _run_gnss(f, 3, None)
+    out = f.process_uwb(_uwb(T0 + NS, 0, frame="map"))
+    assert dict(out.rejection_counts)["uwb_frame_mismatch"] == 1
+
+
+def test_uwb_initialises_then_gnss_sets_clock_switching_modes():
+    f = FusionFilter(FusionParams(accel_psd_m2ps3=0.01))
+    rng = np.random.default_rng(19)
+    for k in range(60):
+        out = f.process_uwb(_uwb(T0 + k * NS // 60, k % 3, rng=rng))
+    assert out.initialized and math.isnan(out.clock_bias_m)
+    out = _run_gnss(f, 20, None, start=T0 + NS, clock_m=777.0)
+    assert out.clock_bias_m == pytest.approx(777.0, abs=0.5)
+    assert np.linalg.norm(out.position_m - RX) < 0.5
+
+
+# ----------------------------------------------------------------------------- divergence
+def test_divergence_detected_and_reinitialised_from_snapshot():
+    rng = np.random.default_rng(23)
+    f = FusionFilter(FusionParams(use_uwb=False))
+    f.initialize(T0, RX + np.array([400.0, -300.0, 200.0]), clock_bias_m=150.0, position_std_m=0.5)
+    diverged = []
+    out = None
+    for k in range(1, 40):
+        out = f.process_gnss(_epoch(T0 + k * NS // 5, rng=rng))
+        diverged.append(out.diverged)
+    assert any(diverged) and out.reinitializations >= 1
+    assert dict(out.rejection_counts)["divergence"] >= 1
+    assert np.linalg.norm(out.position_m - RX) < 3.0
+
+
+def test_divergence_reinitialises_from_supplied_reference():
+    f = FusionFilter(FusionParams(use_uwb=False, min_satellites_init=8, divergence_gnss_epochs=2))
+    f.initialize(T0, RX + np.array([400.0, 0.0, 0.0]), clock_bias_m=150.0, position_std_m=0.5)
+    f.supply_reference_solution(T0, RX + np.array([1.0, 0.0, 0.0]), 2.0, clock_bias_m=150.0)
+    # only 7 satellites: the internal snapshot needs 8, so the reference must be used
+    outs = [
+        f.process_gnss(dataclasses.replace(e, observations=e.observations[:7]))
+        for e in (_epoch(T0 + k * NS // 5) for k in range(1, 4))
+    ]
+    first = next(o for o in outs if o.diverged)
+    np.testing.assert_allclose(first.position_m, RX + np.array([1.0, 0.0, 0.0]), atol=1e-6)
+
+
+# ----------------------------------------------------------------------------- time handling
+def test_asynchronous_stream_is_deterministic_and_time_ordered():
+    def run():
+        rng = np.random.default_rng(29)
+        f = FusionFilter()
+        res = []
+        for k in range(30):
+            t = T0 + k * NS // 5
+            res.append(f.process_gnss(_epoch(t, rng=rng)))
+            res.append(f.process_uwb(_uwb(t, 0, rng=rng)))  # same stamp as the epoch: dt = 0 is fine
+            res.append(f.process_uwb(_uwb(t + NS // 10, 1, rng=rng)))
+        return res
+
+    a, b = run(), run()
+    for x, y in zip(a, b, strict=True):
+        np.testing.assert_array_equal(x.position_m, y.position_m)
+        np.testing.assert_array_equal(x.covariance_pv, y.covariance_pv)
+    assert all(x.stamp_ns <= y.stamp_ns for x, y in zip(a, a[1:], strict=False))
+
+
+def test_reorder_buffer_releases_in_stamp_order_and_counts_late():
+    buf = ReorderBuffer(window_ns=100)
+    msgs = [_uwb(s, 0) for s in (300, 100, 200, 250)]
+    for m in msgs:
+        assert buf.push(m)
+    ready = buf.pop_ready(now_ns=360)
+    assert [m.stamp_ns for m in ready] == [100, 200, 250]
+    assert not buf.push(_uwb(150, 0)) and buf.late == 1
+    assert [m.stamp_ns for m in buf.flush()] == [300]
+    with pytest.raises(ValueError):
+        ReorderBuffer(-1)

@@ -1,0 +1,191 @@
+"""Measurement models of the GNSS/UWB tightly-coupled filter, as callables (filterpy ``hx`` style).
+
+Every model maps a batch of full navigation states ``X`` of shape (m, 8) -- rows
+``[x, y, z, vx, vy, vz, c*dt, c*ddt]`` in m, m/s, m, m/s (ECEF, or the local frame for UWB-only) --
+to predicted measurements of shape (m, k). The CKF evaluates a model on all 2n cubature points at
+once, so the models are vectorised over rows and never branch on the measurement type: the fusion
+filter builds one callable per update with :func:`stack_models`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from gnss_common.constants import EARTH_ROTATION_RATE_RADPS, SPEED_OF_LIGHT_MPS
+
+MeasurementModel = Callable[[np.ndarray], np.ndarray]
+"""hx(X): X (m, 8) states -> (m, k) predicted measurements."""
+
+STATE_DIM = 8
+"""Size of the navigation (and error) state [p(3), v(3), c*dt, c*ddt]."""
+
+_OMEGA_OVER_C = EARTH_ROTATION_RATE_RADPS / SPEED_OF_LIGHT_MPS
+_EYE8 = np.eye(STATE_DIM)
+_PP = np.zeros((6, 6))
+_PP[0:3, 0:3] = np.eye(3)
+_PV = np.zeros((6, 6))
+_PV[0:3, 3:6] = _PV[3:6, 0:3] = np.eye(3)
+_VV = np.zeros((6, 6))
+_VV[3:6, 3:6] = np.eye(3)
+
+
+def pseudorange_model(
+    sat_pos_ecef_m: np.ndarray,
+    sat_clock_bias_m: np.ndarray,
+    iono_delay_m: np.ndarray,
+    tropo_delay_m: np.ndarray,
+) -> MeasurementModel:
+    """Pseudorange model for k satellites.
+
+    Args:
+        sat_pos_ecef_m: satellite positions at transmission time, ECEF (frame of transmission
+            time), m, shape (k, 3).
+        sat_clock_bias_m: c * satellite clock offset, m, shape (k,).
+        iono_delay_m: modelled ionospheric delay, m, shape (k,).
+        tropo_delay_m: modelled tropospheric delay, m, shape (k,).
+
+    Returns:
+        hx mapping states (m, 8) to pseudoranges (m, k), m.
+
+    Notes:
+        Cao et al., eq. 5: ``rho = |p_s - p_r| + T + I + c (dt_r - dt_s)``. The Earth-rotation
+        (Sagnac) correction is the first-order closed form
+        ``omega_e / c (x_s y_r - y_s x_r)`` (IS-GPS-200 20.3.3.4.3.4 rotation to first order; the
+        neglected second-order term is below 1 mm for GNSS ranges).
+    """
+    ps = np.asarray(sat_pos_ecef_m, dtype=float)
+    const = (
+        np.asarray(iono_delay_m, float)
+        + np.asarray(tropo_delay_m, float)
+        - np.asarray(sat_clock_bias_m, float)
+    )
+    xs = ps[:, 0]
+    ys = ps[:, 1]
+
+    def hx(states: np.ndarray) -> np.ndarray:
+        p = states[:, None, 0:3]
+        geom = np.sqrt(((ps[None, :, :] - p) ** 2).sum(axis=2))
+        sagnac = _OMEGA_OVER_C * (xs[None, :] * states[:, 1:2] - ys[None, :] * states[:, 0:1])
+        return geom + sagnac + states[:, 6:7] + const[None, :]
+
+    return hx
+
+
+def pseudorange_rate_model(
+    sat_pos_ecef_m: np.ndarray, sat_vel_ecef_mps: np.ndarray, sat_clock_drift_mps: np.ndarray
+) -> MeasurementModel:
+    """Pseudorange-rate (from Doppler) model for k satellites.
+
+    Args:
+        sat_pos_ecef_m: satellite positions, ECEF, m, shape (k, 3).
+        sat_vel_ecef_mps: satellite velocities, ECEF, m/s, shape (k, 3).
+        sat_clock_drift_mps: c * satellite clock drift, m/s, shape (k,).
+
+    Returns:
+        hx mapping states (m, 8) to pseudorange rates (m, k), m/s, positive when the range grows
+        (``-lambda * doppler_hz``).
+
+    Notes:
+        Cao et al., eq. 6: ``rho_dot = (v_s - v_r)^T e + c (ddt_r - ddt_s)`` with ``e`` the unit
+        line of sight from the receiver to the satellite, plus the time derivative of the Sagnac
+        term of :func:`pseudorange_model` (a few mm/s) so that the two models are consistent.
+    """
+    ps = np.asarray(sat_pos_ecef_m, dtype=float)
+    vs = np.asarray(sat_vel_ecef_mps, dtype=float)
+    drift = np.asarray(sat_clock_drift_mps, dtype=float)
+
+    def hx(states: np.ndarray) -> np.ndarray:
+        d = ps[None, :, :] - states[:, None, 0:3]
+        r = np.sqrt((d * d).sum(axis=2))
+        dv = vs[None, :, :] - states[:, None, 3:6]
+        rate = (d * dv).sum(axis=2) / r
+        sagnac_rate = _OMEGA_OVER_C * (
+            vs[None, :, 0] * states[:, 1:2]
+            - vs[None, :, 1] * states[:, 0:1]
+            + ps[None, :, 0] * states[:, 4:5]
+            - ps[None, :, 1] * states[:, 3:4]
+        )
+        return rate + sagnac_rate + states[:, 7:8] - drift[None, :]
+
+    return hx
+
+
+def uwb_range_model(anchor_pos_m: np.ndarray, lever_arm_m: np.ndarray | None = None) -> MeasurementModel:
+    """UWB two-way range model for k anchors.
+
+    Args:
+        anchor_pos_m: anchor positions in the state frame, m, shape (k, 3).
+        lever_arm_m: tag position minus GNSS antenna position in the state frame, m, shape (3,)
+            (zero: tag at the antenna, the paper's setting).
+
+    Returns:
+        hx mapping states (m, 8) to ranges (m, k), m.
+
+    Notes:
+        Cao et al., eq. 7: ``rho_U = |p_anchor - p_tag|`` with ``p_tag = p_r + lever_arm``. Two-way
+        ranging has no clock term.
+    """
+    pa = np.asarray(anchor_pos_m, dtype=float)
+    arm = np.zeros(3) if lever_arm_m is None else np.asarray(lever_arm_m, dtype=float)
+
+    def hx(states: np.ndarray) -> np.ndarray:
+        tag = states[:, None, 0:3] + arm
+        return np.sqrt(((pa[None, :, :] - tag) ** 2).sum(axis=2))
+
+    return hx
+
+
+def stack_models(models: list[MeasurementModel]) -> MeasurementModel:
+    """Concatenate several models into one (columns in the given order).
+
+    Args:
+        models: list of hx callables, each (m, 8) -> (m, k_i).
+
+    Returns:
+        hx mapping (m, 8) to (m, sum k_i).
+    """
+    if len(models) == 1:
+        return models[0]
+
+    def hx(states: np.ndarray) -> np.ndarray:
+        return np.concatenate([h(states) for h in models], axis=1)
+
+    return hx
+
+
+def constant_velocity_transition(dt_s: float) -> np.ndarray:
+    """Discrete state transition of the 8-state constant-velocity / clock model.
+
+    Args:
+        dt_s: time step T_s, s (>= 0).
+
+    Returns:
+        Phi, shape (8, 8).
+
+    Notes:
+        Cao et al., eq. 9 (continuous F) and eq. 10 (Phi = exp(F T_s)).
+    """
+    phi = _EYE8.copy()
+    phi[0, 3] = phi[1, 4] = phi[2, 5] = dt_s
+    phi[6, 7] = dt_s
+    return phi
+
+
+def white_acceleration_noise(accel_psd_m2ps3: float, dt_s: float) -> np.ndarray:
+    """Process noise of position/velocity under white acceleration noise.
+
+    Args:
+        accel_psd_m2ps3: acceleration noise power spectral density q per axis, m^2/s^3.
+        dt_s: time step, s.
+
+    Returns:
+        Q for [p, v], shape (6, 6), m^2, m^2/s, m^2/s^2.
+
+    Notes:
+        Integral of Phi G q G^T Phi^T over T_s for the constant-velocity model of Cao et al.,
+        eq. 9-10 (Brown & Hwang, 4th ed., sec. 9.3): q [[T^3/3, T^2/2], [T^2/2, T]] per axis.
+    """
+    q = accel_psd_m2ps3
+    return (q * dt_s**3 / 3.0) * _PP + (q * dt_s**2 / 2.0) * _PV + (q * dt_s) * _VV
