@@ -11,9 +11,9 @@ import math
 from collections import Counter
 from dataclasses import dataclass
 
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 
-from diagnostic_msgs.msg import DiagnosticArray
 from rfi_msgs.msg import CarrierPhaseArray, CorrelatorArray
 from rfi_node_common.diagnostics import OK, WARN, StampTimer, diagnostic_array
 from rfi_node_common.main import run_node
