@@ -18,14 +18,14 @@ def sample_bag(tmp_path_factory):
     return path, counts
 
 
-def replay(path, rate):
+def replay(path, rate, transport='dds'):
     context = make_context()
     try:
         with BagReader(path) as reader:
             types = {t: info[0] for t, info in reader.topics.items()}
             expected = [(m.topic, m.raw) for m in reader.messages()]
         relay = RelayNode(types, context=context)
-        harness = ReplayHarness([relay], context=context)
+        harness = ReplayHarness([relay], context=context, transport=transport)
         result = harness.run(path, rate=rate)
         harness.destroy()
         relay.destroy_node()
@@ -40,10 +40,11 @@ def relayed_in_order(result):
     return [(topic, raw) for _, topic, raw in merged]
 
 
+@pytest.mark.parametrize('transport', ['dds', 'direct'])
 @pytest.mark.parametrize('rate', [None, 1.0], ids=['max', '1x'])
-def test_relay_complete_in_order_and_byte_identical(sample_bag, rate):
+def test_relay_complete_in_order_and_byte_identical(sample_bag, rate, transport):
     path, counts = sample_bag
-    expected, result = replay(path, rate)
+    expected, result = replay(path, rate, transport)
     assert result.inputs == counts
     assert len(expected) == sum(counts.values()) == 190  # 20 IF + 20 jammer + 10 GNSS + 40 UWB + 100 correlators
     assert relayed_in_order(result) == expected
@@ -57,3 +58,19 @@ def test_outputs_do_not_depend_on_replay_speed(sample_bag):
     _, fast = replay(path, None)
     _, paced = replay(path, 4.0)
     assert fast.outputs == paced.outputs
+
+
+def test_direct_transport_gives_the_same_outputs_as_dds(sample_bag):
+    path, _ = sample_bag
+    _, dds = replay(path, None, 'dds')
+    _, direct = replay(path, None, 'direct')
+    assert direct.outputs == dds.outputs
+
+
+def test_unknown_transport_is_refused():
+    context = make_context()
+    try:
+        with pytest.raises(ValueError, match='transport'):
+            ReplayHarness([], context=context, transport='carrier-pigeon')
+    finally:
+        rclpy.shutdown(context=context)

@@ -10,6 +10,7 @@ per-topic counts and the nodes' final diagnostics).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -25,6 +26,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--out', default='report', help='report folder to write (default: report)')
     parser.add_argument('--rate', type=float, default=None,
                         help='replay pace as a multiple of real time (default: as fast as possible)')
+    parser.add_argument('--transport', choices=('dds', 'direct'), default='dds',
+                        help='dds: the nodes talk over the middleware on one executor, as on a robot (default); '
+                             'direct: the same nodes and callbacks, messages handed over in-process (much faster)')
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
     return parser
 
@@ -54,6 +58,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     argv = list(sys.argv if argv is None else argv)
     args = build_parser().parse_args(remove_ros_args(argv)[1:])
+    # Synchronous publication: about 3x lower latency per hop for the in-process replay.
+    os.environ.setdefault('RMW_FASTRTPS_PUBLICATION_MODE', 'SYNCHRONOUS')
     if args.rate is not None and not args.rate > 0:
         return fail(f'--rate must be > 0 (got {args.rate})')
     try:
@@ -71,7 +77,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     nodes = []
     try:
         nodes = [RfiMonitorNode(context=context), FusionNode(context=context), ImmCarrierNode(context=context)]
-        harness = ReplayHarness(nodes, context=context)
+        harness = ReplayHarness(nodes, context=context, transport=args.transport)
         progress = None
         if not args.no_progress:
             from tqdm import tqdm
