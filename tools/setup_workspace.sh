@@ -67,4 +67,16 @@ mkdir -p log
 start=$(date +%s)
 colcon --log-level error build --base-paths src --event-handlers console_cohesion- summary- status- \
   > log/last_build.txt 2>&1 || { cat log/last_build.txt >&2; die "colcon build failed (output above, also in log/last_build.txt)"; }
+# numba's on-disk cache checks only the source file of each compiled function, not the modules it
+# inlines: when any source of a package changed, drop that package's compiled cache.
+for pkg_dir in src/*/; do
+  pkg=$(basename "$pkg_dir")
+  [ -d "install/$pkg" ] || continue
+  sum=$(find "$pkg_dir$pkg" -name '*.py' -print0 2>/dev/null | sort -z | xargs -0 cat 2>/dev/null | sha256sum | cut -d' ' -f1)
+  mark="install/$pkg/.rfi-source-hash"
+  if [ ! -f "$mark" ] || [ "$(cat "$mark")" != "$sum" ]; then
+    find "install/$pkg" \( -name '*.nbi' -o -name '*.nbc' \) -delete
+    echo "$sum" > "$mark"
+  fi
+done
 echo "setup: colcon build done in $(( $(date +%s) - start )) s"

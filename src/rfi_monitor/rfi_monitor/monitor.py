@@ -34,10 +34,12 @@ Example
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 
@@ -58,19 +60,32 @@ from rfi_monitor.if_measurement import (
     STATUS_NON_FINITE,
     STATUS_OK,
 )
+from rfi_monitor.sweep_analysis import SweepAnalysis, SweepAnalysisParams, analyse
 from rfi_monitor.sweep_period import J_LOCKED, S_PERIOD, SweepPeriodParams
 from rfi_monitor.tracker import (
+    DEC_HISTORY,
+    K_FITAT,
     K_LAST_START,
+    K_LATSRC,
+    K_MISSES,
+    K_NDEC,
+    K_NFIT,
     K_NRESETS,
+    LAT_COARSE,
     M_F0,
+    M_NEXT,
+    M_TLAT,
     MAX_ABS_RATE,
+    MAX_REFINE_WINDOW,
     N_MPAR,
     P_CHIRP_CORR,
     P_DOMAIN,
+    P_FIT_GAIN,
     P_MAX_DF,
     P_MIN_ABS,
     P_PHASE_GAIN,
     P_POW_LAMBDA,
+    P_REFINE_W,
     P_RESET,
     P_WRAP,
     TrackerState,
@@ -85,7 +100,8 @@ class RfiMonitorParams:
 
     Attributes:
         tracker: TrackingFilterParams (default: the proposed adaptive fading KF).
-        sweep: SweepPeriodParams.
+        sweep: SweepPeriodParams (default here: with lattice voting, ours; ``paper_method()``
+            switches it off).
         classifier: ClassifierParams.
         chirp_correction: use eq. 10 (real samples) with the tracker's sweep estimate.
         reset_at_sweep_start: reset the filter at estimated sweep starts (eq. 21-22).
@@ -101,10 +117,15 @@ class RfiMonitorParams:
         max_invalid_fraction: a block with more non-finite or saturated samples than this
             fraction is rejected (result valid=False, type UNKNOWN), in [0, 1].
         min_block_samples: shorter blocks raise ValueError (>= the classifier's nfft).
+        refine_window: half-window W (samples) of the sweep-start step fit that refines the reset
+            lattice (ours, tracker module docstring), 0..MAX_REFINE_WINDOW; 0 runs the paper's
+            lattice (LPD peaks only).
+        fit_gain: phase gain of the step-fit lattice loop (period gain fit_gain^2 / 4), (0, 1].
+        analysis: SweepAnalysisParams of the block-level periodicity detector (ours).
     """
 
     tracker: TrackingFilterParams = field(default_factory=lambda: TrackingFilterParams(mode=MODE_AFKF))
-    sweep: SweepPeriodParams = field(default_factory=SweepPeriodParams)
+    sweep: SweepPeriodParams = field(default_factory=lambda: SweepPeriodParams(lattice_voting=True))
     classifier: ClassifierParams = field(default_factory=ClassifierParams)
     chirp_correction: bool = True
     reset_at_sweep_start: bool = True
@@ -119,6 +140,9 @@ class RfiMonitorParams:
     noise_bandwidth_hz: float = 0.0
     max_invalid_fraction: float = 0.05
     min_block_samples: int = 1024
+    refine_window: int = 24
+    fit_gain: float = 0.2
+    analysis: SweepAnalysisParams = field(default_factory=SweepAnalysisParams)
 
     def __post_init__(self) -> None:
         for name in ("min_abs_ratio", "domain_margin", "noise_floor_power", "noise_bandwidth_hz"):
@@ -138,6 +162,18 @@ class RfiMonitorParams:
             raise ValueError("max_invalid_fraction must be in [0, 1]")
         if self.min_block_samples < self.classifier.nfft:
             raise ValueError("min_block_samples must be >= classifier.nfft")
+        if not 0 <= int(self.refine_window) <= MAX_REFINE_WINDOW:
+            raise ValueError(f"refine_window must be in 0..{MAX_REFINE_WINDOW}")
+        if not 0 < self.fit_gain <= 1:
+            raise ValueError("fit_gain must be in (0, 1]")
+
+    @staticmethod
+    def paper_method(**kw: Any) -> RfiMonitorParams:
+        """Parameters that run Kang et al.'s method only (no step-fit lattice, no periodicity
+        detector); keyword arguments set the other fields."""
+        base = RfiMonitorParams(**kw)
+        return dataclasses.replace(base, refine_window=0, analysis=SweepAnalysisParams(enabled=False),
+                                   sweep=dataclasses.replace(base.sweep, lattice_voting=False))
 
 
 @dataclass(frozen=True)
@@ -239,6 +275,8 @@ class RfiMonitor:
         """
         fst, ist, ring = self.params.tracker.initial_state()
         self._state = TrackerState(fst, ist, ring, sp.initial_state())
+        self._analysis: SweepAnalysis | None = None
+        self._stream_first: int | None = None
         self._next_index: int | None = None
         self._rate: float | None = None
         self._if: float | None = None
@@ -259,6 +297,7 @@ class RfiMonitor:
         for code, name in _STATUS_NAMES.items():
             d[name] = int(self._state.counters[code])
         d["sweep_resets"] = int(self._state.mist[K_NRESETS])
+        d["sweep_start_fits"] = int(self._state.mist[K_NFIT])
         return MappingProxyType(d)
 
     def _to_rel_hz(self, f_dig: float, fs: float, fif: float, cplx: bool) -> float:
@@ -347,7 +386,9 @@ class RfiMonitor:
         self._block_counters["saturated_samples"] += n_sat
         # --- per-sample loop (always run: keeps the state continuous) ---------------------------
         resets_before = int(self._state.mist[K_NRESETS])
-        traces = self._run_tracker(xc, cplx, int(first_sample_index), return_traces)
+        if self._stream_first is None:
+            self._stream_first = int(first_sample_index)
+        traces = self._run_chunks(xc, cplx, int(first_sample_index), float(sample_rate_hz), return_traces)
         self._resets_in_block = int(self._state.mist[K_NRESETS]) - resets_before
         nan = math.nan
         if n_bad + n_sat > self.params.max_invalid_fraction * n:
@@ -360,6 +401,61 @@ class RfiMonitor:
                               int(stamp_ns), int(first_sample_index), traces)
 
     # ------------------------------------------------------------------------------------------
+    def _run_chunks(self, xc: np.ndarray, cplx: bool, first: int, fs: float, store: bool) -> BlockTraces | None:
+        """Run the fused loop, stopping at absolute analysis boundaries (multiples of the hop) to run
+        the periodicity detector, so that the result does not depend on how the stream is cut."""
+        ap = self.params.analysis
+        if not ap.enabled:
+            return self._run_tracker(xc, cplx, first, store)
+        hop = max(1, int(round(ap.hop_s * fs)))
+        n = xc.size
+        cuts = [0]
+        b = (first // hop + 1) * hop
+        while b <= first + n:
+            cuts.append(b - first)
+            b += hop
+        if cuts[-1] != n:
+            cuts.append(n)
+        parts = []
+        for i0, i1 in zip(cuts[:-1], cuts[1:], strict=False):
+            if i1 <= i0:
+                continue
+            parts.append(self._run_tracker(xc[i0:i1], cplx, first + i0, store))
+            if (first + i1) % hop == 0:
+                self._run_analysis(first + i1)
+        if not store:
+            return None
+        tr = [p for p in parts if p is not None]
+        return BlockTraces(*(np.concatenate([getattr(t, name) for t in tr]) for name in
+                             ("sample_index", "z", "f", "df", "p11", "z_ar", "reset")))
+
+    def _run_analysis(self, at_index: int) -> None:
+        """Periodicity detector on the decimated history; seeds the reset lattice when none runs."""
+        st = self._state
+        dec = int(self.params.sweep.decimation)
+        ndec = int(st.mist[K_NDEC])
+        L = min(ndec, DEC_HISTORY)
+        if L < self.params.analysis.min_window or self._stream_first is None:
+            return
+        idx = np.arange(ndec - L, ndec) & (DEC_HISTORY - 1)
+        w = st.zdec[idx]
+        # decimated value k averages measurements of samples m_first + k D .. + D - 1
+        m_first = self._stream_first + 1
+        first_centre = m_first + (ndec - L) * dec + 0.5 * (dec - 1)
+        a = analyse(w, dec, first_centre, at_index, self.params.analysis)
+        self._analysis = a
+        if (a.periodic and self.params.refine_window > 0 and self.params.reset_at_sweep_start
+                and st.mst[M_NEXT] < 0.0):
+            per = a.period_samples
+            k = math.ceil((at_index - a.start_index) / per)
+            st.mst[M_NEXT] = a.start_index + k * per
+            st.mst[M_TLAT] = per
+            st.mist[K_LATSRC] = LAT_COARSE
+            st.mist[K_MISSES] = 0
+            st.mist[K_FITAT] = -1
+            if int(st.mist[K_NRESETS]) == 0:
+                st.mist[K_LAST_START] = int(math.floor(st.mst[M_NEXT] - per))
+
     def _run_tracker(self, xc: np.ndarray, cplx: bool, first: int, store: bool) -> BlockTraces | None:
         p = self.params
         st = self._state
@@ -374,6 +470,8 @@ class RfiMonitor:
         mpar[P_PHASE_GAIN] = p.phase_gain
         mpar[P_WRAP] = 1.0 if cplx else 0.0
         mpar[P_MAX_DF] = MAX_ABS_RATE
+        mpar[P_REFINE_W] = float(p.refine_window)
+        mpar[P_FIT_GAIN] = p.fit_gain
         n = xc.size
         m = n if store else 1
         o_idx = np.empty(m, dtype=np.int64)
@@ -382,7 +480,8 @@ class RfiMonitor:
         xr = np.ascontiguousarray(xc.real, dtype=np.float64)
         xi = np.ascontiguousarray(xc.imag, dtype=np.float64) if cplx else xr
         k = track_block(xr, xi, cplx, first, self._tpar, spar, mpar, st.fst, st.ist, st.ring, st.sf, st.si,
-                        st.zhist, st.gam, st.pmat, st.hist, st.peaks, st.mst, st.mist, st.counters, store,
+                        st.zhist, st.gam, st.pmat, st.hist, st.peaks, st.mst, st.mist, st.counters,
+                        st.dfring, st.zring, st.zdec, store,
                         o_idx, o_z, o_f, o_df, o_p11, o_zar, o_reset)
         if not store:
             return None
@@ -419,8 +518,20 @@ class RfiMonitor:
         # a chirp's swept band |df| T must explain the occupied band (a lock on noise peaks does not)
         band = 1.0 if cplx else 0.5
         per_s = float(st.sf[S_PERIOD])
+        lattice = float(st.mst[M_NEXT]) >= 0.0 and int(st.mist[K_LATSRC]) > 0
+        if lattice and float(st.mst[M_TLAT]) > 0:
+            per_s = float(st.mst[M_TLAT])
         swept = abs(df) * per_s if per_s > 0 else 0.0
-        chirp_ok = (locked or self._resets_in_block > 0) and swept >= 0.5 * feat.occupancy * band
+        chirp_ok = (locked or lattice or self._resets_in_block > 0) and swept >= 0.5 * feat.occupancy * band
+        an = self._analysis
+        hop = max(1, int(round(p.analysis.hop_s * fs)))
+        periodic = (p.analysis.enabled and an is not None and an.periodic
+                    and an.sample_index >= first + xs.size - 2 * hop)
+        if periodic and an is not None:
+            chirp_ok = True
+            if not (locked or lattice):
+                per_s = an.period_samples
+        locked = locked or lattice or periodic
         jtype, conf = classify(feat, jn_pow, chirp_ok, df, True, cp)
         jn = max(jn_pow, feat.jn_spectral_db)
         bw_noise = p.noise_bandwidth_hz if p.noise_bandwidth_hz > 0 else (fs if cplx else fs / 2)
@@ -441,7 +552,7 @@ class RfiMonitor:
             else:
                 rate = sgn * df * fs * fs
                 if locked:
-                    per = float(st.sf[S_PERIOD]) / fs
+                    per = per_s / fs
                     bw = abs(rate) * per
                     if math.isfinite(st.mst[M_F0]):
                         f0 = self._to_rel_hz(float(st.mst[M_F0]), fs, fif, cplx)
@@ -456,6 +567,11 @@ class RfiMonitor:
     def state_summary(self) -> dict[str, float]:
         """Current tracker state: frequency (cycles/sample), rate, P, period (samples), last start."""
         st = self._state
+        lattice = float(st.mst[M_NEXT]) >= 0.0 and int(st.mist[K_LATSRC]) > 0
+        per = float(st.mst[M_TLAT]) if lattice else float(st.sf[S_PERIOD])
+        locked = lattice or int(st.si[J_LOCKED]) == 1
         return {"f": float(st.fst[F_F]), "df": float(st.fst[F_DF]), "p11": float(st.fst[F_P11]),
-                "p22": float(st.fst[F_P22]), "period_samples": float(st.sf[S_PERIOD]),
-                "locked": float(st.si[J_LOCKED]), "last_start": float(st.mist[K_LAST_START])}
+                "p22": float(st.fst[F_P22]), "period_samples": per if locked else math.nan,
+                "locked": float(locked), "lpd_locked": float(st.si[J_LOCKED]),
+                "lpd_period_samples": float(st.sf[S_PERIOD]), "lattice_source": float(st.mist[K_LATSRC]),
+                "last_start": float(st.mist[K_LAST_START])}

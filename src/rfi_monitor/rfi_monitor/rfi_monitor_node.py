@@ -1,22 +1,73 @@
 """ROS node of the RFI monitor: /rfi/if_samples -> /rfi/jammer_state, /diagnostics.
 
-Skeleton of the foundation issue: it validates and counts IF blocks (format, gaps, stamp order)
-and reports them on /diagnostics. The tracking core (Kang et al.) plugs in with its own issue;
-until then no JammerState is published, because nothing unvalidated is published as valid.
+The node is thin: it declares the parameters (the core's :class:`rfi_monitor.monitor.RfiMonitorParams`,
+flattened, plus a few of its own), checks and decodes each ``rfi_msgs/IfSamples`` block into a numpy
+array (``np.frombuffer`` by ``sample_format``, little-endian, times ``scale``: volts), hands it to one
+:class:`rfi_monitor.monitor.RfiMonitor` (Kang et al., eq. 8-27, plus the identification of
+docs/rfi_monitor/README.md) and publishes the returned estimate as a ``rfi_msgs/JammerState``.
+
+Output policy (one decision, applied to every block):
+
+* Exactly one JammerState per block that the core *analysed* (``JammerEstimate.valid``): header
+  copied from the block (stamp = time of its first sample, frame_id of the front end), frequencies
+  relative to the block's ``center_frequency_hz`` (the core converts from the IF), NaN where the
+  core does not know a value. While the noise floor is being learned the core reports UNKNOWN
+  (confidence 0.5, NaNs); that is published, since it is what the monitor knows.
+* Nothing for a rejected block: malformed blocks (checked here before the core sees them) and
+  blocks the core refuses to analyse (``valid`` False: too many saturated samples). An invalid
+  estimate is therefore never on the topic; a consumer that needs the monitor's status reads
+  /diagnostics or notices the missing state. Each rejection is counted as ``rejected_<reason>``
+  and gives one warning, throttled to ``warning_throttle_s``.
+
+Stream continuity: the core owns it. A jump in ``first_sample_index`` resets the per-sample tracker
+(the calibration is kept) and is counted as a gap; a change of sample rate, IF or complexness resets
+it and the calibration and is counted as ``rate_changes``. A snapshot front end (1 ms every second)
+therefore produces one gap per block; gaps are reported but are not a warning. A block rejected here
+never reaches the core, so the block after it counts as a gap.
+
+Rejection reasons (checked in this order): ``stamp_not_increasing`` (stamp <= that of the last
+accepted block), ``unknown_sample_format``, ``bad_bits_per_sample`` (outside 1..16, or above 8 for
+INT8), ``bad_sample_rate`` (not finite or <= 0), ``bad_intermediate_frequency`` (not finite or
+|IF| >= the Nyquist band), ``bad_scale`` (not finite or <= 0), ``bad_center_frequency`` (not
+finite), ``empty_block``, ``truncated_sample`` (INT16 with an odd byte count), ``odd_length_iq``,
+``short_block`` (fewer samples than ``min_block_samples``), ``saturated`` (the core: more than
+``max_invalid_fraction`` of the samples at full scale), ``core_error`` (the core raised on a block
+that passed the checks; a bug, logged as an error).
+
+Saturation: full scale is ``(2**(bits_per_sample - 1) - 1) * scale`` for two's-complement front ends
+(bits >= 4). For 1-3 bit sign/magnitude front ends the largest level is a normal value (a 2-bit
+front end puts about a third of its samples there), so no saturation check is made.
+
+Diagnostics (/diagnostics, every ``diagnostics_period_s`` of *stamp* time via StampTimer, after the
+block of that stamp is counted): blocks_received, blocks_processed, states_published, each
+rejected_* count, gaps, rate_changes, the core's per-sample counters (``core.*``), calibrated, the
+last type, and ``accounting_ok`` (blocks_received == blocks_processed + sum of rejected_*). Level:
+ERROR if the accounting does not add up or the core raised since the last report, WARN if blocks
+were rejected since the last report, else OK.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from collections import Counter
 from dataclasses import dataclass
+from typing import Any
 
+import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 
+from rfi_monitor.classifier import ClassifierParams
+from rfi_monitor.monitor import JammerEstimate, RfiMonitor, RfiMonitorParams
+from rfi_monitor.sweep_analysis import SweepAnalysisParams
+from rfi_monitor.sweep_period import SweepPeriodParams
+from rfi_monitor.tracker import MAX_REFINE_WINDOW
+from rfi_monitor.tracking_filters import MODE_AFKF, MODE_AKF, MODE_KF, TrackingFilterParams
 from rfi_msgs.msg import IfSamples, JammerState
-from rfi_node_common.diagnostics import OK, WARN, StampTimer, diagnostic_array
+from rfi_node_common.diagnostics import ERROR, OK, WARN, StampTimer, diagnostic_array
 from rfi_node_common.main import run_node
-from rfi_node_common.params import declare, parameter
+from rfi_node_common.params import declare, parameter, validate_ranges
 from rfi_node_common.qos import DATA_QOS
 from rfi_node_common.stamps import stamp_to_ns
 
@@ -24,20 +75,249 @@ TOPICS = """topics:
   subscribes /rfi/if_samples (rfi_msgs/IfSamples)
   publishes  /rfi/jammer_state (rfi_msgs/JammerState), /diagnostics (diagnostic_msgs/DiagnosticArray)"""
 
+TYPE_NAMES = {JammerState.NONE: 'NONE', JammerState.CW: 'CW', JammerState.CHIRP: 'CHIRP',
+              JammerState.WIDEBAND: 'WIDEBAND', JammerState.UNKNOWN: 'UNKNOWN'}
+"""JammerState type code -> name (for diagnostics and logs)."""
+
+TRACKER_MODES = {'kf': MODE_KF, 'akf': MODE_AKF, 'afkf': MODE_AFKF}
+"""tracker_mode parameter -> tracking_filters mode code."""
+
+SAMPLE_WIDTH_BYTES = {IfSamples.INT8: 1, IfSamples.INT16: 2}
+"""IfSamples.sample_format -> bytes per stored value."""
+
+SAMPLE_DTYPES = {IfSamples.INT8: np.dtype('<i1'), IfSamples.INT16: np.dtype('<i2')}
+"""IfSamples.sample_format -> numpy dtype of the stored values (little-endian)."""
+
+NESTED = (('tracker', 'tracker_', TrackingFilterParams), ('sweep', 'sweep_', SweepPeriodParams),
+          ('classifier', 'classifier_', ClassifierParams), ('analysis', 'analysis_', SweepAnalysisParams))
+"""(RfiMonitorParams field, node parameter prefix, dataclass) of the core's nested parameter groups."""
+
+_M = RfiMonitorParams()
+_T = _M.tracker
+_S = _M.sweep
+_C = _M.classifier
+_A = _M.analysis
+
 
 @dataclass(frozen=True)
 class MonitorNodeParams:
+    """Parameters of rfi_monitor_node (documented for users in config/rfi_monitor.yaml).
+
+    The core's RfiMonitorParams, flattened: its nested groups get the prefixes ``tracker_``,
+    ``sweep_``, ``analysis_`` and ``classifier_``; the defaults are the core's own. Node-only parameters:
+    diagnostics_period_s, warning_throttle_s, check_saturation.
+
+    Notes:
+        Kang et al.: tracking filters eq. 11-22 (tracker_*), sweep period eq. 23-27 (sweep_*);
+        Kang et al. give no values for most of them (see docs/rfi_monitor/README.md for ours). The
+        identification (classifier_*) is not in the paper.
+    """
+
+    # --- node ---------------------------------------------------------------------------------
     diagnostics_period_s: float = parameter(
-        1.0, 'Period of /diagnostics in message (stamp) time, s.', minimum=0.01, maximum=3600.0)
+        1.0, 'Period of /diagnostics in message (stamp) time, s.', minimum=0.001, maximum=3600.0)
+    warning_throttle_s: float = parameter(
+        5.0, 'Shortest interval between two warnings about rejected blocks, s (wall time; logging only).',
+        minimum=0.0, maximum=3600.0)
+    check_saturation: bool = parameter(
+        True, 'Count samples at full scale (two\'s-complement front ends, bits_per_sample >= 4) and reject '
+        'blocks with more than max_invalid_fraction of them.')
+    # --- monitor ------------------------------------------------------------------------------
+    chirp_correction: bool = parameter(
+        _M.chirp_correction, 'Correct the three-sample IF measurement for the sweep (Kang et al., eq. 10; '
+        'real samples only).')
+    reset_at_sweep_start: bool = parameter(
+        _M.reset_at_sweep_start, 'Reset the tracking filter at estimated sweep starts (Kang et al., eq. 21-22).')
+    min_abs_ratio: float = parameter(
+        _M.min_abs_ratio, 'Near-zero guard: a sample with |x| <= this times the running RMS gives no '
+        'measurement, dimensionless.', minimum=0.0, maximum=1.0)
+    domain_margin: float = parameter(
+        _M.domain_margin, 'arccos domain margin: a measurement ratio beyond 1 + this is rejected, dimensionless.',
+        minimum=0.0, maximum=10.0)
+    power_time_constant: float = parameter(
+        _M.power_time_constant, 'Time constant of the running RMS used by the near-zero guard, samples.',
+        minimum=1.0, maximum=1e9)
+    phase_gain: float = parameter(
+        _M.phase_gain, 'Gain of the sweep-start lattice phase correction, (0, 1].', minimum=1e-6, maximum=1.0)
+    noise_floor_power: float = parameter(
+        _M.noise_floor_power, 'Fixed noise power of the decoded samples, V^2 (counts * scale, squared); '
+        '0: learn it from the first calibration_blocks blocks.', minimum=0.0, maximum=1e12)
+    calibration_blocks: int = parameter(
+        _M.calibration_blocks, 'Blocks used to learn the noise floor and the front-end noise shape.',
+        minimum=1, maximum=100000)
+    signal_power_dbm: float = parameter(
+        _M.signal_power_dbm, 'Nominal GNSS signal power S for J/S, dBm (Kang et al.: -130).',
+        minimum=-250.0, maximum=50.0)
+    noise_density_dbm_per_mhz: float = parameter(
+        _M.noise_density_dbm_per_mhz, 'Nominal noise density for J/S, dBm/MHz (Kang et al.: -114).',
+        minimum=-250.0, maximum=50.0)
+    noise_bandwidth_hz: float = parameter(
+        _M.noise_bandwidth_hz, 'Bandwidth of the nominal noise power for J/S, Hz; 0: the sampled band.',
+        minimum=0.0, maximum=1e10)
+    max_invalid_fraction: float = parameter(
+        _M.max_invalid_fraction, 'A block with more saturated (or non-finite) samples than this fraction is '
+        'rejected, 0..1.', minimum=0.0, maximum=1.0)
+    min_block_samples: int = parameter(
+        _M.min_block_samples, 'Shortest block analysed, samples (complex: I/Q pairs); >= classifier_nfft.',
+        minimum=32, maximum=2**31 - 1)
+    refine_window: int = parameter(
+        _M.refine_window, 'Half-window W of the sweep-start step fit that refines the reset lattice (ours), '
+        'samples; 0 runs the paper\'s lattice (LPD peaks only).', minimum=0, maximum=MAX_REFINE_WINDOW)
+    fit_gain: float = parameter(
+        _M.fit_gain, 'Phase gain of the step-fit lattice loop (period gain fit_gain^2 / 4), (0, 1].',
+        minimum=1e-6, maximum=1.0)
+    # --- tracking filter (Kang et al., eq. 11-22) ----------------------------------------------
+    tracker_mode: str = parameter(
+        'afkf', 'Frequency tracking filter: kf (eq. 11-17), akf (adaptive gain) or afkf (adaptive fading, '
+        'the proposed filter).', choices=tuple(TRACKER_MODES))
+    tracker_measurement_std: float = parameter(
+        _T.measurement_std, 'sigma_v of the IF measurement (eq. 20), cycles/sample.', minimum=1e-9, maximum=1.0)
+    tracker_process_std: float = parameter(
+        _T.process_std, 'sigma_w on the frequency (eq. 19), cycles/sample.', minimum=0.0, maximum=1.0)
+    tracker_process_rate_std: float = parameter(
+        _T.process_rate_std, 'Process noise on the sweep rate per sample, cycles/sample^2 (eq. 19: 0).',
+        minimum=0.0, maximum=1.0)
+    tracker_window: int = parameter(
+        _T.window, 'Innovation window M of the adaptive filters (eq. 12), samples.', minimum=2, maximum=100000)
+    tracker_initial_frequency: float = parameter(
+        _T.initial_frequency, 'Frequency at start and after a reset, cycles/sample.', minimum=-1.0, maximum=1.0)
+    tracker_initial_frequency_std: float = parameter(
+        _T.initial_frequency_std, '1-sigma of the initial frequency, cycles/sample.', minimum=1e-12, maximum=1.0)
+    tracker_initial_rate_std: float = parameter(
+        _T.initial_rate_std, '1-sigma of the initial sweep rate, cycles/sample^2.', minimum=1e-12, maximum=1.0)
+    # --- sweep period (Kang et al., eq. 23-27) -------------------------------------------------
+    sweep_forgetting: float = parameter(
+        _S.forgetting, 'Forgetting factor gamma of the LPD (eq. 23), [0, 1).', minimum=0.0, maximum=0.999999)
+    sweep_beta: float = parameter(
+        _S.beta, 'Normalisation beta of the LPD (eq. 23), dimensionless.', minimum=1e-12, maximum=1e6)
+    sweep_beta_en: float = parameter(
+        _S.beta_en, 'Enhancement rate beta_en of the peak threshold, dimensionless.', minimum=0.0, maximum=1e6)
+    sweep_kappa: float = parameter(
+        _S.kappa, 'Peak threshold in multiples of the running mean |zAR|, dimensionless.',
+        minimum=1e-6, maximum=1e6)
+    sweep_noise_time_constant: float = parameter(
+        _S.noise_time_constant, 'Time constant of the running mean |zAR|, decimated steps.',
+        minimum=1.0, maximum=1e9)
+    sweep_decimation: int = parameter(
+        _S.decimation, 'Samples averaged per AR(10) step (speed), samples.', minimum=1, maximum=1000)
+    sweep_ar_process_var: float = parameter(
+        _S.ar_process_var, 'Diagonal of Q_AR (eq. 25), dimensionless.', minimum=1e-12, maximum=1e12)
+    sweep_ar_measurement_var: float = parameter(
+        _S.ar_measurement_var, 'sigma_AR^2 (eq. 26), dimensionless.', minimum=1e-12, maximum=1e12)
+    sweep_ar_transition: float = parameter(
+        _S.ar_transition, 'Diagonal of the AR transition A (eq. 25; paper: 0.2), (-1, 1).',
+        minimum=-0.999999, maximum=0.999999)
+    sweep_delay: float = parameter(
+        _S.delay, 'Samples from a sweep start to its detected peak (group delay), samples.',
+        minimum=0.0, maximum=1e6)
+    sweep_min_separation: int = parameter(
+        _S.min_separation, 'Refractory time between two detected sweep starts, samples.', minimum=1, maximum=10**9)
+    sweep_tolerance: float = parameter(
+        _S.tolerance, 'Relative tolerance of a sweep interval to a multiple of the period, (0, 0.5).',
+        minimum=1e-6, maximum=0.499999)
+    sweep_min_consistent: int = parameter(
+        _S.min_consistent, 'Peaks fitting the period lattice needed to lock, minus one.', minimum=1, maximum=100000)
+    sweep_min_tolerance_samples: float = parameter(
+        _S.min_tolerance_samples, 'Absolute floor of the lattice tolerance, samples.', minimum=0.0, maximum=1e6)
+    sweep_max_period: float = parameter(
+        _S.max_period, 'Longest sweep period considered by the lattice voting, samples (> sweep_min_separation).',
+        minimum=1.0, maximum=1e9)
+    sweep_lattice_voting: bool = parameter(
+        _S.lattice_voting, 'Sweep period by lattice voting over all recent peaks (ours) instead of successive '
+        'intervals (the paper).')
+    # --- periodicity detector (ours) -----------------------------------------------------------
+    analysis_enabled: bool = parameter(
+        _A.enabled, 'Run the block-level periodicity detector of the frequency track (seeds the reset lattice '
+        'and the identification).')
+    analysis_hop_s: float = parameter(
+        _A.hop_s, 'Interval between two periodicity analyses (at absolute sample indices), s.',
+        minimum=1e-7, maximum=10.0)
+    analysis_min_strength: float = parameter(
+        _A.min_strength, 'Normalised autocorrelation peak-to-trough of a periodic track, (0, 1.5].',
+        minimum=1e-6, maximum=1.5)
+    analysis_min_lag: int = parameter(
+        _A.min_lag, 'Shortest period detected, decimated samples.', minimum=2, maximum=10**9)
+    analysis_max_period_fraction: float = parameter(
+        _A.max_period_fraction, 'Longest period as a fraction of the analysed window, (0, 0.5].',
+        minimum=1e-6, maximum=0.5)
+    analysis_min_window: int = parameter(
+        _A.min_window, 'Fewest decimated values for an analysis.', minimum=64, maximum=10**9)
+    # --- identification (not in the paper) ----------------------------------------------------
+    classifier_nfft: int = parameter(
+        _C.nfft, 'Welch frame length, samples (a power of two).', minimum=32, maximum=2**20)
+    classifier_max_frames: int = parameter(
+        _C.max_frames, 'At most this many Welch frames per block.', minimum=8, maximum=10**7)
+    classifier_sig_sigma: float = parameter(
+        _C.sig_sigma, 'Significance of an occupied spectral bin, standard deviations of the Welch average.',
+        minimum=1e-6, maximum=1e3)
+    classifier_min_excess: float = parameter(
+        _C.min_excess, 'Smallest relative excess of an occupied bin over the noise, dimensionless.',
+        minimum=1e-6, maximum=1e6)
+    classifier_detect_jn_db: float = parameter(
+        _C.detect_jn_db, 'J/N above which a jammer is declared, dB.', minimum=-100.0, maximum=100.0)
+    classifier_cw_max_occupancy: float = parameter(
+        _C.cw_max_occupancy, 'Largest occupied fraction of the band of a CW, (0, 1).',
+        minimum=1e-6, maximum=0.999999)
+    classifier_min_chirp_rate: float = parameter(
+        _C.min_chirp_rate, '|Sweep rate| that marks a chirp before the period locks, cycles/sample^2.',
+        minimum=1e-12, maximum=1.0)
+    classifier_template_smooth_bins: int = parameter(
+        _C.template_smooth_bins, 'Width of the median filter smoothing the learned noise shape, bins.',
+        minimum=1, maximum=2**20)
+    classifier_sidelobe_db: float = parameter(
+        _C.sidelobe_db, 'Bins more than this below the strongest excess are not occupied, dB.',
+        minimum=0.0, maximum=300.0)
+    classifier_confidence_slope_db: float = parameter(
+        _C.confidence_slope_db, 'J/N margin that maps to a logistic confidence of 0.73, dB.',
+        minimum=1e-6, maximum=100.0)
+
+    def __post_init__(self) -> None:
+        validate_ranges(self)
+        try:
+            self.monitor_params()
+        except ValueError as err:
+            raise ValueError(f'invalid monitor parameters: {err}') from None
+
+    def monitor_params(self) -> RfiMonitorParams:
+        """The core's parameters. Core fields without a node parameter keep the core's default.
+
+        Raises:
+            ValueError: a combination the core rejects (e.g. min_block_samples < classifier_nfft).
+        """
+        own = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        nested: dict[str, Any] = {}
+        for name, prefix, cls in NESTED:
+            values = {f.name: own[prefix + f.name] for f in dataclasses.fields(cls) if prefix + f.name in own}
+            if cls is TrackingFilterParams:
+                values['mode'] = TRACKER_MODES[self.tracker_mode]
+            nested[name] = dataclasses.replace(getattr(_M, name), **values)
+        top = {f.name: own[f.name] for f in dataclasses.fields(RfiMonitorParams)
+               if f.name in own and f.name not in nested}
+        return dataclasses.replace(_M, **top, **nested)
 
 
-def check_block(msg: IfSamples) -> str | None:
-    """Return why an IF block is unusable, or None if it is well formed."""
-    width = {IfSamples.INT8: 1, IfSamples.INT16: 2}.get(msg.sample_format)
+def check_block(msg: IfSamples, min_block_samples: int) -> str | None:
+    """Why an IF block cannot be analysed (a ``rejected_<reason>`` key), or None if it is well formed.
+
+    Args:
+        msg: rfi_msgs/IfSamples.
+        min_block_samples: shortest block, samples (complex: I/Q pairs).
+    """
+    width = SAMPLE_WIDTH_BYTES.get(msg.sample_format)
     if width is None:
         return 'unknown_sample_format'
-    if not msg.sample_rate_hz > 0.0:
+    if not 1 <= msg.bits_per_sample <= 8 * width:
+        return 'bad_bits_per_sample'
+    fs = msg.sample_rate_hz
+    if not (math.isfinite(fs) and fs > 0.0):
         return 'bad_sample_rate'
+    nyquist = fs if msg.is_complex else fs / 2.0
+    if not (math.isfinite(msg.intermediate_frequency_hz) and abs(msg.intermediate_frequency_hz) < nyquist):
+        return 'bad_intermediate_frequency'
+    if not (math.isfinite(msg.scale) and msg.scale > 0.0):
+        return 'bad_scale'
+    if not math.isfinite(msg.center_frequency_hz):
+        return 'bad_center_frequency'
     if len(msg.samples) == 0:
         return 'empty_block'
     if len(msg.samples) % width:
@@ -45,18 +325,65 @@ def check_block(msg: IfSamples) -> str | None:
     values = len(msg.samples) // width
     if msg.is_complex and values % 2:
         return 'odd_length_iq'
+    if values // (2 if msg.is_complex else 1) < min_block_samples:
+        return 'short_block'
     return None
 
 
+def decode_samples(msg: IfSamples) -> np.ndarray:
+    """The block's values in volts: float64, shape (n,) real or (2n,) interleaved I, Q.
+
+    ``msg`` must have passed :func:`check_block`. Values are ``count * scale``.
+    """
+    counts = np.frombuffer(msg.samples, dtype=SAMPLE_DTYPES[msg.sample_format])
+    return counts.astype(np.float64) * msg.scale
+
+
+def full_scale(msg: IfSamples) -> float | None:
+    """Largest magnitude of the front end, V: (2**(bits - 1) - 1) * scale for bits >= 4, else None
+    (odd-level 1-3 bit quantisers reach their top level in normal operation)."""
+    if msg.bits_per_sample < 4:
+        return None
+    return float((2 ** (msg.bits_per_sample - 1) - 1) * msg.scale)
+
+
+def jammer_state_msg(est: JammerEstimate, block: IfSamples) -> JammerState:
+    """JammerEstimate -> rfi_msgs/JammerState (header and center frequency from the block)."""
+    m = JammerState()
+    m.header = block.header
+    m.type = int(est.type)
+    m.confidence = float(est.confidence)
+    m.jammer_to_noise_db = float(est.jammer_to_noise_db)
+    m.jammer_to_signal_db = float(est.jammer_to_signal_db)
+    m.frequency_hz = float(est.frequency_hz)
+    m.frequency_std_hz = float(est.frequency_std_hz)
+    m.sweep_rate_hz_per_s = float(est.sweep_rate_hz_per_s)
+    m.sweep_period_s = float(est.sweep_period_s)
+    m.sweep_start_frequency_hz = float(est.sweep_start_frequency_hz)
+    m.sweep_bandwidth_hz = float(est.sweep_bandwidth_hz)
+    m.center_frequency_hz = float(block.center_frequency_hz)
+    m.sample_rate_hz = float(est.sample_rate_hz)
+    return m
+
+
+def rejected_total(counts: Counter[str]) -> int:
+    """Sum of the ``rejected_*`` counters."""
+    return sum(v for k, v in counts.items() if k.startswith('rejected_'))
+
+
 class RfiMonitorNode(Node):
-    """Thin node around the RFI monitor core (see module docstring)."""
+    """Thin node around :class:`rfi_monitor.monitor.RfiMonitor` (see module docstring)."""
 
     def __init__(self, **kwargs) -> None:
         super().__init__('rfi_monitor', **kwargs)
         self.params = declare(self, MonitorNodeParams)
+        self.monitor = RfiMonitor(self.params.monitor_params())
         self.counts: Counter[str] = Counter()
-        self._next_index: int | None = None
+        self._core_counters: dict[str, int] = {}
         self._last_stamp_ns: int | None = None
+        self._last_type: int | None = None
+        self._rejected_at_last_report = 0
+        self._errors_at_last_report = 0
         self._diag_timer = StampTimer(self.params.diagnostics_period_s)
         self.state_pub = self.create_publisher(JammerState, '/rfi/jammer_state', DATA_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DATA_QOS)
@@ -65,28 +392,77 @@ class RfiMonitorNode(Node):
     def on_block(self, msg: IfSamples) -> None:
         stamp_ns = stamp_to_ns(msg.header.stamp)
         self.counts['blocks_received'] += 1
-        reason = check_block(msg)
-        if reason is None and self._last_stamp_ns is not None and stamp_ns < self._last_stamp_ns:
-            reason = 'stamp_backwards'
+        if self._last_stamp_ns is not None and stamp_ns <= self._last_stamp_ns:
+            reason: str | None = 'stamp_not_increasing'
+        else:
+            reason = check_block(msg, self.params.min_block_samples)
+        if reason is None:
+            self._last_stamp_ns = stamp_ns
+            reason = self._analyse(stamp_ns, msg)
         if reason is not None:
             self.counts[f'rejected_{reason}'] += 1
-            self.get_logger().warn(f'IF block rejected: {reason}', throttle_duration_sec=5.0)
-        else:
-            if self._next_index is not None and msg.first_sample_index != self._next_index:
-                self.counts['gaps'] += 1
-            width = 1 if msg.sample_format == IfSamples.INT8 else 2
-            n = len(msg.samples) // width // (2 if msg.is_complex else 1)
-            self._next_index = msg.first_sample_index + n
-            self._last_stamp_ns = stamp_ns
-            self.counts['blocks_processed'] += 1
+            self.get_logger().warn(f'IF block at {stamp_ns} ns rejected: {reason}',
+                                   throttle_duration_sec=self.params.warning_throttle_s)
         if self._diag_timer.due(stamp_ns):
-            rejected = sum(v for k, v in self.counts.items() if k.startswith('rejected_'))
-            level = WARN if rejected or self.counts['gaps'] else OK
-            self.diag_pub.publish(diagnostic_array(
-                stamp_ns, 'rfi_monitor', self.get_name(), level,
-                'tracking core not installed: blocks validated and counted only', dict(sorted(self.counts.items()))))
+            self.diag_pub.publish(self.diagnostics(stamp_ns))
+
+    def _analyse(self, stamp_ns: int, msg: IfSamples) -> str | None:
+        """Run the core on a well-formed block and publish its estimate; return a rejection reason."""
+        try:
+            est = self.monitor.process(
+                decode_samples(msg), msg.sample_rate_hz, msg.intermediate_frequency_hz, msg.first_sample_index,
+                stamp_ns, is_complex=bool(msg.is_complex),
+                full_scale=full_scale(msg) if self.params.check_saturation else None)
+        except (ValueError, ArithmeticError) as err:
+            self.get_logger().error(f'core raised on a checked IF block ({type(err).__name__}: {err})',
+                                    throttle_duration_sec=self.params.warning_throttle_s)
+            return 'core_error'
+        self._core_counters = dict(est.counters)
+        if not est.valid:
+            return 'saturated'
+        self.counts['blocks_processed'] += 1
+        self._last_type = int(est.type)
+        self.state_pub.publish(jammer_state_msg(est, msg))
+        self.counts['states_published'] += 1
+        return None
+
+    def accounting(self) -> dict[str, object]:
+        """Counters of the node and the core, and whether every block received is accounted for."""
+        values: dict[str, object] = dict(sorted(self.counts.items()))
+        for key in ('blocks_received', 'blocks_processed', 'states_published'):
+            values.setdefault(key, 0)
+        core = self._core_counters
+        values['gaps'] = core.get('gaps', 0)
+        values['rate_changes'] = core.get('rate_changes', 0)
+        values.update({f'core.{k}': v for k, v in sorted(core.items()) if k not in ('gaps', 'rate_changes')})
+        values['calibrated'] = self.monitor.calibrated
+        values['last_type'] = 'none yet' if self._last_type is None else TYPE_NAMES.get(self._last_type, '?')
+        values['accounting_ok'] = (self.counts['blocks_received']
+                                   == self.counts['blocks_processed'] + rejected_total(self.counts))
+        return values
+
+    def diagnostics(self, stamp_ns: int) -> DiagnosticArray:
+        """The /diagnostics message at ``stamp_ns`` (levels: see the module docstring)."""
+        values = self.accounting()
+        rejected = rejected_total(self.counts)
+        new = rejected - self._rejected_at_last_report
+        self._rejected_at_last_report = rejected
+        errors = self.counts['rejected_core_error']
+        new_errors = errors - self._errors_at_last_report
+        self._errors_at_last_report = errors
+        state = f'last type {values["last_type"]}' if self.monitor.calibrated else 'learning the noise floor'
+        if not values['accounting_ok']:
+            level, text = ERROR, 'block accounting does not add up'
+        elif new_errors:
+            level, text = ERROR, f'{new_errors} blocks made the core raise since the last report'
+        elif new:
+            level, text = WARN, f'{new} blocks rejected since the last report'
+        else:
+            level, text = OK, 'monitoring'
+        return diagnostic_array(stamp_ns, 'rfi_monitor', self.get_name(), level, f'{text}; {state}', values)
 
 
 def main(argv=None) -> int:
     return run_node(RfiMonitorNode, executable='rfi_monitor_node', params_cls=MonitorNodeParams, topics=TOPICS,
-                    summary='Detect, classify and track GNSS jammers from IF sample blocks.', argv=argv)
+                    summary='Detect, classify and track GNSS jammers from IF sample blocks (Kang et al.).',
+                    argv=argv)

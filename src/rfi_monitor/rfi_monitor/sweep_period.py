@@ -15,16 +15,23 @@ Kang et al., Sec. 3.2:
 3. Peak: the maximum of zAR over an excursion above the threshold
    ``max(beta_en (f_max - f_min) / fs, kappa * noise level of zAR)`` (the paper's fixed threshold,
    plus a noise-relative floor so that the same parameters work at any J/N).
-4. Period: from successive peak times. Interval d_i is consistent when d_i is within ``tol`` of
-   an integer multiple q_i (1 or 2) of the median interval (a missed peak gives q = 2);
-   ``T^ = sum d_i / sum q_i`` over the consistent intervals of the last 16 peaks; the estimate is
-   locked when at least ``min_consistent`` intervals, and at least 60 % of them, agree (false
-   peaks from noise give inconsistent intervals and so no lock).
+4. Period from the peak times (the paper only says "from successive peaks"). Default: interval
+   d_i between successive peaks is consistent when within ``tol`` of q_i = 1 or 2 times the median
+   interval (a missed peak gives q = 2); ``T^ = sum d_i / sum q_i`` over the consistent intervals
+   of the last 16 peaks; locked when at least ``min_consistent`` intervals, and at least 60 % of
+   them, agree. Option ``lattice_voting`` (ours): every distance from the newest peak to one of
+   its 4 predecessors, over q = 1, 2, is a candidate T_c, refined by least squares; a peak fits
+   when within ``max(min_tolerance_samples, tol T_c)`` of the lattice; score ``fits - (expected -
+   fits) / 2``; locked when the fits are significant against chance (in-span peaks times
+   2 tol / T, plus four standard deviations plus two), fill a third of the lattice points and 60 %
+   of the peaks in the span, and two successive votes agree (two failed votes unlock). It keeps
+   lock where one false peak between two true ones breaks the interval rule.
 
 Decimation (documented deviation, for speed): the LPD runs at the full rate; its output is
-averaged over ``decimation`` samples and the AR Kalman filter (p x p covariance, O(p^2) per
-step) and peak detector run at the decimated rate. A peak time is then known to +-D/2 samples,
-and the period, averaged over up to 15 intervals, to about D / sum(q) samples.
+averaged over ``decimation`` samples (default 4) and the AR Kalman filter (p x p covariance,
+O(p^2) per step, full-matrix loops that the compiler vectorises) and peak detector run at the
+decimated rate. A peak time is then known to +-D/2 samples, and the period, a least-squares fit
+over up to 16 peaks, to a small fraction of D (1 % of the period at D = 4 in the tests).
 The peak is late with respect to the sweep start by the LPD length (the 6-sample difference
 reaches its full value 5 samples after the jump) plus the half decimation block; ``delay``
 removes this deterministic group delay.
@@ -46,11 +53,18 @@ PEAK_RING = 16
 """Number of recent peak times kept for the period estimate."""
 
 # float state layout
-S_ZG, S_ACC, S_NOISE, S_PKMAX, S_PERIOD, S_ZAR = 0, 1, 2, 3, 4, 5
-N_SFSTATE = 6
+S_ZG, S_ACC, S_NOISE, S_PKMAX, S_PERIOD, S_ZAR, S_CAND = 0, 1, 2, 3, 4, 5, 6
+N_SFSTATE = 7
 # int state layout
 J_DEC, J_INPEAK, J_PKIDX, J_NPEAKS, J_RPOS, J_RCOUNT, J_LOCKED, J_ZPOS, J_ZCOUNT, J_NDEC = range(10)
 N_SISTATE = 10
+# packed parameters (SweepPeriodParams.as_array)
+(Q_GAMMA, Q_NORM, Q_THR, Q_KAPPA, Q_LAMBDA, Q_DEC, Q_QAR, Q_RAR, Q_A, Q_DELAY, Q_MINSEP, Q_TOL, Q_MINCONS,
+ Q_TOLABS, Q_MAXPER, Q_VOTING) = range(16)
+N_SPAR = 16
+
+_AR_FASTMATH = {"nsz", "arcp", "contract", "reassoc"}
+"""Fast-math flags that keep NaN/inf semantics (no 'nnan'/'ninf'), so finiteness guards still work."""
 
 
 @dataclass(frozen=True)
@@ -69,8 +83,11 @@ class SweepPeriodParams:
         ar_transition: diagonal of A (eq. 25; the paper: 0.2).
         delay: samples from a sweep start to its detected peak (group delay), >= 0.
         min_separation: minimum samples between two peaks (refractory), >= 1.
-        tolerance: relative tolerance of an interval to a multiple of the median, in (0, 0.5).
-        min_consistent: consistent intervals needed to lock, >= 1.
+        tolerance: relative tolerance of a peak to the period lattice, in (0, 0.5).
+        min_consistent: peaks fitting the lattice needed to lock, minus one, >= 1.
+        min_tolerance_samples: absolute floor of the lattice tolerance, samples, >= 0.
+        max_period: longest period considered by the voting, samples (> min_separation).
+        lattice_voting: period by lattice voting (ours) instead of successive intervals (default).
     """
 
     forgetting: float = 0.92
@@ -78,14 +95,17 @@ class SweepPeriodParams:
     beta_en: float = 1e-4
     kappa: float = 8.0
     noise_time_constant: float = 256.0
-    decimation: int = 2
+    decimation: int = 4
     ar_process_var: float = 1.0
     ar_measurement_var: float = 1.0
     ar_transition: float = 0.2
     delay: float = 12.0
-    min_separation: int = 24
+    min_separation: int = 12
     tolerance: float = 0.05
     min_consistent: int = 3
+    min_tolerance_samples: float = 3.0
+    max_period: float = 10000.0
+    lattice_voting: bool = False
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.forgetting < 1.0:
@@ -110,29 +130,36 @@ class SweepPeriodParams:
             raise ValueError("tolerance must be in (0, 0.5)")
         if int(self.min_consistent) < 1:
             raise ValueError("min_consistent must be >= 1")
+        if not (math.isfinite(self.min_tolerance_samples) and self.min_tolerance_samples >= 0):
+            raise ValueError("min_tolerance_samples must be finite and >= 0")
+        if not (math.isfinite(self.max_period) and self.max_period > self.min_separation):
+            raise ValueError("max_period must be finite and > min_separation")
 
     def as_array(self, band: float) -> np.ndarray:
         """Packed parameters for the kernels; ``band`` = (f_max - f_min) / fs, cycles/sample."""
         return np.array([self.forgetting, self.beta * band, self.beta_en * band, self.kappa,
                          1.0 / self.noise_time_constant, self.decimation, self.ar_process_var,
                          self.ar_measurement_var, self.ar_transition, self.delay, self.min_separation,
-                         self.tolerance, self.min_consistent], dtype=np.float64)
+                         self.tolerance, self.min_consistent, self.min_tolerance_samples,
+                         self.max_period, 1.0 if self.lattice_voting else 0.0], dtype=np.float64)
 
 
 def initial_state() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
                              np.ndarray]:
-    """(float state, int state, z history, AR Gamma, AR P, AR history, peak ring) at start."""
+    """(float state, int state, z history, AR Gamma, AR P (with a scratch row), AR history, peaks)."""
     sf = np.zeros(N_SFSTATE)
     sf[S_PERIOD] = math.nan
+    sf[S_CAND] = math.nan
     return (sf, np.zeros(N_SISTATE, dtype=np.int64), np.zeros(LPD_LAG), np.zeros(AR_ORDER),
             np.vstack([np.eye(AR_ORDER), np.zeros((1, AR_ORDER))]), np.zeros(AR_ORDER),
             np.zeros(PEAK_RING, dtype=np.int64))
 
 
 @njit(cache=True)
-def _update_period(sf: np.ndarray, si: np.ndarray, peaks: np.ndarray, tol: float,
-                   min_consistent: int) -> None:
-    """Re-estimate the period from the stored peak times (step 4 of the module docstring)."""
+def _update_period_intervals(sf: np.ndarray, si: np.ndarray, peaks: np.ndarray, par: np.ndarray) -> None:
+    """Period from successive peak intervals (step 4, default): d_i consistent when within tol of
+    q_i = 1 or 2 times the median interval; T = sum d_i / sum q_i; locked when at least
+    min_consistent intervals, and 60 % of them, are consistent."""
     cnt = si[J_RCOUNT]
     if cnt < 2:
         return
@@ -147,6 +174,7 @@ def _update_period(sf: np.ndarray, si: np.ndarray, peaks: np.ndarray, tol: float
     med = np.median(d)
     if med <= 0:
         return
+    tol = par[Q_TOL]
     sd = 0.0
     sq = 0.0
     nc = 0
@@ -156,99 +184,142 @@ def _update_period(sf: np.ndarray, si: np.ndarray, peaks: np.ndarray, tol: float
             sd += d[i]
             sq += q
             nc += 1
-    if nc >= min_consistent and 5 * nc >= 3 * d.size:
+    if nc >= int(par[Q_MINCONS]) and 5 * nc >= 3 * d.size:
         sf[S_PERIOD] = sd / sq
         si[J_LOCKED] = 1
     else:
         si[J_LOCKED] = 0
 
 
-@njit(cache=True, inline="always")
-def sweep_step(n: int, z: float, sf: np.ndarray, si: np.ndarray, zhist: np.ndarray, gam: np.ndarray,
-               pmat: np.ndarray, hist: np.ndarray, peaks: np.ndarray, par: np.ndarray, sign: float,
-               wrap: bool) -> int:
-    """Consume one measurement; return the estimated sweep-start sample index of a newly
-    detected peak, or -1.
+@njit(cache=True)
+def _lattice_fit(d: np.ndarray, tc: float, tol_abs: float, tol_rel: float, kmax: int) -> tuple[int, float, float]:
+    """Peaks (distances d to the newest) on the lattice k * tc (1 <= k <= kmax): (fits, span, LS T)."""
+    tol = max(tol_abs, tol_rel * tc)
+    fit = 1
+    span = 0.0
+    skd = 0.0
+    skk = 0.0
+    for b in range(d.size):
+        kk = math.floor(d[b] / tc + 0.5)
+        if 1 <= kk <= kmax and abs(d[b] - kk * tc) <= tol:
+            fit += 1
+            span = max(span, d[b])
+            skd += kk * d[b]
+            skk += kk * kk
+    return fit, span, skd / skk if skk > 0 else tc
+
+
+@njit(cache=True)
+def _update_period(sf: np.ndarray, si: np.ndarray, peaks: np.ndarray, par: np.ndarray) -> None:
+    """Re-estimate the period from the stored peak times by lattice voting (step 4, module doc).
+
+    Candidates: the distance from the newest peak to each of its 4 nearest predecessors, over
+    q = 1, 2. Each candidate is refined twice by least squares (first on lattice numbers <= 4,
+    where its error is small, then on all), then scored.
+    """
+    cnt = si[J_RCOUNT]
+    if cnt < 3:
+        return
+    k = peaks.size
+    newest = peaks[(si[J_RPOS] - 1) % k]
+    d = np.empty(cnt - 1)
+    for b in range(1, cnt):
+        d[b - 1] = newest - peaks[(si[J_RPOS] - 1 - b) % k]
+    tol_rel, tol_abs, min_sep = par[Q_TOL], par[Q_TOLABS], par[Q_MINSEP]
+    best_score = -1e300
+    best_t = math.nan
+    best_ok = False
+    for a in range(min(4, d.size)):
+        for q in range(1, 3):
+            tc = d[a] / q
+            if tc < min_sep:
+                break
+            if tc > par[Q_MAXPER]:
+                continue
+            fit, span, tc = _lattice_fit(d, tc, tol_abs, tol_rel, 4)
+            fit, span, tc = _lattice_fit(d, tc, tol_abs, tol_rel, 1 << 30)
+            fit, span, t_ls = _lattice_fit(d, tc, tol_abs, tol_rel, 1 << 30)
+            expected = span / t_ls + 1.0
+            # peaks inside the span that do not fit are false peaks
+            in_span = 1
+            for b in range(d.size):
+                if d[b] <= span + tol_abs:
+                    in_span += 1
+            score = fit - 0.5 * (expected - fit)
+            if score > best_score + 1e-9 or (abs(score - best_score) <= 1e-9 and t_ls > best_t):
+                best_score, best_t = score, t_ls
+                # significance: peaks that fit by chance, in_span p0, with p0 = 2 tol / T
+                chance = in_span * min(1.0, 2.0 * max(tol_abs, tol_rel * t_ls) / t_ls)
+                best_ok = (fit >= int(par[Q_MINCONS]) + 1 and 3 * fit >= expected
+                           and 5 * fit >= 3 * in_span and t_ls <= par[Q_MAXPER]
+                           and fit >= chance + 4.0 * math.sqrt(chance) + 2.0)
+    # a lattice that fits by chance does not repeat: the previous vote must agree
+    prev = sf[S_CAND]
+    sf[S_CAND] = best_t if best_ok else math.nan
+    if best_ok and abs(best_t - prev) <= tol_rel * best_t:
+        sf[S_PERIOD] = best_t
+        si[J_LOCKED] = 1
+    elif not best_ok and not prev > 0:
+        si[J_LOCKED] = 0                       # two failed votes in a row unlock
+
+
+@njit(cache=True, inline="always", fastmath=_AR_FASTMATH)
+def ar_step(v: float, gam: np.ndarray, pmat: np.ndarray, hist: np.ndarray, a: float, q_ar: float,
+            r_ar: float) -> float:
+    """One step of the AR(p) coefficient Kalman filter (eq. 24-27); returns zAR (eq. 27).
 
     Args:
-        n: absolute sample index of z.
-        z: measurement (or the tracker's prediction for a rejected sample), cycles/sample.
-        sf, si, zhist, gam, pmat, hist, peaks: estimator state, updated in place (pmat has shape
-            (p + 1, p): the AR covariance, upper triangle valid, and a scratch row).
-        par: ``SweepPeriodParams.as_array(band)``.
-        sign: +1 to detect sweep starts of an up-chirp (z drops), -1 for a down-chirp.
-        wrap: wrap differences to [-0.5, 0.5) (signed complex measurements).
+        v: new (decimated) LPD value zG.
+        gam: Gamma estimate, shape (p,), updated in place.
+        pmat: shape (p + 1, p): rows 0..p-1 the posterior covariance of Gamma (full symmetric),
+            row p scratch; updated in place.
+        hist: C_n = the last p values of zG (newest first), shape (p,), shifted in place.
+        a: diagonal of A; q_ar: diagonal of Q_AR; r_ar: sigma_AR^2.
     """
-    gamma = par[0]
-    norm = par[1]
-    # --- LPD (eq. 23) -----------------------------------------------------------------------
-    pos = si[J_ZPOS]
-    if si[J_ZCOUNT] >= zhist.size:
-        dz = z - zhist[pos]
-        if wrap:
-            dz = dz - math.floor(dz + 0.5)
-    else:
-        dz = 0.0
-        si[J_ZCOUNT] += 1
-    zhist[pos] = z
-    si[J_ZPOS] = pos + 1 if pos + 1 < zhist.size else 0
-    zg = gamma * sf[S_ZG] - (1.0 - gamma) * dz / norm
-    sf[S_ZG] = zg
-    # --- decimation -----------------------------------------------------------------------
-    sf[S_ACC] += zg * sign
-    si[J_DEC] += 1
-    dec = int(par[5])
-    if si[J_DEC] < dec:
-        return -1
-    v = sf[S_ACC] / dec
-    sf[S_ACC] = 0.0
-    si[J_DEC] = 0
-    si[J_NDEC] += 1
-    # --- AR(p) Kalman filter (eq. 24-27) ------------------------------------------------------
     p = gam.size
-    a = par[8]
-    q_ar = par[6]
-    r_ar = par[7]
     a2 = a * a
     pred = 0.0
     for i in range(p):
         gam[i] = a * gam[i]
         pred += hist[i] * gam[i]
-    # P- = A P A^T + Q (A = a I), PC = P- C, s = C^T P- C + R; P is symmetric: the upper
-    # triangle is updated and mirrored (halves the O(p^2) work); pc lives in pmat's extra row
     pc = pmat[p]
-    for i in range(p):
-        pmat[i, i] = a2 * pmat[i, i] + q_ar
-        for j in range(i + 1, p):
+    for i in range(p):                     # P- = A P A^T + Q (A = a I)
+        for j in range(p):
             pmat[i, j] = a2 * pmat[i, j]
-    for i in range(p):
+        pmat[i, i] += q_ar
+    s = r_ar
+    for i in range(p):                     # P- C and C^T P- C + R
         acc = 0.0
-        for j in range(i):
-            acc += pmat[j, i] * hist[j]
-        for j in range(i, p):
+        for j in range(p):
             acc += pmat[i, j] * hist[j]
         pc[i] = acc
-    s = r_ar
-    for i in range(p):
-        s += hist[i] * pc[i]
-    innov = v - pred
+        s += hist[i] * acc
     inv_s = 1.0 / s
+    innov = (v - pred) * inv_s
     zar = 0.0
     for i in range(p):
-        gam[i] += pc[i] * inv_s * innov
+        gam[i] += pc[i] * innov
         zar += hist[i] * gam[i]
-    for i in range(p):
+    for i in range(p):                     # P+ = P- - P-C C^T P- / s
         ki = pc[i] * inv_s
-        for j in range(i, p):
+        for j in range(p):
             pmat[i, j] -= ki * pc[j]
     for i in range(p - 1, 0, -1):
         hist[i] = hist[i - 1]
     hist[0] = v
+    return zar
+
+
+@njit(cache=True, inline="always")
+def peak_step(n: int, zar: float, sf: np.ndarray, si: np.ndarray, peaks: np.ndarray, par: np.ndarray) -> int:
+    """Peak detection on zAR at a decimated step ending at sample n; returns the estimated sweep
+    start (sample index, group delay removed) of a newly completed peak, or -1."""
+    dec = int(par[Q_DEC])
+    si[J_NDEC] += 1
     sf[S_ZAR] = zar
-    # --- peak detection -------------------------------------------------------------------------
-    thr = max(par[2], par[3] * sf[S_NOISE])
+    thr = max(par[Q_THR], par[Q_KAPPA] * sf[S_NOISE])
     out = -1
-    if zar > thr and si[J_NDEC] > 2 * p:
+    if zar > thr and si[J_NDEC] > max(2 * AR_ORDER, 1.0 / par[Q_LAMBDA]):   # after the noise level warms up
         if si[J_INPEAK] == 0:
             si[J_INPEAK] = 1
             sf[S_PKMAX] = zar
@@ -261,25 +332,32 @@ def sweep_step(n: int, z: float, sf: np.ndarray, si: np.ndarray, zhist: np.ndarr
             si[J_INPEAK] = 0
             t_pk = si[J_PKIDX]
             last = peaks[(si[J_RPOS] - 1) % peaks.size]
-            if si[J_RCOUNT] == 0 or t_pk - last >= int(par[10]):
+            min_sep = float(par[Q_MINSEP])
+            if si[J_LOCKED] == 1:
+                min_sep = max(min_sep, 0.3 * sf[S_PERIOD])    # no second peak early in a locked sweep
+            if si[J_RCOUNT] == 0 or t_pk - last >= min_sep:
                 peaks[si[J_RPOS]] = t_pk
                 si[J_RPOS] = (si[J_RPOS] + 1) % peaks.size
                 if si[J_RCOUNT] < peaks.size:
                     si[J_RCOUNT] += 1
                 si[J_NPEAKS] += 1
-                _update_period(sf, si, peaks, par[11], int(par[12]))
-                out = t_pk - int(par[9] + 0.5)
+                if par[Q_VOTING] < 0.5:
+                    _update_period_intervals(sf, si, peaks, par)
+                elif si[J_LOCKED] == 0 or si[J_NPEAKS] % 4 == 0:
+                    _update_period(sf, si, peaks, par)
+                out = t_pk - int(par[Q_DELAY] + 0.5)
         # noise level: EWMA of |zAR| outside peaks
-        lam = par[4]
+        lam = par[Q_LAMBDA]
         sf[S_NOISE] = (1.0 - lam) * sf[S_NOISE] + lam * abs(zar)
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=_AR_FASTMATH, error_model="numpy")
 def _run(z: np.ndarray, par: np.ndarray, sign: float, wrap: bool) -> tuple[np.ndarray, np.ndarray,
                                                                            np.ndarray, float, int]:
     sf, si = np.zeros(N_SFSTATE), np.zeros(N_SISTATE, dtype=np.int64)
     sf[S_PERIOD] = math.nan
+    sf[S_CAND] = math.nan
     zhist = np.zeros(LPD_LAG)
     gam = np.zeros(AR_ORDER)
     pmat = np.zeros((AR_ORDER + 1, AR_ORDER))
@@ -287,18 +365,38 @@ def _run(z: np.ndarray, par: np.ndarray, sign: float, wrap: bool) -> tuple[np.nd
         pmat[i, i] = 1.0
     hist = np.zeros(AR_ORDER)
     peaks = np.zeros(PEAK_RING, dtype=np.int64)
-    zg = np.empty(z.size)
-    zar = np.empty(z.size)
+    zg_out = np.empty(z.size)
+    zar_out = np.empty(z.size)
     starts = np.full(z.size, -1, dtype=np.int64)
     ns = 0
+    gamma, norm, dec = par[Q_GAMMA], par[Q_NORM], int(par[Q_DEC])
+    zg = 0.0
+    acc = 0.0
+    ndec = 0
     for n in range(z.size):
-        s = sweep_step(n, z[n], sf, si, zhist, gam, pmat, hist, peaks, par, sign, wrap)
-        if s >= 0:
-            starts[ns] = s
-            ns += 1
-        zg[n] = sf[S_ZG]
-        zar[n] = sf[S_ZAR]
-    return zg, zar, starts[:ns], sf[S_PERIOD], si[J_LOCKED]
+        # LPD (eq. 23)
+        pos = n % LPD_LAG
+        if n >= LPD_LAG:
+            dz = z[n] - zhist[pos]
+            if wrap:
+                dz = dz - math.floor(dz + 0.5)
+        else:
+            dz = 0.0
+        zhist[pos] = z[n]
+        zg = gamma * zg - (1.0 - gamma) * dz / norm
+        acc += zg * sign
+        ndec += 1
+        if ndec == dec:
+            zar = ar_step(acc / dec, gam, pmat, hist, par[Q_A], par[Q_QAR], par[Q_RAR])
+            acc = 0.0
+            ndec = 0
+            s = peak_step(n, zar, sf, si, peaks, par)
+            if s >= 0:
+                starts[ns] = s
+                ns += 1
+        zg_out[n] = zg
+        zar_out[n] = sf[S_ZAR]
+    return zg_out, zar_out, starts[:ns], sf[S_PERIOD], si[J_LOCKED]
 
 
 def estimate_sweep_period(z: np.ndarray, params: SweepPeriodParams = SweepPeriodParams(), band: float = 0.5,

@@ -109,69 +109,75 @@ class TrackingFilterParams:
 
 
 @njit(cache=True, inline="always")
-def kf_predict(fst: np.ndarray, q_f: float, q_df: float) -> None:
-    """Time update (eq. 15-16) with F = [[1, 1], [0, 1]], in place on the float state."""
-    p11, p12, p22 = fst[F_P11], fst[F_P12], fst[F_P22]
-    fst[F_F] = fst[F_F] + fst[F_DF]
-    fst[F_P11] = p11 + 2.0 * p12 + p22 + q_f
-    fst[F_P12] = p12 + p22
-    fst[F_P22] = p22 + q_df
+def kf_predict(f: float, df: float, p11: float, p12: float, p22: float, q_f: float,
+               q_df: float) -> tuple[float, float, float, float, float]:
+    """Time update (eq. 15-16) with F = [[1, 1], [0, 1]]; returns (f, df, P11, P12, P22)."""
+    return f + df, df, p11 + 2.0 * p12 + p22 + q_f, p12 + p22, p22 + q_df
 
 
 @njit(cache=True, inline="always")
-def kf_update(fst: np.ndarray, ist: np.ndarray, ring: np.ndarray, z: float, r: float, mode: int,
-              wrap: bool) -> float:
-    """Measurement update with the gain scaled per mode (eq. 11-14, 17-18); returns the innovation.
+def kf_gain_scale(mode: int, c: float, c_hat: float, p11: float) -> float:
+    """Gain factor g of K = g P^- H^T C^-1 (eq. 13-14 and the AKF of Sec. 4).
 
     Args:
-        fst, ist, ring: float state, int state and innovation ring (length M), updated in place.
-        z: measurement, cycles/sample.
-        r: measurement variance R, (cycles/sample)^2.
         mode: MODE_KF / MODE_AKF / MODE_AFKF.
-        wrap: wrap the innovation to [-0.5, 0.5) (signed complex measurement).
+        c: computed innovation variance H P^- H^T + R (eq. 11).
+        c_hat: windowed innovation variance (eq. 12); < 0 while the window is not yet full (g = 1).
+        p11: P^-(1,1).
     """
-    nu = z - fst[F_F]
-    if wrap:
-        nu = nu - math.floor(nu + 0.5)
-    p11, p12, p22 = fst[F_P11], fst[F_P12], fst[F_P22]
+    if mode == MODE_KF or c_hat < 0.0:
+        return 1.0
+    alpha = max(1.0, c_hat / c)                          # eq. 13
+    if mode == MODE_AKF:
+        return min(alpha, c / p11)                       # AKF, capped so that K(1) <= 1
+    return 1.0 / alpha                                   # eq. 14
+
+
+@njit(cache=True, inline="always")
+def kf_update(f: float, df: float, p11: float, p12: float, p22: float, nu: float, r: float,
+              g: float) -> tuple[float, float, float, float, float]:
+    """Measurement update with the scaled gain (eq. 14, 17-18; Joseph form); returns the state.
+
+    Args:
+        f, df, p11, p12, p22: prior state and covariance.
+        nu: innovation z - f, cycles/sample (already wrapped for signed measurements).
+        r: measurement variance R, (cycles/sample)^2.
+        g: gain factor from ``kf_gain_scale``.
+    """
     c = p11 + r
-    m = ring.size
-    # sliding sum of squared innovations (eq. 12)
-    pos = ist[I_WPOS]
-    nu2 = nu * nu
-    if ist[I_WCOUNT] >= m:
-        fst[F_WSUM] -= ring[pos]
-    else:
-        ist[I_WCOUNT] += 1
-    ring[pos] = nu2
-    fst[F_WSUM] += nu2
-    ist[I_WPOS] = pos + 1 if pos + 1 < m else 0
-    g = 1.0
-    if mode != MODE_KF and ist[I_WCOUNT] >= m:
-        c_hat = max(fst[F_WSUM], 0.0) / (m - 1)
-        alpha = max(1.0, c_hat / c)                      # eq. 13
-        g = min(alpha, c / p11) if mode == MODE_AKF else 1.0 / alpha   # AKF (K1 <= 1) / eq. 14
     k1 = g * p11 / c
     k2 = g * p12 / c
-    fst[F_F] = fst[F_F] + k1 * nu                        # eq. 18
-    fst[F_DF] = fst[F_DF] + k2 * nu
     a11 = (1.0 - k1) * p11                               # Joseph form of eq. 17
     a12 = (1.0 - k1) * p12
     a21 = p12 - k2 * p11
     a22 = p22 - k2 * p12
-    fst[F_P11] = a11 * (1.0 - k1) + k1 * k1 * r
-    fst[F_P12] = -a11 * k2 + a12 + k1 * k2 * r
-    fst[F_P22] = -a21 * k2 + a22 + k2 * k2 * r
-    return nu
+    return (f + k1 * nu, df + k2 * nu, a11 * (1.0 - k1) + k1 * k1 * r, -a11 * k2 + a12 + k1 * k2 * r,
+            -a21 * k2 + a22 + k2 * k2 * r)
 
 
 @njit(cache=True, inline="always")
-def kf_sweep_reset(fst: np.ndarray, samples_since_start: float) -> None:
-    """Reset at a sweep start (eq. 21-22); ``samples_since_start`` = T - 1 of the last sweep."""
+def kf_sweep_reset(f: float, df: float, p11: float, p22: float,
+                   samples_since_start: float) -> tuple[float, float, float]:
+    """Reset at a sweep start (eq. 21-22) from the posterior at T - 1; returns (f0, P11, P12 = 0).
+
+    ``samples_since_start`` = T - 1 of the last sweep. f~ and df~ are taken as uncorrelated (eq. 22).
+    """
     m = samples_since_start
-    fst[F_F] = fst[F_F] - m * fst[F_DF]
-    fst[F_P11] = fst[F_P11] + m * m * fst[F_P22]
-    fst[F_P12] = 0.0
+    return f - m * df, p11 + m * m * p22, 0.0
+
+
+@njit(cache=True, inline="always")
+def window_push(ring: np.ndarray, pos: int, count: int, wsum: float, nu2: float) -> tuple[int, int, float]:
+    """Slide the innovation window of eq. 12 by one squared innovation; returns (pos, count, sum)."""
+    m = ring.size
+    if count >= m:
+        wsum -= ring[pos]
+    else:
+        count += 1
+    ring[pos] = nu2
+    wsum += nu2
+    pos = pos + 1 if pos + 1 < m else 0
+    return pos, count, wsum
 
 
 @njit(cache=True)
@@ -180,23 +186,33 @@ def _run(z: np.ndarray, valid: np.ndarray, reset: np.ndarray, par: np.ndarray, f
     n = z.size
     mode = int(par[0])
     r, q_f, q_df = par[1], par[2], par[3]
+    m_win = ring.size
+    f, df, p11, p12, p22, wsum = fst[F_F], fst[F_DF], fst[F_P11], fst[F_P12], fst[F_P22], fst[F_WSUM]
+    count, pos = ist[I_WCOUNT], ist[I_WPOS]
     f_out = np.empty(n)
     df_out = np.empty(n)
     p11_out = np.empty(n)
     last_start = 0
     for k in range(n):
         if k > 0:
-            kf_predict(fst, q_f, q_df)
+            f, df, p11, p12, p22 = kf_predict(f, df, p11, p12, p22, q_f, q_df)
             if reset[k]:
-                # state now predicts sample k; eq. 21 uses the posterior at T - 1 = k - 1
-                fst[F_F] -= fst[F_DF]
-                kf_sweep_reset(fst, float(k - 1 - last_start))
+                # the state predicts sample k; eq. 21 uses the posterior at T - 1 = k - 1
+                f, p11, p12 = kf_sweep_reset(f - df, df, p11, p22, float(k - 1 - last_start))
                 last_start = k
         if valid[k]:
-            kf_update(fst, ist, ring, z[k], r, mode, wrap)
-        f_out[k] = fst[F_F]
-        df_out[k] = fst[F_DF]
-        p11_out[k] = fst[F_P11]
+            nu = z[k] - f
+            if wrap:
+                nu = nu - math.floor(nu + 0.5)
+            pos, count, wsum = window_push(ring, pos, count, wsum, nu * nu)
+            c_hat = max(wsum, 0.0) / (m_win - 1) if count >= m_win else -1.0
+            g = kf_gain_scale(mode, p11 + r, c_hat, p11)
+            f, df, p11, p12, p22 = kf_update(f, df, p11, p12, p22, nu, r, g)
+        f_out[k] = f
+        df_out[k] = df
+        p11_out[k] = p11
+    fst[F_F], fst[F_DF], fst[F_P11], fst[F_P12], fst[F_P22], fst[F_WSUM] = f, df, p11, p12, p22, wsum
+    ist[I_WCOUNT], ist[I_WPOS] = count, pos
     return f_out, df_out, p11_out
 
 

@@ -210,3 +210,22 @@ def test_real_capture_plus_simulated_chirp_detected_and_tracked():
     assert ests[-1].type == CHIRP
     assert ests[-1].sweep_period_s == pytest.approx(15e-6, rel=0.01)
     assert ests[-1].jammer_to_noise_db == pytest.approx(10.0, abs=1.0)
+
+
+def test_fast_chirp_locked_by_the_periodicity_detector():
+    # 1e13 Hz/s over 5.1 MHz: a 19.5-sample period, faster than the LPD's smoothing (ours)
+    fe = FrontEndConfig(noise_density_dbm_per_mhz=-124.0)
+    mon = _calibrated(fe, noise_density_dbm_per_mhz=-124.0)
+    jam = ChirpJammer(sweep_rate_hz_per_s=1e13, sweep_period_s=ChirpJammer().bandwidth_hz / 1e13)
+    e = _feed(mon, IfSimulator(fe, (jam,), seed=12).generate(3 * BLOCK).values(), fe, BLOCK)[-1]
+    assert e.type == CHIRP
+    assert e.sweep_period_s == pytest.approx(jam.sweep_period_s, rel=0.01)
+
+
+def test_paper_method_parameters():
+    p = RfiMonitorParams.paper_method(phase_gain=0.5)
+    assert p.refine_window == 0 and not p.analysis.enabled and not p.sweep.lattice_voting
+    assert p.phase_gain == 0.5
+    assert RfiMonitorParams().sweep.lattice_voting and RfiMonitorParams().analysis.enabled
+    with pytest.raises(ValueError):
+        RfiMonitorParams(refine_window=99)

@@ -407,7 +407,9 @@ class IfSimulator:
         w = (g[0::2] + 1j * g[1::2]) / math.sqrt(2.0)
         buf = np.concatenate([self._jam_hist[idx], w])
         self._jam_hist[idx] = buf[buf.size - (self._NOISE_JAMMER_TAPS - 1):]
-        y = np.convolve(buf, self._taps[idx], mode="valid")  # unit power, complex
+        taps = self._taps[idx]
+        assert taps is not None  # set for every NoiseJammer in __init__
+        y: np.ndarray = np.convolve(buf, taps.astype(np.complex128), mode="valid")  # unit power, complex
         y = y * np.exp(2j * np.pi * self._signed(j.center_frequency_hz) * t)
         p = self.jammer_power_mw(j)
         if self.front_end.is_complex:
