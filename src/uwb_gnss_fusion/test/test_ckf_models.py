@@ -259,3 +259,123 @@ def test_fll_jitter_and_sigmas_grow_with_jamming():
 def test_loop_params_validation(kwargs):
     with pytest.raises(ValueError):
         TrackingLoopParams(**kwargs)
+
+
+# ----------------------------------------------------------------------------- beyond the paper
+def _range_hx(anchor):
+    return lambda pts: np.linalg.norm(pts[:, :3] - anchor, axis=1)[:, None]
+
+
+def _two_range_hx(a1, a2):
+    return lambda pts: np.stack(
+        [np.linalg.norm(pts[:, :3] - a1, axis=1), np.linalg.norm(pts[:, :3] - a2, axis=1)], axis=1
+    )
+
+
+@pytest.mark.parametrize("two", [False, True])
+def test_active_dims_shortcut_equals_full_cubature_update(two):
+    rng = np.random.default_rng(11)
+    p0 = _random_spd(rng, 8)
+    x0 = rng.standard_normal(8)
+    a1, a2 = np.array([4.0, 1.0, 0.5]), np.array([-3.0, 2.0, 1.0])
+    hx = _two_range_hx(a1, a2) if two else _range_hx(a1)
+    z = hx(x0[None, :])[0] + 0.3
+    r = np.full(z.size, 0.04)
+    full = CubatureKalmanFilter(x0, p0)
+    short = CubatureKalmanFilter(x0, p0)
+    res_f = full.update(z, r, hx)
+    res_s = short.update(z, r, hx, active_dims=3)
+    np.testing.assert_allclose(short.x, full.x, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(short.p, full.p, rtol=1e-9, atol=1e-10)
+    np.testing.assert_allclose(res_s.innovation, res_f.innovation, atol=1e-10)
+    np.testing.assert_allclose(res_s.innovation_var, res_f.innovation_var, rtol=1e-10)
+
+
+def test_iterated_update_reaches_the_map_point_and_is_not_pulled_to_the_anchor():
+    from scipy.optimize import minimize
+
+    rng = np.random.default_rng(12)
+    anchor = np.array([3.0, 1.0, 0.5])
+    hx = _range_hx(anchor)
+    z = np.array([2.5])
+    r = np.array([0.01])
+    for _ in range(3):
+        a = rng.standard_normal((8, 8))
+        p0 = 0.3 * a @ a.T + 0.5 * np.eye(8)
+        f = CubatureKalmanFilter(np.zeros(8), p0)
+        res = f.update(z, r, hx, active_dims=3, max_iterations=30)
+        assert res.iterations > 0 and res.nonlinearity > 1.0
+        p_inv = np.linalg.inv(p0)
+
+        def cost(x, p_inv=p_inv):
+            return x @ p_inv @ x + (z[0] - np.linalg.norm(x[:3] - anchor)) ** 2 / r[0]
+
+        best = minimize(cost, f.x, method="BFGS", options={"gtol": 1e-10})
+        assert cost(f.x) == pytest.approx(best.fun, rel=1e-6)
+        np.testing.assert_allclose(f.x, best.x, atol=1e-3)
+        plain = CubatureKalmanFilter(np.zeros(8), p0)
+        plain.update(z, r, hx, active_dims=3)
+        # the cubature mean lies inside the range sphere (convexity); the MAP point on it
+        assert np.linalg.norm(plain.x[:3] - anchor) < 2.4
+        assert np.linalg.norm(f.x[:3] - anchor) == pytest.approx(2.5, abs=0.01)
+
+
+def test_repeated_range_updates_keep_the_iterated_filter_on_the_sphere():
+    # Tag 5 m from an anchor, wide prior across the line of sight, the same noise-free range
+    # applied 50 times (no process noise): the plain CKF walks towards the anchor, the iterated
+    # update stays at 5 m.
+    anchor = np.array([5.0, 0.0, 0.0])
+    hx = _range_hx(anchor)
+    p0 = np.diag([4.0, 4.0, 4.0, 1.0, 1.0, 1.0, 1.0, 1.0])
+    plain = CubatureKalmanFilter(np.zeros(8), p0)
+    iterated = CubatureKalmanFilter(np.zeros(8), p0)
+    for _ in range(50):
+        plain.update(np.array([5.0]), np.array([0.01]), hx, active_dims=3)
+        iterated.update(np.array([5.0]), np.array([0.01]), hx, active_dims=3, max_iterations=10)
+    assert np.linalg.norm(plain.x[:3] - anchor) < 4.8
+    assert np.linalg.norm(iterated.x[:3] - anchor) == pytest.approx(5.0, abs=0.01)
+    np.testing.assert_allclose(iterated.x[:3], 0.0, atol=0.02)
+
+
+def test_iterations_are_not_used_for_a_linear_model():
+    rng = np.random.default_rng(13)
+    p0 = _random_spd(rng, 8)
+    h = rng.standard_normal((3, 8))
+    f = CubatureKalmanFilter(np.zeros(8), p0)
+    res = f.update(np.ones(3), np.ones(3), lambda pts: pts @ h.T, max_iterations=10)
+    assert res.iterations == 0 and abs(res.nonlinearity) < 1e-9
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_huber_weighting_equals_kalman_update_with_inflated_noise(sign):
+    # Scalar linear model: |e| = |nu| / sqrt(P_zz) > k inflates R by |e| / k (closed form).
+    p0 = np.diag([4.0, 1.0])
+    r = 1.0
+    nu = sign * 9.0
+    e = abs(nu) / math.sqrt(4.0 + r)
+    k = 2.0
+    f = CubatureKalmanFilter(np.zeros(2), p0)
+    res = f.update(np.array([nu]), np.array([r]), lambda pts: pts[:, :1], huber_k=k)
+    r_eff = r * e / k
+    assert res.noise_scale[0] == pytest.approx(e / k)
+    assert f.x[0] == pytest.approx(4.0 / (4.0 + r_eff) * nu, rel=1e-12)
+    assert f.p[0, 0] == pytest.approx(4.0 - 16.0 / (4.0 + r_eff), rel=1e-12)
+    # skewed: only positive innovations (too-long NLOS ranges) are down-weighted
+    g = CubatureKalmanFilter(np.zeros(2), p0)
+    res = g.update(np.array([nu]), np.array([r]), lambda pts: pts[:, :1], huber_k_positive=k)
+    if sign > 0:
+        assert res.noise_scale[0] == pytest.approx(e / k)
+    else:
+        assert res.noise_scale[0] == 1.0
+        assert g.x[0] == pytest.approx(4.0 / 5.0 * nu, rel=1e-12)
+
+
+def test_uwb_latency_back_propagates_with_velocity():
+    anchor = np.array([[10.0, 0.0, 0.0]])
+    states = np.zeros((2, 8))
+    states[0, 3] = 2.0  # moving towards the anchor at 2 m/s: 0.25 s earlier it was 0.5 m further
+    states[1, 0:3] = [1.0, 2.0, 0.5]
+    hx = uwb_range_model(anchor, latency_s=0.25)
+    np.testing.assert_allclose(hx(states)[:, 0], [10.5, np.linalg.norm(anchor[0] - states[1, 0:3])])
+    with pytest.raises(ValueError):
+        uwb_range_model(anchor, latency_s=-0.1)

@@ -105,6 +105,13 @@ def _run_gnss(f, n, rng, start=T0, dt_ns=NS // 5, **kw):
         dict(anchors=(("a", 0.0, 0.0, 0.0), ("a", 1.0, 0.0, 0.0))),
         dict(uwb_lever_arm_m=(0.0, 0.0)),
         dict(clock_h_minus2_hz=-1.0),
+        dict(uwb_latency_s=-0.1),
+        dict(max_update_iterations=-1),
+        dict(nonlinearity_threshold=0.0),
+        dict(uwb_huber_k=0.0),
+        dict(uwb_huber_k_positive=float("nan")),
+        dict(divergence_uwb_gated_fraction=0.0),
+        dict(divergence_uwb_gated_fraction=1.5),
     ],
 )
 def test_params_validation(kwargs):
@@ -296,6 +303,30 @@ def test_uwb_only_local_frame_with_four_anchors():
     # a GNSS epoch cannot be used in the local frame: counted, not crashed
     out = f.process_gnss(_epoch(T0 + 11 * NS))
     assert dict(out.rejection_counts)["gnss_disabled"] == 1
+
+
+@pytest.mark.parametrize("fraction", [1.0, 0.5])
+def test_divergence_when_most_anchors_disagree_even_if_one_agrees(fraction):
+    # The tag jumps to a point at the same distance from anchor 1: anchor 1 keeps agreeing with the
+    # stale estimate, the other three are gated. The original rule (consecutive gated ranges,
+    # fraction 1) never fires; the windowed rule declares divergence and multilaterates.
+    anchors = np.array([[0.0, 0.0, 2.0], [10.0, 0.0, 0.5], [10.0, 10.0, 2.5], [0.0, 10.0, 0.3]])
+    truth = np.array([4.0, 6.0, 1.0])
+    rel = truth - anchors[0]
+    c, s_ = math.cos(0.6), math.sin(0.6)
+    jumped = anchors[0] + np.array([c * rel[0] - s_ * rel[1], s_ * rel[0] + c * rel[1], rel[2]])
+    f = FusionFilter(FusionParams(use_gnss=False, accel_psd_m2ps3=0.01, divergence_uwb_gated_fraction=fraction))
+    out = None
+    for k in range(400):
+        pos = truth if k < 200 else jumped
+        out = f.process_uwb(_uwb(T0 + k * NS // 40, k % 4, frame="map", anchors=anchors, truth=pos))
+    counts = dict(out.rejection_counts)
+    if fraction == 1.0:
+        assert "divergence" not in counts and out.reinitializations == 0
+        assert np.linalg.norm(out.position_m - jumped) > 0.5  # lost, and not saying so
+    else:
+        assert counts["divergence"] >= 1 and out.reinitializations >= 1
+        assert np.linalg.norm(out.position_m - jumped) < 0.05
 
 
 def test_map_frame_uwb_rejected_by_earth_filter():

@@ -2,12 +2,27 @@
 
 Generic and pure: the state, the models and the noise are passed in. The fusion filter uses it
 on the 8-state error vector of Cao et al. (the models add the error to the nominal state).
+
+Beyond the paper, :meth:`CubatureKalmanFilter.update` offers (all off by default, so that the
+default update is exactly Cao et al. eq. 17-24):
+
+* ``active_dims``: an exact shortcut for models that depend on the leading state components only
+  (a UWB range depends on the position): the cubature points that do not move those components all
+  map to the same measurement, so only ``2 m + 1`` model evaluations and an ``m x m`` Cholesky
+  factor are needed. The result equals the full 2n-point update to rounding.
+* ``huber_k`` / ``huber_k_positive``: Huber M-estimation in innovation form (noise inflation of
+  measurements whose normalised innovation exceeds the threshold), optionally skewed (a smaller
+  threshold for positive innovations, e.g. for non-line-of-sight UWB ranges, which are only ever
+  too long).
+* ``max_iterations``: Gauss-Newton refinement of the posterior mean (iterated update) when the
+  measurement is strongly nonlinear over the prior spread, which removes the pull of repeated
+  range-only updates towards the anchor.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -65,6 +80,36 @@ def robust_cholesky(p: np.ndarray) -> np.ndarray:
     raise CholeskyError("covariance is not positive definite")
 
 
+def leading_sqrt_columns(p: np.ndarray, m: int) -> np.ndarray:
+    """First ``m`` columns of the lower Cholesky factor of ``p``, from its leading m x m block.
+
+    Args:
+        p: covariance, shape (n, n).
+        m: number of leading columns, 1 <= m <= n.
+
+    Returns:
+        ``L[:, :m]`` with ``L = chol(p)``, shape (n, m): ``L[:m, :m] = chol(p[:m, :m])`` and
+        ``L[m:, :m] = p[m:, :m] chol(p[:m, :m])^-T`` (block Cholesky).
+
+    Raises:
+        CholeskyError: if the leading block is not positive definite.
+    """
+    n = p.shape[0]
+    try:
+        full = np.linalg.cholesky(p)  # one small LAPACK call is cheaper than block algebra
+        if math.isfinite(float(full[:, :m].sum())):
+            return full[:, :m]
+    except np.linalg.LinAlgError:
+        pass
+    l_aa = robust_cholesky(p[:m, :m])
+    if m == n:
+        return l_aa
+    out = np.empty((n, m))
+    out[:m] = l_aa
+    out[m:] = np.linalg.solve(l_aa, p[:m, m:]).T
+    return out
+
+
 @dataclass(frozen=True)
 class UpdateResult:
     """Outcome of one gated CKF measurement update.
@@ -76,6 +121,12 @@ class UpdateResult:
         innovation: z - z_hat under the prior, shape (k,).
         innovation_var: diagonal of P_zz under the prior, shape (k,).
         nis: normalised innovation squared of the applied set (nu^T P_zz^-1 nu), or NaN if none.
+        noise_scale: factor applied to each measurement's noise variance by the robust (Huber)
+            weighting, shape (k,) (1: full weight).
+        iterations: Gauss-Newton refinement steps taken after the cubature update (0: the plain
+            CKF update of Cao et al. eq. 17-24).
+        nonlinearity: largest ratio of the linearisation-error variance to the (weighted)
+            measurement noise variance over the applied measurements (see ``update``).
     """
 
     x: np.ndarray
@@ -84,6 +135,9 @@ class UpdateResult:
     innovation: np.ndarray
     innovation_var: np.ndarray
     nis: float
+    noise_scale: np.ndarray = field(default_factory=lambda: np.ones(0))
+    iterations: int = 0
+    nonlinearity: float = 0.0
 
 
 class CubatureKalmanFilter:
@@ -148,16 +202,39 @@ class CubatureKalmanFilter:
         self.p = d.T @ d / pts.shape[0] + q
 
     def update(
-        self, z: np.ndarray, r: np.ndarray, hx: MeasurementModel, gate_nis: float = np.inf
+        self,
+        z: np.ndarray,
+        r: np.ndarray,
+        hx: MeasurementModel,
+        gate_nis: float = np.inf,
+        *,
+        active_dims: int | None = None,
+        huber_k: float = np.inf,
+        huber_k_positive: float | None = None,
+        max_iterations: int = 0,
+        nonlinearity_threshold: float = 0.05,
     ) -> UpdateResult:
-        """Cubature measurement update with per-measurement innovation gating.
+        """Cubature measurement update with per-measurement gating (and optional robust extras).
 
         Args:
             z: measurements, shape (k,).
             r: measurement noise covariance, shape (k, k) (or (k,) variances).
-            hx: measurement model, points (2n, n) -> (2n, k).
+            hx: measurement model, points (N, n) -> (N, k) (N = 2n, or 2m + 1 with active_dims).
             gate_nis: per-measurement threshold on ``nu_i^2 / P_zz[i, i]`` (a 1-dof chi-square
                 quantile); measurements above it are excluded from this update. ``inf``: no gating.
+            active_dims: the model depends on the first ``m`` state components only (None: all).
+                Exact: the update equals the full 2n-point one to rounding.
+            huber_k: Huber threshold on the normalised innovation ``e = nu / sqrt(P_zz[i, i])``
+                (inf: off). A measurement with ``|e| > k`` gets its noise variance multiplied by
+                ``|e| / k``.
+            huber_k_positive: threshold for positive innovations (measurement larger than
+                predicted); None: ``huber_k``.
+            max_iterations: Gauss-Newton refinement steps allowed after the cubature update when
+                the measurement is strongly nonlinear over the prior (0: off).
+            nonlinearity_threshold: refine only if, for some applied measurement, the variance of
+                the cubature linearisation error (``Omega_ii = var(Z_i) - P_xz^T P^-1 P_xz``, the
+                residual of the statistical linear regression) exceeds this fraction of its noise
+                variance.
 
         Returns:
             :class:`UpdateResult`; the filter's ``x`` and ``p`` are replaced by the posterior.
@@ -169,54 +246,244 @@ class CubatureKalmanFilter:
             Cao et al., eq. 17-24 (Arasaratnam & Haykin 2009, eq. 33-42): points
             ``chi_i = x + S xi_i``, ``Z_i = h(chi_i)``, ``z_hat = mean Z_i``,
             ``P_zz = cov(Z) + R``, ``P_xz = cov(chi, Z)``, ``K = P_xz P_zz^-1``,
-            ``x += K (z - z_hat)``, ``P -= K P_zz K^T``. Gating is beyond the paper: each
-            measurement's innovation is tested under the prior (its marginal is independent of the
-            other measurements), and the update is then computed with the accepted subset only.
+            ``x += K (z - z_hat)``, ``P -= K P_zz K^T``. With the lower Cholesky factor S,
+            ``P_xz = S G`` with ``G = (1/2n) sum_i xi_i (Z_i - z_hat)^T`` (used below).
+
+            Beyond the paper:
+
+            * Gating: each measurement's innovation is tested under the prior (its marginal is
+              independent of the other measurements); the update then uses the accepted subset.
+            * Huber weighting in innovation form (Karlgaard & Schaub 2007, Huber-based divided
+              difference filtering; one reweighting step): ``R_ii <- R_ii |e_i| / k``, with a
+              separate threshold for positive innovations (skewed, NLOS-aware).
+            * Iterated update: a Gauss-Newton minimisation of the MAP cost
+              ``|x - x_prior|^2_P^-1 + |z - h(x)|^2_R^-1`` started at the cubature posterior mean
+              (the iterated EKF of Bell & Cathey 1993, with the Jacobian taken by central
+              differences along the prior's Cholesky columns, i.e. cubature points with a small
+              spread); the covariance is that of the last linearisation. It is used
+              only when the statistical-linearisation error ``Omega`` is significant: then the
+              cubature mean of a range exceeds the range of the mean (convexity), and repeated
+              updates drag the state towards the anchor; the MAP point stays on the range
+              sphere. For nearly linear measurements (pseudoranges) nothing changes.
         """
         z = np.asarray(z, dtype=float)
         r = np.asarray(r, dtype=float)
         if r.ndim == 1:
             r = np.diag(r)
         k = z.size
-        s = robust_cholesky(self.p)
-        dx = self._xi @ s.T
-        pts = self.x[None, :] + dx
+        n = self.n
+        m = n if active_dims is None else int(active_dims)
+        if not 1 <= m <= n:
+            raise ValueError(f"active_dims must be in [1, {n}], got {active_dims}")
+        x0 = self.x
+        p0 = self.p
+        lcols = leading_sqrt_columns(p0, m)  # (n, m)
+        c = math.sqrt(n)
+        npts = 2 * m + (1 if m < n else 0)
+        pts = np.empty((npts, n))
+        step = c * lcols.T
+        pts[:m] = x0 + step
+        pts[m : 2 * m] = x0 - step
+        if m < n:
+            pts[2 * m] = x0
         zs = hx(pts)
-        m = pts.shape[0]
-        z_hat = zs.mean(axis=0)
-        dz = zs - z_hat
-        pzz = dz.T @ dz / m + r
-        pxz = dx.T @ dz / m
-        nu = z - z_hat
+        inv2n = 1.0 / (2 * n)
         if k == 1:
-            var = pzz[0]
-            s11 = float(var[0])
-            nu0 = float(nu[0])
-            ok = math.isfinite(nu0) and nu0 * nu0 <= gate_nis * s11
-            accepted = np.array([ok])
-            if not ok:
-                return UpdateResult(self.x.copy(), self.p.copy(), accepted, nu, var, float("nan"))
-            gain = pxz / s11
-            nu_a = nu
-            nis = nu0 * nu0 / s11
+            z1 = zs[:, 0]
+            zp1 = z1[:m]
+            zm1 = z1[m : 2 * m]
+            n_c = 2 * (n - m)
+            zc1 = float(z1[2 * m]) if m < n else 0.0
+            zh = (float(zp1.sum()) + float(zm1.sum()) + n_c * zc1) * inv2n
+            d1 = z1[: 2 * m] - zh
+            var_z = (float(d1 @ d1) + n_c * (zc1 - zh) ** 2) * inv2n
+            return self._update_scalar(
+                float(z[0]),
+                float(r[0, 0]),
+                hx,
+                gate_nis,
+                lcols,
+                (c * inv2n) * (zp1 - zm1),
+                zh,
+                var_z,
+                huber_k,
+                huber_k_positive,
+                max_iterations,
+                nonlinearity_threshold,
+            )
+        zp = zs[:m]
+        zm = zs[m : 2 * m]
+        if m < n:
+            zc = zs[2 * m]
+            z_hat = (zp.sum(axis=0) + zm.sum(axis=0) + (2 * (n - m)) * zc) * inv2n
+            dz = zs - z_hat
+            dc = dz[2 * m]
+            cov_z = (dz[: 2 * m].T @ dz[: 2 * m] + (2 * (n - m)) * np.outer(dc, dc)) * inv2n
         else:
-            var = np.diag(pzz).copy()
-            accepted = np.isfinite(nu) & (nu * nu <= gate_nis * var)
-            n_acc = int(accepted.sum())
-            if n_acc == 0:
-                return UpdateResult(self.x.copy(), self.p.copy(), accepted, nu, var, float("nan"))
-            if n_acc < k:
-                idx = np.flatnonzero(accepted)
-                pzz = pzz[np.ix_(idx, idx)]
-                pxz = pxz[:, idx]
-                nu_a = nu[idx]
+            z_hat = (zp.sum(axis=0) + zm.sum(axis=0)) * inv2n
+            dz = zs - z_hat
+            cov_z = (dz.T @ dz) * inv2n
+        g = (c * inv2n) * (zp - zm)  # (m, k): S^-1 P_xz on the active columns
+        nu = z - z_hat
+        pzz = cov_z + r
+        var = np.diag(pzz).copy()
+        accepted = np.isfinite(nu) & (nu * nu <= gate_nis * var)
+        n_acc = int(accepted.sum())
+        scale = np.ones(k)
+        if n_acc == 0:
+            return UpdateResult(x0.copy(), p0.copy(), accepted, nu, var, math.nan, scale, 0, 0.0)
+        idx = None if n_acc == k else np.flatnonzero(accepted)
+        if idx is not None:
+            pzz = pzz[np.ix_(idx, idx)]
+            r_a = r[np.ix_(idx, idx)]
+            cov_a = cov_z[np.ix_(idx, idx)]
+            g_a = g[:, idx]
+            nu_a = nu[idx]
+            var_a = var[idx]
+        else:
+            r_a, cov_a, g_a, nu_a, var_a = r, cov_z, g, nu, var
+        robust = math.isfinite(huber_k) or (huber_k_positive is not None and math.isfinite(huber_k_positive))
+        if robust:
+            e = nu_a / np.sqrt(var_a)
+            k_pos = huber_k if huber_k_positive is None else huber_k_positive
+            thr = np.where(e > 0.0, k_pos, huber_k)
+            s_a = np.where(np.abs(e) > thr, np.abs(e) / thr, 1.0)
+            if np.any(s_a > 1.0):
+                d = np.sqrt(s_a)
+                r_a = r_a * np.outer(d, d)
+                pzz = cov_a + r_a
+                if idx is None:
+                    scale = s_a
+                else:
+                    scale[idx] = s_a
+        # Cubature update (eq. 22-24) in the whitened active coordinates: x = x0 + L b.
+        ch = np.linalg.cholesky(pzz)
+        wn = np.linalg.solve(ch, nu_a)
+        nis = float(wn @ wn)
+        gain_w = np.linalg.solve(ch.T, np.linalg.solve(ch, g_a.T)).T  # G P_zz^-1, (m, k)
+        b = gain_w @ nu_a
+        lcg = lcols @ gain_w
+        p_new = p0 - lcg @ pzz @ lcg.T
+        omega = np.diag(cov_a) - np.einsum("ij,ij->j", g_a, g_a)
+        nonlin = float(np.max(omega / np.diag(r_a)))
+        iters = 0
+        if max_iterations > 0 and nonlin > nonlinearity_threshold:
+            b_map, iters, hl = self._gauss_newton(z if idx is None else z[idx], r_a, hx, lcols, b, max_iterations, idx)
+            if iters:
+                # covariance of the last linearisation (iterated EKF, Bell & Cathey 1993)
+                s_l = hl @ hl.T + r_a
+                lk = lcols @ np.linalg.solve(s_l, hl).T
+                p_new = p0 - lk @ s_l @ lk.T
+                b = b_map
+        self.x = x0 + lcols @ b
+        self.p = 0.5 * (p_new + p_new.T)
+        return UpdateResult(self.x.copy(), self.p.copy(), accepted, nu, var, nis, scale, iters, nonlin)
+
+    def _update_scalar(
+        self, z, r, hx, gate_nis, lcols, g, z_hat, var_z, huber_k, huber_k_positive, max_iterations, threshold
+    ) -> UpdateResult:
+        """The update of :meth:`update` for one measurement, in floats (same equations)."""
+        x0 = self.x
+        p0 = self.p
+        nu = z - z_hat
+        s11 = var_z + r
+        prior_var = s11
+        if not (math.isfinite(nu) and nu * nu <= gate_nis * s11):
+            return UpdateResult(
+                x0.copy(),
+                p0.copy(),
+                np.array([False]),
+                np.array([nu]),
+                np.array([s11]),
+                math.nan,
+                np.ones(1),
+                0,
+                0.0,
+            )
+        scale = 1.0
+        k_pos = huber_k if huber_k_positive is None else huber_k_positive
+        thr = k_pos if nu > 0.0 else huber_k
+        if math.isfinite(thr):
+            e = abs(nu) / math.sqrt(s11)
+            if e > thr:
+                scale = e / thr
+                r *= scale
+                s11 = var_z + r
+        nis = nu * nu / s11
+        b = g * (nu / s11)
+        lg = lcols @ g
+        p_new = p0 - np.outer(lg, lg) * (1.0 / s11)
+        nonlin = (var_z - float(g @ g)) / r
+        iters = 0
+        if max_iterations > 0 and nonlin > threshold:
+            r_m = np.array([[r]])
+            b_map, iters, hl = self._gauss_newton(np.array([z]), r_m, hx, lcols, b, max_iterations, None)
+            if iters:
+                h0 = hl[0]
+                lh = lcols @ h0
+                p_new = p0 - np.outer(lh, lh) * (1.0 / (float(h0 @ h0) + r))
+                b = b_map
+        self.x = x0 + lcols @ b
+        self.p = 0.5 * (p_new + p_new.T)
+        return UpdateResult(
+            self.x.copy(),
+            self.p.copy(),
+            np.array([True]),
+            np.array([nu]),
+            np.array([prior_var]),
+            nis,
+            np.array([scale]),
+            iters,
+            nonlin,
+        )
+
+    def _gauss_newton(self, z, r, hx, lcols, b, max_iterations, idx):
+        """Iterated (Gauss-Newton) refinement in whitened coordinates ``x = x_prior + L b``.
+
+        Minimises ``b^T b + (z - h(x))^T R^-1 (z - h(x))`` from ``b``; returns the final ``b``,
+        the number of steps that lowered the cost (each step is halved up to four times until it
+        does) and ``H L`` at the final point, shape (k, m).
+        """
+        x0 = self.x
+        m = lcols.shape[1]
+        n = self.n
+        r_chol = np.linalg.cholesky(r)
+        eps = 0.01  # central-difference step, in prior standard deviations
+        steps = eps * lcols.T
+        pts = np.empty((2 * m + 1, n))
+
+        def evaluate(bb):
+            xc = x0 + lcols @ bb
+            pts[:m] = xc + steps
+            pts[m : 2 * m] = xc - steps
+            pts[2 * m] = xc
+            zz = hx(pts)
+            if idx is not None:
+                zz = zz[:, idx]
+            hl = (zz[:m] - zz[m : 2 * m]).T * (0.5 / eps)  # (k, m): H L
+            res = z - zz[2 * m]
+            wres = np.linalg.solve(r_chol, res) if res.size > 1 else res / r_chol[0]
+            return hl, res, float(bb @ bb + wres @ wres)
+
+        hl, res, cost = evaluate(b)
+        iters = 0
+        for _ in range(max_iterations):
+            if res.size == 1:
+                h0 = hl[0]
+                b_new = h0 * (float(res[0] + h0 @ b) / float(h0 @ h0 + r[0, 0]))
             else:
-                nu_a = nu
-            c = np.linalg.cholesky(pzz)
-            gain = np.linalg.solve(c.T, np.linalg.solve(c, pxz.T)).T
-            w = np.linalg.solve(c, nu_a)
-            nis = float(w @ w)
-        self.x = self.x + gain @ nu_a
-        p = self.p - gain @ pzz @ gain.T
-        self.p = 0.5 * (p + p.T)
-        return UpdateResult(self.x.copy(), self.p.copy(), accepted, nu, var, nis)
+                b_new = hl.T @ np.linalg.solve(hl @ hl.T + r, res + hl @ b)
+            hl_n, res_n, cost_n = evaluate(b_new)
+            halvings = 0
+            while not cost_n <= cost and halvings < 4:
+                b_new = 0.5 * (b + b_new)
+                hl_n, res_n, cost_n = evaluate(b_new)
+                halvings += 1
+            if not cost_n <= cost:
+                break
+            iters += 1
+            moved = float(np.max(np.abs(b_new - b)))
+            b, hl, res, cost = b_new, hl_n, res_n, cost_n
+            if moved < 1e-4:
+                break
+        return b, iters, hl

@@ -15,6 +15,7 @@ every update (eq. 25).
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -85,9 +86,25 @@ class FusionParams:
         max_position_std_m: a larger position 1-sigma (per axis) is declared divergence, m.
         divergence_gnss_epochs: consecutive GNSS epochs with at least half of >= 4 pseudoranges
             gated out that declare divergence.
-        divergence_uwb_ranges: consecutive gated UWB ranges that declare divergence.
+        divergence_uwb_ranges: length of the window of recent UWB ranges (all anchors) examined
+            for divergence.
+        divergence_uwb_gated_fraction: divergence is declared when at least this fraction of the
+            last ``divergence_uwb_ranges`` ranges was gated out, in (0, 1] (1: that many
+            consecutive gated ranges, the original rule).
         reference_max_age_s: a caller-supplied reference (SPP) older than this is not used, s.
         uwb_init_window_s: ranges used for UWB multilateration must lie within this window, s.
+        uwb_latency_s: age of a UWB range at its stamp, s (>= 0; 0: the paper's model). The range
+            is modelled as the distance at ``stamp - uwb_latency_s`` (constant-velocity
+            back-propagation). Beyond the paper; set it from the ranging hardware / time-base
+            calibration, not per data set.
+        max_update_iterations: Gauss-Newton (iterated) refinement steps allowed after a cubature
+            update whose linearisation error is significant (0: the plain CKF update of Cao et al.
+            eq. 17-24). Beyond the paper; see :meth:`.ckf.CubatureKalmanFilter.update`.
+        nonlinearity_threshold: refine when the cubature linearisation-error variance exceeds this
+            fraction of the measurement noise variance (> 0).
+        uwb_huber_k: Huber threshold on the normalised UWB innovation (inf: off). Beyond the paper.
+        uwb_huber_k_positive: Huber threshold for positive UWB innovations (measured range longer
+            than predicted, the non-line-of-sight direction); inf: same as ``uwb_huber_k``.
     """
 
     use_gnss: bool = True
@@ -118,6 +135,12 @@ class FusionParams:
     divergence_uwb_ranges: int = 40
     reference_max_age_s: float = 5.0
     uwb_init_window_s: float = 1.0
+    uwb_latency_s: float = 0.0
+    divergence_uwb_gated_fraction: float = 0.5
+    max_update_iterations: int = 5
+    nonlinearity_threshold: float = 0.05
+    uwb_huber_k: float = math.inf
+    uwb_huber_k_positive: float = math.inf
 
     def __post_init__(self) -> None:
         pos = {
@@ -135,6 +158,10 @@ class FusionParams:
             "max_position_std_m": self.max_position_std_m,
             "reference_max_age_s": self.reference_max_age_s,
             "uwb_init_window_s": self.uwb_init_window_s,
+            "nonlinearity_threshold": self.nonlinearity_threshold,
+            # inf switches the Huber weighting off; anything else must be finite and > 0
+            "uwb_huber_k": 1.0 if self.uwb_huber_k == math.inf else self.uwb_huber_k,
+            "uwb_huber_k_positive": 1.0 if self.uwb_huber_k_positive == math.inf else self.uwb_huber_k_positive,
         }
         for name, value in pos.items():
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
@@ -154,6 +181,17 @@ class FusionParams:
                 raise ValueError(f"FusionParams.{name} must be finite")
         if len(self.uwb_lever_arm_m) != 3 or not all(math.isfinite(v) for v in self.uwb_lever_arm_m):
             raise ValueError("FusionParams.uwb_lever_arm_m must be three finite numbers")
+        if not (isinstance(self.uwb_latency_s, (int, float)) and 0.0 <= self.uwb_latency_s <= 1.0):
+            raise ValueError(f"FusionParams.uwb_latency_s must be in [0, 1] s, got {self.uwb_latency_s!r}")
+        if not (isinstance(self.max_update_iterations, int) and 0 <= self.max_update_iterations <= 50):
+            raise ValueError(
+                f"FusionParams.max_update_iterations must be an int in [0, 50], got {self.max_update_iterations!r}"
+            )
+        if not (0.0 < self.divergence_uwb_gated_fraction <= 1.0):
+            raise ValueError(
+                "FusionParams.divergence_uwb_gated_fraction must be in (0, 1], "
+                f"got {self.divergence_uwb_gated_fraction!r}"
+            )
         if self.min_satellites_init < 4:
             raise ValueError(f"FusionParams.min_satellites_init must be >= 4, got {self.min_satellites_init}")
         if self.divergence_gnss_epochs < 1 or self.divergence_uwb_ranges < 1:
@@ -271,7 +309,12 @@ class FusionFilter:
         :mod:`.jamming_weights`). Beyond the paper: per-measurement chi-square gating, divergence
         detection with reinitialisation, asynchronous GNSS/UWB with an out-of-order policy
         (older-than-filter-time messages are rejected and counted "out_of_order"; use
-        :class:`ReorderBuffer` in front to re-order within a window), GNSS-only / UWB-only / both.
+        :class:`ReorderBuffer` in front to re-order within a window), GNSS-only / UWB-only / both;
+        an iterated (Gauss-Newton) refinement of strongly nonlinear updates
+        (``max_update_iterations``; 0 restores the paper's plain CKF update), a windowed UWB
+        divergence test (``divergence_uwb_gated_fraction``), an optional UWB range latency and an
+        optional skewed Huber weighting of UWB ranges. A UWB range is applied with the exact
+        position-only cubature shortcut (``active_dims``), which equals the 16-point update.
 
     Example:
         >>> f = FusionFilter(FusionParams(use_gnss=False))
@@ -283,7 +326,8 @@ class FusionFilter:
     def __init__(self, params: FusionParams | None = None) -> None:
         self.params = params if params is not None else FusionParams()
         self._gate = self.params.gate_nis
-        self._q_buf = np.zeros((STATE_DIM, STATE_DIM))
+        self._transition_cache: dict[tuple[int, bool], tuple[np.ndarray, np.ndarray]] = {}
+        self._counts_tuple: tuple[tuple[str, int], ...] | None = None
         clock = self.params.clock
         self._clock_q = lambda dt_s: _clock_q(clock, dt_s)
         self._lever = np.asarray(self.params.uwb_lever_arm_m, dtype=float)
@@ -311,10 +355,12 @@ class FusionFilter:
         self._ckf = CubatureKalmanFilter(np.zeros(STATE_DIM), np.eye(STATE_DIM))
         self._bad_gnss_epochs = 0
         self._bad_uwb = 0
+        self._uwb_gated: deque[int] = deque(maxlen=self.params.divergence_uwb_ranges)
 
     def _count(self, reason: str, n: int = 1) -> None:
         if n > 0:
             self._counts[reason] = self._counts.get(reason, 0) + n
+            self._counts_tuple = None
 
     @property
     def rejection_counts(self) -> dict[str, int]:
@@ -390,6 +436,7 @@ class FusionFilter:
         self._clock_initialized = clock_ok
         self._bad_gnss_epochs = 0
         self._bad_uwb = 0
+        self._uwb_gated = deque(maxlen=self.params.divergence_uwb_ranges)
         return self._output(False)
 
     def supply_reference_solution(
@@ -454,14 +501,23 @@ class FusionFilter:
         return True
 
     def _predict_to(self, stamp_ns: int) -> None:
-        dt = (stamp_ns - self._t_ns) / _NS
-        if dt <= 0.0:
+        dt_ns = stamp_ns - self._t_ns
+        if dt_ns <= 0:
             return
-        phi = constant_velocity_transition(dt)
-        q = self._q_buf
-        q[0:6, 0:6] = white_acceleration_noise(self.params.accel_psd_m2ps3, dt)
-        if self._frame == FRAME_EARTH:
-            q[6:8, 6:8] = self._clock_q(dt)
+        key = (dt_ns, self._frame == FRAME_EARTH)
+        cached = self._transition_cache.get(key)
+        if cached is None:
+            dt = dt_ns / _NS
+            phi = constant_velocity_transition(dt)
+            q = np.zeros((STATE_DIM, STATE_DIM))
+            q[0:6, 0:6] = white_acceleration_noise(self.params.accel_psd_m2ps3, dt)
+            if key[1]:
+                q[6:8, 6:8] = self._clock_q(dt)
+            cached = (phi, q)
+            if len(self._transition_cache) >= 64:  # the few distinct steps of a stream recur
+                self._transition_cache.clear()
+            self._transition_cache[key] = cached
+        phi, q = cached
         # Nominal propagation (positioning status prediction) and error-covariance time update
         # (Cao et al., eq. 15-16); the error mean is zero after every correction.
         self._nominal = phi @ self._nominal
@@ -494,6 +550,11 @@ class FusionFilter:
         if abs(stamp_ns - self._js_stamp_ns) > self.params.jammer_info_timeout_s * _NS:
             return math.nan
         return self._js_db
+
+    def _rejection_tuple(self) -> tuple[tuple[str, int], ...]:
+        if self._counts_tuple is None:
+            self._counts_tuple = tuple(sorted(self._counts.items()))
+        return self._counts_tuple
 
     def _output(
         self,
@@ -531,7 +592,7 @@ class FusionFilter:
             uwb_rejected=uwb_rej,
             normalized_innovation_squared=nis,
             jammer_to_signal_db=self._current_js_db(self._t_ns),
-            rejection_counts=tuple(sorted(self._counts.items())),
+            rejection_counts=self._rejection_tuple(),
             reinitializations=self._reinits,
         )
 
@@ -756,7 +817,12 @@ class FusionFilter:
             var.append(prep.sigma_rate[ridx] ** 2)
         try:
             res = self._ckf.update(
-                np.concatenate(z), np.concatenate(var), self._shifted(stack_models(models)), self._gate
+                np.concatenate(z),
+                np.concatenate(var),
+                self._shifted(stack_models(models)),
+                self._gate,
+                max_iterations=self.params.max_update_iterations,
+                nonlinearity_threshold=self.params.nonlinearity_threshold,
             )
         except CholeskyError:
             self._count("numerical_failure")
@@ -820,23 +886,45 @@ class FusionFilter:
                 return self._output(False)
             return self._output(False, uwb_used=1)
         self._predict_to(stamp)
-        hx = uwb_range_model(anchor[None, :], self._lever)
+        # The model acts on the error state directly: the anchor is expressed relative to the
+        # nominal tag position (back-propagated over the latency), which also keeps the ECEF
+        # magnitudes out of the range difference.
+        lat = p.uwb_latency_s
+        nominal = self._nominal
+        rel = anchor - nominal[0:3] + lat * nominal[3:6] if lat > 0.0 else anchor - nominal[0:3]
+        hx = uwb_range_model(rel[None, :], self._lever, lat)
         try:
-            res = self._ckf.update(np.array([rng]), np.array([std * std]), self._shifted(hx), self._gate)
+            res = self._ckf.update(
+                np.array([rng]),
+                np.array([std * std]),
+                hx,
+                self._gate,
+                active_dims=6 if lat > 0.0 else 3,
+                huber_k=p.uwb_huber_k,
+                huber_k_positive=p.uwb_huber_k_positive,
+                max_iterations=p.max_update_iterations,
+                nonlinearity_threshold=p.nonlinearity_threshold,
+            )
         except CholeskyError:
             self._count("numerical_failure")
             return self._declare_divergence(stamp)
         self._correct()
-        if res.accepted[0]:
-            self._bad_uwb = 0
+        ok = bool(res.accepted[0])
+        window = self._uwb_gated
+        if len(window) == window.maxlen:
+            self._bad_uwb -= window[0]
+        window.append(0 if ok else 1)
+        self._bad_uwb += 0 if ok else 1
+        if ok:
             self._last_uwb_stamp = stamp
             if self._position_lost():
                 self._count("divergence")
                 return self._declare_divergence(stamp)
             return self._output(False, uwb_used=1, nis=res.nis)
         self._count("innovation_gate_uwb")
-        self._bad_uwb += 1
-        if self._bad_uwb >= p.divergence_uwb_ranges:
+        # Divergence: most of the recent ranges (all anchors together) inconsistent with the state.
+        # A single anchor that still agrees (the state sits on its range sphere) does not mask it.
+        if len(window) == window.maxlen and self._bad_uwb >= p.divergence_uwb_gated_fraction * window.maxlen:
             self._count("divergence")
             return self._declare_divergence(stamp)
         return self._output(False, uwb_rej=1)

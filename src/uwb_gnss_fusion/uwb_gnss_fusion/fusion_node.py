@@ -1,26 +1,105 @@
 """ROS node of the GNSS/UWB fusion: /gnss/measurements, /uwb/ranges, /rfi/jammer_state -> odometry.
 
-Skeleton of the foundation issue: it validates and counts its inputs and reports them on
-/diagnostics. The cubature Kalman filter (Cao et al.) plugs in with its own issue; until then no
-position is published, because nothing unvalidated is published as valid.
+The node is thin. It declares the parameters (one frozen dataclass, :class:`FusionNodeParams`,
+documented for users in config/fusion.yaml), converts messages to the ``gnss_common.observations``
+dataclasses (:mod:`uwb_gnss_fusion.conversions`), puts them in stamp order, hands them to the pure
+core (:class:`uwb_gnss_fusion.fusion_filter.FusionFilter`, the tightly-coupled cubature Kalman
+filter of Cao et al.) and publishes what the core returns. Each GNSS epoch or UWB range is one
+predict-to-stamp + update of the core and gives one /fusion/status; /fusion/odometry and
+/fusion/fix follow whenever the filter is initialised.
+
+Time. All time is message time (``header.stamp``, integer ns); the node never reads a clock, so a
+bag replayed at any speed gives identical outputs. Inputs pass through a re-ordering buffer
+(:class:`uwb_gnss_fusion.fusion_filter.ReorderBuffer`) of ``reorder_window_s``: a message is
+processed once a message stamped ``reorder_window_s`` later has arrived, so measurements that
+arrive up to that much out of order are applied in stamp order (the outputs lag by the window).
+Later arrivals are rejected and counted (``late_beyond_reorder_window``). A stamp more than
+``max_stamp_jump_s`` away from the latest accepted one is rejected (``stamp_far_future`` /
+``stamp_far_past``) unless ``stamp_jump_confirmations`` messages in a row agree on the jump (a
+clock or bag restart): then the pending messages are processed and the filter restarts
+(``time_jump_restarts``). Stamps <= 0 are rejected (``stamp_not_positive``: an unset header).
+
+Jammer information. /rfi/jammer_state feeds ``JammerState.jammer_to_signal_db`` to the core's
+measurement weighting (Cao et al., eq. 4), in stamp order with the measurements:
+
+* ``type`` NONE: the monitor sees no interference; the J/S is cleared (weights from the reported
+  C/N0 only), whatever ``jammer_to_signal_db`` holds.
+* another type with a finite J/S in [-100, 150] dB: that J/S is used until it is older than
+  ``jammer_info_timeout_s`` (core).
+* another type with a NaN J/S (e.g. a monitor not yet converged): the message is ignored and
+  counted (``jammer_state_nan``); the previous J/S stays until it times out. A non-finite (inf)
+  or out-of-range J/S is counted as ``jammer_state_nonphysical`` and ignored likewise.
+
+SPP. Each GNSS epoch is also solved by :class:`uwb_gnss_fusion.spp.SinglePointPositioner`; a valid
+(RAIM-consistent) fix is handed to the core as its reference solution, which the core uses to
+re-initialise after a divergence (``use_spp_reference``). The first initialisation is the core's
+own (robust snapshot fix of the first epoch with ``min_satellites_init`` satellites, or UWB
+multilateration from three anchors).
+
+Outputs.
+
+* /fusion/status (rfi_msgs/FusionStatus): one per processed GNSS epoch or UWB range, every
+  field filled; ``header.stamp`` is the stamp of the measurement processed; ``rejection_reasons``
+  / ``rejection_counts`` are the cumulative counts of the node (reasons above) and of the core
+  (``fusion_filter`` reasons such as ``innovation_gate_pseudorange``, ``duplicate_svid``,
+  ``negative_range``), sorted by reason.
+* /fusion/odometry (nav_msgs/Odometry), only while the filter is initialised and its state is
+  finite: ``header.frame_id`` ``earth_frame_id`` (ECEF) or ``map_frame_id`` (the anchors' local
+  frame, UWB-only mode), ``child_frame_id`` the parameter; the estimated point is the GNSS antenna
+  (the UWB tag is offset by ``uwb_lever_arm_m``). Orientation is not estimated: the quaternion is
+  the identity and its covariance diagonal is :data:`ORIENTATION_UNKNOWN_VARIANCE_RAD2` (the
+  ``robot_localization`` convention for an unobserved quantity: a large variance, no
+  correlations). The twist holds the velocity with the axes of ``header.frame_id`` (with the
+  identity orientation those are also the child frame's), angular velocity 0 with variance
+  :data:`ORIENTATION_UNKNOWN_VARIANCE_RAD2`. Pose and twist covariances hold the filter's
+  position and velocity blocks (the position-velocity correlation has no place in Odometry).
+* /fusion/fix (sensor_msgs/NavSatFix), only in the earth frame and only while initialised with
+  a finite state: WGS 84 latitude/longitude/ellipsoidal altitude of the antenna, ENU position
+  covariance (row-major E, N, U), ``COVARIANCE_TYPE_KNOWN``, ``STATUS_FIX``, service GPS,
+  ``header.frame_id`` = ``child_frame_id``. Nothing is published before the first
+  initialisation or after a reset to uninitialised: a consumer must not read a NaN position as
+  a fix, and ``STATUS_NO_FIX`` with NaN fields would be exactly that for a careless one. The loss
+  is visible on /fusion/status (``initialized`` false) and /diagnostics (WARN).
+* /diagnostics: every ``diagnostics_period_s`` of stamp time, the node's counters, the core's
+  counters (``filter.<reason>``) and ``accounting_ok``: for GNSS, UWB and jammer messages,
+  received == rejected by the node + processed + still buffered.
+
+A core exception on an input (it should not happen; the core counts bad input itself) is caught,
+counted (``core_exception``), logged and reported as ERROR; the node keeps running.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from collections import Counter
 from dataclasses import dataclass
+from typing import Any
 
+import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
-from sensor_msgs.msg import NavSatFix
+from sensor_msgs.msg import NavSatFix, NavSatStatus
 
+from gnss_common.observations import GnssEpoch
 from rfi_msgs.msg import FusionStatus, GnssMeasurementArray, JammerState, UwbRange
-from rfi_node_common.diagnostics import OK, StampTimer, diagnostic_array
+from rfi_node_common.diagnostics import ERROR, OK, WARN, StampTimer, diagnostic_array
 from rfi_node_common.main import run_node
-from rfi_node_common.params import declare, parameter
+from rfi_node_common.params import declare, parameter, validate_ranges
 from rfi_node_common.qos import DATA_QOS
-from rfi_node_common.stamps import stamp_to_ns
+from rfi_node_common.stamps import ns_to_stamp, stamp_to_ns
+from uwb_gnss_fusion.conversions import msg_to_observation, msg_to_uwb
+from uwb_gnss_fusion.fusion_filter import (
+    FRAME_EARTH,
+    FRAME_MAP,
+    FusionFilter,
+    FusionOutput,
+    FusionParams,
+    ReorderBuffer,
+)
+from uwb_gnss_fusion.jamming_weights import TrackingLoopParams
+from uwb_gnss_fusion.spp import SinglePointPositioner
 
 TOPICS = """topics:
   subscribes /gnss/measurements (rfi_msgs/GnssMeasurementArray), /uwb/ranges (rfi_msgs/UwbRange),
@@ -28,21 +107,276 @@ TOPICS = """topics:
   publishes  /fusion/odometry (nav_msgs/Odometry), /fusion/fix (sensor_msgs/NavSatFix),
              /fusion/status (rfi_msgs/FusionStatus), /diagnostics (diagnostic_msgs/DiagnosticArray)"""
 
+ORIENTATION_UNKNOWN_VARIANCE_RAD2 = 1.0e6
+"""Variance written for the unestimated orientation and angular velocity, rad^2 (rad^2/s^2)."""
+
+JSR_VALID_RANGE_DB = (-100.0, 150.0)
+"""J/S accepted from /rfi/jammer_state, dB."""
+
+UINT16_MAX = 2**16 - 1
+UINT32_MAX = 2**32 - 1
+_NS = 1_000_000_000
+KINDS = ('gnss', 'uwb', 'jammer')
+"""Input kinds, as used in the counter names (``<kind>_received`` ...)."""
+
+_FP = FusionParams()
+_LOOP = TrackingLoopParams()
+
 
 @dataclass(frozen=True)
 class FusionNodeParams:
+    """Parameters of fusion_node (documented for users in config/fusion.yaml).
+
+    The filter fields mirror :class:`uwb_gnss_fusion.fusion_filter.FusionParams` (same names,
+    ``loop_*`` = its ``loop`` :class:`TrackingLoopParams`), with the same defaults; the UWB anchor
+    registry of FusionParams is not a parameter: anchor positions come in each UwbRange message.
+
+    Notes:
+        Cao et al.: constant-velocity model (eq. 8-10) driven by ``accel_psd_m2ps3``, pseudorange
+        / Doppler / UWB models (eq. 5-7), effective C/N0 under J/S (eq. 4) with the quality
+        factor ``jammer_quality_factor``; tracking jitter of Kaplan & Hegarty (``loop_*``).
+    """
+
+    # --- node ------------------------------------------------------------------------------
+    earth_frame_id: str = parameter(
+        FRAME_EARTH, 'Frame id of ECEF (REP 105 earth): expected on /gnss/measurements and on UwbRange '
+        'messages with ECEF anchors; header.frame_id of the outputs in ECEF.')
+    map_frame_id: str = parameter(
+        FRAME_MAP, 'Frame id of the anchors\' local frame (UWB-only mode, axes taken as ENU): UwbRange '
+        'messages in this frame run the filter in it; header.frame_id of the outputs then.')
+    child_frame_id: str = parameter(
+        'gnss_antenna', 'Odometry child_frame_id and NavSatFix frame_id: the point estimated (the GNSS antenna).')
+    reorder_window_s: float = parameter(
+        0.1, 'Re-ordering window: inputs are processed in stamp order once a message this much newer has '
+        'arrived; later arrivals are rejected. The outputs lag by it, s (0: process at once).',
+        minimum=0.0, maximum=10.0)
+    max_stamp_jump_s: float = parameter(
+        30.0, 'A stamp further than this from the latest accepted stamp is rejected (unless confirmed, see '
+        'stamp_jump_confirmations), s.', minimum=0.01, maximum=1.0e6)
+    stamp_jump_confirmations: int = parameter(
+        5, 'Consecutive messages that must agree on a stamp jump before the node accepts it and restarts the '
+        'filter (a clock or bag restart).', minimum=1, maximum=100000)
+    use_spp_reference: bool = parameter(
+        True, 'Solve each GNSS epoch by single-point positioning and give valid fixes to the filter as its '
+        're-initialisation reference.')
     diagnostics_period_s: float = parameter(
         1.0, 'Period of /diagnostics in message (stamp) time, s.', minimum=0.01, maximum=3600.0)
+    warning_throttle_s: float = parameter(
+        5.0, 'Shortest interval between two warnings about rejected input, s (wall time; logging only).',
+        minimum=0.0, maximum=3600.0)
+    # --- filter (FusionParams) -------------------------------------------------------------
+    use_gnss: bool = parameter(_FP.use_gnss, 'Apply GNSS pseudoranges (false: UWB-only filter).')
+    use_doppler: bool = parameter(_FP.use_doppler, 'Apply pseudorange rates (Doppler) as well as pseudoranges.')
+    use_uwb: bool = parameter(_FP.use_uwb, 'Apply UWB ranges (false: the GNSS-only baseline filter).')
+    accel_psd_m2ps3: float = parameter(
+        _FP.accel_psd_m2ps3, 'White-acceleration PSD per axis of the constant-velocity model, m^2/s^3.',
+        minimum=1e-9, maximum=1e4)
+    clock_h0_s: float = parameter(
+        _FP.clock_h0_s, 'Receiver clock white-FM coefficient h0, s.', minimum=1e-30, maximum=1e-12)
+    clock_h_minus2_hz: float = parameter(
+        _FP.clock_h_minus2_hz, 'Receiver clock random-walk-FM coefficient h_-2, 1/s.', minimum=0.0, maximum=1e-12)
+    uwb_range_std_m: float = parameter(
+        _FP.uwb_range_std_m, 'UWB range 1-sigma used when a message gives NaN range_std_m, m.',
+        minimum=1e-4, maximum=100.0)
+    uwb_lever_arm_m: tuple = parameter(
+        _FP.uwb_lever_arm_m, 'UWB tag minus GNSS antenna, in the state frame (ECEF or map), m, [x, y, z].')
+    uwb_max_range_m: float = parameter(
+        _FP.uwb_max_range_m, 'Longest physical UWB range; longer ranges are rejected, m.', minimum=1.0, maximum=1e5)
+    gate_probability: float = parameter(
+        _FP.gate_probability, 'Per-measurement innovation gate, probability of the 1-dof chi-square (1: no gating).',
+        minimum=0.5, maximum=1.0)
+    elevation_mask_deg: float = parameter(
+        _FP.elevation_mask_deg, 'Satellites below this elevation are rejected, deg.', minimum=-90.0, maximum=89.0)
+    min_cn0_dbhz: float = parameter(
+        _FP.min_cn0_dbhz, 'Pseudoranges with a lower reported C/N0 are rejected, dB-Hz.', minimum=0.0, maximum=70.0)
+    nominal_cn0_dbhz: float = parameter(
+        _FP.nominal_cn0_dbhz, 'Jammer-free C/N0 fed to eq. 4 when a J/S is known, dB-Hz.', minimum=0.0, maximum=70.0)
+    jammer_quality_factor: float = parameter(
+        _FP.jammer_quality_factor, 'Jamming resistance quality factor Q of eq. 4 (1: narrowband/swept jammer).',
+        minimum=0.01, maximum=100.0)
+    jammer_info_timeout_s: float = parameter(
+        _FP.jammer_info_timeout_s, 'A J/S older than this is ignored, s.', minimum=0.01, maximum=3600.0)
+    loop_dll_bandwidth_hz: float = parameter(
+        _LOOP.dll_bandwidth_hz, 'Code loop (DLL) noise bandwidth of the receiver, Hz.', minimum=0.001, maximum=100.0)
+    loop_correlator_spacing_chips: float = parameter(
+        _LOOP.correlator_spacing_chips, 'Early-late correlator spacing, chips.', minimum=0.001, maximum=1.0)
+    loop_integration_time_s: float = parameter(
+        _LOOP.integration_time_s, 'Predetection integration time, s.', minimum=1e-4, maximum=1.0)
+    loop_fll_bandwidth_hz: float = parameter(
+        _LOOP.fll_bandwidth_hz, 'Frequency loop noise bandwidth, Hz.', minimum=0.001, maximum=100.0)
+    loop_code_floor_m: float = parameter(
+        _LOOP.code_floor_m, 'Pseudorange 1-sigma floor added in quadrature (multipath, atmosphere, orbit), m.',
+        minimum=0.0, maximum=100.0)
+    loop_rate_floor_mps: float = parameter(
+        _LOOP.rate_floor_mps, 'Pseudorange-rate 1-sigma floor added in quadrature, m/s.', minimum=0.0, maximum=100.0)
+    min_satellites_init: int = parameter(
+        _FP.min_satellites_init, 'Satellites needed to initialise from GNSS alone.', minimum=4, maximum=64)
+    init_position_std_m: float = parameter(
+        _FP.init_position_std_m, 'Initial position 1-sigma per axis, m.', minimum=1e-3, maximum=1e7)
+    init_velocity_std_mps: float = parameter(
+        _FP.init_velocity_std_mps, 'Initial velocity 1-sigma per axis, m/s.', minimum=1e-4, maximum=1e4)
+    init_clock_bias_std_m: float = parameter(
+        _FP.init_clock_bias_std_m, 'Initial receiver clock bias 1-sigma, m.', minimum=1e-3, maximum=1e7)
+    init_clock_drift_std_mps: float = parameter(
+        _FP.init_clock_drift_std_mps, 'Initial receiver clock drift 1-sigma, m/s.', minimum=1e-4, maximum=1e4)
+    max_prediction_s: float = parameter(
+        _FP.max_prediction_s, 'A measurement further than this after the filter time resets the filter, s.',
+        minimum=0.01, maximum=3600.0)
+    max_position_std_m: float = parameter(
+        _FP.max_position_std_m, 'A larger position 1-sigma (any axis) is declared divergence, m.',
+        minimum=0.01, maximum=1e7)
+    divergence_gnss_epochs: int = parameter(
+        _FP.divergence_gnss_epochs, 'Consecutive GNSS epochs with at least half of >= 4 pseudoranges gated out '
+        'that declare divergence.', minimum=1, maximum=100000)
+    divergence_uwb_ranges: int = parameter(
+        _FP.divergence_uwb_ranges, 'Window of recent UWB ranges (all anchors) examined for divergence.',
+        minimum=1, maximum=100000)
+    divergence_uwb_gated_fraction: float = parameter(
+        _FP.divergence_uwb_gated_fraction, 'Divergence is declared when at least this fraction of the last '
+        'divergence_uwb_ranges ranges was gated out (1.0: that many consecutive gated ranges).',
+        minimum=0.01, maximum=1.0)
+    reference_max_age_s: float = parameter(
+        _FP.reference_max_age_s, 'A reference (SPP) solution older than this is not used to re-initialise, s.',
+        minimum=0.01, maximum=3600.0)
+    uwb_init_window_s: float = parameter(
+        _FP.uwb_init_window_s, 'Ranges used for UWB multilateration must lie within this window, s.',
+        minimum=0.01, maximum=3600.0)
+    uwb_latency_s: float = parameter(
+        _FP.uwb_latency_s, 'Age of a UWB range at its stamp (modelled by constant-velocity back-propagation), s.',
+        minimum=0.0, maximum=1.0)
+    max_update_iterations: int = parameter(
+        _FP.max_update_iterations, 'Gauss-Newton refinement steps allowed after a cubature update with a '
+        'significant linearisation error (0: the plain CKF update of the paper).', minimum=0, maximum=50)
+    nonlinearity_threshold: float = parameter(
+        _FP.nonlinearity_threshold, 'Refine an update when its linearisation-error variance exceeds this '
+        'fraction of the measurement noise variance.', minimum=1e-6, maximum=1e6)
+    uwb_huber_k: float = parameter(
+        _FP.uwb_huber_k, 'Huber threshold on the normalised UWB innovation (.inf: off).', minimum=0.01)
+    uwb_huber_k_positive: float = parameter(
+        _FP.uwb_huber_k_positive, 'Huber threshold for positive UWB innovations (NLOS direction; .inf: as '
+        'uwb_huber_k).', minimum=0.01)
+
+    def __post_init__(self) -> None:
+        validate_ranges(self)
+        for name in ('earth_frame_id', 'map_frame_id', 'child_frame_id'):
+            if not isinstance(getattr(self, name), str) or not getattr(self, name):
+                raise ValueError(f'parameter {name} must be a non-empty string')
+        if self.earth_frame_id == self.map_frame_id:
+            raise ValueError('parameters earth_frame_id and map_frame_id must differ')
+        if len(self.uwb_lever_arm_m) != 3:
+            raise ValueError(f'parameter uwb_lever_arm_m must have 3 elements, got {list(self.uwb_lever_arm_m)}')
+        try:
+            self.fusion_params()
+        except (TypeError, ValueError) as err:
+            raise ValueError(f'invalid filter parameters: {err}') from None
+
+    def fusion_params(self) -> FusionParams:
+        """The core's parameters.
+
+        Raises:
+            ValueError: a combination the core rejects (e.g. use_gnss and use_uwb both false).
+        """
+        loop = TrackingLoopParams(
+            dll_bandwidth_hz=self.loop_dll_bandwidth_hz, correlator_spacing_chips=self.loop_correlator_spacing_chips,
+            integration_time_s=self.loop_integration_time_s, fll_bandwidth_hz=self.loop_fll_bandwidth_hz,
+            code_floor_m=self.loop_code_floor_m, rate_floor_mps=self.loop_rate_floor_mps)
+        names = {f.name for f in dataclasses.fields(FusionParams)} - {'loop', 'anchors'}
+        values: dict[str, Any] = {n: getattr(self, n) for n in names}
+        values['uwb_lever_arm_m'] = tuple(float(v) for v in self.uwb_lever_arm_m)
+        return FusionParams(loop=loop, **values)
+
+
+@dataclass(frozen=True)
+class _Item:
+    """One input waiting in the re-ordering buffer."""
+
+    stamp_ns: int
+    kind: str
+    payload: Any
+
+
+def _finite(*arrays: Any) -> bool:
+    return all(bool(np.all(np.isfinite(np.asarray(a, dtype=float)))) for a in arrays)
+
+
+def status_msg(out: FusionOutput, stamp_ns: int, frame_id: str, reasons: dict[str, int]) -> FusionStatus:
+    """FusionOutput -> rfi_msgs/FusionStatus (counts clamped to their integer types)."""
+    m = FusionStatus()
+    m.header.stamp = ns_to_stamp(stamp_ns)
+    m.header.frame_id = frame_id
+    m.mode = int(out.mode)
+    m.initialized = bool(out.initialized)
+    m.diverged = bool(out.diverged)
+    m.reinitializations = min(int(out.reinitializations), UINT32_MAX)
+    m.satellites_used = min(int(out.satellites_used), UINT16_MAX)
+    m.satellites_rejected = min(int(out.satellites_rejected), UINT16_MAX)
+    m.uwb_used = min(int(out.uwb_used), UINT16_MAX)
+    m.uwb_rejected = min(int(out.uwb_rejected), UINT16_MAX)
+    m.normalized_innovation_squared = float(out.normalized_innovation_squared)
+    m.clock_bias_m = float(out.clock_bias_m)
+    m.clock_drift_mps = float(out.clock_drift_mps)
+    m.jammer_to_signal_db = float(out.jammer_to_signal_db)
+    items = sorted(reasons.items())
+    m.rejection_reasons = [k for k, _ in items]
+    m.rejection_counts = [min(int(v), UINT32_MAX) for _, v in items]
+    return m
+
+
+def odometry_msg(out: FusionOutput, frame_id: str, child_frame_id: str) -> Odometry:
+    """FusionOutput (initialised, finite) -> nav_msgs/Odometry (see the module docstring)."""
+    m = Odometry()
+    m.header.stamp = ns_to_stamp(out.stamp_ns)
+    m.header.frame_id = frame_id
+    m.child_frame_id = child_frame_id
+    p, v, c = out.position_m, out.velocity_mps, out.covariance_pv
+    m.pose.pose.position.x, m.pose.pose.position.y, m.pose.pose.position.z = (float(x) for x in p)
+    m.pose.pose.orientation.w = 1.0
+    pose_cov = np.zeros((6, 6))
+    pose_cov[:3, :3] = c[:3, :3]
+    twist_cov = np.zeros((6, 6))
+    twist_cov[:3, :3] = c[3:6, 3:6]
+    for k in range(3, 6):
+        pose_cov[k, k] = ORIENTATION_UNKNOWN_VARIANCE_RAD2
+        twist_cov[k, k] = ORIENTATION_UNKNOWN_VARIANCE_RAD2
+    m.pose.covariance = [float(x) for x in pose_cov.ravel()]
+    m.twist.twist.linear.x, m.twist.twist.linear.y, m.twist.twist.linear.z = (float(x) for x in v)
+    m.twist.covariance = [float(x) for x in twist_cov.ravel()]
+    return m
+
+
+def fix_msg(out: FusionOutput, frame_id: str) -> NavSatFix:
+    """FusionOutput (initialised, finite, earth frame) -> sensor_msgs/NavSatFix."""
+    m = NavSatFix()
+    m.header.stamp = ns_to_stamp(out.stamp_ns)
+    m.header.frame_id = frame_id
+    m.status.status = NavSatStatus.STATUS_FIX
+    m.status.service = NavSatStatus.SERVICE_GPS
+    m.latitude, m.longitude, m.altitude = out.geodetic
+    m.position_covariance = [float(x) for x in out.position_covariance_enu_m2.ravel()]
+    m.position_covariance_type = NavSatFix.COVARIANCE_TYPE_KNOWN
+    return m
 
 
 class FusionNode(Node):
-    """Thin node around the fusion filter core (see module docstring)."""
+    """Thin node around :class:`FusionFilter` (see module docstring)."""
 
     def __init__(self, **kwargs) -> None:
         super().__init__('uwb_gnss_fusion', **kwargs)
         self.params = declare(self, FusionNodeParams)
-        self.counts: Counter[str] = Counter()
+        self.filter = FusionFilter(self.params.fusion_params())
+        self.spp = SinglePointPositioner()
+        self.counts: Counter[str] = Counter({f'{k}_{what}': 0 for k in KINDS
+                                             for what in ('received', 'rejected', 'processed')})
+        self.reasons: Counter[str] = Counter()
+        self._retired_filter_counts: Counter[str] = Counter()
+        self._buffer = ReorderBuffer(round(self.params.reorder_window_s * _NS))
+        self._buffered: Counter[str] = Counter()
+        self._latest_ns: int | None = None
+        self._jump_streak = 0
         self._diag_timer = StampTimer(self.params.diagnostics_period_s)
+        self._rejections_at_last_report = 0
+        self._faults_at_last_report = 0
+        self._fix_frames = {FRAME_EARTH: self.params.earth_frame_id, FRAME_MAP: self.params.map_frame_id}
         self.odom_pub = self.create_publisher(Odometry, '/fusion/odometry', DATA_QOS)
         self.fix_pub = self.create_publisher(NavSatFix, '/fusion/fix', DATA_QOS)
         self.status_pub = self.create_publisher(FusionStatus, '/fusion/status', DATA_QOS)
@@ -51,21 +385,213 @@ class FusionNode(Node):
         self.create_subscription(UwbRange, '/uwb/ranges', self.on_uwb, DATA_QOS)
         self.create_subscription(JammerState, '/rfi/jammer_state', self.on_jammer, DATA_QOS)
 
-    def _received(self, kind: str, stamp_ns: int) -> None:
-        self.counts[f'{kind}_received'] += 1
-        if self._diag_timer.due(stamp_ns):
-            self.diag_pub.publish(diagnostic_array(
-                stamp_ns, 'uwb_gnss_fusion', self.get_name(), OK,
-                'fusion filter not installed: inputs counted only', dict(sorted(self.counts.items()))))
-
+    # ------------------------------------------------------------------ callbacks
     def on_gnss(self, msg: GnssMeasurementArray) -> None:
-        self._received('gnss_epochs', stamp_to_ns(msg.header.stamp))
+        stamp_ns = stamp_to_ns(msg.header.stamp)
+        self.counts['gnss_received'] += 1
+        self.counts['satellites_received'] += len(msg.measurements)
+        if msg.header.frame_id != self.params.earth_frame_id:
+            self._reject('gnss', 'gnss_frame_id', f'GNSS frame_id {msg.header.frame_id!r} is not '
+                         f'{self.params.earth_frame_id!r}')
+        else:
+            # Built field by field (not msg_to_epoch, which raises on a duplicate satellite) so that the
+            # core drops only the duplicated satellites and counts them (duplicate_svid).
+            epoch = GnssEpoch(stamp_ns=stamp_ns, gps_week=int(msg.gps_week),
+                              gps_time_of_week_s=float(msg.gps_time_of_week_s),
+                              observations=tuple(msg_to_observation(m) for m in msg.measurements))
+            self._enqueue(_Item(stamp_ns, 'gnss', epoch))
+        self._report()
 
     def on_uwb(self, msg: UwbRange) -> None:
-        self._received('uwb_ranges', stamp_to_ns(msg.header.stamp))
+        stamp_ns = stamp_to_ns(msg.header.stamp)
+        self.counts['uwb_received'] += 1
+        frame = msg.header.frame_id
+        core_frame = {self.params.earth_frame_id: FRAME_EARTH, self.params.map_frame_id: FRAME_MAP}.get(frame)
+        if core_frame is None:
+            self._reject('uwb', 'uwb_frame_id', f'UWB frame_id {frame!r} is neither '
+                         f'{self.params.earth_frame_id!r} nor {self.params.map_frame_id!r}')
+        else:
+            meas = dataclasses.replace(msg_to_uwb(msg), frame_id=core_frame)
+            self._enqueue(_Item(stamp_ns, 'uwb', meas))
+        self._report()
 
     def on_jammer(self, msg: JammerState) -> None:
-        self._received('jammer_states', stamp_to_ns(msg.header.stamp))
+        stamp_ns = stamp_to_ns(msg.header.stamp)
+        self.counts['jammer_received'] += 1
+        js = float(msg.jammer_to_signal_db)
+        if msg.type == JammerState.NONE:
+            self._enqueue(_Item(stamp_ns, 'jammer', math.nan))
+        elif math.isnan(js):
+            self._reject('jammer', 'jammer_state_nan', 'JammerState with a jammer type but a NaN J/S ignored')
+        elif not (math.isfinite(js) and JSR_VALID_RANGE_DB[0] <= js <= JSR_VALID_RANGE_DB[1]):
+            self._reject('jammer', 'jammer_state_nonphysical', f'JammerState J/S {js} dB ignored')
+        else:
+            self._enqueue(_Item(stamp_ns, 'jammer', js))
+        self._report()
+
+    # ------------------------------------------------------------------ ordering
+    def _reject(self, kind: str, reason: str, text: str) -> None:
+        self.counts[f'{kind}_rejected'] += 1
+        self.reasons[reason] += 1
+        self.get_logger().warn(f'{text} ({reason})', throttle_duration_sec=self.params.warning_throttle_s)
+
+    def _enqueue(self, item: _Item) -> None:
+        """Admit the stamp, buffer the item and process everything the buffer releases."""
+        stamp_ns = item.stamp_ns
+        if stamp_ns <= 0:
+            self._reject(item.kind, 'stamp_not_positive', f'{item.kind} message with stamp {stamp_ns} ns')
+            return
+        if self._latest_ns is not None and abs(stamp_ns - self._latest_ns) > self.params.max_stamp_jump_s * _NS:
+            self._jump_streak += 1
+            if self._jump_streak < self.params.stamp_jump_confirmations:
+                reason = 'stamp_far_future' if stamp_ns > self._latest_ns else 'stamp_far_past'
+                self._reject(item.kind, reason, f'{item.kind} stamp {stamp_ns} ns is '
+                             f'{(stamp_ns - self._latest_ns) / _NS:+.3f} s from the latest {self._latest_ns} ns')
+                return
+            self._restart(stamp_ns)
+        self._jump_streak = 0
+        if not self._buffer.push(item):
+            self._reject(item.kind, 'late_beyond_reorder_window',
+                         f'{item.kind} stamp {stamp_ns} ns arrived after newer messages were processed')
+            return
+        self._buffered[item.kind] += 1
+        self._latest_ns = stamp_ns if self._latest_ns is None else max(self._latest_ns, stamp_ns)
+        self._release(self._buffer.pop_ready(self._latest_ns))
+
+    def _release(self, items: list) -> None:
+        for ready in items:
+            self._buffered[ready.kind] -= 1
+            self._process(ready)
+
+    def _restart(self, stamp_ns: int) -> None:
+        """A confirmed stamp jump: finish the pending messages, then start a fresh filter."""
+        self._release(self._buffer.flush())
+        self.counts['time_jump_restarts'] += 1
+        self.get_logger().warn(f'stamps jumped to {stamp_ns} ns (from {self._latest_ns} ns): filter restarted')
+        self._retired_filter_counts.update(self.filter.rejection_counts)
+        self.filter = FusionFilter(self.params.fusion_params())
+        self.spp.reset()
+        self._buffer = ReorderBuffer(self._buffer.window_ns)
+        self._latest_ns = None
+
+    @property
+    def buffered(self) -> dict[str, int]:
+        """Messages waiting in the re-ordering buffer, per kind."""
+        return {kind: self._buffered[kind] for kind in KINDS}
+
+    def flush(self) -> None:
+        """Process every buffered message now (e.g. at the end of a bag); not needed in normal running."""
+        self._release(self._buffer.flush())
+
+    # ------------------------------------------------------------------ core
+    def _process(self, item: _Item) -> None:
+        try:
+            if item.kind == 'jammer':
+                self.filter.set_jammer_to_signal(item.stamp_ns, item.payload)
+                self.counts['jammer_processed'] += 1
+                return
+            if item.kind == 'gnss':
+                self._supply_reference(item.payload)
+                out = self.filter.process_gnss(item.payload)
+            else:
+                out = self.filter.process_uwb(item.payload)
+        except (ValueError, TypeError, ArithmeticError, np.linalg.LinAlgError) as err:
+            # The core validates its input and counts rejections; an exception here is a core bug.
+            self.counts[f'{item.kind}_processed'] += 1
+            self.counts['core_exceptions'] += 1
+            self.reasons['core_exception'] += 1
+            self.get_logger().error(
+                f'fusion core raised on a {item.kind} message at {item.stamp_ns} ns: {type(err).__name__}: {err}',
+                throttle_duration_sec=self.params.warning_throttle_s)
+            return
+        self.counts[f'{item.kind}_processed'] += 1
+        self._publish(out, item.stamp_ns)
+
+    def _supply_reference(self, epoch: GnssEpoch) -> None:
+        if not (self.params.use_spp_reference and self.params.use_gnss):
+            return
+        res = self.spp.process(epoch)
+        if not res.valid:
+            self.counts['spp_invalid'] += 1
+            return
+        self.counts['spp_valid'] += 1
+        std_m = math.sqrt(float(np.max(np.diag(res.covariance)[:3])))
+        self.filter.supply_reference_solution(epoch.stamp_ns, res.position_ecef_m, std_m, res.clock_bias_m)
+
+    def filter_counts(self) -> dict[str, int]:
+        """The core's cumulative counts (including filters replaced after a stamp jump)."""
+        total = Counter(self._retired_filter_counts)
+        total.update(self.filter.rejection_counts)
+        return dict(total)
+
+    def rejection_reasons(self) -> dict[str, int]:
+        """Cumulative reasons and counts of the node and of the core, merged."""
+        total = Counter(self.filter_counts())
+        total.update({k: v for k, v in self.reasons.items() if v})
+        return dict(total)
+
+    def _publish(self, out: FusionOutput, stamp_ns: int) -> None:
+        frame = self._fix_frames.get(out.frame_id, out.frame_id)
+        self.status_pub.publish(status_msg(out, stamp_ns, frame, self.rejection_reasons()))
+        if not out.initialized:
+            return
+        if not _finite(out.position_m, out.velocity_mps, out.covariance_pv):
+            self.counts['nonfinite_estimates_suppressed'] += 1
+            return
+        self.odom_pub.publish(odometry_msg(out, frame, self.params.child_frame_id))
+        if out.frame_id == FRAME_EARTH:
+            fix = fix_msg(out, self.params.child_frame_id)
+            if _finite(fix.latitude, fix.longitude, fix.altitude, fix.position_covariance):
+                self.fix_pub.publish(fix)
+            else:
+                self.counts['nonfinite_estimates_suppressed'] += 1
+
+    # ------------------------------------------------------------------ diagnostics
+    def accounting(self) -> dict[str, object]:
+        """Counters of the node and the core, and whether every input adds up.
+
+        For each kind: ``<kind>_received == <kind>_rejected + <kind>_processed + <kind>_buffered``.
+        """
+        values: dict[str, object] = dict(sorted(self.counts.items()))
+        buffered = self.buffered
+        ok = True
+        for kind in KINDS:
+            values[f'{kind}_buffered'] = buffered[kind]
+            ok = ok and self.counts[f'{kind}_received'] == (
+                self.counts[f'{kind}_rejected'] + self.counts[f'{kind}_processed'] + buffered[kind])
+        values.update({f'rejected.{k}': v for k, v in sorted(self.reasons.items())})
+        values.update({f'filter.{k}': v for k, v in sorted(self.filter_counts().items())})
+        values['initialized'] = self.filter.initialized
+        values['accounting_ok'] = ok
+        return values
+
+    def diagnostics(self, stamp_ns: int) -> DiagnosticArray:
+        """The /diagnostics message: ERROR if the accounting fails or the core raised since the last
+        report, WARN if the filter is not initialised or input was rejected since the last report."""
+        values = self.accounting()
+        rejections = sum(self.rejection_reasons().values())
+        new = rejections - self._rejections_at_last_report
+        self._rejections_at_last_report = rejections
+        faults = self.counts['core_exceptions']
+        new_faults = faults - self._faults_at_last_report
+        self._faults_at_last_report = faults
+        if not values['accounting_ok']:
+            level, text = ERROR, 'input accounting does not add up'
+        elif new_faults:
+            level, text = ERROR, f'{new_faults} core exceptions since the last report'
+        elif not self.filter.initialized:
+            level, text = WARN, 'filter not initialised'
+        elif new:
+            level, text = WARN, f'{new} rejections since the last report'
+        else:
+            level, text = OK, 'fusing'
+        return diagnostic_array(stamp_ns, 'uwb_gnss_fusion', self.get_name(), level, text, values)
+
+    def _report(self) -> None:
+        """Publish /diagnostics when due, timed by the latest accepted stamp (a rejected stamp never
+        drives the timer)."""
+        if self._latest_ns is not None and self._diag_timer.due(self._latest_ns):
+            self.diag_pub.publish(self.diagnostics(self._latest_ns))
 
 
 def main(argv=None) -> int:

@@ -9,6 +9,7 @@ filter builds one callable per update with :func:`stack_models`.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -112,26 +113,53 @@ def pseudorange_rate_model(
     return hx
 
 
-def uwb_range_model(anchor_pos_m: np.ndarray, lever_arm_m: np.ndarray | None = None) -> MeasurementModel:
+def uwb_range_model(
+    anchor_pos_m: np.ndarray, lever_arm_m: np.ndarray | None = None, latency_s: float = 0.0
+) -> MeasurementModel:
     """UWB two-way range model for k anchors.
 
     Args:
         anchor_pos_m: anchor positions in the state frame, m, shape (k, 3).
         lever_arm_m: tag position minus GNSS antenna position in the state frame, m, shape (3,)
             (zero: tag at the antenna, the paper's setting).
+        latency_s: age of the range at its stamp, s (>= 0): the range measures the distance at
+            ``stamp - latency_s``, when the tag was at ``p - v latency_s`` under the
+            constant-velocity model (0: the paper's model).
 
     Returns:
-        hx mapping states (m, 8) to ranges (m, k), m.
+        hx mapping states (m, 8) to ranges (m, k), m. The model depends on the position only
+        (state components 0-2), or on position and velocity (0-5) if ``latency_s > 0``.
 
     Notes:
         Cao et al., eq. 7: ``rho_U = |p_anchor - p_tag|`` with ``p_tag = p_r + lever_arm``. Two-way
-        ranging has no clock term.
+        ranging has no clock term. The latency term is beyond the paper (constant-velocity
+        back-propagation, Cao et al. eq. 10, over ``latency_s``).
     """
     pa = np.asarray(anchor_pos_m, dtype=float)
     arm = np.zeros(3) if lever_arm_m is None else np.asarray(lever_arm_m, dtype=float)
+    lat = float(latency_s)
+    if not (math.isfinite(lat) and lat >= 0.0):
+        raise ValueError(f"latency_s must be finite and >= 0, got {latency_s!r}")
+    if pa.shape[0] == 1:
+        a0 = pa[0] - arm
+
+        if lat == 0.0:
+
+            def hx1(states: np.ndarray) -> np.ndarray:
+                d = states[:, 0:3] - a0
+                return np.sqrt(np.einsum("ij,ij->i", d, d))[:, None]
+
+            return hx1
+
+        def hx1_lat(states: np.ndarray) -> np.ndarray:
+            d = states[:, 0:3] - lat * states[:, 3:6] - a0
+            return np.sqrt(np.einsum("ij,ij->i", d, d))[:, None]
+
+        return hx1_lat
 
     def hx(states: np.ndarray) -> np.ndarray:
-        tag = states[:, None, 0:3] + arm
+        pos = states[:, 0:3] if lat == 0.0 else states[:, 0:3] - lat * states[:, 3:6]
+        tag = pos[:, None, :] + arm
         return np.sqrt(((pa[None, :, :] - tag) ** 2).sum(axis=2))
 
     return hx

@@ -1,0 +1,377 @@
+"""Scenario stream ``gnss_uwb``: GNSS measurements and UWB ranges of Cao et al. under a jamming schedule.
+
+Section keys (all optional; the defaults are the simulator's defaults, i.e. the paper's static
+rooftop set-up moved to the ARL1 station, Cao et al., Sec. IV-1 and Table 1)::
+
+    gnss_uwb:
+      start_gps_week: 1854            # continuous GPS week of the first epoch (the ARL1 nav file's week)
+      start_gps_tow_s: 3600.0         # GPS time of week of the first epoch, s
+      receiver_ecef_m: [-740289.918, -5457071.734, 3207245.542]   # static antenna = tag, ECEF, m
+      gnss_rate_hz: 5.0               # GNSS epoch rate, Hz
+      uwb_rate_hz: 20.0               # ranging rate per anchor, Hz (anchors interleaved)
+      anchors:                        # one entry per anchor, ids A1, A2, ... in this order
+        - {range_m: 11.71, azimuth_deg: 20.0, up_m: 1.5}
+        - {range_m: 13.00, azimuth_deg: 140.0, up_m: -0.5}
+        - {range_m: 11.26, azimuth_deg: 260.0, up_m: 0.8}
+      uwb_noise_std_m: 0.03           # UWB range noise 1-sigma, m
+      uwb_reported_std_m: .nan        # range_std_m written in /uwb/ranges, m (.nan or null: the filter decides)
+      elevation_mask_deg: 10.0        # satellites below are not tracked, deg
+      cn0_zenith_dbhz: 49.0           # jammer-free C/N0 at 90 deg elevation, dB-Hz
+      cn0_horizon_dbhz: 34.0          # jammer-free C/N0 at 0 deg elevation, dB-Hz
+      correlated_error_std_m: 0.7     # per-satellite Gauss-Markov pseudorange error 1-sigma, m
+      correlated_error_tau_s: 60.0    # its correlation time, s
+      report_sigmas: false            # write pseudorange_std_m / pseudorange_rate_std_mps (else NaN)
+      ionosphere: true                # Klobuchar delay from the nav file header (false: none)
+      nav_file: null                  # RINEX GPS nav file (null: the installed ARL1 copy, see below)
+      truth_jammer_state: true        # also write /truth/jammer_state
+      jamming:                        # the schedule: consecutive phases from the start
+        - {jsr_db: null, duration_s: 30.0}   # null: no jammer
+        - {jsr_db: 22.0}                     # the last phase may omit duration_s: it runs to the end
+
+Each phase's ``duration_s`` must be a whole number of GNSS and UWB periods, and the phases must
+cover the scenario's ``duration_s`` exactly.
+
+Simulation. :func:`rfi_experiments.sim.gnss_uwb.simulate` takes one J/S per run, so the builder
+simulates each phase as its own run (seeded from ``seed`` and the phase index) and joins them:
+the stamps continue on the same GNSS/UWB grid, the receiver clock of a phase starts where the
+previous one ended (bias extrapolated by one GNSS period with the last drift), the geometry, anchors
+and receiver are the same. Not continuous across a phase boundary: the per-satellite Gauss-Markov
+errors (re-drawn from their stationary distribution, so their statistics are unchanged), the state
+of outlier bursts (a burst ends at a boundary) and the random number streams.
+
+Output, in stamp order, per GNSS epoch k (stamp = receive time on the GPS time scale of
+gnss_common.gps_time; at equal stamps in this order):
+
+* ``/gnss/measurements`` (rfi_msgs/GnssMeasurementArray, frame "earth");
+* ``/truth/position`` (geometry_msgs/PointStamped, frame "earth"): the true antenna (= tag)
+  position, ECEF, m, at every GNSS epoch (static receiver);
+* ``/truth/jammer_state`` (rfi_msgs/JammerState, only with ``truth_jammer_state``) at the start of
+  each phase and then once per second: ``type`` CHIRP (the paper's linear chirp) or NONE,
+  ``jammer_to_signal_db`` the phase's J/S (NaN without a jammer), ``confidence`` 1, every other
+  float NaN. It has the layout of the RFI monitor's output, so remapping it to /rfi/jammer_state
+  gives the fusion node an ideal monitor;
+
+and the UWB ranges ``/uwb/ranges`` (rfi_msgs/UwbRange, frame "earth", anchor ids A1...), each
+anchor at ``uwb_rate_hz``, interleaved. Nothing else of the simulator's truth (clock, outlier
+masks) is written: it stays available from the simulator itself.
+
+Ephemeris: ``nav_file: null`` resolves ``share/rfi_experiments/data/arlm2000.15n`` through the
+ament index (ARL1, 2015-07-19, SGL-UT/gnsstk commit 028fdaae, LGPL-3.0; see data/README.md); in a
+source checkout where the package is not installed it falls back to ``src/rfi_experiments/data``.
+
+Notes
+-----
+Measurement models: Cao et al., eq. 4 (effective C/N0 under J/S), eq. 5-7, as implemented by the
+simulator (see its module docstring).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gnss_common.constants import SPEED_OF_LIGHT_MPS
+from gnss_common.gps_time import gps_to_stamp_ns
+from rfi_experiments.scenario import Scenario, ScenarioError
+from rfi_experiments.sim.gnss_uwb import (
+    ARL1_ECEF_M,
+    PAPER_ANCHOR_RANGES_M,
+    BroadcastGeometry,
+    GnssUwbScenario,
+    simulate,
+)
+
+GNSS_TOPIC = '/gnss/measurements'
+UWB_TOPIC = '/uwb/ranges'
+TRUTH_POSITION_TOPIC = '/truth/position'
+TRUTH_JAMMER_TOPIC = '/truth/jammer_state'
+EARTH_FRAME = 'earth'
+TRUTH_JAMMER_PERIOD_S = 1.0
+"""Period of /truth/jammer_state within a phase, s."""
+
+NAV_FILE_NAME = 'arlm2000.15n'
+"""Default ephemeris: ARL1 broadcast navigation file of 2015-07-19 (GPS week 1854)."""
+
+_DEFAULT_SIM = GnssUwbScenario()
+
+DEFAULTS: dict[str, Any] = {
+    'start_gps_week': _DEFAULT_SIM.start_week,
+    'start_gps_tow_s': _DEFAULT_SIM.start_tow_s,
+    'receiver_ecef_m': list(ARL1_ECEF_M),
+    'gnss_rate_hz': _DEFAULT_SIM.gnss_rate_hz,
+    'uwb_rate_hz': _DEFAULT_SIM.uwb_rate_hz,
+    'anchors': [{'range_m': r, 'azimuth_deg': a, 'up_m': u} for r, a, u in zip(
+        PAPER_ANCHOR_RANGES_M, _DEFAULT_SIM.anchor_azimuths_deg, _DEFAULT_SIM.anchor_up_m, strict=True)],
+    'uwb_noise_std_m': _DEFAULT_SIM.uwb_noise_std_m,
+    'uwb_reported_std_m': None,
+    'elevation_mask_deg': _DEFAULT_SIM.elevation_mask_deg,
+    'cn0_zenith_dbhz': _DEFAULT_SIM.cn0_zenith_dbhz,
+    'cn0_horizon_dbhz': _DEFAULT_SIM.cn0_horizon_dbhz,
+    'correlated_error_std_m': _DEFAULT_SIM.correlated_error_std_m,
+    'correlated_error_tau_s': _DEFAULT_SIM.correlated_error_tau_s,
+    'report_sigmas': _DEFAULT_SIM.report_sigmas,
+    'ionosphere': True,
+    'nav_file': None,
+    'truth_jammer_state': True,
+    'jamming': [{'jsr_db': None}],
+}
+"""Every section key and its default (no jamming over the whole scenario)."""
+
+JSR_RANGE_DB = (-60.0, 80.0)
+"""Accepted J/S of a phase, dB (beyond: certainly a typo)."""
+
+
+def default_nav_path() -> Path:
+    """The installed ARL1 nav file (ament index), else the source checkout's copy.
+
+    Raises:
+        ScenarioError: neither exists.
+    """
+    candidates = []
+    try:
+        from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
+        try:
+            candidates.append(Path(get_package_share_directory('rfi_experiments')) / 'data' / NAV_FILE_NAME)
+        except PackageNotFoundError:
+            pass
+    except ImportError:
+        pass
+    candidates.append(Path(__file__).resolve().parents[2] / 'data' / NAV_FILE_NAME)
+    for path in candidates:
+        if path.is_file():
+            return path
+    raise ScenarioError(f'gnss_uwb: no ephemeris {NAV_FILE_NAME} (looked in {", ".join(map(str, candidates))}); '
+                        'install rfi_experiments or set gnss_uwb.nav_file')
+
+
+def _number(value: Any, key: str, low: float = -math.inf, high: float = math.inf, *,
+            low_open: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ScenarioError(f'gnss_uwb.{key} must be a finite number, got {value!r}')
+    value = float(value)
+    if value < low or value > high or (low_open and value == low):
+        rng = f'{"(" if low_open else "["}{low}, {high}]'
+        raise ScenarioError(f'gnss_uwb.{key} must be in {rng}, got {value}')
+    return value
+
+
+def _integer(value: Any, key: str, low: int, high: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        raise ScenarioError(f'gnss_uwb.{key} must be an integer in [{low}, {high}], got {value!r}')
+    return value
+
+
+def _boolean(value: Any, key: str) -> bool:
+    if not isinstance(value, bool):
+        raise ScenarioError(f'gnss_uwb.{key} must be true or false, got {value!r}')
+    return value
+
+
+def _whole_periods(duration_s: float, rate_hz: float) -> bool:
+    n = duration_s * rate_hz
+    return abs(n - round(n)) < 1e-6 and round(n) >= 1
+
+
+def _anchors(value: Any) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
+    if not isinstance(value, (list, tuple)) or not value:
+        raise ScenarioError('gnss_uwb.anchors must be a non-empty list of {range_m, azimuth_deg, up_m}')
+    ranges, azimuths, ups = [], [], []
+    for i, a in enumerate(value):
+        if not isinstance(a, Mapping) or set(a) != {'range_m', 'azimuth_deg', 'up_m'}:
+            raise ScenarioError(f'gnss_uwb.anchors[{i}] must be a mapping with exactly range_m, azimuth_deg, '
+                                f'up_m, got {a!r}')
+        r = _number(a['range_m'], f'anchors[{i}].range_m', 0.0, 1000.0, low_open=True)
+        u = _number(a['up_m'], f'anchors[{i}].up_m', -1000.0, 1000.0)
+        if not r > abs(u):
+            raise ScenarioError(f'gnss_uwb.anchors[{i}]: range_m {r} must exceed |up_m| {abs(u)}')
+        ranges.append(r)
+        azimuths.append(_number(a['azimuth_deg'], f'anchors[{i}].azimuth_deg', -360.0, 360.0))
+        ups.append(u)
+    return tuple(ranges), tuple(azimuths), tuple(ups)
+
+
+def _phases(value: Any, duration_s: float, gnss_rate_hz: float,
+            uwb_rate_hz: float) -> list[tuple[float | None, float]]:
+    if not isinstance(value, (list, tuple)) or not value:
+        raise ScenarioError('gnss_uwb.jamming must be a non-empty list of phases {jsr_db, duration_s}')
+    phases: list[tuple[float | None, float]] = []
+    elapsed = 0.0
+    for i, ph in enumerate(value):
+        key = f'jamming[{i}]'
+        last = i == len(value) - 1
+        if not isinstance(ph, Mapping) or 'jsr_db' not in ph or not set(ph) <= {'jsr_db', 'duration_s'}:
+            raise ScenarioError(f'gnss_uwb.{key} must be a mapping with jsr_db (null: no jammer) and '
+                                f'duration_s (optional on the last phase), got {ph!r}')
+        jsr = ph['jsr_db']
+        jsr = None if jsr is None else _number(jsr, f'{key}.jsr_db', *JSR_RANGE_DB)
+        if 'duration_s' in ph:
+            dur = _number(ph['duration_s'], f'{key}.duration_s', 0.0, 1e6, low_open=True)
+        elif last:
+            dur = duration_s - elapsed
+            if dur <= 1e-9:
+                raise ScenarioError(f'gnss_uwb.{key}: the earlier phases already fill duration_s {duration_s}')
+        else:
+            raise ScenarioError(f'gnss_uwb.{key}.duration_s is required (only the last phase may omit it)')
+        if not (_whole_periods(dur, gnss_rate_hz) and _whole_periods(dur, uwb_rate_hz)):
+            raise ScenarioError(f'gnss_uwb.{key}.duration_s {dur} must be a whole number of GNSS '
+                                f'(1/{gnss_rate_hz} s) and UWB (1/{uwb_rate_hz} s) periods')
+        phases.append((jsr, dur))
+        elapsed += dur
+    if abs(elapsed - duration_s) > 1e-6:
+        raise ScenarioError(f'gnss_uwb.jamming: the phases last {elapsed} s but the scenario lasts {duration_s} s')
+    return phases
+
+
+def parse_section(scenario: Scenario, section: Mapping[str, Any]) -> tuple[dict[str, Any], list, Path]:
+    """Validate the section.
+
+    Returns:
+        ``(settings, phases, nav_path)``: the resolved settings (every key of :data:`DEFAULTS`,
+        validated), the phases ``[(jsr_db or None, duration_s), ...]`` and the nav file.
+
+    Raises:
+        ScenarioError: unknown key, wrong type, non-physical value (the message names the key).
+    """
+    unknown = set(section) - set(DEFAULTS)
+    if unknown:
+        raise ScenarioError(f'gnss_uwb: unknown key(s) {", ".join(sorted(map(str, unknown)))} '
+                            f'(known: {", ".join(DEFAULTS)})')
+    s = {**DEFAULTS, **section}
+    out: dict[str, Any] = {}
+    out['start_gps_week'] = _integer(s['start_gps_week'], 'start_gps_week', 0, 10_000)
+    out['start_gps_tow_s'] = _number(s['start_gps_tow_s'], 'start_gps_tow_s', 0.0, 604800.0)
+    rx = s['receiver_ecef_m']
+    if not isinstance(rx, (list, tuple)) or len(rx) != 3:
+        raise ScenarioError(f'gnss_uwb.receiver_ecef_m must be a list of 3 numbers, m, got {rx!r}')
+    rx = tuple(_number(v, 'receiver_ecef_m', -1e7, 1e7) for v in rx)
+    if not 6.0e6 < math.hypot(*rx) < 6.5e6:
+        raise ScenarioError(f'gnss_uwb.receiver_ecef_m {rx} is not near the Earth surface')
+    out['receiver_ecef_m'] = rx
+    out['gnss_rate_hz'] = _number(s['gnss_rate_hz'], 'gnss_rate_hz', 0.0, 100.0, low_open=True)
+    out['uwb_rate_hz'] = _number(s['uwb_rate_hz'], 'uwb_rate_hz', 0.0, 1000.0, low_open=True)
+    out['anchors'] = _anchors(s['anchors'])
+    out['uwb_noise_std_m'] = _number(s['uwb_noise_std_m'], 'uwb_noise_std_m', 0.0, 100.0)
+    rep = s['uwb_reported_std_m']
+    if rep is None or (isinstance(rep, float) and math.isnan(rep)):
+        out['uwb_reported_std_m'] = math.nan
+    else:
+        out['uwb_reported_std_m'] = _number(rep, 'uwb_reported_std_m', 0.0, 100.0, low_open=True)
+    out['elevation_mask_deg'] = _number(s['elevation_mask_deg'], 'elevation_mask_deg', -10.0, 60.0)
+    out['cn0_zenith_dbhz'] = _number(s['cn0_zenith_dbhz'], 'cn0_zenith_dbhz', 0.0, 70.0)
+    out['cn0_horizon_dbhz'] = _number(s['cn0_horizon_dbhz'], 'cn0_horizon_dbhz', 0.0, 70.0)
+    out['correlated_error_std_m'] = _number(s['correlated_error_std_m'], 'correlated_error_std_m', 0.0, 100.0)
+    out['correlated_error_tau_s'] = _number(s['correlated_error_tau_s'], 'correlated_error_tau_s', 0.0, 1e6,
+                                            low_open=True)
+    for key in ('report_sigmas', 'ionosphere', 'truth_jammer_state'):
+        out[key] = _boolean(s[key], key)
+    if s['nav_file'] is None:
+        nav = default_nav_path()
+    else:
+        if not isinstance(s['nav_file'], str):
+            raise ScenarioError(f'gnss_uwb.nav_file must be a path or null, got {s["nav_file"]!r}')
+        nav = Path(s['nav_file'])
+        if not nav.is_absolute() and scenario.source is not None:
+            nav = scenario.source.parent / nav
+        if not nav.is_file():
+            raise ScenarioError(f'gnss_uwb.nav_file {nav} does not exist')
+    out['nav_file'] = str(nav)
+    phases = _phases(s['jamming'], scenario.duration_s, out['gnss_rate_hz'], out['uwb_rate_hz'])
+    out['jamming'] = phases
+    end_tow = out['start_gps_tow_s'] + scenario.duration_s
+    if end_tow >= 604800.0:
+        raise ScenarioError(f'gnss_uwb: the scenario runs past the end of GPS week {out["start_gps_week"]} '
+                            f'(start_gps_tow_s + duration_s = {end_tow} s)')
+    return out, phases, nav
+
+
+def _jammer_truth(stamp_ns: int, jsr_db: float | None):
+    from rfi_msgs.msg import JammerState
+    from rfi_node_common.stamps import ns_to_stamp
+
+    msg = JammerState()
+    msg.header.stamp = ns_to_stamp(stamp_ns)
+    msg.header.frame_id = 'truth'
+    msg.type = JammerState.NONE if jsr_db is None else JammerState.CHIRP
+    msg.confidence = 1.0
+    for name in ('jammer_to_noise_db', 'frequency_hz', 'frequency_std_hz', 'sweep_rate_hz_per_s', 'sweep_period_s',
+                 'sweep_start_frequency_hz', 'sweep_bandwidth_hz', 'center_frequency_hz', 'sample_rate_hz'):
+        setattr(msg, name, math.nan)
+    msg.jammer_to_signal_db = math.nan if jsr_db is None else float(jsr_db)
+    return msg
+
+
+def build(scenario: Scenario, section: Mapping[str, Any], seed: int) -> Iterator[tuple[int, str, Any]]:
+    """Validate ``section`` and yield ``(stamp_ns, topic, message)`` in stamp order.
+
+    Args:
+        scenario: the scenario (its ``duration_s`` is the length, s).
+        section: the ``gnss_uwb`` section (see the module docstring).
+        seed: seed of this stream; phase i is simulated with a seed drawn from
+            ``np.random.default_rng(seed)``.
+
+    Raises:
+        ScenarioError: invalid section, or a nav file that gives fewer than 4 satellites at the
+            start or the end of the scenario (raised before anything is yielded).
+    """
+    s, phases, nav = parse_section(scenario, section)
+    try:
+        geometry = BroadcastGeometry(nav)
+    except (OSError, ValueError) as err:
+        raise ScenarioError(f'gnss_uwb.nav_file {nav}: cannot read ({err})') from None
+    week, tow0 = s['start_gps_week'], s['start_gps_tow_s']
+    for t in (tow0, tow0 + scenario.duration_s):
+        if geometry(week, t).prn.size < 4:
+            raise ScenarioError(f'gnss_uwb: {nav.name} has fewer than 4 valid ephemerides at GPS week {week}, '
+                                f'tow {t} s: choose start_gps_week/start_gps_tow_s within the file')
+    return _generate(s, phases, geometry, seed)
+
+
+def _generate(s: dict[str, Any], phases: list, geometry: BroadcastGeometry, seed: int
+              ) -> Iterator[tuple[int, str, Any]]:
+    from uwb_gnss_fusion.conversions import epoch_to_msg, point_to_msg, uwb_to_msg
+
+    week, tow0 = s['start_gps_week'], s['start_gps_tow_s']
+    alpha = geometry.iono_alpha if s['ionosphere'] else None
+    beta = geometry.iono_beta if s['ionosphere'] else None
+    phase_seeds = np.random.default_rng(seed).integers(0, 2**31 - 1, size=len(phases))
+    ranges, azimuths, ups = s['anchors']
+    bias0_s, drift0 = _DEFAULT_SIM.clock_bias0_s, _DEFAULT_SIM.clock_drift0
+    dt_g = 1.0 / s['gnss_rate_hz']
+    n_jam = max(1, round(TRUTH_JAMMER_PERIOD_S * s['gnss_rate_hz']))
+    rx = np.asarray(s['receiver_ecef_m'], dtype=float)
+    t_start = 0.0
+    for (jsr, dur), phase_seed in zip(phases, phase_seeds, strict=True):
+        sim = GnssUwbScenario(
+            jsr_db=jsr, duration_s=dur, seed=int(phase_seed), start_week=week, start_tow_s=tow0 + t_start,
+            receiver_ecef_m=tuple(rx), gnss_rate_hz=s['gnss_rate_hz'], uwb_rate_hz=s['uwb_rate_hz'],
+            anchor_ranges_m=ranges, anchor_azimuths_deg=azimuths, anchor_up_m=ups,
+            uwb_noise_std_m=s['uwb_noise_std_m'], uwb_reported_std_m=s['uwb_reported_std_m'],
+            elevation_mask_deg=s['elevation_mask_deg'], cn0_zenith_dbhz=s['cn0_zenith_dbhz'],
+            cn0_horizon_dbhz=s['cn0_horizon_dbhz'], correlated_error_std_m=s['correlated_error_std_m'],
+            correlated_error_tau_s=s['correlated_error_tau_s'], clock_bias0_s=bias0_s, clock_drift0=drift0,
+            report_sigmas=s['report_sigmas'])
+        run = simulate(sim, geometry, alpha, beta)
+        # The next phase's clock starts where this one ends (one GNSS period later).
+        drift0 = float(run.truth.clock_drift_mps[-1]) / SPEED_OF_LIGHT_MPS
+        bias0_s = float(run.truth.clock_bias_m[-1]) / SPEED_OF_LIGHT_MPS + drift0 * dt_g
+        items: list[tuple[int, int, str, Any]] = []
+        for k, epoch in enumerate(run.gnss_epochs):
+            items.append((epoch.stamp_ns, 0, GNSS_TOPIC, epoch_to_msg(epoch)))
+            items.append((epoch.stamp_ns, 1, TRUTH_POSITION_TOPIC, point_to_msg(epoch.stamp_ns, rx, EARTH_FRAME)))
+            if s['truth_jammer_state'] and k % n_jam == 0:
+                items.append((epoch.stamp_ns, 2, TRUTH_JAMMER_TOPIC, _jammer_truth(epoch.stamp_ns, jsr)))
+        items += [(u.stamp_ns, 3, UWB_TOPIC, uwb_to_msg(u)) for u in run.uwb_ranges]
+        items.sort(key=lambda item: (item[0], item[1]))
+        for stamp_ns, _, topic, msg in items:
+            yield stamp_ns, topic, msg
+        t_start += dur
+
+
+def start_stamp_ns(section: Mapping[str, Any]) -> int:
+    """Stamp of the first GNSS epoch of a section (defaults applied), ns."""
+    s = {**DEFAULTS, **section}
+    return gps_to_stamp_ns(int(s['start_gps_week']), float(s['start_gps_tow_s']))
