@@ -4,15 +4,21 @@ Run (workspace built, venv and install/setup.bash sourced, src/ on PYTHONPATH as
     python benchmarks/imm_carrier_node_speed.py [--seconds 4] [--repeats 3]
 Writes docs/imm_carrier/node_speed.md.
 
-What is measured, for method imm, pll and both:
-* replay: the bag (32 GPS satellites, T = 1 ms, rubidium clock, 51 dB-Hz) replayed through the
-  node with rfi_experiments.replay.ReplayHarness at maximum rate (one message in flight, DDS
-  in-process, one SingleThreadedExecutor); real-time factor = bag time / wall time (> 1 keeps up).
-* callback: the node's on_correlators called directly on the decoded messages (no DDS, no
-  executor): the node's own ceiling.
-* where the time goes: cProfile of one callback-only run, split into the core
-  (CarrierTracker.process), message conversion in and out, and publishing (serialisation).
-Medians of the repeats are quoted. Machine: 2 shared cores (other engineers' jobs running).
+What is measured, for method imm, pll and both (real-time factor RTF = bag time / wall time; above 1
+the node keeps up):
+* replay, dds: the bag (32 GPS satellites, T = 1 ms, rubidium clock, 51 dB-Hz) replayed through the
+  node with rfi_experiments.replay.ReplayHarness at maximum rate, transport 'dds' (middleware
+  in-process, one SingleThreadedExecutor, one message in flight, spin until settled).
+* replay, direct: the same harness with transport 'direct' (same node and callbacks, messages handed
+  over in-process without the middleware; serialisation kept).
+* callback: the node's on_correlators called directly on the serialised messages, as its raw
+  subscription receives them (no harness, no executor): the node's own ceiling.
+* reference: a fixed pure-Python + numpy workload timed right before every measurement. Its time
+  over the fastest time seen in the whole run is the load slowdown of that moment (another process
+  shares the 2 cores); "normalised RTF" = RTF x slowdown estimates the RTF on an idle machine.
+* where the time goes: cProfile of one callback-only run, split into decoding, the core, encoding,
+  publishing and the rest of the callback.
+Medians of the repeats are quoted.
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
 import rclpy
 from rclpy.context import Context
 from rclpy.parameter import Parameter
@@ -39,6 +46,7 @@ from rfi_experiments.scenario import Scenario, write_scenario_bag
 OUT = Path(__file__).resolve().parents[1] / 'docs' / 'imm_carrier' / 'node_speed.md'
 N_SATELLITES = 32
 METHODS = ('imm', 'pll', 'both')
+MODES = ('dds', 'direct', 'callback')
 
 
 def make_bag(path: Path, seconds: float) -> None:
@@ -48,16 +56,26 @@ def make_bag(path: Path, seconds: float) -> None:
     write_scenario_bag(scenario, path, overwrite=True)
 
 
+def reference_time_s() -> float:
+    """Wall time of a fixed mixed workload (Python loop + small numpy calls), s; the load probe."""
+    t0 = time.perf_counter()
+    acc = 0.0
+    a = np.arange(64, dtype=float)
+    for k in range(20_000):
+        acc += float(np.sum(a * k)) * 1e-9 + (k % 7)
+    return time.perf_counter() - t0
+
+
 def new_node(method: str) -> tuple[Context, ImmCarrierNode]:
     context = Context()
     rclpy.init(context=context)
     return context, ImmCarrierNode(context=context, parameter_overrides=[Parameter('method', value=method)])
 
 
-def replay_rtf(bag: Path, method: str) -> tuple[float, int]:
+def replay_rtf(bag: Path, method: str, transport: str) -> tuple[float, int]:
     context, node = new_node(method)
     try:
-        harness = ReplayHarness([node], context=context, collect=['/diagnostics'])
+        harness = ReplayHarness([node], context=context, collect=['/diagnostics'], transport=transport)
         result = harness.run(bag, topics=['/gnss/correlators'])
         harness.destroy()
         # 1 ms intervals: the log-time span of n arrays is (n - 1) ms; count n ms of bag time.
@@ -68,17 +86,17 @@ def replay_rtf(bag: Path, method: str) -> tuple[float, int]:
         rclpy.shutdown(context=context)
 
 
-def callback_rtf(messages: list, method: str, profile: cProfile.Profile | None = None) -> float:
+def callback_rtf(raws: list[bytes], method: str, profile: cProfile.Profile | None = None) -> tuple[float, int]:
     context, node = new_node(method)
     try:
         t0 = time.perf_counter()
         if profile is not None:
             profile.enable()
-        for msg in messages:
-            node.on_correlators(msg)
+        for raw in raws:
+            node.on_correlators(raw)
         if profile is not None:
             profile.disable()
-        return len(messages) * 1e-3 / (time.perf_counter() - t0)
+        return len(raws) * 1e-3 / (time.perf_counter() - t0), node.counts['arrays_processed']
     finally:
         node.destroy_node()
         rclpy.shutdown(context=context)
@@ -88,10 +106,10 @@ def split(profile: cProfile.Profile) -> dict[str, float]:
     """Cumulative seconds in the node's parts (from cProfile; profiling overhead included)."""
     stats = pstats.Stats(profile)
     total = 0.0
-    parts = {'core (CarrierTracker.process)': ('tracker.py', 'process'),
-             'msg -> CorrelatorSample': ('imm_carrier_node.py', 'correlator_sample'),
-             'estimate -> CarrierPhase msg': ('imm_carrier_node.py', 'carrier_phase_msg'),
-             'publish (serialise + DDS write)': ('publisher.py', 'publish')}
+    parts = {'decode (CDR -> arrays)': ('cdr.py', 'decode_correlator_array'),
+             'core (CarrierTracker.process_arrays)': ('tracker.py', 'process_arrays'),
+             'encode (table -> CDR)': ('cdr.py', 'encode_carrier_phase_array'),
+             'publish (DDS write of the bytes)': ('publisher.py', 'publish')}
     out = dict.fromkeys(parts, 0.0)
     for (filename, _, func), (_, _, _, cumtime, _) in stats.stats.items():  # type: ignore[attr-defined]
         if func == 'on_correlators':
@@ -99,7 +117,7 @@ def split(profile: cProfile.Profile) -> dict[str, float]:
         for name, (file_end, fname) in parts.items():
             if filename.endswith(file_end) and func == fname:
                 out[name] += cumtime
-    out['rest of the callback (diagnostics, counters, list building)'] = total - sum(out.values())
+    out['rest of the callback (diagnostics, counters)'] = total - sum(out.values())
     out['total callback'] = total
     return out
 
@@ -109,38 +127,51 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--seconds', type=float, default=4.0, help='bag duration, s')
     parser.add_argument('--repeats', type=int, default=3)
     args = parser.parse_args(argv)
+    reference_time_s()
     with tempfile.TemporaryDirectory() as tmp:
         bag = Path(tmp) / 'bag'
         t0 = time.perf_counter()
         make_bag(bag, args.seconds)
         gen_s = time.perf_counter() - t0
         with BagReader(bag) as reader:
-            messages = [m.decode() for m in reader.messages(['/gnss/correlators'])]
-        rows = []
+            raws = [m.raw for m in reader.messages(['/gnss/correlators'])]
+        runs: dict[tuple[str, str], list[tuple[float, float]]] = {}  # (method, mode) -> [(rtf, ref_s)]
         splits = {}
         for method in METHODS:
-            callback_rtf(messages[:200], method)  # warm-up: numba cache load
-            replay = [replay_rtf(bag, method) for _ in range(args.repeats)]
-            assert all(n == len(messages) for _, n in replay), 'not every array was processed'
-            direct = [callback_rtf(messages, method) for _ in range(args.repeats)]
-            rows.append((method, statistics.median(r for r, _ in replay), statistics.median(direct)))
+            callback_rtf(raws[:200], method)  # warm-up: numba cache load
+            for _ in range(args.repeats):
+                for mode in MODES:
+                    ref = reference_time_s()
+                    if mode == 'callback':
+                        rtf, n = callback_rtf(raws, method)
+                    else:
+                        rtf, n = replay_rtf(bag, method, mode)
+                    assert n == len(raws), 'not every array was processed'
+                    runs.setdefault((method, mode), []).append((rtf, ref))
             profile = cProfile.Profile()
-            callback_rtf(messages, method, profile)
+            callback_rtf(raws, method, profile)
             splits[method] = split(profile)
-            print(f'{method}: replay RTF {rows[-1][1]:.2f}, callback RTF {rows[-1][2]:.2f}', file=sys.stderr)
+            print(method, {m: [round(r, 2) for r, _ in runs[(method, m)]] for m in MODES}, file=sys.stderr)
+    ref_best = min(ref for v in runs.values() for _, ref in v)
     updates = {'imm': N_SATELLITES, 'pll': N_SATELLITES, 'both': 2 * N_SATELLITES}
-    lines = ['| method | filter updates / s needed | replay RTF (bag through DDS + executor) | callback-only RTF | '
-             'keeps up (replay RTF >= 1) |', '|---|---|---|---|---|']
-    for method, replay, direct in rows:
-        lines.append(f'| {method} | {updates[method] * 1000:,} | {replay:.2f} | {direct:.2f} | '
-                     f'{"yes" if replay >= 1.0 else "no"} |')
+    lines = ['| method | filter updates / s needed | replay RTF, dds | replay RTF, direct | callback-only RTF | '
+             'load slowdown (median) | normalised RTF dds / direct / callback | keeps up through DDS (RTF >= 1) |',
+             '|---|---|---|---|---|---|---|---|']
+    for method in METHODS:
+        med = {m: statistics.median(r for r, _ in runs[(method, m)]) for m in MODES}
+        norm = {m: statistics.median(r * ref / ref_best for r, ref in runs[(method, m)]) for m in MODES}
+        slow = statistics.median(ref / ref_best for m in MODES for _, ref in runs[(method, m)])
+        lines.append(f'| {method} | {updates[method] * 1000:,} | {med["dds"]:.2f} | {med["direct"]:.2f} | '
+                     f'{med["callback"]:.2f} | {slow:.2f} | {norm["dds"]:.2f} / {norm["direct"]:.2f} / '
+                     f'{norm["callback"]:.2f} | {"yes" if med["dds"] >= 1.0 else "no"} |')
     lines += ['', '| part of the callback (cProfile, one run) | ' + ' | '.join(METHODS) + ' |',
               '|---|' + '---|' * len(METHODS)]
     for part in splits['imm']:
         cells = []
         for method in METHODS:
             s = splits[method]
-            cells.append(f'{s[part]:.2f} s ({100 * s[part] / s["total callback"]:.0f} %)')
+            us = 1e6 * s[part] / len(raws)
+            cells.append(f'{us:.0f} us ({100 * s[part] / s["total callback"]:.0f} %)')
         lines.append(f'| {part} | ' + ' | '.join(cells) + ' |')
     load = ', '.join(f'{x:.1f}' for x in os.getloadavg())
     table = '\n'.join(lines)
@@ -149,12 +180,16 @@ def main(argv: list[str] | None = None) -> int:
     OUT.write_text(
         '# imm_carrier_node: 32 satellites at 1 kHz, in-process bag replay\n\n'
         f'Generated by benchmarks/imm_carrier_node_speed.py: a {args.seconds:g} s bag (32 GPS satellites, T = 1 ms, '
-        f'{len(messages)} CorrelatorArrays; simulated in {gen_s:.1f} s) replayed at maximum rate, medians of '
+        f'{len(raws)} CorrelatorArrays; simulated in {gen_s:.1f} s) replayed at maximum rate, medians of '
         f'{args.repeats} repeats, on the development machine (2 cores shared with other jobs; '
         f'Python {sys.version.split()[0]}, {os.cpu_count()} CPUs seen, load average at the end {load}). '
-        'RTF = bag time / wall time: above 1 the node keeps up in real time.\n\n' + table + '\n\n'
-        'cProfile times include the profiler\'s own overhead (it slows Python-heavy parts most); the shares, '
-        'not the seconds, are the point.\n')
+        'RTF = bag time / wall time: above 1 the node keeps up in real time. dds: ReplayHarness through the '
+        'middleware (one message in flight); direct: ReplayHarness transport direct (no middleware); callback: '
+        'on_correlators on the serialised messages. Load slowdown: time of a fixed reference workload just '
+        f'before each measurement over its fastest time in this run ({ref_best * 1e3:.0f} ms); normalised RTF = '
+        'RTF x slowdown.\n\n' + table + '\n\n'
+        'Per-message times in the second table are cProfile cumulative times over the messages (the profiler adds '
+        'overhead to each Python call); the shares are the point.\n')
     return 0
 
 

@@ -64,6 +64,14 @@ def main() -> int:
 
     rows.append(("PLL process_batch (compiled loop, one channel)", _median_rate(pll_batch, n)))
 
+    def pll_single():
+        p = CostasPll(PllParams())
+        p.initialize(0.0, 0.0)
+        for k in range(m):
+            p.update(zi[k], zq[k], 45.0, 0.001, dphi[k])
+
+    rows.append(("PLL update() per step (compiled scalar step, frozen result)", _median_rate(pll_single, m)))
+
     epochs = 500
     samples = [
         [
@@ -74,6 +82,27 @@ def main() -> int:
         ]
         for e in range(epochs)
     ]
+    const = np.ones(32, dtype=np.int64)
+    svid = np.arange(1, 33, dtype=np.int64)
+    t32 = np.full(32, 0.001)
+    cn0_32 = np.full(32, 45.0)
+    arrays = [(zi[e * 32 + 1 : e * 32 + 33], zq[e * 32 + 1 : e * 32 + 33], dphi[e * 32 + 1 : e * 32 + 33])
+              for e in range(epochs)]
+
+    for method in ("imm", "pll"):
+
+        def tracker_arrays(method=method):
+            tr = CarrierTracker(TrackerParams(method=method))
+            for e in range(epochs):
+                a, b, c = arrays[e]
+                tr.process_arrays((e + 1) * 1_000_000, const, svid, t32, a, b, cn0_32, c)
+
+        rows.append(
+            (
+                f"{method.upper()} CarrierTracker.process_arrays, 32 channels per call (node path)",
+                _median_rate(tracker_arrays, 32 * epochs),
+            )
+        )
 
     def tracker():
         tr = CarrierTracker(TrackerParams())
@@ -81,7 +110,8 @@ def main() -> int:
             tr.process((e + 1) * 1_000_000, samples[e])
 
     rows.append(
-        ("CarrierTracker.process, 32 channels per epoch (node path)", _median_rate(tracker, 32 * epochs))
+        ("IMM CarrierTracker.process, 32 CorrelatorSample per call (dataclasses in and out)",
+         _median_rate(tracker, 32 * epochs))
     )
 
     lines = [

@@ -30,7 +30,8 @@ from imm_carrier.measurement_model import CN0_MAX_DBHZ, CN0_MIN_DBHZ, IQ_SCALING
 TWO_PI = 2.0 * math.pi
 
 # Layout of the compiled filter's state vector.
-_ST_X1, _ST_P1, _ST_X2, _ST_P2, _ST_MU, _ST_SAT = 0, 2, 5, 7, 10, 12
+# Slots 10-11 hold the natural logarithms of the mode probabilities (log mu_1, log mu_2).
+_ST_X1, _ST_P1, _ST_X2, _ST_P2, _ST_LOGMU, _ST_SAT = 0, 2, 5, 7, 10, 12
 _ST_LEN = 13
 # Layout of the compiled step's output vector.
 (
@@ -128,32 +129,61 @@ def _wrap(a: float) -> float:
 
 
 @njit(cache=True)
+def _log0(x: float) -> float:
+    """log x, with log 0 = -inf (a transition probability of exactly 0 or 1)."""
+    return math.log(x) if x > 0.0 else -math.inf
+
+
+@njit(cache=True)
+def _logaddexp(a: float, b: float) -> float:
+    """log(exp a + exp b) without overflow or underflow; -inf if both are -inf."""
+    m = max(a, b)
+    if m == -math.inf:
+        return -math.inf
+    return m + math.log1p(math.exp(-abs(a - b)))
+
+
+@njit(cache=True)
 def _imm_step(st, zi, zq, amp, sig, t, dphi, p_change, prior_plus, q_f, q_g, form_code, out):
     """One IMM cycle (mixing, mode-matched EKF prediction and update, mode probabilities, combination).
 
     st: state, float64[13], updated in place; out: float64[11], written. Zhao et al., Fig. 2-3;
     Bar-Shalom, Li & Kirubarajan (2001), Section 11.6.6 (IMM). NaN zi/zq: prediction only.
+
+    The mode probabilities are kept as logarithms (state slots 10-11) and combined with log-sum-exp.
+    In linear form a probability that underflows to exactly 0 (inside a data bit at T = 1 ms and high
+    C/N0 the other bit's probability falls by 2 T C/N0 = 4000 in log per look at 60 dB-Hz) made
+    ``c_j L_j`` zero for both modes as soon as one correlator favoured the vanished mode by more than
+    ~745 (exp underflow), and the normalisation divided 0 by 0. The log form is exact, needs no floor
+    (a floor would change the filter's answer, e.g. let a glitch flip a bit that cannot change), and
+    equals the linear IMM to rounding wherever that one is defined (tested against the reference).
     """
-    mu1 = st[_ST_MU]
-    mu2 = st[_ST_MU + 1]
-    # 1. Mixing probabilities, transition matrix [[1-p, p], [p, 1-p]].
-    c1 = (1.0 - p_change) * mu1 + p_change * mu2
-    c2 = p_change * mu1 + (1.0 - p_change) * mu2
-    if c1 > 1e-300:
-        a11 = (1.0 - p_change) * mu1 / c1
-        a21 = p_change * mu2 / c1
+    l1 = st[_ST_LOGMU]
+    l2 = st[_ST_LOGMU + 1]
+    # 1. Mixing probabilities, transition matrix [[1-p, p], [p, 1-p]], in the log domain:
+    # log c_j = log sum_i Pi[i, j] mu_i, log mu_{i|j} = log Pi[i, j] + log mu_i - log c_j.
+    ls = _log0(1.0 - p_change)
+    lp = _log0(p_change)
+    b11, b21 = ls + l1, lp + l2
+    b12, b22 = lp + l1, ls + l2
+    lc1 = _logaddexp(b11, b21)
+    lc2 = _logaddexp(b12, b22)
+    if lc1 > -math.inf:
+        a11 = math.exp(b11 - lc1)
+        a21 = math.exp(b21 - lc1)
+    else:  # mode 1 impossible a priori: its mixed state has zero weight, any convex mix will do
+        a11 = math.exp(l1)
+        a21 = math.exp(l2)
+    if lc2 > -math.inf:
+        a12 = math.exp(b12 - lc2)
+        a22 = math.exp(b22 - lc2)
     else:
-        a11 = mu1
-        a21 = mu2
-    if c2 > 1e-300:
-        a12 = p_change * mu1 / c2
-        a22 = (1.0 - p_change) * mu2 / c2
-    else:
-        a12 = mu1
-        a22 = mu2
+        a12 = math.exp(l1)
+        a22 = math.exp(l2)
     if prior_plus == prior_plus:  # known or partly known bit: overrides the predicted mode probability
         c1 = min(max(prior_plus, 1e-12), 1.0 - 1e-12)
-        c2 = 1.0 - c1
+        lc1 = math.log(c1)
+        lc2 = math.log1p(-c1)
     x1p, x1w = st[_ST_X1], st[_ST_X1 + 1]
     x2p, x2w = st[_ST_X2], st[_ST_X2 + 1]
     p1a, p1b, p1c = st[_ST_P1], st[_ST_P1 + 1], st[_ST_P1 + 2]
@@ -208,7 +238,7 @@ def _imm_step(st, zi, zq, amp, sig, t, dphi, p_change, prior_plus, q_f, q_g, for
         else:
             n2p, n2w, n2a, n2b, n2c = mp, mw, pa, pb, pc
     # Combined prior (before the update), weighted by the predicted mode probabilities.
-    cw1 = c1 / (c1 + c2)
+    cw1 = math.exp(lc1 - _logaddexp(lc1, lc2))
     cw2 = 1.0 - cw1
     prior_phi = cw1 * pr[0, 0] + cw2 * pr[1, 0]
     prior_om = cw1 * pr[0, 1] + cw2 * pr[1, 1]
@@ -216,17 +246,21 @@ def _imm_step(st, zi, zq, amp, sig, t, dphi, p_change, prior_plus, q_f, q_g, for
         pr[1, 2] + (pr[1, 0] - prior_phi) ** 2
     )
     prior_p22 = cw1 * (pr[0, 3] + (pr[0, 1] - prior_om) ** 2) + cw2 * (pr[1, 3] + (pr[1, 1] - prior_om) ** 2)
-    # 5. Mode probabilities.
+    # 5. Mode probabilities, log mu_j = log c_j + log L_j - log sum_i c_i L_i. In the log domain a mode
+    # whose probability is below the smallest double (e.g. the other bit after 20 looks at T = 1 ms and
+    # 60 dB-Hz, log mu = -80 000) keeps its exact log value instead of 0, so no 0/0 can arise.
     if valid:
-        lmax = max(ll[0], ll[1])
-        u1 = c1 * math.exp(ll[0] - lmax)
-        u2 = c2 * math.exp(ll[1] - lmax)
+        lu1 = lc1 + ll[0]
+        lu2 = lc2 + ll[1]
+        lt = _logaddexp(lu1, lu2)
+        if not abs(lt) < math.inf:  # both likelihoods non-finite (absurd I/Q): no mode information
+            lu1, lu2, lt = lc1, lc2, _logaddexp(lc1, lc2)
     else:
-        u1 = c1
-        u2 = c2
-    tot = u1 + u2
-    mu1 = u1 / tot
-    mu2 = u2 / tot
+        lu1, lu2, lt = lc1, lc2, _logaddexp(lc1, lc2)
+    l1 = lu1 - lt
+    l2 = lu2 - lt
+    mu1 = math.exp(l1)
+    mu2 = math.exp(l2)
     # 6. Combination.
     phi = mu1 * n1p + mu2 * n2p
     om = mu1 * n1w + mu2 * n2w
@@ -246,7 +280,7 @@ def _imm_step(st, zi, zq, amp, sig, t, dphi, p_change, prior_plus, q_f, q_g, for
     st[_ST_P1], st[_ST_P1 + 1], st[_ST_P1 + 2] = n1a, n1b, n1c
     st[_ST_X2], st[_ST_X2 + 1] = n2p, n2w
     st[_ST_P2], st[_ST_P2 + 1], st[_ST_P2 + 2] = n2a, n2b, n2c
-    st[_ST_MU], st[_ST_MU + 1] = mu1, mu2
+    st[_ST_LOGMU], st[_ST_LOGMU + 1] = l1, l2
 
 
 @njit(cache=True)
@@ -365,7 +399,7 @@ class ImmCarrierFilter:
     @property
     def residual_phase_rad(self) -> float:
         """Current combined residual phase, rad."""
-        mu1, mu2 = self._st[_ST_MU], self._st[_ST_MU + 1]
+        mu1, mu2 = math.exp(self._st[_ST_LOGMU]), math.exp(self._st[_ST_LOGMU + 1])
         return float(mu1 * self._st[_ST_X1] + mu2 * self._st[_ST_X2])
 
     @property
@@ -404,7 +438,8 @@ class ImmCarrierFilter:
         st[_ST_X1], st[_ST_X1 + 1], st[_ST_X2], st[_ST_X2 + 1] = phase_rad, omega, phase_rad, omega
         st[_ST_P1], st[_ST_P1 + 1], st[_ST_P1 + 2] = pa, 0.0, pc
         st[_ST_P2], st[_ST_P2 + 1], st[_ST_P2 + 2] = pa, 0.0, pc
-        st[_ST_MU], st[_ST_MU + 1] = mode_probability_plus, 1.0 - mode_probability_plus
+        st[_ST_LOGMU] = math.log(mode_probability_plus) if mode_probability_plus > 0.0 else -math.inf
+        st[_ST_LOGMU + 1] = math.log1p(-mode_probability_plus) if mode_probability_plus < 1.0 else -math.inf
         st[_ST_SAT] = satellite_phase_rad
         self._initialized = True
 
@@ -529,7 +564,7 @@ class ImmCarrierFilter:
         self,
         in_phase: np.ndarray,
         quadrature: np.ndarray,
-        cn0_dbhz: np.ndarray,
+        cn0_dbhz: np.ndarray | float,
         integration_time_s: np.ndarray | float,
         predicted_phase_change_rad: np.ndarray,
         bit_transition_probability: np.ndarray | float | None = None,

@@ -107,38 +107,62 @@ _PLL_OUT_LEN = 5  # phase estimate, frequency (rad/s), discriminator, bandwidth,
 
 
 @njit(cache=True)
+def _bandwidth_hz(elapsed_s, start_hz, end_hz, duration_s):
+    """Scalar compiled form of :func:`bandwidth_schedule_hz` (same polynomial, same Horner order)."""
+    t = min(max(elapsed_s, 0.0), duration_s)
+    u = t * (70.0 / duration_s)
+    a4, a3, a2, a1, a0 = _EQ10_COEFFS_MS
+    um = u * 1e3
+    p = (((a4 * um + a3) * um + a2) * um + a1) * um + a0
+    p1m = 70.0 * 1e3
+    p1 = (((a4 * p1m + a3) * p1m + a2) * p1m + a1) * p1m + a0
+    return end_hz + (start_hz - end_hz) * ((p - p1) / (a0 - p1))
+
+
+@njit(cache=True)
+def _pll_step(st, zi, zq, tk, dphi, bn, amp, alpha, out):
+    """One Costas PLL step on scalars; st: float64[8] in place; out: float64[5] written.
+
+    NaN or infinite I/Q: the NCO free-runs (no discriminator update).
+    """
+    sat = st[4] + dphi
+    sat = sat - TWO_PI * math.floor((sat + math.pi) / TWO_PI)
+    st[4] = sat
+    st[0] += tk * st[1]
+    st[5] += tk
+    e = 0.0
+    if zi == zi and zq == zq and abs(zi) < math.inf and abs(zq) < math.inf:
+        th = sat + st[0]
+        c = math.cos(th)
+        s = math.sin(th)
+        ir = zi * c + zq * s
+        qr = -zi * s + zq * c
+        if ir != 0.0:
+            e = math.atan(qr / ir)
+        elif qr != 0.0:
+            e = math.copysign(0.5 * math.pi, qr)
+        w0 = bn / THIRD_ORDER_BN_TO_W0
+        st[3] += tk * w0 * w0 * w0 * e
+        st[2] += tk * (st[3] + THIRD_ORDER_A3 * w0 * w0 * e)
+        st[1] = st[2] + THIRD_ORDER_B3 * w0 * e
+        a2 = amp * amp
+        st[6] += alpha * ((ir * ir - qr * qr) / a2 - st[6])
+        st[7] += alpha * ((ir * ir + qr * qr) / a2 - st[7])
+    out[0] = st[0] + e
+    out[1] = st[2]
+    out[2] = e
+    out[3] = bn
+    out[4] = st[6]
+
+
+@njit(cache=True)
 def _pll_run(st, zi, zq, t, dphi, bn, amp, alpha, out):
-    """Costas PLL over a batch; NaN I/Q: the NCO free-runs (no discriminator update)."""
+    """Costas PLL over a batch (:func:`_pll_step` per sample); out: float64[n, 5]."""
+    row = np.empty(_PLL_OUT_LEN)
     for k in range(zi.shape[0]):
-        tk = t[k]
-        sat = st[4] + dphi[k]
-        sat = sat - TWO_PI * math.floor((sat + math.pi) / TWO_PI)
-        st[4] = sat
-        st[0] += tk * st[1]
-        st[5] += tk
-        e = 0.0
-        if zi[k] == zi[k] and zq[k] == zq[k] and abs(zi[k]) < math.inf and abs(zq[k]) < math.inf:
-            th = sat + st[0]
-            c = math.cos(th)
-            s = math.sin(th)
-            ir = zi[k] * c + zq[k] * s
-            qr = -zi[k] * s + zq[k] * c
-            if ir != 0.0:
-                e = math.atan(qr / ir)
-            elif qr != 0.0:
-                e = math.copysign(0.5 * math.pi, qr)
-            w0 = bn[k] / THIRD_ORDER_BN_TO_W0
-            st[3] += tk * w0 * w0 * w0 * e
-            st[2] += tk * (st[3] + THIRD_ORDER_A3 * w0 * w0 * e)
-            st[1] = st[2] + THIRD_ORDER_B3 * w0 * e
-            a2 = amp[k] * amp[k]
-            st[6] += alpha[k] * ((ir * ir - qr * qr) / a2 - st[6])
-            st[7] += alpha[k] * ((ir * ir + qr * qr) / a2 - st[7])
-        out[k, 0] = st[0] + e
-        out[k, 1] = st[2]
-        out[k, 2] = e
-        out[k, 3] = bn[k]
-        out[k, 4] = st[6]
+        _pll_step(st, zi[k], zq[k], t[k], dphi[k], bn[k], amp[k], alpha[k], row)
+        for m in range(_PLL_OUT_LEN):
+            out[k, m] = row[m]
 
 
 @dataclass(frozen=True)
@@ -184,6 +208,7 @@ class CostasPll:
             raise ValueError("params must be a PllParams")
         self.params = params
         self._st = np.zeros(_PLL_ST_LEN)
+        self._out = np.zeros(_PLL_OUT_LEN)
         self._initialized = False
 
     @property
@@ -312,25 +337,35 @@ class CostasPll:
         integration_time_s: float,
         predicted_phase_change_rad: float,
     ) -> PllStepResult:
-        """One loop step (see :meth:`process_batch`); raises ValueError on invalid T, C/N0 or phase change."""
+        """One loop step (compiled scalar step, same arithmetic as :meth:`process_batch`).
+
+        Args and units as :meth:`process_batch`, for one sample (NaN I/Q: the NCO free-runs).
+
+        Raises:
+            ValueError: not initialised, or invalid T, C/N0 or phase change (the tracker counts these
+            before calling).
+        """
         if not (math.isfinite(integration_time_s) and integration_time_s > 0):
             raise ValueError(f"integration_time_s must be finite and > 0, got {integration_time_s!r}")
         if not (math.isfinite(cn0_dbhz) and CN0_MIN_DBHZ <= cn0_dbhz <= CN0_MAX_DBHZ):
             raise ValueError(f"cn0_dbhz must be in [{CN0_MIN_DBHZ}, {CN0_MAX_DBHZ}], got {cn0_dbhz!r}")
         if not math.isfinite(predicted_phase_change_rad):
             raise ValueError("predicted_phase_change_rad must be finite")
-        r = self.process_batch(
-            np.array([in_phase], dtype=float),
-            quadrature,
-            cn0_dbhz,
-            integration_time_s,
-            np.array([predicted_phase_change_rad]),
+        if not self._initialized:
+            raise ValueError("PLL not initialised")
+        p = self.params
+        t = float(integration_time_s)
+        bn = _bandwidth_hz(
+            self._st[5], p.start_bandwidth_hz, p.end_bandwidth_hz, p.tightening_duration_s
         )
+        amp = math.sqrt(2.0 * t * 10.0 ** (cn0_dbhz / 10.0)) if p.iq_scaling == "unit_noise" else 1.0
+        alpha = min(t / p.lock_time_constant_s, 1.0)
+        out = self._out
+        _pll_step(
+            self._st, float(in_phase), float(quadrature), t, float(predicted_phase_change_rad), bn, amp, alpha, out
+        )
+        o = out.tolist()
+        finite = math.isfinite(o[0]) and math.isfinite(o[1])
         return PllStepResult(
-            float(r.phase_rad[0]),
-            float(r.frequency_hz[0]),
-            float(r.discriminator_rad[0]),
-            float(r.bandwidth_hz[0]),
-            float(r.lock_metric[0]),
-            bool(r.locked[0]),
+            o[0], o[1] / TWO_PI, o[2], o[3], o[4], finite and o[4] > p.lock_threshold
         )

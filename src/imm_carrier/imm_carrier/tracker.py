@@ -1,9 +1,16 @@
 """Per-channel carrier tracking manager: one IMM (or PLL) per satellite, with input checks and counters.
 
-The node converts each CorrelatorArray into ``CorrelatorSample``s and calls
-``CarrierTracker.process(stamp_ns, samples)``; it publishes the returned ``CarrierPhaseEstimate``s
-and the ``counters`` as diagnostics. Time is the message stamp in integer nanoseconds (end of the
+The node hands the correlators of one interval to ``CarrierTracker.process_arrays(stamp_ns, ...)`` as
+arrays (one element per channel) and gets one :class:`CarrierPhaseBatch` back (one row per accepted
+correlator); ``CarrierTracker.process(stamp_ns, samples)`` is the same on ``CorrelatorSample``s and
+returns ``CarrierPhaseEstimate``s. Time is the message stamp in integer nanoseconds (end of the
 integration interval); no clock is read.
+
+Speed: all channels of one interval go through ONE compiled call (:func:`_track_epoch`): channel
+look-up, life cycle (start, timeout, gap restart), every input check and counter, and the filter steps
+(the IMM's :func:`imm_carrier.imm._imm_step`, the PLL's :func:`imm_carrier.pll._pll_step`). The
+channel states live in a 2-D array, one row per slot, and the (constellation, svid) -> slot map is a
+65536-entry table, so no Python object is created per channel.
 """
 
 from __future__ import annotations
@@ -12,7 +19,30 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from imm_carrier.imm import ImmCarrierFilter, ImmParams
+import numpy as np
+from numba import njit
+
+from gnss_common.clock_model import PROCESS_NOISE_FORMS
+from imm_carrier.imm import (
+    _O_MU1,
+    _O_MU2,
+    _O_OMEGA,
+    _O_P11,
+    _O_P22,
+    _O_PHI,
+    _O_PRIOR_PHI,
+    _OUT_LEN,
+    _ST_LOGMU,
+    _ST_P1,
+    _ST_P2,
+    _ST_SAT,
+    _ST_X1,
+    _ST_X2,
+    ImmParams,
+    _amp_sigma,
+    _imm_step,
+    _wrap,
+)
 from imm_carrier.measurement_model import (
     CN0_MAX_DBHZ,
     CN0_MIN_DBHZ,
@@ -21,10 +51,11 @@ from imm_carrier.measurement_model import (
     CarrierPhaseEstimate,
     CorrelatorSample,
 )
-from imm_carrier.pll import CostasPll, PllParams
+from imm_carrier.pll import _PLL_OUT_LEN, PllParams, _bandwidth_hz, _pll_step
 
 METHODS = ("imm", "pll")
 MAX_SVID = 255
+MAX_CONSTELLATION = 255
 
 COUNTER_KEYS = (
     "processed",
@@ -41,8 +72,82 @@ COUNTER_KEYS = (
     "rejected_invalid_svid",
     "rejected_duplicate_channel",
     "slips_detected",
+    "channels_restarted_nonfinite",
 )
-"""Keys of CarrierTracker.counters."""
+"""Keys of CarrierTracker.counters (their order is the compiled kernel's counter index)."""
+(
+    _K_PROCESSED,
+    _K_STARTED,
+    _K_DROPPED,
+    _K_RESTARTED_GAP,
+    _K_NONFINITE_IQ,
+    _K_INTEGRATION_TIME,
+    _K_CN0_RANGE,
+    _K_CN0_USED_LAST,
+    _K_CN0_MISSING,
+    _K_PREDICTED_PHASE,
+    _K_STAMP_BACKWARDS,
+    _K_INVALID_SVID,
+    _K_DUPLICATE,
+    _K_SLIPS,
+    _K_RESTARTED_NONFINITE,
+) = range(len(COUNTER_KEYS))
+_REJECTED_INDICES = np.array([i for i, k in enumerate(COUNTER_KEYS) if k.startswith("rejected_")])
+
+BATCH_COLUMNS = (
+    "constellation",
+    "svid",
+    "phase_rad",
+    "phase_std_rad",
+    "frequency_hz",
+    "frequency_std_hz",
+    "data_bit",
+    "data_bit_probability",
+    "mode_probability_plus",
+    "mode_probability_minus",
+    "locked",
+    "cycle_slips",
+)
+"""Columns of CarrierPhaseBatch.values, in order (the fields of rfi_msgs/CarrierPhase)."""
+(
+    _V_CONST,
+    _V_SVID,
+    _V_PHASE,
+    _V_PHASE_STD,
+    _V_FREQ,
+    _V_FREQ_STD,
+    _V_BIT,
+    _V_BIT_PROB,
+    _V_MU1,
+    _V_MU2,
+    _V_LOCKED,
+    _V_SLIPS,
+) = range(len(BATCH_COLUMNS))
+N_BATCH_COLUMNS = len(BATCH_COLUMNS)
+
+_M_IMM, _M_PLL = 0, 1
+# Layout of the kernel's float configuration vector.
+(
+    _C_QF,
+    _C_QG,
+    _C_FORM,
+    _C_UNIT_NOISE,
+    _C_P_BIT,
+    _C_BIT_PERIOD,
+    _C_INIT_PHASE_STD,
+    _C_INIT_FREQ_STD,
+    _C_LOCK_STD,
+    _C_SLIP_THR,
+    _C_MAX_GAP,
+    _C_BW_START,
+    _C_BW_END,
+    _C_BW_DURATION,
+    _C_LOCK_TC,
+    _C_LOCK_THR,
+) = range(16)
+_CFG_LEN = 16
+_STATE_WIDTH = 16  # >= the IMM's 13 and the PLL's 8 state slots
+_KEY_TABLE_SIZE = (MAX_CONSTELLATION + 1) * 256
 
 
 @dataclass(frozen=True)
@@ -79,12 +184,272 @@ class TrackerParams:
             raise ValueError("bit_period_s must be finite and >= 0")
 
 
-@dataclass
-class _Channel:
-    filt: ImmCarrierFilter | CostasPll
-    last_stamp_ns: int
-    last_cn0_dbhz: float
-    slips: int = 0
+@dataclass(frozen=True)
+class CarrierPhaseBatch:
+    """Estimates of one interval, one row per accepted correlator, in input order.
+
+    Attributes:
+        stamp_ns: stamp of the interval, ns.
+        method: METHOD_IMM or METHOD_PLL.
+        values: shape (n, N_BATCH_COLUMNS), float64, columns BATCH_COLUMNS with the units of
+            CarrierPhaseEstimate (constellation, svid, data_bit, locked (0/1) and cycle_slips hold
+            integers; the mode probabilities are NaN for the PLL, which has none).
+    """
+
+    stamp_ns: int
+    method: int
+    values: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.values.shape[0])
+
+    def column(self, name: str) -> np.ndarray:
+        """Column ``name`` (one of BATCH_COLUMNS), shape (n,), a view."""
+        return self.values[:, BATCH_COLUMNS.index(name)]
+
+    @property
+    def locked(self) -> np.ndarray:
+        """Lock flags, bool, shape (n,)."""
+        return self.values[:, _V_LOCKED] > 0.5
+
+    def to_estimates(self) -> tuple[CarrierPhaseEstimate, ...]:
+        """The rows as CarrierPhaseEstimate dataclasses (convenient, not for the hot path)."""
+        out = []
+        for r in self.values.tolist():
+            modes = (r[_V_MU1], r[_V_MU2]) if self.method == METHOD_IMM else ()
+            out.append(
+                CarrierPhaseEstimate(
+                    stamp_ns=self.stamp_ns,
+                    constellation=int(r[_V_CONST]),
+                    svid=int(r[_V_SVID]),
+                    method=self.method,
+                    phase_rad=r[_V_PHASE],
+                    phase_std_rad=r[_V_PHASE_STD],
+                    frequency_hz=r[_V_FREQ],
+                    frequency_std_hz=r[_V_FREQ_STD],
+                    data_bit=int(r[_V_BIT]),
+                    data_bit_probability=r[_V_BIT_PROB],
+                    mode_probabilities=modes,
+                    locked=r[_V_LOCKED] > 0.5,
+                    cycle_slips=int(r[_V_SLIPS]),
+                )
+            )
+        return tuple(out)
+
+
+@njit(cache=True)
+def _transition_probability(stamp_ns, t_s, p, bit_s):
+    """IMM bit-transition probability of the interval ending at stamp_ns: p on a bit edge, else 0."""
+    if bit_s <= 0.0 or t_s >= bit_s - 1e-9:
+        return p
+    start_s = stamp_ns * 1e-9 - t_s
+    x = start_s / bit_s
+    phase = x - math.floor(x + 0.5)
+    return p if abs(phase) * bit_s < 0.5 * t_s else 0.0
+
+
+@njit(cache=True)
+def _init_channel(method, st, zi, zq, dphi, cfg, row):
+    """Start a channel from its first correlator (IMM: initialize_from_correlator; PLL: the same) and
+    write its first, unlocked estimate into row."""
+    sat = _wrap(dphi)
+    phase = math.atan2(zq, zi) - sat
+    for m in range(st.shape[0]):
+        st[m] = 0.0
+    row[_V_PHASE] = phase
+    row[_V_FREQ] = 0.0
+    row[_V_BIT] = 0.0
+    row[_V_BIT_PROB] = 0.5
+    row[_V_LOCKED] = 0.0
+    row[_V_SLIPS] = 0.0
+    if method == _M_IMM:
+        pa = cfg[_C_INIT_PHASE_STD] ** 2
+        pc = (2.0 * math.pi * cfg[_C_INIT_FREQ_STD]) ** 2
+        st[_ST_X1] = phase
+        st[_ST_X2] = phase
+        st[_ST_P1] = pa
+        st[_ST_P1 + 2] = pc
+        st[_ST_P2] = pa
+        st[_ST_P2 + 2] = pc
+        st[_ST_LOGMU] = math.log(0.5)
+        st[_ST_LOGMU + 1] = math.log(0.5)
+        st[_ST_SAT] = sat
+        row[_V_PHASE_STD] = cfg[_C_INIT_PHASE_STD]
+        row[_V_FREQ_STD] = cfg[_C_INIT_FREQ_STD]
+        row[_V_MU1] = 0.5
+        row[_V_MU2] = 0.5
+    else:
+        st[0] = phase
+        st[4] = sat
+        st[6] = 1.0
+        st[7] = 1.0
+        row[_V_PHASE_STD] = math.nan
+        row[_V_FREQ_STD] = math.nan
+        row[_V_MU1] = math.nan
+        row[_V_MU2] = math.nan
+
+
+@njit(cache=True)
+def _track_epoch(
+    method,
+    stamp_ns,
+    timeout_ns,
+    const,
+    svid,
+    t,
+    zi,
+    zq,
+    cn0,
+    dphi,
+    cfg,
+    slot_of_key,
+    key_of_slot,
+    state,
+    last_stamp,
+    last_cn0,
+    slips,
+    was_locked,
+    seen,
+    call_id,
+    counters,
+    values,
+):
+    """All channels of one interval: life cycle, input checks, counters, filter steps (see CarrierTracker).
+
+    Returns the number of rows written into values (one per accepted correlator, input order).
+    """
+    # Channels not seen for longer than the timeout are dropped.
+    for s in range(key_of_slot.shape[0]):
+        key = key_of_slot[s]
+        if key >= 0 and stamp_ns - last_stamp[s] > timeout_ns:
+            slot_of_key[key] = -1
+            key_of_slot[s] = -1
+            counters[_K_DROPPED] += 1
+    imm_out = np.empty(_OUT_LEN)
+    pll_out = np.empty(_PLL_OUT_LEN)
+    unit_noise = cfg[_C_UNIT_NOISE] > 0.5
+    n_out = 0
+    for k in range(const.shape[0]):
+        c = const[k]
+        sv = svid[k]
+        if c < 0 or c > MAX_CONSTELLATION or sv <= 0 or sv > MAX_SVID:
+            counters[_K_INVALID_SVID] += 1
+            continue
+        key = c * 256 + sv
+        if seen[key] == call_id:
+            counters[_K_DUPLICATE] += 1
+            continue
+        seen[key] = call_id
+        tk = t[k]
+        if not (tk > 0.0 and tk < math.inf):
+            counters[_K_INTEGRATION_TIME] += 1
+            continue
+        i_k = zi[k]
+        q_k = zq[k]
+        if not (abs(i_k) < math.inf and abs(q_k) < math.inf):
+            counters[_K_NONFINITE_IQ] += 1
+            continue
+        d_k = dphi[k]
+        if not abs(d_k) < math.inf:
+            counters[_K_PREDICTED_PHASE] += 1
+            continue
+        slot = slot_of_key[key]
+        c0 = cn0[k]
+        if c0 != c0:
+            if slot < 0:
+                counters[_K_CN0_MISSING] += 1
+                continue
+            c0 = last_cn0[slot]
+            counters[_K_CN0_USED_LAST] += 1
+        elif not (CN0_MIN_DBHZ <= c0 <= CN0_MAX_DBHZ):
+            counters[_K_CN0_RANGE] += 1
+            continue
+        if slot >= 0 and stamp_ns <= last_stamp[slot]:
+            counters[_K_STAMP_BACKWARDS] += 1
+            continue
+        if slot >= 0 and float(stamp_ns - last_stamp[slot]) > cfg[_C_MAX_GAP] * tk * 1e9:
+            slot_of_key[key] = -1
+            key_of_slot[slot] = -1
+            counters[_K_RESTARTED_GAP] += 1
+            slot = -1
+        counters[_K_PROCESSED] += 1
+        row = values[n_out]
+        n_out += 1
+        row[_V_CONST] = c
+        row[_V_SVID] = sv
+        if slot < 0:
+            for s in range(key_of_slot.shape[0]):  # the caller guarantees a free slot
+                if key_of_slot[s] < 0:
+                    slot = s
+                    break
+            slot_of_key[key] = slot
+            key_of_slot[slot] = key
+            last_stamp[slot] = stamp_ns
+            last_cn0[slot] = c0
+            slips[slot] = 0
+            was_locked[slot] = False
+            _init_channel(method, state[slot], i_k, q_k, d_k, cfg, row)
+            counters[_K_STARTED] += 1
+            continue
+        last_stamp[slot] = stamp_ns
+        last_cn0[slot] = c0
+        st = state[slot]
+        if method == _M_IMM:
+            amp, sig = _amp_sigma(c0, tk, unit_noise)
+            p = _transition_probability(stamp_ns, tk, cfg[_C_P_BIT], cfg[_C_BIT_PERIOD])
+            _imm_step(
+                st, i_k, q_k, amp, sig, tk, d_k, p, math.nan, cfg[_C_QF], cfg[_C_QG], int(cfg[_C_FORM]), imm_out
+            )
+            phase = imm_out[_O_PHI]
+            omega = imm_out[_O_OMEGA]
+            std = math.sqrt(max(imm_out[_O_P11], 0.0))
+            mu1 = imm_out[_O_MU1]
+            mu2 = imm_out[_O_MU2]
+            finite = abs(phase) < math.inf and abs(omega) < math.inf and abs(std) < math.inf
+            if finite and abs(phase - imm_out[_O_PRIOR_PHI]) > cfg[_C_SLIP_THR]:
+                slips[slot] += 1
+                counters[_K_SLIPS] += 1
+            row[_V_PHASE] = phase
+            row[_V_PHASE_STD] = std
+            row[_V_FREQ] = omega / (2.0 * math.pi)
+            row[_V_FREQ_STD] = math.sqrt(max(imm_out[_O_P22], 0.0)) / (2.0 * math.pi)
+            row[_V_BIT] = 1.0 if mu1 > mu2 else (-1.0 if mu2 > mu1 else 0.0)
+            row[_V_BIT_PROB] = max(mu1, mu2)
+            row[_V_MU1] = mu1
+            row[_V_MU2] = mu2
+            row[_V_LOCKED] = 1.0 if (finite and std < cfg[_C_LOCK_STD]) else 0.0
+        else:
+            bn = _bandwidth_hz(st[5], cfg[_C_BW_START], cfg[_C_BW_END], cfg[_C_BW_DURATION])
+            amp = math.sqrt(2.0 * tk * 10.0 ** (c0 / 10.0)) if unit_noise else 1.0
+            alpha = min(tk / cfg[_C_LOCK_TC], 1.0)
+            _pll_step(st, i_k, q_k, tk, d_k, bn, amp, alpha, pll_out)
+            phase = pll_out[0]
+            finite = abs(phase) < math.inf and abs(pll_out[1]) < math.inf
+            locked = finite and pll_out[4] > cfg[_C_LOCK_THR]
+            finite = finite and abs(pll_out[4]) < math.inf and abs(st[7]) < math.inf  # lock averages too
+            if was_locked[slot] and not locked:
+                slips[slot] += 1
+                counters[_K_SLIPS] += 1
+            was_locked[slot] = locked
+            # Costas loop: the bit is the sign of the rotated prompt I (phase error within +-pi/2).
+            th = st[4] + phase
+            i_rot = i_k * math.cos(th) + q_k * math.sin(th)
+            bit = 1.0 if i_rot > 0.0 else (-1.0 if i_rot < 0.0 else 0.0)
+            row[_V_PHASE] = phase
+            row[_V_PHASE_STD] = math.nan
+            row[_V_FREQ] = pll_out[1] / (2.0 * math.pi)
+            row[_V_FREQ_STD] = math.nan
+            row[_V_BIT] = bit
+            row[_V_BIT_PROB] = 0.5 if bit == 0.0 else 1.0
+            row[_V_MU1] = math.nan
+            row[_V_MU2] = math.nan
+            row[_V_LOCKED] = 1.0 if locked else 0.0
+        row[_V_SLIPS] = slips[slot]
+        if not finite:  # absurd input (e.g. |I| ~ 1e200) overflowed the filter: restart on the next sample
+            slot_of_key[key] = -1
+            key_of_slot[slot] = -1
+            counters[_K_RESTARTED_NONFINITE] += 1
+    return n_out
 
 
 class CarrierTracker:
@@ -93,52 +458,178 @@ class CarrierTracker:
     ``cycle_slips`` in the estimates counts slips *detected* on line: for the IMM, steps where the
     update moved the phase by more than ``slip_jump_threshold_rad``; for the PLL, losses of the lock
     indicator. True slips against truth are counted offline by cycle_slips.count_cycle_slips.
+
+    Per correlator, in order: (constellation, svid) must be a channel id (0 <= constellation <= 255,
+    0 < svid <= 255), not repeated in the interval; T finite and > 0; I, Q and the predicted phase
+    change finite; C/N0 in [0, 70] dB-Hz (NaN: the channel's last value, rejected for a new channel);
+    the stamp must increase per channel. A gap longer than max_gap_intervals restarts the channel, and
+    so does a non-finite estimate (only absurd correlator magnitudes overflow the filter; that answer
+    is published unlocked and counted as channels_restarted_nonfinite).
+    Rejections are counted (COUNTER_KEYS), never raised; a new channel's first correlator only
+    initialises it and is returned with locked = False.
     """
+
+    _INITIAL_SLOTS = 64
+    _key_of_slot: np.ndarray
+    _state: np.ndarray
+    _last_stamp: np.ndarray
+    _last_cn0: np.ndarray
+    _slips: np.ndarray
+    _was_locked: np.ndarray
 
     def __init__(self, params: TrackerParams) -> None:
         if not isinstance(params, TrackerParams):
             raise ValueError("params must be a TrackerParams")
         self.params = params
-        self._channels: dict[tuple[int, int], _Channel] = {}
-        self._counters = dict.fromkeys(COUNTER_KEYS, 0)
-        self._pll_was_locked: dict[tuple[int, int], bool] = {}
+        self._method_code = _M_IMM if params.method == "imm" else _M_PLL
+        self._method = METHOD_IMM if params.method == "imm" else METHOD_PLL
+        self._timeout_ns = int(params.channel_timeout_s * 1e9)
+        imm, pll = params.imm, params.pll
+        q_f, q_g = imm.q_phase
+        cfg = np.zeros(_CFG_LEN)
+        cfg[_C_QF], cfg[_C_QG] = q_f, q_g
+        cfg[_C_FORM] = PROCESS_NOISE_FORMS.index(imm.process_noise_form)
+        unit_noise = imm.iq_scaling == "unit_noise" if params.method == "imm" else pll.iq_scaling == "unit_noise"
+        cfg[_C_UNIT_NOISE] = 1.0 if unit_noise else 0.0
+        cfg[_C_P_BIT] = imm.bit_transition_probability
+        cfg[_C_BIT_PERIOD] = params.bit_period_s
+        cfg[_C_INIT_PHASE_STD] = imm.initial_phase_std_rad
+        cfg[_C_INIT_FREQ_STD] = imm.initial_frequency_std_hz
+        cfg[_C_LOCK_STD] = imm.lock_phase_std_max_rad
+        cfg[_C_SLIP_THR] = imm.slip_jump_threshold_rad
+        cfg[_C_MAX_GAP] = params.max_gap_intervals
+        cfg[_C_BW_START] = pll.start_bandwidth_hz
+        cfg[_C_BW_END] = pll.end_bandwidth_hz
+        cfg[_C_BW_DURATION] = pll.tightening_duration_s
+        cfg[_C_LOCK_TC] = pll.lock_time_constant_s
+        cfg[_C_LOCK_THR] = pll.lock_threshold
+        self._cfg = cfg
+        self._slot_of_key = np.full(_KEY_TABLE_SIZE, -1, dtype=np.int64)
+        self._seen = np.zeros(_KEY_TABLE_SIZE, dtype=np.int64)
+        self._call_id = 0
+        self._counters = np.zeros(len(COUNTER_KEYS), dtype=np.int64)
+        self._allocate(self._INITIAL_SLOTS)
+
+    def _allocate(self, n_slots: int) -> None:
+        """(Re)allocate the slot arrays with n_slots rows, keeping the live channels."""
+        old = self._key_of_slot if hasattr(self, "_key_of_slot") else None
+        key_of_slot = np.full(n_slots, -1, dtype=np.int64)
+        state = np.zeros((n_slots, _STATE_WIDTH))
+        last_stamp = np.zeros(n_slots, dtype=np.int64)
+        last_cn0 = np.zeros(n_slots)
+        slips = np.zeros(n_slots, dtype=np.int64)
+        was_locked = np.zeros(n_slots, dtype=np.bool_)
+        if old is not None:
+            m = old.size
+            key_of_slot[:m] = old
+            state[:m] = self._state
+            last_stamp[:m] = self._last_stamp
+            last_cn0[:m] = self._last_cn0
+            slips[:m] = self._slips
+            was_locked[:m] = self._was_locked
+        self._key_of_slot, self._state, self._last_stamp = key_of_slot, state, last_stamp
+        self._last_cn0, self._slips, self._was_locked = last_cn0, slips, was_locked
 
     @property
     def counters(self) -> dict[str, int]:
         """Copy of the counters (see COUNTER_KEYS)."""
-        return dict(self._counters)
+        return dict(zip(COUNTER_KEYS, self._counters.tolist(), strict=True))
+
+    @property
+    def rejected_total(self) -> int:
+        """Sum of the ``rejected_*`` counters (cheap; for the node's per-message check)."""
+        return int(self._counters[_REJECTED_INDICES].sum())
 
     @property
     def channel_keys(self) -> tuple[tuple[int, int], ...]:
         """(constellation, svid) of the live channels."""
-        return tuple(self._channels)
+        return tuple((k // 256, k % 256) for k in self._key_of_slot.tolist() if k >= 0)
 
-    def _drop_stale(self, stamp_ns: int) -> None:
-        limit = int(self.params.channel_timeout_s * 1e9)
-        for key in [k for k, ch in self._channels.items() if stamp_ns - ch.last_stamp_ns > limit]:
-            del self._channels[key]
-            self._pll_was_locked.pop(key, None)
-            self._counters["channels_dropped_timeout"] += 1
-
-    def _new_channel(self, s: CorrelatorSample, stamp_ns: int, cn0: float) -> _Channel:
-        if self.params.method == "imm":
-            filt: ImmCarrierFilter | CostasPll = ImmCarrierFilter(self.params.imm)
-        else:
-            filt = CostasPll(self.params.pll)
-        filt.initialize_from_correlator(s.in_phase, s.quadrature, s.predicted_phase_change_rad)
-        return _Channel(filt=filt, last_stamp_ns=stamp_ns, last_cn0_dbhz=cn0)
+    @property
+    def channel_count(self) -> int:
+        """Number of live channels."""
+        return int(np.count_nonzero(self._key_of_slot >= 0))
 
     def _transition_probability(self, stamp_ns: int, t_s: float) -> float:
-        p = self.params.imm.bit_transition_probability
-        bit = self.params.bit_period_s
-        if bit <= 0 or t_s >= bit - 1e-9:
-            return p
-        start_s = stamp_ns * 1e-9 - t_s
-        phase = start_s / bit - round(start_s / bit)
-        return p if abs(phase) * bit < 0.5 * t_s else 0.0
+        """The IMM's bit-transition probability for the interval ending at stamp_ns (ns) of length t_s (s)."""
+        return float(
+            _transition_probability(
+                int(stamp_ns), float(t_s), self.params.imm.bit_transition_probability, self.params.bit_period_s
+            )
+        )
+
+    def process_arrays(
+        self,
+        stamp_ns: int,
+        constellation: np.ndarray,
+        svid: np.ndarray,
+        integration_time_s: np.ndarray,
+        in_phase: np.ndarray,
+        quadrature: np.ndarray,
+        cn0_dbhz: np.ndarray,
+        predicted_phase_change_rad: np.ndarray,
+    ) -> CarrierPhaseBatch:
+        """Process the correlators of one interval, given as arrays (one element per channel).
+
+        Args:
+            stamp_ns: end of the integration interval, ns (int).
+            constellation: constellation codes, shape (n,), integers.
+            svid: satellite numbers, shape (n,), integers.
+            integration_time_s: T, s, shape (n,).
+            in_phase, quadrature: prompt I and Q, correlator units, shape (n,).
+            cn0_dbhz: C/N0, dB-Hz, shape (n,) (NaN: unknown).
+            predicted_phase_change_rad: satellite-motion phase change over the interval, rad, shape (n,).
+
+        Returns:
+            CarrierPhaseBatch with one row per accepted correlator, in input order. Rejections are
+            counted (``counters``). The counters change only if the call returns: should the compiled
+            core raise, they are left as they were before the call.
+
+        Raises:
+            ValueError: arrays of different lengths or not 1-D.
+        """
+        const = np.asarray(constellation, dtype=np.int64)
+        n = const.shape[0] if const.ndim == 1 else -1
+        sv = np.asarray(svid, dtype=np.int64)
+        t, zi, zq, cn0, dphi = (np.ascontiguousarray(a, dtype=np.float64) for a in
+                                (integration_time_s, in_phase, quadrature, cn0_dbhz, predicted_phase_change_rad))
+        if n < 0 or sv.shape != (n,) or any(a.shape != (n,) for a in (t, zi, zq, cn0, dphi)):
+            raise ValueError("the correlator arrays must be 1-D and of equal length")
+        live = int(np.count_nonzero(self._key_of_slot >= 0))
+        if live + n > self._key_of_slot.size:
+            self._allocate(max(2 * self._key_of_slot.size, live + n))
+        self._call_id += 1
+        counters = self._counters.copy()
+        values = np.empty((n, N_BATCH_COLUMNS))
+        n_out = _track_epoch(
+            self._method_code,
+            int(stamp_ns),
+            self._timeout_ns,
+            np.ascontiguousarray(const),
+            np.ascontiguousarray(sv),
+            t,
+            zi,
+            zq,
+            cn0,
+            dphi,
+            self._cfg,
+            self._slot_of_key,
+            self._key_of_slot,
+            self._state,
+            self._last_stamp,
+            self._last_cn0,
+            self._slips,
+            self._was_locked,
+            self._seen,
+            self._call_id,
+            counters,
+            values,
+        )
+        self._counters = counters
+        return CarrierPhaseBatch(int(stamp_ns), self._method, values[:n_out])
 
     def process(self, stamp_ns: int, samples: Sequence[CorrelatorSample]) -> tuple[CarrierPhaseEstimate, ...]:
-        """Process the correlators of one interval.
+        """Process the correlators of one interval given as CorrelatorSample (see :meth:`process_arrays`).
 
         Args:
             stamp_ns: end of the integration interval, ns (int).
@@ -148,134 +639,18 @@ class CarrierTracker:
             One estimate per accepted sample (rejected samples are counted, not returned). A new
             channel's first sample only initialises it and is returned with locked=False.
         """
-        stamp_ns = int(stamp_ns)
-        self._drop_stale(stamp_ns)
-        out = []
-        seen: set[tuple[int, int]] = set()
-        c = self._counters
-        for s in samples:
-            key = (int(s.constellation), int(s.svid))
-            if not (0 < key[1] <= MAX_SVID):
-                c["rejected_invalid_svid"] += 1
-                continue
-            if key in seen:
-                c["rejected_duplicate_channel"] += 1
-                continue
-            seen.add(key)
-            t_s = s.integration_time_s
-            if not (math.isfinite(t_s) and t_s > 0):
-                c["rejected_integration_time"] += 1
-                continue
-            if not (math.isfinite(s.in_phase) and math.isfinite(s.quadrature)):
-                c["rejected_nonfinite_iq"] += 1
-                continue
-            if not math.isfinite(s.predicted_phase_change_rad):
-                c["rejected_predicted_phase"] += 1
-                continue
-            ch = self._channels.get(key)
-            cn0 = s.cn0_dbhz
-            if math.isnan(cn0):
-                if ch is None:
-                    c["rejected_cn0_missing"] += 1
-                    continue
-                cn0 = ch.last_cn0_dbhz
-                c["cn0_missing_used_last"] += 1
-            elif not (CN0_MIN_DBHZ <= cn0 <= CN0_MAX_DBHZ):
-                c["rejected_cn0_range"] += 1
-                continue
-            if ch is not None and stamp_ns <= ch.last_stamp_ns:
-                c["rejected_stamp_backwards"] += 1
-                continue
-            if ch is not None and (stamp_ns - ch.last_stamp_ns) > self.params.max_gap_intervals * t_s * 1e9:
-                del self._channels[key]
-                c["channels_restarted_gap"] += 1
-                ch = None
-            c["processed"] += 1
-            if ch is None:
-                ch = self._new_channel(s, stamp_ns, cn0)
-                self._channels[key] = ch
-                c["channels_started"] += 1
-                out.append(self._initial_estimate(stamp_ns, key, ch))
-                continue
-            ch.last_stamp_ns = stamp_ns
-            ch.last_cn0_dbhz = cn0
-            out.append(self._step(stamp_ns, key, ch, s, cn0))
-        return tuple(out)
+        def ident(v: int) -> int:  # ids beyond int64 are invalid anyway: map them to -1 (rejected)
+            v = int(v)
+            return v if -1 <= v < 2**31 else -1
 
-    def _initial_estimate(self, stamp_ns: int, key: tuple[int, int], ch: _Channel) -> CarrierPhaseEstimate:
-        method = METHOD_IMM if self.params.method == "imm" else METHOD_PLL
-        p = self.params.imm
-        phase = ch.filt.residual_phase_rad
-        is_imm = method == METHOD_IMM
-        return CarrierPhaseEstimate(
-            stamp_ns=stamp_ns,
-            constellation=key[0],
-            svid=key[1],
-            method=method,
-            phase_rad=phase,
-            phase_std_rad=p.initial_phase_std_rad if is_imm else math.nan,
-            frequency_hz=0.0,
-            frequency_std_hz=p.initial_frequency_std_hz if is_imm else math.nan,
-            data_bit=0,
-            data_bit_probability=0.5,
-            mode_probabilities=(0.5, 0.5) if is_imm else (),
-            locked=False,
-            cycle_slips=0,
+        batch = self.process_arrays(
+            stamp_ns,
+            np.array([ident(s.constellation) for s in samples], dtype=np.int64),
+            np.array([ident(s.svid) for s in samples], dtype=np.int64),
+            np.array([s.integration_time_s for s in samples], dtype=np.float64),
+            np.array([s.in_phase for s in samples], dtype=np.float64),
+            np.array([s.quadrature for s in samples], dtype=np.float64),
+            np.array([s.cn0_dbhz for s in samples], dtype=np.float64),
+            np.array([s.predicted_phase_change_rad for s in samples], dtype=np.float64),
         )
-
-    def _step(
-        self, stamp_ns: int, key: tuple[int, int], ch: _Channel, s: CorrelatorSample, cn0: float
-    ) -> CarrierPhaseEstimate:
-        if isinstance(ch.filt, ImmCarrierFilter):
-            r = ch.filt.update(
-                s.in_phase,
-                s.quadrature,
-                cn0,
-                s.integration_time_s,
-                s.predicted_phase_change_rad,
-                bit_transition_probability=self._transition_probability(stamp_ns, s.integration_time_s),
-            )
-            if r.slip_detected:
-                ch.slips += 1
-                self._counters["slips_detected"] += 1
-            return CarrierPhaseEstimate(
-                stamp_ns=stamp_ns,
-                constellation=key[0],
-                svid=key[1],
-                method=METHOD_IMM,
-                phase_rad=r.phase_rad,
-                phase_std_rad=r.phase_std_rad,
-                frequency_hz=r.frequency_hz,
-                frequency_std_hz=r.frequency_std_hz,
-                data_bit=r.data_bit,
-                data_bit_probability=r.data_bit_probability,
-                mode_probabilities=r.mode_probabilities,
-                locked=r.locked,
-                cycle_slips=ch.slips,
-            )
-        q = ch.filt.update(s.in_phase, s.quadrature, cn0, s.integration_time_s, s.predicted_phase_change_rad)
-        was = self._pll_was_locked.get(key, False)
-        if was and not q.locked:
-            ch.slips += 1
-            self._counters["slips_detected"] += 1
-        self._pll_was_locked[key] = q.locked
-        # Costas loop: the bit is the sign of the rotated prompt I (phase error within +-pi/2).
-        th = ch.filt.satellite_phase_rad + q.phase_rad
-        i_rot = s.in_phase * math.cos(th) + s.quadrature * math.sin(th)
-        bit = 1 if i_rot > 0 else (-1 if i_rot < 0 else 0)
-        finite = math.isfinite(q.phase_rad) and math.isfinite(q.frequency_hz)
-        return CarrierPhaseEstimate(
-            stamp_ns=stamp_ns,
-            constellation=key[0],
-            svid=key[1],
-            method=METHOD_PLL,
-            phase_rad=q.phase_rad,
-            phase_std_rad=math.nan,
-            frequency_hz=q.frequency_hz,
-            frequency_std_hz=math.nan,
-            data_bit=bit,
-            data_bit_probability=0.5 if bit == 0 else 1.0,
-            mode_probabilities=(),
-            locked=q.locked and finite,
-            cycle_slips=ch.slips,
-        )
+        return batch.to_estimates()

@@ -191,3 +191,53 @@ def test_bad_inputs_are_rejected_or_coasted():
 def test_params_validation(kwargs):
     with pytest.raises(ValueError):
         ImmParams(**kwargs)
+
+
+def _one_bit_correlators(n, flip_at, cn0, t, seed):
+    """Unit-amplitude correlators of a constant bit +1 at residual phase 0.4 + 0.01 k rad (10 rad/s); the sign of the
+    correlators is flipped from index flip_at on (a glitch if only one sample, a bit change if all)."""
+    rng = np.random.default_rng(seed)
+    _, sig = iq_amplitude_and_noise_std(cn0, t)
+    theta = 0.4 + 0.01 * np.arange(1, n + 1)
+    sign = np.ones(n)
+    sign[flip_at] = -1.0
+    zi = sign * np.cos(theta) + sig * rng.standard_normal(n)
+    zq = sign * np.sin(theta) + sig * rng.standard_normal(n)
+    return theta, zi, zq
+
+
+def test_sign_flipped_correlator_inside_a_bit_at_high_cn0_does_not_crash():
+    # Regression (commit 6ecd153): T = 1 ms, 60 dB-Hz, bit change forbidden inside the bit (p = 0). The
+    # bit -1 mode's probability underflows to exactly 0; one sign-flipped correlator then favours that
+    # mode by 2 (2 T C/N0) = 4000 in log-likelihood, and normalising 0 * 1 + 1 * exp(-4000) divided by zero.
+    t, cn0, n = 0.001, 60.0, 60
+    theta, zi, zq = _one_bit_correlators(n, [30], cn0, t, seed=5)
+    f = ImmCarrierFilter(ImmParams())
+    f.initialize(0.4, 10.0 / (2 * math.pi), 0.05, 0.1, mode_probability_plus=1.0)
+    results = [f.update(zi[k], zq[k], cn0, t, 0.0, bit_transition_probability=0.0) for k in range(n)]
+    for k, r in enumerate(results):
+        assert all(math.isfinite(v) for v in (r.phase_rad, r.phase_std_rad, r.frequency_hz, r.frequency_std_hz))
+        assert sum(r.mode_probabilities) == pytest.approx(1.0, abs=1e-12)
+        assert 0.0 <= r.mode_probabilities[1] <= 1.0
+        # The bit cannot change inside a bit: the flipped sample is an outlier of mode +1, whose EKF
+        # residual along the phase direction is zero for an exact sign flip, so the phase stays on truth.
+        assert r.data_bit == 1 and r.locked
+        if k >= 10:  # after convergence; noise 1/sqrt(2 T C/N0) = 0.022 rad per look
+            assert abs(r.phase_rad - theta[k]) < 0.02
+    assert results[30].data_bit_probability > 1.0 - 1e-12
+
+
+def test_bit_change_with_zero_transition_probability_stays_finite_and_consistent():
+    # bit_transition_probability = 0 (a pilot-signal setting) on a signal whose bit does change: the model is
+    # wrong, so the filter is not expected to track after the change (it loses the phase by several rad),
+    # but it must neither crash nor return NaN or probabilities outside [0, 1] (at commit 6ecd153 the first
+    # sample after the change raised ZeroDivisionError).
+    t, cn0, n = 0.001, 60.0, 400
+    theta, zi, zq = _one_bit_correlators(n, slice(100, None), cn0, t, seed=6)
+    f = ImmCarrierFilter(ImmParams(bit_transition_probability=0.0))
+    f.initialize(0.4, 10.0 / (2 * math.pi), 0.05, 0.1, mode_probability_plus=0.5)
+    r = f.process_batch(zi, zq, cn0, t, np.zeros(n))
+    assert np.all(np.isfinite(r.phase_rad)) and np.all(np.isfinite(r.phase_std_rad))
+    assert np.all((r.mode_probability_plus >= 0.0) & (r.mode_probability_plus <= 1.0))
+    assert np.all(np.abs(r.phase_rad[10:100] - theta[10:100]) < 0.02)
+    assert np.all(r.accepted) and r.mode_probability_plus[99] == 1.0

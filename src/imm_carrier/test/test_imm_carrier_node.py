@@ -22,7 +22,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from gnss_common.gps_time import gps_to_stamp_ns
-from imm_carrier import imm as imm_module
+from imm_carrier import tracker as tracker_module
 from imm_carrier.imm_carrier_node import CarrierNodeParams, ImmCarrierNode
 from rfi_msgs.msg import CarrierPhase, CarrierPhaseArray, Correlator, CorrelatorArray
 from rfi_node_common.qos import DATA_QOS
@@ -268,16 +268,17 @@ def test_a_core_fault_is_counted_and_the_node_keeps_going(rig_factory, monkeypat
     """If the core raises an ArithmeticError on accepted input, the node counts it, restarts that tracker's
     channels, goes to ERROR and keeps answering; the PLL beside it is untouched."""
     rig = rig_factory({'method': 'both', 'diagnostics_period_s': 0.01})
-    update = imm_module.ImmCarrierFilter.update
+    process_arrays = tracker_module.CarrierTracker.process_arrays
     calls = Counter()
 
     def faulty(self, *args, **kwargs):
-        calls['n'] += 1
-        if calls['n'] == 13:  # interval 8 (2 updates per interval from interval 2), first satellite
-            raise ZeroDivisionError('injected')
-        return update(self, *args, **kwargs)
+        if self.params.method == 'imm':
+            calls['n'] += 1
+            if calls['n'] == 8:  # interval 8
+                raise ZeroDivisionError('injected')
+        return process_arrays(self, *args, **kwargs)
 
-    monkeypatch.setattr(imm_module.ImmCarrierFilter, 'update', faulty)
+    monkeypatch.setattr(tracker_module.CarrierTracker, 'process_arrays', faulty)
     for k in range(1, 8):
         rig.send(clean_array(k))
     rig.send(clean_array(8))
@@ -296,9 +297,9 @@ def test_a_core_fault_is_counted_and_the_node_keeps_going(rig_factory, monkeypat
 
 
 def test_half_cycle_glitch_at_high_cn0_and_1ms_does_not_stop_the_node(rig_factory):
-    """T = 1 ms at 60 dB-Hz with one sign-flipped correlator inside a data bit (at commit 6ecd153 the IMM core
-    raises ZeroDivisionError here: see the node docstring). The node must answer every array, account for
-    every correlator and never publish a non-finite locked estimate."""
+    """T = 1 ms at 60 dB-Hz with one sign-flipped correlator inside a data bit (up to commit 8350ac4 the IMM core
+    raised ZeroDivisionError here: see imm._imm_step). The node must answer every array, account for every
+    correlator, never publish a non-finite locked estimate, and (since the fix) see no core fault."""
     rig = rig_factory({'method': 'imm', 'diagnostics_period_s': 0.01})
     rng = np.random.default_rng(5)
     sigma = 1.0 / math.sqrt(2 * 0.001 * 1e6)
@@ -310,6 +311,8 @@ def test_half_cycle_glitch_at_high_cn0_and_1ms_does_not_stop_the_node(rig_factor
         rig.send(array(START_NS + k * 1_000_000, [correlator(5, i=i, q=q, t=0.001, cn0=60.0, dphi=0.01)]))
     values = rig.last_values()
     assert len(rig.estimates) == n and values['accounting_ok'] == 'True'
+    assert 'imm.core_faults' not in values and values['imm.processed'] == str(n)
+    assert rig.diagnostics[-1].status[0].level == DiagnosticStatus.OK
     for out in rig.estimates:
         for e in out.estimates:
             assert not e.locked or (math.isfinite(e.phase_rad) and math.isfinite(e.frequency_hz))

@@ -80,3 +80,29 @@ def test_pll_rejects_bad_inputs():
         pll.update(1.0, 0.0, 40.0, 0.0, 0.0)
     with pytest.raises(ValueError):
         PllParams(start_bandwidth_hz=1.0, end_bandwidth_hz=2.0)
+
+
+def test_scalar_update_equals_process_batch():
+    # update() is a compiled scalar step; it must give the batch loop's numbers (same arithmetic), through
+    # the bandwidth tightening, with coasting (NaN) samples and a unit-noise lock indicator.
+    rng = np.random.default_rng(7)
+    n, t_int = 400, 0.02
+    params = PllParams(tightening_duration_s=5.0, iq_scaling="unit_noise")
+    cn0 = rng.uniform(25.0, 45.0, n)
+    dphi = rng.uniform(-3, 3, n)
+    theta = 0.3 + np.cumsum(dphi) + 0.01 * np.arange(n)
+    amp = np.sqrt(2 * t_int * 10 ** (cn0 / 10))
+    zi = amp * np.cos(theta) + rng.standard_normal(n)
+    zq = amp * np.sin(theta) + rng.standard_normal(n)
+    zi[[50, 51, 300]] = math.nan
+    a, b = CostasPll(params), CostasPll(params)
+    for p in (a, b):
+        p.initialize(0.25, 0.1, satellite_phase_rad=0.05)
+    batch = a.process_batch(zi, zq, cn0, t_int, dphi)
+    steps = [b.update(zi[k], zq[k], cn0[k], t_int, dphi[k]) for k in range(n)]
+    np.testing.assert_allclose([s.phase_rad for s in steps], batch.phase_rad, rtol=0, atol=1e-12)
+    np.testing.assert_allclose([s.frequency_hz for s in steps], batch.frequency_hz, rtol=0, atol=1e-12)
+    np.testing.assert_allclose([s.bandwidth_hz for s in steps], batch.bandwidth_hz, rtol=1e-12)
+    np.testing.assert_allclose([s.lock_metric for s in steps], batch.lock_metric, rtol=0, atol=1e-12)
+    assert [s.locked for s in steps] == list(batch.locked)
+    assert steps[-1].bandwidth_hz == pytest.approx(1.0) and steps[0].bandwidth_hz == pytest.approx(15.0)

@@ -7,6 +7,7 @@ import pytest
 
 from imm_carrier.imm import ImmCarrierFilter, ImmParams
 from imm_carrier.measurement_model import METHOD_IMM, METHOD_PLL, CorrelatorSample
+from imm_carrier.pll import CostasPll
 from imm_carrier.tracker import CarrierTracker, TrackerParams
 
 T = 0.02
@@ -111,3 +112,91 @@ def test_params_validation():
         TrackerParams(channel_timeout_s=0.0)
     with pytest.raises(ValueError):
         TrackerParams(max_gap_intervals=1.0)
+
+
+@pytest.mark.parametrize("method", ["imm", "pll"])
+def test_compiled_multichannel_epoch_equals_one_filter_per_channel(method):
+    # 70 channels (more than the 64 initial slots: the bank grows), T = 1 ms on the GPS bit grid, arrays in
+    # shuffled order, one satellite missing every 7th interval (gap restart) and NaN C/N0 now and then:
+    # every row must equal an independent ImmCarrierFilter / CostasPll driven step by step.
+    rng = np.random.default_rng(21)
+    t_s, t_ns, n_ep = 0.001, 1_000_000, 45
+    keys = [(1, sv) for sv in range(1, 33)] + [(3, sv) for sv in range(1, 39)]
+    params = TrackerParams(method=method)
+    tr = CarrierTracker(params)
+    ref: dict = {}
+    last_cn0: dict = {}
+    t0 = 1_400_000_000 * 1_000_000_000  # a multiple of 20 ms
+    for e in range(1, n_ep + 1):
+        stamp = t0 + e * t_ns
+        order = rng.permutation(len(keys))
+        order = [j for j in order if not (j == 5 and e % 7 == 0)]
+        const = np.array([keys[j][0] for j in order])
+        svid = np.array([keys[j][1] for j in order])
+        n = len(order)
+        cn0 = rng.uniform(30, 50, n)
+        cn0[rng.random(n) < 0.1] = math.nan
+        dphi = rng.uniform(-3, 3, n)
+        zi, zq = rng.normal(0.3, 1.0, n), rng.normal(-0.2, 1.0, n)
+        batch = tr.process_arrays(stamp, const, svid, np.full(n, t_s), zi, zq, cn0, dphi)
+        rows = {(int(r[0]), int(r[1])): r for r in batch.values}
+        for j in range(n):
+            key = (int(const[j]), int(svid[j]))
+            c = cn0[j] if not math.isnan(cn0[j]) else last_cn0.get(key, math.nan)
+            if math.isnan(c):
+                assert key not in rows
+                continue
+            last_cn0[key] = c
+            row = rows[key]
+            gap = key in ref and stamp - ref[key][1] > 1.5 * t_ns
+            if key not in ref or gap:
+                f = ImmCarrierFilter(params.imm) if method == "imm" else CostasPll(params.pll)
+                f.initialize_from_correlator(zi[j], zq[j], dphi[j])
+                ref[key] = [f, stamp]
+                assert row[2] == pytest.approx(f.residual_phase_rad, abs=1e-12) and row[10] == 0.0
+                continue
+            f = ref[key][0]
+            ref[key][1] = stamp
+            if method == "imm":
+                p = tr._transition_probability(stamp, t_s)
+                r = f.update(zi[j], zq[j], c, t_s, dphi[j], bit_transition_probability=p)
+                expected = [r.phase_rad, r.phase_std_rad, r.frequency_hz, r.frequency_std_hz, r.data_bit,
+                            r.data_bit_probability, *r.mode_probabilities, float(r.locked)]
+            else:
+                r = f.update(zi[j], zq[j], c, t_s, dphi[j])
+                expected = [r.phase_rad, math.nan, r.frequency_hz, math.nan]
+            np.testing.assert_allclose(row[2:2 + len(expected)], expected, rtol=1e-12, atol=1e-12)
+    c = tr.counters
+    assert c["channels_started"] == len(keys) + c["channels_restarted_gap"] and c["channels_restarted_gap"] == 6
+    assert len(tr.channel_keys) == tr.channel_count == len(keys)
+    # Every correlator offered is processed or rejected (only a new channel without C/N0 is rejected here).
+    offered = n_ep * len(keys) - n_ep // 7
+    assert c["processed"] + c["rejected_cn0_missing"] == offered and c["cn0_missing_used_last"] > 0
+
+
+def test_batch_rows_convert_to_estimates():
+    tr = CarrierTracker(TrackerParams())
+    b = tr.process_arrays(T_NS, np.array([1, 1]), np.array([4, 0]), np.full(2, T), np.ones(2), np.zeros(2),
+                          np.full(2, 45.0), np.zeros(2))
+    assert len(b) == 1 and tr.counters["rejected_invalid_svid"] == 1
+    (e,) = b.to_estimates()
+    assert (e.constellation, e.svid, e.method, e.mode_probabilities, e.locked) == (1, 4, METHOD_IMM, (0.5, 0.5), False)
+    assert b.column("svid").tolist() == [4.0]
+    with pytest.raises(ValueError):
+        tr.process_arrays(T_NS, np.array([1]), np.array([4, 5]), np.full(2, T), np.ones(2), np.zeros(2),
+                          np.full(2, 45.0), np.zeros(2))
+
+
+@pytest.mark.parametrize("method", ["imm", "pll"])
+def test_overflowing_correlator_restarts_the_channel_unlocked(method):
+    tr = CarrierTracker(TrackerParams(method=method))
+    for k in range(1, 30):
+        tr.process(k * T_NS, [_sample(dphi=0.0)])
+    (bad,) = tr.process(30 * T_NS, [_sample(i=1e300, q=-1e300, dphi=0.0)])
+    # |I|, |Q| ~ 1e300 overflow the IMM's covariance and the PLL's lock averages: the answer is unlocked and
+    # the channel restarts from its next correlator (counted), then locks again.
+    assert not bad.locked and tr.counters["channels_restarted_nonfinite"] == 1
+    (first,) = tr.process(31 * T_NS, [_sample(dphi=0.0)])
+    assert math.isfinite(first.phase_rad) and not first.locked and tr.counters["channels_started"] == 2
+    outs = [tr.process(k * T_NS, [_sample(dphi=0.0)])[0] for k in range(32, 60)]
+    assert outs[-1].locked and math.isfinite(outs[-1].phase_rad)

@@ -1,0 +1,121 @@
+"""Byte-exact oracle tests of the node's compiled CDR codec against rclpy's serialisation of the real messages."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from rclpy.serialization import deserialize_message, serialize_message
+
+from imm_carrier.cdr import decode_correlator_array, encode_carrier_phase_array
+from imm_carrier.measurement_model import METHOD_IMM, METHOD_PLL
+from imm_carrier.tracker import N_BATCH_COLUMNS
+from rfi_msgs.msg import CarrierPhase, CarrierPhaseArray, Correlator, CorrelatorArray
+
+
+def _correlator_array(rng, n, frame_id, sec=1_400_000_000, nanosec=123_456_789):
+    msg = CorrelatorArray()
+    msg.header.stamp.sec = sec
+    msg.header.stamp.nanosec = nanosec
+    msg.header.frame_id = frame_id
+    for _ in range(n):
+        msg.correlators.append(Correlator(
+            constellation=int(rng.integers(0, 256)), svid=int(rng.integers(0, 65536)),
+            integration_time_s=float(rng.uniform(1e-3, 2e-2)), in_phase=float(rng.normal()),
+            quadrature=float(rng.normal()), cn0_dbhz=float(rng.choice([rng.uniform(0, 70), math.nan])),
+            predicted_phase_change_rad=float(rng.uniform(-1e3, 1e3))))
+    return msg
+
+
+# frame_id lengths 0..8 move the first element through every alignment residue.
+@pytest.mark.parametrize('frame_id', ['', 'a', 'ab', 'abc', 'abcd', 'gnss_receiver', 'abcdefg', 'abcdefgh'])
+@pytest.mark.parametrize('n', [0, 1, 5, 32])
+def test_decode_equals_rclpy_deserialisation(frame_id, n):
+    rng = np.random.default_rng(len(frame_id) * 100 + n)
+    msg = _correlator_array(rng, n, frame_id, sec=-5 if n == 1 else 1_400_000_000)
+    raw = serialize_message(msg)
+    d = decode_correlator_array(raw)
+    assert d is not None
+    assert d.stamp_ns == msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+    back = deserialize_message(raw[:4 + d.header_end] + b'\x00' * 8, CorrelatorArray)  # header + empty sequence
+    assert back.header == msg.header
+    for name, values in (('constellation', d.constellation), ('svid', d.svid),
+                         ('integration_time_s', d.integration_time_s), ('in_phase', d.in_phase),
+                         ('quadrature', d.quadrature), ('cn0_dbhz', d.cn0_dbhz),
+                         ('predicted_phase_change_rad', d.predicted_phase_change_rad)):
+        np.testing.assert_array_equal(values, [getattr(c, name) for c in msg.correlators], err_msg=name)
+
+
+def test_decode_rejects_big_endian_and_truncated_input():
+    msg = _correlator_array(np.random.default_rng(1), 3, 'rx')
+    raw = serialize_message(msg)
+    assert decode_correlator_array(b'\x00\x00' + raw[2:]) is None
+    for cut in (5, 20, len(raw) - 1):
+        assert decode_correlator_array(raw[:cut]) is None
+
+
+def _table(rng, n, method):
+    v = np.empty((n, N_BATCH_COLUMNS))
+    v[:, 0] = rng.integers(0, 256, n)
+    v[:, 1] = rng.integers(0, 65536, n)
+    v[:, 2:6] = rng.normal(size=(n, 4)) * 10
+    v[:, 6] = rng.choice([-1, 0, 1], n)
+    v[:, 7] = rng.random(n)
+    v[:, 8] = rng.random(n)
+    v[:, 9] = 1 - v[:, 8]
+    v[:, 10] = rng.integers(0, 2, n)
+    v[:, 11] = rng.integers(0, 2**32 + 10, n)
+    if method == METHOD_PLL:
+        v[:, [3, 5, 8, 9]] = math.nan
+    if n > 2:
+        v[1, 2] = math.nan  # a non-finite phase is never published as locked
+        v[1, 10] = 1.0
+        v[2, 11] = -3
+    return v
+
+
+def _expected_msg(header, tables):
+    out = CarrierPhaseArray()
+    out.header = header
+    for values, method in tables:
+        for r in values:
+            out.estimates.append(CarrierPhase(
+                constellation=int(r[0]), svid=int(r[1]), method=method, phase_rad=r[2], phase_std_rad=r[3],
+                frequency_hz=r[4], frequency_std_hz=r[5], data_bit=int(r[6]), data_bit_probability=r[7],
+                mode_probabilities=[r[8], r[9]] if method == METHOD_IMM else [],
+                locked=bool(r[10] > 0.5 and math.isfinite(r[2]) and math.isfinite(r[4])),
+                cycle_slips=min(max(int(r[11]), 0), 2**32 - 1)))
+    return out
+
+
+@pytest.mark.parametrize('frame_id', ['', 'a', 'ab', 'abc', 'abcd', 'gnss_receiver', 'abcdefg'])
+@pytest.mark.parametrize('sizes', [((0, METHOD_IMM),), ((1, METHOD_PLL),), ((32, METHOD_IMM),),
+                                   ((3, METHOD_IMM), (3, METHOD_PLL)), ((5, METHOD_PLL), (2, METHOD_IMM))])
+def test_encode_equals_rclpy_serialisation(frame_id, sizes):
+    rng = np.random.default_rng(len(frame_id) + 7 * sum(n for n, _ in sizes))
+    inp = _correlator_array(rng, 2, frame_id)
+    raw_in = serialize_message(inp)
+    d = decode_correlator_array(raw_in)
+    tables = [(_table(rng, n, m), m) for n, m in sizes]
+    raw_out = encode_carrier_phase_array(raw_in[:4 + d.header_end], tables)
+    expected = _expected_msg(inp.header, tables)
+    reference = serialize_message(expected)
+    # The middleware leaves alignment padding uninitialised and its buffer length is its size estimate,
+    # which pads even an empty float64 sequence (the data written does not): so our bytes must be a prefix
+    # of the reference except at padding (bytes where two serialisations of the same message differ, or
+    # that we zeroed), at most 4 bytes shorter per PLL row.
+    n_pll = sum(n for n, m in sizes if m == METHOD_PLL)
+    assert len(reference) - 4 * n_pll <= len(raw_out) <= len(reference)
+    got = deserialize_message(raw_out, CarrierPhaseArray)
+    assert got.header == expected.header and len(got.estimates) == len(expected.estimates)
+    for a, b in zip(got.estimates, expected.estimates, strict=True):
+        for name in CarrierPhase.get_fields_and_field_types():
+            np.testing.assert_array_equal(np.asarray(getattr(a, name), dtype=float),
+                                          np.asarray(getattr(b, name), dtype=float), err_msg=name)
+    ours = np.frombuffer(raw_out, np.uint8)
+    theirs = np.frombuffer(reference, np.uint8)[:ours.size]
+    again = np.frombuffer(serialize_message(got), np.uint8)[:ours.size]
+    fixed = theirs == again  # bytes the middleware wrote the same twice: fields (padding may repeat too)
+    differ = np.flatnonzero(fixed & (ours != theirs))
+    assert all(ours[i] == 0 for i in differ), differ  # where we differ, it is padding we zeroed
