@@ -15,10 +15,13 @@ Two transports:
 - ``dds`` (default): real publishers and subscriptions over the middleware, one
   SingleThreadedExecutor, settled by counting as above. This is how the nodes run on a robot.
 - ``direct``: the same node objects and callbacks, but messages are handed from publisher to
-  subscriptions in this process without the middleware (serialised once, deserialised per
-  subscription, first in first out). It gives the same per-node message order and is 10-100x
-  faster, because a middleware round trip costs about a millisecond here; use it for long
-  replays and benchmarks. Nothing goes out on the network in this mode.
+  subscriptions in this process without the middleware, first in first out: a published
+  message object goes to typed subscriptions as it is (one object shared by all of them, so a
+  callback must not modify its message, which ROS callbacks should not do anyway), and is
+  serialised only for raw subscriptions; bag bytes are deserialised once per message. It gives
+  the same per-node message order and is 10-100x faster, because a middleware round trip costs
+  about a millisecond here; use it for long replays and benchmarks. Nothing goes out on the
+  network in this mode.
 
 Timers are not fired by the harness: nodes in this suite compute (and report diagnostics) from
 message stamps, never from the wall clock.
@@ -58,14 +61,16 @@ class ReplayResult:
     """What a replay produced.
 
     Attributes:
-        outputs: topic -> list of (receive index, CDR bytes) of every message the nodes published.
+        outputs: topic -> list of (receive index, message) of every message the nodes published;
+            the message is CDR bytes (dds transport) or the published object (direct transport,
+            or bytes where the node published bytes); :meth:`messages` gives objects either way.
         output_types: topic -> message type name.
         inputs: topic -> number of bag messages published.
         wall_time_s: wall-clock duration of the replay, s.
         bag_duration_s: span of the replayed messages' log times, s.
     """
 
-    outputs: dict[str, list[tuple[int, bytes]]] = field(default_factory=dict)
+    outputs: dict[str, list[tuple[int, Any]]] = field(default_factory=dict)
     output_types: dict[str, str] = field(default_factory=dict)
     inputs: dict[str, int] = field(default_factory=dict)
     wall_time_s: float = 0.0
@@ -73,7 +78,8 @@ class ReplayResult:
 
     def messages(self, topic: str) -> list[Any]:
         """The messages published on ``topic``, deserialised, in order."""
-        return [deserialize(raw, self.output_types[topic]) for _, raw in self.outputs.get(topic, [])]
+        return [deserialize(m, self.output_types[topic]) if isinstance(m, bytes) else m
+                for _, m in self.outputs.get(topic, [])]
 
     @property
     def real_time_factor(self) -> float:
@@ -98,8 +104,10 @@ class ReplayHarness:
         if transport not in TRANSPORTS:
             raise ValueError(f'transport must be one of {", ".join(TRANSPORTS)}, got {transport!r}')
         self._direct = transport == 'direct'
-        self._routes: dict[str, list[Callable[[bytes], None]]] = defaultdict(list)
-        self._queue: deque[tuple[str, bytes]] = deque()
+        # topic -> (what the receiver takes: 'bytes', 'object' or 'as published', callback)
+        self._routes: dict[str, list[tuple[str, Callable[[Any], None]]]] = defaultdict(list)
+        self._queue: deque[tuple[str, Any]] = deque()
+        self._types: dict[str, type] = {}
         self._context = context
         self._nodes = list(nodes)
         self._settle_timeout_s = settle_timeout_s
@@ -116,7 +124,7 @@ class ReplayHarness:
         else:
             self._instrument()
         self._publishers: dict[str, Any] = {}
-        self._outputs: dict[str, list[tuple[int, bytes]]] = defaultdict(list)
+        self._outputs: dict[str, list[tuple[int, Any]]] = defaultdict(list)
         self._output_types: dict[str, str] = {}
         self._received = 0
         topics = collect if collect is not None else self._node_output_topics()
@@ -133,19 +141,19 @@ class ReplayHarness:
         for node in self._nodes:
             for sub in node.subscriptions:
                 if sub.topic_name not in IGNORED_TOPICS:
-                    self._routes[sub.topic_name].append(self._direct_delivery(sub))
+                    self._types[sub.topic_name] = sub.msg_type
+                    self._routes[sub.topic_name].append(('bytes' if sub.raw else 'object', self._direct_delivery(sub)))
             for pub in node.publishers:
                 if pub.topic_name not in IGNORED_TOPICS:
+                    self._types[pub.topic_name] = pub.msg_type
                     pub.publish = self._direct_publish(pub.topic_name)
 
     @staticmethod
-    def _direct_delivery(sub: Any) -> Callable[[bytes], None]:
-        callback, with_info, raw, msg_type = sub.callback, sub._callback_type.name != 'MessageOnly', sub.raw, \
-            sub.msg_type
+    def _direct_delivery(sub: Any) -> Callable[[Any], None]:
+        callback, with_info = sub.callback, sub._callback_type.name != 'MessageOnly'
         info = {'source_timestamp': 0, 'received_timestamp': 0}
 
-        def deliver(data: bytes) -> None:
-            msg = data if raw else deserialize_message(data, msg_type)
+        def deliver(msg: Any) -> None:
             if with_info:
                 callback(msg, info)
             else:
@@ -156,14 +164,26 @@ class ReplayHarness:
         queue = self._queue
 
         def publish(msg: Any) -> None:
-            queue.append((topic, msg if isinstance(msg, bytes) else serialize(msg)))
+            queue.append((topic, msg))
         return publish
 
     def _drain(self) -> None:
+        """Hand every queued message to the subscriptions of its topic, first in first out."""
         while self._queue:
-            topic, data = self._queue.popleft()
-            for deliver in self._routes.get(topic, ()):
-                deliver(data)
+            topic, payload = self._queue.popleft()
+            as_bytes = payload if isinstance(payload, bytes) else None
+            as_object = None if isinstance(payload, bytes) else payload
+            for takes, deliver in self._routes.get(topic, ()):
+                if takes == 'bytes':
+                    if as_bytes is None:
+                        as_bytes = serialize(as_object)
+                    deliver(as_bytes)
+                elif takes == 'object':
+                    if as_object is None:
+                        as_object = deserialize_message(as_bytes, self._types[topic])
+                    deliver(as_object)
+                else:
+                    deliver(payload)
 
     # -- instrumentation ---------------------------------------------------------------------
     def _instrument(self) -> None:
@@ -223,13 +243,14 @@ class ReplayHarness:
         self._output_types[topic] = msgtype
         taken = self._taken
 
-        def on_message(raw: bytes) -> None:
+        def on_message(msg: Any) -> None:
             taken[key] += 1
             self._received += 1
-            outputs.append((self._received, raw))
+            outputs.append((self._received, msg))
 
         if self._direct:
-            self._routes[topic].append(on_message)
+            self._types.setdefault(topic, message_class(msgtype))
+            self._routes[topic].append(('as published', on_message))
             return
         self._node.create_subscription(message_class(msgtype), topic, on_message, DATA_QOS, raw=True)
 

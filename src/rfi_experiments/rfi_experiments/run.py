@@ -1,10 +1,12 @@
 """``ros2 run rfi_experiments run BAG --out DIR``: replay a jamming experiment through the suite.
 
-The three nodes (rfi_monitor, uwb_gnss_fusion, imm_carrier) run in this process on one
-SingleThreadedExecutor, wired by their topics exactly as on a robot; the bag's messages are fed
-through them by :class:`rfi_experiments.replay.ReplayHarness` (deterministic, nothing dropped).
-At the end a summary table is printed and a report folder written (``summary.md`` with the
-per-topic counts and the nodes' final diagnostics).
+The three nodes (rfi_monitor, uwb_gnss_fusion, imm_carrier with ``method: both``) run in this
+process, wired by their topics exactly as on a robot; the bag's messages are fed through them by
+:class:`rfi_experiments.replay.ReplayHarness` (deterministic, nothing dropped), over the
+middleware on one SingleThreadedExecutor (``--transport dds``) or handed over in-process
+(``--transport direct``, the same callbacks, much faster). At the end a summary table is printed
+and a report folder written: ``index.md`` with figures (rfi_experiments.report), ``summary.json``
+and ``replay.md`` (per-topic counts, the nodes' final diagnostics, where the time went).
 """
 
 from __future__ import annotations
@@ -26,11 +28,47 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--out', default='report', help='report folder to write (default: report)')
     parser.add_argument('--rate', type=float, default=None,
                         help='replay pace as a multiple of real time (default: as fast as possible)')
-    parser.add_argument('--transport', choices=('dds', 'direct'), default='dds',
-                        help='dds: the nodes talk over the middleware on one executor, as on a robot (default); '
-                             'direct: the same nodes and callbacks, messages handed over in-process (much faster)')
+    parser.add_argument('--transport', choices=('dds', 'direct'), default='direct',
+                        help='direct: the nodes\' callbacks get the messages handed over in-process (default, '
+                             'fast); dds: the nodes talk over the middleware on one executor, as separate nodes '
+                             'on a robot do (about a millisecond per hop here)')
+    parser.add_argument('--params-file', action='append', default=[], metavar='YAML',
+                        help='ROS 2 parameters file (node_name: ros__parameters: ...; "/**" for all nodes), '
+                             'e.g. the one shipped beside a bag; may be given more than once')
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
     return parser
+
+
+def load_params_files(paths: Sequence[str]) -> dict[str, dict[str, object]]:
+    """Node name -> {parameter: value} from ROS 2 parameters files ('/**' applies to every node).
+
+    Raises:
+        ValueError: a file is missing or not in the ROS 2 parameters-file layout.
+    """
+    import yaml
+
+    merged: dict[str, dict[str, object]] = {}
+    for path in paths:
+        try:
+            data = yaml.safe_load(Path(path).read_text())
+        except (OSError, yaml.YAMLError) as err:
+            raise ValueError(f'cannot read parameters file {path}: {err}') from None
+        if not isinstance(data, dict):
+            raise ValueError(f'{path}: not a ROS 2 parameters file (expected node_name: ros__parameters: ...)')
+        for node, section in data.items():
+            params = section.get('ros__parameters') if isinstance(section, dict) else None
+            if not isinstance(params, dict):
+                raise ValueError(f'{path}: node {node!r} has no ros__parameters mapping')
+            merged.setdefault(str(node).lstrip('/'), {}).update(params)
+    return merged
+
+
+def overrides_for(node_name: str, params: dict[str, dict[str, object]]) -> list:
+    """rclpy Parameter overrides of one node: the '/**' (or '**') entries, then its own."""
+    from rclpy.parameter import Parameter
+
+    values = {**params.get('**', {}), **params.get(node_name, {})}
+    return [Parameter(name, value=value) for name, value in values.items()]
 
 
 def fail(message: str) -> int:
@@ -48,11 +86,14 @@ def diagnostics_summary(messages: list) -> dict[str, dict[str, str]]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    import time
+
     import rclpy
     from rclpy.utilities import remove_ros_args
 
     from imm_carrier.imm_carrier_node import ImmCarrierNode
     from rfi_experiments.replay import ReplayHarness, ReplayStalled
+    from rfi_experiments.report import write_report
     from rfi_monitor.rfi_monitor_node import RfiMonitorNode
     from uwb_gnss_fusion.fusion_node import FusionNode
 
@@ -63,9 +104,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.rate is not None and not args.rate > 0:
         return fail(f'--rate must be > 0 (got {args.rate})')
     try:
+        params = load_params_files(args.params_file)
+    except ValueError as err:
+        return fail(str(err))
+    params.setdefault('imm_carrier', {}).setdefault('method', 'both')
+    try:
         with BagReader(args.bag) as reader:
             topics = reader.topics
-            total = reader.message_count
     except BagError as err:
         return fail(str(err))
     inputs = sorted(t for t in topics if not t.startswith('/truth/'))
@@ -76,7 +121,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     rclpy.init(args=argv, context=context)
     nodes = []
     try:
-        nodes = [RfiMonitorNode(context=context), FusionNode(context=context), ImmCarrierNode(context=context)]
+        try:
+            for name, cls in (('rfi_monitor', RfiMonitorNode), ('uwb_gnss_fusion', FusionNode),
+                              ('imm_carrier', ImmCarrierNode)):
+                nodes.append(cls(context=context, parameter_overrides=overrides_for(name, params)))
+        except ValueError as err:
+            return fail(f'{name}: {err}')
         harness = ReplayHarness(nodes, context=context, transport=args.transport)
         progress = None
         if not args.no_progress:
@@ -93,16 +143,18 @@ def main(argv: Sequence[str] | None = None) -> int:
             if progress is not None:
                 progress.close()
         diagnostics = diagnostics_summary(result.messages('/diagnostics')) if '/diagnostics' in result.outputs else {}
+        outputs = {t: result.messages(t) for t in ('/rfi/jammer_state', '/fusion/odometry', '/carrier/estimates')
+                   if t in result.outputs}
         harness.destroy()
     finally:
         for node in nodes:
             node.destroy_node()
         rclpy.try_shutdown(context=context)
 
-    lines = [f'# Replay of {args.bag}', '',
-             f'{total} messages in the bag, {sum(result.inputs.values())} input messages replayed '
-             f'({result.bag_duration_s:.1f} s of data in {result.wall_time_s:.1f} s wall time, '
-             f'{result.real_time_factor:.1f}x real time).', '',
+    replay_line = (f'{sum(result.inputs.values())} input messages replayed through rfi_monitor, uwb_gnss_fusion '
+                   f'and imm_carrier ({args.transport} transport): {result.bag_duration_s:.1f} s of data in '
+                   f'{result.wall_time_s:.1f} s, {result.real_time_factor:.1f}x real time.')
+    lines = [f'# Replay of {args.bag}', '', replay_line, '',
              '| topic | direction | messages |', '|---|---|---|']
     for t in inputs:
         lines.append(f'| {t} | in | {result.inputs.get(t, 0)} |')
@@ -113,12 +165,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     for name, values in diagnostics.items():
         lines += ['', f'## Diagnostics of {name}', '', '| key | value |', '|---|---|']
         lines += [f'| {k} | {v} |' for k, v in values.items()]
-    text = '\n'.join(lines) + '\n'
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / 'summary.md').write_text(text)
-    print(text)
-    print(f'report written to {out / "summary.md"}')
+    (out / 'replay.md').write_text('\n'.join(lines) + '\n')
+    start = time.monotonic()
+    summary = write_report(args.bag, outputs, out,
+                           header=replay_line + ' Counts and diagnostics: [replay.md](replay.md).')
+    print(replay_line)
+    print()
+    print(summary.table())
+    print()
+    print(f'report written to {out / "index.md"} (figures and tables; evaluation took '
+          f'{time.monotonic() - start:.1f} s)')
     return 0
 
 

@@ -3,7 +3,8 @@
 A scenario is a small YAML file (see ``scenarios/`` in this package's share directory): a seed, a
 duration, and one section per input stream (IF snapshots, GNSS measurements, UWB ranges,
 correlators) plus the jamming schedule. The run is reproducible: the same file gives the same
-bag, byte for byte.
+bag, message for message and field for field (not byte for byte: rclpy's serialiser leaves the
+CDR alignment padding uninitialised, so the padding bytes may differ between two runs).
 """
 
 from __future__ import annotations
