@@ -6,6 +6,7 @@ SHELL := /bin/bash
 PYTHON ?= python3
 VENV ?= .venv
 BAG ?= bags/default
+PARAMS ?= $(BAG).params.yaml
 OUT ?= report
 PYTEST_ARGS ?=
 
@@ -24,7 +25,7 @@ test: setup
 	@$(RUN) python -m pytest $(PYTEST_ARGS)
 
 demo: setup
-	@$(RUN) tools/ros2_run rfi_experiments run $(BAG) --out $(OUT)
+	@$(RUN) tools/ros2_run rfi_experiments run $(BAG) --out $(OUT) $$([ -f $(PARAMS) ] && echo --params-file $(PARAMS))
 
 lint: setup
 	@$(RUN) ruff check src test tools benchmarks && mypy
