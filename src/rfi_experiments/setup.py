@@ -13,7 +13,7 @@ setup(
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
         ('share/' + package_name + '/scenarios', glob('scenarios/*.yaml')),
-        ('share/' + package_name + '/data', glob('data/*.15n') + ['data/README.md']),
+        ('share/' + package_name + '/data', sorted(glob('data/*.1[0-9][no]')) + ['data/README.md']),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
