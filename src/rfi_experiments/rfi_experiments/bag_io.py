@@ -215,8 +215,10 @@ class BagReader:
     def message_count(self) -> int:
         return int(self._reader.message_count)
 
-    def messages(self, topics: Iterable[str] | None = None) -> Iterator[BagMessage]:
-        """Messages in log-time order, optionally only those of ``topics``.
+    def messages(self, topics: Iterable[str] | None = None, *, start_ns: int | None = None,
+                 stop_ns: int | None = None) -> Iterator[BagMessage]:
+        """Messages in log-time order, optionally only those of ``topics`` with log time in
+        ``[start_ns, stop_ns)`` (absolute log times, ns).
 
         Raises:
             BagError: a topic of ``topics`` is not in the bag, or the bag is corrupt.
@@ -229,7 +231,7 @@ class BagReader:
                                f'(it has {", ".join(sorted(self._reader.topics)) or "none"})')
         connections = [c for c in self._reader.connections if wanted is None or c.topic in wanted]
         try:
-            for conn, stamp_ns, raw in self._reader.messages(connections=connections):
+            for conn, stamp_ns, raw in self._reader.messages(connections=connections, start=start_ns, stop=stop_ns):
                 yield BagMessage(conn.topic, conn.msgtype, int(stamp_ns), bytes(raw))
         except BagError:
             raise

@@ -298,7 +298,8 @@ class ReplayHarness:
                 raise ReplayStalled(f'{topic}: {pub.get_subscription_count()} of {expected} subscriptions matched')
 
     def run(self, bag: str | os.PathLike[str], *, topics: Iterable[str] | None = None,
-            rate: float | None = None, progress: Callable[[int, int], None] | None = None) -> ReplayResult:
+            rate: float | None = None, progress: Callable[[int, int], None] | None = None,
+            window_s: tuple[float, float] | None = None) -> ReplayResult:
         """Replay ``bag`` (all topics, or ``topics``) through the nodes.
 
         Args:
@@ -306,6 +307,8 @@ class ReplayHarness:
             topics: input topics to publish (default: all topics of the bag).
             rate: pace as a multiple of the recorded pace; None replays as fast as the graph settles.
             progress: called as ``progress(done, total)`` after each message.
+            window_s: replay only the messages whose log time lies in [start, stop) seconds after
+                the bag's first message.
         """
         if rate is not None and not rate > 0:
             raise ValueError(f'rate must be > 0 or None, got {rate}')
@@ -313,10 +316,14 @@ class ReplayHarness:
         with BagReader(bag) as reader:
             selected = list(topics) if topics is not None else sorted(reader.topics)
             total = sum(reader.topics[t][1] for t in selected if t in reader.topics)
+            start_ns = stop_ns = None
+            if window_s is not None:
+                start_ns = reader.start_ns + round(window_s[0] * 1e9)
+                stop_ns = reader.start_ns + round(window_s[1] * 1e9)
             counts: dict[str, int] = defaultdict(int)
             wall_start = time.monotonic()
             first = last = None
-            for i, message in enumerate(reader.messages(selected)):
+            for i, message in enumerate(reader.messages(selected, start_ns=start_ns, stop_ns=stop_ns)):
                 first = message.stamp_ns if first is None else first
                 last = message.stamp_ns
                 if rate is not None:
