@@ -6,6 +6,7 @@
 # Environment: PYTHON (interpreter to make the venv with, default python3), VENV (default .venv).
 # Idempotent: a second run only re-runs colcon build (incremental).
 set -euo pipefail
+trap 'echo "setup: failed (line $LINENO of tools/setup_workspace.sh)" >&2' ERR
 
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$here"
@@ -71,8 +72,8 @@ colcon --log-level error build --base-paths src --event-handlers console_cohesio
 # inlines: when any source of a package changed, drop that package's compiled cache.
 for pkg_dir in src/*/; do
   pkg=$(basename "$pkg_dir")
-  [ -d "install/$pkg" ] || continue
-  sum=$(find "$pkg_dir$pkg" -name '*.py' -print0 2>/dev/null | sort -z | xargs -0 cat 2>/dev/null | sha256sum | cut -d' ' -f1)
+  [ -d "install/$pkg" ] && [ -d "$pkg_dir$pkg" ] || continue   # Python packages only
+  sum=$(find "$pkg_dir$pkg" -name '*.py' -print0 | sort -z | xargs -0 cat | sha256sum | cut -d' ' -f1)
   mark="install/$pkg/.rfi-source-hash"
   if [ ! -f "$mark" ] || [ "$(cat "$mark")" != "$sum" ]; then
     find "install/$pkg" \( -name '*.nbi' -o -name '*.nbc' \) -delete
