@@ -50,6 +50,7 @@ STREAMS = {
     'if_snapshots': 'rfi_experiments.streams.if_snapshots',
     'gnss_uwb': 'rfi_experiments.streams.gnss_uwb',
     'correlators': 'rfi_experiments.streams.correlators',
+    'rinex_jammed': 'rfi_experiments.streams.rinex_jammed',
 }
 """Stream name -> module whose ``build(scenario, section, seed)`` yields (stamp_ns, topic, message)."""
 

@@ -50,6 +50,8 @@ FRAME_EARTH = "earth"
 FRAME_MAP = "map"
 
 _NS = 1_000_000_000
+_MIN_SIN_ELEVATION = math.sin(math.radians(5.0))
+"""Floor of sin(elevation) in the elevation weighting of satellites without C/N0 (caps the factor at 11.5)."""
 
 
 @dataclass(frozen=True)
@@ -313,7 +315,8 @@ class FusionFilter:
         an iterated (Gauss-Newton) refinement of strongly nonlinear updates
         (``max_update_iterations``; 0 restores the paper's plain CKF update), a windowed UWB
         divergence test (``divergence_uwb_gated_fraction``), an optional UWB range latency and an
-        optional skewed Huber weighting of UWB ranges. A UWB range is applied with the exact
+        optional skewed Huber weighting of UWB ranges, and an elevation weighting (sigma / sin(el)) of
+        satellites that report no C/N0. A UWB range is applied with the exact
         position-only cubature shortcut (``active_dims``), which equals the 16-point update.
 
     Example:
@@ -651,17 +654,30 @@ class FusionFilter:
             if p.use_doppler and not rate_ok:
                 self._count("invalid_doppler")
             rows.append((o, sp, sv, rate_ok))
+        sin_el = None
         if rows and receiver_m is not None:
             _, el = azimuth_elevation(receiver_m, np.array([r[1] for r in rows]))
-            above = np.degrees(np.atleast_1d(el)) >= p.elevation_mask_deg
+            el = np.atleast_1d(el)
+            above = np.degrees(el) >= p.elevation_mask_deg
             self._count("below_elevation_mask", int(above.size - above.sum()))
             rows = [r for r, a in zip(rows, above, strict=True) if a]
+            sin_el = np.sin(el[above])
         if not rows:
             return None
         n = len(rows)
-        cn0 = np.array([r[0].cn0_dbhz if math.isfinite(r[0].cn0_dbhz) else p.nominal_cn0_dbhz for r in rows])
+        has_cn0 = np.array([math.isfinite(r[0].cn0_dbhz) for r in rows])
+        cn0 = np.array([r[0].cn0_dbhz if ok else p.nominal_cn0_dbhz for r, ok in zip(rows, has_cn0, strict=True)])
         js = self._current_js_db(epoch.stamp_ns)
         s_pr, s_rate, _ = measurement_sigmas(cn0, math.nan, p.loop, p.jammer_quality_factor)
+        if sin_el is not None and not has_cn0.all():
+            # No C/N0 reported (e.g. RINEX without S1): the nominal C/N0 holds at zenith and the
+            # sigma grows as 1/sin(el), the usual elevation weighting when the signal strength is
+            # unknown (Euler & Goad 1991; RTKLIB's b/sin(el) term). Without it every satellite had
+            # the same weight, and low satellites (larger troposphere/multipath error) pulled the
+            # solution (docs/uwb_gnss_fusion/fusion_real_gnss.md).
+            scale = np.where(has_cn0, 1.0, 1.0 / np.maximum(sin_el, _MIN_SIN_ELEVATION))
+            s_pr = s_pr * scale
+            s_rate = s_rate * scale
         if math.isfinite(js):
             # eq. 4 on the nominal jammer-free C/N0; the weaker of (reported, predicted) is used so
             # that a receiver that already reports the degraded C/N0 is not penalised twice.

@@ -1,0 +1,232 @@
+"""Benchmark: the fusion node (GNSS only) on real RINEX data against the stations' surveyed positions.
+
+Stations (src/gnss_common/test/data, source and licence in the README there): ARL1 (RINEX 2.11,
+2015-07-19, with D1 Doppler and S1 C/N0) and GEONET 0759 / 3040 (RINEX 2.10, 2005-04-02, C1/P2
+only: no Doppler, no C/N0), 120 epochs at 30 s each. Truth: header APPROX POSITION XYZ.
+
+Pipeline per station: ``rfi_experiments.rinex_to_bag`` (convert_rinex + write_bag) into a temporary
+bag -> ``ReplayHarness`` (transport 'direct') through ``FusionNode`` -> /fusion/odometry, one per
+GNSS epoch. The SPP reference is ``uwb_gnss_fusion.spp.SinglePointPositioner`` (default SppParams, as
+benchmarks/spp_real_data.py) on the same epochs. Errors in ENU at the truth; horizontal and 3D
+RMS, 95th percentile and max over all epochs with an estimate.
+
+Two node configurations:
+
+* ``default``: the shipped defaults (tuned for the 5 Hz simulated receiver of Cao et al.),
+  except ``reorder_window_s = 0`` (a single in-order topic: nothing to re-order, and the last
+  epoch is then not left in the buffer);
+* ``real_gnss``: :data:`REAL_GNSS_PARAMS`, each one explained there (why the defaults do not fit a
+  static station logged every 30 s with or without Doppler).
+
+Goal (uwb_gnss_fusion issue): SPP within 5 m horizontal RMS of each station; the filter better
+than SPP (horizontal and 3D RMS) on every station.
+
+Prints a Markdown table and writes it, with a figure, to docs/uwb_gnss_fusion/fusion_real_gnss.md.
+Run (from the repository root, with the workspace environment of README.md and PYTHONPATH on src/*):
+    python benchmarks/fusion_real_gnss.py
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import rclpy  # noqa: E402
+from rclpy.context import Context  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+
+from rfi_experiments.evaluation import ecef_errors_enu, error_3d_m, error_stats, horizontal_error_m  # noqa: E402
+from rfi_experiments.replay import ReplayHarness  # noqa: E402
+from rfi_experiments.rinex_to_bag import convert_rinex, write_bag  # noqa: E402
+from uwb_gnss_fusion.fusion_node import FusionNode  # noqa: E402
+from uwb_gnss_fusion.spp import SinglePointPositioner  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT / "src" / "gnss_common" / "test" / "data"
+OUT = ROOT / "docs" / "uwb_gnss_fusion"
+STATIONS = (
+    ("ARL1", "arlm200a.15o", "arlm2000.15n"),
+    ("GEONET 0759", "07590920.05o", "07590920.05n"),
+    ("GEONET 3040", "30400920.05o", "30400920.05n"),
+)
+GOAL_SPP_HORIZONTAL_RMS_M = 5.0
+
+DEFAULT_PARAMS: dict[str, object] = {"reorder_window_s": 0.0}
+REAL_GNSS_PARAMS: dict[str, object] = {
+    # A single in-order topic: no re-ordering window (and no epoch left buffered at the end).
+    "reorder_window_s": 0.0,
+    # Static station: the white-acceleration PSD of the constant-velocity model sets how fast the
+    # filter forgets. 0.1 m^2/s^3 (default, a moving robot at 5 Hz) adds q dt^3 / 3 = 900 m^2 of
+    # position variance per 30 s epoch, i.e. no memory at all; 1e-6 adds 0.009 m^2 (0.1 m).
+    "accel_psd_m2ps3": 1.0e-6,
+    # Real stations: below 10 deg the residual troposphere and multipath dominate (the SPP's mask).
+    "elevation_mask_deg": 10.0,
+    # GEONET files have no Doppler, so the first fix cannot observe the clock drift (0759: +418 m/s,
+    # 3040: -330 m/s); the default 1 m/s 1-sigma claimed drift = 0 +- 1 m/s, the next epoch 30 s
+    # later was 12.5 km off, every pseudorange was gated and the filter reinitialised every 5
+    # epochs. 1000 m/s covers a crystal's +-3 ppm; with Doppler (ARL1) the first update fixes it.
+    "init_clock_drift_std_mps": 1000.0,
+    # Epochs are 30 s apart and the GEONET time tags jitter by 1 ms (30.001 s steps), which the
+    # 30 s defaults treated as a time gap (filter reset) or a stamp jump (message rejected).
+    "max_prediction_s": 120.0,
+    "max_stamp_jump_s": 120.0,
+}
+CONFIGS = (("default", DEFAULT_PARAMS), ("real_gnss", REAL_GNSS_PARAMS))
+
+
+def replay_station(bag: Path, params: dict[str, object]) -> tuple[np.ndarray, np.ndarray, dict, float]:
+    """Replay one bag through FusionNode: (stamps ns (N,), ECEF positions (N, 3), accounting, wall s)."""
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        node = FusionNode(context=context, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
+        harness = ReplayHarness([node], context=context, transport="direct")
+        t0 = time.perf_counter()
+        result = harness.run(bag, topics=["/gnss/measurements"])
+        wall = time.perf_counter() - t0
+        accounting = node.accounting()
+        harness.destroy()
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+    odom = result.messages("/fusion/odometry")
+    t = np.array([m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec for m in odom], dtype=np.int64)
+    p = np.array([[m.pose.pose.position.x, m.pose.pose.position.y, m.pose.pose.position.z] for m in odom])
+    return t, p.reshape(-1, 3), accounting, wall
+
+
+def stats_row(err_enu: np.ndarray) -> dict[str, float]:
+    h = error_stats(horizontal_error_m(err_enu))
+    d = error_stats(error_3d_m(err_enu))
+    return {"n": h.count, "h_rms": h.rms_m, "h_p95": h.p95_m, "h_max": h.max_m,
+            "d_rms": d.rms_m, "d_p95": d.p95_m, "d_max": d.max_m}
+
+
+def main() -> None:
+    OUT.mkdir(parents=True, exist_ok=True)
+    rows: list[dict[str, Any]] = []
+    series: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, obs, nav in STATIONS:
+            conv = convert_rinex(DATA / obs, DATA / nav)
+            truth = conv.truth_position_ecef_m
+            assert truth is not None, f"{obs}: no header position"
+            bag = Path(tmp) / name.replace(" ", "_")
+            write_bag(conv, bag)
+            positioner = SinglePointPositioner()
+            sol = [(e.stamp_ns, positioner.process(e)) for e in conv.epochs]
+            spp_t = np.array([t for t, r in sol if r.valid], dtype=np.int64)
+            spp_err = ecef_errors_enu(np.array([r.position_ecef_m for _, r in sol if r.valid]), truth)
+            rows.append({"station": name, "solution": "SPP", "epochs": len(conv.epochs),
+                         "reinit": "", "gated": "", **stats_row(spp_err)})
+            series[(name, "SPP")] = (spp_t, spp_err)
+            for config, params in CONFIGS:
+                t, p, acc, wall = replay_station(bag, params)
+                err = ecef_errors_enu(p, truth)
+                gated = acc.get("filter.innovation_gate_pseudorange", 0)
+                rows.append({"station": name, "solution": f"fusion node ({config})", "epochs": len(conv.epochs),
+                             "reinit": acc.get("filter.divergence", 0) + acc.get("filter.time_gap_reset", 0)
+                             + acc.get("rejected.stamp_far_future", 0),
+                             "gated": gated, "wall": wall, "accounting_ok": acc["accounting_ok"], **stats_row(err)})
+                series[(name, config)] = (t, err)
+    header = ("| station | solution | epochs with estimate / total | horiz. RMS (m) | horiz. p95 (m) | horiz. max (m) "
+              "| 3D RMS (m) | 3D p95 (m) | 3D max (m) | resets (divergence, time gap, rejected stamp) "
+              "| gated pseudoranges |")
+    lines = [header, "|" + "---|" * 11]
+    for r in rows:
+        lines.append(f"| {r['station']} | {r['solution']} | {r['n']}/{r['epochs']} | {r['h_rms']:.2f} "
+                     f"| {r['h_p95']:.2f} | {r['h_max']:.2f} | {r['d_rms']:.2f} | {r['d_p95']:.2f} "
+                     f"| {r['d_max']:.2f} | {r['reinit']} | {r['gated']} |")
+    table = "\n".join(lines)
+    spp_ok = all(r["h_rms"] < GOAL_SPP_HORIZONTAL_RMS_M for r in rows if r["solution"] == "SPP")
+    verdicts = []
+    for config, _ in CONFIGS:
+        better = []
+        for name, _, _ in STATIONS:
+            spp = next(r for r in rows if r["station"] == name and r["solution"] == "SPP")
+            fus = next(r for r in rows if r["station"] == name and r["solution"] == f"fusion node ({config})")
+            better.append(fus["h_rms"] < spp["h_rms"] and fus["d_rms"] < spp["d_rms"])
+        verdicts.append((config, all(better), better))
+    print(table)
+    print()
+    print(f"SPP within {GOAL_SPP_HORIZONTAL_RMS_M} m horizontal RMS on every station: {'met' if spp_ok else 'NOT met'}")
+    for config, ok, per in verdicts:
+        print(f"fusion node ({config}) better than SPP (horizontal and 3D RMS) on every station: "
+              f"{'met' if ok else 'NOT met'} ({', '.join(f'{s[0]}: {b}' for s, b in zip(STATIONS, per, strict=True))})")
+    all_ok = all(r.get("accounting_ok", True) for r in rows)
+    print(f"node input accounting adds up in every replay: {all_ok}")
+
+    fig, axes = plt.subplots(len(STATIONS), 2, figsize=(11, 3.2 * len(STATIONS)), sharex="row")
+    for i, (name, _, _) in enumerate(STATIONS):
+        for label, style in (("SPP", "k."), ("default", "C3-"), ("real_gnss", "C0-")):
+            t, err = series[(name, label)]
+            rel_min = (t - t[0]) / 60e9 if t.size else t
+            axes[i, 0].plot(rel_min, horizontal_error_m(err), style, ms=3, lw=1, label=label)
+            axes[i, 1].plot(rel_min, err[:, 2], style, ms=3, lw=1, label=label)
+        axes[i, 0].set_ylabel(f"{name}\nhorizontal error (m)")
+        axes[i, 1].set_ylabel("up error (m)")
+        axes[i, 0].set_ylim(0, 3)
+        axes[i, 1].set_ylim(-6, 6)
+        axes[i, 0].grid(alpha=0.3)
+        axes[i, 1].grid(alpha=0.3)
+    axes[0, 0].legend(loc="upper right", fontsize=8)
+    axes[-1, 0].set_xlabel("time from first epoch (min)")
+    axes[-1, 1].set_xlabel("time from first epoch (min)")
+    fig.suptitle("Fusion node (GNSS only) vs SPP on real RINEX data, errors against the surveyed position")
+    fig.tight_layout()
+    fig.savefig(OUT / "fusion_real_gnss.png", dpi=110)
+
+    params_md = "\n".join(f"| `{k}` | {v} |" for k, v in REAL_GNSS_PARAMS.items())
+    doc = OUT / "fusion_real_gnss.md"
+    doc.write_text(
+        "# The fusion node on real GNSS data\n\n"
+        "Generated by `benchmarks/fusion_real_gnss.py` (do not edit by hand). Each station's RINEX pair is\n"
+        "converted by `rinex_to_bag` into a bag and replayed through `FusionNode` (ReplayHarness,\n"
+        "transport 'direct'; GNSS only: these stations have no UWB). SPP: `SinglePointPositioner`\n"
+        "with default parameters on the same epochs. Truth: RINEX header APPROX POSITION (surveyed).\n"
+        "Errors in ENU at the truth, over every epoch with an estimate (120 epochs at 30 s per station).\n"
+        "Both node rows run the current core (with the elevation weighting described below); `default` is\n"
+        "the shipped parameters, `real_gnss` the parameters below.\n\n"
+        + table + "\n\n"
+        f"SPP within {GOAL_SPP_HORIZONTAL_RMS_M} m horizontal RMS on every station: "
+        f"**{'met' if spp_ok else 'NOT met'}**.\n\n"
+        + "\n".join(f"Fusion node ({c}) better than SPP in horizontal and 3D RMS on every station: "
+                    f"**{'met' if ok else 'NOT met'}**." for c, ok, _ in verdicts)
+        + "\n\n## Why the defaults do not fit, and the parameters for real static stations\n\n"
+        "The shipped defaults are those of the simulated 5 Hz receiver of Cao et al. On a static station\n"
+        "logged every 30 s they fail in three ways:\n\n"
+        "1. **Process noise.** The default white-acceleration PSD (0.1 m^2/s^3) adds q dt^3/3 = 900 m^2 of\n"
+        "   position variance per 30 s step: the filter forgets everything between epochs and is a noisy\n"
+        "   SPP with a different weighting.\n"
+        "2. **No Doppler (GEONET).** The first fix cannot observe the receiver clock drift, but the filter\n"
+        "   took it as 0 +- 1 m/s (`init_clock_drift_std_mps`). The GEONET receivers drift by +418 m/s\n"
+        "   (0759) and -330 m/s (3040), so 30 s later the predicted clock was about 12 km off, every\n"
+        "   pseudorange was gated and the filter reinitialised every 5 epochs.\n"
+        "3. **Clock and time tags.** The GEONET time tags step by 30.000 or 30.001 s; the 30 s defaults of\n"
+        "   `max_prediction_s` (filter reset) and `max_stamp_jump_s` (node rejection) fired on them.\n\n"
+        "The `real_gnss` configuration (node parameters, all documented in config/fusion.yaml):\n\n"
+        "| parameter | value |\n|---|---|\n" + params_md + "\n\n"
+        "One change in the core as well (`fusion_filter.py`, `_prepare_epoch`): a satellite without a\n"
+        "reported C/N0 had the sigma of the nominal C/N0 whatever its elevation, so all GEONET satellites\n"
+        "weighed the same and the low ones (larger troposphere and multipath errors) pulled the solution\n"
+        "(3D RMS 1.2-1.5 m, worse than SPP, even with the parameters above). Such a satellite now gets the\n"
+        "nominal sigma divided by sin(elevation) (the usual elevation weighting, Euler & Goad 1991,\n"
+        "RTKLIB's b/sin(el)); satellites with a C/N0 (every simulated bag, ARL1) are unchanged.\n\n"
+        "What remains: the errors of the three stations are dominated by slowly varying biases (residual\n"
+        "ionosphere and troposphere of the broadcast models, orbit and clock errors; ARL1's mean error is\n"
+        "+2.4 m up), which no filter of white measurement noise can average away. The filter gains over\n"
+        "SPP what averaging the epoch-to-epoch noise gives, about 10-20 %.\n\n"
+        "![errors](fusion_real_gnss.png)\n"
+    )
+    print(f"wrote {doc} and {OUT / 'fusion_real_gnss.png'}")
+
+
+if __name__ == "__main__":
+    main()
