@@ -4,6 +4,7 @@ each node starts and shuts down cleanly on SIGINT."""
 from __future__ import annotations
 
 import os
+import select
 import signal
 import subprocess
 import time
@@ -47,11 +48,31 @@ def test_node_help_documents_parameters_and_topics(package, name):
     assert 'subscribes' in out and 'publishes' in out
 
 
+def wait_for_line(stream, text, timeout_s):
+    """Read ``stream`` until a line contains ``text``; return what was read (bounded by timeout_s)."""
+    seen = []
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        ready, _, _ = select.select([stream], [], [], max(0.0, deadline - time.monotonic()))
+        if not ready:
+            break
+        line = stream.readline()
+        if not line:
+            break
+        seen.append(line)
+        if text in line:
+            return ''.join(seen)
+    raise AssertionError(f'no line with {text!r} within {timeout_s} s; got:\n' + ''.join(seen))
+
+
 @pytest.mark.parametrize('package,name', NODES, ids=[e[1] for e in NODES])
 def test_node_starts_and_stops_cleanly(package, name):
     proc = subprocess.Popen([executable(package, name)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    time.sleep(2.0)  # let it come up: there is no readiness signal to wait on without ros2cli
-    assert proc.poll() is None, proc.stderr.read()
+    try:
+        wait_for_line(proc.stderr, f'{name} ready', timeout_s=120.0)  # the node logs it once constructed
+    except AssertionError:
+        proc.kill()
+        raise
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=30)
     assert proc.returncode == 0, err

@@ -25,7 +25,7 @@ def run_node(node_factory: Callable[[], Any], *, executable: str, summary: str, 
     A configuration error (invalid parameter) prints one line and returns 2.
     """
     import rclpy
-    from rclpy.executors import ExternalShutdownException
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from rclpy.utilities import remove_ros_args
 
     argv = list(sys.argv if argv is None else argv)
@@ -41,7 +41,10 @@ def run_node(node_factory: Callable[[], Any], *, executable: str, summary: str, 
     node = None
     try:
         node = node_factory()
-        rclpy.spin(node)
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        node.get_logger().info(f'{executable} ready')  # after set-up: from here Ctrl-C ends spin cleanly
+        executor.spin()
         return 0
     except (KeyboardInterrupt, ExternalShutdownException):
         return 0
