@@ -69,17 +69,16 @@ def run_case(jn_db: float, js_db: float = 30.0, rate: float = 1e12, seed: int = 
     ft = blk.truth.digital_frequency[0]
     z, _ = measure_if(x)
     zt = ft[1:-1]
-    tp = dict(measurement_std=0.08, process_std=1e-4)
     res = {}
-    est = {}
+    est: dict = {}
     for name, mode in (("KF", MODE_KF), ("AKF", MODE_AKF)):
-        f = run_tracking_filter(z, TrackingFilterParams(mode=mode, **tp))[0]
+        f = run_tracking_filter(z, TrackingFilterParams(mode, measurement_std=0.08, process_std=1e-4))[0]
         res[name] = float(np.sqrt(np.mean((f[SKIP:] - zt[SKIP:]) ** 2)))
         est[name] = f
     reset = np.zeros(z.size, bool)
     s = blk.truth.sweep_start_indices[0] - 1
     reset[s[(s > 0) & (s < z.size)]] = True
-    f = run_tracking_filter(z, TrackingFilterParams(mode=MODE_AFKF, **tp), reset)[0]
+    f = run_tracking_filter(z, TrackingFilterParams(MODE_AFKF, measurement_std=0.08, process_std=1e-4), reset)[0]
     res["AFKF + true resets"] = float(np.sqrt(np.mean((f[SKIP:] - zt[SKIP:]) ** 2)))
     blkn = int(1e-3 * FS)
     period_err = {}
@@ -92,6 +91,7 @@ def run_case(jn_db: float, js_db: float = 30.0, rate: float = 1e12, seed: int = 
         fs_list, idx = [], []
         for k in range(N_MS):
             e = mon.process(x[k * blkn:(k + 1) * blkn], FS, 9.548e6, k * blkn, 0, return_traces=True)
+            assert e.traces is not None
             fs_list.append(e.traces.f)
             idx.append(e.traces.sample_index)
         fp = np.concatenate(fs_list)
@@ -127,6 +127,7 @@ def confusion(n_per_class: int = 50) -> np.ndarray:
             jn = rng.uniform(3.0, 20.0)
             nd = _noise_density_for_jn(jn)
             fe = FrontEndConfig(noise_density_dbm_per_mhz=nd, bits=int(rng.choice([2, 4, 8])))
+            jams: tuple = ()
             if truth == CW:
                 jams = (CwJammer(frequency_hz=rng.uniform(-8e6, 8e6), phase_rad=rng.uniform(0, 6.28)),)
             elif truth == CHIRP:
@@ -136,18 +137,14 @@ def confusion(n_per_class: int = 50) -> np.ndarray:
                                     time_offset_s=rng.uniform(0, bw / rate)),)
             elif truth == WIDEBAND:
                 jams = (NoiseJammer(bandwidth_hz=rng.uniform(2e6, 30e6), center_frequency_hz=rng.uniform(-2e6, 2e6)),)
-            else:
-                jams = ()
             seed = int(rng.integers(1 << 30))
             clean = IfSimulator(fe, (), seed=seed + 1).generate(blk).values()
             mon = RfiMonitor(RfiMonitorParams(calibration_blocks=1))
             mon.process(clean, FS, 9.548e6, 0, 0)
             mon.reset()
             x = IfSimulator(fe, jams, seed=seed).generate(3 * blk).values()
-            e = None
-            for k in range(3):
-                e = mon.process(x[k * blk:(k + 1) * blk], FS, 9.548e6, k * blk, 0)
-            cm[truth, e.type] += 1
+            types = [mon.process(x[k * blk:(k + 1) * blk], FS, 9.548e6, k * blk, 0).type for k in range(3)]
+            cm[truth, types[-1]] += 1
     return cm
 
 
@@ -164,7 +161,7 @@ def real_captures() -> list[str]:
         if not path.exists():
             rows.append(f"| {name} | missing | | |")
             continue
-        raw = np.fromfile(path, dtype=dt)
+        raw: np.ndarray = np.fromfile(path, dtype=dt)
         x = raw[0::2] + 1j * raw[1::2] if cplx else raw
         x = x.astype(np.complex128 if np.iscomplexobj(x) else np.float64)
         blk = int(fs * 1e-3) // 2 if name.startswith("gnss") else int(fs * 1e-3)

@@ -14,12 +14,16 @@ Features of one block (vectorised numpy, no per-sample Python):
 * ``occupancy``: occupied bins / all bins. A CW occupies the Hann main lobe (<= 4 bins); a chirp
   its swept band; wideband noise most bins (then the median scale itself rises and only the
   power J/N sees it).
+* ``line_fraction``: share of the occupied excess power inside the strongest line's main lobe
+  (+-2 bins): ~1 for a CW, also with the harmonic lines a 2-bit quantiser adds; <= 0.44 for chirps
+  and band-limited noise.
 * The tracker: period lock (Kang et al., Sec. 3.2) and the sweep rate estimate.
 
 Decision (thresholds are parameters of ``ClassifierParams``):
 
     narrowband = jn_spectral_db >= detect_jn_db
-    CW       if narrowband and occupancy <= cw_max_occupancy
+    CW       if narrowband and (occupancy <= cw_max_occupancy or the strongest line holds
+             >= CW_MIN_LINE_FRACTION of the occupied excess power: harmonics of a quantised CW)
     CHIRP    if narrowband and occupancy > cw_max_occupancy and the tracker's period is locked
              with a swept band |df| T that covers at least half the occupied band
              (or, before lock, |sweep rate| >= min_chirp_rate = 1.5e11 Hz/s at 38 MS/s; the rate
@@ -44,6 +48,16 @@ from scipy.ndimage import median_filter
 
 NONE, CW, CHIRP, WIDEBAND, UNKNOWN = 0, 1, 2, 3, 4
 """Type codes, identical to rfi_msgs/JammerState."""
+LINE_HALF_WIDTH_BINS = 2
+"""Half width of a line's Hann main lobe, Welch bins (the lobe spans +-2 bins)."""
+CW_MIN_LINE_FRACTION = 0.7
+"""A narrowband excess whose strongest line (Hann main lobe) holds at least this share of the
+occupied excess power is a CW even when its occupancy exceeds ``cw_max_occupancy``. A CW through a
+coarse quantiser (2 bits) or another front-end nonlinearity gets harmonic and intermodulation lines
+(a hard-limited tone keeps 8 / pi^2 = 81 % of its power in the fundamental; above the significance
+floor, measured: >= 98 % of the occupied excess), which occupy more bins than the main lobe; a chirp
+spreads its power over its swept band (measured <= 0.44 for 2-10 MHz sweeps, band-limited noise
+<= 0.39; benchmarks/rfi_monitor_paper.py confusion set)."""
 
 
 @dataclass(frozen=True)
@@ -106,6 +120,7 @@ class BlockFeatures:
     occupancy: float
     peak_bin: int
     peak_frequency: float    # parabolic-interpolated Welch peak, cycles/sample (complex: signed)
+    line_fraction: float = 0.0   # share of the occupied excess power in the strongest line's main lobe
 
 
 def welch_psd(x: np.ndarray, nfft: int, max_frames: int) -> tuple[np.ndarray, int]:
@@ -123,16 +138,31 @@ def welch_psd(x: np.ndarray, nfft: int, max_frames: int) -> tuple[np.ndarray, in
     nfr = x.size // nfft
     if nfr < 1:
         raise ValueError("block shorter than one frame")
-    sel = np.linspace(0, nfr - 1, min(nfr, max_frames)).astype(np.int64)
-    fr = x[: nfr * nfft].reshape(nfr, nfft)[sel]
-    w = np.hanning(nfft)
+    fr = x[: nfr * nfft].reshape(nfr, nfft)
+    if nfr > max_frames:
+        fr = fr[np.linspace(0, nfr - 1, max_frames).astype(np.int64)]
+    w = _hann(nfft)
+    spec = np.fft.fft(fr * w, axis=1) if np.iscomplexobj(x) else np.fft.rfft(fr * w, axis=1)
+    p = np.mean(spec.real ** 2 + spec.imag ** 2, axis=0)
     if np.iscomplexobj(x):
-        p = np.mean(np.abs(np.fft.fft(fr * w, axis=1)) ** 2, axis=0)
         p = np.fft.fftshift(p)
+        pw = float(np.mean(fr.real ** 2 + fr.imag ** 2))
     else:
-        p = np.mean(np.abs(np.fft.rfft(fr * w, axis=1)) ** 2, axis=0)
-    pw = float(np.mean(np.abs(fr) ** 2))
-    return p * (pw / p.sum()), int(sel.size)
+        pw = float(np.mean(fr * fr))
+    return p * (pw / p.sum()), int(fr.shape[0])
+
+
+_HANN: dict[int, np.ndarray] = {}
+
+
+def _hann(nfft: int) -> np.ndarray:
+    """Cached Hann window of nfft points (read-only)."""
+    w = _HANN.get(nfft)
+    if w is None:
+        w = np.hanning(nfft)
+        w.flags.writeable = False
+        _HANN[nfft] = w
+    return w
 
 
 def smooth_template(psd: np.ndarray, width: int) -> np.ndarray:
@@ -168,15 +198,18 @@ def block_features(x: np.ndarray, template: np.ndarray | None, par: ClassifierPa
     else:
         f_pk = (k + dk) / par.nfft
     if not scale > 0:
-        return BlockFeatures(power, psd, frames, scale, -math.inf, 0.0, k, f_pk)
+        return BlockFeatures(power, psd, frames, scale, -math.inf, 0.0, k, f_pk, 0.0)
     thr = max(par.sig_sigma / math.sqrt(frames), par.min_excess)
     excess = white / scale - 1.0
     # the relative floor keeps a strong CW's Hann sidelobes (< -31 dB) out of its occupancy
     occ = excess > max(thr, 10 ** (-par.sidelobe_db / 10) * float(np.max(excess)))
     noise_power = scale * float(tpl.sum())
-    jpow = float(np.sum((white[occ] - scale) * tpl[occ]))
+    exc_pow = np.where(occ, (white - scale) * tpl, 0.0)
+    jpow = float(np.sum(exc_pow))
     jn_spec = 10 * math.log10(jpow / noise_power) if jpow > 0 else -math.inf
-    return BlockFeatures(power, psd, frames, scale, jn_spec, float(np.mean(occ)), k, f_pk)
+    lo, hi = max(k - LINE_HALF_WIDTH_BINS, 0), min(k + LINE_HALF_WIDTH_BINS + 1, nb)
+    line = float(np.sum(exc_pow[lo:hi])) / jpow if jpow > 0 else 0.0
+    return BlockFeatures(power, psd, frames, scale, jn_spec, float(np.mean(occ)), k, f_pk, line)
 
 
 def logistic(margin_db: float, slope_db: float) -> float:
@@ -203,8 +236,8 @@ def classify(feat: BlockFeatures, jn_power_db: float, period_locked: bool, sweep
     nb = feat.jn_spectral_db >= thr
     if nb:
         c_det = logistic(feat.jn_spectral_db - thr, s)
-        if feat.occupancy <= par.cw_max_occupancy:
-            structure = 1.0 - 0.5 * feat.occupancy / par.cw_max_occupancy
+        if feat.occupancy <= par.cw_max_occupancy or feat.line_fraction >= CW_MIN_LINE_FRACTION:
+            structure = 1.0 - 0.5 * min(feat.occupancy / par.cw_max_occupancy, 1.0)
             return CW, c_det * structure
         if period_locked:
             return CHIRP, c_det

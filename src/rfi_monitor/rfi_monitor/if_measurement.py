@@ -74,59 +74,89 @@ def acos_fast(x: float) -> float:
 
 
 @njit(cache=True, inline="always")
+def sincos_small(e: float) -> tuple[float, float]:
+    """(sin e, cos e) by Taylor polynomials for |e| <= 0.07 rad (|error| < 1e-10).
+
+    The chirp correction needs them for ``e = pi df`` with |df| <= MAX_ABS_RATE = 0.02
+    cycles/sample^2 (|e| <= 0.063); libm's sin and cos cost ~20 ns each per sample.
+    """
+    e2 = e * e
+    return (e * (1.0 - e2 * (1.0 / 6.0 - e2 * (1.0 / 120.0))),
+            1.0 - e2 * (0.5 - e2 * (1.0 / 24.0 - e2 * (1.0 / 720.0))))
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def measure_real(r_prev: float, r_0: float, r_next: float, delta_f: float, chirp_correction: bool,
                  min_abs: float, domain_margin: float) -> tuple[float, int]:
+    """Digital frequency of a real tone/chirp from three consecutive samples (``measure_real_sq``
+    with the near-zero threshold given as |r_n| <= min_abs)."""
+    return measure_real_sq(r_prev, r_0, r_next, delta_f, chirp_correction, min_abs * min_abs, domain_margin)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def measure_real_sq(r_prev: float, r_0: float, r_next: float, delta_f: float, chirp_correction: bool,
+                    min_abs_sq: float, domain_margin: float) -> tuple[float, int]:
     """Digital frequency of a real tone/chirp from three consecutive samples.
 
     Args:
         r_prev, r_0, r_next: samples r_{n-1}, r_n, r_{n+1}, any consistent unit.
-        delta_f: sweep, cycles/sample^2 (Kang's Delta f), used by the chirp correction.
+        delta_f: sweep, cycles/sample^2 (Kang's Delta f), used by the chirp correction,
+            |delta_f| <= 0.02 (the polynomial sin/cos of ``sincos_small``).
         chirp_correction: apply eq. 10 (else eq. 8).
-        min_abs: reject when |r_n| <= min_abs (same unit as the samples).
+        min_abs_sq: reject when r_n^2 <= min_abs_sq (sample unit squared).
         domain_margin: tolerated excess of |S / r_n| over 1 before rejection, >= 0.
 
     Returns:
         (f_n in cycles/sample in [0, 0.5], status code). f_n is NaN unless status == STATUS_OK.
 
     Notes:
-        Kang et al., eq. 8 and eq. 10 (see the module docstring for the derivation).
+        Kang et al., eq. 8 and eq. 10 (see the module docstring for the derivation). Written
+        without data-dependent branches and with one division (speed): with ``Q = sqrt(r_n^2 -
+        S^2) = |r_n| sin(w0)``, eq. 10's ratio ``S / (r_n [cos(e) - tan(theta) sin(e)])`` with
+        ``tan(theta) = -D / (r_n sin(w0))`` is ``S Q / (r_n Q cos(e) + D |r_n| sin(e))``, e = pi df;
+        its factor is below 0.5 when ``den r_n < r_n^2 Q / 2``. Without correction (or sin(w0) <
+        1e-6) the ratio is S / r_n (eq. 8). Checks in order: non-finite, near zero, domain of S /
+        r_n, correction factor, domain of the corrected ratio.
     """
-    if not (math.isfinite(r_prev) and math.isfinite(r_0) and math.isfinite(r_next)):
-        return math.nan, STATUS_NON_FINITE
-    if abs(r_0) <= min_abs:
-        return math.nan, STATUS_NEAR_ZERO
     s = 0.5 * (r_next + r_prev)
-    ratio = s / r_0
-    if abs(ratio) > 1.0 + domain_margin:
-        return math.nan, STATUS_DOMAIN
-    ratio = min(1.0, max(-1.0, ratio))
-    w = acos_fast(ratio)
-    if chirp_correction and delta_f != 0.0:
-        sw = math.sin(w)
-        if sw < 1e-6:
-            return w / _TWO_PI, STATUS_OK
-        d = 0.5 * (r_next - r_prev)
-        tan_theta = -d / (r_0 * sw)
-        e = math.pi * delta_f
-        factor = math.cos(e) - tan_theta * math.sin(e)
-        if factor < 0.5:
-            return math.nan, STATUS_CORRECTION
-        ratio = s / (r_0 * factor)
-        if abs(ratio) > 1.0 + domain_margin:
-            return math.nan, STATUS_DOMAIN
-        ratio = min(1.0, max(-1.0, ratio))
-        w = acos_fast(ratio)
-    return w / _TWO_PI, STATUS_OK
+    d = 0.5 * (r_next - r_prev)
+    r0sq = r_0 * r_0
+    abs_r0 = abs(r_0)
+    lim = 1.0 + domain_margin
+    q = math.sqrt(max(r0sq - s * s, 0.0))
+    sn, cs = sincos_small(math.pi * delta_f)
+    den_c = r_0 * q * cs + d * abs_r0 * sn
+    use_corr = chirp_correction and delta_f != 0.0 and q >= 1e-6 * abs_r0
+    num = s * q if use_corr else s
+    den = den_c if use_corr else r_0
+    ratio = num / den
+    bad_corr = use_corr and den_c * r_0 < 0.5 * r0sq * q
+    finite = math.isfinite(r_prev + r_0 + r_next)
+    st = STATUS_DOMAIN if abs(ratio) > lim else STATUS_OK
+    st = STATUS_CORRECTION if bad_corr else st
+    st = STATUS_DOMAIN if s * s > lim * lim * r0sq else st
+    st = STATUS_NEAR_ZERO if r0sq <= min_abs_sq else st
+    st = STATUS_NON_FINITE if not finite else st
+    w = acos_fast(min(1.0, max(-1.0, ratio)))
+    return (w * (1.0 / _TWO_PI) if st == STATUS_OK else math.nan), st
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def measure_complex(re_prev: float, im_prev: float, re_0: float, im_0: float, re_next: float,
                     im_next: float, min_abs: float) -> tuple[float, int]:
+    """Signed digital frequency of a complex tone/chirp from three consecutive I/Q samples
+    (``measure_complex_sq`` with the near-zero threshold given as |x_n| <= min_abs)."""
+    return measure_complex_sq(re_prev, im_prev, re_0, im_0, re_next, im_next, min_abs * min_abs)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def measure_complex_sq(re_prev: float, im_prev: float, re_0: float, im_0: float, re_next: float,
+                       im_next: float, min_abs_sq: float) -> tuple[float, int]:
     """Signed digital frequency of a complex tone/chirp from three consecutive I/Q samples.
 
     Args:
         re_*, im_*: I and Q of x_{n-1}, x_n, x_{n+1}.
-        min_abs: reject when |x_n| <= min_abs.
+        min_abs_sq: reject when |x_n|^2 <= min_abs_sq.
 
     Returns:
         (f_n in cycles/sample in (-0.5, 0.5], status code); NaN unless STATUS_OK.
@@ -138,7 +168,7 @@ def measure_complex(re_prev: float, im_prev: float, re_0: float, im_0: float, re
     if not (math.isfinite(re_prev) and math.isfinite(im_prev) and math.isfinite(re_0)
             and math.isfinite(im_0) and math.isfinite(re_next) and math.isfinite(im_next)):
         return math.nan, STATUS_NON_FINITE
-    if re_0 * re_0 + im_0 * im_0 <= min_abs * min_abs:
+    if re_0 * re_0 + im_0 * im_0 <= min_abs_sq:
         return math.nan, STATUS_NEAR_ZERO
     # x_{n+1} conj(x_n) + x_n conj(x_{n-1})
     a_re = re_next * re_0 + im_next * im_0 + re_0 * re_prev + im_0 * im_prev
@@ -148,7 +178,7 @@ def measure_complex(re_prev: float, im_prev: float, re_0: float, im_0: float, re
     return math.atan2(a_im, a_re) / _TWO_PI, STATUS_OK
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _measure_block_real(x: np.ndarray, delta_f: np.ndarray, chirp_correction: bool, min_abs: float,
                         domain_margin: float) -> tuple[np.ndarray, np.ndarray]:
     n = x.size
@@ -160,7 +190,7 @@ def _measure_block_real(x: np.ndarray, delta_f: np.ndarray, chirp_correction: bo
     return z, st
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _measure_block_complex(xr: np.ndarray, xi: np.ndarray, min_abs: float) -> tuple[np.ndarray, np.ndarray]:
     n = xr.size
     z = np.full(max(n - 2, 0), np.nan)

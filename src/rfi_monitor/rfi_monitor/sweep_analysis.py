@@ -49,7 +49,7 @@ class SweepAnalysisParams:
     """
 
     enabled: bool = True
-    hop_s: float = 0.5e-3
+    hop_s: float = 1e-3
     min_strength: float = 0.3
     min_lag: int = 3
     max_period_fraction: float = 0.25
@@ -149,11 +149,19 @@ def analyse(zdec: np.ndarray, decimation: int, first_centre: float, sample_index
     kbest = int(cand[np.argmax(st_c)])
     best = float(np.max(st_c))
     # prefer a sub-multiple that is also a peak of at least half the strength
-    for q in range(int(kbest // lo), 1, -1):
-        k = _local_max_near(r, kbest / q, 1.0)
-        if k >= lo and r[k] >= r[k - 1] and r[k] >= r[k + 1] and r[k] - trough[k - 1] >= 0.5 * best:
-            kbest = k
-            break
+    # (vectorised over q, largest q first: the local maximum of r within +-1 lag of kbest / q)
+    qs = np.arange(int(kbest // lo), 1, -1)
+    if qs.size:
+        cen = kbest / qs
+        k_lo = np.maximum(1, np.floor(cen - 1.0)).astype(np.int64)
+        k_hi = np.minimum(r.size - 2, np.ceil(cen + 1.0)).astype(np.int64)
+        idx = k_lo[:, None] + np.arange(4)[None, :]
+        vals = np.where(idx <= k_hi[:, None], r[np.minimum(idx, r.size - 1)], -np.inf)
+        ks = idx[np.arange(qs.size), np.argmax(vals, axis=1)]
+        ok = ((k_hi >= k_lo) & (ks >= lo) & (r[ks] >= r[ks - 1]) & (r[ks] >= r[np.minimum(ks + 1, r.size - 1)])
+              & (r[ks] - trough[ks - 1] >= 0.5 * best))
+        if ok.any():
+            kbest = int(ks[np.argmax(ok)])
     strength = float(r[kbest] - trough[kbest - 1])
     if strength < par.min_strength:
         return SweepAnalysis(False, strength, nan, nan, nan, nan, sample_index)
@@ -169,10 +177,10 @@ def analyse(zdec: np.ndarray, decimation: int, first_centre: float, sample_index
     if not t_dec > 0:
         return none
     # Fourier coefficients at 1/T and 2/T (decimated time), phase referenced to absolute samples
-    i = np.arange(n)
-    ph = 2 * np.pi * i / t_dec
-    c1 = complex(np.sum(x * np.exp(-1j * ph)))
-    c2 = complex(np.sum(x * np.exp(-2j * ph)))
+    e1 = np.exp((-2j * np.pi / t_dec) * np.arange(n))
+    xe1 = x * e1
+    c1 = complex(np.sum(xe1))
+    c2 = complex(np.dot(xe1, e1))
     if abs(c1) == 0:
         return none
     sgn = -1.0 if (c2 * np.conj(c1) ** 2).imag > 0 else 1.0

@@ -28,10 +28,11 @@ Kang et al., Sec. 3.2:
    lock where one false peak between two true ones breaks the interval rule.
 
 Decimation (documented deviation, for speed): the LPD runs at the full rate; its output is
-averaged over ``decimation`` samples (default 4) and the AR Kalman filter (p x p covariance,
-O(p^2) per step, full-matrix loops that the compiler vectorises) and peak detector run at the
-decimated rate. A peak time is then known to +-D/2 samples, and the period, a least-squares fit
-over up to 16 peaks, to a small fraction of D (1 % of the period at D = 4 in the tests).
+averaged over ``decimation`` samples (default 4; ``RfiMonitorParams.paper_method()`` uses 2; the
+paper runs at the full rate, D = 1) and the AR Kalman filter (low-rank covariance, O(K p) per step, see
+``ar_step``) and peak detector run at the decimated rate. A peak time is then known to +-D/2
+samples, and the period, a least-squares fit over up to 16 peaks, to a small fraction of D (1 %
+of the period at D = 4 in the tests).
 The peak is late with respect to the sweep start by the LPD length (the 6-sample difference
 reaches its full value 5 samples after the jump) plus the half decimation block; ``delay``
 removes this deterministic group delay.
@@ -60,8 +61,35 @@ J_DEC, J_INPEAK, J_PKIDX, J_NPEAKS, J_RPOS, J_RCOUNT, J_LOCKED, J_ZPOS, J_ZCOUNT
 N_SISTATE = 10
 # packed parameters (SweepPeriodParams.as_array)
 (Q_GAMMA, Q_NORM, Q_THR, Q_KAPPA, Q_LAMBDA, Q_DEC, Q_QAR, Q_RAR, Q_A, Q_DELAY, Q_MINSEP, Q_TOL, Q_MINCONS,
- Q_TOLABS, Q_MAXPER, Q_VOTING) = range(16)
-N_SPAR = 16
+ Q_TOLABS, Q_MAXPER, Q_VOTING, Q_ARK) = range(17)
+N_SPAR = 17
+
+AR_LR_MAX = 8
+"""Most rank-one terms kept by the low-rank AR covariance (see ``ar_step``)."""
+AR_LR_TOL = 1e-6
+"""Relative weight below which a decayed rank-one term of the AR covariance is dropped."""
+# rows of the AR covariance array ``pmat`` (shape (AR_PMAT_ROWS, p)): 0..p-1 the full matrix,
+# p scratch, p+1..p+AR_LR_MAX the low-rank vectors, then: their weights, d and the ring pos; scratch
+AR_LR_BASE = AR_ORDER + 1
+AR_LR_WROW = AR_LR_BASE + AR_LR_MAX
+AR_LR_CROW = AR_LR_WROW + 1
+AR_PMAT_ROWS = AR_LR_CROW + 1
+AR_LR_D = AR_LR_MAX
+AR_LR_POS = AR_LR_MAX + 1
+assert AR_LR_POS < AR_ORDER
+
+
+def ar_low_rank_terms(a: float, tol: float = AR_LR_TOL) -> int:
+    """Rank-one terms K the low-rank AR covariance keeps for a transition ``a`` (-1: full matrix).
+
+    The term dropped after K steps carries the weight ``a^(2 (K + 1))`` relative to a fresh one;
+    K is the smallest with ``a^(2 (K + 1)) <= tol`` (a = 0.2: K = 4, dropped weight 1.0e-7).
+    """
+    a2 = a * a
+    if a2 == 0.0:
+        return 0
+    k = int(math.ceil(math.log(tol) / math.log(a2))) - 1
+    return max(k, 0) if k <= AR_LR_MAX else -1
 
 _AR_FASTMATH = {"nsz", "arcp", "contract", "reassoc"}
 """Fast-math flags that keep NaN/inf semantics (no 'nnan'/'ninf'), so finiteness guards still work."""
@@ -141,18 +169,26 @@ class SweepPeriodParams:
                          1.0 / self.noise_time_constant, self.decimation, self.ar_process_var,
                          self.ar_measurement_var, self.ar_transition, self.delay, self.min_separation,
                          self.tolerance, self.min_consistent, self.min_tolerance_samples,
-                         self.max_period, 1.0 if self.lattice_voting else 0.0], dtype=np.float64)
+                         self.max_period, 1.0 if self.lattice_voting else 0.0,
+                         ar_low_rank_terms(self.ar_transition)], dtype=np.float64)
 
 
 def initial_state() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
                              np.ndarray]:
-    """(float state, int state, z history, AR Gamma, AR P (with a scratch row), AR history, peaks)."""
+    """(float state, int state, z history, AR Gamma, AR P (``ar_step``), AR history, peaks)."""
     sf = np.zeros(N_SFSTATE)
     sf[S_PERIOD] = math.nan
     sf[S_CAND] = math.nan
     return (sf, np.zeros(N_SISTATE, dtype=np.int64), np.zeros(LPD_LAG), np.zeros(AR_ORDER),
-            np.vstack([np.eye(AR_ORDER), np.zeros((1, AR_ORDER))]), np.zeros(AR_ORDER),
-            np.zeros(PEAK_RING, dtype=np.int64))
+            initial_ar_covariance(), np.zeros(AR_ORDER), np.zeros(PEAK_RING, dtype=np.int64))
+
+
+def initial_ar_covariance() -> np.ndarray:
+    """AR covariance array of ``ar_step`` for P_0 = I (full rows and low-rank form d = 1, no terms)."""
+    pmat = np.zeros((AR_PMAT_ROWS, AR_ORDER))
+    pmat[:AR_ORDER] = np.eye(AR_ORDER)
+    pmat[AR_LR_WROW, AR_LR_D] = 1.0
+    return pmat
 
 
 @njit(cache=True)
@@ -264,50 +300,148 @@ def _update_period(sf: np.ndarray, si: np.ndarray, peaks: np.ndarray, par: np.nd
 
 
 @njit(cache=True, inline="always", fastmath=_AR_FASTMATH)
-def ar_step(v: float, gam: np.ndarray, pmat: np.ndarray, hist: np.ndarray, a: float, q_ar: float,
-            r_ar: float) -> float:
-    """One step of the AR(p) coefficient Kalman filter (eq. 24-27); returns zAR (eq. 27).
-
-    Args:
-        v: new (decimated) LPD value zG.
-        gam: Gamma estimate, shape (p,), updated in place.
-        pmat: shape (p + 1, p): rows 0..p-1 the posterior covariance of Gamma (full symmetric),
-            row p scratch; updated in place.
-        hist: C_n = the last p values of zG (newest first), shape (p,), shifted in place.
-        a: diagonal of A; q_ar: diagonal of Q_AR; r_ar: sigma_AR^2.
-    """
-    p = gam.size
+def _ar_step_full(v: float, gam: np.ndarray, pmat: np.ndarray, hist: np.ndarray, a: float, q_ar: float,
+                  r_ar: float) -> float:
+    """Full-matrix AR coefficient Kalman step (any |a| < 1); see ``ar_step``."""
+    p = AR_ORDER
     a2 = a * a
     pred = 0.0
     for i in range(p):
         gam[i] = a * gam[i]
         pred += hist[i] * gam[i]
-    pc = pmat[p]
     for i in range(p):                     # P- = A P A^T + Q (A = a I)
         for j in range(p):
             pmat[i, j] = a2 * pmat[i, j]
         pmat[i, i] += q_ar
     s = r_ar
-    for i in range(p):                     # P- C and C^T P- C + R
+    for i in range(p):                     # P- C (scratch row p) and C^T P- C + R
         acc = 0.0
         for j in range(p):
             acc += pmat[i, j] * hist[j]
-        pc[i] = acc
+        pmat[p, i] = acc
         s += hist[i] * acc
     inv_s = 1.0 / s
     innov = (v - pred) * inv_s
     zar = 0.0
     for i in range(p):
-        gam[i] += pc[i] * innov
+        gam[i] += pmat[p, i] * innov
         zar += hist[i] * gam[i]
     for i in range(p):                     # P+ = P- - P-C C^T P- / s
-        ki = pc[i] * inv_s
+        ki = pmat[p, i] * inv_s
         for j in range(p):
-            pmat[i, j] -= ki * pc[j]
+            pmat[i, j] -= ki * pmat[p, j]
     for i in range(p - 1, 0, -1):
         hist[i] = hist[i - 1]
     hist[0] = v
     return zar
+
+
+@njit(cache=True, inline="always", fastmath=_AR_FASTMATH)
+def _dot_row(pmat: np.ndarray, row: int, x: np.ndarray) -> float:
+    """pmat[row, :p] . x[:p] with four partial sums (a short dependency chain), p = AR_ORDER."""
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    s3 = 0.0
+    for i in range(0, AR_ORDER - 3, 4):
+        s0 += pmat[row, i] * x[i]
+        s1 += pmat[row, i + 1] * x[i + 1]
+        s2 += pmat[row, i + 2] * x[i + 2]
+        s3 += pmat[row, i + 3] * x[i + 3]
+    for i in range(AR_ORDER - AR_ORDER % 4, AR_ORDER):
+        s0 += pmat[row, i] * x[i]
+    return (s0 + s1) + (s2 + s3)
+
+
+@njit(cache=True, inline="always", fastmath=_AR_FASTMATH)
+def _dot(a: np.ndarray, x: np.ndarray) -> float:
+    """a[:p] . x[:p] with four partial sums, p = AR_ORDER."""
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    s3 = 0.0
+    for i in range(0, AR_ORDER - 3, 4):
+        s0 += a[i] * x[i]
+        s1 += a[i + 1] * x[i + 1]
+        s2 += a[i + 2] * x[i + 2]
+        s3 += a[i + 3] * x[i + 3]
+    for i in range(AR_ORDER - AR_ORDER % 4, AR_ORDER):
+        s0 += a[i] * x[i]
+    return (s0 + s1) + (s2 + s3)
+
+
+@njit(cache=True, inline="always", fastmath=_AR_FASTMATH)
+def _ar_step_low_rank(v: float, gam: np.ndarray, pmat: np.ndarray, hist: np.ndarray, a: float, q_ar: float,
+                      r_ar: float, k_terms: int) -> float:
+    """Low-rank AR coefficient Kalman step (``ar_step``, Notes); k_terms >= 0 rank-one terms.
+
+    2-D indexing only (no row views, which cost reference counting in the compiled loop) and dot
+    products with partial sums (the step is a serial recursion: its latency counts)."""
+    p = AR_ORDER
+    u_row = AR_ORDER                        # scratch row: u = P- C
+    a2 = a * a
+    d = a2 * pmat[AR_LR_WROW, AR_LR_D] + q_ar      # P- = d I - sum_k w_k u_k u_k^T
+    pmat[AR_LR_WROW, AR_LR_D] = d
+    # c_k = w_k (u_k . C) into the scratch row; s = R + C^T P- C = R + d |C|^2 - sum_k w_k (u_k . C)^2
+    s = r_ar + d * _dot(hist, hist)
+    for k in range(k_terms):
+        wk = a2 * pmat[AR_LR_WROW, k]
+        pmat[AR_LR_WROW, k] = wk
+        dk = _dot_row(pmat, AR_LR_BASE + k, hist)
+        pmat[AR_LR_CROW, k] = wk * dk
+        s -= wk * dk * dk
+    for i in range(p):                      # u = P- C = d C - sum_k c_k u_k
+        acc = d * hist[i]
+        for k in range(k_terms):
+            acc -= pmat[AR_LR_CROW, k] * pmat[AR_LR_BASE + k, i]
+        pmat[u_row, i] = acc
+    pred = a * _dot(gam, hist)
+    inv_s = 1.0 / s
+    innov = (v - pred) * inv_s
+    for i in range(p):
+        gam[i] = a * gam[i] + pmat[u_row, i] * innov
+    zar = _dot(gam, hist)
+    if k_terms > 0:                         # P+ = P- - u u^T / s: the new term replaces the oldest
+        pos = int(pmat[AR_LR_WROW, AR_LR_POS])
+        for i in range(p):
+            pmat[AR_LR_BASE + pos, i] = pmat[u_row, i]
+        pmat[AR_LR_WROW, pos] = inv_s
+        pmat[AR_LR_WROW, AR_LR_POS] = pos + 1 if pos + 1 < k_terms else 0
+    for i in range(p - 1, 0, -1):
+        hist[i] = hist[i - 1]
+    hist[0] = v
+    return zar
+
+
+@njit(cache=True, inline="always", fastmath=_AR_FASTMATH)
+def ar_step(v: float, gam: np.ndarray, pmat: np.ndarray, hist: np.ndarray, a: float, q_ar: float,
+            r_ar: float, k_terms: int) -> float:
+    """One step of the AR(p) coefficient Kalman filter (eq. 24-27); returns zAR (eq. 27).
+
+    Args:
+        v: new (decimated) LPD value zG.
+        gam: Gamma estimate, shape (p,), updated in place.
+        pmat: covariance of Gamma, shape (AR_PMAT_ROWS, p) (``initial_ar_covariance``): rows
+            0..p-1 the full matrix (used when k_terms < 0), row p scratch, then the low-rank form;
+            updated in place.
+        hist: C_n = the last p values of zG (newest first), shape (p,), shifted in place.
+        a: diagonal of A; q_ar: diagonal of Q_AR; r_ar: sigma_AR^2.
+        k_terms: rank-one terms of the low-rank form (``ar_low_rank_terms``); -1: full matrix.
+
+    Notes:
+        Kang et al., eq. 24-27 (after Oikonomou et al. 2006) with A = a I, Q = q I:
+        ``P-_n = a^2 P+_{n-1} + q I``, ``u = P-_n C_n``, ``s = C_n^T u + sigma_AR^2``,
+        ``Gamma^_n = a Gamma^_{n-1} + u (zG_n - a C_n^T Gamma^_{n-1}) / s``, ``P+_n = P-_n - u u^T / s``.
+        Low-rank form (speed; exact up to the dropped terms): unrolling the recursion,
+        ``P-_n = d_n I - sum_{k>=1} a^(2k) u_{n-k} u_{n-k}^T / s_{n-k}`` with ``d_n = a^2 d_{n-1} + q``.
+        A term's weight decays by a^2 per step (0.04 for the paper's A = 0.2 I), so only the last
+        K terms are kept (``ar_low_rank_terms``: the first dropped one weighs a^(2 (K + 1)) <= 1e-6
+        relative, 1.0e-7 at a = 0.2). Cost O(K p) instead of O(p^2) per step: u = d C - sum_k w_k
+        u_k (u_k . C). The stable coefficient filter (A = 0.2 I) does not accumulate the error.
+    """
+    if k_terms >= 0:
+        return _ar_step_low_rank(v, gam, pmat, hist, a, q_ar, r_ar, k_terms)
+    return _ar_step_full(v, gam, pmat, hist, a, q_ar, r_ar)
 
 
 @njit(cache=True, inline="always")
@@ -360,9 +494,10 @@ def _run(z: np.ndarray, par: np.ndarray, sign: float, wrap: bool) -> tuple[np.nd
     sf[S_CAND] = math.nan
     zhist = np.zeros(LPD_LAG)
     gam = np.zeros(AR_ORDER)
-    pmat = np.zeros((AR_ORDER + 1, AR_ORDER))
+    pmat = np.zeros((AR_PMAT_ROWS, AR_ORDER))
     for i in range(AR_ORDER):
         pmat[i, i] = 1.0
+    pmat[AR_LR_WROW, AR_LR_D] = 1.0
     hist = np.zeros(AR_ORDER)
     peaks = np.zeros(PEAK_RING, dtype=np.int64)
     zg_out = np.empty(z.size)
@@ -387,7 +522,7 @@ def _run(z: np.ndarray, par: np.ndarray, sign: float, wrap: bool) -> tuple[np.nd
         acc += zg * sign
         ndec += 1
         if ndec == dec:
-            zar = ar_step(acc / dec, gam, pmat, hist, par[Q_A], par[Q_QAR], par[Q_RAR])
+            zar = ar_step(acc / dec, gam, pmat, hist, par[Q_A], par[Q_QAR], par[Q_RAR], int(par[Q_ARK]))
             acc = 0.0
             ndec = 0
             s = peak_step(n, zar, sf, si, peaks, par)

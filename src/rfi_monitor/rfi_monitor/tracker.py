@@ -7,15 +7,19 @@ hot state (filter, LPD, decimation, lattice) lives in local variables inside the
 loaded from / stored to the arrays of ``TrackerState`` once per block, so that a stream fed as
 one block or as many gives bit-identical per-sample estimates.
 
-Speed (see docs/rfi_monitor/speed.md): the filter's covariance recursion is a serial chain with one
-division per sample; everything else is kept off that chain so that the CPU overlaps it:
+Speed (see docs/rfi_monitor/speed.md):
 
-* arccos by a polynomial (``acos_fast``) instead of libm;
-* the chirp correction of eq. 10 uses the sweep estimate ``df`` of ``DF_LAG`` samples earlier
-  (a sweep rate changes little over 8 samples; after a reset eq. 21-22 keep df), so the
-  measurement of sample n does not wait for the filter update of sample n - 1;
-* the AR(10) Kalman step runs every ``decimation`` samples with full-matrix loops under
-  NaN-preserving fast-math flags (vectorised).
+* the three-sample measurements are computed one chunk of CHUNK = 16 samples ahead of the serial
+  part (software pipeline) in a loop the compiler vectorises; they need the filter's df only
+  ``DF_LAG`` = 32 samples late (a sweep rate changes little over 32 samples; after a reset eq.
+  21-22 keep df), written without data-dependent branches and with one division
+  (``if_measurement.measure_real_sq``); arccos by a polynomial, sin/cos of pi df by Taylor terms;
+* the filter step (``tracking_filters.filter_step``) has one division and no branch: a rejected
+  sample runs the same arithmetic with K = 0; the update and the next prediction are fused;
+* the AR(10) Kalman step keeps its covariance in a low-rank form (``sweep_period.ar_step``,
+  K = 4 rank-one terms at A = 0.2 I, relative error 1e-7) and runs every ``decimation`` samples;
+* the hot state lives in local variables, the per-status counters too; per-sample helpers take
+  scalars only (an array argument costs reference counting on every call).
 
 Reset scheduler, paper method (Kang et al., Sec. 3.1-3.2: "the estimated time index at the peak is
 sent to the filter and used to reset the filter"): a peak is detected some samples after the sweep
@@ -39,6 +43,8 @@ Additions on top ("ours", switchable, reported separately in the benchmarks):
 
 Sample alignment: the measurement for sample n needs x_{n+1}, so a block of samples
 [a, a + N) yields estimates for samples [a - 1, a + N - 1) (the first block: [1, N - 1)).
+The filter state stored between blocks (``fst``) is the prediction for the next sample; the
+per-sample traces hold the posterior of each sample.
 """
 
 from __future__ import annotations
@@ -48,7 +54,16 @@ import math
 import numpy as np
 from numba import njit
 
-from rfi_monitor.if_measurement import N_STATUS, STATUS_OK, measure_complex, measure_real
+from rfi_monitor.if_measurement import (
+    N_STATUS,
+    STATUS_CORRECTION,
+    STATUS_DOMAIN,
+    STATUS_NEAR_ZERO,
+    STATUS_NON_FINITE,
+    STATUS_OK,
+    measure_complex_sq,
+    measure_real_sq,
+)
 from rfi_monitor.sweep_period import (
     _AR_FASTMATH,
     AR_ORDER,
@@ -58,6 +73,7 @@ from rfi_monitor.sweep_period import (
     N_SISTATE,
     PEAK_RING,
     Q_A,
+    Q_ARK,
     Q_DEC,
     Q_GAMMA,
     Q_NORM,
@@ -78,11 +94,8 @@ from rfi_monitor.tracking_filters import (
     F_WSUM,
     I_WCOUNT,
     I_WPOS,
-    kf_gain_scale,
-    kf_predict,
+    filter_step,
     kf_sweep_reset,
-    kf_update,
-    window_push,
 )
 
 # monitor float state
@@ -102,8 +115,10 @@ N_MPAR = 10
 
 MAX_ABS_RATE = 0.02
 """Clamp of |df| used inside the chirp correction, cycles/sample^2 (guards a diverged estimate)."""
-DF_LAG = 8
-"""Samples by which the df used in the chirp correction lags the filter (power of two)."""
+CHUNK = 16
+"""Length of the aligned chunks whose measurements are computed ahead in a vectorised loop (power of two)."""
+DF_LAG = 2 * CHUNK
+"""Samples by which the df used in the chirp correction lags the filter (measured one chunk ahead)."""
 Z_RING = 64
 """Recent measurements kept for the sweep-start fit (power of two, > 2 * max refine window)."""
 MAX_REFINE_WINDOW = 24
@@ -200,8 +215,15 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
     g2 = 0.25 * g1 * g1
     tol = spar[Q_TOL]
     gamma, norm, dec = spar[Q_GAMMA], spar[Q_NORM], int(spar[Q_DEC])
-    a_ar, q_ar, r_ar = spar[Q_A], spar[Q_QAR], spar[Q_RAR]
-    m_win = ring.size
+    a_ar, q_ar, r_ar, k_ar = spar[Q_A], spar[Q_QAR], spar[Q_RAR], int(spar[Q_ARK])
+    lpd_scale = (1.0 - gamma) / norm
+    inv_dec = 1.0 / dec
+    min_abs_ratio2 = min_abs_ratio * min_abs_ratio
+    n_ok = 0
+    n_near = 0
+    n_dom = 0
+    n_nonfin = 0
+    n_corr = 0
     # ---- load the hot state into locals ---------------------------------------------------------
     f, df, p11, p12, p22, wsum = fst[F_F], fst[F_DF], fst[F_P11], fst[F_P12], fst[F_P22], fst[F_WSUM]
     wcount, wpos = ist[I_WCOUNT], ist[I_WPOS]
@@ -217,25 +239,66 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
     dmask = zdec.size - 1
     dfmask = dfring.size - 1
     n_out = 0
-    for j in range(xr.size):
-        re_n = xr[j]
-        im_n = xi[j] if is_complex else 0.0
-        if nbuf < 2:
-            re2, im2 = re1, im1
-            re1, im1 = re_n, im_n
-            nbuf += 1
-            if math.isfinite(re_n) and math.isfinite(im_n):
-                pw = re_n * re_n + im_n * im_n
-            continue
-        m = first_index + j - 1                     # index of the middle sample
-        p_m = re1 * re1 + im1 * im1
-        if math.isfinite(p_m):
-            pw = (1.0 - lam) * pw + lam * p_m
-        min_abs = min_abs_ratio * math.sqrt(pw)
-        # --- time update and scheduled sweep reset ------------------------------------------
-        did_reset = False
-        if started == 1:
-            f, df, p11, p12, p22 = kf_predict(f, df, p11, p12, p22, q_f, q_df)
+    m_win = ring.size
+    n = xr.size
+    # extended window: the two carried samples, then the block (sample k of the block is xe[k + 2])
+    xe = np.empty(n + 2)
+    xe[0], xe[1] = re2, re1
+    xe[2:] = xr
+    xie = np.empty(n + 2 if is_complex else 1)
+    if is_complex:
+        xie[0], xie[1] = im2, im1
+        xie[2:] = xi
+    j0 = 0
+    while nbuf < 2 and j0 < n:                      # stream start: fill the 3-sample window
+        p0 = xe[j0 + 2] * xe[j0 + 2] + (xie[j0 + 2] * xie[j0 + 2] if is_complex else 0.0)
+        if math.isfinite(p0):
+            pw = p0
+        nbuf += 1
+        j0 += 1
+    zbuf = np.empty(2 * CHUNK)
+    sbuf = np.empty(2 * CHUNK, dtype=np.int64)
+    thr = np.empty(CHUNK)
+    dfc = np.empty(CHUNK)
+    # Software pipeline over chunks of samples inside aligned CHUNK windows: the measurements of
+    # chunk c + 1 are computed (a loop the compiler vectorises) before the serial part of chunk c
+    # runs, so that the CPU overlaps them with the filter's serial chain. They need only the
+    # samples, the running power and df of DF_LAG = 2 CHUNK samples ago (already known), so their
+    # values do not depend on where blocks or chunks start.
+    jf = j0                                        # next chunk to measure (block index)
+    jp = j0                                        # chunk to run (already measured)
+    lp = 0
+    slot = 0
+    while True:
+        lf = 0
+        if jf < n:
+            m0 = first_index + jf - 1
+            lf = min(CHUNK - (m0 & (CHUNK - 1)), n - jf)
+            for i in range(lf):
+                k = jf + i + 1                      # middle sample in xe
+                p_m = xe[k] * xe[k] + (xie[k] * xie[k] if is_complex else 0.0)
+                pw = pw + lam * (p_m - pw) if math.isfinite(p_m) else pw
+                thr[i] = min_abs_ratio2 * pw
+                dfc[i] = min(MAX_ABS_RATE, max(-MAX_ABS_RATE, dfring[(m0 + i) & dfmask]))
+            b0 = slot * CHUNK
+            if is_complex:
+                for i in range(lf):
+                    k = jf + i + 1
+                    zbuf[b0 + i], sbuf[b0 + i] = measure_complex_sq(xe[k - 1], xie[k - 1], xe[k], xie[k],
+                                                                    xe[k + 1], xie[k + 1], thr[i])
+            else:
+                for i in range(lf):
+                    k = jf + i + 1
+                    zbuf[b0 + i], sbuf[b0 + i] = measure_real_sq(xe[k - 1], xe[k], xe[k + 1], dfc[i], chirp_corr,
+                                                                 thr[i], margin)
+        bp = (1 - slot) * CHUNK
+        m0 = first_index + jp - 1
+        for i in range(lp):
+            m = m0 + i                              # index of the middle sample
+            z = zbuf[bp + i]
+            status = sbuf[bp + i]
+            # --- scheduled sweep reset (the state is the prior of sample m) ----------------------
+            did_reset = False
             if reset_on and nxt >= 0.0 and m >= nxt:
                 # back to the posterior at T - 1, then eq. 21-22
                 f, p11, p12 = kf_sweep_reset(f - df, df, p11, p22, float(m - 1 - last_start))
@@ -250,115 +313,110 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
                 did_reset = True
                 w = min(refine_w, int((tlat - 2.0) * 0.5))
                 fitat = m + w if w >= 4 else -1
-        started = 1
-        prior_f = f
-        # --- measurement (eq. 8/10 or complex counterpart) ------------------------------------
-        if is_complex:
-            z, status = measure_complex(re2, im2, re1, im1, re_n, im_n, min_abs)
-        else:
-            dfl = dfring[m & dfmask]                 # df of DF_LAG samples ago
-            dfc = min(MAX_ABS_RATE, max(-MAX_ABS_RATE, dfl))
-            z, status = measure_real(re2, re1, re_n, dfc, chirp_corr, min_abs, margin)
-        dfring[m & dfmask] = df
-        counters[status] += 1
-        if status == STATUS_OK:
-            nu = z - f
-            if wrap:
-                nu = nu - math.floor(nu + 0.5)
-            wpos, wcount, wsum = window_push(ring, wpos, wcount, wsum, nu * nu)
-            c_hat = max(wsum, 0.0) / (m_win - 1) if wcount >= m_win else -1.0
-            g = kf_gain_scale(mode, p11 + r, c_hat, p11)
-            f, df, p11, p12, p22 = kf_update(f, df, p11, p12, p22, nu, r, g)
-            zl = z
-        else:
-            zl = prior_f
-        nmeas += 1
-        zring[m & zmask] = zl
-        # --- LPD (eq. 23) and decimation -------------------------------------------------------
-        # zpos counts 0..2 LPD_LAG - 1: >= LPD_LAG once the history is full (no modulo per sample)
-        hpos = zpos - LPD_LAG if zpos >= LPD_LAG else zpos
-        if zpos >= LPD_LAG:
-            dz = zl - zhist[hpos]
-            if wrap:
-                dz = dz - math.floor(dz + 0.5)
-        else:
-            dz = 0.0
-        zhist[hpos] = zl
-        zpos = zpos + 1 if zpos + 1 < 2 * LPD_LAG else LPD_LAG
-        zg = gamma * zg - (1.0 - gamma) * dz / norm
-        sgn = 1.0 if df >= 0.0 else -1.0
-        acc += zg * sgn
-        zacc += zl
-        decn += 1
-        start = -1
-        if decn >= dec:
-            zdec[ndec & dmask] = zacc / dec
-            ndec += 1
-            zar = ar_step(acc / dec, gam, pmat, hist, a_ar, q_ar, r_ar)
-            acc = 0.0
-            zacc = 0.0
-            decn = 0
-            start = peak_step(m, zar, sf, si, peaks, spar)
-        # --- reset lattice ------------------------------------------------------------------------
-        per = sf[S_PERIOD]
-        lpd_locked = si[J_LOCKED] == 1 and per > 0.0
-        if refine_w == 0:
-            # paper method: the lattice exists while the LPD period is locked
-            if not lpd_locked:
-                nxt = -1.0
-                latsrc = 0
+            prior_f = f
+            dfring[m & dfmask] = df                 # read by the measurement of m + DF_LAG
+            n_ok += status == STATUS_OK
+            n_near += status == STATUS_NEAR_ZERO
+            n_dom += status == STATUS_DOMAIN
+            n_nonfin += status == STATUS_NON_FINITE
+            n_corr += status == STATUS_CORRECTION
+            valid = status == STATUS_OK
+            # --- filter: update with z (K = 0 if rejected), predict sample m + 1 ---------------------
+            wp0 = wpos
+            (f_post, df_post, p11_post, f, df, p11, p12, p22, ring[wp0], wpos, wcount,
+             wsum) = filter_step(mode, f, df, p11, p12, p22, z, valid, wrap, ring[wpos], wpos, wcount, m_win,
+                                 wsum, r, q_f, q_df)
+            zl = z if valid else prior_f
+            nmeas += 1
+            zring[m & zmask] = zl
+            # --- LPD (eq. 23) and decimation -------------------------------------------------------
+            # zpos counts 0..2 LPD_LAG - 1: >= LPD_LAG once the history is full (no modulo per sample)
+            hpos = zpos - LPD_LAG if zpos >= LPD_LAG else zpos
+            if zpos >= LPD_LAG:
+                dz = zl - zhist[hpos]
+                if wrap:
+                    dz = dz - math.floor(dz + 0.5)
             else:
-                tlat = per
-                if start >= 0:
-                    if nxt < 0.0:
-                        k = math.ceil((m + 1 - start) / per)
-                        nxt = start + k * per
-                        latsrc = 1
-                        if nresets == 0:
-                            last_start = start
-                    else:
-                        u = (start - nxt) / per
-                        e = (u - math.floor(u + 0.5)) * per
-                        if abs(e) <= 2.0 * tol * per:
-                            nxt += phase_gain * e
-        else:
-            # ours: acquire from the LPD (or the monitor's coarse detector), then the step-fit loop
-            if nxt < 0.0 and lpd_locked and start >= 0:
-                k = math.ceil((m + 1 - start) / per)
-                nxt = start + k * per
-                tlat = per
-                latsrc = 1
-                misses = 0
-                if nresets == 0:
-                    last_start = start
-            if fitat >= 0 and m == fitat:
-                fitat = -1
-                w = m - int(math.ceil(ppred))
-                if nxt >= 0.0 and w >= 4:
-                    s_hat = _step_fit(zring, m - w, w, df, tlat, wrap)
-                    e = s_hat - ppred - 0.5          # E[ceil(t) - t] = 0.5
-                    if abs(e) <= 0.5 * w:
-                        nxt += g1 * e
-                        tlat += g2 * e
-                        misses = 0
-                        mist[K_NFIT] += 1
-                    else:
-                        misses += 1
-                        if misses >= MAX_MISSES:
-                            nxt = -1.0
-                            latsrc = 0
-        # --- shift the 3-sample window ---------------------------------------------------------
-        re2, im2 = re1, im1
-        re1, im1 = re_n, im_n
-        if store:
-            o_idx[n_out] = m
-            o_z[n_out] = z
-            o_f[n_out] = f
-            o_df[n_out] = df
-            o_p11[n_out] = p11
-            o_zar[n_out] = sf[S_ZAR]
-            o_reset[n_out] = did_reset
-        n_out += 1
+                dz = 0.0
+            zhist[hpos] = zl
+            zpos = zpos + 1 if zpos + 1 < 2 * LPD_LAG else LPD_LAG
+            zg = gamma * zg - lpd_scale * dz
+            sgn = 1.0 if df >= 0.0 else -1.0
+            acc += zg * sgn
+            zacc += zl
+            decn += 1
+            start = -1
+            if decn >= dec:
+                zdec[ndec & dmask] = zacc * inv_dec
+                ndec += 1
+                zar = ar_step(acc * inv_dec, gam, pmat, hist, a_ar, q_ar, r_ar, k_ar)
+                acc = 0.0
+                zacc = 0.0
+                decn = 0
+                start = peak_step(m, zar, sf, si, peaks, spar)
+            # --- reset lattice ------------------------------------------------------------------------
+            per = sf[S_PERIOD]
+            lpd_locked = si[J_LOCKED] == 1 and per > 0.0
+            if refine_w == 0:
+                # paper method: the lattice exists while the LPD period is locked
+                if not lpd_locked:
+                    nxt = -1.0
+                    latsrc = 0
+                else:
+                    tlat = per
+                    if start >= 0:
+                        if nxt < 0.0:
+                            kp = math.ceil((m + 1 - start) / per)
+                            nxt = start + kp * per
+                            latsrc = 1
+                            if nresets == 0:
+                                last_start = start
+                        else:
+                            u = (start - nxt) / per
+                            e = (u - math.floor(u + 0.5)) * per
+                            if abs(e) <= 2.0 * tol * per:
+                                nxt += phase_gain * e
+            else:
+                # ours: acquire from the LPD (or the monitor's coarse detector), then the step-fit loop
+                if nxt < 0.0 and lpd_locked and start >= 0:
+                    kp = math.ceil((m + 1 - start) / per)
+                    nxt = start + kp * per
+                    tlat = per
+                    latsrc = 1
+                    misses = 0
+                    if nresets == 0:
+                        last_start = start
+                if fitat >= 0 and m == fitat:
+                    fitat = -1
+                    w = m - int(math.ceil(ppred))
+                    if nxt >= 0.0 and w >= 4:
+                        s_hat = _step_fit(zring, m - w, w, df, tlat, wrap)
+                        e = s_hat - ppred - 0.5          # E[ceil(t) - t] = 0.5
+                        if abs(e) <= 0.5 * w:
+                            nxt += g1 * e
+                            tlat += g2 * e
+                            misses = 0
+                            mist[K_NFIT] += 1
+                        else:
+                            misses += 1
+                            if misses >= MAX_MISSES:
+                                nxt = -1.0
+                                latsrc = 0
+            if store:
+                o_idx[n_out] = m
+                o_z[n_out] = z
+                o_f[n_out] = f_post
+                o_df[n_out] = df_post
+                o_p11[n_out] = p11_post
+                o_zar[n_out] = sf[S_ZAR]
+                o_reset[n_out] = did_reset
+            n_out += 1
+        if lf == 0:
+            break
+        jp, lp, jf, slot = jf, lf, jf + lf, 1 - slot
+    re2, re1 = xe[n], xe[n + 1]
+    if is_complex:
+        im2, im1 = xie[n], xie[n + 1]
     # ---- store the state -------------------------------------------------------------------------
     fst[F_F], fst[F_DF], fst[F_P11], fst[F_P12], fst[F_P22], fst[F_WSUM] = f, df, p11, p12, p22, wsum
     ist[I_WCOUNT], ist[I_WPOS] = wcount, wpos
@@ -370,5 +428,10 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
     mist[K_FITAT], mist[K_MISSES], mist[K_DECN], mist[K_LATSRC], mist[K_NDEC] = fitat, misses, decn, latsrc, ndec
     mist[K_ZPOS] = zpos
     mist[K_NMEAS] = nmeas
+    counters[STATUS_OK] += n_ok
+    counters[STATUS_NEAR_ZERO] += n_near
+    counters[STATUS_DOMAIN] += n_dom
+    counters[STATUS_NON_FINITE] += n_nonfin
+    counters[STATUS_CORRECTION] += n_corr
     return n_out
 

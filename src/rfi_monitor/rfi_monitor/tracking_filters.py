@@ -25,6 +25,11 @@ The covariance update uses the Joseph form ``(I - K H) P (I - K H)^T + K R K^T``
 eq. 17 for the optimal gain (a_n = 1) and stays positive semi-definite for a scaled gain (eq. 17
 with a_n K can turn P(1,1) negative when a_n P11 / C > 1).
 
+Speed (``filter_step``, used by the stand-alone runner and the fused loop alike): the gain of the
+fading filter is ``K = P^- H^T / max(C_n, C^_n)`` (one division), the update and the next
+prediction are fused (``kf_update_predict``), and a rejected sample runs the same arithmetic with
+K = 0 (selects, no branch), so that the per-sample serial chain is short.
+
 The sweep reset (eq. 21-22): at an estimated sweep start, after m = T - 1 samples of the last
 sweep, ``f^_0 = f^_{T-1} - (T - 1) df^_{T-1}`` and ``P(1,1) = P11 + (T - 1)^2 P22``; as in the
 paper, f~ and df~ are taken as uncorrelated, so P(1,2) is set to 0 and P(2,2) kept.
@@ -116,43 +121,62 @@ def kf_predict(f: float, df: float, p11: float, p12: float, p22: float, q_f: flo
 
 
 @njit(cache=True, inline="always")
-def kf_gain_scale(mode: int, c: float, c_hat: float, p11: float) -> float:
-    """Gain factor g of K = g P^- H^T C^-1 (eq. 13-14 and the AKF of Sec. 4).
+def kf_gain_inv(mode: int, c: float, c_hat: float, p11: float) -> float:
+    """Gain factor over the innovation variance, g / C, of K = g P^- H^T / C (eq. 13-14, Sec. 4).
 
     Args:
         mode: MODE_KF / MODE_AKF / MODE_AFKF.
         c: computed innovation variance H P^- H^T + R (eq. 11).
         c_hat: windowed innovation variance (eq. 12); < 0 while the window is not yet full (g = 1).
         p11: P^-(1,1).
+
+    Notes:
+        For the fading filter ``g / C = 1 / (a_n C) = 1 / max(C, C^)`` (eq. 13-14): one division,
+        and the same value while the window fills (c_hat < 0). The AKF's ``g = min(a_n, C / P11)``
+        caps K(1) at 1 (module docstring).
     """
+    if mode == MODE_AFKF:
+        return 1.0 / max(c, c_hat)                       # eq. 13-14
     if mode == MODE_KF or c_hat < 0.0:
-        return 1.0
+        return 1.0 / c
     alpha = max(1.0, c_hat / c)                          # eq. 13
-    if mode == MODE_AKF:
-        return min(alpha, c / p11)                       # AKF, capped so that K(1) <= 1
-    return 1.0 / alpha                                   # eq. 14
+    return min(alpha, c / p11) / c                       # AKF, capped so that K(1) <= 1
 
 
 @njit(cache=True, inline="always")
-def kf_update(f: float, df: float, p11: float, p12: float, p22: float, nu: float, r: float,
-              g: float) -> tuple[float, float, float, float, float]:
-    """Measurement update with the scaled gain (eq. 14, 17-18; Joseph form); returns the state.
+def kf_update_predict(f: float, df: float, p11: float, p12: float, p22: float, nu: float, r: float,
+                      kinv: float, q_f: float, q_df: float
+                      ) -> tuple[float, float, float, float, float, float, float, float]:
+    """Measurement update with the scaled gain (eq. 14, 17-18, Joseph form), then the time update
+    to the next sample (eq. 15-16), in one step.
 
     Args:
-        f, df, p11, p12, p22: prior state and covariance.
-        nu: innovation z - f, cycles/sample (already wrapped for signed measurements).
+        f, df, p11, p12, p22: prior state and covariance of this sample.
+        nu: innovation z - f, cycles/sample (wrapped for signed measurements; 0 if no measurement).
         r: measurement variance R, (cycles/sample)^2.
-        g: gain factor from ``kf_gain_scale``.
+        kinv: g / C from ``kf_gain_inv`` (K = kinv P^- H^T); 0 for a rejected sample (predict only).
+        q_f, q_df: process noise variances of f and df.
+
+    Returns:
+        (f, df, P11) posterior of this sample, then (f, df, P11, P12, P22) prior of the next one.
+
+    Notes:
+        With ``k = kinv [P11, P12]`` and ``C = P11 + R`` the Joseph form is
+        ``P+ = P - kinv (2 - C kinv) p p^T`` for ``p = [P11, P12]`` (it equals eq. 17 when kinv = 1/C);
+        with F = [[1, 1], [0, 1]] the prediction of it is
+        ``F P F^T + Q - t (F p)(F p)^T``, t = kinv (2 - C kinv), F p = [P11 + P12, P12]. Written this
+        way the serial chain from one sample to the next holds one division and few operations.
     """
     c = p11 + r
-    k1 = g * p11 / c
-    k2 = g * p12 / c
-    a11 = (1.0 - k1) * p11                               # Joseph form of eq. 17
-    a12 = (1.0 - k1) * p12
-    a21 = p12 - k2 * p11
-    a22 = p22 - k2 * p12
-    return (f + k1 * nu, df + k2 * nu, a11 * (1.0 - k1) + k1 * k1 * r, -a11 * k2 + a12 + k1 * k2 * r,
-            -a21 * k2 + a22 + k2 * k2 * r)
+    s1 = p11 + p12
+    a = nu * kinv
+    t = kinv * (2.0 - c * kinv)
+    f_post = f + p11 * a
+    df_post = df + p12 * a
+    p11_post = p11 - p11 * p11 * t
+    return (f_post, df_post, p11_post, f + df + s1 * a, df_post,
+            (p11 + 2.0 * p12 + p22 + q_f) - s1 * s1 * t, (p12 + p22) - p12 * s1 * t,
+            (p22 + q_df) - p12 * p12 * t)
 
 
 @njit(cache=True, inline="always")
@@ -167,26 +191,75 @@ def kf_sweep_reset(f: float, df: float, p11: float, p22: float,
 
 
 @njit(cache=True, inline="always")
-def window_push(ring: np.ndarray, pos: int, count: int, wsum: float, nu2: float) -> tuple[int, int, float]:
-    """Slide the innovation window of eq. 12 by one squared innovation; returns (pos, count, sum)."""
-    m = ring.size
-    if count >= m:
-        wsum -= ring[pos]
+def window_push(old: float, pos: int, count: int, m: int, wsum: float, nu2: float,
+                valid: bool) -> tuple[float, int, int, float]:
+    """Slide the innovation window of eq. 12 (a ring of m squared innovations) by one squared
+    innovation if ``valid`` (else keep it).
+
+    Args:
+        old: ring[pos], the value the new one replaces once the window is full.
+        pos, count, m: write position, values held (<= m) and length M of the window.
+        wsum: sum of the values held.
+        nu2: new squared innovation.
+        valid: push (else leave the window unchanged).
+
+    Returns:
+        (value to store at ring[pos], new pos, new count, new sum). Scalars only and selects, no
+        branches (rejections are random) and no array argument (the compiled loop would count
+        references to it on every sample).
+    """
+    full = count >= m
+    wsum = wsum + ((nu2 - (old if full else 0.0)) if valid else 0.0)
+    store = nu2 if valid else old
+    nxt = pos + 1
+    pos = (nxt if nxt < m else 0) if valid else pos
+    count = count + 1 if (valid and not full) else count
+    return store, pos, count, wsum
+
+
+@njit(cache=True, inline="always")
+def filter_step(mode: int, f: float, df: float, p11: float, p12: float, p22: float, z: float, valid: bool,
+                wrap: bool, old: float, wpos: int, wcount: int, m_win: int, wsum: float, r: float, q_f: float,
+                q_df: float) -> tuple[float, float, float, float, float, float, float, float, float, int, int,
+                                      float]:
+    """One sample of KF / AKF / AFKF from the prior of this sample to the prior of the next.
+
+    Args:
+        mode: MODE_*.
+        f, df, p11, p12, p22: prior state and covariance.
+        z: measurement, cycles/sample (ignored unless valid).
+        valid: the measurement is accepted (else prediction only, window unchanged).
+        wrap: wrap the innovation to [-0.5, 0.5) (signed measurements).
+        old, wpos, wcount, m_win, wsum: innovation window of eq. 12 (``window_push``).
+        r, q_f, q_df: R and the process noise variances.
+
+    Returns:
+        (f, df, P11) posterior of this sample, (f, df, P11, P12, P22) prior of the next one,
+        then (value to store at ring[wpos], wpos, wcount, wsum) of the window.
+    """
+    nu = z - f if valid else 0.0
+    if wrap:
+        nu = nu - math.floor(nu + 0.5)
+    store, wpos, wcount, wsum = window_push(old, wpos, wcount, m_win, wsum, nu * nu, valid)
+    c = p11 + r
+    if mode == MODE_AKF:
+        kinv = kf_gain_inv(mode, c, wsum / (m_win - 1) if wcount >= m_win else -1.0, p11)
     else:
-        count += 1
-    ring[pos] = nu2
-    wsum += nu2
-    pos = pos + 1 if pos + 1 < m else 0
-    return pos, count, wsum
+        # KF: 1 / C; AFKF: 1 / max(C, C^) = (M - 1) / max((M - 1) C, sum nu^2)   (eq. 12-14)
+        m1 = float(m_win - 1)
+        weff = wsum if (mode == MODE_AFKF and wcount >= m_win) else -1.0
+        kinv = m1 / max(c * m1, weff)
+    kinv = kinv if valid else 0.0
+    fp, dfp, p11p, f, df, p11, p12, p22 = kf_update_predict(f, df, p11, p12, p22, nu, r, kinv, q_f, q_df)
+    return fp, dfp, p11p, f, df, p11, p12, p22, store, wpos, wcount, wsum
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _run(z: np.ndarray, valid: np.ndarray, reset: np.ndarray, par: np.ndarray, fst: np.ndarray,
          ist: np.ndarray, ring: np.ndarray, wrap: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     n = z.size
     mode = int(par[0])
     r, q_f, q_df = par[1], par[2], par[3]
-    m_win = ring.size
     f, df, p11, p12, p22, wsum = fst[F_F], fst[F_DF], fst[F_P11], fst[F_P12], fst[F_P22], fst[F_WSUM]
     count, pos = ist[I_WCOUNT], ist[I_WPOS]
     f_out = np.empty(n)
@@ -194,23 +267,14 @@ def _run(z: np.ndarray, valid: np.ndarray, reset: np.ndarray, par: np.ndarray, f
     p11_out = np.empty(n)
     last_start = 0
     for k in range(n):
-        if k > 0:
-            f, df, p11, p12, p22 = kf_predict(f, df, p11, p12, p22, q_f, q_df)
-            if reset[k]:
-                # the state predicts sample k; eq. 21 uses the posterior at T - 1 = k - 1
-                f, p11, p12 = kf_sweep_reset(f - df, df, p11, p22, float(k - 1 - last_start))
-                last_start = k
-        if valid[k]:
-            nu = z[k] - f
-            if wrap:
-                nu = nu - math.floor(nu + 0.5)
-            pos, count, wsum = window_push(ring, pos, count, wsum, nu * nu)
-            c_hat = max(wsum, 0.0) / (m_win - 1) if count >= m_win else -1.0
-            g = kf_gain_scale(mode, p11 + r, c_hat, p11)
-            f, df, p11, p12, p22 = kf_update(f, df, p11, p12, p22, nu, r, g)
-        f_out[k] = f
-        df_out[k] = df
-        p11_out[k] = p11
+        if reset[k] and k > 0:
+            # the state predicts sample k; eq. 21 uses the posterior at T - 1 = k - 1
+            f, p11, p12 = kf_sweep_reset(f - df, df, p11, p22, float(k - 1 - last_start))
+            last_start = k
+        p0 = pos
+        (f_out[k], df_out[k], p11_out[k], f, df, p11, p12, p22, ring[p0], pos, count,
+         wsum) = filter_step(mode, f, df, p11, p12, p22, z[k], valid[k], wrap, ring[pos], pos, count, ring.size,
+                             wsum, r, q_f, q_df)
     fst[F_F], fst[F_DF], fst[F_P11], fst[F_P12], fst[F_P22], fst[F_WSUM] = f, df, p11, p12, p22, wsum
     ist[I_WCOUNT], ist[I_WPOS] = count, pos
     return f_out, df_out, p11_out

@@ -44,7 +44,7 @@ def test_one_block_equals_many_blocks():
     for name in ("sample_index", "z", "f", "df", "p11", "z_ar", "reset"):
         np.testing.assert_array_equal(np.concatenate([getattr(p, name) for p in parts]), getattr(ta, name))
     assert a.state_summary == b.state_summary
-    assert ta.reset.sum() > 100  # the chirp was tracked with sweep resets
+    assert ta is not None and ta.reset.sum() > 100  # the chirp was tracked with sweep resets
 
 
 def test_chirp_identified_and_tracked_at_11db():
@@ -72,6 +72,32 @@ def test_cw_identified_with_frequency():
     assert e.type == CW
     assert abs(e.frequency_hz - 1.3e6) < 3 * e.frequency_std_hz
     assert e.sweep_rate_hz_per_s == 0.0 and math.isnan(e.sweep_period_s)
+
+
+def test_cw_through_a_two_bit_quantiser_is_cw():
+    # a 2-bit front end turns a strong CW into a near square wave: harmonic lines widen its
+    # occupancy and its three-sample track becomes periodic (the quantised waveform repeats with the
+    # tone's phase); it must stay CW (7/50 such cases were CHIRP in the confusion matrix)
+    fe = FrontEndConfig(bits=2, noise_density_dbm_per_mhz=-128.8)     # J/S 30 dB, J/N 16 dB
+    mon = _calibrated(fe)
+    for f_dig in (0.0524, 0.3506):
+        mon.reset()
+        f_hz = f_dig * fe.sample_rate_hz - fe.intermediate_frequency_hz
+        x = IfSimulator(fe, (CwJammer(frequency_hz=f_hz, phase_rad=1.0),), seed=11).generate(3 * BLOCK).values()
+        ests = _feed(mon, x, fe, BLOCK)
+        assert [e.type for e in ests] == [CW] * 3
+        assert abs(ests[-1].frequency_hz - f_hz) < 3 * ests[-1].frequency_std_hz
+
+
+def test_line_fraction_separates_cw_from_chirp():
+    from rfi_monitor.classifier import CW_MIN_LINE_FRACTION, ClassifierParams, block_features
+    fe = FrontEndConfig(bits=2, noise_density_dbm_per_mhz=-120.0)
+    cw = IfSimulator(fe, (CwJammer(frequency_hz=2.1e6),), seed=12).generate(BLOCK).values()
+    ch = IfSimulator(fe, (ChirpJammer(start_frequency_hz=-1e6, sweep_rate_hz_per_s=4e11, sweep_period_s=5e-6),),
+                     seed=12).generate(BLOCK).values()
+    a = block_features(cw, None, ClassifierParams())
+    b = block_features(ch, None, ClassifierParams())
+    assert a.line_fraction >= 0.9 > CW_MIN_LINE_FRACTION > 0.5 > b.line_fraction
 
 
 def test_strong_cw_is_still_cw():
@@ -225,6 +251,7 @@ def test_fast_chirp_locked_by_the_periodicity_detector():
 def test_paper_method_parameters():
     p = RfiMonitorParams.paper_method(phase_gain=0.5)
     assert p.refine_window == 0 and not p.analysis.enabled and not p.sweep.lattice_voting
+    assert p.sweep.decimation == 2              # its best setting (monitor.paper_method docstring)
     assert p.phase_gain == 0.5
     assert RfiMonitorParams().sweep.lattice_voting and RfiMonitorParams().analysis.enabled
     with pytest.raises(ValueError):

@@ -62,3 +62,32 @@ def test_invalid(kw):
 def test_bad_input():
     with pytest.raises(ValueError):
         estimate_sweep_period(np.array([0.1, np.nan, 0.2]))
+
+
+def test_low_rank_ar_step_equals_the_full_matrix_filter():
+    # eq. 24-27 with A = 0.2 I: the low-rank covariance drops terms of relative weight a^(2(K+1))
+    from rfi_monitor.sweep_period import (
+        AR_ORDER,
+        _ar_step_full,
+        _ar_step_low_rank,
+        ar_low_rank_terms,
+        initial_ar_covariance,
+    )
+    k = ar_low_rank_terms(0.2)
+    assert k == 4 and 0.04 ** (k + 1) <= 1e-6
+    assert ar_low_rank_terms(0.9) == -1            # slow decay: full matrix
+    rng = np.random.default_rng(3)
+    v = np.convolve(rng.standard_normal(3000), [1.0, 0.6, -0.3], mode="same")
+    state = [(np.zeros(AR_ORDER), initial_ar_covariance(), np.zeros(AR_ORDER)) for _ in range(2)]
+    za = np.array([_ar_step_full(x, *state[0], 0.2, 1.0, 1.0) for x in v])
+    zb = np.array([_ar_step_low_rank(x, *state[1], 0.2, 1.0, 1.0, k) for x in v])
+    np.testing.assert_allclose(zb, za, rtol=0, atol=1e-6 * np.max(np.abs(za)))
+    np.testing.assert_allclose(state[1][0], state[0][0], atol=1e-6)
+
+
+def test_paper_decimation_one_locks():
+    k = np.arange(20_000)
+    T = 195.3
+    z = 0.1832 + 0.134 * np.mod(k / T, 1.0)
+    *_, per, locked = estimate_sweep_period(z, SweepPeriodParams(decimation=1))
+    assert locked and per == pytest.approx(T, rel=0.005)

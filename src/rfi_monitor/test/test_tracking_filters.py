@@ -45,6 +45,43 @@ def test_kf_equals_reference_on_a_linear_ramp():
     assert abs(df[-1] - 3e-4) < 3e-5
 
 
+def _reference_afkf(z, p: TrackingFilterParams):
+    """Textbook adaptive fading KF (eq. 11-14: alpha = max(1, C^/C), K = P H^T / (alpha C)), Joseph form."""
+    F = np.array([[1.0, 1.0], [0.0, 1.0]])
+    H = np.array([[1.0, 0.0]])
+    Q = np.diag([p.process_std ** 2, p.process_rate_std ** 2])
+    R = p.measurement_std ** 2
+    x = np.array([p.initial_frequency, 0.0])
+    P = np.diag([p.initial_frequency_std ** 2, p.initial_rate_std ** 2])
+    window: list[float] = []
+    out = []
+    for k, zk in enumerate(z):
+        if k > 0:
+            x = F @ x
+            P = F @ P @ F.T + Q
+        if np.isfinite(zk):
+            nu = zk - x[0]
+            window = (window + [nu * nu])[-p.window:]
+            C = (H @ P @ H.T).item() + R
+            alpha = max(1.0, sum(window) / (p.window - 1) / C) if len(window) == p.window else 1.0
+            K = (P @ H.T) / (alpha * C)
+            x = x + (K * nu).ravel()
+            A = np.eye(2) - K @ H
+            P = A @ P @ A.T + R * (K @ K.T)
+        out.append(x[0])
+    return np.array(out)
+
+
+def test_afkf_equals_reference():
+    rng = np.random.default_rng(5)
+    p = TrackingFilterParams(mode=MODE_AFKF, measurement_std=0.02, window=8)
+    z = 0.25 + 2e-4 * np.arange(600) + 0.02 * rng.standard_normal(600)
+    z[rng.random(600) < 0.1] += 0.2                 # outliers: alpha > 1 on many samples
+    z[[5, 77, 78]] = np.nan
+    f = run_tracking_filter(z, p)[0]
+    np.testing.assert_allclose(f, _reference_afkf(z, p), rtol=0, atol=1e-10)
+
+
 def test_afkf_equals_kf_when_innovations_are_consistent():
     # with the true noise much smaller than the assumed R, C^ < C so alpha = 1 (eq. 13)
     rng = np.random.default_rng(1)
@@ -62,10 +99,9 @@ def test_afkf_resists_outliers_and_akf_follows_them():
     z = 0.3 + 0.01 * rng.standard_normal(n)
     bursts = rng.random(n) < 0.05
     z[bursts] += rng.uniform(-0.25, 0.2, bursts.sum())   # heavy-tailed errors like Fig. 2
-    p = dict(measurement_std=0.01, process_std=1e-4)
     errs = {}
     for mode in (MODE_KF, MODE_AKF, MODE_AFKF):
-        f = run_tracking_filter(z, TrackingFilterParams(mode=mode, **p))[0]
+        f = run_tracking_filter(z, TrackingFilterParams(mode, measurement_std=0.01, process_std=1e-4))[0]
         errs[mode] = np.sqrt(np.mean((f[500:] - 0.3) ** 2))
     assert errs[MODE_AFKF] < errs[MODE_KF] < errs[MODE_AKF]
 
