@@ -237,7 +237,7 @@ def test_bad_inputs_are_counted_never_crash_never_nan():
     assert outs[0].satellites_used == len(SATS) + 1 - 6  # 9 given: NaN, inf, 2 duplicates, negative, below
     assert outs[2].satellites_used == 3  # tightly coupled: fewer than 4 satellites still update
     # a stamp far in the future resets and re-initialises from that epoch
-    out = f.process_gnss(_epoch(t + 100 * NS, rng=rng))
+    out = f.process_gnss(_epoch(t + int((f.params.max_prediction_s + 10.0) * NS), rng=rng))
     assert dict(out.rejection_counts)["time_gap_reset"] == 1 and out.initialized
     with pytest.raises(TypeError):
         f.process_gnss(dataclasses.replace(good, stamp_ns=1.5))
@@ -339,12 +339,99 @@ def test_map_frame_uwb_rejected_by_earth_filter():
 def test_uwb_initialises_then_gnss_sets_clock_switching_modes():
     f = FusionFilter(FusionParams(accel_psd_m2ps3=0.01))
     rng = np.random.default_rng(19)
-    for k in range(60):
+    for k in range(90):
         out = f.process_uwb(_uwb(T0 + k * NS // 60, k % 3, rng=rng))
+        # three anchors: two mirror solutions, so the filter waits a whole uwb_init_window_s
+        assert out.initialized == (k >= 60)
     assert out.initialized and math.isnan(out.clock_bias_m)
-    out = _run_gnss(f, 20, None, start=T0 + NS, clock_m=777.0)
+    out = _run_gnss(f, 20, None, start=T0 + 3 * NS // 2, clock_m=777.0)
     assert out.clock_bias_m == pytest.approx(777.0, abs=0.5)
     assert np.linalg.norm(out.position_m - RX) < 0.5
+
+
+def test_uwb_multilateration_finds_the_tag_all_around_the_anchors():
+    # Four non-coplanar anchors of a compact cluster (like the Hanyang set-up); noise-free ranges
+    # from tags all around it, near and far: the initial fix is the unique solution. A single
+    # Gauss-Newton start from the centroid can stop in a local minimum; the multi-start cannot.
+    anchors = np.array([[2.58, -0.87, 1.97], [-0.05, -0.9, 0.6], [2.5, 0.85, 1.2], [0.0, 0.8, 2.4]])
+    for radius in (4.0, 15.0, 50.0):
+        for ang in np.radians(np.arange(0.0, 360.0, 30.0)):
+            truth = np.array([radius * math.cos(ang), radius * math.sin(ang), 0.1])
+            f = FusionFilter(FusionParams(use_gnss=False))
+            outs = [
+                f.process_uwb(_uwb(T0 + j * NS // 40, j, frame="map", anchors=anchors, truth=truth))
+                for j in range(4)
+            ]
+            # fewer than four anchors in the window: wait (three leave two mirror solutions)
+            assert [o.initialized for o in outs] == [False, False, False, True]
+            np.testing.assert_allclose(outs[-1].position_m, truth, atol=1e-4)
+
+
+def test_snapshot_fix_inconsistent_with_uwb_ranges_is_refused():
+    # A GNSS snapshot fix must agree with the recent UWB ranges (within the chi-square gate, with
+    # the fix's init_position_std_m as its 1-sigma); a jammed epoch whose outliers could not be
+    # excluded must not replace a state the UWB supports. Here the range says the tag is 100 m
+    # further from anchor 1 than the fix: refused, until the range is older than the window.
+    for offset_m, expect_init in ((100.0, False), (0.0, True)):
+        f = FusionFilter()
+        r = _uwb(T0, 0)
+        f.process_uwb(dataclasses.replace(r, range_m=r.range_m + offset_m))  # one anchor: no multilateration
+        out = f.process_gnss(_epoch(T0 + NS // 10))
+        assert out.initialized == expect_init
+        assert dict(out.rejection_counts).get("gnss_fix_inconsistent_with_uwb", 0) == (0 if expect_init else 1)
+    out = f.process_gnss(_epoch(T0 + 2 * NS))
+    assert out.initialized
+
+
+def test_gnss_divergence_while_uwb_agrees_resets_the_clock_not_the_position():
+    # A receiver clock step of 3 km: every pseudorange is gated for divergence_gnss_epochs epochs
+    # and GNSS declares divergence. The UWB ranges still agree with the state, so the position is
+    # kept and only the clock is re-solved (no snapshot reinitialisation, no reset).
+    rng = np.random.default_rng(31)
+    f = FusionFilter(FusionParams(accel_psd_m2ps3=0.01))
+    out = None
+    errors = []
+    for k in range(5 * 30):  # 30 s of GNSS at 5 Hz, 3 anchors at 20 Hz each in between
+        t = T0 + k * NS // 5
+        clock = 150.0 if k < 5 * 15 else 3150.0
+        out = f.process_gnss(_epoch(t, clock_m=clock, rng=rng))
+        for j in range(12):
+            out = f.process_uwb(_uwb(t + (j + 1) * NS // 65, j % 3, rng=rng))
+        if k >= 5 * 5:
+            errors.append(_horizontal_error(out))
+    counts = dict(out.rejection_counts)
+    assert counts["clock_reset_uwb_consistent"] >= 1
+    assert "reset_uninitialized" not in counts and out.reinitializations == counts["clock_reset_uwb_consistent"]
+    assert max(errors) < 0.1
+    assert out.clock_bias_m == pytest.approx(3150.0, abs=1.0)
+
+
+def test_clock_drift_unobserved_without_doppler_and_kept_on_reinitialisation():
+    # No Doppler, 30 s epochs (a RINEX station), receiver clock drifting at +400 m/s: the first fix
+    # cannot observe the drift; with init_clock_drift_unobserved_std_mps (1000 m/s) the second
+    # epoch solves it. With a 1 m/s prior the 12 km clock error gates every pseudorange.
+    def run(unobserved_std):
+        rng = np.random.default_rng(37)
+        f = FusionFilter(
+            FusionParams(use_uwb=False, use_doppler=False, init_clock_drift_unobserved_std_mps=unobserved_std)
+        )
+        out = None
+        for k in range(8):
+            out = f.process_gnss(_epoch(T0 + 30 * k * NS, clock_m=150.0 + 400.0 * 30 * k, rng=rng))
+        return f, out
+
+    f, out = run(1000.0)
+    counts = dict(out.rejection_counts)
+    assert "innovation_gate_pseudorange" not in counts and "divergence" not in counts
+    assert out.clock_drift_mps == pytest.approx(400.0, abs=0.5)
+    assert _horizontal_error(out) < 1.0
+    _, bad = run(1.0)
+    assert dict(bad.rejection_counts)["innovation_gate_pseudorange"] >= 8
+    # a reinitialisation without a drift keeps the drift of the lost state (same oscillator)
+    again = f.initialize(out.stamp_ns, RX + 5.0, clock_bias_m=out.clock_bias_m)
+    assert again.clock_drift_mps == pytest.approx(out.clock_drift_mps)
+    fresh = FusionFilter().initialize(T0, RX, clock_bias_m=0.0)
+    assert fresh.clock_drift_mps == 0.0
 
 
 # ----------------------------------------------------------------------------- divergence

@@ -84,6 +84,10 @@ class FusionParams:
         min_satellites_init: satellites needed to initialise from GNSS alone.
         init_position_std_m / init_velocity_std_mps / init_clock_bias_std_m /
         init_clock_drift_std_mps: initial 1-sigmas when the solver gives none.
+        init_clock_drift_unobserved_std_mps: clock-drift 1-sigma at an initialisation where the
+            drift is unobserved (no Doppler in the fix) and no earlier drift estimate exists, m/s
+            (1000 m/s covers a crystal's +-3 ppm; GEONET receivers drift by +418 and -330 m/s). On a
+            reinitialisation the drift of the lost state is kept (the oscillator did not change).
         max_prediction_s: a stamp further than this after the filter time resets the filter, s.
         max_position_std_m: a larger position 1-sigma (per axis) is declared divergence, m.
         divergence_gnss_epochs: consecutive GNSS epochs with at least half of >= 4 pseudoranges
@@ -120,7 +124,7 @@ class FusionParams:
     uwb_max_range_m: float = 500.0
     anchors: tuple[tuple[str, float, float, float], ...] = ()
     gate_probability: float = 0.9999
-    elevation_mask_deg: float = 5.0
+    elevation_mask_deg: float = 10.0
     min_cn0_dbhz: float = 20.0
     nominal_cn0_dbhz: float = 45.0
     jammer_quality_factor: float = 1.0
@@ -131,7 +135,8 @@ class FusionParams:
     init_velocity_std_mps: float = 1.0
     init_clock_bias_std_m: float = 10.0
     init_clock_drift_std_mps: float = 1.0
-    max_prediction_s: float = 30.0
+    init_clock_drift_unobserved_std_mps: float = 1000.0
+    max_prediction_s: float = 120.0
     max_position_std_m: float = 200.0
     divergence_gnss_epochs: int = 5
     divergence_uwb_ranges: int = 40
@@ -156,6 +161,7 @@ class FusionParams:
             "init_velocity_std_mps": self.init_velocity_std_mps,
             "init_clock_bias_std_m": self.init_clock_bias_std_m,
             "init_clock_drift_std_mps": self.init_clock_drift_std_mps,
+            "init_clock_drift_unobserved_std_mps": self.init_clock_drift_unobserved_std_mps,
             "max_prediction_s": self.max_prediction_s,
             "max_position_std_m": self.max_position_std_m,
             "reference_max_age_s": self.reference_max_age_s,
@@ -318,6 +324,11 @@ class FusionFilter:
         optional skewed Huber weighting of UWB ranges, and an elevation weighting (sigma / sin(el)) of
         satellites that report no C/N0. A UWB range is applied with the exact
         position-only cubature shortcut (``active_dims``), which equals the 16-point update.
+        Reinitialisation trusts the unjammed sensor: a GNSS-declared divergence the UWB ranges do
+        not confirm re-solves the clock and keeps the position; a GNSS snapshot fix that fails the
+        gate against a recent UWB range is refused; a reinitialisation keeps the clock drift.
+        UWB multilateration is multi-start and waits for a fourth anchor (or a whole
+        ``uwb_init_window_s``) because three anchors have two mirror solutions.
 
     Example:
         >>> f = FusionFilter(FusionParams(use_gnss=False))
@@ -346,10 +357,14 @@ class FusionFilter:
         self._last_gnss_stamp: int | None = None
         self._last_uwb_stamp: int | None = None
         self._last_prep: tuple[int, _Prepared] | None = None
+        self._initialized = False
+        self._drift_memory_mps: float | None = None
+        self._uwb_wait_since_ns: int | None = None
         self._reset_state()
 
     # ------------------------------------------------------------------ state handling
     def _reset_state(self) -> None:
+        self._remember_drift()
         self._initialized = False
         self._clock_initialized = False
         self._frame = FRAME_EARTH
@@ -359,6 +374,13 @@ class FusionFilter:
         self._bad_gnss_epochs = 0
         self._bad_uwb = 0
         self._uwb_gated: deque[int] = deque(maxlen=self.params.divergence_uwb_ranges)
+
+    def _remember_drift(self) -> None:
+        """Keep the clock drift of a state about to be replaced (reinitialisation, reset)."""
+        if self._initialized and self._clock_initialized and self._frame == FRAME_EARTH:
+            drift = float(self._nominal[7])
+            if math.isfinite(drift):
+                self._drift_memory_mps = drift
 
     def _count(self, reason: str, n: int = 1) -> None:
         if n > 0:
@@ -399,7 +421,9 @@ class FusionFilter:
             frame_id: "earth" (ECEF) or "map" (UWB-only local frame).
             velocity_mps: velocity, m/s, shape (3,) (None: zero with ``init_velocity_std_mps``).
             clock_bias_m: receiver c*dt, m (NaN: set from the next GNSS epoch).
-            clock_drift_mps: receiver c*ddt, m/s (NaN: zero with ``init_clock_drift_std_mps``).
+            clock_drift_mps: receiver c*ddt, m/s (NaN: the drift of the previous state if there was
+                one, with ``init_clock_drift_std_mps``; else zero with
+                ``init_clock_drift_unobserved_std_mps``).
             position_std_m: 1-sigma per axis, m (None: ``init_position_std_m``).
 
         Returns:
@@ -421,6 +445,8 @@ class FusionFilter:
         std_p = p.init_position_std_m if position_std_m is None else float(position_std_m)
         if not (math.isfinite(std_p) and std_p > 0.0):
             raise ValueError("position_std_m must be finite and > 0")
+        self._remember_drift()
+        self._uwb_wait_since_ns = None
         self._frame = frame_id
         self._t_ns = stamp_ns
         self._nominal = np.zeros(STATE_DIM)
@@ -428,11 +454,12 @@ class FusionFilter:
         self._nominal[3:6] = vel
         clock_ok = math.isfinite(clock_bias_m) and frame_id == FRAME_EARTH
         self._nominal[6] = clock_bias_m if clock_ok else 0.0
-        self._nominal[7] = clock_drift_mps if (clock_ok and math.isfinite(clock_drift_mps)) else 0.0
+        drift, drift_std = self._initial_drift(clock_drift_mps if clock_ok else math.nan)
+        self._nominal[7] = drift if clock_ok else 0.0
         var = np.array(
             [std_p**2] * 3
             + [p.init_velocity_std_mps**2] * 3
-            + [p.init_clock_bias_std_m**2, p.init_clock_drift_std_mps**2]
+            + [p.init_clock_bias_std_m**2, drift_std**2]
         )
         self._ckf = CubatureKalmanFilter(np.zeros(STATE_DIM), np.diag(var))
         self._initialized = True
@@ -441,6 +468,16 @@ class FusionFilter:
         self._bad_uwb = 0
         self._uwb_gated = deque(maxlen=self.params.divergence_uwb_ranges)
         return self._output(False)
+
+    def _initial_drift(self, clock_drift_mps: float) -> tuple[float, float]:
+        """(drift m/s, 1-sigma m/s) for a (re)initialisation: the given value, else the drift of
+        the previous state, else zero with the wide unobserved-drift sigma."""
+        p = self.params
+        if math.isfinite(clock_drift_mps):
+            return float(clock_drift_mps), p.init_clock_drift_std_mps
+        if self._drift_memory_mps is not None:
+            return self._drift_memory_mps, p.init_clock_drift_std_mps
+        return 0.0, p.init_clock_drift_unobserved_std_mps
 
     def supply_reference_solution(
         self, stamp_ns: int, position_m: np.ndarray, position_std_m: float, clock_bias_m: float = math.nan
@@ -744,7 +781,7 @@ class FusionFilter:
         else:
             return None
         vel = np.zeros(3)
-        drift = 0.0
+        drift = math.nan  # unobserved without >= 4 Dopplers
         ridx = np.flatnonzero(keep & np.isfinite(prep.rate))
         if ridx.size >= 4:
             d = prep.sat_pos[ridx] - x[0:3]
@@ -803,6 +840,9 @@ class FusionFilter:
             if fix is None:
                 self._count("gnss_init_failed")
                 return self._output(False, sat_rej=n_obs)
+            if not self._fix_agrees_with_uwb(stamp, fix[0], self.params.init_position_std_m):
+                self._count("gnss_fix_inconsistent_with_uwb")
+                return self._output(False, sat_rej=n_obs)
             pos, clk, vel, drift = fix
             self.initialize(stamp, pos, velocity_mps=vel, clock_bias_m=clk, clock_drift_mps=drift)
             self._last_gnss_stamp = stamp
@@ -812,14 +852,15 @@ class FusionFilter:
             # position known from UWB, clock not: set the clock from the pseudorange residuals.
             hx0 = pseudorange_model(prep.sat_pos, prep.sat_clk, prep.iono, prep.tropo)
             res = prep.pr - hx0(self._nominal[None, :])[0]
+            drift, drift_std = self._initial_drift(math.nan)
             self._nominal[6] = float(np.median(res))
-            self._nominal[7] = 0.0
+            self._nominal[7] = drift
             self._ckf.p[6, :] = 0.0
             self._ckf.p[:, 6] = 0.0
             self._ckf.p[7, :] = 0.0
             self._ckf.p[:, 7] = 0.0
             self._ckf.p[6, 6] = self.params.init_clock_bias_std_m**2 + float(self._ckf.p[0:3, 0:3].trace())
-            self._ckf.p[7, 7] = self.params.init_clock_drift_std_mps**2
+            self._ckf.p[7, 7] = drift_std**2
             self._clock_initialized = True
         models = [pseudorange_model(prep.sat_pos, prep.sat_clk, prep.iono, prep.tropo)]
         z = [prep.pr]
@@ -862,6 +903,8 @@ class FusionFilter:
             self._bad_gnss_epochs = 0
         if self._bad_gnss_epochs >= self.params.divergence_gnss_epochs or self._position_lost():
             self._count("divergence")
+            if not self._position_lost() and self._uwb_agrees(stamp):
+                return self._reset_clock_keep_position(stamp, prep)
             return self._declare_divergence(stamp)
         return self._output(False, sat_used=used, sat_rej=pre_rejected + gated_pr, nis=nis)
 
@@ -987,7 +1030,11 @@ class FusionFilter:
         """Gauss-Newton multilateration from the latest range of each anchor within the window.
 
         Starts from ``guess`` (e.g. the diverged estimate, which keeps the solution on the right
-        side of a flat anchor cluster) or else from the anchors' centroid.
+        side of a flat anchor cluster). Without a guess it is multi-start: the anchors' centroid
+        and the centroid moved by the mean range along +-x and +-y of the frame (the tag is usually
+        around the anchors, not at their centroid), keeping the solution with the smallest
+        residual. A single start from the centroid converged to a local minimum 12 m from the tag
+        on the Hanyang NLOS case (the first second of the run then dominated its RMS error).
         """
         win = self.params.uwb_init_window_s * _NS
         recent = [(a, r) for (t, a, r, f) in self._recent_uwb.values() if f == frame and stamp_ns - t <= win]
@@ -995,11 +1042,32 @@ class FusionFilter:
             return None
         anchors = np.array([a for a, _ in recent])
         ranges = np.array([r for _, r in recent])
-        x = (
-            anchors.mean(axis=0) + np.array([0.1, 0.1, 0.0])
-            if guess is None
-            else np.asarray(guess, float).copy()
-        )
+        if guess is not None:
+            starts = [np.asarray(guess, float).copy()]
+        else:
+            c = anchors.mean(axis=0)
+            rm = float(np.mean(ranges))
+            starts = [c + np.array([0.1, 0.1, 0.0])] + [
+                c + rm * np.array(u) for u in ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0))
+            ]
+        best: tuple[float, np.ndarray] | None = None
+        for x0 in starts:
+            x = self._gauss_newton_multilateration(x0, anchors, ranges)
+            if x is None:
+                continue
+            res = ranges - np.linalg.norm(x + self._lever - anchors, axis=1)
+            rms = float(np.sqrt(np.mean(res**2)))
+            if math.isfinite(rms) and (best is None or rms < best[0] - 1e-9):
+                best = (rms, x)
+        if best is None or best[0] > 1.0:
+            return None
+        return best[1]
+
+    def _gauss_newton_multilateration(
+        self, x0: np.ndarray, anchors: np.ndarray, ranges: np.ndarray
+    ) -> np.ndarray | None:
+        """Gauss-Newton on the ranges from ``x0`` (m, (3,)); None if it meets an anchor or NaN."""
+        x = x0.copy()
         for _ in range(20):
             d = x + self._lever - anchors
             r = np.linalg.norm(d, axis=1)
@@ -1010,12 +1078,19 @@ class FusionFilter:
             x = x + dx
             if np.linalg.norm(dx) < 1e-6:
                 break
-        res = ranges - np.linalg.norm(x + self._lever - anchors, axis=1)
-        if not np.all(np.isfinite(x)) or np.sqrt(np.mean(res**2)) > 1.0:
-            return None
-        return x
+        return x if np.all(np.isfinite(x)) else None
 
     def _init_from_uwb(self, stamp_ns: int, frame: str) -> bool:
+        """Initialise by multilateration. Three anchors leave two mirror solutions (across the
+        anchors' plane) with zero residual, so with fewer than four anchors in the window the
+        filter waits until ranges have been collected for a whole ``uwb_init_window_s`` (every
+        anchor of a >= 1 Hz set has then reported) before accepting a three-anchor solution."""
+        if self._uwb_wait_since_ns is None:
+            self._uwb_wait_since_ns = stamp_ns
+        win = self.params.uwb_init_window_s * _NS
+        n_recent = sum(1 for (t, _, _, f) in self._recent_uwb.values() if f == frame and stamp_ns - t <= win)
+        if n_recent < 4 and stamp_ns - self._uwb_wait_since_ns < win:
+            return False
         pos = self._multilaterate(stamp_ns, frame)
         if pos is None:
             return False
@@ -1029,6 +1104,58 @@ class FusionFilter:
         lim = self.params.max_position_std_m**2
         worst = max(p[0, 0], p[1, 1], p[2, 2])
         return not (worst <= lim and math.isfinite(float(self._nominal.sum())))
+
+    def _uwb_agrees(self, stamp_ns: int) -> bool:
+        """True if the UWB ranges still agree with the state (GNSS-declared divergence is then a
+        GNSS fault, not a lost state): a range was accepted within ``uwb_init_window_s`` and fewer
+        than ``divergence_uwb_gated_fraction`` of the (at least half-full) range window were gated."""
+        p = self.params
+        window = self._uwb_gated
+        return (
+            p.use_uwb
+            and self._last_uwb_stamp is not None
+            and stamp_ns - self._last_uwb_stamp <= p.uwb_init_window_s * _NS
+            and 2 * len(window) >= (window.maxlen or 1)
+            and self._bad_uwb < p.divergence_uwb_gated_fraction * len(window)
+        )
+
+    def _fix_agrees_with_uwb(self, stamp_ns: int, position_m: np.ndarray, position_std_m: float) -> bool:
+        """Consistency of a GNSS snapshot fix with the recent UWB ranges (ECEF anchors only).
+
+        Every range of the last ``uwb_init_window_s`` must pass the filter's chi-square gate with
+        the variance ``position_std_m^2 + uwb_range_std_m^2`` (the fix's 1-sigma projected on the
+        line of sight plus the range noise). A jammed epoch whose outliers the snapshot could not
+        exclude (few satellites) is refused instead of replacing a state the UWB still supports.
+        """
+        p = self.params
+        if not p.use_uwb or math.isinf(self._gate):
+            return True
+        win = p.uwb_init_window_s * _NS
+        var = position_std_m**2 + p.uwb_range_std_m**2
+        for t, anchor, rng, frame in self._recent_uwb.values():
+            if frame != FRAME_EARTH or abs(stamp_ns - t) > win:
+                continue
+            res = rng - float(np.linalg.norm(position_m + self._lever - anchor))
+            if res * res > self._gate * var:
+                return False
+        return True
+
+    def _reset_clock_keep_position(self, stamp_ns: int, prep: _Prepared) -> FusionOutput:
+        """GNSS-declared divergence while UWB agrees with the state: keep position and velocity,
+        re-solve the clock bias from the median pseudorange residual and reset the clock
+        covariance (as when the clock is first initialised after a UWB start)."""
+        self._reinits += 1
+        self._count("clock_reset_uwb_consistent")
+        hx0 = pseudorange_model(prep.sat_pos, prep.sat_clk, prep.iono, prep.tropo)
+        res = prep.pr - hx0(self._nominal[None, :])[0]
+        self._nominal[6] += float(np.median(res))
+        pcov = self._ckf.p
+        pcov[6:8, :] = 0.0
+        pcov[:, 6:8] = 0.0
+        pcov[6, 6] = self.params.init_clock_bias_std_m**2 + float(pcov[0:3, 0:3].trace())
+        pcov[7, 7] = self.params.init_clock_drift_std_mps**2
+        self._bad_gnss_epochs = 0
+        return self._output(True)
 
     def _declare_divergence(self, stamp_ns: int) -> FusionOutput:
         """Reinitialise from (a) the caller's reference solution, (b) a snapshot LS fix of the last
@@ -1052,6 +1179,9 @@ class FusionFilter:
         ):
             prep = self._last_prep[1]
             fix = self._snapshot_fix(prep) if prep.pr.size >= self.params.min_satellites_init else None
+            if fix is not None and not self._fix_agrees_with_uwb(stamp_ns, fix[0], self.params.init_position_std_m):
+                self._count("gnss_fix_inconsistent_with_uwb")
+                fix = None
             if fix is not None:
                 self.initialize(
                     stamp_ns, fix[0], velocity_mps=fix[2], clock_bias_m=fix[1], clock_drift_mps=fix[3]

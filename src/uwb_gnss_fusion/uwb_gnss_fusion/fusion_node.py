@@ -151,7 +151,7 @@ class FusionNodeParams:
         'arrived; later arrivals are rejected. The outputs lag by it, s (0: process at once).',
         minimum=0.0, maximum=10.0)
     max_stamp_jump_s: float = parameter(
-        30.0, 'A stamp further than this from the latest accepted stamp is rejected (unless confirmed, see '
+        120.0, 'A stamp further than this from the latest accepted stamp is rejected (unless confirmed, see '
         'stamp_jump_confirmations), s.', minimum=0.01, maximum=1.0e6)
     stamp_jump_confirmations: int = parameter(
         5, 'Consecutive messages that must agree on a stamp jump before the node accepts it and restarts the '
@@ -219,6 +219,9 @@ class FusionNodeParams:
         _FP.init_clock_bias_std_m, 'Initial receiver clock bias 1-sigma, m.', minimum=1e-3, maximum=1e7)
     init_clock_drift_std_mps: float = parameter(
         _FP.init_clock_drift_std_mps, 'Initial receiver clock drift 1-sigma, m/s.', minimum=1e-4, maximum=1e4)
+    init_clock_drift_unobserved_std_mps: float = parameter(
+        _FP.init_clock_drift_unobserved_std_mps, 'Clock drift 1-sigma at an initialisation without Doppler and '
+        'without an earlier drift estimate, m/s.', minimum=1e-4, maximum=1e5)
     max_prediction_s: float = parameter(
         _FP.max_prediction_s, 'A measurement further than this after the filter time resets the filter, s.',
         minimum=0.01, maximum=3600.0)
