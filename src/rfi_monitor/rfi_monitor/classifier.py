@@ -142,13 +142,17 @@ def welch_psd(x: np.ndarray, nfft: int, max_frames: int) -> tuple[np.ndarray, in
     if nfr > max_frames:
         fr = fr[np.linspace(0, nfr - 1, max_frames).astype(np.int64)]
     w = _hann(nfft)
-    spec = np.fft.fft(fr * w, axis=1) if np.iscomplexobj(x) else np.fft.rfft(fr * w, axis=1)
-    p = np.mean(spec.real ** 2 + spec.imag ** 2, axis=0)
-    if np.iscomplexobj(x):
+    cplx = np.iscomplexobj(x)
+    spec = np.fft.fft(fr * w, axis=1) if cplx else np.fft.rfft(fr * w, axis=1)
+    # |X|^2 summed over frames without temporaries (speed): (re, im) pairs of the float view
+    v = np.ascontiguousarray(spec).view(np.float64)
+    p2 = np.einsum("ij,ij->j", v, v)
+    p = (p2[0::2] + p2[1::2]) / fr.shape[0]
+    fv = np.ascontiguousarray(fr)
+    fv = (fv.view(np.float64) if cplx else fv).ravel()
+    pw = float(np.einsum("i,i->", fv, fv)) / fr.size
+    if cplx:
         p = np.fft.fftshift(p)
-        pw = float(np.mean(fr.real ** 2 + fr.imag ** 2))
-    else:
-        pw = float(np.mean(fr * fr))
     return p * (pw / p.sum()), int(fr.shape[0])
 
 

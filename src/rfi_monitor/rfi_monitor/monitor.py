@@ -264,6 +264,7 @@ class RfiMonitor:
     def __init__(self, params: RfiMonitorParams = RfiMonitorParams()) -> None:
         self.params = params
         self._tpar = params.tracker.as_array()
+        self._packed: dict[bool, tuple[np.ndarray, np.ndarray]] = {}
         self._block_counters = {"blocks": 0, "blocks_rejected": 0, "gaps": 0, "rate_changes": 0,
                                 "non_finite_samples": 0, "saturated_samples": 0}
         self._cal_psd: list[np.ndarray] = []
@@ -354,11 +355,11 @@ class RfiMonitor:
             xf = x.astype(np.float64)
             xc = xf[0::2] + 1j * xf[1::2]
         elif cplx:
-            xc = x.astype(np.complex128)
+            xc = np.asarray(x, dtype=np.complex128)      # no copy when already complex128 (read only)
         elif np.iscomplexobj(x):
             raise ValueError("complex samples passed with is_complex=False")
         else:
-            xc = x.astype(np.float64)
+            xc = np.asarray(x, dtype=np.float64)         # no copy when already float64 (read only)
         n = xc.size
         if n < self.params.min_block_samples:
             raise ValueError(f"block of {n} samples is shorter than min_block_samples "
@@ -463,9 +464,13 @@ class RfiMonitor:
             if int(st.mist[K_NRESETS]) == 0:
                 st.mist[K_LAST_START] = int(math.floor(st.mst[M_NEXT] - per))
 
-    def _run_tracker(self, xc: np.ndarray, cplx: bool, first: int, store: bool) -> BlockTraces | None:
+    def _packed_params(self, cplx: bool) -> tuple[np.ndarray, np.ndarray]:
+        """Packed sweep-period and monitor parameters of the fused loop for real / complex input
+        (built once per kind: the parameters are frozen)."""
+        packed = self._packed.get(cplx)
+        if packed is not None:
+            return packed
         p = self.params
-        st = self._state
         band = 1.0 if cplx else 0.5
         spar = p.sweep.as_array(band)
         mpar = np.zeros(N_MPAR)
@@ -479,6 +484,12 @@ class RfiMonitor:
         mpar[P_MAX_DF] = MAX_ABS_RATE
         mpar[P_REFINE_W] = float(p.refine_window)
         mpar[P_FIT_GAIN] = p.fit_gain
+        self._packed[cplx] = (spar, mpar)
+        return spar, mpar
+
+    def _run_tracker(self, xc: np.ndarray, cplx: bool, first: int, store: bool) -> BlockTraces | None:
+        st = self._state
+        spar, mpar = self._packed_params(cplx)
         n = xc.size
         m = n if store else 1
         o_idx = np.empty(m, dtype=np.int64)
@@ -488,7 +499,7 @@ class RfiMonitor:
         xi = np.ascontiguousarray(xc.imag, dtype=np.float64) if cplx else xr
         k = track_block(xr, xi, cplx, first, self._tpar, spar, mpar, st.fst, st.ist, st.ring, st.sf, st.si,
                         st.zhist, st.gam, st.pmat, st.hist, st.peaks, st.mst, st.mist, st.counters,
-                        st.dfring, st.zring, st.zdec, store,
+                        st.dfring, st.zring, st.zdec, st.lev, store,
                         o_idx, o_z, o_f, o_df, o_p11, o_zar, o_reset)
         if not store:
             return None

@@ -24,7 +24,10 @@ slow to lock for long periods. This detector looks at the whole recent frequency
    towards fs/4). ``|c_2| / |c_1|`` is 1/2 for a saw-tooth and ~0 for a triangular sweep.
 
 Cost: one real FFT pair of 2L points per analysis (the monitor runs it every ``hop_s`` at absolute
-sample boundaries, so block splitting cannot change the result).
+sample boundaries, so block splitting cannot change the result); the peak search (``_best_lag``)
+and the two Fourier coefficients (``_fourier_12``, a rotating phasor instead of a complex
+exponential per value) are compiled (numba): ~0.15 ms per analysis of L = 4096 on this machine,
+of which the FFT pair is ~0.09 ms.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 
 @dataclass(frozen=True)
@@ -91,6 +95,79 @@ class SweepAnalysis:
     sample_index: int
 
 
+@njit(cache=True)
+def _fourier_12(x: np.ndarray, t_dec: float) -> tuple[complex, complex]:
+    """``c_k = sum_n x_n e^{-j 2 pi k n / T}`` for k = 1, 2 (step 4 of the module docstring).
+
+    The phasor advances by a rotation (one complex product per sample) and is recomputed exactly
+    every 256 samples, so its rounding error stays ~1e-14 (the libm exponential of every sample
+    cost ~30 ns each).
+    """
+    w = -2.0 * math.pi / t_dec
+    rot = complex(math.cos(w), math.sin(w))
+    c1 = 0j
+    c2 = 0j
+    e = 1.0 + 0j
+    for i in range(x.size):
+        if (i & 255) == 0:
+            e = complex(math.cos(w * i), math.sin(w * i))
+        xe = x[i] * e
+        c1 += xe
+        c2 += xe * e
+        e = e * rot
+    return c1, c2
+
+
+@njit(cache=True)
+def _best_lag(r: np.ndarray, lo: int, lmax: int) -> tuple[int, np.ndarray]:
+    """Step 3 of the module docstring: the lag of the strongest local maximum of r over
+    [lo, lmax] (strength = r[k] - min(r[1..k])), replaced by the largest sub-multiple kbest / q
+    (q from kbest // lo down to 2) whose neighbourhood (+-1 lag) holds a local maximum of at least
+    half that strength; -1 if there is no local maximum.
+
+    Args:
+        r: normalised autocorrelation, shape (L,), r[0] = 1.
+        lo, lmax: lag range, decimated samples (lo >= 2, lmax < L - 1).
+
+    Returns:
+        (lag, trough) with trough[c - 1] = min(r[1..c]), shape (L - 1,).
+    """
+    n = r.size
+    trough = np.empty(n - 1)
+    m = math.inf
+    for i in range(1, n):
+        m = min(m, r[i])
+        trough[i - 1] = m
+    best = -math.inf
+    kbest = -1
+    for c in range(lo + 1, lmax):
+        if r[c] >= r[c - 1] and r[c] >= r[c + 1]:
+            st = r[c] - trough[c - 1]
+            if st > best:
+                best = st
+                kbest = c
+    if kbest < 0:
+        return kbest, trough
+    for q in range(kbest // lo, 1, -1):
+        cen = kbest / q
+        k_lo = max(1, int(math.floor(cen - 1.0)))
+        k_hi = min(n - 2, int(math.ceil(cen + 1.0)))
+        if k_hi < k_lo:
+            continue
+        ks = k_lo
+        bv = -math.inf
+        for j in range(4):
+            idx = k_lo + j
+            v = r[min(idx, n - 1)] if idx <= k_hi else -math.inf
+            if v > bv:
+                bv = v
+                ks = idx
+        if (ks >= lo and r[ks] >= r[ks - 1] and r[ks] >= r[min(ks + 1, n - 1)]
+                and r[ks] - trough[ks - 1] >= 0.5 * best):
+            return ks, trough
+    return kbest, trough
+
+
 def _parabolic(r: np.ndarray, k: int) -> float:
     if 0 < k < r.size - 1:
         a, b, c = r[k - 1], r[k], r[k + 1]
@@ -138,30 +215,9 @@ def analyse(zdec: np.ndarray, decimation: int, first_centre: float, sample_index
     lo = par.min_lag
     if lmax <= lo + 2:
         return none
-    seg = r[lo:lmax + 1]
-    ismax = np.zeros(seg.size, dtype=bool)
-    ismax[1:-1] = (seg[1:-1] >= seg[:-2]) & (seg[1:-1] >= seg[2:])
-    if not ismax.any():
+    kbest, trough = _best_lag(r, lo, lmax)
+    if kbest < 0:
         return none
-    cand = np.flatnonzero(ismax) + lo
-    trough = np.minimum.accumulate(r[1:])             # trough[c - 1] = min(r[1..c])
-    st_c = r[cand] - trough[cand - 1]
-    kbest = int(cand[np.argmax(st_c)])
-    best = float(np.max(st_c))
-    # prefer a sub-multiple that is also a peak of at least half the strength
-    # (vectorised over q, largest q first: the local maximum of r within +-1 lag of kbest / q)
-    qs = np.arange(int(kbest // lo), 1, -1)
-    if qs.size:
-        cen = kbest / qs
-        k_lo = np.maximum(1, np.floor(cen - 1.0)).astype(np.int64)
-        k_hi = np.minimum(r.size - 2, np.ceil(cen + 1.0)).astype(np.int64)
-        idx = k_lo[:, None] + np.arange(4)[None, :]
-        vals = np.where(idx <= k_hi[:, None], r[np.minimum(idx, r.size - 1)], -np.inf)
-        ks = idx[np.arange(qs.size), np.argmax(vals, axis=1)]
-        ok = ((k_hi >= k_lo) & (ks >= lo) & (r[ks] >= r[ks - 1]) & (r[ks] >= r[np.minimum(ks + 1, r.size - 1)])
-              & (r[ks] - trough[ks - 1] >= 0.5 * best))
-        if ok.any():
-            kbest = int(ks[np.argmax(ok)])
     strength = float(r[kbest] - trough[kbest - 1])
     if strength < par.min_strength:
         return SweepAnalysis(False, strength, nan, nan, nan, nan, sample_index)
@@ -177,10 +233,7 @@ def analyse(zdec: np.ndarray, decimation: int, first_centre: float, sample_index
     if not t_dec > 0:
         return none
     # Fourier coefficients at 1/T and 2/T (decimated time), phase referenced to absolute samples
-    e1 = np.exp((-2j * np.pi / t_dec) * np.arange(n))
-    xe1 = x * e1
-    c1 = complex(np.sum(xe1))
-    c2 = complex(np.dot(xe1, e1))
+    c1, c2 = _fourier_12(x, float(t_dec))
     if abs(c1) == 0:
         return none
     sgn = -1.0 if (c2 * np.conj(c1) ** 2).imag > 0 else 1.0

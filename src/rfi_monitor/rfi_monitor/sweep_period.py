@@ -77,6 +77,8 @@ AR_PMAT_ROWS = AR_LR_CROW + 1
 AR_LR_D = AR_LR_MAX
 AR_LR_POS = AR_LR_MAX + 1
 assert AR_LR_POS < AR_ORDER
+AR_K4 = 4
+"""Rank-one terms of the specialised AR step (``_ar_step_k4``): K at the paper's A = 0.2 I."""
 
 
 def ar_low_rank_terms(a: float, tol: float = AR_LR_TOL) -> int:
@@ -414,6 +416,65 @@ def _ar_step_low_rank(v: float, gam: np.ndarray, pmat: np.ndarray, hist: np.ndar
 
 
 @njit(cache=True, inline="always", fastmath=_AR_FASTMATH)
+def _ar_step_k4(v: float, gam: np.ndarray, pmat: np.ndarray, hist: np.ndarray, a: float, q_ar: float,
+                r_ar: float) -> float:
+    """Low-rank AR step specialised to K = AR_K4 = 4 terms (the paper's A = 0.2 I); see ``ar_step``.
+
+    Same arithmetic as ``_ar_step_low_rank`` with the K loop unrolled (the term weights and dot
+    products live in registers), the K + 2 dot products with C in one pass over it, u written
+    straight into the slot of the dropped term (each element is read before it is overwritten), and
+    ``zAR = C^T Gamma^_n = pred + (s - sigma_AR^2) innov`` (since ``C^T u = s - sigma_AR^2``) instead
+    of a second dot product. About 2x faster per step than the generic loop.
+    """
+    a2 = a * a
+    d = a2 * pmat[AR_LR_WROW, AR_LR_D] + q_ar
+    pmat[AR_LR_WROW, AR_LR_D] = d
+    w0 = a2 * pmat[AR_LR_WROW, 0]
+    w1 = a2 * pmat[AR_LR_WROW, 1]
+    w2 = a2 * pmat[AR_LR_WROW, 2]
+    w3 = a2 * pmat[AR_LR_WROW, 3]
+    pmat[AR_LR_WROW, 0] = w0
+    pmat[AR_LR_WROW, 1] = w1
+    pmat[AR_LR_WROW, 2] = w2
+    pmat[AR_LR_WROW, 3] = w3
+    cc = 0.0
+    d0 = 0.0
+    d1 = 0.0
+    d2 = 0.0
+    d3 = 0.0
+    pg = 0.0
+    for i in range(AR_ORDER):
+        h = hist[i]
+        cc += h * h
+        d0 += pmat[AR_LR_BASE, i] * h
+        d1 += pmat[AR_LR_BASE + 1, i] * h
+        d2 += pmat[AR_LR_BASE + 2, i] * h
+        d3 += pmat[AR_LR_BASE + 3, i] * h
+        pg += gam[i] * h
+    c0 = w0 * d0
+    c1 = w1 * d1
+    c2 = w2 * d2
+    c3 = w3 * d3
+    s = r_ar + d * cc - ((c0 * d0 + c1 * d1) + (c2 * d2 + c3 * d3))
+    pred = a * pg
+    inv_s = 1.0 / s
+    innov = (v - pred) * inv_s
+    pos = int(pmat[AR_LR_WROW, AR_LR_POS])
+    row = AR_LR_BASE + pos
+    for i in range(AR_ORDER):
+        u = d * hist[i] - ((c0 * pmat[AR_LR_BASE, i] + c1 * pmat[AR_LR_BASE + 1, i])
+                           + (c2 * pmat[AR_LR_BASE + 2, i] + c3 * pmat[AR_LR_BASE + 3, i]))
+        gam[i] = a * gam[i] + u * innov
+        pmat[row, i] = u                       # P+ = P- - u u^T / s: the new term replaces the oldest
+    pmat[AR_LR_WROW, pos] = inv_s
+    pmat[AR_LR_WROW, AR_LR_POS] = pos + 1 if pos + 1 < AR_K4 else 0
+    for i in range(AR_ORDER - 1, 0, -1):
+        hist[i] = hist[i - 1]
+    hist[0] = v
+    return pred + (s - r_ar) * innov
+
+
+@njit(cache=True, inline="always", fastmath=_AR_FASTMATH)
 def ar_step(v: float, gam: np.ndarray, pmat: np.ndarray, hist: np.ndarray, a: float, q_ar: float,
             r_ar: float, k_terms: int) -> float:
     """One step of the AR(p) coefficient Kalman filter (eq. 24-27); returns zAR (eq. 27).
@@ -439,6 +500,8 @@ def ar_step(v: float, gam: np.ndarray, pmat: np.ndarray, hist: np.ndarray, a: fl
         relative, 1.0e-7 at a = 0.2). Cost O(K p) instead of O(p^2) per step: u = d C - sum_k w_k
         u_k (u_k . C). The stable coefficient filter (A = 0.2 I) does not accumulate the error.
     """
+    if k_terms == AR_K4:
+        return _ar_step_k4(v, gam, pmat, hist, a, q_ar, r_ar)
     if k_terms >= 0:
         return _ar_step_low_rank(v, gam, pmat, hist, a, q_ar, r_ar, k_terms)
     return _ar_step_full(v, gam, pmat, hist, a, q_ar, r_ar)

@@ -1,8 +1,9 @@
 """Fused per-sample loop: IF measurement -> tracking filter -> LPD/AR sweep period -> sweep resets.
 
-One compiled loop (numba, no Python per sample, no per-sample temporaries) runs, for each new
-sample, the three-sample measurement (if_measurement), the filter (tracking_filters), the
-sweep-period estimator (sweep_period, AR step at the decimated rate) and the reset scheduler. The
+One compiled loop (numba, no Python per sample, no per-sample temporaries) runs, chunk by chunk of
+CHUNK = 16 samples, the three-sample measurement (if_measurement), the filter (tracking_filters),
+then the sweep-period estimator (sweep_period: LPD, AR step at the decimated rate, peaks) and the
+reset scheduler. The
 hot state (filter, LPD, decimation, lattice) lives in local variables inside the loop and is
 loaded from / stored to the arrays of ``TrackerState`` once per block, so that a stream fed as
 one block or as many gives bit-identical per-sample estimates.
@@ -16,8 +17,12 @@ Speed (see docs/rfi_monitor/speed.md):
   (``if_measurement.measure_real_sq``); arccos by a polynomial, sin/cos of pi df by Taylor terms;
 * the filter step (``tracking_filters.filter_step``) has one division and no branch: a rejected
   sample runs the same arithmetic with K = 0; the update and the next prediction are fused;
-* the AR(10) Kalman step keeps its covariance in a low-rank form (``sweep_period.ar_step``,
-  K = 4 rank-one terms at A = 0.2 I, relative error 1e-7) and runs every ``decimation`` samples;
+* the LPD, the AR(10) Kalman step and the peak detector run in a second loop over each chunk after
+  the filter's (the filter only queues the LPD inputs: z, or the prior when rejected, and the sign
+  of df), so that the two serial recursions do not interleave; the AR step keeps its covariance in
+  a low-rank form (``sweep_period.ar_step``, K = 4 rank-one terms at A = 0.2 I, relative error
+  1e-7, unrolled in ``_ar_step_k4``) and runs every ``decimation`` samples;
+* the status counters are counted in the vectorised measurement loop;
 * the hot state lives in local variables, the per-status counters too; per-sample helpers take
   scalars only (an array argument costs reference counting on every call).
 
@@ -26,7 +31,10 @@ sent to the filter and used to reset the filter"): a peak is detected some sampl
 start, so resetting at the detection time would be late. Once the LPD period is locked we keep a
 lattice of predicted sweep starts ``next + k T^`` and reset the filter at each predicted start
 (eq. 21-22); every detected peak (minus the estimator's group delay) nudges the lattice phase by
-``phase_gain`` times its error when the error is within ``2 tol T^`` (first-order loop).
+``phase_gain`` times its error when the error is within ``2 tol T^`` (first-order loop). The peaks
+of a chunk act on the lattice at the end of its aligned CHUNK window (queued in ``lev``, also across
+a block boundary inside the window), i.e. up to CHUNK - 1 = 15 samples after the decimated step
+that completed them; a lattice acquired then starts at the first predicted start after the window.
 
 Additions on top ("ours", switchable, reported separately in the benchmarks):
 
@@ -104,8 +112,8 @@ from rfi_monitor.tracking_filters import (
 N_MSTATE = 13
 # monitor int state
 (K_NBUF, K_LAST_START, K_NRESETS, K_STARTED, K_NMEAS, K_FITAT, K_MISSES, K_DECN, K_LATSRC, K_NDEC,
- K_NFIT, K_ZPOS) = range(12)
-N_MISTATE = 12
+ K_NFIT, K_ZPOS, K_NLEV) = range(13)
+N_MISTATE = 13
 # lattice sources
 LAT_NONE, LAT_LPD, LAT_COARSE = 0, 1, 2
 # packed monitor parameters
@@ -148,6 +156,7 @@ class TrackerState:
         self.dfring = np.zeros(DF_LAG)
         self.zring = np.zeros(Z_RING)
         self.zdec = np.zeros(DEC_HISTORY)
+        self.lev = np.zeros(3 * CHUNK)
 
 
 @njit(cache=True, inline="always")
@@ -188,7 +197,7 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
                 spar: np.ndarray, mpar: np.ndarray, fst: np.ndarray, ist: np.ndarray, ring: np.ndarray,
                 sf: np.ndarray, si: np.ndarray, zhist: np.ndarray, gam: np.ndarray, pmat: np.ndarray,
                 hist: np.ndarray, peaks: np.ndarray, mst: np.ndarray, mist: np.ndarray, counters: np.ndarray,
-                dfring: np.ndarray, zring: np.ndarray, zdec: np.ndarray,
+                dfring: np.ndarray, zring: np.ndarray, zdec: np.ndarray, lev: np.ndarray,
                 store: bool, o_idx: np.ndarray, o_z: np.ndarray, o_f: np.ndarray, o_df: np.ndarray,
                 o_p11: np.ndarray, o_zar: np.ndarray, o_reset: np.ndarray) -> int:
     """Run the fused loop over one block; returns the number of estimates produced.
@@ -198,7 +207,7 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
         is_complex: I/Q input.
         first_index: absolute index of xr[0].
         tpar, spar, mpar: packed filter, sweep-period and monitor parameters.
-        fst ... zdec: state (see TrackerState), updated in place.
+        fst ... lev: state (see TrackerState), updated in place.
         store: write per-sample outputs o_* (each shape (N,)); else they may have size 1.
     """
     mode = int(tpar[0])
@@ -235,6 +244,7 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
     fitat, misses, decn, latsrc, ndec = mist[K_FITAT], mist[K_MISSES], mist[K_DECN], mist[K_LATSRC], mist[K_NDEC]
     zpos = mist[K_ZPOS]
     nmeas = mist[K_NMEAS]
+    nlev = mist[K_NLEV]
     zmask = zring.size - 1
     dmask = zdec.size - 1
     dfmask = dfring.size - 1
@@ -257,6 +267,8 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
         nbuf += 1
         j0 += 1
     zbuf = np.empty(2 * CHUNK)
+    zlb = np.empty(CHUNK)                           # z (or the prior if rejected) of the chunk, for the LPD
+    sgb = np.empty(CHUNK)                           # the filter's df after each sample (its sign: LPD sum)
     sbuf = np.empty(2 * CHUNK, dtype=np.int64)
     thr = np.empty(CHUNK)
     dfc = np.empty(CHUNK)
@@ -291,6 +303,13 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
                     k = jf + i + 1
                     zbuf[b0 + i], sbuf[b0 + i] = measure_real_sq(xe[k - 1], xe[k], xe[k + 1], dfc[i], chirp_corr,
                                                                  thr[i], margin)
+            for i in range(lf):                     # status counters (off the serial loop)
+                status = sbuf[b0 + i]
+                n_ok += status == STATUS_OK
+                n_near += status == STATUS_NEAR_ZERO
+                n_dom += status == STATUS_DOMAIN
+                n_nonfin += status == STATUS_NON_FINITE
+                n_corr += status == STATUS_CORRECTION
         bp = (1 - slot) * CHUNK
         m0 = first_index + jp - 1
         for i in range(lp):
@@ -315,11 +334,6 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
                 fitat = m + w if w >= 4 else -1
             prior_f = f
             dfring[m & dfmask] = df                 # read by the measurement of m + DF_LAG
-            n_ok += status == STATUS_OK
-            n_near += status == STATUS_NEAR_ZERO
-            n_dom += status == STATUS_DOMAIN
-            n_nonfin += status == STATUS_NON_FINITE
-            n_corr += status == STATUS_CORRECTION
             valid = status == STATUS_OK
             # --- filter: update with z (K = 0 if rejected), predict sample m + 1 ---------------------
             wp0 = wpos
@@ -329,63 +343,10 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
             zl = z if valid else prior_f
             nmeas += 1
             zring[m & zmask] = zl
-            # --- LPD (eq. 23) and decimation -------------------------------------------------------
-            # zpos counts 0..2 LPD_LAG - 1: >= LPD_LAG once the history is full (no modulo per sample)
-            hpos = zpos - LPD_LAG if zpos >= LPD_LAG else zpos
-            if zpos >= LPD_LAG:
-                dz = zl - zhist[hpos]
-                if wrap:
-                    dz = dz - math.floor(dz + 0.5)
-            else:
-                dz = 0.0
-            zhist[hpos] = zl
-            zpos = zpos + 1 if zpos + 1 < 2 * LPD_LAG else LPD_LAG
-            zg = gamma * zg - lpd_scale * dz
-            sgn = 1.0 if df >= 0.0 else -1.0
-            acc += zg * sgn
-            zacc += zl
-            decn += 1
-            start = -1
-            if decn >= dec:
-                zdec[ndec & dmask] = zacc * inv_dec
-                ndec += 1
-                zar = ar_step(acc * inv_dec, gam, pmat, hist, a_ar, q_ar, r_ar, k_ar)
-                acc = 0.0
-                zacc = 0.0
-                decn = 0
-                start = peak_step(m, zar, sf, si, peaks, spar)
-            # --- reset lattice ------------------------------------------------------------------------
-            per = sf[S_PERIOD]
-            lpd_locked = si[J_LOCKED] == 1 and per > 0.0
-            if refine_w == 0:
-                # paper method: the lattice exists while the LPD period is locked
-                if not lpd_locked:
-                    nxt = -1.0
-                    latsrc = 0
-                else:
-                    tlat = per
-                    if start >= 0:
-                        if nxt < 0.0:
-                            kp = math.ceil((m + 1 - start) / per)
-                            nxt = start + kp * per
-                            latsrc = 1
-                            if nresets == 0:
-                                last_start = start
-                        else:
-                            u = (start - nxt) / per
-                            e = (u - math.floor(u + 0.5)) * per
-                            if abs(e) <= 2.0 * tol * per:
-                                nxt += phase_gain * e
-            else:
-                # ours: acquire from the LPD (or the monitor's coarse detector), then the step-fit loop
-                if nxt < 0.0 and lpd_locked and start >= 0:
-                    kp = math.ceil((m + 1 - start) / per)
-                    nxt = start + kp * per
-                    tlat = per
-                    latsrc = 1
-                    misses = 0
-                    if nresets == 0:
-                        last_start = start
+            zlb[i] = zl                             # LPD input (pass after the chunk)
+            sgb[i] = df
+            # --- sweep-start fit (ours) ---------------------------------------------------------------
+            if refine_w > 0:
                 if fitat >= 0 and m == fitat:
                     fitat = -1
                     w = m - int(math.ceil(ppred))
@@ -408,9 +369,90 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
                 o_f[n_out] = f_post
                 o_df[n_out] = df_post
                 o_p11[n_out] = p11_post
-                o_zar[n_out] = sf[S_ZAR]
                 o_reset[n_out] = did_reset
             n_out += 1
+        # ---- LPD, AR(10) + peak pass over the chunk, then the reset lattice -----------------------------
+        # A separate loop (speed): the LPD and the serial AR recursion no longer interleave with the
+        # filter's serial chain (the LPD values are those of the per-sample form). The peaks found are
+        # queued (start, period, locked) and act on the lattice at the end of the aligned CHUNK window
+        # (up to CHUNK - 1 samples after the decimated step that completed them), also when a block
+        # ends inside the window, so that block splitting cannot change the result.
+        m_end = m0 + lp - 1
+        zprev = sf[S_ZAR]
+        base = n_out - lp
+        o0 = base
+        for i in range(lp):
+            zl = zlb[i]
+            # LPD (eq. 23); zpos counts 0..2 LPD_LAG - 1: >= LPD_LAG once the history is full
+            hpos = zpos - LPD_LAG if zpos >= LPD_LAG else zpos
+            if zpos >= LPD_LAG:
+                dz = zl - zhist[hpos]
+                if wrap:
+                    dz = dz - math.floor(dz + 0.5)
+            else:
+                dz = 0.0
+            zhist[hpos] = zl
+            zpos = zpos + 1 if zpos + 1 < 2 * LPD_LAG else LPD_LAG
+            zg = gamma * zg - lpd_scale * dz
+            acc += zg if sgb[i] >= 0.0 else -zg
+            zacc += zl
+            decn += 1
+            if decn < dec:
+                continue
+            zdec[ndec & dmask] = zacc * inv_dec
+            ndec += 1
+            zar = ar_step(acc * inv_dec, gam, pmat, hist, a_ar, q_ar, r_ar, k_ar)
+            acc = 0.0
+            zacc = 0.0
+            decn = 0
+            start = peak_step(m0 + i, zar, sf, si, peaks, spar)
+            if start >= 0 and nlev < CHUNK:        # (at most one peak per two decimated steps)
+                lev[3 * nlev] = start
+                lev[3 * nlev + 1] = sf[S_PERIOD]
+                lev[3 * nlev + 2] = si[J_LOCKED]
+                nlev += 1
+            if store:                                # zAR trace: held between decimated steps
+                for j in range(o0, base + i):
+                    o_zar[j] = zprev
+                o0 = base + i
+            zprev = zar
+        if lp > 0 and nlev > 0 and (m_end & (CHUNK - 1)) == CHUNK - 1:
+            m_app = m_end + 1                        # first sample the lattice acts on
+            for j in range(nlev):
+                start = int(lev[3 * j])
+                per = lev[3 * j + 1]
+                lpd_locked = lev[3 * j + 2] > 0.5 and per > 0.0
+                if refine_w == 0:
+                    # paper method: the lattice exists while the LPD period is locked
+                    if not lpd_locked:
+                        nxt = -1.0
+                        latsrc = 0
+                    else:
+                        tlat = per
+                        if nxt < 0.0:
+                            kp = math.ceil((m_app - start) / per)
+                            nxt = start + kp * per
+                            latsrc = 1
+                            if nresets == 0:
+                                last_start = start
+                        else:
+                            u = (start - nxt) / per
+                            e = (u - math.floor(u + 0.5)) * per
+                            if abs(e) <= 2.0 * tol * per:
+                                nxt += phase_gain * e
+                elif nxt < 0.0 and lpd_locked:
+                    # ours: acquire from the LPD (or the monitor's coarse detector), then the step-fit loop
+                    kp = math.ceil((m_app - start) / per)
+                    nxt = start + kp * per
+                    tlat = per
+                    latsrc = 1
+                    misses = 0
+                    if nresets == 0:
+                        last_start = start
+            nlev = 0
+        if store:
+            for i in range(o0, n_out):
+                o_zar[i] = zprev
         if lf == 0:
             break
         jp, lp, jf, slot = jf, lf, jf + lf, 1 - slot
@@ -428,6 +470,7 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
     mist[K_FITAT], mist[K_MISSES], mist[K_DECN], mist[K_LATSRC], mist[K_NDEC] = fitat, misses, decn, latsrc, ndec
     mist[K_ZPOS] = zpos
     mist[K_NMEAS] = nmeas
+    mist[K_NLEV] = nlev
     counters[STATUS_OK] += n_ok
     counters[STATUS_NEAR_ZERO] += n_near
     counters[STATUS_DOMAIN] += n_dom

@@ -78,3 +78,16 @@ def test_bad_arguments():
         measure_if(np.zeros((3, 3)))
     with pytest.raises(ValueError):
         measure_if(np.zeros(10), min_abs=-1.0)
+
+
+def test_atan2_fast_matches_libm_in_every_octant():
+    from rfi_monitor.if_measurement import atan2_fast
+    rng = np.random.default_rng(6)
+    ang = np.r_[np.linspace(-math.pi, math.pi, 4001), rng.uniform(-math.pi, math.pi, 2000)]
+    mag = 10.0 ** rng.uniform(-6, 6, ang.size)
+    for y, x in zip(mag * np.sin(ang), mag * np.cos(ang), strict=True):
+        ref = math.atan2(y, x)
+        err = (atan2_fast(y, x) - ref + math.pi) % (2 * math.pi) - math.pi   # +-pi are the same angle
+        assert abs(err) <= 1e-12
+    assert atan2_fast(0.0, 1.0) == 0.0 and math.isclose(atan2_fast(1.0, 0.0), math.pi / 2, rel_tol=1e-15)
+    assert math.isclose(atan2_fast(0.0, -1.0), math.pi, rel_tol=1e-15)

@@ -256,3 +256,45 @@ def test_paper_method_parameters():
     assert RfiMonitorParams().sweep.lattice_voting and RfiMonitorParams().analysis.enabled
     with pytest.raises(ValueError):
         RfiMonitorParams(refine_window=99)
+
+
+@pytest.mark.parametrize("refine", [24, 0])
+def test_resets_do_not_depend_on_unaligned_block_cuts(refine):
+    # the LPD peaks act on the reset lattice at the end of aligned 16-sample windows, also when a
+    # block ends inside one: resets and the filter track are those of one block
+    fe = FrontEndConfig(noise_density_dbm_per_mhz=-124.0)
+    fs, fif = fe.sample_rate_hz, fe.intermediate_frequency_hz
+    x = IfSimulator(fe, (ChirpJammer(sweep_rate_hz_per_s=3e12),), seed=3).generate(2 * BLOCK).values()
+    par = RfiMonitorParams(noise_floor_power=fe.noise_power_mw, calibration_blocks=1, refine_window=refine)
+    ta = RfiMonitor(par).process(x, fs, fif, 0, 0, return_traces=True).traces
+    cuts = np.cumsum(np.random.default_rng(1).integers(1024, 3000, 60))
+    cuts = np.r_[0, cuts[cuts < x.size - 1024], x.size]
+    b = RfiMonitor(par)
+    parts = [b.process(x[i:j], fs, fif, int(i), 0, return_traces=True).traces
+             for i, j in zip(cuts[:-1], cuts[1:], strict=True)]
+    assert ta is not None and ta.reset.sum() > 50
+    tb = [p for p in parts if p is not None]
+    assert len(tb) == len(parts)
+    np.testing.assert_array_equal(np.concatenate([p.reset for p in tb]), ta.reset)
+    np.testing.assert_allclose(np.concatenate([p.f for p in tb]), ta.f, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("cplx", [False, True])
+def test_welch_psd_equals_the_direct_formula(cplx):
+    from rfi_monitor.classifier import welch_psd
+    rng = np.random.default_rng(4)
+    x = rng.standard_normal(5000) + (1j * rng.standard_normal(5000) if cplx else 0.0)
+    nfft = 256
+    for max_frames in (8, 256):
+        psd, frames = welch_psd(x, nfft, max_frames)
+        nfr = x.size // nfft
+        fr = x[:nfr * nfft].reshape(nfr, nfft)
+        if nfr > max_frames:
+            fr = fr[np.linspace(0, nfr - 1, max_frames).astype(np.int64)]
+        spec = (np.fft.fft if cplx else np.fft.rfft)(fr * np.hanning(nfft), axis=1)
+        p = np.mean(np.abs(spec) ** 2, axis=0)
+        p = np.fft.fftshift(p) if cplx else p
+        ref = p * np.mean(np.abs(fr) ** 2) / p.sum()
+        assert frames == fr.shape[0]
+        np.testing.assert_allclose(psd, ref, rtol=1e-12)
+        assert math.isclose(psd.sum(), np.mean(np.abs(fr) ** 2), rel_tol=1e-12)

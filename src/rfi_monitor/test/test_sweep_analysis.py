@@ -93,3 +93,52 @@ def test_lattice_voting_survives_false_peaks_between_true_ones():
         z[i:i + 40] -= 0.1
     *_, per, locked = estimate_sweep_period(z, SweepPeriodParams(lattice_voting=True))
     assert locked and per == pytest.approx(T, rel=0.01)
+
+
+def test_fourier_coefficients_equal_the_direct_sum():
+    from rfi_monitor.sweep_analysis import _fourier_12
+    x = np.random.default_rng(2).standard_normal(4096)
+    for t_dec in (3.3, 48.8, 1000.0):
+        e1 = np.exp((-2j * np.pi / t_dec) * np.arange(x.size))
+        c1, c2 = _fourier_12(x, t_dec)
+        assert abs(c1 - np.sum(x * e1)) <= 1e-11 * np.sum(np.abs(x))
+        assert abs(c2 - np.sum(x * e1 * e1)) <= 1e-11 * np.sum(np.abs(x))
+
+
+def _best_lag_reference(r, lo, lmax):
+    """Step 3 written with numpy (the vectorised form the compiled _best_lag replaced)."""
+    seg = r[lo:lmax + 1]
+    ismax = np.zeros(seg.size, dtype=bool)
+    ismax[1:-1] = (seg[1:-1] >= seg[:-2]) & (seg[1:-1] >= seg[2:])
+    if not ismax.any():
+        return -1
+    cand = np.flatnonzero(ismax) + lo
+    trough = np.minimum.accumulate(r[1:])
+    st_c = r[cand] - trough[cand - 1]
+    kbest = int(cand[np.argmax(st_c)])
+    best = float(np.max(st_c))
+    for q in range(kbest // lo, 1, -1):
+        cen = kbest / q
+        k_lo, k_hi = max(1, math.floor(cen - 1.0)), min(r.size - 2, math.ceil(cen + 1.0))
+        if k_hi < k_lo:
+            continue
+        ks = k_lo + int(np.argmax(r[k_lo:min(k_lo + 4, k_hi + 1)]))
+        if ks >= lo and r[ks] >= r[ks - 1] and r[ks] >= r[ks + 1] and r[ks] - trough[ks - 1] >= 0.5 * best:
+            return ks
+    return kbest
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_best_lag_equals_the_numpy_reference(seed):
+    from rfi_monitor.sweep_analysis import _best_lag
+    rng = np.random.default_rng(seed)
+    n = 2048
+    T = rng.uniform(5.0, 300.0)
+    t = np.arange(n)
+    z = (t / T) % 1.0 + rng.uniform(0.0, 2.0) * rng.standard_normal(n)
+    x = z - z.mean()
+    r = np.correlate(x, x, mode="full")[n - 1:]
+    r = r / r[0]
+    k, trough = _best_lag(r, 3, n // 4)
+    assert k == _best_lag_reference(r, 3, n // 4)
+    np.testing.assert_array_equal(trough, np.minimum.accumulate(r[1:]))

@@ -91,3 +91,29 @@ def test_paper_decimation_one_locks():
     z = 0.1832 + 0.134 * np.mod(k / T, 1.0)
     *_, per, locked = estimate_sweep_period(z, SweepPeriodParams(decimation=1))
     assert locked and per == pytest.approx(T, rel=0.005)
+
+
+def test_specialised_k4_ar_step_equals_the_generic_low_rank_step():
+    # the unrolled K = 4 step (zAR = pred + (s - R) innov) is the same arithmetic as the generic loop
+    from rfi_monitor.sweep_period import (
+        AR_K4,
+        AR_LR_BASE,
+        AR_LR_WROW,
+        AR_ORDER,
+        _ar_step_k4,
+        _ar_step_low_rank,
+        ar_step,
+        initial_ar_covariance,
+    )
+    rng = np.random.default_rng(5)
+    v = np.convolve(rng.standard_normal(2000), [1.0, -0.7, 0.2], mode="same") * 0.01
+    state = [(np.zeros(AR_ORDER), initial_ar_covariance(), np.zeros(AR_ORDER)) for _ in range(3)]
+    za = np.array([_ar_step_low_rank(x, *state[0], 0.2, 1.0, 1.0, AR_K4) for x in v])
+    zb = np.array([_ar_step_k4(x, *state[1], 0.2, 1.0, 1.0) for x in v])
+    zc = np.array([ar_step(x, *state[2], 0.2, 1.0, 1.0, AR_K4) for x in v])
+    scale = np.max(np.abs(za))
+    np.testing.assert_allclose(zb, za, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_array_equal(zc, zb)                       # ar_step dispatches to the K = 4 form
+    np.testing.assert_allclose(state[1][0], state[0][0], rtol=0, atol=1e-12)
+    lr = slice(AR_LR_BASE, AR_LR_WROW + 1)          # the low-rank terms, weights, d, ring position
+    np.testing.assert_allclose(state[1][1][lr], state[0][1][lr], rtol=0, atol=1e-12)
