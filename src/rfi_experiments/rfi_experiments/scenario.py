@@ -62,6 +62,30 @@ def stream_builder(name: str) -> Builder:
     return importlib.import_module(STREAMS[name]).build
 
 
+def data_path(name: str) -> Path:
+    """A file shipped in rfi_experiments/data (ephemerides, RINEX): the installed copy (ament
+    index), else the source checkout's copy.
+
+    Raises:
+        ScenarioError: neither exists.
+    """
+    candidates = []
+    try:
+        from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
+        try:
+            candidates.append(Path(get_package_share_directory('rfi_experiments')) / 'data' / name)
+        except PackageNotFoundError:
+            pass
+    except ImportError:
+        pass
+    candidates.append(Path(__file__).resolve().parents[1] / 'data' / name)
+    for path in candidates:
+        if path.is_file():
+            return path
+    raise ScenarioError(f'no data file {name} (looked in {", ".join(map(str, candidates))}); install '
+                        'rfi_experiments or give the file\'s path in the scenario section')
+
+
 def scenarios_dir() -> Path:
     """The installed scenarios directory (share/rfi_experiments/scenarios)."""
     from ament_index_python.packages import get_package_share_directory

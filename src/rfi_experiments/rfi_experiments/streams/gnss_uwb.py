@@ -76,7 +76,7 @@ import numpy as np
 
 from gnss_common.constants import SPEED_OF_LIGHT_MPS
 from gnss_common.gps_time import gps_to_stamp_ns
-from rfi_experiments.scenario import Scenario, ScenarioError
+from rfi_experiments.scenario import Scenario, ScenarioError, data_path
 from rfi_experiments.sim.gnss_uwb import (
     ARL1_ECEF_M,
     PAPER_ANCHOR_RANGES_M,
@@ -131,21 +131,7 @@ def default_nav_path() -> Path:
     Raises:
         ScenarioError: neither exists.
     """
-    candidates = []
-    try:
-        from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
-        try:
-            candidates.append(Path(get_package_share_directory('rfi_experiments')) / 'data' / NAV_FILE_NAME)
-        except PackageNotFoundError:
-            pass
-    except ImportError:
-        pass
-    candidates.append(Path(__file__).resolve().parents[2] / 'data' / NAV_FILE_NAME)
-    for path in candidates:
-        if path.is_file():
-            return path
-    raise ScenarioError(f'gnss_uwb: no ephemeris {NAV_FILE_NAME} (looked in {", ".join(map(str, candidates))}); '
-                        'install rfi_experiments or set gnss_uwb.nav_file')
+    return data_path(NAV_FILE_NAME)
 
 
 def _number(value: Any, key: str, low: float = -math.inf, high: float = math.inf, *,

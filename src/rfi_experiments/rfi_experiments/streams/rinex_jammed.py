@@ -92,7 +92,7 @@ from gnss_common.coordinates import azimuth_elevation
 from gnss_common.ephemeris import earth_rotation_correction
 from gnss_common.observations import GnssEpoch, SatelliteObservation, UwbRangeMeasurement
 from gnss_common.rinex import RinexFormatError
-from rfi_experiments.scenario import Scenario, ScenarioError
+from rfi_experiments.scenario import Scenario, ScenarioError, data_path
 from rfi_experiments.sim.gnss_uwb import PAPER_ANCHOR_RANGES_M, GnssUwbScenario, JammingEffect, anchor_positions_ecef
 from uwb_gnss_fusion.jamming_weights import (
     TrackingLoopParams,
@@ -149,29 +149,6 @@ def _number(value: Any, key: str, low: float = -math.inf, high: float = math.inf
     if value < low or value > high or (low_open and value == low):
         raise _error(f'{key} must be in {"(" if low_open else "["}{low}, {high}], got {value}')
     return value
-
-
-def data_path(name: str) -> Path:
-    """A file shipped in rfi_experiments/data: the installed copy (ament index), else the source tree's.
-
-    Raises:
-        ScenarioError: neither exists.
-    """
-    candidates = []
-    try:
-        from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
-        try:
-            candidates.append(Path(get_package_share_directory('rfi_experiments')) / 'data' / name)
-        except PackageNotFoundError:
-            pass
-    except ImportError:
-        pass
-    candidates.append(Path(__file__).resolve().parents[2] / 'data' / name)
-    for path in candidates:
-        if path.is_file():
-            return path
-    raise _error(f'no data file {name} (looked in {", ".join(map(str, candidates))}); install rfi_experiments '
-                 'or set the path in the section')
 
 
 def _file(value: Any, key: str, default: str, scenario: Scenario) -> Path:
