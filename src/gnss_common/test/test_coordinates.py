@@ -11,9 +11,11 @@ from gnss_common.coordinates import (
     ecef_to_enu,
     ecef_to_enu_rotation,
     ecef_to_geodetic,
+    ecef_to_geodetic_scalar,
     enu_to_ecef,
     geodetic_to_ecef,
     rotate_covariance_ecef_to_enu,
+    rotate_covariance_ecef_to_enu_scalar,
 )
 
 ARL1_ECEF_M = np.array([-740289.918, -5457071.734, 3207245.542])
@@ -119,3 +121,40 @@ def test_bad_shapes_and_values_raise():
         ecef_to_geodetic(np.array([1.0, 2.0, 3.0]))  # at the Earth's centre
     with pytest.raises(ValueError):
         rotate_covariance_ecef_to_enu(np.eye(4), 0.0, 0.0)
+
+
+def test_scalar_geodetic_equals_vectorised_over_global_grid():
+    # Global grid of seeded points: every latitude/longitude band, heights from below the geoid to GNSS orbits.
+    rng = np.random.default_rng(20261122)
+    lat = np.concatenate([rng.uniform(-math.pi / 2, math.pi / 2, 3000), [-math.pi / 2, 0.0, math.pi / 2]])
+    lon = np.concatenate([rng.uniform(-math.pi, math.pi, 3000), [0.0, math.pi, -0.5]])
+    h = np.concatenate([rng.uniform(-1000.0, 2.5e7, 3000), [0.0, 100.0, -50.0]])
+    xyz = geodetic_to_ecef(lat, lon, h)
+    vec = ecef_to_geodetic(xyz)
+    sca = np.array([ecef_to_geodetic_scalar(*p) for p in xyz.tolist()])
+    # Same algorithm on floats: only last-place rounding differs (math vs numpy transcendental functions).
+    # 1e-14 rad is 6e-8 m on the ellipsoid; heights to a few ulp of a 3e7 m number.
+    assert np.max(np.abs(sca[:, 0] - vec[:, 0])) < 1.0e-14
+    assert np.max(np.abs(sca[:, 1] - vec[:, 1])) < 1.0e-14
+    assert np.max(np.abs(sca[:, 2] - vec[:, 2])) < 1.0e-7
+    back = geodetic_to_ecef(sca[:, 0], sca[:, 1], sca[:, 2])
+    assert np.max(np.linalg.norm(back - xyz, axis=1)) < 1.0e-3
+    assert all(isinstance(v, float) for v in ecef_to_geodetic_scalar(*xyz[0]))
+
+
+def test_scalar_geodetic_rejects_like_vectorised():
+    for bad in ([math.nan, 0.0, 7.0e6], [0.0, math.inf, 7.0e6], [10.0, 20.0, 30.0]):
+        with pytest.raises(ValueError):
+            ecef_to_geodetic(np.array(bad))
+        with pytest.raises(ValueError):
+            ecef_to_geodetic_scalar(*bad)
+
+
+def test_scalar_covariance_rotation_equals_validated_one():
+    rng = np.random.default_rng(7)
+    a = rng.normal(size=(3, 3))
+    cov = a @ a.T + np.eye(3)
+    for lat, lon in ((0.3, -1.2), (-1.5, 3.0), (0.0, 0.0)):
+        fast = rotate_covariance_ecef_to_enu_scalar(cov, lat, lon)
+        np.testing.assert_allclose(fast, rotate_covariance_ecef_to_enu(cov, lat, lon), rtol=0.0, atol=1e-14)
+        np.testing.assert_allclose(np.trace(fast), np.trace(cov), rtol=1e-14)

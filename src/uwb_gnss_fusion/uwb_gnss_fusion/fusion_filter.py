@@ -25,7 +25,11 @@ from scipy.stats import chi2
 
 from gnss_common.clock_model import ClockHCoefficients
 from gnss_common.clock_model import clock_process_noise_m as _clock_q
-from gnss_common.coordinates import azimuth_elevation, ecef_to_geodetic, rotate_covariance_ecef_to_enu
+from gnss_common.coordinates import (
+    azimuth_elevation,
+    ecef_to_geodetic_scalar,
+    rotate_covariance_ecef_to_enu_scalar,
+)
 from gnss_common.observations import GPS, GnssEpoch, SatelliteObservation, UwbRangeMeasurement
 
 from .ckf import CholeskyError, CubatureKalmanFilter
@@ -269,12 +273,18 @@ class FusionOutput:
     reinitializations: int
 
     @cached_property
+    def _geodetic_rad(self) -> tuple[float, float, float]:
+        """(lat_rad, lon_rad, height_m) of the ECEF estimate, computed once per output (scalar path)."""
+        x, y, z = self.position_m.tolist()
+        return ecef_to_geodetic_scalar(x, y, z)
+
+    @cached_property
     def geodetic(self) -> tuple[float, float, float]:
         """(latitude_deg, longitude_deg, ellipsoidal altitude_m); NaN unless an ECEF estimate."""
         if not self.initialized or self.frame_id != FRAME_EARTH:
             return (math.nan, math.nan, math.nan)
-        lat, lon, h = ecef_to_geodetic(self.position_m)
-        return (math.degrees(lat), math.degrees(lon), float(h))
+        lat, lon, h = self._geodetic_rad
+        return (math.degrees(lat), math.degrees(lon), h)
 
     @cached_property
     def position_covariance_enu_m2(self) -> np.ndarray:
@@ -285,8 +295,8 @@ class FusionOutput:
         cov = self.covariance_pv[:3, :3]
         if not self.initialized or self.frame_id != FRAME_EARTH:
             return cov.copy()
-        lat, lon, _ = ecef_to_geodetic(self.position_m)
-        return rotate_covariance_ecef_to_enu(cov, lat, lon)
+        lat, lon, _ = self._geodetic_rad
+        return rotate_covariance_ecef_to_enu_scalar(cov, lat, lon)
 
 
 @dataclass
@@ -434,12 +444,12 @@ class FusionFilter:
         """
         stamp_ns = self._check_stamp_type(stamp_ns)
         pos = np.asarray(position_m, dtype=float)
-        if pos.shape != (3,) or not np.all(np.isfinite(pos)):
+        if pos.shape != (3,) or not np.isfinite(pos).all():
             raise ValueError(f"position_m must be 3 finite numbers, got {position_m!r}")
         if frame_id not in (FRAME_EARTH, FRAME_MAP):
             raise ValueError(f"frame_id must be 'earth' or 'map', got {frame_id!r}")
         vel = np.zeros(3) if velocity_mps is None else np.asarray(velocity_mps, dtype=float)
-        if vel.shape != (3,) or not np.all(np.isfinite(vel)):
+        if vel.shape != (3,) or not np.isfinite(vel).all():
             raise ValueError("velocity_mps must be 3 finite numbers")
         p = self.params
         std_p = p.init_position_std_m if position_std_m is None else float(position_std_m)
@@ -491,7 +501,7 @@ class FusionFilter:
             clock_bias_m: receiver c*dt, m (NaN if unknown).
         """
         pos = np.asarray(position_m, dtype=float)
-        if pos.shape != (3,) or not np.all(np.isfinite(pos)) or not (position_std_m > 0.0):
+        if pos.shape != (3,) or not np.isfinite(pos).all() or not (position_std_m > 0.0):
             self._count("invalid_reference")
             return
         self._reference = (int(stamp_ns), pos.copy(), float(position_std_m), float(clock_bias_m))
@@ -664,7 +674,7 @@ class FusionFilter:
                 self._count("malformed_observation")
                 continue
             scalars = (o.pseudorange_m, o.satellite_clock_bias_m, o.ionosphere_delay_m, o.troposphere_delay_m)
-            if not (np.all(np.isfinite(sp)) and all(math.isfinite(float(v)) for v in scalars)):
+            if not (np.isfinite(sp).all() and all(math.isfinite(float(v)) for v in scalars)):
                 self._count("nonfinite_pseudorange")
                 continue
             radius = float(np.linalg.norm(sp))
@@ -684,7 +694,7 @@ class FusionFilter:
             rate_ok = (
                 p.use_doppler
                 and math.isfinite(o.pseudorange_rate_mps)
-                and np.all(np.isfinite(sv))
+                and np.isfinite(sv).all()
                 and math.isfinite(o.satellite_clock_drift_mps)
                 and abs(o.pseudorange_rate_mps) < 2.0e4
             )
@@ -769,7 +779,7 @@ class FusionFilter:
                     break
             res = (prep.pr[idx] - hx(x[None, :])[0]) * w
             dof = idx.size - 4
-            if not np.all(np.isfinite(res)) or np.linalg.norm(x[0:3]) < 6.0e6:
+            if not np.isfinite(res).all() or np.linalg.norm(x[0:3]) < 6.0e6:
                 return None
             if dof == 0 or float(res @ res) <= chi2.ppf(0.999, dof):
                 if dof == 0 and idx.size < self.params.min_satellites_init:
@@ -1007,7 +1017,7 @@ class FusionFilter:
             except (ValueError, TypeError):
                 self._count("malformed_anchor_position")
                 return None
-            if not np.all(np.isfinite(anchor)):
+            if not np.isfinite(anchor).all():
                 self._count("nonfinite_anchor_position")
                 return None
         rng = meas.range_m
@@ -1078,7 +1088,7 @@ class FusionFilter:
             x = x + dx
             if np.linalg.norm(dx) < 1e-6:
                 break
-        return x if np.all(np.isfinite(x)) else None
+        return x if np.isfinite(x).all() else None
 
     def _init_from_uwb(self, stamp_ns: int, frame: str) -> bool:
         """Initialise by multilateration. Three anchors leave two mirror solutions (across the

@@ -88,7 +88,7 @@ from rfi_node_common.diagnostics import ERROR, OK, WARN, StampTimer, diagnostic_
 from rfi_node_common.main import run_node
 from rfi_node_common.params import declare, parameter, validate_ranges
 from rfi_node_common.qos import DATA_QOS
-from rfi_node_common.stamps import ns_to_stamp, stamp_to_ns
+from rfi_node_common.stamps import stamp_to_ns
 from uwb_gnss_fusion.conversions import msg_to_observation, msg_to_uwb
 from uwb_gnss_fusion.fusion_filter import (
     FRAME_EARTH,
@@ -299,13 +299,43 @@ class _Item:
 
 
 def _finite(*arrays: Any) -> bool:
-    return all(bool(np.all(np.isfinite(np.asarray(a, dtype=float)))) for a in arrays)
+    """True if every element of every argument (floats or float arrays) is finite.
+
+    One ``isfinite(...).all()`` per array (no ``np.all`` wrapper); plain ``math.isfinite`` for scalars.
+    """
+    for a in arrays:
+        if isinstance(a, float):
+            if not math.isfinite(a):
+                return False
+        elif isinstance(a, np.ndarray) and a.dtype == np.float64:
+            if not np.isfinite(a).all():
+                return False
+        elif not np.isfinite(np.asarray(a, dtype=float)).all():
+            return False
+    return True
+
+
+_POSE_COV_TEMPLATE = np.zeros((6, 6))
+for _k in range(3, 6):
+    _POSE_COV_TEMPLATE[_k, _k] = ORIENTATION_UNKNOWN_VARIANCE_RAD2
+_POSE_COV_TEMPLATE.flags.writeable = False
+"""6x6 Odometry covariance with the unestimated rotation block filled; copied per message."""
+
+
+def _set_stamp(header: Any, stamp_ns: int) -> None:
+    """Write integer ns (>= 0) into the message's own ``header.stamp`` (as ``ns_to_stamp``, without
+    building a second Time message)."""
+    stamp_ns = int(stamp_ns)
+    if stamp_ns < 0:
+        raise ValueError(f'negative stamp {stamp_ns} ns cannot be a ROS time')
+    stamp = header.stamp
+    stamp.sec, stamp.nanosec = divmod(stamp_ns, _NS)
 
 
 def status_msg(out: FusionOutput, stamp_ns: int, frame_id: str, reasons: dict[str, int]) -> FusionStatus:
     """FusionOutput -> rfi_msgs/FusionStatus (counts clamped to their integer types)."""
     m = FusionStatus()
-    m.header.stamp = ns_to_stamp(stamp_ns)
+    _set_stamp(m.header, stamp_ns)
     m.header.frame_id = frame_id
     m.mode = int(out.mode)
     m.initialized = bool(out.initialized)
@@ -328,34 +358,34 @@ def status_msg(out: FusionOutput, stamp_ns: int, frame_id: str, reasons: dict[st
 def odometry_msg(out: FusionOutput, frame_id: str, child_frame_id: str) -> Odometry:
     """FusionOutput (initialised, finite) -> nav_msgs/Odometry (see the module docstring)."""
     m = Odometry()
-    m.header.stamp = ns_to_stamp(out.stamp_ns)
+    _set_stamp(m.header, out.stamp_ns)
     m.header.frame_id = frame_id
     m.child_frame_id = child_frame_id
-    p, v, c = out.position_m, out.velocity_mps, out.covariance_pv
-    m.pose.pose.position.x, m.pose.pose.position.y, m.pose.pose.position.z = (float(x) for x in p)
+    c = out.covariance_pv
+    position = m.pose.pose.position
+    position.x, position.y, position.z = out.position_m.tolist()
     m.pose.pose.orientation.w = 1.0
-    pose_cov = np.zeros((6, 6))
+    # Fresh float64 arrays of 36 (the message's own storage type): no per-element conversion.
+    pose_cov = _POSE_COV_TEMPLATE.copy()
     pose_cov[:3, :3] = c[:3, :3]
-    twist_cov = np.zeros((6, 6))
+    twist_cov = _POSE_COV_TEMPLATE.copy()
     twist_cov[:3, :3] = c[3:6, 3:6]
-    for k in range(3, 6):
-        pose_cov[k, k] = ORIENTATION_UNKNOWN_VARIANCE_RAD2
-        twist_cov[k, k] = ORIENTATION_UNKNOWN_VARIANCE_RAD2
-    m.pose.covariance = [float(x) for x in pose_cov.ravel()]
-    m.twist.twist.linear.x, m.twist.twist.linear.y, m.twist.twist.linear.z = (float(x) for x in v)
-    m.twist.covariance = [float(x) for x in twist_cov.ravel()]
+    m.pose.covariance = pose_cov.reshape(36)
+    linear = m.twist.twist.linear
+    linear.x, linear.y, linear.z = out.velocity_mps.tolist()
+    m.twist.covariance = twist_cov.reshape(36)
     return m
 
 
 def fix_msg(out: FusionOutput, frame_id: str) -> NavSatFix:
     """FusionOutput (initialised, finite, earth frame) -> sensor_msgs/NavSatFix."""
     m = NavSatFix()
-    m.header.stamp = ns_to_stamp(out.stamp_ns)
+    _set_stamp(m.header, out.stamp_ns)
     m.header.frame_id = frame_id
     m.status.status = NavSatStatus.STATUS_FIX
     m.status.service = NavSatStatus.SERVICE_GPS
     m.latitude, m.longitude, m.altitude = out.geodetic
-    m.position_covariance = [float(x) for x in out.position_covariance_enu_m2.ravel()]
+    m.position_covariance = np.array(out.position_covariance_enu_m2, dtype=np.float64).reshape(9)
     m.position_covariance_type = NavSatFix.COVARIANCE_TYPE_KNOWN
     return m
 
@@ -379,6 +409,8 @@ class FusionNode(Node):
         self._diag_timer = StampTimer(self.params.diagnostics_period_s)
         self._rejections_at_last_report = 0
         self._faults_at_last_report = 0
+        self._reasons_cache: tuple[tuple, dict[str, int]] | None = None
+        self._uwb_core_frames = {self.params.earth_frame_id: FRAME_EARTH, self.params.map_frame_id: FRAME_MAP}
         self._fix_frames = {FRAME_EARTH: self.params.earth_frame_id, FRAME_MAP: self.params.map_frame_id}
         self.odom_pub = self.create_publisher(Odometry, '/fusion/odometry', DATA_QOS)
         self.fix_pub = self.create_publisher(NavSatFix, '/fusion/fix', DATA_QOS)
@@ -409,7 +441,7 @@ class FusionNode(Node):
         stamp_ns = stamp_to_ns(msg.header.stamp)
         self.counts['uwb_received'] += 1
         frame = msg.header.frame_id
-        core_frame = {self.params.earth_frame_id: FRAME_EARTH, self.params.map_frame_id: FRAME_MAP}.get(frame)
+        core_frame = self._uwb_core_frames.get(frame)
         if core_frame is None:
             self._reject('uwb', 'uwb_frame_id', f'UWB frame_id {frame!r} is neither '
                          f'{self.params.earth_frame_id!r} nor {self.params.map_frame_id!r}')
@@ -533,9 +565,21 @@ class FusionNode(Node):
         total.update({k: v for k, v in self.reasons.items() if v})
         return dict(total)
 
+    def _status_reasons(self) -> dict[str, int]:
+        """:meth:`rejection_reasons` for a status message, recomputed only when a count changed.
+
+        The key holds the core's current counts, the node's reasons and the restarts (which retire
+        core counts), so the result always equals :meth:`rejection_reasons`.
+        """
+        key = (tuple(self.filter.rejection_counts.items()), tuple(self.reasons.items()),
+               self.counts['time_jump_restarts'])
+        if self._reasons_cache is None or self._reasons_cache[0] != key:
+            self._reasons_cache = (key, self.rejection_reasons())
+        return self._reasons_cache[1]
+
     def _publish(self, out: FusionOutput, stamp_ns: int) -> None:
         frame = self._fix_frames.get(out.frame_id, out.frame_id)
-        self.status_pub.publish(status_msg(out, stamp_ns, frame, self.rejection_reasons()))
+        self.status_pub.publish(status_msg(out, stamp_ns, frame, self._status_reasons()))
         if not out.initialized:
             return
         if not _finite(out.position_m, out.velocity_mps, out.covariance_pv):
