@@ -17,9 +17,12 @@ Speed (see docs/rfi_monitor/speed.md):
   (``if_measurement.measure_real_sq``); arccos by a polynomial, sin/cos of pi df by Taylor terms;
 * the filter step (``tracking_filters.filter_step``) has one division and no branch: a rejected
   sample runs the same arithmetic with K = 0; the update and the next prediction are fused;
-* the LPD, the AR(10) Kalman step and the peak detector run in a second loop over each chunk after
-  the filter's (the filter only queues the LPD inputs: z, or the prior when rejected, and the sign
-  of df), so that the two serial recursions do not interleave; the AR step keeps its covariance in
+* the LPD, the AR(10) Kalman step and the peak detector of one chunk run interleaved with the
+  filter of the next chunk (one loop body: the filter only queues the LPD inputs, z or the prior
+  when rejected, and the sign of df, in one half of a double buffer, and the LPD pass consumes the
+  other half), so that the CPU overlaps the two independent serial recursions; after the last
+  chunk of a block one more pass runs the LPD alone (so the LPD state at a block end is complete,
+  as the monitor's block-level detector needs). The AR step keeps its covariance in
   a low-rank form (``sweep_period.ar_step``, K = 4 rank-one terms at A = 0.2 I, relative error
   1e-7, unrolled in ``_ar_step_k4``) and runs every ``decimation`` samples;
 * the status counters are counted in the vectorised measurement loop;
@@ -32,9 +35,11 @@ start, so resetting at the detection time would be late. Once the LPD period is 
 lattice of predicted sweep starts ``next + k T^`` and reset the filter at each predicted start
 (eq. 21-22); every detected peak (minus the estimator's group delay) nudges the lattice phase by
 ``phase_gain`` times its error when the error is within ``2 tol T^`` (first-order loop). The peaks
-of a chunk act on the lattice at the end of its aligned CHUNK window (queued in ``lev``, also across
-a block boundary inside the window), i.e. up to CHUNK - 1 = 15 samples after the decimated step
-that completed them; a lattice acquired then starts at the first predicted start after the window.
+found in the aligned CHUNK window V are queued in ``lev`` with the sample that completed them and act
+on the lattice at the end of window V + 1 (the LPD pass of V runs during the filter of V + 1; also
+across a block boundary inside a window, so block splitting cannot change the result), i.e. CHUNK to
+2 CHUNK - 1 = 16..31 samples after the decimated step that completed them; a lattice acquired then
+starts at the first predicted start after that window.
 
 Additions on top ("ours", switchable, reported separately in the benchmarks):
 
@@ -156,7 +161,7 @@ class TrackerState:
         self.dfring = np.zeros(DF_LAG)
         self.zring = np.zeros(Z_RING)
         self.zdec = np.zeros(DEC_HISTORY)
-        self.lev = np.zeros(3 * CHUNK)
+        self.lev = np.zeros(4 * CHUNK)
 
 
 @njit(cache=True, inline="always")
@@ -267,8 +272,11 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
         nbuf += 1
         j0 += 1
     zbuf = np.empty(2 * CHUNK)
-    zlb = np.empty(CHUNK)                           # z (or the prior if rejected) of the chunk, for the LPD
-    sgb = np.empty(CHUNK)                           # the filter's df after each sample (its sign: LPD sum)
+    zlb = np.empty(2 * CHUNK)                       # z (or the prior if rejected) of two chunks, for the LPD
+    sgb = np.empty(2 * CHUNK)                       # the filter's df after each sample (its sign: LPD sum)
+    qh, lq, mq0, qbase = 0, 0, 0, 0                 # LPD queue: half, length, first sample, first output
+    zprev = sf[S_ZAR]
+    o0 = 0
     sbuf = np.empty(2 * CHUNK, dtype=np.int64)
     thr = np.empty(CHUNK)
     dfc = np.empty(CHUNK)
@@ -312,116 +320,124 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
                 n_corr += status == STATUS_CORRECTION
         bp = (1 - slot) * CHUNK
         m0 = first_index + jp - 1
-        for i in range(lp):
-            m = m0 + i                              # index of the middle sample
-            z = zbuf[bp + i]
-            status = sbuf[bp + i]
-            # --- scheduled sweep reset (the state is the prior of sample m) ----------------------
-            did_reset = False
-            if reset_on and nxt >= 0.0 and m >= nxt:
-                # back to the posterior at T - 1, then eq. 21-22
-                f, p11, p12 = kf_sweep_reset(f - df, df, p11, p22, float(m - 1 - last_start))
-                if wrap:
-                    f = f - math.floor(f + 0.5)
-                mst[M_F0] = f
-                mst[M_P11_0] = p11
-                last_start = m
-                nresets += 1
-                ppred = nxt
-                nxt += tlat
-                did_reset = True
-                w = min(refine_w, int((tlat - 2.0) * 0.5))
-                fitat = m + w if w >= 4 else -1
-            prior_f = f
-            dfring[m & dfmask] = df                 # read by the measurement of m + DF_LAG
-            valid = status == STATUS_OK
-            # --- filter: update with z (K = 0 if rejected), predict sample m + 1 ---------------------
-            wp0 = wpos
-            (f_post, df_post, p11_post, f, df, p11, p12, p22, ring[wp0], wpos, wcount,
-             wsum) = filter_step(mode, f, df, p11, p12, p22, z, valid, wrap, ring[wpos], wpos, wcount, m_win,
-                                 wsum, r, q_f, q_df)
-            zl = z if valid else prior_f
-            nmeas += 1
-            zring[m & zmask] = zl
-            zlb[i] = zl                             # LPD input (pass after the chunk)
-            sgb[i] = df
-            # --- sweep-start fit (ours) ---------------------------------------------------------------
-            if refine_w > 0:
-                if fitat >= 0 and m == fitat:
-                    fitat = -1
-                    w = m - int(math.ceil(ppred))
-                    if nxt >= 0.0 and w >= 4:
-                        s_hat = _step_fit(zring, m - w, w, df, tlat, wrap)
-                        e = s_hat - ppred - 0.5          # E[ceil(t) - t] = 0.5
-                        if abs(e) <= 0.5 * w:
-                            nxt += g1 * e
-                            tlat += g2 * e
-                            misses = 0
-                            mist[K_NFIT] += 1
-                        else:
-                            misses += 1
-                            if misses >= MAX_MISSES:
-                                nxt = -1.0
-                                latsrc = 0
-            if store:
-                o_idx[n_out] = m
-                o_z[n_out] = z
-                o_f[n_out] = f_post
-                o_df[n_out] = df_post
-                o_p11[n_out] = p11_post
-                o_reset[n_out] = did_reset
-            n_out += 1
-        # ---- LPD, AR(10) + peak pass over the chunk, then the reset lattice -----------------------------
-        # A separate loop (speed): the LPD and the serial AR recursion no longer interleave with the
-        # filter's serial chain (the LPD values are those of the per-sample form). The peaks found are
-        # queued (start, period, locked) and act on the lattice at the end of the aligned CHUNK window
-        # (up to CHUNK - 1 samples after the decimated step that completed them), also when a block
-        # ends inside the window, so that block splitting cannot change the result.
+        ch = CHUNK - qh                             # half of zlb / sgb for this chunk's LPD inputs
+        base = n_out
+        # The filter over this chunk, interleaved with the LPD / AR(10) / peak pass over the previous
+        # chunk (its inputs are queued in the other half of zlb / sgb): the two serial recursions are
+        # independent, so the CPU overlaps them (module doc, "Speed").
+        for i in range(max(lp, lq)):
+            if i < lp:
+                m = m0 + i                          # index of the middle sample
+                z = zbuf[bp + i]
+                status = sbuf[bp + i]
+                # --- scheduled sweep reset (the state is the prior of sample m) --------------------
+                did_reset = False
+                if reset_on and nxt >= 0.0 and m >= nxt:
+                    # back to the posterior at T - 1, then eq. 21-22
+                    f, p11, p12 = kf_sweep_reset(f - df, df, p11, p22, float(m - 1 - last_start))
+                    if wrap:
+                        f = f - math.floor(f + 0.5)
+                    mst[M_F0] = f
+                    mst[M_P11_0] = p11
+                    last_start = m
+                    nresets += 1
+                    ppred = nxt
+                    nxt += tlat
+                    did_reset = True
+                    w = min(refine_w, int((tlat - 2.0) * 0.5))
+                    fitat = m + w if w >= 4 else -1
+                prior_f = f
+                dfring[m & dfmask] = df             # read by the measurement of m + DF_LAG
+                valid = status == STATUS_OK
+                # --- filter: update with z (K = 0 if rejected), predict sample m + 1 -----------------
+                wp0 = wpos
+                (f_post, df_post, p11_post, f, df, p11, p12, p22, ring[wp0], wpos, wcount,
+                 wsum) = filter_step(mode, f, df, p11, p12, p22, z, valid, wrap, ring[wpos], wpos, wcount,
+                                     m_win, wsum, r, q_f, q_df)
+                zl = z if valid else prior_f
+                nmeas += 1
+                zring[m & zmask] = zl
+                zlb[ch + i] = zl                    # LPD input (pass during the next chunk)
+                sgb[ch + i] = df
+                # --- sweep-start fit (ours) -----------------------------------------------------------
+                if refine_w > 0:
+                    if fitat >= 0 and m == fitat:
+                        fitat = -1
+                        w = m - int(math.ceil(ppred))
+                        if nxt >= 0.0 and w >= 4:
+                            s_hat = _step_fit(zring, m - w, w, df, tlat, wrap)
+                            e = s_hat - ppred - 0.5          # E[ceil(t) - t] = 0.5
+                            if abs(e) <= 0.5 * w:
+                                nxt += g1 * e
+                                tlat += g2 * e
+                                misses = 0
+                                mist[K_NFIT] += 1
+                            else:
+                                misses += 1
+                                if misses >= MAX_MISSES:
+                                    nxt = -1.0
+                                    latsrc = 0
+                if store:
+                    o_idx[n_out] = m
+                    o_z[n_out] = z
+                    o_f[n_out] = f_post
+                    o_df[n_out] = df_post
+                    o_p11[n_out] = p11_post
+                    o_reset[n_out] = did_reset
+                n_out += 1
+            if i < lq:
+                # --- LPD (eq. 23), decimation, AR(10) step (eq. 24-27), peaks: sample mq0 + i -----------
+                zl = zlb[qh + i]
+                # zpos counts 0..2 LPD_LAG - 1: >= LPD_LAG once the history is full
+                hpos = zpos - LPD_LAG if zpos >= LPD_LAG else zpos
+                if zpos >= LPD_LAG:
+                    dz = zl - zhist[hpos]
+                    if wrap:
+                        dz = dz - math.floor(dz + 0.5)
+                else:
+                    dz = 0.0
+                zhist[hpos] = zl
+                zpos = zpos + 1 if zpos + 1 < 2 * LPD_LAG else LPD_LAG
+                zg = gamma * zg - lpd_scale * dz
+                acc += zg if sgb[qh + i] >= 0.0 else -zg
+                zacc += zl
+                decn += 1
+                if decn >= dec:
+                    zdec[ndec & dmask] = zacc * inv_dec
+                    ndec += 1
+                    zar = ar_step(acc * inv_dec, gam, pmat, hist, a_ar, q_ar, r_ar, k_ar)
+                    acc = 0.0
+                    zacc = 0.0
+                    decn = 0
+                    start = peak_step(mq0 + i, zar, sf, si, peaks, spar)
+                    if start >= 0 and nlev < CHUNK:    # (at most one peak per two decimated steps)
+                        lev[4 * nlev] = start
+                        lev[4 * nlev + 1] = sf[S_PERIOD]
+                        lev[4 * nlev + 2] = si[J_LOCKED]
+                        lev[4 * nlev + 3] = mq0 + i
+                        nlev += 1
+                    if store:                            # zAR trace: held between decimated steps
+                        for j in range(o0, qbase + i):
+                            o_zar[j] = zprev
+                        o0 = qbase + i
+                    zprev = zar
+        if store and lq > 0:                    # zAR trace of the previous chunk: held after its last step
+            for j in range(o0, qbase + lq):
+                o_zar[j] = zprev
+            o0 = qbase + lq
+        # ---- the reset lattice --------------------------------------------------------------------------
+        # Peaks found in the aligned CHUNK window V (queued in lev with the sample that completed them)
+        # act on the lattice at the end of window V + 1, whatever the block split (module doc).
         m_end = m0 + lp - 1
-        zprev = sf[S_ZAR]
-        base = n_out - lp
-        o0 = base
-        for i in range(lp):
-            zl = zlb[i]
-            # LPD (eq. 23); zpos counts 0..2 LPD_LAG - 1: >= LPD_LAG once the history is full
-            hpos = zpos - LPD_LAG if zpos >= LPD_LAG else zpos
-            if zpos >= LPD_LAG:
-                dz = zl - zhist[hpos]
-                if wrap:
-                    dz = dz - math.floor(dz + 0.5)
-            else:
-                dz = 0.0
-            zhist[hpos] = zl
-            zpos = zpos + 1 if zpos + 1 < 2 * LPD_LAG else LPD_LAG
-            zg = gamma * zg - lpd_scale * dz
-            acc += zg if sgb[i] >= 0.0 else -zg
-            zacc += zl
-            decn += 1
-            if decn < dec:
-                continue
-            zdec[ndec & dmask] = zacc * inv_dec
-            ndec += 1
-            zar = ar_step(acc * inv_dec, gam, pmat, hist, a_ar, q_ar, r_ar, k_ar)
-            acc = 0.0
-            zacc = 0.0
-            decn = 0
-            start = peak_step(m0 + i, zar, sf, si, peaks, spar)
-            if start >= 0 and nlev < CHUNK:        # (at most one peak per two decimated steps)
-                lev[3 * nlev] = start
-                lev[3 * nlev + 1] = sf[S_PERIOD]
-                lev[3 * nlev + 2] = si[J_LOCKED]
-                nlev += 1
-            if store:                                # zAR trace: held between decimated steps
-                for j in range(o0, base + i):
-                    o_zar[j] = zprev
-                o0 = base + i
-            zprev = zar
         if lp > 0 and nlev > 0 and (m_end & (CHUNK - 1)) == CHUNK - 1:
             m_app = m_end + 1                        # first sample the lattice acts on
-            for j in range(nlev):
-                start = int(lev[3 * j])
-                per = lev[3 * j + 1]
-                lpd_locked = lev[3 * j + 2] > 0.5 and per > 0.0
+            n_app = 0
+            while n_app < nlev and lev[4 * n_app + 3] < m_app - CHUNK:
+                n_app += 1
+            for j in range(n_app):
+                start = int(lev[4 * j])
+                per = lev[4 * j + 1]
+                lpd_locked = lev[4 * j + 2] > 0.5 and per > 0.0
                 if refine_w == 0:
                     # paper method: the lattice exists while the LPD period is locked
                     if not lpd_locked:
@@ -449,13 +465,18 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
                     misses = 0
                     if nresets == 0:
                         last_start = start
-            nlev = 0
-        if store:
-            for i in range(o0, n_out):
-                o_zar[i] = zprev
-        if lf == 0:
+            for j in range(4 * (nlev - n_app)):     # keep the entries of window V + 1
+                lev[j] = lev[4 * n_app + j]
+            nlev -= n_app
+        qh, lq, mq0, qbase = ch, lp, m0, base
+        if lf == 0 and lq == 0:
             break
+        # (after the last chunk, one more pass with lp = 0 runs the LPD over it: its peaks wait in lev
+        # for the end of the next window)
         jp, lp, jf, slot = jf, lf, jf + lf, 1 - slot
+    if store:
+        for j in range(o0, n_out):
+            o_zar[j] = zprev
     re2, re1 = xe[n], xe[n + 1]
     if is_complex:
         im2, im1 = xie[n], xie[n + 1]
