@@ -4,6 +4,8 @@ Prints Markdown tables and writes them with figures to docs/rfi_monitor/. Run:
 
     PYTHONPATH=src/gnss_common:src/rfi_monitor:src/rfi_experiments python benchmarks/rfi_monitor_paper.py
 
+(``--print-only``: print the tables, write nothing.)
+
 Readings of the paper's noise (Sec. 4: S = -130 dBm, noise -114 dBm/MHz, J/S 30 dB): counted over
 the whole f_s/2 = 19.096 MHz it gives J/N = +1.2 dB; counted over a 2 MHz front-end band,
 +11.2 dB. The simulator puts white noise over the sampled band, so we vary J/N directly and report
@@ -20,6 +22,7 @@ at the simulator's sweep starts (upper bound of what period estimation can give)
 
 from __future__ import annotations
 
+import argparse
 import math
 from pathlib import Path
 
@@ -191,6 +194,11 @@ def real_captures() -> list[str]:
 
 
 def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--print-only", action="store_true",
+                    help="print the tables only (no figures, docs/ left unchanged), e.g. to compare a change")
+    args = ap.parse_args()
+    write = not args.print_only
     OUT.mkdir(parents=True, exist_ok=True)
     md = ["# Kang et al. reproduction (benchmarks/rfi_monitor_paper.py)", ""]
     # 1. the paper's comparison at J/S 30 dB, both noise readings, 5 seeds (median)
@@ -228,6 +236,31 @@ def main() -> None:
         md.append(f"| {rate:.0e} | {per_us:.2f} | {med['KF']:.4f} | {med['AKF']:.4f} | {med['proposed']:.4f} | "
                   f"{med['ours']:.4f} | {med['AFKF + true resets']:.4f} | {pe} |")
     # 4. Fig. 4-like plot
+    if write:
+        _figures(curve)
+    # 5. confusion matrix
+    cm = confusion(50)
+    names = ["NONE", "CW", "CHIRP", "WIDEBAND", "UNKNOWN"]
+    md += ["", "## Confusion matrix (ours): 200 seeded cases, third 1 ms block "
+           "(J/N uniform 3-20 dB, 2/4/8-bit, random parameters)", "",
+           "| truth \\ estimate | " + " | ".join(names) + " |", "|---" * 6 + "|"]
+    for i in range(4):
+        md.append(f"| {names[i]} | " + " | ".join(str(v) for v in cm[i]) + " |")
+    md.append(f"\naccuracy {np.trace(cm[:, :4]) / cm.sum():.3f}")
+    # 6. real captures
+    md += ["", "## Real captures (ours; no jammer) and half-simulated chirp "
+           "(J/N 10 dB, 2e11 Hz/s, 10 us) on the second half",
+           "", "| capture | blocks after calibration | false alarms | chirp detected | period us |",
+           "|---|---|---|---|---|"]
+    md += real_captures()
+    text = "\n".join(md)
+    print(text)
+    if write:
+        (OUT / "paper_results.md").write_text(text + "\n")
+
+
+def _figures(curve: list) -> None:
+    """Fig. 4-like tracking plot and RMSE vs J/N."""
     res, pe, est, ft, starts = run_case(11.2, seed=0, traces=True)
     n0, n1 = 100_000, 101_200
     fig, ax = plt.subplots(figsize=(9, 4.5))
@@ -255,24 +288,7 @@ def main() -> None:
     ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
     fig.savefig(OUT / "rmse_vs_jn.png", dpi=120)
-    # 5. confusion matrix
-    cm = confusion(50)
-    names = ["NONE", "CW", "CHIRP", "WIDEBAND", "UNKNOWN"]
-    md += ["", "## Confusion matrix (ours): 200 seeded cases, third 1 ms block "
-           "(J/N uniform 3-20 dB, 2/4/8-bit, random parameters)", "",
-           "| truth \\ estimate | " + " | ".join(names) + " |", "|---" * 6 + "|"]
-    for i in range(4):
-        md.append(f"| {names[i]} | " + " | ".join(str(v) for v in cm[i]) + " |")
-    md.append(f"\naccuracy {np.trace(cm[:, :4]) / cm.sum():.3f}")
-    # 6. real captures
-    md += ["", "## Real captures (ours; no jammer) and half-simulated chirp "
-           "(J/N 10 dB, 2e11 Hz/s, 10 us) on the second half",
-           "", "| capture | blocks after calibration | false alarms | chirp detected | period us |",
-           "|---|---|---|---|---|"]
-    md += real_captures()
-    text = "\n".join(md)
-    print(text)
-    (OUT / "paper_results.md").write_text(text + "\n")
+
 
 
 if __name__ == "__main__":

@@ -164,19 +164,30 @@ def kf_update_predict(f: float, df: float, p11: float, p12: float, p22: float, n
         With ``k = kinv [P11, P12]`` and ``C = P11 + R`` the Joseph form is
         ``P+ = P - kinv (2 - C kinv) p p^T`` for ``p = [P11, P12]`` (it equals eq. 17 when kinv = 1/C);
         with F = [[1, 1], [0, 1]] the prediction of it is
-        ``F P F^T + Q - t (F p)(F p)^T``, t = kinv (2 - C kinv), F p = [P11 + P12, P12]. Written this
-        way the serial chain from one sample to the next holds one division and few operations.
+        ``F P F^T + Q - t (F p)(F p)^T``, t = kinv (2 - C kinv), F p = [P11 + P12, P12].
+        Written for a short serial chain (speed): kinv holds the one division of the sample and
+        depends on the innovation (eq. 12-14), so everything that does not need it is formed
+        first, and each output is one or two fused multiply-adds after it:
+        ``f = (f + df) + ((P11 + P12) nu) kinv`` and, per element with ``b = (F p)_i (F p)_j``,
+        ``(F P F^T + Q)_ij + kinv (b C kinv - 2 b)``. Same equations; the rounding differs from
+        the textbook order by ~1 ulp.
     """
     c = p11 + r
     s1 = p11 + p12
-    a = nu * kinv
-    t = kinv * (2.0 - c * kinv)
-    f_post = f + p11 * a
-    df_post = df + p12 * a
-    p11_post = p11 - p11 * p11 * t
-    return (f_post, df_post, p11_post, f + df + s1 * a, df_post,
-            (p11 + 2.0 * p12 + p22 + q_f) - s1 * s1 * t, (p12 + p22) - p12 * s1 * t,
-            (p22 + q_df) - p12 * p12 * t)
+    b11 = s1 * s1
+    b12 = p12 * s1
+    b22 = p12 * p12
+    bp = p11 * p11
+    g1 = p11 * nu
+    g2 = p12 * nu
+    g3 = s1 * nu
+    f_post = f + g1 * kinv
+    df_post = df + g2 * kinv
+    p11_post = p11 + kinv * (bp * c * kinv - 2.0 * bp)
+    return (f_post, df_post, p11_post, (f + df) + g3 * kinv, df_post,
+            (p11 + 2.0 * p12 + p22 + q_f) + kinv * (b11 * c * kinv - 2.0 * b11),
+            (p12 + p22) + kinv * (b12 * c * kinv - 2.0 * b12),
+            (p22 + q_df) + kinv * (b22 * c * kinv - 2.0 * b22))
 
 
 @njit(cache=True, inline="always")
@@ -209,7 +220,8 @@ def window_push(old: float, pos: int, count: int, m: int, wsum: float, nu2: floa
         references to it on every sample).
     """
     full = count >= m
-    wsum = wsum + ((nu2 - (old if full else 0.0)) if valid else 0.0)
+    base = wsum - (old if full else 0.0)          # off the chain through nu2
+    wsum = base + nu2 if valid else wsum
     store = nu2 if valid else old
     nxt = pos + 1
     pos = (nxt if nxt < m else 0) if valid else pos
