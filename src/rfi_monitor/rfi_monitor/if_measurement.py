@@ -27,6 +27,19 @@ arccos: ``acos_fast`` (Abramowitz & Stegun 4.4.46, |error| <= 2e-8 rad, i.e. 3e-
 far below any measurement noise) replaces libm's acos, which alone cost ~19 ns per sample on the
 benchmark machine (the real-time budget at 38.192 MS/s is 26 ns per sample for the whole chain).
 
+Noise compensation (beyond the paper, real samples only): with white noise of power N on a tone of
+power J, the ratio S / r_n is compressed towards 0 by about ``kappa = J / (J + N)`` (the noise
+adds to the denominator's power, not to the numerator's correlation), so eq. 8 is biased towards
+fs/4: at J/N 11.2 dB (kappa 0.93) a chirp sweeping 0.18..0.32 cycles/sample is measured with a
+bias of +0.004 at its start and -0.003 at its end, which the tracker turns into a too shallow
+sweep and a late reset value (docs/rfi_monitor/paper_results.md). ``inv_kappa = 1 / kappa``
+multiplies the ratio before the domain test and arccos; the monitor takes kappa from its running
+power and calibrated noise floor, ``kappa = 1 - N / P``. Measured on a tone (median bias,
+cycles/sample, uncompensated -> compensated): J/N 11.2 dB, f = 0.15: +0.0098 -> +0.0035; f = 0.2:
++0.0032 -> -0.0002; f = 0.3: -0.0033 -> +0.0002; near 0 and fs/2 the arccos domain clipping
+dominates and remains (f = 0.05: +0.059 -> +0.054). The complex measurement is unbiased (measured
+below 1e-4 at J/N 5 and 11 dB) and needs none.
+
 Guards (the paper's Fig. 2 errors): a sample with |r_n| (or |x_n|) below ``min_abs`` is rejected
 (near-zero divisor); a real ratio outside [-1 - margin, 1 + margin] is rejected (arccos domain),
 inside the margin it is clipped to [-1, 1]; a chirp correction whose factor falls below 0.5 is
@@ -131,12 +144,12 @@ def measure_real(r_prev: float, r_0: float, r_next: float, delta_f: float, chirp
                  min_abs: float, domain_margin: float) -> tuple[float, int]:
     """Digital frequency of a real tone/chirp from three consecutive samples (``measure_real_sq``
     with the near-zero threshold given as |r_n| <= min_abs)."""
-    return measure_real_sq(r_prev, r_0, r_next, delta_f, chirp_correction, min_abs * min_abs, domain_margin)
+    return measure_real_sq(r_prev, r_0, r_next, delta_f, chirp_correction, min_abs * min_abs, domain_margin, 1.0)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
 def measure_real_sq(r_prev: float, r_0: float, r_next: float, delta_f: float, chirp_correction: bool,
-                    min_abs_sq: float, domain_margin: float) -> tuple[float, int]:
+                    min_abs_sq: float, domain_margin: float, inv_kappa: float) -> tuple[float, int]:
     """Digital frequency of a real tone/chirp from three consecutive samples.
 
     Args:
@@ -146,6 +159,7 @@ def measure_real_sq(r_prev: float, r_0: float, r_next: float, delta_f: float, ch
         chirp_correction: apply eq. 10 (else eq. 8).
         min_abs_sq: reject when r_n^2 <= min_abs_sq (sample unit squared).
         domain_margin: tolerated excess of |S / r_n| over 1 before rejection, >= 0.
+        inv_kappa: noise compensation 1 / kappa >= 1 (module docstring), 1: none (the paper).
 
     Returns:
         (f_n in cycles/sample in [0, 0.5], status code). f_n is NaN unless status == STATUS_OK.
@@ -159,7 +173,7 @@ def measure_real_sq(r_prev: float, r_0: float, r_next: float, delta_f: float, ch
         1e-6) the ratio is S / r_n (eq. 8). Checks in order: non-finite, near zero, domain of S /
         r_n, correction factor, domain of the corrected ratio.
     """
-    s = 0.5 * (r_next + r_prev)
+    s = 0.5 * inv_kappa * (r_next + r_prev)       # S / kappa (noise compensation; 1: eq. 8 / 10)
     d = 0.5 * (r_next - r_prev)
     r0sq = r_0 * r_0
     abs_r0 = abs(r_0)
@@ -221,13 +235,13 @@ def measure_complex_sq(re_prev: float, im_prev: float, re_0: float, im_0: float,
 
 @njit(cache=True, error_model="numpy")
 def _measure_block_real(x: np.ndarray, delta_f: np.ndarray, chirp_correction: bool, min_abs: float,
-                        domain_margin: float) -> tuple[np.ndarray, np.ndarray]:
+                        domain_margin: float, inv_kappa: float) -> tuple[np.ndarray, np.ndarray]:
     n = x.size
     z = np.full(max(n - 2, 0), np.nan)
     st = np.zeros(max(n - 2, 0), dtype=np.int8)
     for k in range(1, n - 1):
-        z[k - 1], st[k - 1] = measure_real(x[k - 1], x[k], x[k + 1], delta_f[k - 1], chirp_correction,
-                                           min_abs, domain_margin)
+        z[k - 1], st[k - 1] = measure_real_sq(x[k - 1], x[k], x[k + 1], delta_f[k - 1], chirp_correction,
+                                              min_abs * min_abs, domain_margin, inv_kappa)
     return z, st
 
 
@@ -243,7 +257,8 @@ def _measure_block_complex(xr: np.ndarray, xi: np.ndarray, min_abs: float) -> tu
 
 
 def measure_if(x: np.ndarray, delta_f: float | np.ndarray = 0.0, chirp_correction: bool = False,
-               min_abs: float = 0.0, domain_margin: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
+               min_abs: float = 0.0, domain_margin: float = 0.05,
+               tone_power_fraction: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Per-sample IF measurements of a whole array (stand-alone; the monitor fuses this in its loop).
 
     Args:
@@ -252,19 +267,23 @@ def measure_if(x: np.ndarray, delta_f: float | np.ndarray = 0.0, chirp_correctio
         chirp_correction: use eq. 10 instead of eq. 8 (real samples only).
         min_abs: near-zero guard on |x_n|, sample units, >= 0.
         domain_margin: arccos domain margin (real samples), >= 0.
+        tone_power_fraction: kappa = J / (J + N) of the noise compensation (real samples, module
+            docstring), in (0, 1]; 1: none (eq. 8 / 10 as in the paper).
 
     Returns:
         (z, status): z shape (n - 2,), cycles/sample, measurement for samples 1..n-2 (NaN where
         rejected); status shape (n - 2,) int8 codes.
 
     Raises:
-        ValueError: x not 1-D, or negative guards.
+        ValueError: x not 1-D, negative guards, or tone_power_fraction outside (0, 1].
     """
     x = np.asarray(x)
     if x.ndim != 1:
         raise ValueError("x must be 1-D")
     if min_abs < 0 or domain_margin < 0:
         raise ValueError("min_abs and domain_margin must be >= 0")
+    if not 0.0 < tone_power_fraction <= 1.0:
+        raise ValueError(f"tone_power_fraction must be in (0, 1], got {tone_power_fraction}")
     if np.iscomplexobj(x):
         xc = x.astype(np.complex128)
         return _measure_block_complex(np.ascontiguousarray(xc.real), np.ascontiguousarray(xc.imag),
@@ -272,4 +291,4 @@ def measure_if(x: np.ndarray, delta_f: float | np.ndarray = 0.0, chirp_correctio
     xr = x.astype(np.float64)
     df = np.broadcast_to(np.asarray(delta_f, dtype=np.float64), (max(xr.size - 2, 0),))
     return _measure_block_real(xr, np.ascontiguousarray(df), bool(chirp_correction), float(min_abs),
-                               float(domain_margin))
+                               float(domain_margin), 1.0 / float(tone_power_fraction))

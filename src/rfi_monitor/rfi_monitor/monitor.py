@@ -73,6 +73,10 @@ from rfi_monitor.tracker import (
     K_NRESETS,
     LAT_COARSE,
     M_F0,
+    M_FLOOR,
+    M_L11,
+    M_L12,
+    M_L22,
     M_NEXT,
     M_TLAT,
     MAX_ABS_RATE,
@@ -80,15 +84,18 @@ from rfi_monitor.tracker import (
     N_MPAR,
     P_CHIRP_CORR,
     P_DOMAIN,
-    P_FIT_GAIN,
+    P_LAT_DRIFT,
     P_MAX_DF,
     P_MIN_ABS,
+    P_NOISE_COMP,
     P_PHASE_GAIN,
     P_POW_LAMBDA,
     P_REFINE_W,
     P_RESET,
+    P_RESET_CROSS,
     P_WRAP,
     TrackerState,
+    lattice_init,
     track_block,
 )
 from rfi_monitor.tracking_filters import F_DF, F_F, F_P11, F_P22, MODE_AFKF, TrackingFilterParams
@@ -120,7 +127,15 @@ class RfiMonitorParams:
         refine_window: half-window W (samples) of the sweep-start step fit that refines the reset
             lattice (ours, tracker module docstring), 0..MAX_REFINE_WINDOW; 0 runs the paper's
             lattice (LPD peaks only).
-        fit_gain: phase gain of the step-fit lattice loop (period gain fit_gain^2 / 4), (0, 1].
+        lattice_period_drift: random walk of the sweep period per sweep, relative, of the
+            step-fit lattice filter (ours; tracker module docstring), in [0, 0.01]. Larger: the
+            lattice follows a drifting sweep period faster, with more reset jitter.
+        noise_compensation: divide the real three-sample ratio by kappa = 1 - N / P (running power
+            P, calibrated noise floor N), which removes eq. 8's bias towards fs/4 at moderate J/N
+            (ours; if_measurement module docstring). No effect on complex samples or before the
+            noise floor is known.
+        reset_cross_covariance: at a sweep reset keep the exact covariance of eq. 21's linear map
+            instead of eq. 22's uncorrelated P(1,1) (ours; tracking_filters.kf_sweep_reset).
         analysis: SweepAnalysisParams of the block-level periodicity detector (ours).
     """
 
@@ -141,7 +156,9 @@ class RfiMonitorParams:
     max_invalid_fraction: float = 0.05
     min_block_samples: int = 1024
     refine_window: int = 24
-    fit_gain: float = 0.2
+    lattice_period_drift: float = 1e-5
+    noise_compensation: bool = True
+    reset_cross_covariance: bool = True
     analysis: SweepAnalysisParams = field(default_factory=SweepAnalysisParams)
 
     def __post_init__(self) -> None:
@@ -164,8 +181,8 @@ class RfiMonitorParams:
             raise ValueError("min_block_samples must be >= classifier.nfft")
         if not 0 <= int(self.refine_window) <= MAX_REFINE_WINDOW:
             raise ValueError(f"refine_window must be in 0..{MAX_REFINE_WINDOW}")
-        if not 0 < self.fit_gain <= 1:
-            raise ValueError("fit_gain must be in (0, 1]")
+        if not 0.0 <= self.lattice_period_drift <= 0.01:
+            raise ValueError("lattice_period_drift must be in [0, 0.01]")
 
     @staticmethod
     def paper_method(**kw: Any) -> RfiMonitorParams:
@@ -180,6 +197,7 @@ class RfiMonitorParams:
         """
         base = RfiMonitorParams(**kw)
         return dataclasses.replace(base, refine_window=0, analysis=SweepAnalysisParams(enabled=False),
+                                   noise_compensation=False, reset_cross_covariance=False,
                                    sweep=dataclasses.replace(base.sweep, lattice_voting=False, decimation=2))
 
 
@@ -459,6 +477,7 @@ class RfiMonitor:
             st.mst[M_NEXT] = a.start_index + k * per
             st.mst[M_TLAT] = per
             st.mist[K_LATSRC] = LAT_COARSE
+            st.mst[M_L11], st.mst[M_L12], st.mst[M_L22] = lattice_init(per, float(self.params.refine_window))
             st.mist[K_MISSES] = 0
             st.mist[K_FITAT] = -1
             if int(st.mist[K_NRESETS]) == 0:
@@ -483,7 +502,9 @@ class RfiMonitor:
         mpar[P_WRAP] = 1.0 if cplx else 0.0
         mpar[P_MAX_DF] = MAX_ABS_RATE
         mpar[P_REFINE_W] = float(p.refine_window)
-        mpar[P_FIT_GAIN] = p.fit_gain
+        mpar[P_LAT_DRIFT] = p.lattice_period_drift
+        mpar[P_NOISE_COMP] = 1.0 if (p.noise_compensation and not cplx) else 0.0
+        mpar[P_RESET_CROSS] = 1.0 if p.reset_cross_covariance else 0.0
         self._packed[cplx] = (spar, mpar)
         return spar, mpar
 
@@ -497,6 +518,7 @@ class RfiMonitor:
         o_reset = np.empty(m, dtype=np.bool_)
         xr = np.ascontiguousarray(xc.real, dtype=np.float64)
         xi = np.ascontiguousarray(xc.imag, dtype=np.float64) if cplx else xr
+        st.mst[M_FLOOR] = self._floor if math.isfinite(self._floor) else 0.0
         k = track_block(xr, xi, cplx, first, self._tpar, spar, mpar, st.fst, st.ist, st.ring, st.sf, st.si,
                         st.zhist, st.gam, st.pmat, st.hist, st.peaks, st.mst, st.mist, st.counters,
                         st.dfring, st.zring, st.zdec, st.lev, store,

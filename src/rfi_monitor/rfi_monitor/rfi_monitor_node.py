@@ -163,9 +163,15 @@ class MonitorNodeParams:
     refine_window: int = parameter(
         _M.refine_window, 'Half-window W of the sweep-start step fit that refines the reset lattice (ours), '
         'samples; 0 runs the paper\'s lattice (LPD peaks only).', minimum=0, maximum=MAX_REFINE_WINDOW)
-    fit_gain: float = parameter(
-        _M.fit_gain, 'Phase gain of the step-fit lattice loop (period gain fit_gain^2 / 4), (0, 1].',
-        minimum=1e-6, maximum=1.0)
+    lattice_period_drift: float = parameter(
+        _M.lattice_period_drift, 'Random walk of the sweep period per sweep, relative, of the step-fit lattice '
+        'filter (ours), 0..0.01.', minimum=0.0, maximum=0.01)
+    noise_compensation: bool = parameter(
+        _M.noise_compensation, 'Divide the real three-sample ratio by kappa = 1 - N/P (removes eq. 8\'s bias '
+        'towards fs/4 at moderate J/N; ours). No effect on complex samples.')
+    reset_cross_covariance: bool = parameter(
+        _M.reset_cross_covariance, 'At a sweep reset keep the exact covariance of eq. 21 instead of eq. 22 '
+        '(ours).')
     # --- tracking filter (Kang et al., eq. 11-22) ----------------------------------------------
     tracker_mode: str = parameter(
         'afkf', 'Frequency tracking filter: kf (eq. 11-17), akf (adaptive gain) or afkf (adaptive fading, '

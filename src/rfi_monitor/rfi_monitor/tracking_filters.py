@@ -32,7 +32,9 @@ K = 0 (selects, no branch), so that the per-sample serial chain is short.
 
 The sweep reset (eq. 21-22): at an estimated sweep start, after m = T - 1 samples of the last
 sweep, ``f^_0 = f^_{T-1} - (T - 1) df^_{T-1}`` and ``P(1,1) = P11 + (T - 1)^2 P22``; as in the
-paper, f~ and df~ are taken as uncorrelated, so P(1,2) is set to 0 and P(2,2) kept.
+paper, f~ and df~ are taken as uncorrelated, so P(1,2) is set to 0 and P(2,2) kept. The monitor
+can instead keep the exact covariance of that linear map (``kf_sweep_reset(cross_covariance=True)``,
+beyond the paper; the stand-alone runner here uses eq. 22).
 
 For a complex (signed) measurement the innovation is wrapped to [-0.5, 0.5).
 """
@@ -191,13 +193,26 @@ def kf_update_predict(f: float, df: float, p11: float, p12: float, p22: float, n
 
 
 @njit(cache=True, inline="always")
-def kf_sweep_reset(f: float, df: float, p11: float, p22: float,
-                   samples_since_start: float) -> tuple[float, float, float]:
-    """Reset at a sweep start (eq. 21-22) from the posterior at T - 1; returns (f0, P11, P12 = 0).
+def kf_sweep_reset(f: float, df: float, p11: float, p12: float, p22: float,
+                   samples_since_start: float, cross_covariance: bool) -> tuple[float, float, float]:
+    """Reset at a sweep start (eq. 21-22) from the posterior at T - 1; returns (f0, P11, P12).
 
-    ``samples_since_start`` = T - 1 of the last sweep. f~ and df~ are taken as uncorrelated (eq. 22).
+    Args:
+        f, df: state at T - 1 of the last sweep; p11, p12, p22: its covariance.
+        samples_since_start: T - 1 of the last sweep.
+        cross_covariance: False: the paper's eq. 22, f~ and df~ taken as uncorrelated (P12 of the
+            reset state 0); True (beyond the paper): the exact covariance of the linear map
+            ``[f0, df] = [[1, -m], [0, 1]] [f, df]``, ``P11 - 2 m P12 + m^2 P22`` and
+            ``P12 - m P22``, which keeps the correlation that eq. 21 creates between f0~ and
+            df~ (a too steep df~ gives a too low f0~), so that the first samples of the sweep
+            correct both.
+
+    Notes:
+        Kang et al., eq. 21 (f0) and eq. 22 (P(1,1)); P(2,2) is kept.
     """
     m = samples_since_start
+    if cross_covariance:
+        return f - m * df, p11 - 2.0 * m * p12 + m * m * p22, p12 - m * p22
     return f - m * df, p11 + m * m * p22, 0.0
 
 
@@ -281,7 +296,7 @@ def _run(z: np.ndarray, valid: np.ndarray, reset: np.ndarray, par: np.ndarray, f
     for k in range(n):
         if reset[k] and k > 0:
             # the state predicts sample k; eq. 21 uses the posterior at T - 1 = k - 1
-            f, p11, p12 = kf_sweep_reset(f - df, df, p11, p22, float(k - 1 - last_start))
+            f, p11, p12 = kf_sweep_reset(f - df, df, p11, p12, p22, float(k - 1 - last_start), False)
             last_start = k
         p0 = pos
         (f_out[k], df_out[k], p11_out[k], f, df, p11, p12, p22, ring[p0], pos, count,

@@ -91,3 +91,20 @@ def test_atan2_fast_matches_libm_in_every_octant():
         assert abs(err) <= 1e-12
     assert atan2_fast(0.0, 1.0) == 0.0 and math.isclose(atan2_fast(1.0, 0.0), math.pi / 2, rel_tol=1e-15)
     assert math.isclose(atan2_fast(0.0, -1.0), math.pi, rel_tol=1e-15)
+
+
+def test_noise_compensation_removes_the_bias_towards_fs_over_4():
+    # tone at J/N 11.2 dB: eq. 8 is compressed towards 0.25 by kappa = J / (J + N); dividing the
+    # ratio by kappa removes the bias away from the band edges (module docstring)
+    rng = np.random.default_rng(7)
+    n = 200000
+    jn = 10 ** 1.12
+    kappa = jn / (jn + 1.0)
+    for f in (0.2, 0.3):
+        x = math.sqrt(2.0) * np.cos(2 * np.pi * f * np.arange(n) + 0.3) + rng.normal(0.0, math.sqrt(1 / jn), n)
+        plain = np.nanmedian(measure_if(x)[0]) - f
+        comp = np.nanmedian(measure_if(x, tone_power_fraction=kappa)[0]) - f
+        assert abs(plain) > 0.0025 and abs(comp) < 0.001
+        assert np.sign(plain) == np.sign(0.25 - f)
+    with pytest.raises(ValueError, match="tone_power_fraction"):
+        measure_if(np.ones(10), tone_power_fraction=0.0)

@@ -8,6 +8,7 @@ from rfi_monitor.tracking_filters import (
     MODE_AKF,
     MODE_KF,
     TrackingFilterParams,
+    kf_sweep_reset,
     run_tracking_filter,
 )
 
@@ -154,3 +155,19 @@ def test_complex_wrap():
                                                         initial_frequency=0.45), signed=True)[0]
     err = (f - truth + 0.5) % 1.0 - 0.5
     assert np.max(np.abs(err[200:])) < 1e-3
+
+
+def test_sweep_reset_eq21_22_and_its_exact_covariance():
+    f, df, m = 0.31, 6.9e-4, 194.0
+    p = np.array([[4e-6, 2e-8], [2e-8, 3e-10]])
+    f0, p11, p12 = kf_sweep_reset(f, df, p[0, 0], p[0, 1], p[1, 1], m, False)
+    assert f0 == pytest.approx(f - m * df)
+    assert (p11, p12) == (pytest.approx(p[0, 0] + m * m * p[1, 1]), 0.0)          # eq. 22
+    # exact: A P A^T with A = [[1, -m], [0, 1]]
+    a = np.array([[1.0, -m], [0.0, 1.0]])
+    pe = a @ p @ a.T
+    f0x, p11x, p12x = kf_sweep_reset(f, df, p[0, 0], p[0, 1], p[1, 1], m, True)
+    assert f0x == f0
+    assert p11x == pytest.approx(pe[0, 0]) and p12x == pytest.approx(pe[0, 1])
+    # positive f~, df~ correlation (a ramp tracker's) makes f0~ less uncertain than eq. 22 says
+    assert p11x < p11
