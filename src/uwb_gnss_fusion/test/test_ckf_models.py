@@ -379,3 +379,66 @@ def test_uwb_latency_back_propagates_with_velocity():
     np.testing.assert_allclose(hx(states)[:, 0], [10.5, np.linalg.norm(anchor[0] - states[1, 0:3])])
     with pytest.raises(ValueError):
         uwb_range_model(anchor, latency_s=-0.1)
+
+
+@pytest.mark.parametrize(
+    ("latency_s", "offset_m", "prior_std_m", "huber_k", "huber_k_positive"),
+    [
+        (0.0, 0.05, 0.05, math.inf, math.inf),  # plain update (no refinement: nearly linear)
+        (0.0, 0.3, 1.0, math.inf, math.inf),  # wide prior: Gauss-Newton refinement
+        (0.1, 0.3, 1.0, math.inf, math.inf),  # latency: 6 active components
+        (0.0, 0.8, 0.05, 1.5, 0.5),  # skewed Huber weighting of a long range
+        (0.0, -0.6, 0.05, 1.5, math.inf),  # Huber on a negative innovation
+        (0.0, 50.0, 0.05, math.inf, math.inf),  # gated out
+    ],
+)
+def test_compiled_uwb_step_equals_generic_ckf_update(latency_s, offset_m, prior_std_m, huber_k, huber_k_positive):
+    from uwb_gnss_fusion.uwb_update import STATUS_APPLIED, STATUS_GATED, predict_inplace, range_update_inplace
+
+    rng = np.random.default_rng(5)
+    p0 = _random_spd(rng, 8) * 0.01 + np.diag([prior_std_m**2] * 3 + [0.01] * 5)
+    nominal = np.array([3.0, -2.0, 1.0, 0.2, -0.1, 0.05, 100.0, 0.3])
+    anchor, lever = np.array([10.0, 4.0, 2.0]), np.array([0.1, 0.0, 0.2])
+    phi, q = constant_velocity_transition(0.05), np.diag(rng.uniform(1e-4, 1e-3, 8))
+    m = 6 if latency_s > 0.0 else 3
+    # generic path: numpy predict, then CubatureKalmanFilter.update on the error state (as before)
+    nom_g = phi @ nominal
+    ckf = CubatureKalmanFilter(np.zeros(8), p0)
+    ckf.predict_linear(phi, q)
+    rel = anchor - nom_g[0:3] + latency_s * nom_g[3:6]
+    hx = uwb_range_model(rel[None, :], lever, latency_s)
+    z = float(hx(np.zeros((1, 8)))[0, 0]) + offset_m
+    gate = 15.1
+    res = ckf.update(np.array([z]), np.array([0.01]), hx, gate, active_dims=m, huber_k=huber_k,
+                     huber_k_positive=huber_k_positive, max_iterations=5, nonlinearity_threshold=0.05)
+    nom_g = nom_g + ckf.x
+    # compiled path, in place
+    nom_c, p_c, out = nominal.copy(), p0.copy(), np.zeros(6)
+    predict_inplace(nom_c, p_c, phi, q)
+    status = range_update_inplace(nom_c, p_c, anchor, lever, latency_s, m, z, 0.01, gate, huber_k,
+                                  huber_k_positive, 5, 0.05, out)
+    assert status == (STATUS_APPLIED if res.accepted[0] else STATUS_GATED)
+    np.testing.assert_allclose(nom_c, nom_g, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(p_c, ckf.p, rtol=1e-9, atol=1e-14)
+    assert out[0] == pytest.approx(res.innovation[0], abs=1e-12)
+    assert out[1] == pytest.approx(res.innovation_var[0], rel=1e-12)
+    assert out[3] == pytest.approx(res.noise_scale[0], rel=1e-12)
+    assert int(out[4]) == res.iterations
+    if res.accepted[0]:
+        assert out[2] == pytest.approx(res.nis, rel=1e-9)
+    if prior_std_m > 0.5 and res.accepted[0]:
+        assert res.iterations > 0  # the refinement branch is exercised
+
+
+def test_compiled_uwb_update_reports_a_covariance_without_cholesky_factor():
+    from uwb_gnss_fusion.uwb_update import STATUS_CHOLESKY_FAILED, range_update_inplace
+
+    p = np.eye(8)
+    p[0, 0] = -1.0
+    nominal = np.zeros(8)
+    before = (nominal.copy(), p.copy())
+    status = range_update_inplace(nominal, p, np.array([10.0, 0.0, 0.0]), np.zeros(3), 0.0, 3, 10.0, 0.01,
+                                  15.1, math.inf, math.inf, 5, 0.05, np.zeros(6))
+    assert status == STATUS_CHOLESKY_FAILED
+    np.testing.assert_array_equal(nominal, before[0])
+    np.testing.assert_array_equal(p, before[1])

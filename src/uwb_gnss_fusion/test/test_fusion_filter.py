@@ -181,7 +181,9 @@ def test_outlier_burst_recovery_within_5_s():
         errors.append(np.linalg.norm(out.position_m - RX))
     errors = np.array(errors)
     counts = dict(out.rejection_counts)
-    assert counts["innovation_gate_pseudorange"] >= 10 + 2 * 5
+    # every outlier is caught, by the common-mode screen (default) or by the CKF gate
+    caught = counts.get("common_mode_pseudorange", 0) + counts.get("innovation_gate_pseudorange", 0)
+    assert caught >= 10 + 2 * 5
     for start in (30, 50):
         pre = np.sqrt(np.mean(errors[(start - 5) * 5 : start * 5] ** 2))
         post = errors[(start + 2 + 5) * 5]
@@ -462,6 +464,25 @@ def test_divergence_reinitialises_from_supplied_reference():
     np.testing.assert_allclose(first.position_m, RX + np.array([1.0, 0.0, 0.0]), atol=1e-6)
 
 
+def test_divergence_asks_the_reference_provider_only_then():
+    asked = []
+
+    def provider(stamp_ns):
+        asked.append(stamp_ns)
+        return T0, RX + np.array([1.0, 0.0, 0.0]), 2.0, 150.0
+
+    f = FusionFilter(FusionParams(use_uwb=False, min_satellites_init=8, divergence_gnss_epochs=2),
+                     reference_provider=provider)
+    f.initialize(T0, RX + np.array([400.0, 0.0, 0.0]), clock_bias_m=150.0, position_std_m=0.5)
+    outs = [
+        f.process_gnss(dataclasses.replace(e, observations=e.observations[:7]))
+        for e in (_epoch(T0 + k * NS // 5) for k in range(1, 4))
+    ]
+    first = next(o for o in outs if o.diverged)
+    assert asked == [first.stamp_ns]  # asked once, at the divergence, not on every epoch
+    np.testing.assert_allclose(first.position_m, RX + np.array([1.0, 0.0, 0.0]), atol=1e-6)
+
+
 # ----------------------------------------------------------------------------- time handling
 def test_asynchronous_stream_is_deterministic_and_time_ordered():
     def run():
@@ -493,3 +514,27 @@ def test_reorder_buffer_releases_in_stamp_order_and_counts_late():
     assert [m.stamp_ns for m in buf.flush()] == [300]
     with pytest.raises(ValueError):
         ReorderBuffer(-1)
+
+
+def test_common_mode_screen_catches_an_outlier_the_clock_variance_hides():
+    # With a TCXO-class clock (h_-2 = 2e-18 /s) the clock-drift variance enters every rate's
+    # innovation variance, so a 1 m/s error on one pseudorange rate passes the per-measurement
+    # CKF gate and shifts the velocity by ~0.5 m/s; the common-mode screen removes the clock from
+    # the test and drops it.
+    vel_err = {}
+    for screen in (True, False):
+        rng = np.random.default_rng(21)
+        f = FusionFilter(FusionParams(use_uwb=False, accel_psd_m2ps3=0.01, clock_h_minus2_hz=2e-18,
+                                      common_mode_screen=screen))
+        _run_gnss(f, 50, rng)
+        ep = _epoch(T0 + 50 * NS // 5, rng=rng)
+        obs = list(ep.observations)
+        obs[3] = dataclasses.replace(obs[3], pseudorange_rate_mps=obs[3].pseudorange_rate_mps + 1.0)
+        out = f.process_gnss(dataclasses.replace(ep, observations=tuple(obs)))
+        counts = dict(out.rejection_counts)
+        vel_err[screen] = float(np.linalg.norm(out.velocity_mps))
+        if screen:
+            assert counts.get("common_mode_doppler", 0) == 1
+        else:
+            assert counts.get("innovation_gate_doppler", 0) == 0
+    assert vel_err[True] < 0.01 < 0.3 < vel_err[False]

@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -43,6 +43,8 @@ from .measurement_models import (
     uwb_range_model,
     white_acceleration_noise,
 )
+from .robust_screen import common_mode_screen, projected_variance
+from .uwb_update import STATUS_APPLIED, STATUS_CHOLESKY_FAILED, predict_inplace, range_update_inplace
 
 MODE_NONE = 0
 MODE_GNSS = 1
@@ -114,7 +116,13 @@ class FusionParams:
             fraction of the measurement noise variance (> 0).
         uwb_huber_k: Huber threshold on the normalised UWB innovation (inf: off). Beyond the paper.
         uwb_huber_k_positive: Huber threshold for positive UWB innovations (measured range longer
-            than predicted, the non-line-of-sight direction); inf: same as ``uwb_huber_k``.
+            than predicted, the non-line-of-sight direction); inf: positive innovations are not
+            down-weighted.
+        common_mode_screen: before the CKF update, drop pseudoranges and pseudorange rates whose
+            innovation departs from the epoch's median (common clock) innovation by more than the
+            gate allows with the clock-free variance (:mod:`.robust_screen`; beyond the paper).
+            Counted as ``common_mode_pseudorange`` / ``common_mode_doppler``; they count as gated
+            for the divergence rule.
     """
 
     use_gnss: bool = True
@@ -152,6 +160,7 @@ class FusionParams:
     nonlinearity_threshold: float = 0.05
     uwb_huber_k: float = math.inf
     uwb_huber_k_positive: float = math.inf
+    common_mode_screen: bool = True
 
     def __post_init__(self) -> None:
         pos = {
@@ -320,6 +329,11 @@ class FusionFilter:
 
     Args:
         params: :class:`FusionParams`.
+        reference_provider: optional callable ``provider(stamp_ns)`` returning the caller's
+            independent solution at or before ``stamp_ns`` as ``(stamp_ns, ecef_position_m (3,),
+            position_std_m, clock_bias_m)``, or None. It is asked only when the filter diverges
+            (the pull form of :meth:`supply_reference_solution`: a caller whose solver is expensive,
+            e.g. the node's SPP, then solves only the epochs needed instead of every epoch).
 
     Notes:
         Cao et al., eq. 5-7 (models, :mod:`.measurement_models`), eq. 8-10 (constant-velocity error
@@ -347,14 +361,20 @@ class FusionFilter:
         (True, 'map')
     """
 
-    def __init__(self, params: FusionParams | None = None) -> None:
+    def __init__(
+        self,
+        params: FusionParams | None = None,
+        reference_provider: Callable[[int], tuple[int, np.ndarray, float, float] | None] | None = None,
+    ) -> None:
         self.params = params if params is not None else FusionParams()
+        self._reference_provider = reference_provider
         self._gate = self.params.gate_nis
         self._transition_cache: dict[tuple[int, bool], tuple[np.ndarray, np.ndarray]] = {}
         self._counts_tuple: tuple[tuple[str, int], ...] | None = None
         clock = self.params.clock
         self._clock_q = lambda dt_s: _clock_q(clock, dt_s)
         self._lever = np.asarray(self.params.uwb_lever_arm_m, dtype=float)
+        self._uwb_scratch = np.zeros(6)  # diagnostics of the compiled UWB update (.uwb_update)
         self._anchor_registry: Mapping[str, np.ndarray] = {
             a[0]: np.array([float(a[1]), float(a[2]), float(a[3])]) for a in self.params.anchors
         }
@@ -401,6 +421,10 @@ class FusionFilter:
     def rejection_counts(self) -> dict[str, int]:
         """Cumulative rejection/event counts by reason (a copy)."""
         return dict(self._counts)
+
+    def rejection_counts_key(self) -> tuple[tuple[str, int], ...]:
+        """The cumulative counts as a sorted tuple (cached until a count changes; cheap to compare)."""
+        return self._rejection_tuple()
 
     @property
     def initialized(self) -> bool:
@@ -569,10 +593,10 @@ class FusionFilter:
             self._transition_cache[key] = cached
         phi, q = cached
         # Nominal propagation (positioning status prediction) and error-covariance time update
-        # (Cao et al., eq. 15-16); the error mean is zero after every correction.
-        self._nominal = phi @ self._nominal
+        # (Cao et al., eq. 15-16), compiled and in place; the error mean is zero after every
+        # correction.
         self._ckf.x[:] = 0.0
-        self._ckf.predict_linear(phi, q)
+        predict_inplace(self._nominal, self._ckf.p, phi, q)
         self._t_ns = stamp_ns
 
     def _correct(self) -> None:
@@ -872,6 +896,13 @@ class FusionFilter:
             self._ckf.p[6, 6] = self.params.init_clock_bias_std_m**2 + float(self._ckf.p[0:3, 0:3].trace())
             self._ckf.p[7, 7] = drift_std**2
             self._clock_initialized = True
+        n_screened = 0
+        if self.params.common_mode_screen:
+            prep, n_screened = self._common_mode_screen(prep)
+            if prep.pr.size == 0:
+                self._count("no_valid_satellites")
+                return self._output(False, sat_rej=n_obs)
+            n = prep.pr.size
         models = [pseudorange_model(prep.sat_pos, prep.sat_clk, prep.iono, prep.tropo)]
         z = [prep.pr]
         var = [prep.sigma_pr**2]
@@ -907,7 +938,7 @@ class FusionFilter:
         nis = res.nis / n_applied if n_applied else math.nan
         # Divergence: most pseudoranges of a well-observed epoch inconsistent with the state, for
         # several epochs in a row (a single jammed epoch with outliers does not trip it).
-        if n >= 4 and gated_pr * 2 >= n:
+        if n + n_screened >= 4 and (gated_pr + n_screened) * 2 >= n + n_screened:
             self._bad_gnss_epochs += 1
         else:
             self._bad_gnss_epochs = 0
@@ -916,7 +947,46 @@ class FusionFilter:
             if not self._position_lost() and self._uwb_agrees(stamp):
                 return self._reset_clock_keep_position(stamp, prep)
             return self._declare_divergence(stamp)
-        return self._output(False, sat_used=used, sat_rej=pre_rejected + gated_pr, nis=nis)
+        return self._output(False, sat_used=used, sat_rej=pre_rejected + n_screened + gated_pr, nis=nis)
+
+    def _common_mode_screen(self, prep: _Prepared) -> tuple[_Prepared, int]:
+        """Drop the pseudoranges (and mark the rates) that fail the common-mode innovation screen.
+
+        Returns:
+            (the epoch without the dropped pseudoranges, how many were dropped).
+
+        Notes:
+            :mod:`.robust_screen`: innovations at the predicted state, the median removed, tested
+            with ``R_i + e_i^T P e_i`` (position covariance for pseudoranges, velocity covariance
+            for rates).
+        """
+        x = self._nominal[None, :]
+        p = self._ckf.p
+        d = prep.sat_pos - self._nominal[None, 0:3]
+        los = d / np.linalg.norm(d, axis=1)[:, None]
+        nu = prep.pr - pseudorange_model(prep.sat_pos, prep.sat_clk, prep.iono, prep.tropo)(x)[0]
+        keep = common_mode_screen(nu, prep.sigma_pr**2 + projected_variance(los, p[0:3, 0:3]), self._gate)
+        rate = prep.rate
+        ridx = np.flatnonzero(np.isfinite(rate))
+        if ridx.size >= 3:
+            h_rate = pseudorange_rate_model(prep.sat_pos[ridx], prep.sat_vel[ridx], prep.sat_drift[ridx])
+            nu_r = rate[ridx] - h_rate(x)[0]
+            ok_r = common_mode_screen(
+                nu_r, prep.sigma_rate[ridx] ** 2 + projected_variance(los[ridx], p[3:6, 3:6]), self._gate
+            )
+            if not ok_r.all():
+                rate = rate.copy()
+                rate[ridx[~ok_r]] = math.nan
+                self._count("common_mode_doppler", int(ridx.size - ok_r.sum()))
+        n_drop = int(keep.size - keep.sum())
+        if n_drop == 0:
+            return (prep if rate is prep.rate else replace(prep, rate=rate)), 0
+        self._count("common_mode_pseudorange", n_drop)
+        return _Prepared(
+            sat_pos=prep.sat_pos[keep], sat_vel=prep.sat_vel[keep], sat_clk=prep.sat_clk[keep],
+            sat_drift=prep.sat_drift[keep], iono=prep.iono[keep], tropo=prep.tropo[keep], pr=prep.pr[keep],
+            rate=rate[keep], sigma_pr=prep.sigma_pr[keep], sigma_rate=prep.sigma_rate[keep],
+        ), n_drop
 
     # ------------------------------------------------------------------ UWB
     def process_uwb(self, meas: UwbRangeMeasurement) -> FusionOutput:
@@ -960,25 +1030,36 @@ class FusionFilter:
         # magnitudes out of the range difference.
         lat = p.uwb_latency_s
         nominal = self._nominal
-        rel = anchor - nominal[0:3] + lat * nominal[3:6] if lat > 0.0 else anchor - nominal[0:3]
-        hx = uwb_range_model(rel[None, :], self._lever, lat)
-        try:
-            res = self._ckf.update(
-                np.array([rng]),
-                np.array([std * std]),
-                hx,
-                self._gate,
-                active_dims=6 if lat > 0.0 else 3,
-                huber_k=p.uwb_huber_k,
-                huber_k_positive=p.uwb_huber_k_positive,
-                max_iterations=p.max_update_iterations,
-                nonlinearity_threshold=p.nonlinearity_threshold,
-            )
-        except CholeskyError:
-            self._count("numerical_failure")
-            return self._declare_divergence(stamp)
-        self._correct()
-        ok = bool(res.accepted[0])
+        # Compiled update (.uwb_update, the same equations as CubatureKalmanFilter.update with
+        # active_dims); the generic update handles a covariance that needs jitter (or raises).
+        status = range_update_inplace(
+            nominal, self._ckf.p, anchor, self._lever, lat, 6 if lat > 0.0 else 3, rng, std * std, self._gate,
+            p.uwb_huber_k, p.uwb_huber_k_positive, p.max_update_iterations, p.nonlinearity_threshold,
+            self._uwb_scratch,
+        )
+        if status == STATUS_CHOLESKY_FAILED:
+            rel = anchor - nominal[0:3] + lat * nominal[3:6] if lat > 0.0 else anchor - nominal[0:3]
+            try:
+                res = self._ckf.update(
+                    np.array([rng]),
+                    np.array([std * std]),
+                    uwb_range_model(rel[None, :], self._lever, lat),
+                    self._gate,
+                    active_dims=6 if lat > 0.0 else 3,
+                    huber_k=p.uwb_huber_k,
+                    huber_k_positive=p.uwb_huber_k_positive,
+                    max_iterations=p.max_update_iterations,
+                    nonlinearity_threshold=p.nonlinearity_threshold,
+                )
+            except CholeskyError:
+                self._count("numerical_failure")
+                return self._declare_divergence(stamp)
+            self._correct()
+            ok = bool(res.accepted[0])
+            nis = res.nis
+        else:
+            ok = status == STATUS_APPLIED
+            nis = float(self._uwb_scratch[2])
         window = self._uwb_gated
         if len(window) == window.maxlen:
             self._bad_uwb -= window[0]
@@ -989,7 +1070,7 @@ class FusionFilter:
             if self._position_lost():
                 self._count("divergence")
                 return self._declare_divergence(stamp)
-            return self._output(False, uwb_used=1, nis=res.nis)
+            return self._output(False, uwb_used=1, nis=nis)
         self._count("innovation_gate_uwb")
         # Divergence: most of the recent ranges (all anchors together) inconsistent with the state.
         # A single anchor that still agrees (the state sits on its range sphere) does not mask it.
@@ -1172,6 +1253,10 @@ class FusionFilter:
         GNSS epoch, (c) UWB multilateration; else reset to uninitialised."""
         self._reinits += 1
         frame = self._frame
+        if self._reference_provider is not None and frame == FRAME_EARTH:
+            supplied = self._reference_provider(stamp_ns)
+            if supplied is not None:
+                self.supply_reference_solution(*supplied)
         ref = self._reference
         done = False
         if (
