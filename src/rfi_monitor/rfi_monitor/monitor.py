@@ -68,9 +68,12 @@ from rfi_monitor.tracker import (
     K_LAST_START,
     K_LATSRC,
     K_MISSES,
+    K_NCONS,
     K_NDEC,
     K_NFIT,
     K_NRESETS,
+    K_NSUSP,
+    K_TRACK,
     LAT_COARSE,
     M_F0,
     M_FLOOR,
@@ -83,6 +86,7 @@ from rfi_monitor.tracker import (
     MAX_REFINE_WINDOW,
     N_MPAR,
     P_CHIRP_CORR,
+    P_CONFIRM,
     P_DOMAIN,
     P_LAT_DRIFT,
     P_MAX_DF,
@@ -136,6 +140,10 @@ class RfiMonitorParams:
             noise floor is known.
         reset_cross_covariance: at a sweep reset keep the exact covariance of eq. 21's linear map
             instead of eq. 22's uncorrelated P(1,1) (ours; tracking_filters.kf_sweep_reset).
+        confirm_fits: tracking mode (ours; tracker module docstring): after this many consecutive
+            successful sweep-start fits the lattice is confirmed and the LPD / AR(10) / peak pass is
+            suspended until the lattice drops (MAX_MISSES failed fits), then resumed from its initial
+            state; 0: the period search always runs (the paper). Needs refine_window > 0, >= 0.
         analysis: SweepAnalysisParams of the block-level periodicity detector (ours).
     """
 
@@ -159,6 +167,7 @@ class RfiMonitorParams:
     lattice_period_drift: float = 1e-5
     noise_compensation: bool = True
     reset_cross_covariance: bool = True
+    confirm_fits: int = 4
     analysis: SweepAnalysisParams = field(default_factory=SweepAnalysisParams)
 
     def __post_init__(self) -> None:
@@ -181,6 +190,8 @@ class RfiMonitorParams:
             raise ValueError("min_block_samples must be >= classifier.nfft")
         if not 0 <= int(self.refine_window) <= MAX_REFINE_WINDOW:
             raise ValueError(f"refine_window must be in 0..{MAX_REFINE_WINDOW}")
+        if int(self.confirm_fits) < 0:
+            raise ValueError("confirm_fits must be >= 0")
         if not 0.0 <= self.lattice_period_drift <= 0.01:
             raise ValueError("lattice_period_drift must be in [0, 0.01]")
 
@@ -197,7 +208,7 @@ class RfiMonitorParams:
         """
         base = RfiMonitorParams(**kw)
         return dataclasses.replace(base, refine_window=0, analysis=SweepAnalysisParams(enabled=False),
-                                   noise_compensation=False, reset_cross_covariance=False,
+                                   noise_compensation=False, reset_cross_covariance=False, confirm_fits=0,
                                    sweep=dataclasses.replace(base.sweep, lattice_voting=False, decimation=2))
 
 
@@ -324,6 +335,7 @@ class RfiMonitor:
             d[name] = int(self._state.counters[code])
         d["sweep_resets"] = int(self._state.mist[K_NRESETS])
         d["sweep_start_fits"] = int(self._state.mist[K_NFIT])
+        d["period_search_suspensions"] = int(self._state.mist[K_NSUSP])
         return MappingProxyType(d)
 
     def _to_rel_hz(self, f_dig: float, fs: float, fif: float, cplx: bool) -> float:
@@ -448,7 +460,10 @@ class RfiMonitor:
                 continue
             parts.append(self._run_tracker(xc[i0:i1], cplx, first + i0, store))
             if (first + i1) % hop == 0:
-                self._run_analysis(first + i1)
+                # tracking mode (confirmed lattice): the detector has nothing to seed, and the
+                # identification takes the confirmed lattice as the periodicity evidence
+                if not (ap.skip_while_tracking and int(self._state.mist[K_TRACK]) == 1):
+                    self._run_analysis(first + i1)
         if not store:
             return None
         tr = [p for p in parts if p is not None]
@@ -479,6 +494,7 @@ class RfiMonitor:
             st.mist[K_LATSRC] = LAT_COARSE
             st.mst[M_L11], st.mst[M_L12], st.mst[M_L22] = lattice_init(per, float(self.params.refine_window))
             st.mist[K_MISSES] = 0
+            st.mist[K_NCONS] = 0
             st.mist[K_FITAT] = -1
             if int(st.mist[K_NRESETS]) == 0:
                 st.mist[K_LAST_START] = int(math.floor(st.mst[M_NEXT] - per))
@@ -505,6 +521,7 @@ class RfiMonitor:
         mpar[P_LAT_DRIFT] = p.lattice_period_drift
         mpar[P_NOISE_COMP] = 1.0 if (p.noise_compensation and not cplx) else 0.0
         mpar[P_RESET_CROSS] = 1.0 if p.reset_cross_covariance else 0.0
+        mpar[P_CONFIRM] = float(p.confirm_fits)
         self._packed[cplx] = (spar, mpar)
         return spar, mpar
 
@@ -567,6 +584,10 @@ class RfiMonitor:
         hop = max(1, int(round(p.analysis.hop_s * fs)))
         periodic = (p.analysis.enabled and an is not None and an.periodic
                     and an.sample_index >= first + xs.size - 2 * hop)
+        if int(st.mist[K_TRACK]) == 1:
+            # tracking mode: confirm_fits significant sweep-start steps in a row at the lattice's
+            # period are the periodicity evidence (the detector may not run then)
+            chirp_ok = True
         if periodic and an is not None:
             chirp_ok = True
             if not (locked or lattice):
@@ -614,4 +635,4 @@ class RfiMonitor:
                 "p22": float(st.fst[F_P22]), "period_samples": per if locked else math.nan,
                 "locked": float(locked), "lpd_locked": float(st.si[J_LOCKED]),
                 "lpd_period_samples": float(st.sf[S_PERIOD]), "lattice_source": float(st.mist[K_LATSRC]),
-                "last_start": float(st.mist[K_LAST_START])}
+                "last_start": float(st.mist[K_LAST_START]), "tracking_mode": float(st.mist[K_TRACK])}

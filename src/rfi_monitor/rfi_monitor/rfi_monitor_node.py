@@ -169,6 +169,10 @@ class MonitorNodeParams:
     noise_compensation: bool = parameter(
         _M.noise_compensation, 'Divide the real three-sample ratio by kappa = 1 - N/P (removes eq. 8\'s bias '
         'towards fs/4 at moderate J/N; ours). No effect on complex samples.')
+    confirm_fits: int = parameter(
+        _M.confirm_fits, 'Tracking mode (ours): after this many consecutive significant sweep-start fits the '
+        'LPD/AR(10)/peak search is suspended until fits fail; 0: always search (the paper).',
+        minimum=0, maximum=10**6)
     reset_cross_covariance: bool = parameter(
         _M.reset_cross_covariance, 'At a sweep reset keep the exact covariance of eq. 21 instead of eq. 22 '
         '(ours).')
@@ -248,6 +252,9 @@ class MonitorNodeParams:
         minimum=1e-6, maximum=0.5)
     analysis_min_window: int = parameter(
         _A.min_window, 'Fewest decimated values for an analysis.', minimum=64, maximum=10**9)
+    analysis_skip_while_tracking: bool = parameter(
+        _A.skip_while_tracking, 'No periodicity analysis while in tracking mode (the confirmed lattice is then '
+        'the periodicity evidence).')
     # --- identification (not in the paper) ----------------------------------------------------
     classifier_nfft: int = parameter(
         _C.nfft, 'Welch frame length, samples (a power of two).', minimum=32, maximum=2**20)

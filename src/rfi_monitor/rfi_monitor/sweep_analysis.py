@@ -52,6 +52,10 @@ class SweepAnalysisParams:
         min_lag: shortest period, decimated samples, >= 2.
         max_period_fraction: longest period as a fraction of the analysed window, in (0, 0.5].
         min_window: fewest decimated values for an analysis, >= 64.
+        skip_while_tracking: no analysis while the monitor is in tracking mode (a step-fit
+            lattice confirmed, ``RfiMonitorParams.confirm_fits``): it could only seed a lattice
+            when none runs; the identification then takes the confirmed lattice as the evidence
+            of periodicity (speed, ours).
     """
 
     enabled: bool = True
@@ -60,6 +64,7 @@ class SweepAnalysisParams:
     min_lag: int = 3
     max_period_fraction: float = 0.25
     min_window: int = 1024
+    skip_while_tracking: bool = True
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.hop_s) and self.hop_s > 0):

@@ -60,6 +60,23 @@ Additions on top ("ours", switchable, reported separately in the benchmarks):
 * Lattice seeding from the block-level periodicity detector (``sweep_analysis``), done by the
   monitor at absolute sample boundaries (so block splitting cannot change it), when the LPD
   estimator has not locked (fast or slow sweeps, low J/N).
+* Tracking mode (``confirm_fits`` > 0, needs the step fit; speed, as acquisition vs tracking in a
+  GNSS receiver; the paper keeps everything running): while a lattice exists, the LPD peaks are
+  not read (they only acquire a lattice), so after ``confirm_fits`` successful fits in a row
+  (``K_TRACK``) the LPD / AR(10) / peak pass is suspended; only the decimated history of the
+  periodicity detector (``zdec``) is kept up, and the monitor skips that detector too
+  (``SweepAnalysisParams.skip_while_tracking``). ``RESUME_MISSES`` = 2 failed fits in a row end
+  the tracking mode: the pass resumes with a warm restart (``_period_search_resume``: peaks,
+  lock and period forgotten, the LPD delay line restarted, the AR(10) filter and the zAR noise
+  level kept, so that peaks are found at once), and has run for two sweeps when the fourth miss
+  drops the lattice. The per-sample frequency track does not change while the lattice is held;
+  after a drop, re-acquisition starts from the restarted search instead of a continuously running
+  one (a 7.3 us chirp replacing a 5.1 us one is re-acquired at its period; the continuous search
+  locked twice that period at J/N 8 dB; test_tracking_mode.py). While suspended the zAR trace is
+  NaN and ``sweep_period``'s lock and period are frozen (the lattice gives the period). The switch
+  is decided at the end of an aligned CHUNK window and acts on the LPD pass from the next window
+  on (``K_SWAT``, ``K_SWMODE``; the LPD pass of a window always runs after the filter of the
+  window before it), so block splitting cannot change it (tested).
 
 Sample alignment: the measurement for sample n needs x_{n+1}, so a block of samples
 [a, a + N) yields estimates for samples [a - 1, a + N - 1) (the first block: [1, N - 1)).
@@ -88,6 +105,7 @@ from rfi_monitor.sweep_period import (
     _AR_FASTMATH,
     AR_ORDER,
     J_LOCKED,
+    J_NDEC,
     LPD_LAG,
     N_SFSTATE,
     N_SISTATE,
@@ -100,6 +118,8 @@ from rfi_monitor.sweep_period import (
     Q_QAR,
     Q_RAR,
     Q_TOL,
+    S_CAND,
+    S_NOISE,
     S_PERIOD,
     S_ZAR,
     ar_step,
@@ -124,14 +144,14 @@ from rfi_monitor.tracking_filters import (
 N_MSTATE = 17
 # monitor int state
 (K_NBUF, K_LAST_START, K_NRESETS, K_STARTED, K_NMEAS, K_FITAT, K_MISSES, K_DECN, K_LATSRC, K_NDEC,
- K_NFIT, K_ZPOS, K_NLEV) = range(13)
-N_MISTATE = 13
+ K_NFIT, K_ZPOS, K_NLEV, K_NCONS, K_TRACK, K_SWAT, K_SWMODE, K_LPDOFF, K_NSUSP) = range(19)
+N_MISTATE = 19
 # lattice sources
 LAT_NONE, LAT_LPD, LAT_COARSE = 0, 1, 2
 # packed monitor parameters
 (P_CHIRP_CORR, P_MIN_ABS, P_DOMAIN, P_POW_LAMBDA, P_RESET, P_PHASE_GAIN, P_WRAP, P_MAX_DF, P_REFINE_W,
- P_LAT_DRIFT, P_NOISE_COMP, P_RESET_CROSS) = range(12)
-N_MPAR = 12
+ P_LAT_DRIFT, P_NOISE_COMP, P_RESET_CROSS, P_CONFIRM) = range(13)
+N_MPAR = 13
 
 MAX_ABS_RATE = 0.02
 """Clamp of |df| used inside the chirp correction, cycles/sample^2 (guards a diverged estimate)."""
@@ -147,6 +167,9 @@ DEC_HISTORY = 4096
 """Decimated measurements kept for the block-level periodicity detector (power of two)."""
 MAX_MISSES = 4
 """Consecutive failed sweep-start fits that drop the lattice."""
+RESUME_MISSES = 2
+"""Consecutive failed sweep-start fits that end the tracking mode (the period search resumes, so
+that it has run for MAX_MISSES - RESUME_MISSES sweeps when the lattice drops)."""
 LATTICE_PHASE_Q = 0.01 ** 2
 """Process noise of the sweep-start lattice filter on the start, samples^2 per sweep (jitter of a
 jammer's sweep start that does not accumulate)."""
@@ -198,6 +221,7 @@ class TrackerState:
         self.mst[M_TLAT] = math.nan
         self.mist = np.zeros(N_MISTATE, dtype=np.int64)
         self.mist[K_FITAT] = -1
+        self.mist[K_SWAT] = -1
         self.counters = np.zeros(N_STATUS, dtype=np.int64)
         self.dfring = np.zeros(DF_LAG)
         self.zring = np.zeros(Z_RING)
@@ -260,6 +284,22 @@ def _step_fit(zring: np.ndarray, c: int, w: int, df: float, period: float,
     return float(n0 + best_k), var, gain / max(var, 1e-300)
 
 
+@njit(cache=True)
+def _period_search_resume(sf: np.ndarray, si: np.ndarray, peaks: np.ndarray) -> None:
+    """Warm restart of the period search after a suspension (tracking mode, module doc): the peak
+    history, the period lock and the peak in progress are forgotten (the jammer may have changed);
+    the AR(10) coefficients and covariance, the zAR noise level and the warm-up count are kept, so
+    that peaks are detected at once. (The LPD delay line is restarted by the caller.)"""
+    noise, ndec = sf[S_NOISE], si[J_NDEC]
+    sf[:] = 0.0
+    sf[S_PERIOD] = math.nan
+    sf[S_CAND] = math.nan
+    sf[S_NOISE] = noise
+    si[:] = 0
+    si[J_NDEC] = ndec
+    peaks[:] = 0
+
+
 @njit(cache=True, fastmath=_AR_FASTMATH, error_model="numpy")
 def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: int, tpar: np.ndarray,
                 spar: np.ndarray, mpar: np.ndarray, fst: np.ndarray, ist: np.ndarray, ring: np.ndarray,
@@ -290,6 +330,7 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
     refine_w = int(mpar[P_REFINE_W])
     lat_drift = mpar[P_LAT_DRIFT]
     reset_cross = mpar[P_RESET_CROSS] > 0.5
+    confirm_n = int(mpar[P_CONFIRM]) if refine_w > 0 else 0
     # noise compensation (if_measurement): kappa = 1 - floor / running power, floor 0 (unknown) -> 1
     floor = mst[M_FLOOR] if (mpar[P_NOISE_COMP] > 0.5 and not is_complex) else 0.0
     tol = spar[Q_TOL]
@@ -316,6 +357,7 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
     zpos = mist[K_ZPOS]
     nmeas = mist[K_NMEAS]
     nlev = mist[K_NLEV]
+    ncons, trk, swat, swmode, lpdoff = mist[K_NCONS], mist[K_TRACK], mist[K_SWAT], mist[K_SWMODE], mist[K_LPDOFF]
     zmask = zring.size - 1
     dmask = zdec.size - 1
     dfmask = dfring.size - 1
@@ -390,6 +432,18 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
         m0 = first_index + jp - 1
         ch = CHUNK - qh                             # half of zlb / sgb for this chunk's LPD inputs
         base = n_out
+        # Tracking mode (module doc): the period search is suspended / resumed from the aligned window
+        # swat on (decided at the end of the window before it, which the LPD pass never reached yet).
+        if lq > 0 and mq0 >= swat >= 0 and lpdoff != swmode:
+            if lpdoff == 1:                         # resume (warm restart)
+                _period_search_resume(sf, si, peaks)
+                zpos = 0
+                zg = 0.0
+            else:
+                mist[K_NSUSP] += 1
+            acc = 0.0
+            lpdoff = swmode
+        lpd_on = lpdoff == 0
         # The filter over this chunk, interleaved with the LPD / AR(10) / peak pass over the previous
         # chunk (its inputs are queued in the other half of zlb / sgb): the two serial recursions are
         # independent, so the CPU overlaps them (module doc, "Speed").
@@ -451,11 +505,18 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
                                 l11, l12, l22 = l11 - k1 * l11, l12 - k1 * l12, l22 - k2 * l12
                                 misses = 0
                                 mist[K_NFIT] += 1
+                                ncons += 1
+                                if confirm_n > 0 and ncons >= confirm_n:
+                                    trk = 1
                             else:
                                 misses += 1
+                                ncons = 0
+                                if misses >= RESUME_MISSES:
+                                    trk = 0              # resume the period search (tracking mode)
                                 if misses >= MAX_MISSES:
                                     nxt = -1.0
                                     latsrc = 0
+                                    trk = 0
                 if store:
                     o_idx[n_out] = m
                     o_z[n_out] = z
@@ -464,7 +525,21 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
                     o_p11[n_out] = p11_post
                     o_reset[n_out] = did_reset
                 n_out += 1
-            if i < lq:
+            if i < lq and not lpd_on:
+                # --- tracking mode: only the decimated history of the periodicity detector -------------
+                zacc += zlb[qh + i]
+                decn += 1
+                if decn >= dec:
+                    zdec[ndec & dmask] = zacc * inv_dec
+                    ndec += 1
+                    zacc = 0.0
+                    decn = 0
+                    if store:
+                        for j in range(o0, qbase + i):
+                            o_zar[j] = zprev
+                        o0 = qbase + i
+                    zprev = math.nan
+            elif i < lq:
                 # --- LPD (eq. 23), decimation, AR(10) step (eq. 24-27), peaks: sample mq0 + i -----------
                 zl = zlb[qh + i]
                 # zpos counts 0..2 LPD_LAG - 1: >= LPD_LAG once the history is full
@@ -542,12 +617,16 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
                     tlat = per
                     latsrc = 1
                     misses = 0
+                    ncons = 0
                     l11, l12, l22 = lattice_init(per, float(refine_w))
                     if nresets == 0:
                         last_start = start
             for j in range(4 * (nlev - n_app)):     # keep the entries of window V + 1
                 lev[j] = lev[4 * n_app + j]
             nlev -= n_app
+        if confirm_n > 0 and lp > 0 and (m_end & (CHUNK - 1)) == CHUNK - 1 and trk != swmode:
+            swmode = trk                             # tracking mode from the next aligned window on
+            swat = m_end + 1
         qh, lq, mq0, qbase = ch, lp, m0, base
         if lf == 0 and lq == 0:
             break
@@ -573,6 +652,8 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
     mist[K_ZPOS] = zpos
     mist[K_NMEAS] = nmeas
     mist[K_NLEV] = nlev
+    sf[S_ZAR] = zprev                                # the held zAR trace value (NaN while suspended)
+    mist[K_NCONS], mist[K_TRACK], mist[K_SWAT], mist[K_SWMODE], mist[K_LPDOFF] = ncons, trk, swat, swmode, lpdoff
     counters[STATUS_OK] += n_ok
     counters[STATUS_NEAR_ZERO] += n_near
     counters[STATUS_DOMAIN] += n_dom
