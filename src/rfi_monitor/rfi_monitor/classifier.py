@@ -44,6 +44,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import fft as sp_fft
 from scipy.ndimage import median_filter
 
 NONE, CW, CHIRP, WIDEBAND, UNKNOWN = 0, 1, 2, 3, 4
@@ -141,22 +142,38 @@ def welch_psd(x: np.ndarray, nfft: int, max_frames: int) -> tuple[np.ndarray, in
     fr = x[: nfr * nfft].reshape(nfr, nfft)
     if nfr > max_frames:
         fr = fr[np.linspace(0, nfr - 1, max_frames).astype(np.int64)]
-    w = _hann(nfft)
     cplx = np.iscomplexobj(x)
-    spec = np.fft.fft(fr * w, axis=1) if cplx else np.fft.rfft(fr * w, axis=1)
+    # single precision FFT (scipy's pocketfft; numpy's float32 path is slower than its float64 one):
+    # the PSD needs ~1e-3 relative accuracy (it is smoothed and thresholded in dB), float32 gives
+    # 1e-7; 53 us instead of 74 us for 149 frames of 256 on the development machine
+    w = _hann32(nfft)
+    fw = fr.astype(np.complex64 if cplx else np.float32)
+    fw *= w
+    spec = sp_fft.fft(fw, axis=1, overwrite_x=True) if cplx else sp_fft.rfft(fw, axis=1, overwrite_x=True)
     # |X|^2 summed over frames without temporaries (speed): (re, im) pairs of the float view
-    v = np.ascontiguousarray(spec).view(np.float64)
-    p2 = np.einsum("ij,ij->j", v, v)
+    v = np.ascontiguousarray(spec).view(np.float32)
+    p2 = np.einsum("ij,ij->j", v, v).astype(np.float64)   # float32 sums of <= max_frames terms: ~1e-5
     p = (p2[0::2] + p2[1::2]) / fr.shape[0]
     fv = np.ascontiguousarray(fr)
     fv = (fv.view(np.float64) if cplx else fv).ravel()
-    pw = float(np.einsum("i,i->", fv, fv)) / fr.size
+    pw = float(np.dot(fv, fv)) / fr.size
     if cplx:
         p = np.fft.fftshift(p)
     return p * (pw / p.sum()), int(fr.shape[0])
 
 
 _HANN: dict[int, np.ndarray] = {}
+_HANN32: dict[int, np.ndarray] = {}
+
+
+def _hann32(nfft: int) -> np.ndarray:
+    """Cached single-precision Hann window of nfft points (read-only)."""
+    w = _HANN32.get(nfft)
+    if w is None:
+        w = _hann(nfft).astype(np.float32)
+        w.flags.writeable = False
+        _HANN32[nfft] = w
+    return w
 
 
 def _hann(nfft: int) -> np.ndarray:

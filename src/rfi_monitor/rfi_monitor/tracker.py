@@ -140,8 +140,8 @@ from rfi_monitor.tracking_filters import (
 
 # monitor float state
 (M_RE2, M_IM2, M_RE1, M_IM1, M_POW, M_NEXT, M_F0, M_P11_0, M_TLAT, M_PPRED, M_ZG, M_ACC,
- M_ZACC, M_FLOOR, M_L11, M_L12, M_L22) = range(17)
-N_MSTATE = 17
+ M_ZACC, M_FLOOR, M_L11, M_L12, M_L22, M_IKAP) = range(18)
+N_MSTATE = 18
 # monitor int state
 (K_NBUF, K_LAST_START, K_NRESETS, K_STARTED, K_NMEAS, K_FITAT, K_MISSES, K_DECN, K_LATSRC, K_NDEC,
  K_NFIT, K_ZPOS, K_NLEV, K_NCONS, K_TRACK, K_SWAT, K_SWMODE, K_LPDOFF, K_NSUSP) = range(19)
@@ -219,6 +219,7 @@ class TrackerState:
         self.mst[M_F0] = math.nan
         self.mst[M_P11_0] = math.nan
         self.mst[M_TLAT] = math.nan
+        self.mst[M_IKAP] = 1.0
         self.mist = np.zeros(N_MISTATE, dtype=np.int64)
         self.mist[K_FITAT] = -1
         self.mist[K_SWAT] = -1
@@ -349,6 +350,7 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
     wcount, wpos = ist[I_WCOUNT], ist[I_WPOS]
     re2, im2, re1, im1 = mst[M_RE2], mst[M_IM2], mst[M_RE1], mst[M_IM1]
     pw = mst[M_POW]
+    ikap_w = mst[M_IKAP]
     nxt, tlat, ppred = mst[M_NEXT], mst[M_TLAT], mst[M_PPRED]
     l11, l12, l22 = mst[M_L11], mst[M_L12], mst[M_L22]
     zg, acc, zacc = mst[M_ZG], mst[M_ACC], mst[M_ZACC]
@@ -387,7 +389,6 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
     o0 = 0
     sbuf = np.empty(2 * CHUNK, dtype=np.int64)
     thr = np.empty(CHUNK)
-    ikap = np.empty(CHUNK)
     dfc = np.empty(CHUNK)
     # Software pipeline over chunks of samples inside aligned CHUNK windows: the measurements of
     # chunk c + 1 are computed (a loop the compiler vectorises) before the serial part of chunk c
@@ -403,12 +404,15 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
         if jf < n:
             m0 = first_index + jf - 1
             lf = min(CHUNK - (m0 & (CHUNK - 1)), n - jf)
+            if (m0 & (CHUNK - 1)) == 0:
+                # noise compensation factor, once per aligned window (the running power changes
+                # little over CHUNK samples; aligned, so that block splitting cannot change it)
+                ikap_w = 1.0 / max(MIN_KAPPA, 1.0 - floor / pw) if pw > 0.0 else 1.0
             for i in range(lf):
                 k = jf + i + 1                      # middle sample in xe
                 p_m = xe[k] * xe[k] + (xie[k] * xie[k] if is_complex else 0.0)
                 pw = pw + lam * (p_m - pw) if math.isfinite(p_m) else pw
                 thr[i] = min_abs_ratio2 * pw
-                ikap[i] = 1.0 / max(MIN_KAPPA, 1.0 - floor / pw) if pw > 0.0 else 1.0
                 dfc[i] = min(MAX_ABS_RATE, max(-MAX_ABS_RATE, dfring[(m0 + i) & dfmask]))
             b0 = slot * CHUNK
             if is_complex:
@@ -420,7 +424,7 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
                 for i in range(lf):
                     k = jf + i + 1
                     zbuf[b0 + i], sbuf[b0 + i] = measure_real_sq(xe[k - 1], xe[k], xe[k + 1], dfc[i], chirp_corr,
-                                                                 thr[i], margin, ikap[i])
+                                                                 thr[i], margin, ikap_w)
             for i in range(lf):                     # status counters (off the serial loop)
                 status = sbuf[b0 + i]
                 n_ok += status == STATUS_OK
@@ -644,6 +648,7 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
     ist[I_WCOUNT], ist[I_WPOS] = wcount, wpos
     mst[M_RE2], mst[M_IM2], mst[M_RE1], mst[M_IM1] = re2, im2, re1, im1
     mst[M_POW] = pw
+    mst[M_IKAP] = ikap_w
     mst[M_NEXT], mst[M_TLAT], mst[M_PPRED] = nxt, tlat, ppred
     mst[M_L11], mst[M_L12], mst[M_L22] = l11, l12, l22
     mst[M_ZG], mst[M_ACC], mst[M_ZACC] = zg, acc, zacc

@@ -296,5 +296,7 @@ def test_welch_psd_equals_the_direct_formula(cplx):
         p = np.fft.fftshift(p) if cplx else p
         ref = p * np.mean(np.abs(fr) ** 2) / p.sum()
         assert frames == fr.shape[0]
-        np.testing.assert_allclose(psd, ref, rtol=1e-12)
+        # the FFT runs in single precision (classifier.welch_psd): each bin to float32 accuracy
+        # (measured 1.1e-7 relative), the total power exactly (it is computed in double)
+        np.testing.assert_allclose(psd, ref, rtol=1e-6)
         assert math.isclose(psd.sum(), np.mean(np.abs(fr) ** 2), rel_tol=1e-12)
