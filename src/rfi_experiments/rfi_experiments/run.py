@@ -1,25 +1,94 @@
 """``ros2 run rfi_experiments run BAG --out DIR``: replay a jamming experiment through the suite.
 
-The three nodes (rfi_monitor, uwb_gnss_fusion, imm_carrier with ``method: both``) run in this
-process, wired by their topics exactly as on a robot; the bag's messages are fed through them by
-:class:`rfi_experiments.replay.ReplayHarness` (deterministic, nothing dropped), over the
-middleware on one SingleThreadedExecutor (``--transport dds``) or handed over in-process
-(``--transport direct``, the same callbacks, much faster). At the end a summary table is printed
-and a report folder written: ``index.md`` with figures (rfi_experiments.report), ``summary.json``
-and ``replay.md`` (per-topic counts, the nodes' final diagnostics, where the time went).
+The three nodes (rfi_monitor, uwb_gnss_fusion, imm_carrier with ``method: both``) are wired by
+their topics exactly as on a robot, in one of three ways (``--transport``):
+
+- ``direct`` (default) and ``dds``: the nodes run in this process and the bag's messages are fed
+  through them by :class:`rfi_experiments.replay.ReplayHarness` (deterministic, nothing dropped),
+  handed over in-process (the same callbacks, much faster) or over the middleware on one
+  SingleThreadedExecutor;
+- ``processes``: the three node executables run as separate processes (resolved through the
+  ament index as ``ros2 run`` does, ``--ros-args --params-file`` for the parameters files and the
+  caller's ``--ros-args``), ``play`` feeds them the bag at ``--rate`` (after a slow warm-up, see
+  :func:`run_processes`), and this process records their outputs (reliable, keep-all
+  subscriptions) until every node has handled its last input; then the nodes are stopped with
+  SIGINT (killed if they do not exit), also on Ctrl-C, SIGTERM or an error.
+
+A window of the bag can be replayed (``--start``, ``--duration``). At the end a summary table is
+printed and a report folder written: ``index.md`` with figures (rfi_experiments.report),
+``summary.json`` and ``replay.md`` (per-topic counts, the nodes' final diagnostics, where the
+time went); with ``processes`` also ``logs/`` (the output of each process).
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import os
+import signal
+import subprocess
 import sys
+import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, TextIO
 
 from rfi_experiments.bag_io import BagError, BagReader
+from rfi_experiments.play import add_window_arguments, window_ns, window_s
 
 EXIT_USAGE = 2
+EXIT_FAILED = 1
+
+PROCESSES_DEFAULT_RATE = 1.0
+"""Default pace of ``--transport processes``, x real time. Measured on the whole of bags/default
+(2 shared cores, two runs each): at 1x every output equals the direct transport's, field for
+field; at 3x (2.3-2.6x real time end to end) one or two of 11694 /fusion/status messages carried a
+cumulative rejection count one lower (a jammer state that the fusion rejects on arrival came after
+them), all else equal. Faster still, messages can reach the fusion after its 0.1 s re-ordering
+window and be rejected."""
+
+NODE_EXECUTABLES = (('rfi_monitor', 'rfi_monitor', 'rfi_monitor_node'),
+                    ('uwb_gnss_fusion', 'uwb_gnss_fusion', 'fusion_node'),
+                    ('imm_carrier', 'imm_carrier', 'imm_carrier_node'))
+"""(node name, package, executable) of the three nodes."""
+
+NODE_ENDPOINTS = {
+    'rfi_monitor': (('/rfi/if_samples',), ('/rfi/jammer_state', '/diagnostics')),
+    'uwb_gnss_fusion': (('/gnss/measurements', '/uwb/ranges', '/rfi/jammer_state'),
+                        ('/fusion/odometry', '/fusion/fix', '/fusion/status', '/diagnostics')),
+    'imm_carrier': (('/gnss/correlators',), ('/carrier/estimates', '/diagnostics')),
+}
+"""Node name -> (topics it subscribes, topics it publishes), before remapping."""
+
+OUTPUT_TYPES = {
+    '/rfi/jammer_state': 'rfi_msgs/msg/JammerState',
+    '/fusion/odometry': 'nav_msgs/msg/Odometry',
+    '/fusion/fix': 'sensor_msgs/msg/NavSatFix',
+    '/fusion/status': 'rfi_msgs/msg/FusionStatus',
+    '/carrier/estimates': 'rfi_msgs/msg/CarrierPhaseArray',
+    '/diagnostics': 'diagnostic_msgs/msg/DiagnosticArray',
+}
+"""Every topic the three nodes publish, and its type: what ``processes`` records."""
+
+STAMPED_ONE_TO_ONE = (('rfi_monitor', '/rfi/if_samples', '/rfi/jammer_state'),
+                      ('imm_carrier', '/gnss/correlators', '/carrier/estimates'))
+"""(node, input, output): the node publishes the output with the header stamp of each input it
+accepts, in input order. An output stamped at the last input's stamp shows that the node is done.
+The fusion has no such output (its outputs lag by its re-ordering window and its last inputs stay
+in that window), so its end is seen as quiescence."""
+
+DISCOVERY_SETTLE_S = 1.0
+"""Wait after this process sees every node's endpoints, and after play's publishers are matched, s:
+the other side of each match (the subscriber's) completes a little later, and until then the
+middleware delivers the first messages only by retransmission, up to seconds late."""
+
+SYNCED = (('rfi_monitor', '/rfi/if_samples', '/rfi/jammer_state'),)
+"""(node, input, output) that ``play`` paces on (``--sync``): after each IF block it waits for the
+monitor's jammer state, so the fusion gets it before the GNSS and UWB messages that follow the
+block in the bag, as in a replay in one process, however long the monitor takes for a block."""
+
+REPORT_TOPICS = ('/rfi/jammer_state', '/fusion/odometry', '/carrier/estimates')
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -27,11 +96,31 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('bag', help='bag directory (mcap)')
     parser.add_argument('--out', default='report', help='report folder to write (default: report)')
     parser.add_argument('--rate', type=float, default=None,
-                        help='replay pace as a multiple of real time (default: as fast as possible)')
-    parser.add_argument('--transport', choices=('dds', 'direct'), default='direct',
+                        help='replay pace as a multiple of real time (default: as fast as possible with direct and '
+                             f'dds, which never drop or reorder; {PROCESSES_DEFAULT_RATE:g} with processes: measured '
+                             'on bags/default to give the direct transport\'s outputs field for field; faster, the '
+                             'fusion can get jammer states after its 0.1 s re-ordering window)')
+    parser.add_argument('--transport', choices=('direct', 'dds', 'processes'), default='direct',
                         help='direct: the nodes\' callbacks get the messages handed over in-process (default, '
                              'fast); dds: the nodes talk over the middleware on one executor, as separate nodes '
-                             'on a robot do (about a millisecond per hop here)')
+                             'on a robot do (about a millisecond per hop here); processes: the node executables '
+                             'run as separate processes that `play` feeds, and this process records their outputs')
+    add_window_arguments(parser)
+    parser.add_argument('--timeout', type=float, default=60.0, metavar='SECONDS',
+                        help='processes: longest wait for the node processes to come up, and for the last outputs '
+                             'after play has finished (default 60)')
+    parser.add_argument('--record-outputs', metavar='BAG',
+                        help='also write every message the nodes published to this (new) mcap bag, in the order '
+                             'received (log time: the run\'s start plus the receive index, ns)')
+    parser.add_argument('--warmup', type=float, default=0.5, metavar='SECONDS',
+                        help='processes: play the first SECONDS of the bag at --warmup-rate, the rest at --rate, so '
+                             'that the nodes\' first-call costs (numba, imports) do not pile up a backlog (default '
+                             '0.5; 0: none)')
+    parser.add_argument('--warmup-rate', type=float, default=0.1, metavar='RATE',
+                        help='processes: pace of the warm-up, x real time (default 0.1)')
+    parser.add_argument('--settle', type=float, default=1.0, metavar='SECONDS',
+                        help='processes: the run is complete once every node has answered its last input and '
+                             'nothing has been published for this long (default 1)')
     parser.add_argument('--params-file', action='append', default=[], metavar='YAML',
                         help='ROS 2 parameters file (node_name: ros__parameters: ...; "/**" for all nodes), '
                              'e.g. the one shipped beside a bag; may be given more than once')
@@ -85,25 +174,369 @@ def diagnostics_summary(messages: list) -> dict[str, dict[str, str]]:
     return last
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    import time
+def write_outputs_bag(result: Any, path: str) -> None:
+    """Write every output of a replay (ReplayResult) to a new bag, in receive order across topics.
 
+    Raises:
+        BagError: the bag exists or cannot be written.
+    """
+    from rfi_experiments.bag_io import BagWriter
+
+    items = sorted((i, topic, m) for topic, messages in result.outputs.items() for i, m in messages)
+    t0 = time.time_ns()
+    with BagWriter(path) as bag:
+        for i, topic, m in items:
+            if isinstance(m, bytes):
+                bag.write_raw(topic, result.output_types[topic], m, t0 + i)
+            else:
+                bag.write(topic, m, t0 + i)
+
+
+class RunError(RuntimeError):
+    """A replay could not be completed; the message says what is missing and where to look."""
+
+
+def ros_arguments(argv: Sequence[str]) -> list[str]:
+    """The ``--ros-args ... [--]`` parts of ``argv`` (remaps, parameters), to pass on to other processes."""
+    out: list[str] = []
+    inside = False
+    for arg in argv:
+        if arg == '--ros-args':
+            inside = True
+            out.append(arg)
+        elif inside and arg == '--':
+            inside = False
+            out.append(arg)
+        elif inside:
+            out.append(arg)
+    return out
+
+
+def executable_path(package: str, name: str) -> str:
+    """Where ``ros2 run package name`` looks: ``<prefix of package>/lib/<package>/<name>`` (as tools/ros2_run).
+
+    Raises:
+        RunError: the package is not in the ament index or has no such executable.
+    """
+    from ament_index_python.packages import PackageNotFoundError, get_package_prefix
+
+    try:
+        prefix = get_package_prefix(package)
+    except PackageNotFoundError:
+        raise RunError(f'package {package!r} not found (is install/setup.bash sourced?)') from None
+    path = os.path.join(prefix, 'lib', package, name)
+    if not os.access(path, os.X_OK):
+        raise RunError(f'no executable {name!r} in package {package!r} ({path})')
+    return path
+
+
+class ChildProcesses:
+    """The processes a ``processes`` run starts: each in its own session (a Ctrl-C reaches only this
+    process, which then stops them in order), its output in ``log_dir/<name>.log``."""
+
+    def __init__(self, log_dir: Path) -> None:
+        self.log_dir = log_dir
+        self.procs: dict[str, subprocess.Popen] = {}
+        self._logs: dict[str, TextIO] = {}
+
+    def start(self, name: str, command: list[str], *, stderr_to_terminal: bool = False) -> subprocess.Popen:
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        log = open(self.log_dir / f'{name}.log', 'w')  # noqa: SIM115 (closed in stop())
+        self._logs[name] = log
+        log.write('$ ' + ' '.join(command) + '\n')
+        log.flush()
+        proc = subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=log,
+                                stderr=None if stderr_to_terminal else subprocess.STDOUT, start_new_session=True)
+        self.procs[name] = proc
+        return proc
+
+    def log_tail(self, name: str, lines: int = 8) -> str:
+        try:
+            text = (self.log_dir / f'{name}.log').read_text(errors='replace').splitlines()
+        except OSError:
+            return ''
+        return '\n'.join('    ' + line for line in text[-lines:])
+
+    def check_alive(self, names: Sequence[str]) -> None:
+        """Raise RunError if one of ``names`` has exited (with the end of its log)."""
+        for name in names:
+            code = self.procs[name].poll()
+            if code is not None:
+                raise RunError(f'{name} exited early with code {code}; the end of {self.log_dir / name}.log:\n'
+                               + self.log_tail(name))
+
+    def stop(self, timeout_s: float = 10.0) -> dict[str, int]:
+        """SIGINT to every process still running, then SIGKILL to those not gone after ``timeout_s``;
+        return each process's exit code (negative: killed by that signal)."""
+        for proc in self.procs.values():
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+        deadline = time.monotonic() + timeout_s
+        codes: dict[str, int] = {}
+        try:
+            for name, proc in self.procs.items():
+                try:
+                    codes[name] = proc.wait(timeout=max(0.0, deadline - time.monotonic()))
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    codes[name] = proc.wait()
+        finally:  # also on a second Ctrl-C while waiting: no process is left behind
+            for name, proc in self.procs.items():
+                if proc.poll() is None:
+                    proc.kill()
+                    codes[name] = proc.wait()
+            for log in self._logs.values():
+                log.close()
+        return codes
+
+
+@dataclass
+class ProcessesRun:
+    """What a ``processes`` run measured besides the recorded outputs."""
+
+    exit_codes: dict[str, int]
+    completion: str
+
+
+@dataclass
+class Segment:
+    """The window of the bag that a ``processes`` run plays, and what it holds."""
+
+    start_s: float
+    duration_s: float | None  # None: to the end of the bag
+    counts: dict[str, int]
+    first_ns: int | None  # log times of its first and last input
+    last_ns: int | None
+    last_input: dict[str, int]  # node -> header stamp of its last one-to-one input, ns
+
+
+def _segment(reader: BagReader, inputs: list[str], start_s: float, duration_s: float | None) -> Segment:
+    start_ns, stop_ns = window_ns(reader.start_ns, window_s(start_s, duration_s) or (0.0, math.inf))
+    counts = {t: 0 for t in inputs}
+    first = last = None
+    last_raw: dict[str, Any] = {}
+    stamped = {topic: node for node, topic, _ in STAMPED_ONE_TO_ONE}
+    for message in reader.messages(inputs, start_ns=start_ns, stop_ns=stop_ns):
+        counts[message.topic] += 1
+        first = message.stamp_ns if first is None else first
+        last = message.stamp_ns
+        if message.topic in stamped:
+            last_raw[message.topic] = message
+    last_input = {}
+    for topic, message in last_raw.items():
+        stamp = message.decode().header.stamp
+        last_input[stamped[topic]] = stamp.sec * 1_000_000_000 + stamp.nanosec
+    return Segment(start_s, duration_s, counts, first, last, last_input)
+
+
+def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[str],
+                  params: dict[str, dict[str, object]], window: tuple[float, float] | None,
+                  out: Path) -> tuple[Any, ProcessesRun]:
+    """Replay ``inputs`` of the bag through the node executables as separate processes fed by ``play``.
+
+    ``play`` plays the first ``--warmup`` seconds at ``--warmup-rate`` and the rest at ``--rate``,
+    and after each IF block waits for the monitor's jammer state (``--sync``). Without the slow
+    start, the nodes' first-call costs (numba compilation or cache loading, imports) pile up a
+    backlog at a real-time pace; the fusion node's executor then takes GNSS, UWB and jammer
+    messages out of arrival order and rejects those later than its re-ordering window. Neither
+    changes anything else: the nodes take their time from the stamps.
+
+    Returns:
+        ``(ReplayResult, ProcessesRun)``: the recorded outputs (CDR bytes, in arrival order per topic)
+        and input counts as the in-process transports give them, and the exit codes of the processes.
+
+    Raises:
+        RunError: an executable is missing, a process died, discovery or the last outputs did not
+            come within ``--timeout``, or ``play`` failed (the message names it and its log).
+    """
     import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    from rfi_experiments.bag_io import message_class
+    from rfi_experiments.replay import ReplayResult
+    from rfi_node_common.qos import RECORDER_QOS
+
+    rate = PROCESSES_DEFAULT_RATE if args.rate is None else args.rate
+    paths = {name: executable_path(package, exe) for name, package, exe in NODE_EXECUTABLES}
+    play = executable_path('rfi_experiments', 'play')
+    forwarded = ros_arguments(argv)
+    start_s, stop_s = window if window is not None else (0.0, math.inf)
+    with BagReader(args.bag) as reader:
+        seg = _segment(reader, inputs, start_s, None if math.isinf(stop_s) else stop_s - start_s)
+    if seg.first_ns is None or seg.last_ns is None:
+        raise RunError(f'no input message in the selected window of {args.bag}')
+
+    children = ChildProcesses(out / 'logs')
+    context = rclpy.context.Context()
+    rclpy.init(args=list(argv), context=context)
+    node = rclpy.create_node('rfi_run_recorder', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    recorded: dict[str, list[tuple[int, bytes]]] = {t: [] for t in OUTPUT_TYPES}
+    received: dict[str, Any] = {'n': 0, 'at': time.monotonic()}  # messages so far, time of the last
+
+    def recorder(topic: str):
+        messages = recorded[topic]
+
+        def on_message(raw: bytes) -> None:
+            received['n'] += 1
+            received['at'] = time.monotonic()
+            messages.append((received['n'], raw))
+        return on_message
+
+    previous = {sig: signal.signal(sig, _raise_interrupt) for sig in (signal.SIGTERM, signal.SIGHUP)}
+    exit_codes: dict[str, int] = {}
+    try:
+        subs = {t: node.create_subscription(message_class(m), t, recorder(t), RECORDER_QOS, raw=True)
+                for t, m in OUTPUT_TYPES.items()}
+        for name, path in paths.items():
+            command = [path, '--ros-args']
+            for params_file in args.params_file:
+                command += ['--params-file', str(Path(params_file).resolve())]
+            if name == 'imm_carrier':  # run's default, unless a parameters file sets it
+                command += ['-p', f'method:={params["imm_carrier"]["method"]}']
+            command += forwarded[1:] if forwarded else []
+            children.start(name, command)
+        _wait_for_graph(node, executor, subs, children, args.timeout)
+        node_names = list(paths)
+        wall_start = time.monotonic()
+        play_cmd = [play, str(args.bag), '--topics', *inputs, '--rate', repr(rate), '--start', repr(seg.start_s)]
+        if seg.duration_s is not None:
+            play_cmd += ['--duration', repr(seg.duration_s)]
+        play_cmd += ['--warmup', repr(args.warmup), '--warmup-rate', repr(args.warmup_rate),
+                     '--wait-subscribers', repr(args.timeout), '--start-delay', repr(DISCOVERY_SETTLE_S),
+                     '--ack-timeout', repr(args.timeout)]
+        play_cmd += [f'--sync={inp}:{out}' for _, inp, out in SYNCED if inp in inputs]
+        if args.no_progress:
+            play_cmd.append('--no-progress')
+        play_cmd += forwarded
+        player = children.start('play', play_cmd, stderr_to_terminal=not args.no_progress)
+        while player.poll() is None:
+            executor.spin_once(timeout_sec=0.05)
+            children.check_alive(node_names)
+        if player.returncode != 0:
+            raise RunError(f'play exited with code {player.returncode}; the end of {children.log_dir}/play.log:\n'
+                           + children.log_tail('play'))
+        completion = _wait_for_last_outputs(executor, recorded, seg.last_input, received, children, node_names,
+                                            args)
+        wall_time_s = received['at'] - wall_start  # the first play's start to the last output
+    finally:
+        exit_codes = children.stop()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        executor.remove_node(node)
+        node.destroy_node()
+        executor.shutdown()
+        rclpy.try_shutdown(context=context)
+    result = ReplayResult(outputs={t: v for t, v in recorded.items() if v},
+                          output_types={t: OUTPUT_TYPES[t] for t, v in recorded.items() if v},
+                          inputs={t: n for t, n in seg.counts.items() if n}, wall_time_s=wall_time_s,
+                          bag_duration_s=(seg.last_ns - seg.first_ns) * 1e-9)
+    return result, ProcessesRun(exit_codes=exit_codes, completion=completion)
+
+
+def _raise_interrupt(signum: int, _frame: Any) -> None:
+    raise KeyboardInterrupt(f'signal {signum}')
+
+
+def _wait_for_graph(node: Any, executor: Any, subs: dict[str, Any], children: ChildProcesses,
+                    timeout_s: float) -> None:
+    """Wait until every node shows its endpoints in the graph and the recorder has matched every
+    publisher of the recorded topics."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        children.check_alive([n for n, _, _ in NODE_EXECUTABLES])
+        missing = []
+        for name, (subscribes, publishes) in NODE_ENDPOINTS.items():
+            for topic in subscribes:
+                resolved = node.resolve_topic_name(topic)
+                if not any(i.node_name == name for i in node.get_subscriptions_info_by_topic(resolved)):
+                    missing.append(f'{name} subscribing {resolved}')
+            for topic in publishes:
+                resolved = node.resolve_topic_name(topic)
+                if not any(i.node_name == name for i in node.get_publishers_info_by_topic(resolved)):
+                    missing.append(f'{name} publishing {resolved}')
+        for sub in subs.values():
+            n_graph = len(node.get_publishers_info_by_topic(sub.topic_name))
+            if sub.get_publisher_count() < n_graph:
+                missing.append(f'the recorder matched {sub.get_publisher_count()} of {n_graph} publishers of '
+                               f'{sub.topic_name}')
+        if not missing:
+            # Our view of the graph is complete; the nodes' views of each other follow within the
+            # discovery round trip. Give it that, so the monitor's first jammer state is not late.
+            settle = time.monotonic() + DISCOVERY_SETTLE_S
+            while time.monotonic() < settle:
+                executor.spin_once(timeout_sec=0.05)
+            return
+        if time.monotonic() > deadline:
+            raise RunError(f'the node processes did not come up within {timeout_s} s (ROS_DOMAIN_ID '
+                           f'{os.environ.get("ROS_DOMAIN_ID", "0")}, ROS_AUTOMATIC_DISCOVERY_RANGE '
+                           f'{os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "unset")}); not seen: '
+                           + '; '.join(missing) + f'. Logs: {children.log_dir}')
+        executor.spin_once(timeout_sec=0.05)
+
+
+def _wait_for_last_outputs(executor: Any, recorded: dict[str, list[tuple[int, bytes]]],
+                           last_input: dict[str, int], received: dict[str, Any],
+                           children: ChildProcesses, node_names: list[str], args: argparse.Namespace) -> str:
+    """After ``play`` has finished (every input acknowledged by its subscriber), wait until each node
+    with a one-to-one stamped output has published it for its last input and nothing has been
+    published for ``--settle`` s; a node whose last input was rejected (no output for it) is taken as
+    done after five times that quiet time. Return how completion was decided.
+
+    Raises:
+        RunError: not complete within ``--timeout`` s.
+    """
+    from rclpy.serialization import deserialize_message
+
+    from rfi_experiments.bag_io import message_class
+
+    classes = {topic: message_class(OUTPUT_TYPES[topic]) for _, _, topic in STAMPED_ONE_TO_ONE}
+    start = time.monotonic()
+    while True:
+        executor.spin_once(timeout_sec=0.05)
+        children.check_alive(node_names)
+        waiting = []
+        for name, _, topic in STAMPED_ONE_TO_ONE:
+            expected = last_input.get(name)
+            if expected is None:
+                continue
+            got = None
+            if recorded[topic]:
+                stamp = deserialize_message(recorded[topic][-1][1], classes[topic]).header.stamp
+                got = stamp.sec * 1_000_000_000 + stamp.nanosec
+            if got is None or got < expected:
+                waiting.append(f'{name}: last {topic} stamped {got} ns, its last input {expected} ns')
+        quiet_s = time.monotonic() - max(received['at'], start)
+        if not waiting and quiet_s >= args.settle:
+            return (f'every node answered its last input (rfi_monitor, imm_carrier: by stamp) and nothing was '
+                    f'published for {args.settle:g} s')
+        if waiting and quiet_s >= 5 * args.settle:
+            return (f'nothing was published for {5 * args.settle:g} s; not answered by stamp (last input rejected?): '
+                    + '; '.join(waiting))
+        if time.monotonic() - start > args.timeout:
+            raise RunError(f'outputs still coming or incomplete {args.timeout:g} s after play finished: '
+                           + ('; '.join(waiting) or f'messages still arriving ({received["n"]} so far)')
+                           + f'. Logs: {children.log_dir}')
+
+
+def main(argv: Sequence[str] | None = None) -> int:
     from rclpy.utilities import remove_ros_args
 
-    from imm_carrier.imm_carrier_node import ImmCarrierNode
-    from rfi_experiments.replay import ReplayHarness, ReplayStalled
     from rfi_experiments.report import write_report
-    from rfi_monitor.rfi_monitor_node import RfiMonitorNode
-    from uwb_gnss_fusion.fusion_node import FusionNode
 
     argv = list(sys.argv if argv is None else argv)
     args = build_parser().parse_args(remove_ros_args(argv)[1:])
     # Synchronous publication: about 3x lower latency per hop for the in-process replay.
     os.environ.setdefault('RMW_FASTRTPS_PUBLICATION_MODE', 'SYNCHRONOUS')
-    if args.rate is not None and not args.rate > 0:
-        return fail(f'--rate must be > 0 (got {args.rate})')
+    if args.rate is not None and not (math.isfinite(args.rate) and args.rate > 0):
+        return fail(f'--rate must be a finite number > 0 (got {args.rate})')
+    for name in ('timeout', 'settle', 'warmup', 'warmup_rate'):
+        value = getattr(args, name)
+        if not (math.isfinite(value) and (value > 0 or (name == 'warmup' and value == 0))):
+            return fail(f'--{name.replace("_", "-")} must be a finite number > 0 (got {value})')
     try:
+        window = window_s(args.start, args.duration)
         params = load_params_files(args.params_file)
     except ValueError as err:
         return fail(str(err))
@@ -116,46 +549,61 @@ def main(argv: Sequence[str] | None = None) -> int:
     inputs = sorted(t for t in topics if not t.startswith('/truth/'))
     if not inputs:
         return fail(f'{args.bag} holds no input topics (only {", ".join(sorted(topics)) or "nothing"})')
+    if args.record_outputs and Path(args.record_outputs).exists():
+        return fail(f'--record-outputs {args.record_outputs} exists already')
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
 
-    context = rclpy.context.Context()
-    rclpy.init(args=argv, context=context)
-    nodes = []
-    try:
+    notes: list[str] = []
+    if args.transport == 'processes':
         try:
-            for name, cls in (('rfi_monitor', RfiMonitorNode), ('uwb_gnss_fusion', FusionNode),
-                              ('imm_carrier', ImmCarrierNode)):
-                nodes.append(cls(context=context, parameter_overrides=overrides_for(name, params)))
-        except ValueError as err:
-            return fail(f'{name}: {err}')
-        harness = ReplayHarness(nodes, context=context, transport=args.transport)
-        progress = None
-        if not args.no_progress:
-            from tqdm import tqdm
-            n_inputs = sum(topics[t][1] for t in inputs)
-            progress = tqdm(total=n_inputs, unit='msg', desc=f'replay {Path(args.bag).name}', file=sys.stderr,
-                            mininterval=0.5)
-        try:
-            result = harness.run(args.bag, topics=inputs, rate=args.rate,
-                                 progress=(lambda done, _total: progress.update(1)) if progress else None)
-        except (BagError, ReplayStalled) as err:
+            result, run = run_processes(args, argv, inputs, params, window, out)
+        except (RunError, BagError) as err:
             return fail(str(err))
-        finally:
-            if progress is not None:
-                progress.close()
-        diagnostics = diagnostics_summary(result.messages('/diagnostics')) if '/diagnostics' in result.outputs else {}
-        outputs = {t: result.messages(t) for t in ('/rfi/jammer_state', '/fusion/odometry', '/carrier/estimates')
-                   if t in result.outputs}
-        harness.destroy()
-    finally:
-        for node in nodes:
-            node.destroy_node()
-        rclpy.try_shutdown(context=context)
-
-    replay_line = (f'{sum(result.inputs.values())} input messages replayed through rfi_monitor, uwb_gnss_fusion '
-                   f'and imm_carrier ({args.transport} transport): {result.bag_duration_s:.1f} s of data in '
+        except KeyboardInterrupt:
+            print('run: interrupted; node processes stopped', file=sys.stderr)
+            return 130
+        rate = PROCESSES_DEFAULT_RATE if args.rate is None else args.rate
+        how = f'processes transport: node executables fed by play at {rate:g}x'
+        notes.append(f'Completion: {run.completion}.')
+        notes.append('Exit codes after SIGINT: ' + ', '.join(f'{n} {c}' for n, c in run.exit_codes.items())
+                     + '. Output of each process: [logs/](logs/).')
+        fusion = diagnostics_summary(result.messages('/diagnostics')).get('uwb_gnss_fusion', {}) \
+            if '/diagnostics' in result.outputs else {}
+        late = int(fusion.get('rejected.late_beyond_reorder_window', 0))
+        if late:
+            warning = (f'{late} messages reached the fusion node later than its re-ordering window and were '
+                       'rejected: the processes lagged (load, or a --rate too high), so the outputs differ from a '
+                       'replay in one process')
+            notes.append(f'Warning: {warning}.')
+            print(f'run: warning: {warning}', file=sys.stderr)
+        bad = {n: c for n, c in run.exit_codes.items() if c != 0}
+        if bad:
+            print(f'run: warning: processes did not exit cleanly: {bad} (logs in {out / "logs"})', file=sys.stderr)
+    else:
+        try:
+            result = run_in_process(args, argv, inputs, topics, params, window)
+        except ValueError as err:
+            return fail(str(err))
+        except (BagError, RuntimeError) as err:
+            return fail(str(err))
+        how = f'{args.transport} transport'
+    if args.record_outputs:
+        try:
+            write_outputs_bag(result, args.record_outputs)
+        except BagError as err:
+            return fail(str(err))
+    diagnostics = diagnostics_summary(result.messages('/diagnostics')) if '/diagnostics' in result.outputs else {}
+    outputs = {t: result.messages(t) for t in REPORT_TOPICS if t in result.outputs}
+    window_text = '' if window is None else (
+        f' (window {window[0]:g}-{"end" if math.isinf(window[1]) else f"{window[1]:g}"} s of the bag)')
+    replay_line = (f'{sum(result.inputs.values())} input messages{window_text} replayed through rfi_monitor, '
+                   f'uwb_gnss_fusion and imm_carrier ({how}): {result.bag_duration_s:.1f} s of data in '
                    f'{result.wall_time_s:.1f} s, {result.real_time_factor:.1f}x real time.')
-    lines = [f'# Replay of {args.bag}', '', replay_line, '',
-             '| topic | direction | messages |', '|---|---|---|']
+    lines = [f'# Replay of {args.bag}', '', replay_line, '']
+    if notes:
+        lines += [' '.join(notes), '']
+    lines += ['| topic | direction | messages |', '|---|---|---|']
     for t in inputs:
         lines.append(f'| {t} | in | {result.inputs.get(t, 0)} |')
     for t in sorted(result.outputs):
@@ -165,8 +613,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     for name, values in diagnostics.items():
         lines += ['', f'## Diagnostics of {name}', '', '| key | value |', '|---|---|']
         lines += [f'| {k} | {v} |' for k, v in values.items()]
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     (out / 'replay.md').write_text('\n'.join(lines) + '\n')
     start = time.monotonic()
     summary = write_report(args.bag, outputs, out,
@@ -178,6 +624,61 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f'report written to {out / "index.md"} (figures and tables; evaluation took '
           f'{time.monotonic() - start:.1f} s)')
     return 0
+
+
+def run_in_process(args: argparse.Namespace, argv: Sequence[str], inputs: list[str],
+                   topics: dict[str, tuple[str, int]], params: dict[str, dict[str, object]],
+                   window: tuple[float, float] | None) -> Any:
+    """The three nodes in this process, fed by ReplayHarness (``direct`` or ``dds``).
+
+    Raises:
+        ValueError: a node rejected its parameters (the message names the node).
+        BagError, ReplayStalled: the bag cannot be read, or the graph did not settle.
+    """
+    import rclpy
+
+    from imm_carrier.imm_carrier_node import ImmCarrierNode
+    from rfi_experiments.replay import ReplayHarness
+    from rfi_monitor.rfi_monitor_node import RfiMonitorNode
+    from uwb_gnss_fusion.fusion_node import FusionNode
+
+    context = rclpy.context.Context()
+    rclpy.init(args=list(argv), context=context)
+    nodes = []
+    try:
+        for name, cls in (('rfi_monitor', RfiMonitorNode), ('uwb_gnss_fusion', FusionNode),
+                          ('imm_carrier', ImmCarrierNode)):
+            try:
+                nodes.append(cls(context=context, parameter_overrides=overrides_for(name, params)))
+            except ValueError as err:
+                raise ValueError(f'{name}: {err}') from None
+        harness = ReplayHarness(nodes, context=context, transport=args.transport)
+        with BagReader(args.bag) as reader:
+            span_s = reader.duration_ns * 1e-9
+        harness_window = None if window is None else (window[0], min(window[1], span_s + 1.0))
+        if harness_window is not None:
+            with BagReader(args.bag) as reader:
+                start_ns, stop_ns = window_ns(reader.start_ns, harness_window)
+                n_inputs = sum(1 for _ in reader.messages(inputs, start_ns=start_ns, stop_ns=stop_ns))
+        else:
+            n_inputs = sum(topics[t][1] for t in inputs)
+        progress = None
+        if not args.no_progress:
+            from tqdm import tqdm
+            progress = tqdm(total=n_inputs, unit='msg', desc=f'replay {Path(args.bag).name}', file=sys.stderr,
+                            mininterval=0.5)
+        try:
+            result = harness.run(args.bag, topics=inputs, rate=args.rate, window_s=harness_window,
+                                 progress=(lambda done, _total: progress.update(1)) if progress else None)
+        finally:
+            if progress is not None:
+                progress.close()
+        harness.destroy()
+        return result
+    finally:
+        for node in nodes:
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)
 
 
 if __name__ == '__main__':

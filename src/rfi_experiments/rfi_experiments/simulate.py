@@ -1,8 +1,9 @@
 """``ros2 run rfi_experiments simulate SCENARIO OUT``: generate a jamming experiment as a bag.
 
 A scenario is a small YAML file (see ``scenarios/`` in this package's share directory): a seed, a
-duration, and one section per input stream (IF snapshots, GNSS measurements, UWB ranges,
-correlators) plus the jamming schedule. The run is reproducible: the same file gives the same
+duration, the timeline (a ``start`` in GPS time and one ``jamming`` schedule that every stream
+derives from, see :mod:`rfi_experiments.scenario`) and one section per input stream (IF
+snapshots, GNSS measurements and UWB ranges, correlators). The run is reproducible: the same file gives the same
 bag, message for message and field for field (not byte for byte: rclpy's serialiser leaves the
 CDR alignment padding uninitialised, so the padding bytes may differ between two runs).
 """

@@ -25,6 +25,11 @@ Section keys (all optional; defaults are the paper's scenario, Zhao, Khanafseh &
         - {svid: 11, cn0_drop_db: 26.0}
         - {svid: 28, cn0_drop_db: 36.0}
 
+In a scenario file with a top-level ``start`` and ``jamming`` schedule, ``start_gps_week`` and
+``start_gps_tow_s`` come from ``start``, and ``onset_phase: {type: chirp, jsr_db: 22.0}`` (instead
+of ``onset_s``) puts the onset at the start of the first phase of that type and J/S
+(rfi_experiments.scenario resolves it); a key written here overrides the shared one.
+
 The duration is the scenario's ``duration_s``. The builder runs
 :func:`rfi_experiments.sim.correlators.simulate_correlators` (one receiver clock shared by all
 satellites) and yields, for each interval k (stamp = end of the interval, GPS time scale as in

@@ -63,6 +63,11 @@ Notes
 -----
 Measurement models: Cao et al., eq. 4 (effective C/N0 under J/S), eq. 5-7, as implemented by the
 simulator (see its module docstring).
+
+In a scenario file with a top-level timeline (``start``, ``jamming``), ``start_gps_week``,
+``start_gps_tow_s`` and ``jamming`` are derived from it by
+:func:`rfi_experiments.scenario.resolve_streams`; a key written in this section overrides the
+derived one.
 """
 
 from __future__ import annotations

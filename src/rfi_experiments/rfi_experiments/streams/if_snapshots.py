@@ -56,6 +56,10 @@ Size: the bag holds ``sample_rate_hz * block_duration_s * (2 if complex) * (1 if
 bytes per snapshot (plus about 250 bytes of headers and truth), i.e. per second of scenario that
 divided by ``period_s``: 38.4 kB/s for the paper's front end (real, 8 bit, 1 ms every second), 20 s
 about 0.8 MB.
+
+In a scenario file with a top-level timeline (``start``, ``jamming``), ``start_stamp_ns`` and ``phases``
+are derived from it by :func:`rfi_experiments.scenario.resolve_streams`; a key written in this
+section overrides the derived one.
 """
 
 from __future__ import annotations

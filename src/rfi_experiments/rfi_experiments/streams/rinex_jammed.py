@@ -76,6 +76,10 @@ Notes
 -----
 Cao et al., eq. 4 (effective C/N0), eq. 5-7 (measurement models of the real data and UWB);
 Kaplan & Hegarty, 3rd ed., eq. 8.53 (DLL) and 8.47 (FLL) via ``jamming_weights``.
+
+In a scenario file with a top-level timeline (``start``, ``jamming``), ``jamming``
+is derived from it by :func:`rfi_experiments.scenario.resolve_streams`; a key written in this
+section overrides the derived one.
 """
 
 from __future__ import annotations
