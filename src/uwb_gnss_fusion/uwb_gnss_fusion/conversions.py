@@ -218,22 +218,24 @@ def uwb_to_msg(meas: UwbRangeMeasurement, rssi_dbm: float = math.nan) -> UwbRang
     return msg
 
 
-def msg_to_uwb(msg: UwbRange) -> UwbRangeMeasurement:
+def msg_to_uwb(msg: UwbRange, frame_id: str | None = None) -> UwbRangeMeasurement:
     """Convert ``rfi_msgs/UwbRange`` to a :class:`UwbRangeMeasurement`.
 
     Args:
         msg: the message.
+        frame_id: ``frame_id`` of the measurement; None: the message's ``header.frame_id`` (the
+            node passes the core's name of the header's frame).
 
     Returns:
-        The measurement (``stamp_ns`` in integer ns, ``frame_id`` from the header). ``rssi_dbm``
-        is not part of the dataclass; read it from the message if needed.
+        The measurement (``stamp_ns`` in integer ns). ``rssi_dbm`` is not part of the dataclass;
+        read it from the message if needed.
     """
     p = msg.anchor_position
     return UwbRangeMeasurement(
         stamp_ns=stamp_to_ns(msg.header.stamp),
         anchor_id=str(msg.anchor_id),
         anchor_position_m=np.array([p.x, p.y, p.z], dtype=float),
-        frame_id=str(msg.header.frame_id),
+        frame_id=str(msg.header.frame_id) if frame_id is None else frame_id,
         range_m=float(msg.range_m),
         range_std_m=float(msg.range_std_m),
     )

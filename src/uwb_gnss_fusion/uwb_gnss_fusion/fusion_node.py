@@ -85,7 +85,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
-from sensor_msgs.msg import NavSatFix, NavSatStatus
+from sensor_msgs.msg import NavSatFix
 
 from gnss_common.observations import GnssEpoch
 from rfi_msgs.msg import FusionStatus, GnssMeasurementArray, JammerState, UwbRange
@@ -104,6 +104,13 @@ from uwb_gnss_fusion.fusion_filter import (
     ReorderBuffer,
 )
 from uwb_gnss_fusion.jamming_weights import TrackingLoopParams
+from uwb_gnss_fusion.output_messages import (  # noqa: F401 (re-exported: the node's output contract)
+    ORIENTATION_UNKNOWN_VARIANCE_RAD2,
+    fix_msg,
+    odometry_msg,
+    reason_lists,
+    status_msg,
+)
 from uwb_gnss_fusion.spp import SinglePointPositioner
 
 TOPICS = """topics:
@@ -112,14 +119,9 @@ TOPICS = """topics:
   publishes  /fusion/odometry (nav_msgs/Odometry), /fusion/fix (sensor_msgs/NavSatFix),
              /fusion/status (rfi_msgs/FusionStatus), /diagnostics (diagnostic_msgs/DiagnosticArray)"""
 
-ORIENTATION_UNKNOWN_VARIANCE_RAD2 = 1.0e6
-"""Variance written for the unestimated orientation and angular velocity, rad^2 (rad^2/s^2)."""
-
 JSR_VALID_RANGE_DB = (-100.0, 150.0)
 """J/S accepted from /rfi/jammer_state, dB."""
 
-UINT16_MAX = 2**16 - 1
-UINT32_MAX = 2**32 - 1
 _NS = 1_000_000_000
 KINDS = ('gnss', 'uwb', 'jammer')
 """Input kinds, as used in the counter names (``<kind>_received`` ...)."""
@@ -306,121 +308,6 @@ class _Item:
     payload: Any
 
 
-def _finite(*arrays: Any) -> bool:
-    """True if every element of every argument (floats or float arrays) is finite.
-
-    One ``isfinite(...).all()`` per array (no ``np.all`` wrapper); plain ``math.isfinite`` for scalars.
-    """
-    for a in arrays:
-        if isinstance(a, float):
-            if not math.isfinite(a):
-                return False
-        elif isinstance(a, np.ndarray) and a.dtype == np.float64:
-            if not np.isfinite(a).all():
-                return False
-        elif not np.isfinite(np.asarray(a, dtype=float)).all():
-            return False
-    return True
-
-
-def _odometry_covariance_index() -> tuple[np.ndarray, np.ndarray]:
-    """Flat indices into ``[covariance_pv.ravel() (36), 0.0, ORIENTATION_UNKNOWN_VARIANCE_RAD2]``
-    that give the row-major 6x6 pose and twist covariances (position / velocity block of the
-    filter, unestimated rotation block diagonal :data:`ORIENTATION_UNKNOWN_VARIANCE_RAD2`)."""
-    zero, unknown = 36, 37
-    pose = np.full((6, 6), zero, dtype=np.intp)
-    twist = np.full((6, 6), zero, dtype=np.intp)
-    for i in range(3):
-        for j in range(3):
-            pose[i, j] = 6 * i + j
-            twist[i, j] = 6 * (i + 3) + (j + 3)
-    for k in range(3, 6):
-        pose[k, k] = twist[k, k] = unknown
-    return pose.ravel(), twist.ravel()
-
-
-_POSE_COV_INDEX, _TWIST_COV_INDEX = _odometry_covariance_index()
-
-
-def _set_stamp(header: Any, stamp_ns: int) -> None:
-    """Write integer ns (>= 0) into the message's own ``header.stamp`` (as ``ns_to_stamp``, without
-    building a second Time message)."""
-    stamp_ns = int(stamp_ns)
-    if stamp_ns < 0:
-        raise ValueError(f'negative stamp {stamp_ns} ns cannot be a ROS time')
-    stamp = header.stamp
-    stamp.sec, stamp.nanosec = divmod(stamp_ns, _NS)
-
-
-def _reason_lists(reasons: dict[str, int]) -> tuple[list[str], list[int]]:
-    """Sorted reasons and their counts (clamped to uint32) for FusionStatus."""
-    items = sorted(reasons.items())
-    return [k for k, _ in items], [min(int(v), UINT32_MAX) for _, v in items]
-
-
-def status_msg(out: FusionOutput, stamp_ns: int, frame_id: str, reasons: dict[str, int],
-               reason_lists: tuple[list[str], list[int]] | None = None) -> FusionStatus:
-    """FusionOutput -> rfi_msgs/FusionStatus (counts clamped to their integer types).
-
-    ``reason_lists``: ``_reason_lists(reasons)`` if the caller has it already (copied into the
-    message, never shared between messages).
-    """
-    m = FusionStatus()
-    _set_stamp(m.header, stamp_ns)
-    m.header.frame_id = frame_id
-    m.mode = int(out.mode)
-    m.initialized = bool(out.initialized)
-    m.diverged = bool(out.diverged)
-    m.reinitializations = min(int(out.reinitializations), UINT32_MAX)
-    m.satellites_used = min(int(out.satellites_used), UINT16_MAX)
-    m.satellites_rejected = min(int(out.satellites_rejected), UINT16_MAX)
-    m.uwb_used = min(int(out.uwb_used), UINT16_MAX)
-    m.uwb_rejected = min(int(out.uwb_rejected), UINT16_MAX)
-    m.normalized_innovation_squared = float(out.normalized_innovation_squared)
-    m.clock_bias_m = float(out.clock_bias_m)
-    m.clock_drift_mps = float(out.clock_drift_mps)
-    m.jammer_to_signal_db = float(out.jammer_to_signal_db)
-    names, counts = _reason_lists(reasons) if reason_lists is None else reason_lists
-    m.rejection_reasons = list(names)
-    m.rejection_counts = counts  # the setter copies into its own array('I')
-    return m
-
-
-def odometry_msg(out: FusionOutput, frame_id: str, child_frame_id: str) -> Odometry:
-    """FusionOutput (initialised, finite) -> nav_msgs/Odometry (see the module docstring)."""
-    m = Odometry()
-    _set_stamp(m.header, out.stamp_ns)
-    m.header.frame_id = frame_id
-    m.child_frame_id = child_frame_id
-    position = m.pose.pose.position
-    position.x, position.y, position.z = out.position_m.tolist()
-    m.pose.pose.orientation.w = 1.0
-    # Both 36-element covariances (fresh float64 arrays, the message's own storage type) by one
-    # gather each from the filter's 6x6 [position, velocity] covariance.
-    source = np.empty(38)
-    source[:36] = out.covariance_pv.reshape(36)
-    source[36] = 0.0
-    source[37] = ORIENTATION_UNKNOWN_VARIANCE_RAD2
-    m.pose.covariance = source.take(_POSE_COV_INDEX)
-    linear = m.twist.twist.linear
-    linear.x, linear.y, linear.z = out.velocity_mps.tolist()
-    m.twist.covariance = source.take(_TWIST_COV_INDEX)
-    return m
-
-
-def fix_msg(out: FusionOutput, frame_id: str) -> NavSatFix:
-    """FusionOutput (initialised, finite, earth frame) -> sensor_msgs/NavSatFix."""
-    m = NavSatFix()
-    _set_stamp(m.header, out.stamp_ns)
-    m.header.frame_id = frame_id
-    m.status.status = NavSatStatus.STATUS_FIX
-    m.status.service = NavSatStatus.SERVICE_GPS
-    m.latitude, m.longitude, m.altitude = out.geodetic
-    m.position_covariance = out.position_covariance_enu_m2.reshape(9).copy()
-    m.position_covariance_type = NavSatFix.COVARIANCE_TYPE_KNOWN
-    return m
-
-
 class FusionNode(Node):
     """Thin node around :class:`FusionFilter` (see module docstring)."""
 
@@ -478,7 +365,7 @@ class FusionNode(Node):
             self._reject('uwb', 'uwb_frame_id', f'UWB frame_id {frame!r} is neither '
                          f'{self.params.earth_frame_id!r} nor {self.params.map_frame_id!r}')
         else:
-            meas = dataclasses.replace(msg_to_uwb(msg), frame_id=core_frame)
+            meas = msg_to_uwb(msg, frame_id=core_frame)
             self._enqueue(_Item(stamp_ns, 'uwb', meas))
         self._report()
 
@@ -634,7 +521,7 @@ class FusionNode(Node):
         cache = self._reasons_cache
         if cache is None or cache[0] != key:
             reasons = self.rejection_reasons()
-            cache = self._reasons_cache = (key, reasons, _reason_lists(reasons))
+            cache = self._reasons_cache = (key, reasons, reason_lists(reasons))
         return cache[1], cache[2]
 
     def _publish(self, out: FusionOutput, stamp_ns: int) -> None:
