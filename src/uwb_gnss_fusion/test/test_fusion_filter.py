@@ -538,3 +538,42 @@ def test_common_mode_screen_catches_an_outlier_the_clock_variance_hides():
         else:
             assert counts.get("innovation_gate_doppler", 0) == 0
     assert vel_err[True] < 0.01 < 0.3 < vel_err[False]
+
+
+def test_vectorised_satellite_checks_equal_the_per_observation_loop():
+    # every rejection reason, alone and mixed, in random epochs: same rows, same counts
+    rng = np.random.default_rng(33)
+    base = list(_epoch(T0, rng=rng).observations)
+    spoil = [
+        lambda o: dataclasses.replace(o, pseudorange_m=math.nan),
+        lambda o: dataclasses.replace(o, satellite_clock_bias_m=math.inf),
+        lambda o: dataclasses.replace(o, satellite_position_ecef_m=np.array([1.0, 2.0, 3.0])),
+        lambda o: dataclasses.replace(o, satellite_position_ecef_m=np.array([math.nan, 0.0, 0.0])),
+        lambda o: dataclasses.replace(o, pseudorange_m=5.0e5),
+        lambda o: dataclasses.replace(o, ionosphere_delay_m=-1.0),
+        lambda o: dataclasses.replace(o, cn0_dbhz=10.0),
+        lambda o: dataclasses.replace(o, cn0_dbhz=math.nan),
+        lambda o: dataclasses.replace(o, pseudorange_rate_mps=math.nan),
+        lambda o: dataclasses.replace(o, pseudorange_rate_mps=3.0e4),
+        lambda o: dataclasses.replace(o, satellite_velocity_ecef_mps=np.array([math.nan, 0.0, 0.0])),
+        lambda o: o,
+    ]
+    for use_doppler in (True, False):
+        for _ in range(50):
+            obs = [spoil[int(rng.integers(len(spoil)))](o) for o in base]
+            params = FusionParams(use_doppler=use_doppler)
+            a, b = FusionFilter(params), FusionFilter(params)
+            fast = a._validate_satellites_vectorised(obs)
+            slow = b._validate_satellites_loop(obs)
+            assert fast is not None
+            assert [(r[0].svid, r[3]) for r in fast] == [(r[0].svid, r[3]) for r in slow]
+            for rf, rs in zip(fast, slow, strict=True):
+                np.testing.assert_array_equal(rf[1], rs[1])
+                np.testing.assert_array_equal(rf[2], rs[2])
+            assert a.rejection_counts == b.rejection_counts
+    # a position that is not a 3-vector: the loop counts it as malformed
+    bad = [dataclasses.replace(base[0], satellite_position_ecef_m=np.zeros(2))] + base[1:]
+    f = FusionFilter()
+    assert f._validate_satellites_vectorised(bad) is None
+    assert len(f._validate_satellites_loop(bad)) == len(base) - 1
+    assert f.rejection_counts == {"malformed_observation": 1}
