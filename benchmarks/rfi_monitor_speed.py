@@ -39,6 +39,24 @@ is tracked from ~0.1 ms on, so the whole-chain rows are close to the steady stat
 frequency track is unchanged while the lattice is held (the step-fit lattice does not read the
 LPD peaks then; tested): the RMSE tables of paper_results.md did not move.
 
+Round 8 (kept; old vs new package alternately in one session, steady-state blocks 20-59 of the
+benchmark stream, CPU time per 1 ms block, medians of 5 monitors, on the quieter runs; the machine
+was shared and some runs were 2-25x slower for both, those are not quoted):
+
+* block_features: the float32 conversion and Hann window in one compiled pass, |X|^2 summed over
+  frames in a compiled loop (double accumulation instead of float32: bins change by ~4e-7), and
+  the ~15 small numpy calls after the Welch PSD in one compiled function
+  (``classifier._spectral_features``): 151-168 -> 87-92 us per block.
+* Fused loop: the running power (near-zero guard, noise compensation) updated once per aligned
+  16-sample window from the deviations of its samples (the same exponential average, 1e-9
+  relative at window ends, tested; the guard's threshold lags by < 16 samples of a 1024-sample
+  average), so the per-sample serial recursion leaves the measurement loop; the five status
+  counters as one packed integer per chunk: fused loop 803-818 -> 754-765 us per block
+  (21.0 -> 19.8 ns per sample). paper_results.md unchanged to the printed digits.
+* process(): non-finite and saturated samples counted in one compiled pass instead of
+  np.isfinite, count_nonzero, abs, masking (17 us per block before).
+* Whole chain, steady state: 998 -> 860-905 us per 1 ms block (1.00 -> 1.10-1.16x real time).
+
 Measured and not kept (fused loop over 20 ms, best of 21, same session; ns per sample):
 
 * Welch features with at most 64 frames instead of all 149 of a 1 ms block (round 6): block

@@ -44,6 +44,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from scipy import fft as sp_fft
 from scipy.ndimage import median_filter
 
@@ -143,6 +144,15 @@ def welch_psd(x: np.ndarray, nfft: int, max_frames: int) -> tuple[np.ndarray, in
     if nfr > max_frames:
         fr = fr[np.linspace(0, nfr - 1, max_frames).astype(np.int64)]
     cplx = np.iscomplexobj(x)
+    if not cplx and fr.shape[0] == nfr and x.dtype == np.float64:
+        # real input, all frames (the monitor's case): window and |X|^2 in compiled loops (speed)
+        fw32 = np.empty((nfr, nfft), dtype=np.float32)
+        _window_frames(x, _hann32(nfft), fw32)
+        spec = sp_fft.rfft(fw32, axis=1, overwrite_x=True)
+        p = _frame_power(spec) / nfr
+        fv = x[: nfr * nfft]
+        pw = float(np.dot(fv, fv)) / fv.size
+        return p * (pw / p.sum()), nfr
     # single precision FFT (scipy's pocketfft; numpy's float32 path is slower than its float64 one):
     # the PSD needs ~1e-3 relative accuracy (it is smoothed and thresholded in dB), float32 gives
     # 1e-7; 53 us instead of 74 us for 149 frames of 256 on the development machine
@@ -160,6 +170,31 @@ def welch_psd(x: np.ndarray, nfft: int, max_frames: int) -> tuple[np.ndarray, in
     if cplx:
         p = np.fft.fftshift(p)
     return p * (pw / p.sum()), int(fr.shape[0])
+
+
+@njit(cache=True)
+def _window_frames(x: np.ndarray, w32: np.ndarray, out: np.ndarray) -> None:
+    """out[i, j] = float32(x[i nfft + j]) * w32[j] (the float32 conversion and the Hann window of
+    ``welch_psd`` in one pass; same float32 arithmetic as astype + multiply)."""
+    nfr, nfft = out.shape
+    for i in range(nfr):
+        o = i * nfft
+        for j in range(nfft):
+            out[i, j] = np.float32(x[o + j]) * w32[j]
+
+
+@njit(cache=True)
+def _frame_power(spec: np.ndarray) -> np.ndarray:
+    """Sum over frames (rows) of |X|^2 of a complex64 spectrum, accumulated in double."""
+    nfr, nb = spec.shape
+    acc = np.zeros(nb)
+    for i in range(nfr):
+        for b in range(nb):
+            v = spec[i, b]
+            re = np.float64(v.real)
+            im = np.float64(v.imag)
+            acc[b] += re * re + im * im
+    return acc
 
 
 _HANN: dict[int, np.ndarray] = {}
@@ -202,35 +237,63 @@ def block_features(x: np.ndarray, template: np.ndarray | None, par: ClassifierPa
         par: ClassifierParams.
     """
     psd, frames = welch_psd(x, par.nfft, par.max_frames)
-    power = float(psd.sum())
-    tpl = np.full(psd.size, 1.0 / psd.size) if template is None else template
-    white = psd / tpl
-    scale = float(np.median(white))
-    k = int(np.argmax(psd / tpl))
+    tpl = np.full(psd.size, 1.0 / psd.size) if template is None else np.ascontiguousarray(template,
+                                                                                      dtype=np.float64)
+    (power, scale, jn_spec, occupancy, k, dk,
+     line) = _spectral_features(psd, tpl, max(par.sig_sigma / math.sqrt(frames), par.min_excess),
+                                10 ** (-par.sidelobe_db / 10))
     nb = psd.size
-    if 0 < k < nb - 1:
-        a, b, c = np.log(psd[k - 1:k + 2] + 1e-300)
-        den = a - 2 * b + c
-        dk = 0.5 * (a - c) / den if den < 0 else 0.0
-    else:
-        dk = 0.0
     if np.iscomplexobj(x):
         f_pk = (k + dk - nb // 2) / par.nfft
     else:
         f_pk = (k + dk) / par.nfft
+    return BlockFeatures(power, psd, frames, scale, jn_spec, occupancy, k, f_pk, line)
+
+
+@njit(cache=True)
+def _spectral_features(psd: np.ndarray, tpl: np.ndarray, thr: float, sidelobe: float
+                       ) -> tuple[float, float, float, float, int, float, float]:
+    """The features of ``block_features`` (module docstring) from the Welch PSD, in one compiled
+    pass (speed: ~15 small numpy calls before). Returns (power, noise scale, jn_spectral_db,
+    occupancy, peak bin k, parabolic offset of the peak in bins, line_fraction); ``thr`` is the
+    occupied-bin threshold on the relative excess, ``sidelobe`` the relative floor below the
+    strongest excess (linear)."""
+    nb = psd.size
+    white = psd / tpl
+    power = 0.0
+    tsum = 0.0
+    for i in range(nb):
+        power += psd[i]
+        tsum += tpl[i]
+    scale = float(np.median(white))
+    k = int(np.argmax(white))
+    dk = 0.0
+    if 0 < k < nb - 1:
+        a = math.log(psd[k - 1] + 1e-300)
+        b = math.log(psd[k] + 1e-300)
+        c = math.log(psd[k + 1] + 1e-300)
+        den = a - 2 * b + c
+        dk = 0.5 * (a - c) / den if den < 0 else 0.0
     if not scale > 0:
-        return BlockFeatures(power, psd, frames, scale, -math.inf, 0.0, k, f_pk, 0.0)
-    thr = max(par.sig_sigma / math.sqrt(frames), par.min_excess)
-    excess = white / scale - 1.0
+        return power, scale, -math.inf, 0.0, k, dk, 0.0
     # the relative floor keeps a strong CW's Hann sidelobes (< -31 dB) out of its occupancy
-    occ = excess > max(thr, 10 ** (-par.sidelobe_db / 10) * float(np.max(excess)))
-    noise_power = scale * float(tpl.sum())
-    exc_pow = np.where(occ, (white - scale) * tpl, 0.0)
-    jpow = float(np.sum(exc_pow))
-    jn_spec = 10 * math.log10(jpow / noise_power) if jpow > 0 else -math.inf
+    emax = white[k] / scale - 1.0
+    lim = max(thr, sidelobe * emax)
+    noise_power = scale * tsum
+    jpow = 0.0
+    lpow = 0.0
+    nocc = 0
     lo, hi = max(k - LINE_HALF_WIDTH_BINS, 0), min(k + LINE_HALF_WIDTH_BINS + 1, nb)
-    line = float(np.sum(exc_pow[lo:hi])) / jpow if jpow > 0 else 0.0
-    return BlockFeatures(power, psd, frames, scale, jn_spec, float(np.mean(occ)), k, f_pk, line)
+    for i in range(nb):
+        if white[i] / scale - 1.0 > lim:
+            e = (white[i] - scale) * tpl[i]
+            jpow += e
+            nocc += 1
+            if lo <= i < hi:
+                lpow += e
+    jn_spec = 10 * math.log10(jpow / noise_power) if jpow > 0 else -math.inf
+    line = lpow / jpow if jpow > 0 else 0.0
+    return power, scale, jn_spec, nocc / nb, k, dk, line
 
 
 def logistic(margin_db: float, slope_db: float) -> float:

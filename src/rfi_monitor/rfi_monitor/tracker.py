@@ -25,7 +25,15 @@ Speed (see docs/rfi_monitor/speed.md):
   as the monitor's block-level detector needs). The AR step keeps its covariance in
   a low-rank form (``sweep_period.ar_step``, K = 4 rank-one terms at A = 0.2 I, relative error
   1e-7, unrolled in ``_ar_step_k4``) and runs every ``decimation`` samples;
-* the status counters are counted in the vectorised measurement loop;
+* the status counters are counted per chunk, one byte per status code packed in one integer;
+* the running power P (near-zero guard ``|x_n|^2 <= min_abs_ratio^2 P``, noise compensation
+  kappa = 1 - N / P) is the exponential average ``P <- P + lam (p_m - P)`` evaluated once per
+  aligned CHUNK window: P stays constant inside the window and at its end becomes
+  ``P + sum_j lam (1 - lam)^(CHUNK - 1 - j) (p_j - P)``, which is the same average (to rounding;
+  a non-finite sample contributes p_j = P instead of being skipped), without a per-sample serial
+  recursion in the measurement loop. The deviations are kept in ``pdev`` and summed in a fixed
+  order, so block splitting cannot change the result; the guard's threshold lags by < CHUNK
+  samples of a 1024-sample average (round 8, docs/rfi_monitor/speed.md);
 * the hot state lives in local variables, the per-status counters too; per-sample helpers take
   scalars only (an array argument costs reference counting on every call).
 
@@ -230,6 +238,7 @@ class TrackerState:
         self.zring = np.zeros(Z_RING)
         self.zdec = np.zeros(DEC_HISTORY)
         self.lev = np.zeros(4 * CHUNK)
+        self.pdev = np.zeros(CHUNK)
 
 
 @njit(cache=True, inline="always")
@@ -308,7 +317,7 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
                 spar: np.ndarray, mpar: np.ndarray, fst: np.ndarray, ist: np.ndarray, ring: np.ndarray,
                 sf: np.ndarray, si: np.ndarray, zhist: np.ndarray, gam: np.ndarray, pmat: np.ndarray,
                 hist: np.ndarray, peaks: np.ndarray, mst: np.ndarray, mist: np.ndarray, counters: np.ndarray,
-                dfring: np.ndarray, zring: np.ndarray, zdec: np.ndarray, lev: np.ndarray,
+                dfring: np.ndarray, zring: np.ndarray, zdec: np.ndarray, lev: np.ndarray, pdev: np.ndarray,
                 store: bool, o_idx: np.ndarray, o_z: np.ndarray, o_f: np.ndarray, o_df: np.ndarray,
                 o_p11: np.ndarray, o_zar: np.ndarray, o_reset: np.ndarray) -> int:
     """Run the fused loop over one block; returns the number of estimates produced.
@@ -342,6 +351,12 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
     lpd_scale = (1.0 - gamma) / norm
     inv_dec = 1.0 / dec
     min_abs_ratio2 = min_abs_ratio * min_abs_ratio
+    # running power per aligned window (module doc, "Speed"): weights lam (1 - lam)^(CHUNK - 1 - j)
+    pwt = np.empty(CHUNK)
+    wj = lam
+    for j in range(CHUNK - 1, -1, -1):
+        pwt[j] = wj
+        wj *= 1.0 - lam
     n_ok = 0
     n_near = 0
     n_dom = 0
@@ -390,7 +405,6 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
     zprev = sf[S_ZAR]
     o0 = 0
     sbuf = np.empty(2 * CHUNK, dtype=np.int64)
-    thr = np.empty(CHUNK)
     dfc = np.empty(CHUNK)
     # Software pipeline over chunks of samples inside aligned CHUNK windows: the measurements of
     # chunk c + 1 are computed (a loop the compiler vectorises) before the serial part of chunk c
@@ -406,35 +420,46 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
         if jf < n:
             m0 = first_index + jf - 1
             lf = min(CHUNK - (m0 & (CHUNK - 1)), n - jf)
-            if (m0 & (CHUNK - 1)) == 0:
+            o_w = m0 & (CHUNK - 1)
+            if o_w == 0:
                 # noise compensation factor, once per aligned window (the running power changes
                 # little over CHUNK samples; aligned, so that block splitting cannot change it)
                 kap = 1.0 - floor / pw if pw > 0.0 else 1.0
                 ikap_w = 1.0 / kap if kap >= MIN_KAPPA else 1.0
+            # running power: constant inside an aligned window (the near-zero guard's threshold),
+            # updated at the window's end from the deviations of its samples (module doc)
+            thr_w = min_abs_ratio2 * pw
             for i in range(lf):
                 k = jf + i + 1                      # middle sample in xe
                 p_m = xe[k] * xe[k] + (xie[k] * xie[k] if is_complex else 0.0)
-                pw = pw + lam * (p_m - pw) if math.isfinite(p_m) else pw
-                thr[i] = min_abs_ratio2 * pw
+                pdev[o_w + i] = p_m - pw if math.isfinite(p_m) else 0.0
                 dfc[i] = min(MAX_ABS_RATE, max(-MAX_ABS_RATE, dfring[(m0 + i) & dfmask]))
+            if o_w + lf == CHUNK:
+                u = 0.0
+                for j in range(CHUNK):              # fixed order: block splitting cannot change it
+                    u += pwt[j] * pdev[j]
+                    pdev[j] = 0.0
+                pw = pw + u
             b0 = slot * CHUNK
             if is_complex:
                 for i in range(lf):
                     k = jf + i + 1
                     zbuf[b0 + i], sbuf[b0 + i] = measure_complex_sq(xe[k - 1], xie[k - 1], xe[k], xie[k],
-                                                                    xe[k + 1], xie[k + 1], thr[i])
+                                                                    xe[k + 1], xie[k + 1], thr_w)
             else:
                 for i in range(lf):
                     k = jf + i + 1
                     zbuf[b0 + i], sbuf[b0 + i] = measure_real_sq(xe[k - 1], xe[k], xe[k + 1], dfc[i], chirp_corr,
-                                                                 thr[i], margin, ikap_w)
-            for i in range(lf):                     # status counters (off the serial loop)
-                status = sbuf[b0 + i]
-                n_ok += status == STATUS_OK
-                n_near += status == STATUS_NEAR_ZERO
-                n_dom += status == STATUS_DOMAIN
-                n_nonfin += status == STATUS_NON_FINITE
-                n_corr += status == STATUS_CORRECTION
+                                                                 thr_w, margin, ikap_w)
+            # status counters (off the serial loop): one byte per status code, packed in one integer
+            packed = 0
+            for i in range(lf):
+                packed += 1 << (8 * sbuf[b0 + i])
+            n_ok += (packed >> (8 * STATUS_OK)) & 0xFF
+            n_near += (packed >> (8 * STATUS_NEAR_ZERO)) & 0xFF
+            n_dom += (packed >> (8 * STATUS_DOMAIN)) & 0xFF
+            n_nonfin += (packed >> (8 * STATUS_NON_FINITE)) & 0xFF
+            n_corr += (packed >> (8 * STATUS_CORRECTION)) & 0xFF
         bp = (1 - slot) * CHUNK
         m0 = first_index + jp - 1
         ch = CHUNK - qh                             # half of zlb / sgb for this chunk's LPD inputs
