@@ -135,12 +135,12 @@ def replay(bag: Path = BAG, instrument: bool = False, keep_outputs: bool = True)
     if instrument:
         replay_module.deserialize_message = timer.wrap(deserialize, 'deserialize_s')
         node.on_gnss = timer.wrap(node.on_gnss, 'node_s')  # type: ignore[method-assign]
-        node.on_uwb = timer.wrap(node.on_uwb, 'node_s')  # type: ignore[method-assign]
+        node.on_uwb_raw = timer.wrap(node.on_uwb_raw, 'node_s')  # type: ignore[method-assign]
         for sub in node.subscriptions:
             if sub.topic_name == '/gnss/measurements':
                 sub.callback = node.on_gnss
             elif sub.topic_name == '/uwb/ranges':
-                sub.callback = node.on_uwb
+                sub.callback = node.on_uwb_raw  # raw subscription: CDR bytes, decoded by the node
         node.spp.process = timer.wrap(node.spp.process, 'spp_s')  # type: ignore[method-assign]
         publish = timer.wrap(node._publish, 'publish_s')
 
@@ -413,15 +413,19 @@ def main() -> None:
 
 
 NOTES = """\
-Baseline: gnss_common and uwb_gnss_fusion as of commit 484ca8a (before H6; `git archive`):
-output messages built through the generated constructors. Now (issue #3, H6): the three output
-messages are allocated with `cls.__new__` and their generated slots written directly
-(`uwb_gnss_fusion/output_messages.py`; used only when the generated layout matches and a probe
-message built both ways compares equal field by field, otherwise the public constructors;
-test_output_messages.py checks fields, storage types and serialised bytes), about 7.5 us instead of
-31 us per input for the three messages; the UWB message conversion no longer copies its dataclass.
-Earlier: the time update and the UWB measurement update compiled (`uwb_update.py`, numba), SPP
-solved only when the filter asks for its re-initialisation reference.
+Baseline: gnss_common and uwb_gnss_fusion as of commit 81a1cbe (`git archive`), which already
+built the three output messages without the generated constructors
+(`uwb_gnss_fusion/output_messages.py`: slots written directly when the generated layout matches and
+a probe message built both ways compares equal, else the public constructors; about 7.5 us instead
+of 31 us per input). Since then: the node subscribes to /uwb/ranges with `raw=True` and decodes the
+CDR bytes itself (`conversions.decode_uwb_range_cdr`, tested field for field against rclpy's
+deserialisation, rclpy used for anything it declines): rclpy's deserialisation built a UwbRange with
+its nested Header, Time and Point for each of the 20 Hz-per-anchor ranges (in a profiled replay of
+the 360 s bag the rclpy_deserialize calls went from 23,400 to 1,800 and the wall time from 7.6 to
+6.5 s); the per-satellite checks of a GNSS epoch run on arrays; the common-mode screen's median and
+the geodetic origin of `ecef_to_enu` are cheaper. Earlier: the time update and the UWB measurement
+update compiled (`uwb_update.py`, numba), SPP solved only when the filter asks for its
+re-initialisation reference.
 
 Method change: the timed repeats no longer keep the published messages (before this table they
 did, through the harness's collector). Kept, 35,000 messages of about 19 Python objects each

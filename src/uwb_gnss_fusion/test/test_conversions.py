@@ -166,3 +166,35 @@ def test_point_round_trip() -> None:
     assert back.tobytes() == xyz.tobytes()
     with pytest.raises(ValueError, match="position_m"):
         point_to_msg(0, np.zeros(4), "map")
+
+
+def test_uwb_range_cdr_decoder_equals_rclpy():
+    from rclpy.serialization import serialize_message
+
+    from uwb_gnss_fusion.conversions import decode_uwb_range_cdr
+
+    rng = np.random.default_rng(12)
+    for k in range(200):
+        msg = UwbRange()
+        msg.header.stamp.sec = int(rng.integers(0, 2**31 - 1))
+        msg.header.stamp.nanosec = int(rng.integers(0, 10**9))
+        msg.header.frame_id = "earth"[: int(rng.integers(0, 6))] + "é" * int(rng.integers(0, 2))
+        msg.anchor_id = "A" * int(rng.integers(0, 12))
+        msg.anchor_position.x, msg.anchor_position.y, msg.anchor_position.z = rng.normal(0, 1e6, 3).tolist()
+        msg.range_m = float(rng.uniform(0, 100)) if k % 7 else math.nan
+        msg.range_std_m = math.nan if k % 3 == 0 else float(rng.uniform(0, 1))
+        msg.rssi_dbm = -math.inf if k % 5 == 0 else -80.0
+        raw = serialize_message(msg)
+        stamp_ns, frame, meas = decode_uwb_range_cdr(raw)
+        ref = msg_to_uwb(msg)
+        assert (stamp_ns, frame) == (ref.stamp_ns, msg.header.frame_id)
+        assert (meas.stamp_ns, meas.anchor_id, meas.frame_id) == (ref.stamp_ns, ref.anchor_id, ref.frame_id)
+        np.testing.assert_array_equal(meas.anchor_position_m, ref.anchor_position_m)
+        np.testing.assert_array_equal([meas.range_m, meas.range_std_m], [ref.range_m, ref.range_std_m])
+        # the node's frame map: a known frame is renamed, an unknown one gives no measurement
+        _, _, mapped = decode_uwb_range_cdr(raw, {msg.header.frame_id: "core"})
+        assert mapped is not None and mapped.frame_id == "core"
+        assert decode_uwb_range_cdr(raw, {})[2] is None
+        # cut short anywhere, or big-endian: declined (the node then uses rclpy, which reports it)
+        assert decode_uwb_range_cdr(raw[: int(rng.integers(0, len(raw) - 8))]) is None
+        assert decode_uwb_range_cdr(b"\x00\x00" + raw[2:]) is None

@@ -9,6 +9,10 @@ by field, with no arithmetic on the values:
 * :func:`uwb_to_msg` / :func:`msg_to_uwb`: ``UwbRangeMeasurement`` <-> ``rfi_msgs/UwbRange``.
 * :func:`point_to_msg` / :func:`msg_to_point`: (stamp_ns, xyz) <-> ``geometry_msgs/PointStamped``
   (truth and reference positions in bags).
+* :func:`decode_uwb_range_cdr`: the serialised ``rfi_msgs/UwbRange`` (CDR bytes, as a ``raw=True``
+  subscription or a bag delivers them) straight to a ``UwbRangeMeasurement``, without rclpy's
+  deserialisation (which builds the message and its nested Header, Time and Point objects; about
+  30 us per range against about 3 us here, at 20 Hz per anchor).
 
 Round trips are exact: every float is a float64 on both sides (NaN stays NaN, -0.0 stays -0.0),
 stamps are integer nanoseconds (``builtin_interfaces/Time`` holds them exactly for stamps >= 0).
@@ -27,6 +31,7 @@ rfi_msgs/UwbRange.msg (Cao et al., eq. 7 two-way range).
 from __future__ import annotations
 
 import math
+import struct
 from collections.abc import Sequence
 
 import numpy as np
@@ -272,3 +277,58 @@ def msg_to_point(msg: PointStamped) -> tuple[int, np.ndarray, str]:
     """
     p = msg.point
     return stamp_to_ns(msg.header.stamp), np.array([p.x, p.y, p.z], dtype=float), str(msg.header.frame_id)
+
+
+_CDR_LE = b"\x00\x01"
+_U32 = struct.Struct("<I")
+_STAMP = struct.Struct("<iI")
+_TAIL = struct.Struct("<6d")
+
+
+def _cdr_string(raw: bytes, pos: int) -> tuple[str, int]:
+    """A CDR string at payload offset ``pos`` (after alignment to 4): (text, offset after it)."""
+    pos = (pos + 3) & ~3
+    (n,) = _U32.unpack_from(raw, 4 + pos)
+    if n == 0 or 4 + pos + 4 + n > len(raw) or raw[4 + pos + 4 + n - 1] != 0:
+        raise ValueError("bad CDR string")
+    return raw[4 + pos + 4:4 + pos + 4 + n - 1].decode("utf-8"), pos + 4 + n
+
+
+def decode_uwb_range_cdr(raw: bytes, frame_map: dict[str, str] | None = None
+                         ) -> tuple[int, str, UwbRangeMeasurement | None] | None:
+    """Decode a serialised ``rfi_msgs/UwbRange`` (little-endian CDR) without rclpy.
+
+    Args:
+        raw: the serialised message: a 4-byte encapsulation header (``00 01 00 00``, CDR little
+            endian), then header.stamp (int32 sec, uint32 nanosec), header.frame_id (string),
+            anchor_id (string), anchor_position (3 float64), range_m, range_std_m, rssi_dbm
+            (float64), each primitive aligned to its size from the end of the encapsulation header,
+            strings as uint32 length (with the NUL) and bytes.
+
+        frame_map: optional header.frame_id -> measurement frame_id (the node's names of the core
+            frames); a frame_id not in it gives no measurement. None: the measurement keeps
+            header.frame_id (as :func:`msg_to_uwb`).
+
+    Returns:
+        ``(stamp_ns, header.frame_id, measurement or None)``; None if ``raw`` is not little-endian
+        CDR or is cut short or malformed (the caller then deserialises it with rclpy, which reports
+        the error). Equal field for field to ``msg_to_uwb(deserialize_message(raw, UwbRange))``
+        (tested).
+    """
+    if len(raw) < 4 or raw[:2] != _CDR_LE:
+        return None
+    try:
+        sec, nanosec = _STAMP.unpack_from(raw, 4)
+        frame_id, pos = _cdr_string(raw, 8)
+        anchor_id, pos = _cdr_string(raw, pos)
+        pos = (pos + 7) & ~7
+        x, y, z, rng, std, _rssi = _TAIL.unpack_from(raw, 4 + pos)
+    except (struct.error, ValueError, UnicodeDecodeError):
+        return None
+    stamp_ns = sec * 1_000_000_000 + nanosec
+    target = frame_id if frame_map is None else frame_map.get(frame_id)
+    if target is None:
+        return stamp_ns, frame_id, None
+    meas = UwbRangeMeasurement(stamp_ns=stamp_ns, anchor_id=anchor_id, anchor_position_m=np.array([x, y, z]),
+                               frame_id=target, range_m=rng, range_std_m=std)
+    return stamp_ns, frame_id, meas
