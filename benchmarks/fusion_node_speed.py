@@ -422,8 +422,8 @@ CDR bytes itself (`conversions.decode_uwb_range_cdr`, tested field for field aga
 deserialisation, rclpy used for anything it declines): rclpy's deserialisation built a UwbRange with
 its nested Header, Time and Point for each of the 20 Hz-per-anchor ranges (in a profiled replay of
 the 360 s bag the rclpy_deserialize calls went from 23,400 to 1,800 and the wall time from 7.6 to
-6.5 s); the per-satellite checks of a GNSS epoch run on arrays; the common-mode screen's median and
-the geodetic origin of `ecef_to_enu` are cheaper. Earlier: the time update and the UWB measurement
+6.5 s); the per-satellite checks of a GNSS epoch run on arrays; the common-mode screen's median is
+cheaper. Earlier: the time update and the UWB measurement
 update compiled (`uwb_update.py`, numba), SPP solved only when the filter asks for its
 re-initialisation reference.
 

@@ -205,7 +205,7 @@ def ecef_to_enu(xyz_m: np.ndarray, ref_ecef_m: np.ndarray) -> np.ndarray:
     """
     pts, single = _as_points(xyz_m, "xyz_m")
     ref = np.asarray(ref_ecef_m, dtype=float).reshape(3)
-    lat, lon, _ = ecef_to_geodetic_scalar(ref[0], ref[1], ref[2])
+    lat, lon, _ = ecef_to_geodetic(ref)
     out = (pts - ref) @ ecef_to_enu_rotation(lat, lon).T
     return out[0] if single else out
 
@@ -214,7 +214,7 @@ def enu_to_ecef(enu_m: np.ndarray, ref_ecef_m: np.ndarray) -> np.ndarray:
     """Inverse of :func:`ecef_to_enu`: ENU point(s), m, (3,) or (N, 3) -> ECEF, m."""
     pts, single = _as_points(enu_m, "enu_m")
     ref = np.asarray(ref_ecef_m, dtype=float).reshape(3)
-    lat, lon, _ = ecef_to_geodetic_scalar(ref[0], ref[1], ref[2])
+    lat, lon, _ = ecef_to_geodetic(ref)
     out = pts @ ecef_to_enu_rotation(lat, lon) + ref
     return out[0] if single else out
 
