@@ -351,6 +351,7 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
     """
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
 
     from rfi_experiments.bag_io import message_class
     from rfi_experiments.replay import ReplayResult
@@ -368,7 +369,10 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
 
     children = ChildProcesses(out / 'logs')
     context = rclpy.context.Context()
-    rclpy.init(args=list(argv), context=context)
+    # Ctrl-C is ours, not rclpy's: its handler would shut the context down under the executor and
+    # leave the outcome to timing (an exception from spin_once, or loops waiting for the children);
+    # ours raises KeyboardInterrupt, and the finally below stops the children in order.
+    rclpy.init(args=list(argv), context=context, signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node('rfi_run_recorder', context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
@@ -384,7 +388,7 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
             messages.append((received['n'], raw))
         return on_message
 
-    previous = {sig: signal.signal(sig, _raise_interrupt) for sig in (signal.SIGTERM, signal.SIGHUP)}
+    previous = {sig: signal.signal(sig, _raise_interrupt) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
     exit_codes: dict[str, int] = {}
     try:
         subs = {t: node.create_subscription(message_class(m), t, recorder(t), RECORDER_QOS, raw=True)
@@ -405,7 +409,10 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
             play_cmd += ['--duration', repr(seg.duration_s)]
         play_cmd += ['--warmup', repr(args.warmup), '--warmup-rate', repr(args.warmup_rate),
                      '--wait-subscribers', repr(args.timeout), '--start-delay', repr(DISCOVERY_SETTLE_S),
-                     '--ack-timeout', repr(args.timeout)]
+                     '--ack-timeout', repr(args.timeout),
+                     # the first answers include each node's first-call cost (numba compilation on a
+                     # cold cache: 15-30 s per node with three starting at once on two cores)
+                     '--sync-timeout', repr(args.timeout)]
         play_cmd += [f'--sync={inp}:{out}' for _, inp, out in SYNCED if inp in inputs]
         if args.no_progress:
             play_cmd.append('--no-progress')

@@ -26,6 +26,7 @@ def run_node(node_factory: Callable[[], Any], *, executable: str, summary: str, 
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
     from rclpy.utilities import remove_ros_args
 
     argv = list(sys.argv if argv is None else argv)
@@ -47,6 +48,13 @@ def run_node(node_factory: Callable[[], Any], *, executable: str, summary: str, 
         executor.spin()
         return 0
     except (KeyboardInterrupt, ExternalShutdownException):
+        return 0
+    except _rclpy.RCLError:
+        # rclpy's SIGINT handler shuts the context down asynchronously: when that happens while the
+        # executor builds its next wait set (between its checks of context.ok()), rcl reports an
+        # invalid context as RCLError instead of ExternalShutdownException. Shutdown, not a fault.
+        if rclpy.ok():
+            raise
         return 0
     except ValueError as err:
         print(f'{executable}: error: {err}', file=sys.stderr)

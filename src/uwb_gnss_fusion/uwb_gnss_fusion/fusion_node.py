@@ -95,6 +95,7 @@ from rfi_node_common.main import run_node
 from rfi_node_common.params import declare, parameter, validate_ranges
 from rfi_node_common.qos import DATA_QOS
 from rfi_node_common.stamps import stamp_to_ns
+from uwb_gnss_fusion import uwb_update
 from uwb_gnss_fusion.conversions import decode_uwb_range_cdr, msg_to_observation, msg_to_uwb
 from uwb_gnss_fusion.fusion_filter import (
     FRAME_EARTH,
@@ -336,6 +337,7 @@ class FusionNode(Node):
         self.fix_pub = self.create_publisher(NavSatFix, '/fusion/fix', DATA_QOS)
         self.status_pub = self.create_publisher(FusionStatus, '/fusion/status', DATA_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DATA_QOS)
+        uwb_update.warm_up()  # compile before subscribing: the node appears when it can keep up
         self.create_subscription(GnssMeasurementArray, '/gnss/measurements', self.on_gnss, DATA_QOS)
         # raw: the ranges (20 Hz per anchor) are decoded by conversions.decode_uwb_range_cdr, not
         # by rclpy's deserialisation (about 10x cheaper); anything it cannot decode goes through rclpy

@@ -303,3 +303,21 @@ def range_update_inplace(
             s += low[i, j] * b[j]
         nominal[i] += s
     return STATUS_APPLIED
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) both kernels on a throwaway state.
+
+    The first call otherwise pays the compilation (10-20 s on a cold cache) inside the first
+    measurement callback; a node calls this before it subscribes, so that it is ready, and looks
+    ready to the graph, only when it can keep up.
+    """
+    n = 8
+    nominal = np.zeros(n)
+    nominal[0] = 6.4e6
+    p = np.eye(n)
+    predict_inplace(nominal, p, np.eye(n), np.eye(n) * 1e-3)
+    range_update_inplace(nominal, p, np.array([6.4e6 + 10.0, 0.0, 0.0]), np.zeros(3), 0.0, 3, 10.0, 0.01,
+                         16.0, np.inf, np.inf, 5, 0.05, np.zeros(6))
+    range_update_inplace(nominal, p, np.array([6.4e6 + 10.0, 0.0, 0.0]), np.zeros(3), 0.1, 6, 10.0, 0.01,
+                         16.0, np.inf, np.inf, 5, 0.05, np.zeros(6))
