@@ -46,3 +46,32 @@ class StampTimer:
             self._last_ns = stamp_ns
             return True
         return False
+
+
+STALE = DiagnosticStatus.STALE
+
+
+def input_timeout_parameter() -> object:
+    """The ``input_timeout_s`` parameter field shared by the nodes (rfi_node_common.inputs.StaleInputWatch)."""
+    from rfi_node_common.params import parameter
+    return parameter(
+        5.0, 'Wall-clock silence after which /diagnostics reports the node STALE (no input received), s; '
+        '0: never. Used only for this report: no estimate depends on the wall clock.', minimum=0.0, maximum=86400.0)
+
+
+def max_stamp_jump_parameter(default_s: float = 120.0) -> object:
+    """The ``max_stamp_jump_s`` parameter field shared by the nodes (rfi_node_common.input_checks.StampGate)."""
+    from rfi_node_common.params import parameter
+    return parameter(
+        default_s, 'A header stamp further than this from the latest accepted stamp is rejected '
+        '(stamp_far_future / stamp_far_past) unless stamp_jump_confirmations messages in a row agree on the '
+        'jump (a clock or bag restart), s.', minimum=0.01, maximum=1.0e6)
+
+
+def stamp_jump_confirmations_parameter(default: int = 5) -> object:
+    """The ``stamp_jump_confirmations`` parameter field shared by the nodes."""
+    from rfi_node_common.params import parameter
+    return parameter(
+        default, 'Consecutive messages, each newer than the last and within max_stamp_jump_s of it, that '
+        'confirm a stamp jump; the node then restarts its state from the new time line.',
+        minimum=1, maximum=100000)

@@ -1,0 +1,198 @@
+"""Input subscriptions of the nodes: any publisher accepted, every loss counted, no callback fatal.
+
+:func:`subscribe_input` creates a node's input subscription with :data:`rfi_node_common.qos.INPUT_QOS`
+(best effort: sensor drivers and reliable publishers alike are accepted, REP 2003) and rclpy's QoS
+overriding (``-p qos_overrides./rfi/if_samples.subscription.reliability:=reliable`` makes one input
+reliable). Around the node's callback it
+
+* counts every message that reaches the subscription (``<topic>.received``);
+* counts the messages that never reached it, from gaps in the publishers' sequence numbers
+  (``<topic>.lost``, :class:`rfi_node_common.input_checks.SequenceLossCounter`) and from the
+  middleware's own lost-message event where it reports one (``<topic>.middleware_lost``), with one
+  throttled warning;
+* catches any exception the callback lets out (a malformed payload that rclpy cannot deserialise, a
+  bug): it is counted (``<topic>.callback_errors``), logged as an error and the node keeps running.
+
+:class:`InputHealth` holds these counters for all inputs of a node and the wall-clock (steady) time
+of the last activity; :class:`StaleInputWatch` publishes a STALE diagnostics status when no input
+has arrived for ``input_timeout_s`` of wall time (also when none ever arrived), so an operator sees
+a silent node. The wall clock is used only there: no estimate depends on it.
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from collections import Counter
+from collections.abc import Callable
+from typing import Any
+
+from rfi_node_common.input_checks import SequenceLossCounter
+from rfi_node_common.qos import INPUT_QOS
+
+STALE_REASON = 'no input'
+
+
+class InputHealth:
+    """Per-topic arrival, loss and callback-error counters of one node, and its last activity time.
+
+    Args:
+        clock: monotonic seconds (injected for tests), default :func:`time.monotonic`.
+    """
+
+    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
+        self._clock = clock
+        self.topics: list[str] = []
+        self.counts: Counter[str] = Counter()
+        self._loss: dict[str, SequenceLossCounter] = {}
+        self.publishers: dict[str, int] = {}
+        self.started_s = clock()
+        self.last_activity_s: float | None = None
+
+    def add_topic(self, topic: str) -> None:
+        if topic not in self._loss:
+            self.topics.append(topic)
+            self._loss[topic] = SequenceLossCounter()
+            self.publishers[topic] = 1
+            for key in ('received', 'lost', 'middleware_lost', 'callback_errors'):
+                self.counts[f'{topic}.{key}'] += 0
+
+    def arrived(self, topic: str, sequence_number: int) -> int:
+        """One message reached the subscription of ``topic``; returns the messages newly found lost."""
+        self.counts[f'{topic}.received'] += 1
+        self.touch()
+        lost = self._loss[topic].observe(sequence_number, self.publishers[topic])
+        if lost:
+            self.counts[f'{topic}.lost'] += lost
+        return lost
+
+    def matched(self, topic: str, publishers: int) -> None:
+        """The middleware now matches ``publishers`` publishers with the subscription of ``topic``."""
+        self.publishers[topic] = max(1, int(publishers))
+        self._loss[topic].forget_beyond(self.publishers[topic])
+
+    def middleware_lost(self, topic: str, count: int) -> None:
+        self.counts[f'{topic}.middleware_lost'] += int(count)
+
+    def callback_error(self, topic: str) -> None:
+        self.counts[f'{topic}.callback_errors'] += 1
+
+    def touch(self) -> None:
+        """Mark activity now (on arrival and when a callback ends, so a long first call is not silence)."""
+        self.last_activity_s = self._clock()
+
+    def lost_total(self) -> int:
+        return sum(self.counts[f'{t}.lost'] + self.counts[f'{t}.middleware_lost'] for t in self.topics)
+
+    def callback_errors_total(self) -> int:
+        return sum(self.counts[f'{t}.callback_errors'] for t in self.topics)
+
+    def silent_for_s(self) -> float:
+        """Wall seconds since the last activity (since start if nothing ever arrived)."""
+        last = self.started_s if self.last_activity_s is None else self.last_activity_s
+        return self._clock() - last
+
+    def values(self) -> dict[str, object]:
+        """Diagnostics key/values: ``input.<topic>.<counter>``."""
+        return {f'input.{k}': v for k, v in sorted(self.counts.items())}
+
+
+def subscribe_input(node: Any, msg_type: Any, topic: str, callback: Callable[[Any], None], health: InputHealth,
+                    *, raw: bool = False, warning_throttle_s: float = 5.0) -> Any:
+    """Create the input subscription of ``node`` on ``topic`` (see the module docstring).
+
+    Args:
+        node: the rclpy node.
+        msg_type: message class.
+        topic: topic name.
+        callback: the node's handler, called with the message (or its bytes with ``raw``).
+        health: the node's :class:`InputHealth`; ``topic`` is added to it.
+        raw: deliver the serialised bytes.
+        warning_throttle_s: shortest interval between two warnings of one kind, s (wall time; logging only).
+
+    Returns:
+        the rclpy Subscription.
+    """
+    from rclpy.event_handler import SubscriptionEventCallbacks
+    from rclpy.qos_overriding_options import QoSOverridingOptions
+
+    health.add_topic(topic)
+    logger = node.get_logger()
+
+    def on_message(msg: Any, info: Any) -> None:
+        lost = health.arrived(topic, info.get('publication_sequence_number', 0) if info else 0)
+        if lost:
+            logger.warn(f'{topic}: {lost} messages lost before this one (publisher sequence gap; '
+                        f'{health.counts[f"{topic}.lost"]} in all)', throttle_duration_sec=warning_throttle_s)
+        try:
+            callback(msg)
+        except Exception as err:  # noqa: BLE001 - one bad message must never end the node
+            health.callback_error(topic)
+            logger.error(f'{topic}: message dropped, its handler raised {type(err).__name__}: {err}',
+                         throttle_duration_sec=warning_throttle_s)
+        finally:
+            health.touch()
+
+    def on_lost(event: Any) -> None:
+        health.middleware_lost(topic, event.total_count_change)
+        logger.warn(f'{topic}: the middleware reports {event.total_count_change} messages lost',
+                    throttle_duration_sec=warning_throttle_s)
+
+    def on_matched(event: Any) -> None:
+        health.matched(topic, event.current_count)
+
+    from rclpy.exceptions import InvalidParameterValueException
+    from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+
+    qos = copy.copy(INPUT_QOS)  # rclpy writes the overrides into the profile it is given
+    overriding: QoSOverridingOptions | None = QoSOverridingOptions.with_default_policies()
+    events = (SubscriptionEventCallbacks(message_lost=on_lost, matched=on_matched),
+              SubscriptionEventCallbacks(matched=on_matched), None)
+    for i, event_callbacks in enumerate(events):
+        try:
+            return node.create_subscription(msg_type, topic, on_message, qos, raw=raw,
+                                            qos_overriding_options=overriding, event_callbacks=event_callbacks)
+        except InvalidParameterValueException:
+            raise
+        except (_rclpy.UnsupportedEventTypeError, NotImplementedError):  # a middleware without these events
+            if i == len(events) - 1:
+                raise
+            overriding = None  # the overrides are declared and already applied to qos
+    raise AssertionError('unreachable')
+
+
+class StaleInputWatch:
+    """Publishes a STALE diagnostics status while a node receives nothing (wall clock).
+
+    Every ``timeout_s / 2`` of steady time it checks :meth:`InputHealth.silent_for_s`; while that is
+    at least ``timeout_s`` it publishes ``make_status(silent_s)`` (the node builds the message, with
+    level STALE, stamped with the node clock's now). Publishing resumes on the stamp timer once input
+    arrives. ``timeout_s`` 0 disables the watch.
+
+    Args:
+        node: the rclpy node.
+        health: the node's input health.
+        timeout_s: silence that makes the node stale, s (wall time).
+        publish_stale: called with the silent time, s, when stale.
+    """
+
+    def __init__(self, node: Any, health: InputHealth, timeout_s: float,
+                 publish_stale: Callable[[float], None]) -> None:
+        self.stale_reports = 0
+        self._health = health
+        self._timeout_s = float(timeout_s)
+        self._publish_stale = publish_stale
+        self.timer = None
+        if self._timeout_s > 0:
+            from rclpy.clock import Clock, ClockType
+            self.timer = node.create_timer(self._timeout_s / 2.0, self.check,
+                                           clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def check(self) -> bool:
+        """Publish a stale report if the node has been silent for ``timeout_s``; return whether it did."""
+        silent_s = self._health.silent_for_s()
+        if silent_s < self._timeout_s:
+            return False
+        self.stale_reports += 1
+        self._publish_stale(silent_s)
+        return True
