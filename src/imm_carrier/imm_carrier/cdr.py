@@ -51,7 +51,8 @@ class DecodedCorrelatorArray:
     """Fields of one CorrelatorArray as arrays, shape (n,) each.
 
     Attributes:
-        stamp_ns: header.stamp, ns.
+        stamp_ns: header.stamp, ns (sec * 1e9 + nanosec; negative for a negative sec).
+        stamp_nanosec: header.stamp.nanosec as sent (a valid Time has it below 1e9).
         header_end: byte offset (from the payload start, after the 4-byte encapsulation) where the
             header ends; ``raw[:4 + header_end]`` is the encapsulation and the header, which an answer
             with the same header can copy.
@@ -60,6 +61,7 @@ class DecodedCorrelatorArray:
     """
 
     stamp_ns: int
+    stamp_nanosec: int
     header_end: int
     constellation: np.ndarray
     svid: np.ndarray
@@ -85,7 +87,9 @@ def _decode(buf, ints, floats, meta):
     """Decode a CDR_LE CorrelatorArray payload (buf includes the encapsulation header).
 
     Writes meta = [sec, nanosec, header_end, n]; ints (n, 2) constellation, svid; floats (n, 5).
-    Returns n, or -1 if the buffer is too short for what it announces or too many elements.
+    Returns n, or -1 if the buffer is too short for what it announces, the frame_id is not a CDR string
+    (length >= 1 with its terminating NUL) or there are too many elements. Every read is bounds-checked
+    first: any byte string gives n or -1, never a read outside buf.
     """
     size = buf.shape[0] - _ENCAPSULATION
     b = buf[_ENCAPSULATION:]
@@ -98,6 +102,8 @@ def _decode(buf, ints, floats, meta):
     meta[1] = _u32(b, 4)
     slen = _u32(b, 8)
     o = 12 + slen
+    if slen < 1 or o > size or b[o - 1] != 0:
+        return _ERR
     meta[2] = o
     o = _align(o, 4)
     if o + 4 > size:
@@ -131,6 +137,9 @@ def _decode(buf, ints, floats, meta):
 def decode_correlator_array(raw: bytes) -> DecodedCorrelatorArray | None:
     """Serialised rfi_msgs/CorrelatorArray -> arrays, or None if not little-endian CDR or malformed.
 
+    Safe on any byte string (fuzz-tested): a truncated, overwritten or random payload gives None or the
+    fields that its bytes encode, never an error or a read out of bounds.
+
     Args:
         raw: the serialised message, as a raw subscription delivers it.
 
@@ -149,6 +158,7 @@ def decode_correlator_array(raw: bytes) -> DecodedCorrelatorArray | None:
         return None
     return DecodedCorrelatorArray(
         stamp_ns=int(meta[0]) * 1_000_000_000 + int(meta[1]),
+        stamp_nanosec=int(meta[1]),
         header_end=int(meta[2]),
         constellation=ints[:n, 0],
         svid=ints[:n, 1],
@@ -204,8 +214,10 @@ def _put_rows(out, o, values, method, tmp, tb):
             o = _put_f8(out, o, r[9], tmp, tb)
         else:
             o = _put_u32(out, o, 0)
-        finite = abs(r[2]) < np.inf and abs(r[4]) < np.inf
-        out[e + o] = 1 if (r[10] > 0.5 and finite) else 0
+        valid = abs(r[2]) < np.inf and abs(r[4]) < np.inf
+        if method == METHOD_IMM:  # the IMM's standard deviations must be usable too
+            valid = valid and 0.0 < r[3] < np.inf and 0.0 < r[5] < np.inf
+        out[e + o] = 1 if (r[10] > 0.5 and valid) else 0
         o += 1
         slips = int(r[11])
         o = _put_u32(out, o, min(max(slips, 0), UINT32_MAX))
@@ -245,7 +257,8 @@ def encode_carrier_phase_array(header: bytes, tables: list[tuple[np.ndarray, int
 
     Returns:
         The serialised message (little-endian CDR), ready for ``Publisher.publish``. ``locked`` is
-        written true only with a finite phase and frequency; cycle_slips is clipped to uint32.
+        written true only with a finite phase and frequency (and, for the IMM, finite standard deviations
+        > 0: a last net behind the tracker's own check); cycle_slips is clipped to uint32.
     """
     if len(tables) > 2:
         raise ValueError("at most two tables (one per method)")

@@ -5,27 +5,58 @@ hands them to one :class:`imm_carrier.tracker.CarrierTracker` per method (the IM
 Pervan and the Costas PLL baseline, or both side by side on the same input), and publishes the
 returned estimates as one ``rfi_msgs/CarrierPhaseArray`` per accepted input array (header copied from
 the input, so the stamp is the input's). All maths, the channel life cycle (start on first sight,
-drop after ``channel_timeout_s``, restart after a gap) and the per-sample input checks are in the core;
-the node only rejects whole arrays whose stamp does not increase, and counts.
+drop after ``channel_timeout_s``, restart after a gap or a diverged estimate) and the per-correlator
+input checks (integration time within the receiver's range, finite and plausible I/Q, physical C/N0
+and predicted phase change) are in the core; the node only admits or rejects whole arrays, and counts.
+
+Input: subscribed with :func:`rfi_node_common.inputs.subscribe_input` (best effort by default, so a
+sensor driver's best-effort publisher and a reliable one are both accepted; ``qos_overrides.
+/gnss/correlators.subscription.*`` parameters change it). Arrivals, messages lost before reaching the
+node and handler errors are counted per topic (``input./gnss/correlators.received``, ``.lost``,
+``.middleware_lost``, ``.callback_errors``).
+
+Whole arrays are rejected, each counted as ``rejected_arrays_<reason>`` (their correlators as
+``correlators_in_rejected_arrays``), when:
+
+* ``malformed``: the payload is not a CorrelatorArray (truncated, overwritten or random bytes, which
+  neither the compiled decoder nor rclpy's deserialisation accept);
+* ``stamp_malformed``: header.stamp.nanosec is 1e9 or more (not a valid builtin_interfaces/Time);
+* ``stamp_not_positive``, ``stamp_not_increasing``, ``stamp_far_future``, ``stamp_far_past``: the
+  stamp is refused by :class:`rfi_node_common.input_checks.StampGate` (zero or negative; not after the
+  latest accepted stamp; further than ``max_stamp_jump_s`` from it). A jump confirmed by
+  ``stamp_jump_confirmations`` arrays in a row is accepted as a new time line (``stamp_restarts``):
+  every tracker's channels restart (``<method>.channels_restarted_stamp_jump``). One bad stamp
+  therefore never stalls the node, and a refused stamp never reaches the trackers or /diagnostics.
 
 Speed (32 satellites at 1 kHz): the subscription is raw and the answer is published as bytes. The
 compiled codec :mod:`imm_carrier.cdr` reads the correlators straight into numpy arrays and writes the
 CarrierPhaseArray from the tracker's result table; each tracker handles all channels of an array in
-one compiled call. No Python object is made per channel. Input that is not little-endian CDR goes
-through rclpy's deserialisation first (slower, same result).
+one compiled call. No Python object is made per channel. Little-endian CDR that the codec declines is
+malformed; another encoding goes through rclpy's deserialisation (slower, same result) and is counted
+as malformed if that fails too.
 
-Accounting (reported on /diagnostics, every ``diagnostics_period_s`` of *stamp* time): every
-correlator received is either in a rejected array or, for each tracker, processed or rejected with a
-reason (``<method>.rejected_*``); ``accounting_ok`` says that these add up. Rejections also give a
-throttled warning. An estimate is published with ``locked = true`` only when the core says so and its
-phase and frequency are finite.
+Accounting (reported on /diagnostics, every ``diagnostics_period_s`` of *accepted stamp* time): every
+array received is processed, rejected with a reason, or (only if a handler raised, which the
+subscription counts as ``callback_errors``) ``arrays_dropped_handler_error``; every correlator
+received is either in a rejected array or, for each tracker, processed or rejected with a reason
+(``<method>.rejected_*``). ``accounting_ok`` says that these add up. Rejections also give a throttled
+warning. An estimate is published with ``locked = true`` only when the core's final check passes
+(phase and frequency finite, the IMM's standard deviations finite and > 0, the state sane; see
+:class:`imm_carrier.tracker.CarrierTracker`), and the codec checks the same again.
 
-Core faults: should the core raise an ArithmeticError (it should not; up to commit 8350ac4 the IMM's
-mode-probability normalisation divided 0 by 0 when one mode's probability had underflowed to 0 and a
-correlator favoured that mode by more than ~745 in log-likelihood, fixed by keeping the mode
-probabilities as logarithms), the node counts it (``<method>.core_faults``), drops that tracker's
-answer for the array (its correlators counted as ``<method>.dropped_core_fault``), restarts that
-tracker's channels, reports ERROR and keeps running.
+Levels: ERROR when the accounting does not add up, a tracker raised or a handler raised since the
+last report; WARN when arrays or correlators were rejected, messages were lost, or channels were
+restarted or suppressed after an invalid estimate since the last report; else OK. When no input has
+arrived for ``input_timeout_s`` of wall time, a STALE report (stamped with the node clock) says so,
+with the same counters (:class:`rfi_node_common.inputs.StaleInputWatch`); no estimate depends on the
+wall clock.
+
+Core faults: should a tracker raise (it should not; up to commit 8350ac4 the IMM's mode-probability
+normalisation divided 0 by 0 when one mode's probability had underflowed to 0 and a correlator
+favoured that mode by more than ~745 in log-likelihood, fixed by keeping the mode probabilities as
+logarithms), the node counts it (``<method>.core_faults``), drops that tracker's answer for the array
+(its correlators counted as ``<method>.dropped_core_fault``), restarts that tracker's channels, reports
+ERROR and keeps running.
 
 /rfi/jammer_state is not subscribed: the trackers take the signal level from the correlators'
 C/N0 (which already reflects the jamming), and CarrierPhase has no field a jammer state would fill.
@@ -43,16 +74,28 @@ from rclpy.serialization import deserialize_message, serialize_message
 
 from gnss_common.clock_model import PRESETS, PROCESS_NOISE_FORMS, RUBIDIUM_LPFRS, ClockHCoefficients
 from gnss_common.constants import GPS_L1_FREQUENCY_HZ
-from imm_carrier.cdr import DecodedCorrelatorArray, decode_correlator_array, encode_carrier_phase_array
+from imm_carrier.cdr import CDR_LE, DecodedCorrelatorArray, decode_correlator_array, encode_carrier_phase_array
 from imm_carrier.imm import ImmParams
-from imm_carrier.measurement_model import IQ_SCALINGS
+from imm_carrier.measurement_model import IQ_SCALINGS, MAX_INTEGRATION_TIME_S, MIN_INTEGRATION_TIME_S
 from imm_carrier.pll import PllParams
 from imm_carrier.tracker import CarrierTracker, TrackerParams
 from rfi_msgs.msg import CarrierPhaseArray, CorrelatorArray
-from rfi_node_common.diagnostics import ERROR, OK, WARN, StampTimer, diagnostic_array
+from rfi_node_common.diagnostics import (
+    ERROR,
+    OK,
+    STALE,
+    WARN,
+    StampTimer,
+    diagnostic_array,
+    input_timeout_parameter,
+    max_stamp_jump_parameter,
+    stamp_jump_confirmations_parameter,
+)
+from rfi_node_common.input_checks import NS_PER_S, STAMP_REASONS, StampGate
+from rfi_node_common.inputs import InputHealth, StaleInputWatch, subscribe_input
 from rfi_node_common.main import run_node
 from rfi_node_common.params import declare, parameter, validate_ranges
-from rfi_node_common.qos import DATA_QOS
+from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS
 
 TOPICS = """topics:
   subscribes /gnss/correlators (rfi_msgs/CorrelatorArray)
@@ -60,6 +103,14 @@ TOPICS = """topics:
 
 CUSTOM_CLOCK = 'custom'
 """clock_preset value that takes the clock from clock_h0 and clock_h_minus2."""
+
+INPUT_TOPIC = '/gnss/correlators'
+MALFORMED = 'malformed'
+STAMP_MALFORMED = 'stamp_malformed'
+ARRAY_REJECTION_REASONS = (MALFORMED, STAMP_MALFORMED, *STAMP_REASONS)
+"""Why a whole CorrelatorArray is rejected (``rejected_arrays_<reason>``; module docstring)."""
+TRACKER_PROBLEM_KEYS = ('locked_suppressed_invalid', 'channels_restarted_nonfinite', 'channels_restarted_diverged')
+"""Tracker counters of invalid estimates (each raises the level to WARN)."""
 
 
 @dataclass(frozen=True)
@@ -132,6 +183,18 @@ class CarrierNodeParams:
     max_gap_intervals: float = parameter(
         1.5, 'A gap longer than this many integration times breaks phase continuity: the channel restarts, '
         'integration intervals.', minimum=1.01, maximum=1e6)
+    min_integration_time_s: float = parameter(
+        MIN_INTEGRATION_TIME_S, 'Shortest coherent integration time T the receiver produces, s; a correlator with '
+        'a shorter T is rejected (rejected_integration_time).', minimum=1e-6, maximum=1.0)
+    max_integration_time_s: float = parameter(
+        MAX_INTEGRATION_TIME_S, 'Longest coherent integration time T the receiver produces, s (Zhao et al.: '
+        '1-20 ms); a correlator with a longer T is rejected (rejected_integration_time).', minimum=1e-5, maximum=10.0)
+    max_iq_magnitude_ratio: float = parameter(
+        100.0, 'A correlator whose magnitude sqrt(I^2 + Q^2) exceeds this many times the RMS expected from its '
+        'C/N0 and T is rejected (rejected_iq_magnitude), dimensionless.', minimum=2.0, maximum=1e6)
+    max_stamp_jump_s: float = max_stamp_jump_parameter(120.0)
+    stamp_jump_confirmations: int = stamp_jump_confirmations_parameter(5)
+    input_timeout_s: float = input_timeout_parameter()
     diagnostics_period_s: float = parameter(
         1.0, 'Period of /diagnostics in message (stamp) time, s.', minimum=0.01, maximum=3600.0)
     warning_throttle_s: float = parameter(
@@ -181,23 +244,34 @@ class CarrierNodeParams:
             tightening_duration_s=self.pll_tightening_duration_s, iq_scaling=self.iq_scaling,
             lock_time_constant_s=self.pll_lock_time_constant_s, lock_threshold=self.pll_lock_threshold)
         return TrackerParams(method=method, imm=imm, pll=pll, channel_timeout_s=self.channel_timeout_s,
-                             max_gap_intervals=self.max_gap_intervals, bit_period_s=self.bit_period_s)
+                             max_gap_intervals=self.max_gap_intervals, bit_period_s=self.bit_period_s,
+                             min_integration_time_s=self.min_integration_time_s,
+                             max_integration_time_s=self.max_integration_time_s,
+                             max_iq_magnitude_ratio=self.max_iq_magnitude_ratio)
 
 
-def decode_input(msg: CorrelatorArray | bytes) -> tuple[DecodedCorrelatorArray, bytes]:
+def decode_input(msg: CorrelatorArray | bytes) -> tuple[DecodedCorrelatorArray, bytes] | None:
     """A CorrelatorArray (serialised, as the raw subscription delivers it, or a message object) -> its
-    fields as arrays, and the serialised encapsulation + header to copy into the answer.
+    fields as arrays, and the serialised encapsulation + header to copy into the answer; None if the
+    bytes are not a CorrelatorArray.
 
-    Little-endian CDR is decoded by the compiled codec; anything else (another encoding, a message
-    object) is first re-serialised by rclpy, which gives little-endian CDR.
+    Little-endian CDR (what rclpy itself writes) is decoded by the compiled codec, which is exact for
+    it (tested against rclpy): little-endian bytes that it declines are malformed. Another encoding is
+    first re-serialised by rclpy, which gives little-endian CDR. Never raises on bytes: what rclpy
+    cannot deserialise (it raises RMWError even for a 4-byte payload) is None.
     """
     raw = msg if isinstance(msg, bytes) else serialize_message(msg)
     decoded = decode_correlator_array(raw)
     if decoded is None:
-        raw = serialize_message(deserialize_message(raw, CorrelatorArray))
+        if raw[:2] == CDR_LE:
+            return None
+        try:
+            raw = serialize_message(deserialize_message(raw, CorrelatorArray))
+        except Exception:  # noqa: BLE001 - RMWError and whatever else a corrupt payload makes rclpy raise
+            return None
         decoded = decode_correlator_array(raw)
         if decoded is None:
-            raise ValueError('CorrelatorArray could not be decoded')
+            return None
     return decoded, raw[:4 + decoded.header_end]
 
 
@@ -214,33 +288,64 @@ class ImmCarrierNode(Node):
         self.params = declare(self, CarrierNodeParams)
         self.trackers = {m: CarrierTracker(self.params.tracker_params(m)) for m in self.params.methods}
         self.counts: Counter[str] = Counter()
+        for key in ('arrays_received', 'arrays_processed', 'arrays_dropped_handler_error', 'stamp_restarts',
+                    'correlators_received', 'correlators_in_rejected_arrays'):
+            self.counts[key] += 0
+        for reason in ARRAY_REJECTION_REASONS:
+            self.counts[f'rejected_arrays_{reason}'] += 0
         self._retired: dict[str, Counter[str]] = {m: Counter() for m in self.trackers}
         self._locked: dict[str, int] = dict.fromkeys(self.trackers, 0)
-        self._last_stamp_ns: int | None = None
-        self._rejected_at_last_report = 0
-        self._faults_at_last_report = 0
+        self.gate = StampGate(self.params.max_stamp_jump_s, self.params.stamp_jump_confirmations)
+        self._at_last_report: Counter[str] = Counter()
         self._diag_timer = StampTimer(self.params.diagnostics_period_s)
+        self.health = InputHealth()
         self.estimates_pub = self.create_publisher(CarrierPhaseArray, '/carrier/estimates', DATA_QOS)
-        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DATA_QOS)
-        self.create_subscription(CorrelatorArray, '/gnss/correlators', self.on_correlators, DATA_QOS, raw=True)
+        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self.subscription = subscribe_input(self, CorrelatorArray, INPUT_TOPIC, self.on_correlators, self.health,
+                                            raw=True, warning_throttle_s=self.params.warning_throttle_s)
+        self.stale_watch = StaleInputWatch(self, self.health, self.params.input_timeout_s, self._publish_stale)
 
     def on_correlators(self, msg: CorrelatorArray | bytes) -> None:
         """One CorrelatorArray, serialised (the raw subscription) or as a message object."""
-        decoded, header = decode_input(msg)
-        stamp_ns = decoded.stamp_ns
-        n = decoded.constellation.shape[0]
         self.counts['arrays_received'] += 1
-        self.counts['correlators_received'] += n
-        if self._last_stamp_ns is not None and stamp_ns <= self._last_stamp_ns:
-            self.counts['rejected_arrays_stamp_not_increasing'] += 1
-            self.counts['correlators_in_rejected_arrays'] += n
-            self._warn(f'correlator array rejected: stamp {stamp_ns} ns does not increase '
-                       f'(last {self._last_stamp_ns} ns)')
-        else:
-            self._last_stamp_ns = stamp_ns
-            self._track(stamp_ns, decoded, header)
-        if self._diag_timer.due(stamp_ns):
+        try:
+            stamp_ns = self._on_array(msg)
+        except Exception:
+            # Only a fault of the node itself gets here (the subscription's guard counts and logs it as
+            # callback_errors, ERROR): the array is counted so the accounting still adds up.
+            self.counts['arrays_dropped_handler_error'] += 1
+            raise
+        if stamp_ns is not None and self._diag_timer.due(stamp_ns):  # driven by accepted stamps only
             self.diag_pub.publish(self.diagnostics(stamp_ns))
+
+    def _on_array(self, msg: CorrelatorArray | bytes) -> int | None:
+        """Decode, admit and track one array; returns its stamp if accepted (None if rejected, counted)."""
+        decoded = decode_input(msg)
+        if decoded is None:
+            size = len(msg) if isinstance(msg, bytes) else -1
+            return self._reject_array(MALFORMED, 0, f'malformed payload ({size} bytes) is not a CorrelatorArray')
+        d, header = decoded
+        n = d.constellation.shape[0]
+        self.counts['correlators_received'] += n
+        if not 0 <= d.stamp_nanosec < NS_PER_S:
+            return self._reject_array(STAMP_MALFORMED, n, f'header.stamp.nanosec {d.stamp_nanosec} is not below 1e9')
+        decision = self.gate.admit(d.stamp_ns)
+        if not decision.accepted:
+            return self._reject_array(decision.reason, n, f'stamp {d.stamp_ns} ns refused ({decision.reason}; latest '
+                                      f'accepted {self.gate.latest_ns} ns)')
+        if decision.restart:
+            self.counts['stamp_restarts'] += 1
+            dropped = sum(tracker.reset_channels() for tracker in self.trackers.values())
+            self._warn(f'stamps jumped to {d.stamp_ns} ns (confirmed by {self.params.stamp_jump_confirmations} '
+                       f'arrays): new time line, {dropped} channels restart')
+        self._track(d.stamp_ns, d, header)
+        return d.stamp_ns
+
+    def _reject_array(self, reason: str, n_correlators: int, text: str) -> None:
+        self.counts[f'rejected_arrays_{reason}'] += 1
+        self.counts['correlators_in_rejected_arrays'] += n_correlators
+        self._warn(f'correlator array rejected: {text}')
+        return None
 
     def _track(self, stamp_ns: int, d: DecodedCorrelatorArray, header: bytes) -> None:
         n = d.constellation.shape[0]
@@ -251,7 +356,7 @@ class ImmCarrierNode(Node):
             try:
                 batch = tracker.process_arrays(stamp_ns, d.constellation, d.svid, d.integration_time_s, d.in_phase,
                                                d.quadrature, d.cn0_dbhz, d.predicted_phase_change_rad)
-            except ArithmeticError as err:
+            except Exception as err:  # noqa: BLE001 - a core fault must not end the node (see _core_fault)
                 self._core_fault(method, n, err)
                 continue
             tables.append((batch.values, batch.method))
@@ -259,10 +364,10 @@ class ImmCarrierNode(Node):
             if tracker.rejected_total > rejected_before:
                 reasons = ', '.join(f'{k}={v}' for k, v in tracker.counters.items() if k.startswith('rejected_') and v)
                 self._warn(f'{method}: correlators rejected (totals: {reasons})')
-        self.counts['arrays_processed'] += 1
         self.estimates_pub.publish(encode_carrier_phase_array(header, tables))
+        self.counts['arrays_processed'] += 1
 
-    def _core_fault(self, method: str, n_samples: int, err: ArithmeticError) -> None:
+    def _core_fault(self, method: str, n_samples: int, err: Exception) -> None:
         """The core raised on an array: count it, drop that tracker's answer, restart its channels.
 
         The tracker's counters are unchanged by a call that raises, so the array's correlators are all
@@ -290,44 +395,67 @@ class ImmCarrierNode(Node):
     def accounting(self) -> dict[str, object]:
         """Counters of the node and of each tracker (``<method>.<key>``), and whether every input adds up.
 
+        Arrays: arrays_received == arrays_processed + rejected_arrays_* + arrays_dropped_handler_error.
         For each tracker: correlators_received == correlators_in_rejected_arrays + processed +
         rejected_* + dropped_core_fault.
         """
         values: dict[str, object] = dict(sorted(self.counts.items()))
-        ok = True
+        c = self.counts
+        ok = c['arrays_received'] == (c['arrays_processed'] + c['arrays_dropped_handler_error']
+                                      + sum(c[f'rejected_arrays_{r}'] for r in ARRAY_REJECTION_REASONS))
         for method, tracker in self.trackers.items():
-            c = self.tracker_counters(method)
-            values.update({f'{method}.{k}': v for k, v in c.items()})
+            tc = self.tracker_counters(method)
+            values.update({f'{method}.{k}': v for k, v in tc.items()})
             values[f'{method}.channels'] = tracker.channel_count
             values[f'{method}.channels_locked'] = self._locked[method]
-            accounted = (self.counts['correlators_in_rejected_arrays'] + c['processed'] + rejected_total(c)
-                         + self.counts[f'{method}.dropped_core_fault'])
-            ok = ok and accounted == self.counts['correlators_received']
+            accounted = (c['correlators_in_rejected_arrays'] + tc['processed'] + rejected_total(tc)
+                         + c[f'{method}.dropped_core_fault'])
+            ok = ok and accounted == c['correlators_received']
         values['accounting_ok'] = ok
         return values
 
-    def diagnostics(self, stamp_ns: int) -> DiagnosticArray:
-        """The /diagnostics message at ``stamp_ns``: ERROR if the accounting does not add up or the core
-        faulted since the last report, WARN if input was rejected since the last report, else OK."""
+    def _values(self) -> dict[str, object]:
+        """Everything /diagnostics reports: the accounting and the input health (``input.<topic>.*``)."""
         values = self.accounting()
-        rejected = self.counts['rejected_arrays_stamp_not_increasing'] + sum(
-            rejected_total(self.tracker_counters(m)) for m in self.trackers)
-        new = rejected - self._rejected_at_last_report
-        self._rejected_at_last_report = rejected
-        faults = sum(self.counts[f'{m}.core_faults'] for m in self.trackers)
-        new_faults = faults - self._faults_at_last_report
-        self._faults_at_last_report = faults
-        channels = ', '.join(f'{m}: {values[f"{m}.channels"]} channels, {values[f"{m}.channels_locked"]} locked'
-                             for m in self.trackers)
+        values.update(self.health.values())
+        return values
+
+    def _channels_text(self, values: dict[str, object]) -> str:
+        return ', '.join(f'{m}: {values[f"{m}.channels"]} channels, {values[f"{m}.channels_locked"]} locked'
+                         for m in self.trackers)
+
+    def diagnostics(self, stamp_ns: int) -> DiagnosticArray:
+        """The /diagnostics message at ``stamp_ns`` (an accepted input stamp); levels in the module docstring."""
+        values = self._values()
+        totals = Counter({
+            'rejected': sum(self.counts[f'rejected_arrays_{r}'] for r in ARRAY_REJECTION_REASONS) + sum(
+                rejected_total(self.tracker_counters(m)) for m in self.trackers),
+            'faults': sum(self.counts[f'{m}.core_faults'] for m in self.trackers),
+            'callback_errors': self.health.callback_errors_total(),
+            'lost': self.health.lost_total(),
+            'invalid': sum(self.tracker_counters(m)[k] for m in self.trackers for k in TRACKER_PROBLEM_KEYS),
+        })
+        new = totals - self._at_last_report  # Counter subtraction keeps the positive differences
+        self._at_last_report = totals
         if not values['accounting_ok']:
             level, text = ERROR, 'input accounting does not add up'
-        elif new_faults:
-            level, text = ERROR, f'{new_faults} tracker faults since the last report (channels restarted)'
-        elif new:
-            level, text = WARN, f'{new} inputs rejected since the last report'
+        elif new['faults'] or new['callback_errors']:
+            level, text = ERROR, (f'{new["faults"]} tracker faults (channels restarted) and {new["callback_errors"]} '
+                                  f'handler errors since the last report')
+        elif new['rejected'] or new['lost'] or new['invalid']:
+            level, text = WARN, (f'since the last report: {new["rejected"]} inputs rejected, {new["lost"]} messages '
+                                 f'lost, {new["invalid"]} invalid estimates (channels restarted or unlocked)')
         else:
             level, text = OK, 'tracking'
-        return diagnostic_array(stamp_ns, 'imm_carrier', self.get_name(), level, f'{text}; {channels}', values)
+        return diagnostic_array(stamp_ns, 'imm_carrier', self.get_name(), level,
+                                f'{text}; {self._channels_text(values)}', values)
+
+    def _publish_stale(self, silent_s: float) -> None:
+        """STALE report of the StaleInputWatch (wall clock): no input for ``silent_s``; stamped with the node clock."""
+        values = self._values()
+        self.diag_pub.publish(diagnostic_array(
+            self.get_clock().now().nanoseconds, 'imm_carrier', self.get_name(), STALE,
+            f'no input on {INPUT_TOPIC} for {silent_s:.1f} s (wall clock); {self._channels_text(values)}', values))
 
 
 def main(argv=None) -> int:

@@ -25,6 +25,21 @@ CN0_MIN_DBHZ = 0.0
 CN0_MAX_DBHZ = 70.0
 """Highest C/N0 accepted as physical, dB-Hz."""
 
+MIN_INTEGRATION_TIME_S = 1e-4
+"""Default shortest coherent integration time accepted, s (0.1 ms: below any GNSS receiver's prompt
+correlator; Zhao et al. use 1-20 ms)."""
+MAX_INTEGRATION_TIME_S = 0.1
+"""Default longest coherent integration time accepted, s (100 ms: the longest coherent integration of
+pilot signals in use; a data signal cannot integrate beyond its 20 ms bit)."""
+
+MAX_PREDICTED_DOPPLER_HZ = 1.0e5
+"""|predicted_phase_change_rad| above 2 pi x this x T is rejected as absurd, Hz (a receiver on a LEO
+satellite sees at most about +-45 kHz of Doppler at L1; terrestrial receivers +-5 kHz)."""
+
+MAX_RESIDUAL_PHASE_RAD = 1.0e9
+"""A tracker whose residual phase exceeds this in magnitude has diverged, rad (beyond it a float64
+phase keeps less than 1.2e-7 rad of resolution; a 1 Hz residual frequency takes 5 years to get there)."""
+
 IQ_SCALINGS = ("unit_amplitude", "unit_noise")
 """How correlators are normalised: A = 1 (Zhao et al., eq. 5) or noise sigma = 1."""
 

@@ -46,8 +46,12 @@ from imm_carrier.imm import (
 from imm_carrier.measurement_model import (
     CN0_MAX_DBHZ,
     CN0_MIN_DBHZ,
+    MAX_INTEGRATION_TIME_S,
+    MAX_PREDICTED_DOPPLER_HZ,
+    MAX_RESIDUAL_PHASE_RAD,
     METHOD_IMM,
     METHOD_PLL,
+    MIN_INTEGRATION_TIME_S,
     CarrierPhaseEstimate,
     CorrelatorSample,
 )
@@ -73,6 +77,10 @@ COUNTER_KEYS = (
     "rejected_duplicate_channel",
     "slips_detected",
     "channels_restarted_nonfinite",
+    "rejected_iq_magnitude",
+    "locked_suppressed_invalid",
+    "channels_restarted_diverged",
+    "channels_restarted_stamp_jump",
 )
 """Keys of CarrierTracker.counters (their order is the compiled kernel's counter index)."""
 (
@@ -91,6 +99,10 @@ COUNTER_KEYS = (
     _K_DUPLICATE,
     _K_SLIPS,
     _K_RESTARTED_NONFINITE,
+    _K_IQ_MAGNITUDE,
+    _K_LOCK_SUPPRESSED,
+    _K_RESTARTED_DIVERGED,
+    _K_RESTARTED_STAMP_JUMP,
 ) = range(len(COUNTER_KEYS))
 _REJECTED_INDICES = np.array([i for i, k in enumerate(COUNTER_KEYS) if k.startswith("rejected_")])
 
@@ -144,8 +156,11 @@ _M_IMM, _M_PLL = 0, 1
     _C_BW_DURATION,
     _C_LOCK_TC,
     _C_LOCK_THR,
-) = range(16)
-_CFG_LEN = 16
+    _C_T_MIN,
+    _C_T_MAX,
+    _C_IQ_RATIO,
+) = range(19)
+_CFG_LEN = 19
 _STATE_WIDTH = 16  # >= the IMM's 13 and the PLL's 8 state slots
 _KEY_TABLE_SIZE = (MAX_CONSTELLATION + 1) * 256
 
@@ -164,6 +179,15 @@ class TrackerParams:
         bit_period_s: navigation data-bit duration, s (GPS L1 C/A: 0.02). When the integration time
             is shorter, the IMM's bit-transition probability is used only on intervals that start on
             a bit edge (stamps on the GPS time grid) and is 0 inside a bit; 0 disables this.
+        min_integration_time_s, max_integration_time_s: the receiver's range of coherent
+            integration times T, s, 0 < min < max; a correlator with T outside it is rejected
+            (``rejected_integration_time``). Defaults 0.1 ms and 100 ms (Zhao et al.: 1-20 ms).
+        max_iq_magnitude_ratio: a correlator whose magnitude sqrt(I^2 + Q^2) exceeds this many times
+            its expected RMS sqrt(A^2 + 2 sigma_v^2) (A, sigma_v from its C/N0 and T, eq. 4-5) is
+            rejected (``rejected_iq_magnitude``), dimensionless, > 1. The magnitude of a correlator
+            that follows the model exceeds 10 RMS with probability below 1e-40; one EKF update moves the
+            phase by up to about the correlator's magnitude (in units of A), so larger values could
+            only throw the channel off.
     """
 
     method: str = "imm"
@@ -172,6 +196,9 @@ class TrackerParams:
     channel_timeout_s: float = 1.0
     max_gap_intervals: float = 1.5
     bit_period_s: float = 0.02
+    min_integration_time_s: float = MIN_INTEGRATION_TIME_S
+    max_integration_time_s: float = MAX_INTEGRATION_TIME_S
+    max_iq_magnitude_ratio: float = 100.0
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -182,6 +209,14 @@ class TrackerParams:
             raise ValueError("max_gap_intervals must be finite and > 1")
         if not (math.isfinite(self.bit_period_s) and self.bit_period_s >= 0):
             raise ValueError("bit_period_s must be finite and >= 0")
+        t_min, t_max = self.min_integration_time_s, self.max_integration_time_s
+        if not (math.isfinite(t_min) and math.isfinite(t_max) and 0 < t_min < t_max):
+            raise ValueError(
+                f"integration time range must satisfy 0 < min_integration_time_s < max_integration_time_s, "
+                f"got {t_min!r}, {t_max!r}"
+            )
+        if not (math.isfinite(self.max_iq_magnitude_ratio) and self.max_iq_magnitude_ratio > 1):
+            raise ValueError("max_iq_magnitude_ratio must be finite and > 1")
 
 
 @dataclass(frozen=True)
@@ -246,6 +281,13 @@ def _transition_probability(stamp_ns, t_s, p, bit_s):
     x = start_s / bit_s
     phase = x - math.floor(x + 0.5)
     return p if abs(phase) * bit_s < 0.5 * t_s else 0.0
+
+
+@njit(cache=True)
+def _sane(phase_rad, frequency_hz, t_s):
+    """A tracker state that can still be meaningful: |phase| <= MAX_RESIDUAL_PHASE_RAD and |frequency| <= 1/T
+    (a residual frequency of a whole cycle per interval cannot be told from zero: the tracker has lost it)."""
+    return abs(phase_rad) <= MAX_RESIDUAL_PHASE_RAD and abs(frequency_hz) * t_s <= 1.0
 
 
 @njit(cache=True)
@@ -341,7 +383,7 @@ def _track_epoch(
             continue
         seen[key] = call_id
         tk = t[k]
-        if not (tk > 0.0 and tk < math.inf):
+        if not (cfg[_C_T_MIN] <= tk <= cfg[_C_T_MAX]):  # NaN fails too
             counters[_K_INTEGRATION_TIME] += 1
             continue
         i_k = zi[k]
@@ -350,7 +392,7 @@ def _track_epoch(
             counters[_K_NONFINITE_IQ] += 1
             continue
         d_k = dphi[k]
-        if not abs(d_k) < math.inf:
+        if not abs(d_k) <= 2.0 * math.pi * MAX_PREDICTED_DOPPLER_HZ * tk:  # absurd or not finite
             counters[_K_PREDICTED_PHASE] += 1
             continue
         slot = slot_of_key[key]
@@ -363,6 +405,10 @@ def _track_epoch(
             counters[_K_CN0_USED_LAST] += 1
         elif not (CN0_MIN_DBHZ <= c0 <= CN0_MAX_DBHZ):
             counters[_K_CN0_RANGE] += 1
+            continue
+        amp, sig = _amp_sigma(c0, tk, unit_noise)
+        if math.hypot(i_k, q_k) > cfg[_C_IQ_RATIO] * math.sqrt(amp * amp + 2.0 * sig * sig):
+            counters[_K_IQ_MAGNITUDE] += 1
             continue
         if slot >= 0 and stamp_ns <= last_stamp[slot]:
             counters[_K_STAMP_BACKWARDS] += 1
@@ -395,7 +441,6 @@ def _track_epoch(
         last_cn0[slot] = c0
         st = state[slot]
         if method == _M_IMM:
-            amp, sig = _amp_sigma(c0, tk, unit_noise)
             p = _transition_probability(stamp_ns, tk, cfg[_C_P_BIT], cfg[_C_BIT_PERIOD])
             _imm_step(
                 st, i_k, q_k, amp, sig, tk, d_k, p, math.nan, cfg[_C_QF], cfg[_C_QG], int(cfg[_C_FORM]), imm_out
@@ -403,30 +448,41 @@ def _track_epoch(
             phase = imm_out[_O_PHI]
             omega = imm_out[_O_OMEGA]
             std = math.sqrt(max(imm_out[_O_P11], 0.0))
+            freq_std = math.sqrt(max(imm_out[_O_P22], 0.0)) / (2.0 * math.pi)
             mu1 = imm_out[_O_MU1]
             mu2 = imm_out[_O_MU2]
-            finite = abs(phase) < math.inf and abs(omega) < math.inf and abs(std) < math.inf
+            finite = abs(phase) < math.inf and abs(omega) < math.inf and std < math.inf and freq_std < math.inf
             if finite and abs(phase - imm_out[_O_PRIOR_PHI]) > cfg[_C_SLIP_THR]:
                 slips[slot] += 1
                 counters[_K_SLIPS] += 1
+            freq = omega / (2.0 * math.pi)
+            # A covariance that collapsed to 0 (cancellation) or a state beyond any trackable value: diverged.
+            valid = finite and std > 0.0 and freq_std > 0.0 and _sane(phase, freq, tk)
+            locked = finite and std < cfg[_C_LOCK_STD]
+            if locked and not valid:  # final check at the output: locked only if valid
+                locked = False
+                counters[_K_LOCK_SUPPRESSED] += 1
             row[_V_PHASE] = phase
             row[_V_PHASE_STD] = std
-            row[_V_FREQ] = omega / (2.0 * math.pi)
-            row[_V_FREQ_STD] = math.sqrt(max(imm_out[_O_P22], 0.0)) / (2.0 * math.pi)
+            row[_V_FREQ] = freq
+            row[_V_FREQ_STD] = freq_std
             row[_V_BIT] = 1.0 if mu1 > mu2 else (-1.0 if mu2 > mu1 else 0.0)
             row[_V_BIT_PROB] = max(mu1, mu2)
             row[_V_MU1] = mu1
             row[_V_MU2] = mu2
-            row[_V_LOCKED] = 1.0 if (finite and std < cfg[_C_LOCK_STD]) else 0.0
         else:
             bn = _bandwidth_hz(st[5], cfg[_C_BW_START], cfg[_C_BW_END], cfg[_C_BW_DURATION])
-            amp = math.sqrt(2.0 * tk * 10.0 ** (c0 / 10.0)) if unit_noise else 1.0
             alpha = min(tk / cfg[_C_LOCK_TC], 1.0)
             _pll_step(st, i_k, q_k, tk, d_k, bn, amp, alpha, pll_out)
             phase = pll_out[0]
+            freq = pll_out[1] / (2.0 * math.pi)
             finite = abs(phase) < math.inf and abs(pll_out[1]) < math.inf
-            locked = finite and pll_out[4] > cfg[_C_LOCK_THR]
             finite = finite and abs(pll_out[4]) < math.inf and abs(st[7]) < math.inf  # lock averages too
+            valid = finite and _sane(phase, freq, tk)  # the PLL has no std (NaN by definition)
+            locked = finite and pll_out[4] > cfg[_C_LOCK_THR]
+            if locked and not valid:  # final check at the output: locked only if valid
+                locked = False
+                counters[_K_LOCK_SUPPRESSED] += 1
             if was_locked[slot] and not locked:
                 slips[slot] += 1
                 counters[_K_SLIPS] += 1
@@ -437,18 +493,22 @@ def _track_epoch(
             bit = 1.0 if i_rot > 0.0 else (-1.0 if i_rot < 0.0 else 0.0)
             row[_V_PHASE] = phase
             row[_V_PHASE_STD] = math.nan
-            row[_V_FREQ] = pll_out[1] / (2.0 * math.pi)
+            row[_V_FREQ] = freq
             row[_V_FREQ_STD] = math.nan
             row[_V_BIT] = bit
             row[_V_BIT_PROB] = 0.5 if bit == 0.0 else 1.0
             row[_V_MU1] = math.nan
             row[_V_MU2] = math.nan
-            row[_V_LOCKED] = 1.0 if locked else 0.0
+        row[_V_LOCKED] = 1.0 if locked else 0.0
         row[_V_SLIPS] = slips[slot]
-        if not finite:  # absurd input (e.g. |I| ~ 1e200) overflowed the filter: restart on the next sample
+        if not finite:  # the filter overflowed: restart on the next sample (answer published unlocked)
             slot_of_key[key] = -1
             key_of_slot[slot] = -1
             counters[_K_RESTARTED_NONFINITE] += 1
+        elif not valid:  # numerically wild (collapsed covariance, aliased frequency, runaway phase): restart
+            slot_of_key[key] = -1
+            key_of_slot[slot] = -1
+            counters[_K_RESTARTED_DIVERGED] += 1
     return n_out
 
 
@@ -459,14 +519,30 @@ class CarrierTracker:
     update moved the phase by more than ``slip_jump_threshold_rad``; for the PLL, losses of the lock
     indicator. True slips against truth are counted offline by cycle_slips.count_cycle_slips.
 
-    Per correlator, in order: (constellation, svid) must be a channel id (0 <= constellation <= 255,
-    0 < svid <= 255), not repeated in the interval; T finite and > 0; I, Q and the predicted phase
-    change finite; C/N0 in [0, 70] dB-Hz (NaN: the channel's last value, rejected for a new channel);
-    the stamp must increase per channel. A gap longer than max_gap_intervals restarts the channel, and
-    so does a non-finite estimate (only absurd correlator magnitudes overflow the filter; that answer
-    is published unlocked and counted as channels_restarted_nonfinite).
-    Rejections are counted (COUNTER_KEYS), never raised; a new channel's first correlator only
-    initialises it and is returned with locked = False.
+    Per correlator, in order (each failure counted under its ``rejected_*`` key, COUNTER_KEYS):
+
+    1. (constellation, svid) a channel id (0 <= constellation <= 255, 0 < svid <= 255):
+       ``rejected_invalid_svid``; not repeated in the interval: ``rejected_duplicate_channel``;
+    2. T in [min_integration_time_s, max_integration_time_s] (the receiver's range; NaN fails):
+       ``rejected_integration_time``;
+    3. I and Q finite: ``rejected_nonfinite_iq``;
+    4. |predicted phase change| <= 2 pi MAX_PREDICTED_DOPPLER_HZ T (finite and physical):
+       ``rejected_predicted_phase``;
+    5. C/N0 in [0, 70] dB-Hz: ``rejected_cn0_range``; NaN: the channel's last value
+       (``cn0_missing_used_last``), or ``rejected_cn0_missing`` for a new channel;
+    6. sqrt(I^2 + Q^2) at most max_iq_magnitude_ratio times the RMS that C/N0 and T give:
+       ``rejected_iq_magnitude``;
+    7. the stamp increases per channel: ``rejected_stamp_backwards``.
+
+    A gap longer than max_gap_intervals restarts the channel. After each filter step the answer is
+    checked: it is published locked only if phase and frequency are finite, the IMM's standard
+    deviations finite and > 0, |phase| <= MAX_RESIDUAL_PHASE_RAD and |frequency| <= 1/T (a locked
+    answer that fails is published unlocked and counted as ``locked_suppressed_invalid``). A channel
+    whose state is not finite (``channels_restarted_nonfinite``) or fails these checks
+    (``channels_restarted_diverged``) restarts from its next correlator, so a tracker thrown off by an
+    input that passed the checks never publishes garbage for long. :meth:`reset_channels` restarts every
+    channel (the node calls it on a confirmed stamp jump). Nothing is raised for bad input; a new
+    channel's first correlator only initialises it and is returned with locked = False.
     """
 
     _INITIAL_SLOTS = 64
@@ -503,6 +579,9 @@ class CarrierTracker:
         cfg[_C_BW_DURATION] = pll.tightening_duration_s
         cfg[_C_LOCK_TC] = pll.lock_time_constant_s
         cfg[_C_LOCK_THR] = pll.lock_threshold
+        cfg[_C_T_MIN] = params.min_integration_time_s
+        cfg[_C_T_MAX] = params.max_integration_time_s
+        cfg[_C_IQ_RATIO] = params.max_iq_magnitude_ratio
         self._cfg = cfg
         self._slot_of_key = np.full(_KEY_TABLE_SIZE, -1, dtype=np.int64)
         self._seen = np.zeros(_KEY_TABLE_SIZE, dtype=np.int64)
@@ -544,6 +623,16 @@ class CarrierTracker:
     def channel_keys(self) -> tuple[tuple[int, int], ...]:
         """(constellation, svid) of the live channels."""
         return tuple((k // 256, k % 256) for k in self._key_of_slot.tolist() if k >= 0)
+
+    def reset_channels(self) -> int:
+        """Drop every channel (each restarts from its next correlator); counted as
+        ``channels_restarted_stamp_jump``. Returns the number of channels dropped."""
+        live = self._key_of_slot >= 0
+        n = int(np.count_nonzero(live))
+        self._slot_of_key[self._key_of_slot[live]] = -1
+        self._key_of_slot[live] = -1
+        self._counters[_K_RESTARTED_STAMP_JUMP] += n
+        return n
 
     @property
     def channel_count(self) -> int:

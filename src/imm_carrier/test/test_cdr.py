@@ -72,6 +72,10 @@ def _table(rng, n, method):
         v[1, 2] = math.nan  # a non-finite phase is never published as locked
         v[1, 10] = 1.0
         v[2, 11] = -3
+    if n > 4:
+        v[3, 3] = 0.0  # nor, for the IMM, a zero or infinite std
+        v[4, 5] = math.inf
+        v[3:5, 10] = 1.0
     return v
 
 
@@ -84,7 +88,8 @@ def _expected_msg(header, tables):
                 constellation=int(r[0]), svid=int(r[1]), method=method, phase_rad=r[2], phase_std_rad=r[3],
                 frequency_hz=r[4], frequency_std_hz=r[5], data_bit=int(r[6]), data_bit_probability=r[7],
                 mode_probabilities=[r[8], r[9]] if method == METHOD_IMM else [],
-                locked=bool(r[10] > 0.5 and math.isfinite(r[2]) and math.isfinite(r[4])),
+                locked=bool(r[10] > 0.5 and math.isfinite(r[2]) and math.isfinite(r[4]) and (
+                    method != METHOD_IMM or (0 < r[3] < math.inf and 0 < r[5] < math.inf))),
                 cycle_slips=min(max(int(r[11]), 0), 2**32 - 1)))
     return out
 
@@ -119,3 +124,73 @@ def test_encode_equals_rclpy_serialisation(frame_id, sizes):
     fixed = theirs == again  # bytes the middleware wrote the same twice: fields (padding may repeat too)
     differ = np.flatnonzero(fixed & (ours != theirs))
     assert all(ours[i] == 0 for i in differ), differ  # where we differ, it is padding we zeroed
+
+
+def _hostile_payloads(rng, count):
+    """Seeded hostile byte strings: random bytes, truncations, overwritten bytes and overwritten lengths of
+    valid CorrelatorArrays (as a fuzzer on the wire sends them)."""
+    valid = [serialize_message(_correlator_array(rng, n, f)) for n, f in ((0, ''), (1, 'a'), (3, 'rx'), (7, 'abcdefg'))]
+    out = [b'', b'\x00', b'\x00\x01\x00\x00', b'\x00\x01\x00\x00' + bytes(8), b'\x00\x01\x00\x00' + b'\xff' * 40]
+    for raw in valid:
+        out += [raw[:cut] for cut in range(len(raw))]
+        count_at = 4 + (12 + int.from_bytes(raw[12:16], 'little') + 3) // 4 * 4
+        for offset in (12, count_at):  # the string length, the sequence count
+            for value in (0, 1, 2**31 - 1, 2**32 - 1, 10**6):
+                buf = bytearray(raw)
+                if offset + 4 <= len(buf):
+                    buf[offset:offset + 4] = value.to_bytes(4, 'little')
+                    out.append(bytes(buf))
+    while len(out) < count:
+        kind = rng.integers(3)
+        if kind == 0:
+            head = b'\x00\x01\x00\x00' if rng.random() < 0.7 else b''
+            out.append(head + rng.integers(0, 256, int(rng.integers(0, 400)), dtype=np.uint8).tobytes())
+        else:
+            buf = bytearray(valid[int(rng.integers(len(valid)))])
+            for _ in range(int(rng.integers(1, 8))):
+                buf[int(rng.integers(4, len(buf)))] = int(rng.integers(256))
+            out.append(bytes(buf) if kind == 1 else bytes(buf[:int(rng.integers(4, len(buf) + 1))]))
+    return out
+
+
+def test_decoder_never_fails_or_reads_out_of_bounds_on_hostile_bytes(monkeypatch):
+    """Fuzz (seeded, 3000 payloads): the compiled decoder returns None or the fields the bytes encode, never
+    raises; its uncompiled twin, whose numpy indexing raises IndexError on any read past the buffer, agrees on
+    every payload (so the compiled one reads nothing out of bounds). Whatever it accepts, rclpy deserialises to
+    the same fields."""
+    from imm_carrier import cdr
+
+    monkeypatch.setattr(cdr, '_u32', cdr._u32.py_func)  # the twin reads through uncompiled helpers too
+    rng = np.random.default_rng(12)
+    accepted = 0
+    for raw in _hostile_payloads(rng, 3000):
+        d = decode_correlator_array(raw)
+        if len(raw) >= 8 and raw[:2] == b'\x00\x01':
+            buf = np.frombuffer(raw, dtype=np.uint8).astype(np.int64)  # int64: Python-side shifts do not wrap
+            n_max = max(0, (len(raw) - 20) // 44)
+            ints, floats, meta = np.empty((n_max, 2), np.int64), np.empty((n_max, 5)), np.zeros(4, np.int64)
+            n = cdr._decode.py_func(buf, ints, floats, meta)  # IndexError here = an out-of-bounds read
+            assert (n < 0) == (d is None)
+            if d is not None:
+                np.testing.assert_array_equal(floats[:n, 1], d.in_phase)
+        if d is None:
+            continue
+        accepted += 1
+        assert 0 < d.header_end <= len(raw) - 4
+        msg = deserialize_message(raw, CorrelatorArray)
+        assert d.stamp_ns == msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        assert d.stamp_nanosec == msg.header.stamp.nanosec
+        assert len(msg.correlators) == d.constellation.shape[0]
+        for name, values in (('svid', d.svid), ('integration_time_s', d.integration_time_s),
+                             ('in_phase', d.in_phase), ('cn0_dbhz', d.cn0_dbhz)):
+            np.testing.assert_array_equal(values, [getattr(c, name) for c in msg.correlators], err_msg=name)
+    assert accepted > 100  # the overwritten payloads that stay well-formed
+
+
+def test_decoder_requires_a_terminated_frame_id():
+    raw = serialize_message(_correlator_array(np.random.default_rng(2), 2, 'rx'))
+    assert decode_correlator_array(raw) is not None
+    no_nul = raw[:18] + b'x' + raw[19:]  # frame_id 'rx' + NUL -> 'rxx' without its terminating NUL
+    assert decode_correlator_array(no_nul) is None
+    empty = raw[:12] + bytes(4) + raw[16:]  # string length 0: not a CDR string (the NUL counts)
+    assert decode_correlator_array(empty) is None

@@ -33,18 +33,25 @@ START_NS = gps_to_stamp_ns(2300, 345600.0)  # on the 20 ms GPS bit grid
 T_S = 0.02
 T_NS = 20_000_000
 SPIN_DEADLINE_S = 10.0
+TOPIC = '/gnss/correlators'
 
 
 class Rig:
     """The node under test plus a test node that publishes correlators and collects the outputs."""
 
-    def __init__(self, params: dict | None = None, args: list[str] | None = None) -> None:
+    def __init__(self, params: dict | None = None, args: list[str] | None = None, *, reliable: bool = True,
+                 publisher_qos=DATA_QOS) -> None:
         self.context = Context()
         rclpy.init(args=args, context=self.context)
-        overrides = [Parameter(k, value=v) for k, v in (params or {}).items()]
+        params = dict(params or {})
+        if args is None:
+            params.setdefault('input_timeout_s', 0.0)  # no wall-clock STALE report in the middle of a test
+        if reliable:  # the tests count every message: make the (best-effort by default) input reliable
+            params.setdefault(f'qos_overrides.{TOPIC}.subscription.reliability', 'reliable')
+        overrides = [Parameter(k, value=v) for k, v in params.items()]
         self.node = ImmCarrierNode(context=self.context, parameter_overrides=overrides)
         self.io = Node('imm_carrier_test_io', context=self.context)
-        self.pub = self.io.create_publisher(CorrelatorArray, '/gnss/correlators', DATA_QOS)
+        self.pub = self.io.create_publisher(CorrelatorArray, TOPIC, publisher_qos)
         self.estimates: list[CarrierPhaseArray] = []
         self.diagnostics: list[DiagnosticArray] = []
         self.io.create_subscription(CarrierPhaseArray, '/carrier/estimates', self.estimates.append, DATA_QOS)
@@ -94,8 +101,8 @@ class Rig:
 def rig_factory():
     rigs = []
 
-    def make(params=None, args=None):
-        rig = Rig(params, args)
+    def make(params=None, args=None, **kwargs):
+        rig = Rig(params, args, **kwargs)
         rigs.append(rig)
         return rig
 
@@ -181,11 +188,15 @@ def test_bad_input_is_counted_in_diagnostics_and_never_locked_nan(rig_factory):
     # Stamps going backwards, or repeating: the whole array is rejected.
     rig.send(array(START_NS + (k - 5) * T_NS, [correlator(3), correlator(7)]))
     rig.send(array(START_NS + k * T_NS, [correlator(3), correlator(7)]))
+    # A refused stamp never drives the diagnostics timer: the next accepted array reports the rejections.
+    n_diagnostics = len(rig.diagnostics)
+    rig.send(clean_array(k + 1))
+    assert len(rig.diagnostics) == n_diagnostics + 1
     values = rig.last_values()
-    assert values['arrays_received'] == '14'
+    assert values['arrays_received'] == '15'
     assert values['rejected_arrays_stamp_not_increasing'] == '2'
     assert values['correlators_in_rejected_arrays'] == '4'
-    assert values['arrays_processed'] == '12' and len(rig.estimates) == 12
+    assert values['arrays_processed'] == '13' and len(rig.estimates) == 13
     for m in ('imm', 'pll'):
         assert values[f'{m}.rejected_nonfinite_iq'] == '2'
         assert values[f'{m}.rejected_integration_time'] == '2'
@@ -193,17 +204,18 @@ def test_bad_input_is_counted_in_diagnostics_and_never_locked_nan(rig_factory):
         assert values[f'{m}.rejected_invalid_svid'] == '1'
         assert values[f'{m}.rejected_predicted_phase'] == '1'
         assert values[f'{m}.rejected_duplicate_channel'] == '1'
-        # 10 clean arrays of 2 + the duplicate array's 2 accepted samples.
-        assert values[f'{m}.processed'] == '22'
-    assert values['correlators_received'] == str(20 + 8 + 3 + 4)
+        # 10 clean arrays of 2 + the duplicate array's 2 accepted samples + the last clean array.
+        assert values[f'{m}.processed'] == '24'
+    assert values['correlators_received'] == str(20 + 8 + 3 + 4 + 2)
     assert values['accounting_ok'] == 'True'
+    assert rig.diagnostics[-1].status[0].level == DiagnosticStatus.WARN
     # The array with only bad samples is answered with an empty array; nothing NaN is locked.
     assert len(rig.estimates[10].estimates) == 0
     for out in rig.estimates:
         for e in out.estimates:
             assert not e.locked or (math.isfinite(e.phase_rad) and math.isfinite(e.frequency_hz))
     # A later clean array is processed normally and the level returns to OK.
-    rig.send(clean_array(k + 1))
+    rig.send(clean_array(k + 2))
     assert rig.diagnostics[-1].status[0].level == DiagnosticStatus.OK
 
 
@@ -317,3 +329,327 @@ def test_half_cycle_glitch_at_high_cn0_and_1ms_does_not_stop_the_node(rig_factor
         for e in out.estimates:
             assert not e.locked or (math.isfinite(e.phase_rad) and math.isfinite(e.frequency_hz))
     assert rig.estimates[-1].estimates[0].locked
+
+
+# ------------------------------------------------------------------ hostile input (issue 12)
+def array_at(sec: int, nanosec: int, correlators) -> CorrelatorArray:
+    """An array with any header stamp, also one that is not a valid ROS time (negative, nanosec >= 1e9)."""
+    msg = CorrelatorArray(correlators=list(correlators))
+    msg.header.stamp.sec = sec
+    msg.header.stamp.nanosec = nanosec
+    msg.header.frame_id = 'gnss_receiver'
+    return msg
+
+
+def level(rig) -> bytes:
+    return rig.diagnostics[-1].status[0].level
+
+
+def assert_no_invalid_locked(rig) -> None:
+    for out in rig.estimates:
+        for e in out.estimates:
+            if e.locked:
+                assert math.isfinite(e.phase_rad) and math.isfinite(e.frequency_hz), e
+                if e.method == CarrierPhase.IMM:
+                    assert 0 < e.phase_std_rad < math.inf and 0 < e.frequency_std_hz < math.inf, e
+
+
+def test_a_negative_or_unset_stamp_is_counted_and_the_node_keeps_running(rig_factory):
+    """Fuzzer finding: a negative header.stamp killed the node (ns_to_stamp raised while publishing diagnostics)."""
+    rig = rig_factory({'method': 'both', 'diagnostics_period_s': 0.01})
+    for k in range(1, 6):
+        rig.send(clean_array(k))
+    n_diagnostics = len(rig.diagnostics)
+    rig.send(array_at(-5, 0, [correlator(3), correlator(7)]))
+    rig.send(array_at(-2**31, 999_999_999, [correlator(3)]))
+    rig.send(array_at(0, 0, [correlator(3), correlator(7)]))
+    assert len(rig.diagnostics) == n_diagnostics  # a refused stamp never reaches the diagnostics timer
+    assert len(rig.estimates) == 5
+    rig.send(clean_array(6))
+    values = rig.last_values()
+    assert values['rejected_arrays_stamp_not_positive'] == '3'
+    assert values['correlators_in_rejected_arrays'] == '5'
+    assert values['arrays_received'] == '9' and values['arrays_processed'] == '6'
+    assert values['accounting_ok'] == 'True' and values[f'input.{TOPIC}.callback_errors'] == '0'
+    assert level(rig) == DiagnosticStatus.WARN
+    rig.send(clean_array(7))
+    assert level(rig) == DiagnosticStatus.OK and len(rig.estimates) == 7
+
+
+def test_malformed_bytes_are_counted_and_the_node_keeps_running(rig_factory):
+    """Fuzzer finding: malformed bytes killed the node (rclpy's deserialize_message raised RMWError, even for a
+    4-byte payload). Every such payload is counted as rejected_arrays_malformed; no handler raises."""
+    from rclpy.serialization import serialize_message
+
+    rig = rig_factory({'method': 'both', 'diagnostics_period_s': 0.01})
+    for k in range(1, 6):
+        rig.send(clean_array(k))
+    rng = np.random.default_rng(31)
+    valid = serialize_message(clean_array(6))
+    payloads = [b'\x00\x01\x00\x00', b'\x00\x01\x00\x00' + bytes(4), b'\x00\x00\x00\x00' + b'\xff' * 40,
+                rng.integers(0, 256, 3, dtype=np.uint8).tobytes(),
+                b'\x00\x01\x00\x00' + rng.integers(0, 256, 200, dtype=np.uint8).tobytes(),
+                valid[:len(valid) - 7], valid[:17], valid[:12] + b'\xff\xff\xff\x7f' + valid[16:]]
+    for payload in payloads:
+        rig.send(payload)
+    for k in range(6, 9):
+        rig.send(clean_array(k))
+    values = rig.last_values()
+    assert values['rejected_arrays_malformed'] == str(len(payloads))
+    assert values[f'input.{TOPIC}.received'] == str(5 + len(payloads) + 3)
+    assert values[f'input.{TOPIC}.callback_errors'] == '0'
+    assert values['arrays_processed'] == '8' and values['accounting_ok'] == 'True'
+    assert len(rig.estimates) == 8 and all(len(out.estimates) == 4 for out in rig.estimates)
+
+
+def test_one_far_future_stamp_does_not_stall_the_node(rig_factory):
+    """Fuzzer finding: one far-future stamp made every later valid array 'not increasing', for good."""
+    rig = rig_factory({'method': 'both', 'diagnostics_period_s': 0.01})
+    for k in range(1, 21):
+        rig.send(clean_array(k))
+    rig.send(array_at(2**31 - 1, 0, [correlator(3), correlator(7)]))
+    rig.send(array_at(1, 0, [correlator(3), correlator(7)]))  # far past
+    rig.send(array_at(5, 2_000_000_000, [correlator(3)]))  # nanosec >= 1e9: not a ROS time
+    for k in range(21, 31):
+        rig.send(clean_array(k))
+    values = rig.last_values()
+    assert values['rejected_arrays_stamp_far_future'] == '1'
+    assert values['rejected_arrays_stamp_far_past'] == '1'
+    assert values['rejected_arrays_stamp_malformed'] == '1'
+    assert values['stamp_restarts'] == '0' and values['arrays_processed'] == '30'
+    assert values['accounting_ok'] == 'True'
+    assert all(e.locked for e in rig.estimates[-1].estimates)
+    assert [stamp_of(m) for m in rig.estimates] == [START_NS + k * T_NS for k in range(1, 31)]
+
+
+def test_a_confirmed_stamp_jump_starts_a_new_time_line_and_restarts_the_channels(rig_factory):
+    rig = rig_factory({'method': 'both', 'diagnostics_period_s': 0.01, 'max_stamp_jump_s': 10.0,
+                       'stamp_jump_confirmations': 3})
+    for k in range(1, 21):
+        rig.send(clean_array(k))
+    jump = 50_000  # intervals: 1000 s later (a receiver clock reset)
+    for k in range(jump + 1, jump + 4):
+        rig.send(clean_array(k))
+    values = rig.last_values()
+    assert values['rejected_arrays_stamp_far_future'] == '2' and values['stamp_restarts'] == '1'
+    assert values['imm.channels_restarted_stamp_jump'] == values['pll.channels_restarted_stamp_jump'] == '2'
+    assert stamp_of(rig.estimates[-1]) == START_NS + (jump + 3) * T_NS
+    assert not any(e.locked for e in rig.estimates[-1].estimates)  # restarted channels start unlocked
+    for k in range(jump + 4, jump + 30):
+        rig.send(clean_array(k))
+    assert all(e.locked for e in rig.estimates[-1].estimates)
+    assert rig.last_values()['accounting_ok'] == 'True'
+
+
+def test_physically_impossible_correlators_are_rejected_and_never_published_locked(rig_factory):
+    """Fuzzer finding: integration_time_s = 1e6 gave the IMM a -6062 rad phase jump with phase_std 0 and locked,
+    and the PLL a frequency of -2.8e14 Hz that never recovered. Each fault of the issue, in every correlator of
+    one array, is rejected per correlator under its reason; the trackers stay locked and sane."""
+    rig = rig_factory({'method': 'both', 'diagnostics_period_s': 0.01})
+    rng = np.random.default_rng(8)
+    for k in range(1, 31):
+        rig.send(clean_array(k, rng=rng))
+    faults = [('integration_time_s', 1e6), ('in_phase', 1e300), ('quadrature', -1e300), ('integration_time_s', 0.0),
+              ('integration_time_s', -0.001), ('in_phase', math.nan), ('cn0_dbhz', 1e300),
+              ('predicted_phase_change_rad', math.inf), ('integration_time_s', 5e-324),
+              ('predicted_phase_change_rad', 1e9)]
+    k = 30
+    for name, value in faults:
+        k += 1
+        msg = clean_array(k, rng=rng)
+        for c in msg.correlators:
+            setattr(c, name, value)
+        rig.send(msg)
+        assert rig.estimates[-1].estimates == []
+    for j in range(k + 1, k + 21):
+        rig.send(clean_array(j, rng=rng))
+    values = rig.last_values()
+    for m in ('imm', 'pll'):
+        assert values[f'{m}.rejected_integration_time'] == str(2 * 4)
+        assert values[f'{m}.rejected_iq_magnitude'] == str(2 * 2)
+        assert values[f'{m}.rejected_nonfinite_iq'] == '2'
+        assert values[f'{m}.rejected_cn0_range'] == '2'
+        assert values[f'{m}.rejected_predicted_phase'] == str(2 * 2)
+        # Nothing reached the filters (the 10 intervals without an accepted correlator restart each channel once,
+        # as any gap does), so no channel was thrown off.
+        assert values[f'{m}.channels_restarted_gap'] == '2' and values[f'{m}.channels_started'] == '4'
+        assert values[f'{m}.channels_restarted_diverged'] == values[f'{m}.channels_restarted_nonfinite'] == '0'
+        assert values[f'{m}.locked_suppressed_invalid'] == '0'
+    assert values['accounting_ok'] == 'True'
+    assert_no_invalid_locked(rig)
+    last = rig.estimates[-1].estimates
+    assert len(last) == 4 and all(e.locked and abs(e.frequency_hz) < 1.0 for e in last)
+
+
+def test_an_estimate_with_a_zero_std_is_never_published_locked(rig_factory):
+    """With the T range opened up to 1e7 s, T = 1e6 s reaches the IMM as before the fix: its covariance cancels
+    to 0. The final check publishes it unlocked (counted), the channel restarts and locks again; level WARN."""
+    rig = rig_factory({'method': 'both', 'diagnostics_period_s': 0.01, 'max_integration_time_s': 10.0})
+    rig.node.trackers['imm'] = tracker_module.CarrierTracker(  # the node's parameter stops at 10 s
+        tracker_module.TrackerParams(method='imm', max_integration_time_s=1e7))
+    rig.node.trackers['pll'] = tracker_module.CarrierTracker(
+        tracker_module.TrackerParams(method='pll', max_integration_time_s=1e7))
+    rng = np.random.default_rng(2)
+    for k in range(1, 31):
+        rig.send(clean_array(k, rng=rng))
+    msg = clean_array(31, rng=rng)
+    for c in msg.correlators:
+        c.integration_time_s = 1e6
+    rig.send(msg)
+    assert not any(e.locked for e in rig.estimates[-1].estimates)
+    values = rig.last_values()
+    assert int(values['imm.locked_suppressed_invalid']) == 2 and values['imm.channels_restarted_diverged'] == '2'
+    assert level(rig) == DiagnosticStatus.WARN
+    for k in range(32, 60):
+        rig.send(clean_array(k, rng=rng))
+    assert_no_invalid_locked(rig)
+    assert all(e.locked and abs(e.frequency_hz) < 1.0 for e in rig.estimates[-1].estimates)
+    assert level(rig) == DiagnosticStatus.OK
+
+
+def test_a_best_effort_publisher_reaches_the_node_and_is_processed(rig_factory):
+    """A sensor driver publishes best effort (qos_profile_sensor_data); a reliable subscription refused it."""
+    from rclpy.qos import ReliabilityPolicy, qos_profile_sensor_data
+
+    rig = rig_factory({'method': 'imm', 'diagnostics_period_s': 0.01}, reliable=False,
+                      publisher_qos=qos_profile_sensor_data)
+    assert rig.node.subscription.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
+    for k in range(1, 21):
+        rig.send(clean_array(k))
+    values = rig.last_values()
+    assert values[f'input.{TOPIC}.received'] == '20' and values[f'input.{TOPIC}.lost'] == '0'
+    assert values['arrays_processed'] == '20' and len(rig.estimates) == 20
+    assert all(e.locked for e in rig.estimates[-1].estimates)
+
+
+def test_a_silent_node_reports_stale_with_its_counters(rig_factory):
+    rig = rig_factory({'input_timeout_s': 0.2, 'diagnostics_period_s': 0.01})
+    rig._spin_until(lambda: any(d.status[0].level == DiagnosticStatus.STALE for d in rig.diagnostics))
+    stale = next(d for d in rig.diagnostics if d.status[0].level == DiagnosticStatus.STALE)
+    values = {kv.key: kv.value for kv in stale.status[0].values}
+    assert 'no input' in stale.status[0].message and stale.status[0].name == 'imm_carrier'
+    assert values[f'input.{TOPIC}.received'] == '0' and values['arrays_received'] == '0'
+    assert values['accounting_ok'] == 'True'
+    assert stamp_of(stale) > 0  # the node clock's now: the only wall-clock use
+    n = len(rig.diagnostics)
+    for k in range(1, 4):
+        rig.send(clean_array(k))
+    assert any(d.status[0].level == DiagnosticStatus.OK and stamp_of(d) == START_NS + T_NS
+               for d in rig.diagnostics[n:])
+
+
+def test_a_handler_error_is_counted_reported_as_error_and_accounted(rig_factory, monkeypatch):
+    """The subscription's guard is the last net: should the node itself raise, the array is counted
+    (arrays_dropped_handler_error), the accounting still adds up, the next report is ERROR, the node goes on."""
+    from imm_carrier import imm_carrier_node
+
+    rig = rig_factory({'method': 'imm', 'diagnostics_period_s': 0.01})
+    for k in range(1, 4):
+        rig.send(clean_array(k))
+    encode = imm_carrier_node.encode_carrier_phase_array
+    calls = Counter()
+
+    def failing(*args):
+        calls['n'] += 1
+        if calls['n'] == 1:
+            raise RuntimeError('injected')
+        return encode(*args)
+
+    monkeypatch.setattr(imm_carrier_node, 'encode_carrier_phase_array', failing)
+    rig.send(clean_array(4))
+    rig.send(clean_array(5))
+    values = rig.last_values()
+    assert values[f'input.{TOPIC}.callback_errors'] == '1' and values['arrays_dropped_handler_error'] == '1'
+    assert values['arrays_received'] == '5' and values['arrays_processed'] == '4'
+    assert values['accounting_ok'] == 'True' and level(rig) == DiagnosticStatus.ERROR
+    rig.send(clean_array(6))
+    assert level(rig) == DiagnosticStatus.OK
+
+
+def test_lost_messages_raise_the_level_to_warn(rig_factory):
+    rig = rig_factory({'method': 'imm', 'diagnostics_period_s': 0.01})
+    for k in range(1, 4):
+        rig.send(clean_array(k))
+    assert level(rig) == DiagnosticStatus.OK
+    rig.node.health.middleware_lost(TOPIC, 3)  # what the subscription's message-lost event handler records
+    rig.send(clean_array(4))
+    assert level(rig) == DiagnosticStatus.WARN and '3 messages lost' in rig.diagnostics[-1].status[0].message
+    assert rig.last_values()[f'input.{TOPIC}.middleware_lost'] == '3'
+    rig.send(clean_array(5))
+    assert level(rig) == DiagnosticStatus.OK
+
+
+HOSTILE_FLOATS = (math.nan, math.inf, -math.inf, 1e300, -1e300, 5e-324, -5e-324, 0.0, -1.0, 1e150, -1e9, 1e9,
+                  1e-4, 0.1, 99.0, 70.0, 1e5)
+FIELDS = ('integration_time_s', 'in_phase', 'quadrature', 'cn0_dbhz', 'predicted_phase_change_rad')
+
+
+def test_fuzzed_arrays_never_raise_and_never_publish_an_invalid_locked_estimate():
+    """Seeded in-process fuzz of the whole handler (no DDS: on_correlators called with the bytes): 3000 arrays,
+    a third clean, the rest with hostile correlator fields (on newer stamps, so that they reach the trackers),
+    hostile ids, random or truncated bytes, or hostile stamps. Nothing raises, every array is accounted, no
+    published estimate is locked unless valid, and clean input afterwards is tracked and locked again."""
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    context = Context()
+    rclpy.init(context=context)
+    node = ImmCarrierNode(context=context, parameter_overrides=[
+        Parameter('method', value='both'), Parameter('input_timeout_s', value=0.0)])
+    published: list[bytes] = []
+    node.estimates_pub.publish = published.append
+    node.diag_pub.publish = lambda msg: None
+    rng = np.random.default_rng(20261201)
+    try:
+        k = 0
+        for _ in range(3000):
+            kind = rng.integers(6)
+            k += 1
+            msg = clean_array(k, svids=(3, 7, 11), rng=rng)
+            if kind in (1, 2):  # hostile field values
+                for _ in range(int(rng.integers(1, 4))):
+                    c = msg.correlators[int(rng.integers(3))]
+                    setattr(c, FIELDS[int(rng.integers(len(FIELDS)))],
+                            HOSTILE_FLOATS[int(rng.integers(len(HOSTILE_FLOATS)))])
+            elif kind == 3:  # hostile ids and sizes
+                c = msg.correlators[int(rng.integers(3))]
+                c.svid = int(rng.choice([0, 255, 256, 65535]))
+                c.constellation = int(rng.choice([0, 255]))
+                if rng.random() < 0.3:
+                    msg.correlators = msg.correlators + [msg.correlators[0]]
+            raw = serialize_message(msg)
+            if kind == 4:  # bytes: random, truncated or overwritten
+                choice = rng.integers(3)
+                if choice == 0:
+                    raw = rng.integers(0, 256, int(rng.integers(1, 300)), dtype=np.uint8).tobytes()
+                elif choice == 1:
+                    raw = raw[:int(rng.integers(0, len(raw)))]
+                else:
+                    buf = bytearray(raw)
+                    for _ in range(int(rng.integers(1, 6))):
+                        buf[int(rng.integers(len(buf)))] = int(rng.integers(256))
+                    raw = bytes(buf)
+            elif kind == 5:  # hostile stamps
+                sec = int(rng.choice([0, -1, -2**31, 2**31 - 1, 1, 2 * 10**9]))
+                raw = serialize_message(array_at(sec, int(rng.integers(10**9)), msg.correlators))
+            node.on_correlators(raw)
+        for j in range(k + 1, k + 60):
+            node.on_correlators(serialize_message(clean_array(j, svids=(3, 7, 11), rng=rng)))
+        values = node.accounting()
+        assert values['accounting_ok'] is True and values['arrays_received'] == 3000 + 59
+        assert values['arrays_dropped_handler_error'] == 0
+        assert values['rejected_arrays_malformed'] > 100
+        for m in ('imm', 'pll'):
+            for key in ('rejected_integration_time', 'rejected_nonfinite_iq', 'rejected_cn0_range',
+                        'rejected_predicted_phase', 'rejected_iq_magnitude', 'rejected_invalid_svid'):
+                assert values[f'{m}.{key}'] > 10, (m, key, values)
+        outs = [deserialize_message(raw, CarrierPhaseArray) for raw in published]
+        for out in outs:
+            for e in out.estimates:
+                if e.locked:
+                    assert math.isfinite(e.phase_rad) and math.isfinite(e.frequency_hz), e
+                    assert e.method == CarrierPhase.PLL or (0 < e.phase_std_rad < math.inf
+                                                             and 0 < e.frequency_std_hz < math.inf), e
+        assert len(outs[-1].estimates) == 6 and all(e.locked for e in outs[-1].estimates)
+    finally:
+        node.destroy_node()
+        rclpy.shutdown(context=context)

@@ -189,7 +189,9 @@ def test_batch_rows_convert_to_estimates():
 
 @pytest.mark.parametrize("method", ["imm", "pll"])
 def test_overflowing_correlator_restarts_the_channel_unlocked(method):
-    tr = CarrierTracker(TrackerParams(method=method))
+    # The magnitude check (rejected_iq_magnitude) normally stops |I|, |Q| ~ 1e300 before the filter: opened up
+    # here to test the net behind it.
+    tr = CarrierTracker(TrackerParams(method=method, max_iq_magnitude_ratio=1e308))
     for k in range(1, 30):
         tr.process(k * T_NS, [_sample(dphi=0.0)])
     (bad,) = tr.process(30 * T_NS, [_sample(i=1e300, q=-1e300, dphi=0.0)])
@@ -200,3 +202,148 @@ def test_overflowing_correlator_restarts_the_channel_unlocked(method):
     assert math.isfinite(first.phase_rad) and not first.locked and tr.counters["channels_started"] == 2
     outs = [tr.process(k * T_NS, [_sample(dphi=0.0)])[0] for k in range(32, 60)]
     assert outs[-1].locked and math.isfinite(outs[-1].phase_rad)
+
+
+def _locked_run(tr, k_end, theta=0.4, rng=None, sigma=0.05):
+    """Intervals 1..k_end of a residual phase theta (rad) with noise (satellite phase change 0)."""
+    outs = []
+    for k in range(1, k_end + 1):
+        n = rng.normal(0.0, sigma, 2) if rng is not None else (0.0, 0.0)
+        outs.append(tr.process(k * T_NS, [_sample(i=math.cos(theta) + n[0], q=math.sin(theta) + n[1], dphi=0.0)]))
+    return outs
+
+
+def _valid_if_locked(e):
+    """The output rule: locked only with finite phase/frequency and (IMM) finite standard deviations > 0."""
+    if not e.locked:
+        return True
+    stds_ok = e.method != METHOD_IMM or (0 < e.phase_std_rad < math.inf and 0 < e.frequency_std_hz < math.inf)
+    return math.isfinite(e.phase_rad) and math.isfinite(e.frequency_hz) and stds_ok
+
+
+@pytest.mark.parametrize("method", ["imm", "pll"])
+def test_physically_impossible_correlators_are_rejected_and_counted(method):
+    """The faults found by fuzzing (issue 12): T = 1e6 s gave the IMM a phase jump of -6062 rad with
+    phase_std 0 and locked, and the PLL a frequency of -2.8e14 Hz for good. Each impossible value is now
+    rejected before the filter, under its own counter, and the channel goes on locked and sane."""
+    tr = CarrierTracker(TrackerParams(method=method))
+    rng = np.random.default_rng(4)
+    _locked_run(tr, 40, rng=rng)
+    t_max, t_min = tr.params.max_integration_time_s, tr.params.min_integration_time_s
+    assert (t_min, t_max) == (1e-4, 0.1)
+    dphi_max = 2 * math.pi * 1e5 * T
+    bad = [
+        (_sample(t=1e6), "rejected_integration_time"),
+        (_sample(t=0.2), "rejected_integration_time"),
+        (_sample(t=5e-5), "rejected_integration_time"),
+        (_sample(t=5e-324), "rejected_integration_time"),
+        (_sample(t=math.nan), "rejected_integration_time"),
+        (_sample(i=1e300), "rejected_iq_magnitude"),
+        (_sample(q=-1e300), "rejected_iq_magnitude"),
+        (_sample(i=150.0), "rejected_iq_magnitude"),  # 150 x the RMS of a 45 dB-Hz correlator (~1)
+        (_sample(cn0=1e300), "rejected_cn0_range"),
+        (_sample(dphi=math.inf), "rejected_predicted_phase"),
+        (_sample(dphi=1.01 * dphi_max), "rejected_predicted_phase"),
+        (_sample(dphi=-1e9), "rejected_predicted_phase"),
+    ]
+    for k, (sample, key) in enumerate(bad, start=41):
+        before = tr.counters
+        assert tr.process(k * T_NS, [sample]) == (), key
+        after = tr.counters
+        assert after[key] == before[key] + 1, key
+        assert sum(after.values()) == sum(before.values()) + 1, key  # nothing else counted, no channel touched
+    assert tr.channel_count == 1 and tr.counters["channels_started"] == 1
+    # The bounds themselves are accepted (a new channel each, not to disturb the locked one).
+    edge = [CorrelatorSample(1, sv, t, 1.0, 0.0, 45.0, d) for sv, t, d in
+            ((20, t_min, 0.0), (21, t_max, 0.0), (22, T, 0.99 * dphi_max), (23, T, -0.99 * dphi_max))]
+    assert len(tr.process(60 * T_NS, edge)) == 4
+    k0 = 60
+    outs = [tr.process((k0 + j) * T_NS, [_sample(i=math.cos(0.4), q=math.sin(0.4), dphi=0.0)])[0] for j in range(1, 6)]
+    # The channel was not thrown off: after the gap (restart) it locks again on the same phase.
+    outs += [tr.process((k0 + j) * T_NS, [_sample(i=math.cos(0.4), q=math.sin(0.4), dphi=0.0)])[0]
+             for j in range(6, 40)]
+    assert outs[-1].locked and abs(math.remainder(outs[-1].phase_rad - 0.4, math.pi)) < 0.05
+    assert abs(outs[-1].frequency_hz) < 1.0
+
+
+@pytest.mark.parametrize("method", ["imm", "pll"])
+def test_a_tracker_thrown_off_by_an_accepted_input_restarts_instead_of_publishing_garbage(method):
+    """With the T check opened up (max 1e7 s), T = 1e6 s reaches the filter, as before the fix: the IMM's
+    covariance cancels to 0 and the PLL's integrators run away. The final check publishes that answer
+    unlocked (counted) and restarts the channel (channels_restarted_diverged); the next estimates are sane
+    and lock again."""
+    tr = CarrierTracker(TrackerParams(method=method, max_integration_time_s=1e7))
+    rng = np.random.default_rng(9)
+    _locked_run(tr, 40, rng=rng)
+    (wild,) = tr.process(41 * T_NS, [_sample(t=1e6, i=0.9, q=0.5, dphi=0.0)])
+    assert not wild.locked
+    c = tr.counters
+    assert c["channels_restarted_diverged"] + c["channels_restarted_nonfinite"] == 1
+    outs = [tr.process(k * T_NS, [_sample(i=math.cos(0.4) + rng.normal(0, 0.05), q=math.sin(0.4)
+                                          + rng.normal(0, 0.05), dphi=0.0)])[0] for k in range(42, 90)]
+    assert all(_valid_if_locked(e) for e in outs)
+    assert all(math.isfinite(e.phase_rad) and abs(e.frequency_hz) * T <= 1.0 for e in outs)
+    assert outs[-1].locked and abs(math.remainder(outs[-1].phase_rad - 0.4, math.pi)) < 0.1
+
+
+def test_a_collapsed_imm_covariance_is_never_published_locked():
+    """phase_std 0 with locked = true was the fuzzer's finding: the final check suppresses it (counted)."""
+    tr = CarrierTracker(TrackerParams(max_integration_time_s=1e7))
+    _locked_run(tr, 30)
+    (e,) = tr.process(31 * T_NS, [_sample(t=1e6, i=math.cos(0.4), q=math.sin(0.4), dphi=0.0)])
+    assert e.phase_std_rad == 0.0 and not e.locked
+    assert tr.counters["locked_suppressed_invalid"] == 1 and tr.counters["channels_restarted_diverged"] == 1
+
+
+@pytest.mark.parametrize("method", ["imm", "pll"])
+def test_random_accepted_extremes_never_give_an_invalid_locked_estimate(method):
+    """Seeded property test: correlators anywhere inside the accepted ranges (T over its whole range, C/N0 0..70,
+    I/Q up to the magnitude bound, predicted phase up to its bound) mixed with good ones: no locked estimate is
+    ever invalid, every estimate is finite or the channel restarted, and after each extreme input the channel's
+    next estimate is sane (|f| <= 1/T) or it restarted."""
+    rng = np.random.default_rng(77)
+    params = TrackerParams(method=method)
+    tr = CarrierTracker(params)
+    stamp = 0
+    for step in range(3000):
+        extreme = rng.random() < 0.2
+        if extreme:
+            log_t = rng.uniform(math.log(params.min_integration_time_s), math.log(params.max_integration_time_s))
+            t = float(np.exp(log_t))
+            cn0 = float(rng.uniform(0, 70))
+            rms = math.sqrt(1.0 + 2.0 / (2 * t * 10 ** (cn0 / 10)))
+            mag = float(rng.uniform(0, 0.99 * params.max_iq_magnitude_ratio * rms))
+            ang = float(rng.uniform(-math.pi, math.pi))
+            i, q = mag * math.cos(ang), mag * math.sin(ang)
+            dphi = float(rng.uniform(-0.99, 0.99) * 2 * math.pi * 1e5 * t)
+        else:
+            t, cn0, dphi = T, 45.0, 0.0
+            i, q = math.cos(0.4) + rng.normal(0, 0.05), math.sin(0.4) + rng.normal(0, 0.05)
+        stamp += int(round(t * 1e9))
+        before = tr.counters
+        out = tr.process(stamp, [_sample(i=i, q=q, t=t, cn0=cn0, dphi=dphi)])
+        assert len(out) == 1, (step, tr.counters)
+        (e,) = out
+        assert _valid_if_locked(e), (step, e)
+        after = tr.counters
+        restarted = sum(after[k] - before[k] for k in ("channels_restarted_nonfinite", "channels_restarted_diverged"))
+        assert restarted or (math.isfinite(e.phase_rad) and abs(e.frequency_hz) * t <= 1.0), (step, e)
+    assert tr.counters["processed"] == 3000
+
+
+def test_reset_channels_restarts_every_channel_counted():
+    tr = CarrierTracker(TrackerParams())
+    tr.process(T_NS, [_sample(svid=3), _sample(svid=7)])
+    assert tr.reset_channels() == 2 and tr.channel_count == 0
+    assert tr.counters["channels_restarted_stamp_jump"] == 2
+    out = tr.process(2 * T_NS, [_sample(svid=3)])
+    assert not out[0].locked and tr.counters["channels_started"] == 3
+
+
+def test_integration_time_range_is_validated():
+    with pytest.raises(ValueError):
+        TrackerParams(min_integration_time_s=0.1, max_integration_time_s=0.01)
+    with pytest.raises(ValueError):
+        TrackerParams(min_integration_time_s=0.0)
+    with pytest.raises(ValueError):
+        TrackerParams(max_iq_magnitude_ratio=1.0)
