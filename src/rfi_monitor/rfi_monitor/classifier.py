@@ -152,7 +152,7 @@ def welch_psd(x: np.ndarray, nfft: int, max_frames: int) -> tuple[np.ndarray, in
         p = _frame_power(spec) / nfr
         fv = x[: nfr * nfft]
         pw = float(np.dot(fv, fv)) / fv.size
-        return p * (pw / p.sum()), nfr
+        return _normalised(p, pw), nfr
     # single precision FFT (scipy's pocketfft; numpy's float32 path is slower than its float64 one):
     # the PSD needs ~1e-3 relative accuracy (it is smoothed and thresholded in dB), float32 gives
     # 1e-7; 53 us instead of 74 us for 149 frames of 256 on the development machine
@@ -169,7 +169,16 @@ def welch_psd(x: np.ndarray, nfft: int, max_frames: int) -> tuple[np.ndarray, in
     pw = float(np.dot(fv, fv)) / fr.size
     if cplx:
         p = np.fft.fftshift(p)
-    return p * (pw / p.sum()), int(fr.shape[0])
+    return _normalised(p, pw), int(fr.shape[0])
+
+
+def _normalised(p: np.ndarray, power: float) -> np.ndarray:
+    """``p`` scaled so that it sums to ``power``; all zero when ``p`` holds no power (a blank block, or one
+    whose only non-zero samples fall on the window's zeros), which the monitor rejects (``blank_block``)."""
+    total = float(p.sum())
+    if not total > 0.0:
+        return np.zeros_like(p)
+    return p * (power / total)
 
 
 @njit(cache=True)

@@ -19,6 +19,32 @@ therefore robust to a CW present during calibration, but not to a wideband jamme
 present from the first block (then set ``noise_floor_power``). Blocks during calibration are
 reported as UNKNOWN. ``reset()`` keeps the calibration unless ``keep_calibration=False``.
 
+Blocks that cannot be analysed give ``valid`` False and a ``rejection`` reason (and no type):
+
+* ``saturated``: more than ``max_invalid_fraction`` of the samples non-finite or at full scale;
+* ``blank_block``: the analysed Welch frames hold no power (below ``MIN_BLOCK_POWER``: all-zero
+  samples, or non-zero samples only where the window is zero); such a block says nothing about a
+  jammer, and it never enters the calibration (it would make the learned noise shape NaN). A
+  calibration whose learned floor is below ``MIN_BLOCK_POWER`` (blocks of pure narrowband excess, no
+  noise) is discarded and learned again (``calibrations_discarded``);
+* ``power_overflow``: the block power is not finite;
+* ``below_noise_floor``: the block power is more than ``BELOW_FLOOR_DB`` below the calibrated
+  noise floor. The thermal noise of a working front end cannot vanish, so such a block means that
+  its gain or ``scale`` no longer matches the calibration, and neither "no jammer" nor a J/N can be
+  read from it;
+* ``implausible_power``: the block power is more than ``MAX_POWER_JN_DB`` above the calibrated
+  floor: no jammer reaches an analysed block that strongly (see the constant), so it is the
+  ``scale`` or the gain that changed, and a J/N read from it would be the scale's, not a jammer's.
+  When either lasts ``calibration_blocks`` blocks in a row, the learned floor is taken as wrong (e.g.
+  learned while a wideband jammer was on, or the front end's gain changed for good) and learned
+  again (``recalibrations``); a fixed ``noise_floor_power`` is never relearned.
+
+J/N of a NONE block: the measured J/N (power or spectral, whichever is larger), but at least the
+block's power resolution ``10 log10(sqrt(2 / n))`` dB (real; ``sqrt(1 / n)`` complex, n samples in the
+Welch frames: the 1-sigma relative error of the block power). A measurement below it, including no
+excess at all (minus infinity), is reported as that resolution: "J/N below x dB". A published NONE
+therefore always carries a finite J/N and J/S.
+
 Time: ``stamp_ns`` (int, ns) is passed in and copied to the result; no clock is read.
 
 Example
@@ -48,6 +74,7 @@ from rfi_monitor import sweep_period as sp
 from rfi_monitor.classifier import (
     CHIRP,
     CW,
+    NONE,
     UNKNOWN,
     ClassifierParams,
     block_features,
@@ -273,9 +300,11 @@ class JammerEstimate:
         sweep_bandwidth_hz: Hz.
         sample_rate_hz: of the analysed block.
         first_sample_index, n_samples: the block.
-        valid: False when the block was rejected (then type UNKNOWN, confidence 0).
+        valid: False when the block was rejected (then type UNKNOWN, confidence 0, NaN fields).
         counters: cumulative counts (measurement status, rejected blocks, gaps, resets).
         traces: per-sample estimates when requested, else None.
+        rejection: why the block was rejected (module docstring: ``saturated``, ``blank_block``,
+            ``power_overflow``, ``below_noise_floor``); empty when valid.
     """
 
     stamp_ns: int
@@ -295,7 +324,29 @@ class JammerEstimate:
     valid: bool
     counters: Mapping[str, int]
     traces: BlockTraces | None = field(default=None, repr=False)
+    rejection: str = ""
 
+
+SATURATED = "saturated"
+BLANK_BLOCK = "blank_block"
+POWER_OVERFLOW = "power_overflow"
+BELOW_NOISE_FLOOR = "below_noise_floor"
+IMPLAUSIBLE_POWER = "implausible_power"
+REJECTIONS = (SATURATED, BLANK_BLOCK, POWER_OVERFLOW, BELOW_NOISE_FLOOR, IMPLAUSIBLE_POWER)
+"""``JammerEstimate.rejection`` reasons (module docstring)."""
+BELOW_FLOOR_DB = 10.0
+"""A calibrated block whose power is more than this below the noise floor is rejected, dB. The block power
+of noise scatters by sqrt(2 / n) (0.2 dB at n = 1024 samples, 1 sigma) and a front end's gain drifts by a
+dB or two with temperature; a 10 dB drop is a front end that no longer delivers the calibrated noise."""
+MAX_POWER_JN_DB = 120.0
+"""A calibrated block whose power J/N exceeds this is rejected (``implausible_power``), dB. A jammer 120 dB above
+the noise floor puts at least -114 + 120 = +6 dBm into the antenna port (noise density -114 dBm/MHz, band
+>= 1 MHz), beyond the 1 dB compression of GNSS low-noise amplifiers (about -20..0 dBm input) and the range of
+front-end AGCs (about 60 dB): such a block would be clipped, never a clean measurement of the jammer."""
+MIN_BLOCK_POWER = 1e-60
+"""Smallest block power analysed, sample units^2 (1e-30 rms): below it the block is blank. The Welch PSD is
+computed in single precision, whose numbers lose precision below 1.2e-38 (subnormal) and end at 1.4e-45;
+no unit a front end reports in (volts, full scale, counts) comes near."""
 
 _STATUS_NAMES = {STATUS_OK: "measurements_ok", STATUS_NEAR_ZERO: "rejected_near_zero",
                  STATUS_DOMAIN: "rejected_arccos_domain", STATUS_NON_FINITE: "rejected_non_finite",
@@ -318,7 +369,9 @@ class RfiMonitor:
         self._tpar = params.tracker.as_array()
         self._packed: dict[bool, tuple[np.ndarray, np.ndarray]] = {}
         self._block_counters = {"blocks": 0, "blocks_rejected": 0, "gaps": 0, "rate_changes": 0,
-                                "non_finite_samples": 0, "saturated_samples": 0}
+                                "non_finite_samples": 0, "saturated_samples": 0, "recalibrations": 0,
+                                "calibrations_discarded": 0}
+        self._off_floor_run = 0
         self._cal_psd: list[np.ndarray] = []
         self._cal_pow: list[float] = []
         self._template: np.ndarray | None = None
@@ -342,8 +395,7 @@ class RfiMonitor:
         self._if: float | None = None
         self._complex: bool | None = None
         if not keep_calibration:
-            self._cal_psd, self._cal_pow, self._template = [], [], None
-            self._floor = self.params.noise_floor_power if self.params.noise_floor_power > 0 else math.nan
+            self._forget_calibration()
             self._cal_key = None
 
     @property
@@ -447,11 +499,8 @@ class RfiMonitor:
             self._stream_first = int(first_sample_index)
         traces = self._run_chunks(xc, cplx, int(first_sample_index), float(sample_rate_hz), return_traces)
         self._resets_in_block = int(self._state.mist[K_NRESETS]) - resets_before
-        nan = math.nan
         if n_bad + n_sat > self.params.max_invalid_fraction * n:
-            self._block_counters["blocks_rejected"] += 1
-            return JammerEstimate(int(stamp_ns), UNKNOWN, 0.0, nan, nan, nan, nan, nan, nan, nan, nan,
-                                  float(sample_rate_hz), int(first_sample_index), n, False, self._counters(),
+            return self._rejected(SATURATED, int(stamp_ns), float(sample_rate_hz), int(first_sample_index), n,
                                   traces)
         xs = xc if n_bad == 0 else np.where(np.isfinite(xc), xc, 0)
         return self._identify(xs, cplx, float(sample_rate_hz), float(intermediate_frequency_hz),
@@ -563,16 +612,48 @@ class RfiMonitor:
             return None
         return BlockTraces(o_idx[:k], o_z[:k], o_f[:k], o_df[:k], o_p11[:k], o_zar[:k], o_reset[:k])
 
+    def _rejected(self, reason: str, stamp_ns: int, fs: float, first: int, n: int,
+                  traces: BlockTraces | None) -> JammerEstimate:
+        """The result of a block that is not analysed: valid False, UNKNOWN, confidence 0, NaN fields."""
+        self._block_counters["blocks_rejected"] += 1
+        nan = math.nan
+        return JammerEstimate(stamp_ns, UNKNOWN, 0.0, nan, nan, nan, nan, nan, nan, nan, nan, fs, first, n, False,
+                              self._counters(), traces, reason)
+
+    def _forget_calibration(self) -> None:
+        """Learn the noise floor (unless fixed) and shape again from the next blocks."""
+        self._cal_psd, self._cal_pow, self._template = [], [], None
+        self._floor = self.params.noise_floor_power if self.params.noise_floor_power > 0 else math.nan
+        self._off_floor_run = 0
+
     def _identify(self, xs: np.ndarray, cplx: bool, fs: float, fif: float, stamp_ns: int, first: int,
                   traces: BlockTraces | None) -> JammerEstimate:
         p = self.params
         cp = p.classifier
         st = self._state
         nan = math.nan
+        # while calibrating the template is None (flat), as block_features needs it then
+        feat = block_features(xs, self._template, cp)
+        if not math.isfinite(feat.power):
+            return self._rejected(POWER_OVERFLOW, stamp_ns, fs, first, xs.size, traces)
+        if not feat.power >= MIN_BLOCK_POWER:
+            return self._rejected(BLANK_BLOCK, stamp_ns, fs, first, xs.size, traces)
+        if self.calibrated:
+            off_floor = None
+            if feat.power < self._floor * 10 ** (-BELOW_FLOOR_DB / 10):
+                off_floor = BELOW_NOISE_FLOOR
+            elif feat.power > self._floor * 10 ** (MAX_POWER_JN_DB / 10):
+                off_floor = IMPLAUSIBLE_POWER
+            if off_floor is not None:
+                self._off_floor_run += 1
+                if self._off_floor_run >= p.calibration_blocks and not p.noise_floor_power > 0:
+                    self._block_counters["recalibrations"] += 1
+                    self._forget_calibration()
+                return self._rejected(off_floor, stamp_ns, fs, first, xs.size, traces)
+        self._off_floor_run = 0
         if not self.calibrated:
-            feat0 = block_features(xs, None, cp)
-            self._cal_psd.append(feat0.psd / feat0.psd.sum())
-            self._cal_pow.append(feat0.power)
+            self._cal_psd.append(feat.psd / feat.psd.sum())
+            self._cal_pow.append(feat.power)
             if len(self._cal_psd) >= p.calibration_blocks:
                 med = np.median(np.stack(self._cal_psd), axis=0)
                 self._template = smooth_template(med, cp.template_smooth_bins)
@@ -585,9 +666,12 @@ class RfiMonitor:
                         exc = np.sum(np.maximum(white - s * (1 + cp.min_excess), 0.0) * self._template)
                         resid.append(max(1.0 - exc, 0.0))
                     self._floor = float(np.median(np.array(self._cal_pow) * np.array(resid)))
+                    if not (math.isfinite(self._floor) and self._floor >= MIN_BLOCK_POWER):
+                        # the blocks were all narrowband excess (no noise seen): nothing to measure J/N against
+                        self._block_counters["calibrations_discarded"] += 1
+                        self._forget_calibration()
             return JammerEstimate(stamp_ns, UNKNOWN, 0.5, nan, nan, nan, nan, nan, nan, nan, nan, fs, first,
                                   xs.size, True, self._counters(), traces)
-        feat = block_features(xs, self._template, cp)
         jn_pow = 10 * math.log10(feat.power / self._floor - 1.0) if feat.power > self._floor else -math.inf
         locked = bool(st.si[J_LOCKED] == 1)
         df = float(st.fst[F_DF])
@@ -614,6 +698,9 @@ class RfiMonitor:
         locked = locked or lattice or periodic
         jtype, conf = classify(feat, jn_pow, chirp_ok, df, True, cp)
         jn = max(jn_pow, feat.jn_spectral_db)
+        if jtype == NONE:
+            # at least the block power's resolution (module docstring): a NONE never carries a NaN J/N
+            jn = max(jn, 5.0 * math.log10((1.0 if cplx else 2.0) / (feat.frames * cp.nfft)))
         bw_noise = p.noise_bandwidth_hz if p.noise_bandwidth_hz > 0 else (fs if cplx else fs / 2)
         n_dbm = p.noise_density_dbm_per_mhz + 10 * math.log10(bw_noise / 1e6)
         js = jn + n_dbm - p.signal_power_dbm if math.isfinite(jn) else nan

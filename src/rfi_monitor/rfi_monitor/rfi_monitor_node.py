@@ -6,6 +6,14 @@ array (``np.frombuffer`` by ``sample_format``, little-endian, times ``scale``: v
 :class:`rfi_monitor.monitor.RfiMonitor` (Kang et al., eq. 8-27, plus the identification of
 docs/rfi_monitor/README.md) and publishes the returned estimate as a ``rfi_msgs/JammerState``.
 
+Input: ``/rfi/if_samples`` is subscribed with :func:`rfi_node_common.inputs.subscribe_input`: best
+effort (a sensor driver's best-effort publisher and a reliable one are both accepted; rclpy's
+``qos_overrides./rfi/if_samples.subscription.*`` parameters change it), every arrival and every
+message lost before the node saw it (publisher sequence gaps, the middleware's lost-message event)
+counted as ``input./rfi/if_samples.*``. Nothing raises out of :meth:`RfiMonitorNode.on_block`: every
+block that reaches it is either processed or rejected under a named reason; the subscription's own
+guard (``callback_errors``) is only the last net and makes the diagnostics ERROR.
+
 Output policy (one decision, applied to every block):
 
 * Exactly one JammerState per block that the core *analysed* (``JammerEstimate.valid``): header
@@ -13,43 +21,80 @@ Output policy (one decision, applied to every block):
   relative to the block's ``center_frequency_hz`` (the core converts from the IF), NaN where the
   core does not know a value. While the noise floor is being learned the core reports UNKNOWN
   (confidence 0.5, NaNs); that is published, since it is what the monitor knows.
-* Nothing for a rejected block: malformed blocks (checked here before the core sees them) and
-  blocks the core refuses to analyse (``valid`` False: too many saturated samples). An invalid
-  estimate is therefore never on the topic; a consumer that needs the monitor's status reads
-  /diagnostics or notices the missing state. Each rejection is counted as ``rejected_<reason>``
-  and gives one warning, throttled to ``warning_throttle_s``.
+* Nothing for a rejected block: malformed or physically impossible blocks (checked here before the
+  core sees them) and blocks the core refuses to analyse (``valid`` False). An invalid estimate is
+  therefore never on the topic, and in particular a block that carries no information (blank,
+  absurd scale) never gives "NONE, confidence 1"; a consumer that needs the monitor's status reads
+  /diagnostics or notices the missing state. Each rejection is counted as ``rejected_<reason>`` and
+  gives one warning, throttled to ``warning_throttle_s``.
 
 Stream continuity: the core owns it. A jump in ``first_sample_index`` resets the per-sample tracker
 (the calibration is kept) and is counted as a gap; a change of sample rate, IF or complexness resets
 it and the calibration and is counted as ``rate_changes``. A snapshot front end (1 ms every second)
 therefore produces one gap per block; gaps are reported but are not a warning. A block rejected here
-never reaches the core, so the block after it counts as a gap.
+never reaches the core, so the block after it counts as a gap (also after a lost message).
 
-Rejection reasons (checked in this order): ``stamp_not_increasing`` (stamp <= that of the last
-accepted block), ``unknown_sample_format``, ``bad_bits_per_sample`` (outside 1..16, or above 8 for
-INT8), ``bad_sample_rate`` (not finite or <= 0), ``bad_intermediate_frequency`` (not finite or
-|IF| >= the Nyquist band), ``bad_scale`` (not finite or <= 0), ``bad_center_frequency`` (not
-finite), ``empty_block``, ``truncated_sample`` (INT16 with an odd byte count), ``odd_length_iq``,
-``short_block`` (fewer samples than ``min_block_samples``), ``saturated`` (the core: more than
-``max_invalid_fraction`` of the samples at full scale), ``core_error`` (the core raised on a block
-that passed the checks; a bug, logged as an error).
+Stamps: :class:`rfi_node_common.input_checks.StampGate` admits every block's stamp first (a block
+whose stamp is accepted moves the time line even if its content is then rejected). A stamp
+<= 0 is ``stamp_not_positive``; one that does not increase is ``stamp_not_increasing``; one more than
+``max_stamp_jump_s`` from the latest accepted stamp is ``stamp_far_future`` / ``stamp_far_past`` and
+does not move the node's time line, so a single bad stamp never stalls the node. A jump confirmed by
+``stamp_jump_confirmations`` consecutive blocks is accepted as a new time line (``stamp_restarts``;
+nothing in the monitor depends on stamp continuity, which the sample index carries). A stamp whose
+nanoseconds are not below 1e9 is ``bad_stamp_nanosec`` (not a canonical ROS time).
+
+Block checks, in this order (``rejected_<reason>``), with the physical ranges they enforce:
+
+* ``unknown_sample_format``; ``bad_bits_per_sample`` (outside 1..16, or above 8 for INT8);
+* ``bad_sample_rate``: not in [SAMPLE_RATE_MIN_HZ, SAMPLE_RATE_MAX_HZ] = [1e5, 1e11] Hz (a GNSS
+  signal needs at least ~1 MS/s, direct-RF samplers stay below 100 GS/s; at a tiny rate the
+  periodicity analysis, one per ``analysis_hop_s``, would run once per sample);
+* ``bad_intermediate_frequency``: not finite, or |IF| at or beyond the Nyquist band (fs/2 real,
+  fs complex);
+* ``bad_scale``: not in [SCALE_MIN, SCALE_MAX] = [1e-12, 1e3] V/count. Every real front end fits:
+  a 16-bit ADC with 1 V full scale has 3e-5 V/count, a front end reporting full-scale units 1/2^(bits-1)
+  or counts 1.0. 1e-12 V/count would put a 16-bit full scale at 33 nV, below the thermal noise of any
+  input stage (about 0.6 uV rms over 2 MHz at 50 ohm); no ADC has a count of 1 kV. Within the range
+  the block's power (count * scale)^2 is a normal double and fits the single-precision Welch FFT;
+  outside it (5e-324, 1e150, 1e308) it underflows to zero or overflows;
+* ``bad_center_frequency``: not finite, negative or above CENTER_FREQUENCY_MAX_HZ = 1e11 Hz (0 is
+  accepted for a stream referenced to its IF);
+* ``empty_block``, ``truncated_sample`` (INT16 with an odd byte count), ``odd_length_iq``,
+  ``short_block`` (fewer samples than ``min_block_samples``), ``long_block`` (more than
+  ``max_block_samples``: bounds memory and the time one callback takes);
+* ``bad_first_sample_index``: ``first_sample_index + samples`` beyond 2^53 (the core keeps
+  absolute sample positions in float64, exact only up to 2^53: 7.5 years at 38.192 MS/s);
+* ``blank_block``: every sample equal (real), or every I and every Q equal (complex): a block
+  with no variation (all zero, a stuck ADC) carries no information about a jammer;
+* from the core (``JammerEstimate.rejection``): ``saturated`` (more than ``max_invalid_fraction``
+  of the samples at full scale), ``blank_block`` (no power in the analysed Welch frames),
+  ``power_overflow``, ``below_noise_floor`` (10 dB below the calibrated noise floor) and
+  ``implausible_power`` (120 dB above it): gain or scale no longer match the calibration, see
+  rfi_monitor.monitor;
+* ``core_error``: the core raised on a block that passed the checks; ``node_error``: the node's own
+  checks raised (both bugs, logged as errors, and the diagnostics are ERROR).
 
 Saturation: full scale is ``(2**(bits_per_sample - 1) - 1) * scale`` for two's-complement front ends
 (bits >= 4). For 1-3 bit sign/magnitude front ends the largest level is a normal value (a 2-bit
 front end puts about a third of its samples there), so no saturation check is made.
 
-Diagnostics (/diagnostics, every ``diagnostics_period_s`` of *stamp* time via StampTimer, after the
-block of that stamp is counted): blocks_received, blocks_processed, states_published, each
-rejected_* count, gaps, rate_changes, the core's per-sample counters (``core.*``), calibrated, the
-last type, and ``accounting_ok`` (blocks_received == blocks_processed + sum of rejected_*). Level:
-ERROR if the accounting does not add up or the core raised since the last report, WARN if blocks
-were rejected since the last report, else OK.
+Diagnostics (/diagnostics, every ``diagnostics_period_s`` of *stamp* time via StampTimer, driven only
+by stamps the StampGate accepted, after the block of that stamp is counted): blocks_received,
+blocks_processed, states_published, each rejected_* count, stamp_restarts, gaps, rate_changes, the
+core's counters (``core.*``), calibrated, the last type, the subscription's ``input.*`` counters and
+``accounting_ok`` (every block that reached the subscription reached the handler, and
+blocks_received == blocks_processed + sum of rejected_*). Level: ERROR if the accounting does not
+add up, the core or the node raised, or the subscription's guard caught an exception since the last report;
+WARN if blocks were rejected or messages lost since the last report; else OK.
+
+Stale input: :class:`rfi_node_common.inputs.StaleInputWatch` publishes a STALE status (stamped with
+the node clock, the only wall-clock use; no estimate depends on it) while nothing has arrived for
+``input_timeout_s``.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections import Counter
 from dataclasses import dataclass
 from typing import Any
@@ -59,21 +104,48 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 
 from rfi_monitor.classifier import ClassifierParams
-from rfi_monitor.monitor import JammerEstimate, RfiMonitor, RfiMonitorParams
+from rfi_monitor.monitor import SATURATED, JammerEstimate, RfiMonitor, RfiMonitorParams
 from rfi_monitor.sweep_analysis import SweepAnalysisParams
 from rfi_monitor.sweep_period import SweepPeriodParams
 from rfi_monitor.tracker import MAX_REFINE_WINDOW
 from rfi_monitor.tracking_filters import MODE_AFKF, MODE_AKF, MODE_KF, TrackingFilterParams
 from rfi_msgs.msg import IfSamples, JammerState
-from rfi_node_common.diagnostics import ERROR, OK, WARN, StampTimer, diagnostic_array
+from rfi_node_common.diagnostics import (
+    ERROR,
+    OK,
+    STALE,
+    WARN,
+    StampTimer,
+    diagnostic_array,
+    input_timeout_parameter,
+    max_stamp_jump_parameter,
+    stamp_jump_confirmations_parameter,
+)
+from rfi_node_common.input_checks import StampGate
+from rfi_node_common.inputs import InputHealth, StaleInputWatch, subscribe_input
 from rfi_node_common.main import run_node
 from rfi_node_common.params import declare, parameter, validate_ranges
-from rfi_node_common.qos import DATA_QOS
-from rfi_node_common.stamps import stamp_to_ns
+from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS
+from rfi_node_common.stamps import NS_PER_S, stamp_to_ns
 
 TOPICS = """topics:
   subscribes /rfi/if_samples (rfi_msgs/IfSamples)
   publishes  /rfi/jammer_state (rfi_msgs/JammerState), /diagnostics (diagnostic_msgs/DiagnosticArray)"""
+
+IF_TOPIC = '/rfi/if_samples'
+
+SAMPLE_RATE_MIN_HZ = 1.0e5
+"""Lowest sample rate accepted, Hz (module docstring: a GNSS band needs >= ~1 MS/s)."""
+SAMPLE_RATE_MAX_HZ = 1.0e11
+"""Highest sample rate accepted, Hz (beyond any direct-RF sampler)."""
+SCALE_MIN = 1.0e-12
+"""Smallest volts (or full-scale units) per count accepted (module docstring)."""
+SCALE_MAX = 1.0e3
+"""Largest volts (or full-scale units) per count accepted (module docstring)."""
+CENTER_FREQUENCY_MAX_HZ = 1.0e11
+"""Highest RF reference frequency accepted, Hz (GNSS bands are 1.1-2.5 GHz; 100 GHz leaves room for any band)."""
+MAX_SAMPLE_INDEX = 2 ** 53
+"""first_sample_index + samples may not exceed this: the core's sample positions are float64, exact to 2^53."""
 
 TYPE_NAMES = {JammerState.NONE: 'NONE', JammerState.CW: 'CW', JammerState.CHIRP: 'CHIRP',
               JammerState.WIDEBAND: 'WIDEBAND', JammerState.UNKNOWN: 'UNKNOWN'}
@@ -105,7 +177,8 @@ class MonitorNodeParams:
 
     The core's RfiMonitorParams, flattened: its nested groups get the prefixes ``tracker_``,
     ``sweep_``, ``analysis_`` and ``classifier_``; the defaults are the core's own. Node-only parameters:
-    diagnostics_period_s, warning_throttle_s, check_saturation.
+    diagnostics_period_s, warning_throttle_s, input_timeout_s, max_stamp_jump_s, stamp_jump_confirmations,
+    check_saturation, max_block_samples.
 
     Notes:
         Kang et al.: tracking filters eq. 11-22 (tracker_*), sweep period eq. 23-27 (sweep_*);
@@ -119,9 +192,15 @@ class MonitorNodeParams:
     warning_throttle_s: float = parameter(
         5.0, 'Shortest interval between two warnings about rejected blocks, s (wall time; logging only).',
         minimum=0.0, maximum=3600.0)
+    input_timeout_s: float = input_timeout_parameter()
+    max_stamp_jump_s: float = max_stamp_jump_parameter(10.0)
+    stamp_jump_confirmations: int = stamp_jump_confirmations_parameter(3)
     check_saturation: bool = parameter(
         True, 'Count samples at full scale (two\'s-complement front ends, bits_per_sample >= 4) and reject '
         'blocks with more than max_invalid_fraction of them.')
+    max_block_samples: int = parameter(
+        2 ** 22, 'Longest block analysed, samples (complex: I/Q pairs); longer blocks are rejected (long_block). '
+        'Bounds memory (about 40 bytes per sample) and the time of one callback.', minimum=1024, maximum=2**31 - 1)
     # --- monitor ------------------------------------------------------------------------------
     chirp_correction: bool = parameter(
         _M.chirp_correction, 'Correct the three-sample IF measurement for the sweep (Kang et al., eq. 10; '
@@ -286,6 +365,9 @@ class MonitorNodeParams:
 
     def __post_init__(self) -> None:
         validate_ranges(self)
+        if self.max_block_samples < self.min_block_samples:
+            raise ValueError(f'max_block_samples {self.max_block_samples} must be >= min_block_samples '
+                             f'{self.min_block_samples}')
         try:
             self.monitor_params()
         except ValueError as err:
@@ -309,12 +391,14 @@ class MonitorNodeParams:
         return dataclasses.replace(_M, **top, **nested)
 
 
-def check_block(msg: IfSamples, min_block_samples: int) -> str | None:
+def check_block(msg: IfSamples, min_block_samples: int, max_block_samples: int = 2 ** 31 - 1) -> str | None:
     """Why an IF block cannot be analysed (a ``rejected_<reason>`` key), or None if it is well formed.
+
+    Checks the fields only (module docstring, in that order); :func:`is_blank` checks the values.
 
     Args:
         msg: rfi_msgs/IfSamples.
-        min_block_samples: shortest block, samples (complex: I/Q pairs).
+        min_block_samples, max_block_samples: shortest and longest block, samples (complex: I/Q pairs).
     """
     width = SAMPLE_WIDTH_BYTES.get(msg.sample_format)
     if width is None:
@@ -322,14 +406,14 @@ def check_block(msg: IfSamples, min_block_samples: int) -> str | None:
     if not 1 <= msg.bits_per_sample <= 8 * width:
         return 'bad_bits_per_sample'
     fs = msg.sample_rate_hz
-    if not (math.isfinite(fs) and fs > 0.0):
+    if not SAMPLE_RATE_MIN_HZ <= fs <= SAMPLE_RATE_MAX_HZ:   # False for NaN
         return 'bad_sample_rate'
     nyquist = fs if msg.is_complex else fs / 2.0
-    if not (math.isfinite(msg.intermediate_frequency_hz) and abs(msg.intermediate_frequency_hz) < nyquist):
+    if not abs(msg.intermediate_frequency_hz) < nyquist:
         return 'bad_intermediate_frequency'
-    if not (math.isfinite(msg.scale) and msg.scale > 0.0):
+    if not SCALE_MIN <= msg.scale <= SCALE_MAX:
         return 'bad_scale'
-    if not math.isfinite(msg.center_frequency_hz):
+    if not 0.0 <= msg.center_frequency_hz <= CENTER_FREQUENCY_MAX_HZ:
         return 'bad_center_frequency'
     if len(msg.samples) == 0:
         return 'empty_block'
@@ -338,9 +422,27 @@ def check_block(msg: IfSamples, min_block_samples: int) -> str | None:
     values = len(msg.samples) // width
     if msg.is_complex and values % 2:
         return 'odd_length_iq'
-    if values // (2 if msg.is_complex else 1) < min_block_samples:
+    n = values // (2 if msg.is_complex else 1)
+    if n < min_block_samples:
         return 'short_block'
+    if n > max_block_samples:
+        return 'long_block'
+    if msg.first_sample_index + n > MAX_SAMPLE_INDEX:
+        return 'bad_first_sample_index'
     return None
+
+
+def decode_counts(msg: IfSamples) -> np.ndarray:
+    """The block's stored values (counts), read only: int8 or int16, shape (n,) real or (2n,) I, Q."""
+    return np.frombuffer(msg.samples, dtype=SAMPLE_DTYPES[msg.sample_format])
+
+
+def is_blank(counts: np.ndarray, is_complex: bool) -> bool:
+    """True if the block has no variation: every value equal (real), or every I and every Q equal."""
+    if not is_complex:
+        return bool(counts.min() == counts.max())
+    i, q = counts[0::2], counts[1::2]
+    return bool(i.min() == i.max() and q.min() == q.max())
 
 
 def decode_samples(msg: IfSamples) -> np.ndarray:
@@ -348,8 +450,7 @@ def decode_samples(msg: IfSamples) -> np.ndarray:
 
     ``msg`` must have passed :func:`check_block`. Values are ``count * scale``.
     """
-    counts = np.frombuffer(msg.samples, dtype=SAMPLE_DTYPES[msg.sample_format])
-    return counts.astype(np.float64) * msg.scale
+    return decode_counts(msg).astype(np.float64) * msg.scale
 
 
 def full_scale(msg: IfSamples) -> float | None:
@@ -392,57 +493,98 @@ class RfiMonitorNode(Node):
         self.params = declare(self, MonitorNodeParams)
         self.monitor = RfiMonitor(self.params.monitor_params())
         self.counts: Counter[str] = Counter()
+        self.health = InputHealth()
+        self._gate = StampGate(self.params.max_stamp_jump_s, self.params.stamp_jump_confirmations)
         self._core_counters: dict[str, int] = {}
-        self._last_stamp_ns: int | None = None
         self._last_type: int | None = None
         self._rejected_at_last_report = 0
         self._errors_at_last_report = 0
+        self._lost_at_last_report = 0
+        self._handler_errors_at_last_report = 0
         self._diag_timer = StampTimer(self.params.diagnostics_period_s)
         self.state_pub = self.create_publisher(JammerState, '/rfi/jammer_state', DATA_QOS)
-        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DATA_QOS)
-        self.create_subscription(IfSamples, '/rfi/if_samples', self.on_block, DATA_QOS)
+        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self.subscription = subscribe_input(self, IfSamples, IF_TOPIC, self.on_block, self.health,
+                                            warning_throttle_s=self.params.warning_throttle_s)
+        self.stale_watch = StaleInputWatch(self, self.health, self.params.input_timeout_s, self.publish_stale)
 
     def on_block(self, msg: IfSamples) -> None:
-        stamp_ns = stamp_to_ns(msg.header.stamp)
+        """Account for one block: processed (one JammerState) or rejected under a named reason; never raises."""
         self.counts['blocks_received'] += 1
-        if self._last_stamp_ns is not None and stamp_ns <= self._last_stamp_ns:
-            reason: str | None = 'stamp_not_increasing'
-        else:
-            reason = check_block(msg, self.params.min_block_samples)
-        if reason is None:
-            self._last_stamp_ns = stamp_ns
-            reason = self._analyse(stamp_ns, msg)
+        stamp_ns: int | None = None
+        try:
+            reason, stamp_ns = self._admit_stamp(msg)
+            if reason is None:
+                reason = check_block(msg, self.params.min_block_samples, self.params.max_block_samples)
+            if reason is None:
+                reason = self._analyse(stamp_ns, msg)
+        except Exception as err:  # noqa: BLE001 - a bug in the checks: count it, never lose the block
+            self.get_logger().error(f'IF block dropped, the node raised {type(err).__name__}: {err}',
+                                    throttle_duration_sec=self.params.warning_throttle_s)
+            reason = 'node_error'
         if reason is not None:
             self.counts[f'rejected_{reason}'] += 1
-            self.get_logger().warn(f'IF block at {stamp_ns} ns rejected: {reason}',
+            self.get_logger().warn(f'IF block at {stamp_to_ns(msg.header.stamp)} ns rejected: {reason}',
                                    throttle_duration_sec=self.params.warning_throttle_s)
-        if self._diag_timer.due(stamp_ns):
-            self.diag_pub.publish(self.diagnostics(stamp_ns))
+        if stamp_ns is not None and self._diag_timer.due(stamp_ns):
+            self._publish(lambda: self.diagnostics(stamp_ns))
+
+    def _admit_stamp(self, msg: IfSamples) -> tuple[str | None, int | None]:
+        """(rejection reason or None, the stamp in ns if the StampGate accepted it)."""
+        if msg.header.stamp.nanosec >= NS_PER_S:
+            return 'bad_stamp_nanosec', None
+        stamp_ns = stamp_to_ns(msg.header.stamp)
+        decision = self._gate.admit(stamp_ns)
+        if not decision.accepted:
+            return decision.reason, None
+        if decision.restart:
+            self.counts['stamp_restarts'] += 1
+            self.get_logger().warn(f'IF block stamps jumped to {stamp_ns} ns (confirmed by '
+                                   f'{self.params.stamp_jump_confirmations} blocks): new time line')
+        return None, stamp_ns
 
     def _analyse(self, stamp_ns: int, msg: IfSamples) -> str | None:
         """Run the core on a well-formed block and publish its estimate; return a rejection reason."""
+        counts = decode_counts(msg)
+        if is_blank(counts, bool(msg.is_complex)):
+            return 'blank_block'
         try:
             est = self.monitor.process(
-                decode_samples(msg), msg.sample_rate_hz, msg.intermediate_frequency_hz, msg.first_sample_index,
-                stamp_ns, is_complex=bool(msg.is_complex),
+                counts.astype(np.float64) * msg.scale, msg.sample_rate_hz, msg.intermediate_frequency_hz,
+                msg.first_sample_index, stamp_ns, is_complex=bool(msg.is_complex),
                 full_scale=full_scale(msg) if self.params.check_saturation else None)
-        except (ValueError, ArithmeticError) as err:
+        except Exception as err:  # noqa: BLE001 - the checks should make this unreachable; count it, keep going
             self.get_logger().error(f'core raised on a checked IF block ({type(err).__name__}: {err})',
                                     throttle_duration_sec=self.params.warning_throttle_s)
             return 'core_error'
         self._core_counters = dict(est.counters)
         if not est.valid:
-            return 'saturated'
+            return est.rejection or SATURATED
         self.counts['blocks_processed'] += 1
         self._last_type = int(est.type)
         self.state_pub.publish(jammer_state_msg(est, msg))
         self.counts['states_published'] += 1
         return None
 
+    def _publish(self, make: Any) -> None:
+        """Publish the diagnostics ``make()`` builds; a failure is logged, never raised (diagnostics only)."""
+        try:
+            self.diag_pub.publish(make())
+        except Exception as err:  # noqa: BLE001 - a report must never end the node
+            self.get_logger().error(f'/diagnostics not published: {type(err).__name__}: {err}',
+                                    throttle_duration_sec=self.params.warning_throttle_s)
+
+    def publish_stale(self, silent_s: float) -> None:
+        """StaleInputWatch: a STALE status stamped with the node clock (no input for ``silent_s`` s)."""
+        def make() -> DiagnosticArray:
+            return diagnostic_array(max(0, self.get_clock().now().nanoseconds), 'rfi_monitor', self.get_name(),
+                                    STALE, f'no input on {IF_TOPIC} for {silent_s:.1f} s', self.accounting())
+        self._publish(make)
+
     def accounting(self) -> dict[str, object]:
-        """Counters of the node and the core, and whether every block received is accounted for."""
+        """Counters of the node, the core and the subscription, and whether every block received is accounted for."""
         values: dict[str, object] = dict(sorted(self.counts.items()))
-        for key in ('blocks_received', 'blocks_processed', 'states_published'):
+        for key in ('blocks_received', 'blocks_processed', 'states_published', 'stamp_restarts'):
             values.setdefault(key, 0)
         core = self._core_counters
         values['gaps'] = core.get('gaps', 0)
@@ -450,7 +592,9 @@ class RfiMonitorNode(Node):
         values.update({f'core.{k}': v for k, v in sorted(core.items()) if k not in ('gaps', 'rate_changes')})
         values['calibrated'] = self.monitor.calibrated
         values['last_type'] = 'none yet' if self._last_type is None else TYPE_NAMES.get(self._last_type, '?')
-        values['accounting_ok'] = (self.counts['blocks_received']
+        values.update(self.health.values())
+        received = self.counts['blocks_received']
+        values['accounting_ok'] = (self.health.counts[f'{IF_TOPIC}.received'] == received
                                    == self.counts['blocks_processed'] + rejected_total(self.counts))
         return values
 
@@ -460,16 +604,26 @@ class RfiMonitorNode(Node):
         rejected = rejected_total(self.counts)
         new = rejected - self._rejected_at_last_report
         self._rejected_at_last_report = rejected
-        errors = self.counts['rejected_core_error']
+        errors = self.counts['rejected_core_error'] + self.counts['rejected_node_error']
         new_errors = errors - self._errors_at_last_report
         self._errors_at_last_report = errors
+        lost = self.health.lost_total()
+        new_lost = lost - self._lost_at_last_report
+        self._lost_at_last_report = lost
+        handler_errors = self.health.callback_errors_total()
+        new_handler_errors = handler_errors - self._handler_errors_at_last_report
+        self._handler_errors_at_last_report = handler_errors
         state = f'last type {values["last_type"]}' if self.monitor.calibrated else 'learning the noise floor'
         if not values['accounting_ok']:
             level, text = ERROR, 'block accounting does not add up'
         elif new_errors:
-            level, text = ERROR, f'{new_errors} blocks made the core raise since the last report'
-        elif new:
-            level, text = WARN, f'{new} blocks rejected since the last report'
+            level, text = ERROR, f'{new_errors} blocks made the core or the node raise since the last report'
+        elif new_handler_errors:
+            level, text = ERROR, f'the input handler raised {new_handler_errors} times since the last report'
+        elif new or new_lost:
+            parts = [f'{new} blocks rejected'] if new else []
+            parts += [f'{new_lost} messages lost'] if new_lost else []
+            level, text = WARN, ' and '.join(parts) + ' since the last report'
         else:
             level, text = OK, 'monitoring'
         return diagnostic_array(stamp_ns, 'rfi_monitor', self.get_name(), level, f'{text}; {state}', values)

@@ -300,3 +300,87 @@ def test_welch_psd_equals_the_direct_formula(cplx):
         # (measured 1.1e-7 relative), the total power exactly (it is computed in double)
         np.testing.assert_allclose(psd, ref, rtol=1e-6)
         assert math.isclose(psd.sum(), np.mean(np.abs(fr) ** 2), rel_tol=1e-12)
+
+
+# ---------------------------------------------------------------- blocks that carry no information
+def test_blank_blocks_are_rejected_and_never_enter_the_calibration():
+    """All-zero samples, or non-zero samples only where the Hann window is zero, hold no power in the Welch
+    frames: rejected as blank_block (before: NaN PSD, and a NaN noise template for good during calibration)."""
+    fe = FrontEndConfig()
+    mon = RfiMonitor()
+    fs, fif = fe.sample_rate_hz, fe.intermediate_frequency_hz
+    x = IfSimulator(fe, (), seed=20).generate(8 * BLOCK).values()
+    zero = np.zeros(BLOCK)
+    on_window_zeros = np.zeros(BLOCK)
+    on_window_zeros[::256] = 1.0          # the first sample of every 256-sample Welch frame: Hann weight 0
+    for k, blank in enumerate((zero, on_window_zeros)):
+        with np.errstate(all="raise"):    # no 0/0 on the way
+            e = mon.process(blank, fs, fif, k * BLOCK, k)
+        assert not e.valid and e.rejection == "blank_block" and e.type == UNKNOWN and e.confidence == 0.0
+        assert math.isnan(e.jammer_to_noise_db)
+    ests = _feed(mon, x, fe, BLOCK, first=2 * BLOCK)
+    assert [e.type for e in ests[:5]] == [UNKNOWN] * 5 and mon.calibrated
+    assert [e.type for e in ests[5:]] == [NONE] * 3
+    assert ests[-1].counters["blocks_rejected"] == 2
+
+
+def test_block_far_off_the_noise_floor_is_rejected_then_relearned():
+    """A block 10 dB or more below the calibrated floor (gain or scale no longer as calibrated) says neither "no
+    jammer" nor a J/N, and one 120 dB above it (scale 1e150 gave WIDEBAND with J/N 300 dB) measures the scale,
+    not a jammer: both rejected; when it lasts calibration_blocks blocks the floor is learned again."""
+    fe = FrontEndConfig()
+    mon = _calibrated(fe)
+    fs, fif = fe.sample_rate_hz, fe.intermediate_frequency_hz
+    x = IfSimulator(fe, (), seed=21).generate(12 * BLOCK).values()
+    e = mon.process(x[:BLOCK] * 1e-6, fs, fif, 0, 0)
+    assert not e.valid and e.rejection == "below_noise_floor"
+    e = mon.process(x[:BLOCK] * 1e7, fs, fif, 0, 0)                 # +140 dB
+    assert not e.valid and e.rejection == "implausible_power" and math.isnan(e.jammer_to_noise_db)
+    e = mon.process(x[:BLOCK] * 1e5, fs, fif, 0, 0)                 # +100 dB: a (very strong) wideband jammer
+    assert e.valid and e.type == WIDEBAND and e.jammer_to_noise_db == pytest.approx(100.0, abs=0.5)
+    e = mon.process(x[BLOCK:2 * BLOCK] * 0.5, fs, fif, BLOCK, 0)     # -6 dB: still a working front end
+    assert e.valid and e.type == NONE
+    quiet = _feed(mon, x[2 * BLOCK:] * 0.1, fe, BLOCK, first=2 * BLOCK)   # -20 dB for good
+    assert [e.rejection for e in quiet[:5]] == ["below_noise_floor"] * 5
+    assert quiet[4].counters["recalibrations"] == 1
+    assert [e.type for e in quiet[5:]] == [UNKNOWN] * 5       # learning the new floor
+    assert mon.calibrated
+    # a fixed noise floor is never relearned
+    fixed = RfiMonitor(RfiMonitorParams(noise_floor_power=float(np.mean(x ** 2)), calibration_blocks=1))
+    out = _feed(fixed, x * 0.01, fe, BLOCK)
+    assert {e.rejection for e in out[1:]} == {"below_noise_floor"} and out[-1].counters["recalibrations"] == 0
+
+
+def test_none_always_carries_a_finite_jn():
+    """A clean block whose power is below the floor and that has no occupied bin used to give NONE with
+    J/N = NaN (10 log10 of a negative excess); J/N is now at least the block power's resolution."""
+    for fe in (FrontEndConfig(), FrontEndConfig(sample_rate_hz=16.368e6, intermediate_frequency_hz=0.0,
+                                                is_complex=True)):
+        n = 16384
+        mon = RfiMonitor()
+        ests = _feed(mon, IfSimulator(fe, (), seed=22).generate(45 * n).values(), fe, n)
+        none = [e for e in ests if e.type == NONE]
+        assert len(none) == 40
+        floor_db = 5 * math.log10((1.0 if fe.is_complex else 2.0) / n)
+        assert all(math.isfinite(e.jammer_to_noise_db) and e.jammer_to_noise_db >= floor_db - 1e-9 for e in none)
+        assert all(math.isfinite(e.jammer_to_signal_db) for e in none)
+        assert sum(e.jammer_to_noise_db == pytest.approx(floor_db) for e in none) >= 5   # the censored ones
+
+
+def test_calibration_that_saw_no_noise_is_discarded():
+    """A calibration whose learned floor is below MIN_BLOCK_POWER (blocks of pure narrowband excess: a tone with
+    no noise leaves 1e-4 of its power outside its line) would later divide by ~0: it is discarded and learned
+    again."""
+    fe = FrontEndConfig()
+    fs, fif = fe.sample_rate_hz, fe.intermediate_frequency_hz
+    mon = RfiMonitor(RfiMonitorParams(calibration_blocks=3))
+    tone = 1e-29 * np.cos(2 * np.pi * 0.2 * np.arange(4 * BLOCK))    # power 5e-59 >= MIN_BLOCK_POWER 1e-60
+    ests = _feed(mon, tone, fe, BLOCK)
+    assert all(e.valid and e.type == UNKNOWN for e in ests)
+    assert not mon.calibrated and ests[2].counters["calibrations_discarded"] == 1
+    assert ests[3].counters["calibrations_discarded"] == 1     # the fourth block starts the new calibration
+    mon = RfiMonitor(RfiMonitorParams(calibration_blocks=3))   # the same tone at a real level calibrates
+    _feed(mon, tone * 1e29, fe, BLOCK)
+    assert mon.calibrated
+    e = mon.process(tone[:BLOCK] * 1e29, fs, fif, 4 * BLOCK, 0)
+    assert e.valid and math.isfinite(e.jammer_to_noise_db) and 0.0 <= e.confidence <= 1.0
