@@ -5,8 +5,10 @@ message per call, as the serialised bytes a publisher would send:
 
 * ``garbage``: random bytes of random length (including empty and the 4-byte encapsulation alone);
 * ``truncated``: a valid message cut short;
-* ``flipped``: a valid message with random bytes overwritten after its header (the stamp is kept,
-  so that a flip cannot move a node's time line by a plausible amount);
+* ``flipped``: a valid message with random bytes overwritten after its header (the stamp is not
+  touched, so that a flip cannot move a node's time line by a plausible amount);
+
+  (these two and ``field`` start from the latest valid message, stamped 1 us after it);
 * ``field``: a valid message with one field set to a hostile value (NaN, +-inf, 1e300, 5e-324,
   0, negative, integer extremes, empty or duplicated arrays, garbage strings);
 * ``stamp``: a valid message with a hostile header stamp (0, negative, far future, far past,
@@ -141,7 +143,8 @@ class HostileStream:
     Args:
         templates: valid messages of the topic (message objects), in stamp order.
         rng: the seeded generator.
-        faults: explicit faults for this topic (message objects), sent first.
+        faults: explicit faults for this topic, ``(message, keep_stamp)`` (:func:`issue_faults`), sent first;
+            those without ``keep_stamp`` are stamped just after the latest valid message.
     """
 
     KINDS = ('garbage', 'truncated', 'flipped', 'field', 'field', 'field', 'stamp', 'duplicate')
@@ -151,6 +154,21 @@ class HostileStream:
         self.rng = rng
         self.faults = list(faults)
         self._raw = [serialize_message(t) for t in templates]
+        self._latest: Any = None
+        self._step = 0
+
+    def _base(self, template: Any, latest_valid: Any | None) -> Any:
+        if latest_valid is not self._latest:
+            self._latest, self._step = latest_valid, 0
+        return latest_valid if latest_valid is not None else template
+
+    def newer(self, msg: Any) -> Any:
+        """``msg`` stamped 1 us after the previous hostile message since the latest valid one, so that a
+        hostile field is judged on its value, not refused for its stamp (valid messages are >= 1 ms apart)."""
+        self._step += 1
+        ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec + 1000 * self._step
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(ns, 1_000_000_000)
+        return msg
 
     def _template(self) -> tuple[Any, bytes]:
         i = int(self.rng.integers(len(self.templates)))
@@ -160,11 +178,13 @@ class HostileStream:
         rng = self.rng
         template, raw = self._template()
         if kind == 'garbage':
-            n = int(rng.choice([0, 1, 3, 4, 8, 16, 40, 200, 1000]))
+            n = int(rng.choice([1, 3, 4, 8, 16, 40, 200, 1000]))  # never empty: the middleware drops 0 bytes
             head = b'\x00\x01\x00\x00' if rng.random() < 0.5 else b''
             return head + rng.integers(0, 256, size=n, dtype=np.uint8).tobytes()
+        if kind in ('truncated', 'flipped'):  # built on the latest valid message, stamped just after it
+            raw = serialize_message(self.newer(copy.deepcopy(self._base(template, latest_valid))))
         if kind == 'truncated':
-            return raw[: int(rng.integers(0, len(raw)))]
+            return raw[: int(rng.integers(1, len(raw)))]
         if kind == 'flipped':
             start = header_end(raw)
             if start >= len(raw):
@@ -174,10 +194,9 @@ class HostileStream:
                 buf[int(rng.integers(start, len(buf)))] = int(rng.integers(256))
             return bytes(buf)
         if kind == 'field':
-            base = latest_valid if latest_valid is not None else template
-            return serialize_message(mutate_field(base, rng))
+            return serialize_message(self.newer(mutate_field(self._base(template, latest_valid), rng)))
         if kind == 'stamp':
-            base = latest_valid if latest_valid is not None else template
+            base = self._base(template, latest_valid)
             choice = int(rng.integers(len(HOSTILE_STAMPS_S) + 1))
             if choice == len(HOSTILE_STAMPS_S):
                 return serialize_message(base)  # the latest valid stamp again
@@ -188,58 +207,62 @@ class HostileStream:
 
     def messages(self, count: int, latest_valid: Callable[[], Any | None]) -> Iterator[tuple[str, bytes]]:
         """``count`` hostile messages (the explicit faults first)."""
-        for fault in self.faults[:count]:
+        for fault, keep_stamp in self.faults[:count]:
+            if not keep_stamp:
+                self._base(fault, latest_valid())
+                fault = self.newer(copy.deepcopy(fault))
             yield 'issue_fault', serialize_message(fault)
         for _ in range(count - min(count, len(self.faults))):
             kind = self.KINDS[int(self.rng.integers(len(self.KINDS)))]
             yield kind, self.make(kind, latest_valid())
 
 
-def issue_faults(topic: str, template: Any) -> list[Any]:
-    """The faults that issue 12 lists for ``topic``, as message objects built on ``template``."""
+def issue_faults(topic: str, template: Any) -> list[tuple[Any, bool]]:
+    """The faults that issue 12 lists for ``topic``, built on ``template`` (the latest valid message sent):
+    ``(message, keep_stamp)``, keep_stamp False for a fault in a value (stamped newer when sent)."""
     t = copy.deepcopy
     out = []
     if topic == '/rfi/if_samples':
-        out.append(with_stamp(template, -5))
-        out.append(with_stamp(template, 2**31 - 1))  # far future: must not stall the node
+        out.append((with_stamp(template, -5), True))
+        out.append((with_stamp(template, 2**31 - 1), True))  # far future: must not stall the node
         zero = t(template)
         zero.samples = bytes(len(template.samples))
-        out.append(zero)
+        out.append((zero, False))
         for scale in (5e-324, 1e150, 1e308):
             m = t(template)
             m.scale = scale
-            out.append(m)
+            out.append((m, False))
         m = t(template)
         m.first_sample_index = 2**63
-        out.append(m)
+        out.append((m, False))
         m = t(template)
         m.first_sample_index = 2**64 - 1
-        out.append(m)
+        out.append((m, False))
     elif topic == '/gnss/correlators':
-        out.append(with_stamp(template, -5))
-        out.append(with_stamp(template, 2**31 - 1))
+        out.append((with_stamp(template, -5), True))
+        out.append((with_stamp(template, 2**31 - 1), True))
         for field, value in (('integration_time_s', 1e6), ('in_phase', 1e300), ('quadrature', -1e300),
                              ('integration_time_s', 0.0), ('integration_time_s', -0.001), ('in_phase', math.nan),
                              ('cn0_dbhz', 1e300), ('predicted_phase_change_rad', math.inf)):
             m = t(template)
             for c in m.correlators:
                 setattr(c, field, value)
-            out.append(m)
+            out.append((m, False))
     elif topic == '/uwb/ranges':
         for std in (-math.inf, math.inf, -1.0, 0.0):
             m = t(template)
             m.range_std_m = std
-            out.append(m)
-        out.append(t(template))  # an exact duplicate (the template itself was sent as valid before)
+            out.append((m, False))
+        out.append((t(template), True))  # an exact duplicate (the template was sent as valid before)
     elif topic == '/gnss/measurements':
-        out.append(t(template))  # an exact duplicate epoch
-        out.append(with_stamp(template, -5))
+        out.append((t(template), True))  # an exact duplicate epoch
+        out.append((with_stamp(template, -5), True))
     elif topic == '/rfi/jammer_state':
         m = t(template)
         m.type = 200
-        out.append(m)
+        out.append((m, False))
         m = t(template)
         m.type = 2
         m.jammer_to_signal_db = math.inf
-        out.append(m)
+        out.append((m, False))
     return out

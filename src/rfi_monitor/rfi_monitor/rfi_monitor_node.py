@@ -10,7 +10,9 @@ Input: ``/rfi/if_samples`` is subscribed with :func:`rfi_node_common.inputs.subs
 effort (a sensor driver's best-effort publisher and a reliable one are both accepted; rclpy's
 ``qos_overrides./rfi/if_samples.subscription.*`` parameters change it), every arrival and every
 message lost before the node saw it (publisher sequence gaps, the middleware's lost-message event)
-counted as ``input./rfi/if_samples.*``. Nothing raises out of :meth:`RfiMonitorNode.on_block`: every
+counted as ``input./rfi/if_samples.*``. The subscription is raw: bytes that rclpy cannot deserialise
+are counted as ``rejected_malformed_message`` (:meth:`RfiMonitorNode.on_raw_block`). Nothing raises
+out of :meth:`RfiMonitorNode.on_block`: every
 block that reaches it is either processed or rejected under a named reason; the subscription's own
 guard (``callback_errors``) is only the last net and makes the diagnostics ERROR.
 
@@ -102,6 +104,7 @@ from typing import Any
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 
 from rfi_monitor.classifier import ClassifierParams
 from rfi_monitor.monitor import SATURATED, JammerEstimate, RfiMonitor, RfiMonitorParams
@@ -504,9 +507,27 @@ class RfiMonitorNode(Node):
         self._diag_timer = StampTimer(self.params.diagnostics_period_s)
         self.state_pub = self.create_publisher(JammerState, '/rfi/jammer_state', DATA_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
-        self.subscription = subscribe_input(self, IfSamples, IF_TOPIC, self.on_block, self.health,
+        # raw: bytes that rclpy cannot deserialise reach on_raw_block and are counted as malformed
+        # (a non-raw subscription would drop them inside rclpy, seen only as a sequence gap)
+        self.subscription = subscribe_input(self, IfSamples, IF_TOPIC, self.on_raw_block, self.health, raw=True,
                                             warning_throttle_s=self.params.warning_throttle_s)
         self.stale_watch = StaleInputWatch(self, self.health, self.params.input_timeout_s, self.publish_stale)
+
+    def on_raw_block(self, raw: bytes | IfSamples) -> None:
+        """A serialised block: deserialised by rclpy, or counted as ``rejected_malformed_message`` (a message
+        object, as an in-process hand-over may give, goes straight to :meth:`on_block`)."""
+        if isinstance(raw, IfSamples):
+            self.on_block(raw)
+            return
+        try:
+            msg = deserialize_message(raw, IfSamples)
+        except Exception as err:  # noqa: BLE001 - rclpy raises RMWError (and others) on malformed CDR
+            self.counts['blocks_received'] += 1
+            self.counts['rejected_malformed_message'] += 1
+            self.get_logger().warn(f'IF block rejected: malformed message ({len(raw)} bytes: {type(err).__name__})',
+                                   throttle_duration_sec=self.params.warning_throttle_s)
+            return
+        self.on_block(msg)
 
     def on_block(self, msg: IfSamples) -> None:
         """Account for one block: processed (one JammerState) or rejected under a named reason; never raises."""

@@ -608,9 +608,10 @@ def test_input_reliability_can_be_overridden_the_ros_way():
         rclpy.shutdown(context=context)
 
 
-def test_messages_lost_on_the_wire_are_counted_and_warned(probe_factory):
-    """Bytes that the middleware cannot deserialise never reach the node; the gap they leave in the publisher's
-    sequence numbers is counted (input./rfi/if_samples.lost) and makes the next report WARN."""
+def test_malformed_bytes_are_counted_as_malformed(probe_factory):
+    """Issue 12: bytes that cannot be deserialised (an empty payload included) reach the raw subscription
+    and are counted as rejected_malformed_message, not lost; the report says WARN and the next block is
+    processed."""
     fe = FrontEndConfig(noise_bandwidth_hz=NOISE_BW_HZ)
     msgs = _short_blocks(fe, CALIBRATION + 2, seed=16)
     p = probe_factory()
@@ -618,10 +619,13 @@ def test_messages_lost_on_the_wire_are_counted_and_warned(probe_factory):
     rng = np.random.default_rng(16)
     for size in (0, 4, 40, 200):
         p.pub.publish(b'\x00\x01\x00\x00' + rng.integers(0, 256, size=size, dtype=np.uint8).tobytes())
-    assert p.send(msgs[CALIBRATION + 1]) is not None
+    p.pub.publish(b'')
+    p._spin_until(lambda: p.node.counts['rejected_malformed_message'] == 5, 'malformed delivery')
+    assert p.send(msgs[CALIBRATION + 1]) is not None, dict(p.node.counts)
     v = p.values()
-    assert v['input./rfi/if_samples.lost'] == '4' and v['accounting_ok'] == 'True'
-    assert p.diagnostics[-1].status[0].level == b'\x01' and 'lost' in p.diagnostics[-1].status[0].message
+    assert v['input./rfi/if_samples.lost'] == '0' and v['accounting_ok'] == 'True', v
+    status = p.diagnostics[-1].status[0]
+    assert status.level == b'\x01' and 'rejected' in status.message
 
 
 def test_stale_input_is_reported_on_the_wall_clock(probe_factory):
