@@ -53,11 +53,3 @@ RECORDER_QOS = QoSProfile(
     durability=DurabilityPolicy.VOLATILE,
 )
 """Subscriptions of ``record``: reliable and keep-all."""
-
-STATUS_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=1,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.TRANSIENT_LOCAL,
-)
-"""Latched status: the last value is delivered to late joiners (not used by the nodes today)."""
