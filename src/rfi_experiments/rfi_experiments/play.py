@@ -2,13 +2,33 @@
 
 Messages go out as the serialized bytes stored in the bag (no re-encoding), in log-time order,
 at the recorded pace times ``--rate`` or as fast as the middleware takes them (``--max``), the
-whole bag or a window of it (``--start``, ``--duration``: seconds after the bag's first message). The
-publishers are reliable and keep all samples, and the player waits for every subscriber to
-acknowledge before it exits, so nothing is dropped. A progress bar runs on stderr; a count per
-topic ends the run. With ``--sync IN:OUT`` the player waits after each message on IN until the
-node that answers it has published its stamped output on OUT (closed-loop pacing, used by ``run
---transport processes`` so that the monitor's jammer state reaches the fusion before the next
-GNSS/UWB messages, as in a replay in one process).
+whole bag or a window of it (``--start``, ``--duration``: seconds after the bag's first message).
+A progress bar runs on stderr; a table per topic ends the run.
+
+Nothing is lost by default:
+
+- Before the first message, the player waits (at most ``--wait-subscribers`` s, default 10) until
+  its publishers are matched with the subscribers: those given by ``--expect-subscribers`` (``N``
+  for every topic, or ``TOPIC:N``), every subscription that the graph shows on a played topic, and,
+  without ``--expect-subscribers``, at least one subscriber of some played topic. Then it waits
+  until that set has been unchanged for ``--start-delay`` s (default 0.5): the subscribers' side of
+  each match completes a little later (2-75 ms measured here), and a best-effort subscriber loses
+  what comes before. Without ``--expect-subscribers``, while some played topics have subscribers
+  and others none, it waits for 2 s without change instead (:data:`PARTIAL_SETTLE_S`): a process
+  announces its subscriptions one by one. ``--expect-subscribers 0`` does not wait for anyone.
+- The publishers are reliable and keep all samples, and at the end the player waits until every
+  reliable subscriber has acknowledged every message (``--ack-timeout``).
+- The final table says, per topic, how many subscribers it had and how many messages went out
+  while none was matched ("to nobody": those are lost). A best-effort subscriber (a node's input
+  with the default sensor QoS) does not acknowledge: the player says so and how to make it reliable
+  (``--ros-args -p qos_overrides.<topic>.subscription.reliability:=reliable`` on that node).
+
+With ``--sync IN:OUT`` the player waits after each message on IN until the node that answers it has
+published its stamped output on OUT (closed-loop pacing, used by ``run --transport processes`` so
+that the monitor's jammer state reaches the fusion before the next GNSS/UWB messages, as in a
+replay in one process). A ``/fusion/status`` or ``/diagnostics`` that the player sees while
+playing is read for the fusion node's rejections of messages that came after its re-ordering
+window, which are reported at the end.
 """
 
 from __future__ import annotations
@@ -18,6 +38,8 @@ import math
 import sys
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
 
 from rfi_experiments.bag_io import BagError, BagReader, message_class
 
@@ -34,12 +56,17 @@ def build_parser() -> argparse.ArgumentParser:
     pace.add_argument('--max', action='store_true', help='publish as fast as possible')
     parser.add_argument('--topics', nargs='+', metavar='TOPIC', help='play only these topics')
     add_window_arguments(parser)
-    parser.add_argument('--wait-subscribers', type=float, default=0.0, metavar='SECONDS',
-                        help='before playing, wait up to this long until every topic has a subscriber')
-    parser.add_argument('--start-delay', type=float, default=0.0, metavar='SECONDS',
-                        help='once the subscribers are matched, wait this long before the first message: the '
-                             'subscribers\' side of discovery completes a little later, and until then the '
-                             'middleware repairs their first messages only by retransmission (default 0)')
+    parser.add_argument('--wait-subscribers', type=float, default=10.0, metavar='SECONDS',
+                        help='before playing, wait up to this long for the subscribers (see --expect-subscribers); '
+                             'after that, play anyway and report the topics without one (default 10; 0: no wait)')
+    parser.add_argument('--expect-subscribers', action='append', default=[], metavar='N|TOPIC:N',
+                        help='subscribers to wait for: N on every played topic, or N on TOPIC (may be repeated). '
+                             'Default: every subscription the graph shows on a played topic, and at least one '
+                             'on some played topic; 0: wait for nobody')
+    parser.add_argument('--start-delay', type=float, default=0.5, metavar='SECONDS',
+                        help='once the subscribers are matched, wait until they have been unchanged for this long '
+                             'before the first message: the subscribers\' side of discovery completes a little '
+                             'later, and a best-effort subscriber loses what comes before (default 0.5)')
     parser.add_argument('--warmup', type=float, default=0.0, metavar='SECONDS',
                         help='play the first SECONDS of the bag (or window) at --warmup-rate, the rest at --rate: '
                              'slow first messages give the subscribers time for their first-call costs (default 0)')
@@ -102,6 +129,106 @@ def fail(message: str) -> int:
     return EXIT_USAGE
 
 
+def parse_expectations(items: Sequence[str], topics: Sequence[str]) -> dict[str, int] | None:
+    """``--expect-subscribers`` values -> topic: subscribers to wait for (None: none given, the default).
+
+    Raises:
+        ValueError: a malformed value, a negative count, or a topic that is not played.
+    """
+    if not items:
+        return None
+    expected: dict[str, int] = {}
+    for item in items:
+        topic, sep, count = item.rpartition(':')
+        try:
+            n = int(count)
+        except ValueError:
+            raise ValueError(f'--expect-subscribers wants N or TOPIC:N, got {item!r}') from None
+        if n < 0:
+            raise ValueError(f'--expect-subscribers: a count must be >= 0, got {item!r}')
+        if not sep:
+            expected.update({t: n for t in topics})
+        elif topic not in topics:
+            raise ValueError(f'--expect-subscribers: {topic} is not played (played: {", ".join(topics)})')
+        else:
+            expected[topic] = n
+    return expected
+
+
+@dataclass
+class Delivery:
+    """What happened to the messages of one topic."""
+
+    published: int = 0
+    to_nobody: int = 0  # published while no subscriber was matched: lost
+    subscribers: int = 0  # most subscribers matched at once
+    best_effort: set[str] = field(default_factory=set)  # nodes whose subscription is best effort
+
+
+def subscriber_view(node: Any, publishers: dict[str, Any]) -> dict[str, tuple[int, int]]:
+    """Topic -> (subscriptions matched with our publisher, subscriptions the graph shows)."""
+    return {t: (p.get_subscription_count(), len(node.get_subscriptions_info_by_topic(p.topic_name)))
+            for t, p in publishers.items()}
+
+
+def unmet(view: dict[str, tuple[int, int]], expected: dict[str, int] | None) -> list[str]:
+    """What the subscribers of ``view`` still lack (empty: ready to play)."""
+    missing = [f'{t}: {matched} of the {graph} subscriptions in the graph matched'
+               for t, (matched, graph) in view.items() if matched < graph]
+    if expected is None:
+        if not any(matched for matched, _ in view.values()):
+            missing.append('no subscriber on any played topic')
+    else:
+        missing += [f'{t}: {view[t][0]} of {n} expected subscribers' for t, n in expected.items() if view[t][0] < n]
+    return missing
+
+
+PARTIAL_SETTLE_S = 2.0
+"""Without ``--expect-subscribers``, while some played topics have a subscriber and others none, the
+subscribers must be unchanged this long (not just ``--start-delay``) before playing, s: a process
+that subscribes several topics announces them one by one, and under load seconds apart."""
+
+
+def wait_for_subscribers(node: Any, executor: Any, publishers: dict[str, Any], expected: dict[str, int] | None,
+                         wait_s: float, settle_s: float) -> list[str]:
+    """Wait until the subscribers are there (:func:`unmet` empty) and unchanged for ``settle_s``
+    (:data:`PARTIAL_SETTLE_S` at least, without ``expected``, while some topic has none), at most
+    ``wait_s`` (0: do not wait). Returns what was still missing when the time ran out."""
+    if wait_s <= 0:
+        return unmet(subscriber_view(node, publishers), expected)
+    deadline = time.monotonic() + wait_s
+    stable: tuple[dict, float] | None = None
+    while True:
+        view = subscriber_view(node, publishers)
+        missing = unmet(view, expected)
+        now = time.monotonic()
+        if not missing:
+            if stable is None or stable[0] != view:
+                stable = (view, now)
+            partial = expected is None and not all(matched for matched, _ in view.values())
+            if now - stable[1] >= (max(settle_s, PARTIAL_SETTLE_S) if partial else settle_s):
+                return []
+        else:
+            stable = None
+        if now > deadline:
+            return missing
+        executor.spin_once(timeout_sec=0.02)
+
+
+def best_effort_subscribers(node: Any, topic: str) -> set[str]:
+    """Nodes (namespace/name) with a best-effort subscription on ``topic``."""
+    from rclpy.qos import ReliabilityPolicy
+
+    return {f'{i.node_namespace.rstrip("/")}/{i.node_name}' if i.node_name not in ('', '_NODE_NAME_UNKNOWN_')
+            else '(a node whose name is not discovered yet)'
+            for i in node.get_subscriptions_info_by_topic(topic)
+            if i.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT}
+
+
+LATE_REASON = 'late_beyond_reorder_window'
+"""The fusion node's rejection reason for a message that came after its re-ordering window."""
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -117,7 +244,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         window = window_s(args.start, args.duration)
     except ValueError as err:
         return fail(str(err))
-    for name in ('start_delay', 'warmup'):
+    for name in ('start_delay', 'warmup', 'wait_subscribers'):
         value = getattr(args, name)
         if not (math.isfinite(value) and value >= 0):
             return fail(f'--{name.replace("_", "-")} must be a finite number >= 0 (got {value})')
@@ -146,8 +273,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not topics:
             return fail(f'{args.bag} holds no topics')
         try:
+            expected = parse_expectations(args.expect_subscribers, topics)
             classes = {t: message_class(available[t][0]) for t in topics}
-        except BagError as err:
+        except (ValueError, BagError) as err:
             return fail(str(err))
         start_ns, stop_ns = window_ns(reader.start_ns, window)
         if window is None:
@@ -165,29 +293,29 @@ def main(argv: Sequence[str] | None = None) -> int:
         node = rclpy.create_node('rfi_play')
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        counts = {t: 0 for t in topics}
+        delivery = {t: Delivery() for t in topics}
         answered: dict[str, int] = {}
         unanswered = {t: 0 for t in sync}
+        fusion: dict[str, int] = {}
         try:
             publishers = {t: node.create_publisher(classes[t], t, PLAYER_QOS) for t in topics}
-            deadline = time.monotonic() + args.wait_subscribers
-            while args.wait_subscribers > 0 and time.monotonic() < deadline:
-                if all(p.get_subscription_count() > 0 for p in publishers.values()):
-                    break
-                time.sleep(0.05)
+            missing = wait_for_subscribers(node, executor, publishers, expected, args.wait_subscribers,
+                                           args.start_delay)
+            if missing:
+                print(f'play: warning: playing without every subscriber ({args.wait_subscribers:g} s waited): '
+                      + '; '.join(missing), file=sys.stderr)
             for inp, out in sync.items():
                 out_class = _discover_class(node, executor, out, max(args.wait_subscribers, args.sync_timeout))
                 if out_class is None:
                     return fail(f'--sync: no publisher of {out} appeared (is the node answering {inp} up?)')
                 node.create_subscription(out_class, out, _answer_recorder(answered, out), RECORDER_QOS)
+            _watch_fusion_status(node, fusion, RECORDER_QOS)
+            for t, p in publishers.items():
+                delivery[t].best_effort |= best_effort_subscribers(node, p.topic_name)
             progress = None
             if not args.no_progress:
                 from tqdm import tqdm
                 progress = tqdm(total=total, unit='msg', desc='play', file=sys.stderr, mininterval=0.5)
-            if args.start_delay > 0:
-                end = time.monotonic() + args.start_delay
-                while time.monotonic() < end:
-                    executor.spin_once(timeout_sec=0.05)
             wall_start = time.monotonic()
             bag_start = None
             for message in reader.messages(topics, start_ns=start_ns, stop_ns=stop_ns):
@@ -198,8 +326,14 @@ def main(argv: Sequence[str] | None = None) -> int:
                     delay = due - time.monotonic()
                     if delay > 0:
                         time.sleep(delay)
-                publishers[message.topic].publish(message.raw)
-                counts[message.topic] += 1
+                pub = publishers[message.topic]
+                pub.publish(message.raw)
+                d = delivery[message.topic]
+                d.published += 1
+                matched = pub.get_subscription_count()
+                d.subscribers = max(d.subscribers, matched)
+                if matched == 0:
+                    d.to_nobody += 1
                 if message.topic in sync:
                     out = sync[message.topic]
                     header = message.decode().header.stamp
@@ -209,6 +343,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         executor.spin_once(timeout_sec=0.01)
                     if answered.get(out, -1) < stamp_ns:
                         unanswered[message.topic] += 1
+                elif fusion:
+                    executor.spin_once(timeout_sec=0)  # keep up with /fusion/status
                 if progress is not None:
                     progress.update(1)
             if progress is not None:
@@ -216,13 +352,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             unacked = [t for t, p in publishers.items()
                        if p.get_subscription_count() > 0 and not p.wait_for_all_acked(
                            rclpy.duration.Duration(seconds=args.ack_timeout))]
-            width = max(len(t) for t in topics)
-            print(f'{"topic":<{width}}  {"type":<34} {"published":>9}')
-            for t in topics:
-                print(f'{t:<{width}}  {available[t][0]:<34} {counts[t]:>9}')
-            print(f'{"total":<{width}}  {"":<34} {sum(counts.values()):>9}')
-            for inp, n in unanswered.items():
-                print(f'sync {inp} -> {sync[inp]}: {counts[inp] - n} answered, {n} not within {args.sync_timeout:g} s')
+            for t, p in publishers.items():
+                delivery[t].best_effort |= best_effort_subscribers(node, p.topic_name)
+            if fusion:  # the status of the last messages
+                end = time.monotonic() + 0.5
+                while time.monotonic() < end:
+                    executor.spin_once(timeout_sec=0.05)
+            print_summary(topics, available, delivery, sync, unanswered, args.sync_timeout, fusion)
             if unacked:
                 print(f'play: warning: not acknowledged by every subscriber within {args.ack_timeout} s: '
                       f'{", ".join(unacked)}', file=sys.stderr)
@@ -231,12 +367,57 @@ def main(argv: Sequence[str] | None = None) -> int:
         except BagError as err:
             return fail(str(err))
         except (KeyboardInterrupt, ExternalShutdownException):
-            print(f'play: interrupted after {sum(counts.values())} of {total} messages', file=sys.stderr)
+            played = sum(d.published for d in delivery.values())
+            print(f'play: interrupted after {played} of {total} messages', file=sys.stderr)
             return 130
         finally:
             executor.remove_node(node)
             node.destroy_node()
             rclpy.try_shutdown()
+
+
+def print_summary(topics: Sequence[str], available: dict[str, tuple[str, int]], delivery: dict[str, Delivery],
+                  sync: dict[str, str], unanswered: dict[str, int], sync_timeout: float,
+                  fusion: dict[str, int]) -> None:
+    """The table per topic (published, subscribers, to nobody), then the warnings."""
+    width = max(len(t) for t in topics)
+    print(f'{"topic":<{width}}  {"type":<34} {"published":>9} {"subscribers":>11} {"to nobody":>9}')
+    for t in topics:
+        d = delivery[t]
+        print(f'{t:<{width}}  {available[t][0]:<34} {d.published:>9} {d.subscribers:>11} {d.to_nobody:>9}')
+    print(f'{"total":<{width}}  {"":<34} {sum(d.published for d in delivery.values()):>9} {"":>11} '
+          f'{sum(d.to_nobody for d in delivery.values()):>9}')
+    for inp, n in unanswered.items():
+        print(f'sync {inp} -> {sync[inp]}: {delivery[inp].published - n} answered, {n} not within {sync_timeout:g} s')
+    nobody = {t: d.to_nobody for t, d in delivery.items() if d.to_nobody}
+    if nobody:
+        print('play: warning: messages published while no subscriber was matched (lost): '
+              + ', '.join(f'{t} {n} of {delivery[t].published}' for t, n in nobody.items())
+              + ' (--expect-subscribers TOPIC:N waits for subscribers that come up late)', file=sys.stderr)
+    for t, d in delivery.items():
+        if d.best_effort:
+            print(f'play: note: {t}: best-effort subscriber {", ".join(sorted(d.best_effort))}: delivery is not '
+                  'acknowledged, so a message it drops is lost without play knowing; to make it reliable, start it '
+                  f'with --ros-args -p qos_overrides.{t}.subscription.reliability:=reliable', file=sys.stderr)
+    if fusion.get(LATE_REASON):
+        print(f'play: warning: the fusion node rejected {fusion[LATE_REASON]} messages that reached it after its '
+              're-ordering window (/fusion/status, cumulative since the node started): the nodes lagged behind '
+              'the replay; play at a lower --rate, or raise the node\'s reorder_window_s', file=sys.stderr)
+
+
+def _watch_fusion_status(node: Any, fusion: dict[str, int], qos: Any) -> None:
+    """If a fusion node publishes /fusion/status, keep its cumulative rejection counts in ``fusion``."""
+    topic = node.resolve_topic_name('/fusion/status')
+    if not node.get_publishers_info_by_topic(topic):
+        return
+    from rfi_msgs.msg import FusionStatus
+
+    def on_status(msg: Any) -> None:
+        fusion.update(zip(msg.rejection_reasons, msg.rejection_counts, strict=False))
+        fusion.setdefault(LATE_REASON, 0)
+
+    node.create_subscription(FusionStatus, topic, on_status, qos)
+    fusion.setdefault(LATE_REASON, 0)
 
 
 def _discover_class(node, executor, topic: str, timeout_s: float):

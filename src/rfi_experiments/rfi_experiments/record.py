@@ -4,6 +4,15 @@ Messages are written as the serialized bytes received (no re-encoding), with the
 log time. Topic types are taken from the graph (``--type TOPIC=pkg/msg/Name`` when the publisher
 is not up yet). Recording stops on Ctrl-C / SIGTERM, after ``--max-messages`` or after
 ``--duration`` seconds; the bag is closed cleanly in every case and a count per topic printed.
+
+Reliability of each subscription (``--reliability``, default ``auto``): as rosbag2 does, from the
+QoS that the topic's discovered publishers offer: reliable if every one of them is reliable, best
+effort otherwise (a reliable subscription refuses a best-effort publisher, a sensor driver's
+usual QoS, and would record nothing from it). With no publisher discovered within
+``--discovery-timeout`` the subscription is reliable. The choice per topic is printed.
+
+If the output folder disappears (or a write fails) while recording, ``record`` stops with an error
+that names the folder and the number of messages written before, and exits with code 1.
 """
 
 from __future__ import annotations
@@ -13,10 +22,15 @@ import signal
 import sys
 import time
 from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
 
 from rfi_experiments.bag_io import BagError, BagWriter, message_class
 
 EXIT_USAGE = 2
+EXIT_FAILED = 1
+
+RELIABILITY_CHOICES = ('auto', 'reliable', 'best_effort')
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -27,7 +41,12 @@ def build_parser() -> argparse.ArgumentParser:
                         help='type of a topic, e.g. /rfi/if_samples=rfi_msgs/msg/IfSamples '
                              '(default: discovered from the graph)')
     parser.add_argument('--discovery-timeout', type=float, default=10.0, metavar='SECONDS',
-                        help='how long to wait for the publishers of topics without --type (default 10)')
+                        help='how long to wait for the publishers of the topics: their type (topics without '
+                             '--type) and their QoS (--reliability auto) (default 10)')
+    parser.add_argument('--reliability', choices=RELIABILITY_CHOICES, default='auto',
+                        help='QoS reliability of the subscriptions: auto (default) = reliable if every '
+                             'discovered publisher of the topic is reliable, else best effort (as rosbag2); '
+                             'reliable if no publisher was discovered')
     parser.add_argument('--max-messages', type=int, default=0, metavar='N',
                         help='stop after N messages in all (default: no limit)')
     parser.add_argument('--duration', type=float, default=0.0, metavar='SECONDS',
@@ -36,17 +55,48 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def fail(message: str) -> int:
+def fail(message: str, code: int = EXIT_USAGE) -> int:
     print(f'record: error: {message}', file=sys.stderr)
-    return EXIT_USAGE
+    return code
+
+
+def offered_reliability(publishers: Sequence[Any]) -> tuple[str, str]:
+    """Subscription reliability for a topic from its publishers' endpoint infos (as rosbag2 adapts
+    to the offered QoS): ('reliable' | 'best_effort', why)."""
+    from rclpy.qos import ReliabilityPolicy
+
+    if not publishers:
+        return 'reliable', 'no publisher discovered'
+    best_effort = [p for p in publishers if p.qos_profile.reliability != ReliabilityPolicy.RELIABLE]
+    if best_effort:
+        names = ', '.join(sorted({p.node_name for p in best_effort} - {'', '_NODE_NAME_UNKNOWN_'}))
+        return 'best_effort', (f'{len(best_effort)} of {len(publishers)} publishers offer best effort'
+                               + (f': {names}' if names else ''))
+    n = len(publishers)
+    return 'reliable', f'{n} publisher{"s" if n > 1 else ""}, all reliable'
+
+
+def subscription_qos(reliability: str) -> Any:
+    """RECORDER_QOS (keep all, volatile) with the given reliability."""
+    import copy
+
+    from rclpy.qos import ReliabilityPolicy
+
+    from rfi_node_common.qos import RECORDER_QOS
+
+    qos = copy.copy(RECORDER_QOS)
+    qos.reliability = ReliabilityPolicy.RELIABLE if reliability == 'reliable' else ReliabilityPolicy.BEST_EFFORT
+    return qos
+
+
+class RecordingFailed(Exception):
+    """The bag could not be written any more (its folder disappeared, a write failed)."""
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from rclpy.utilities import remove_ros_args
-
-    from rfi_node_common.qos import RECORDER_QOS
 
     argv = list(sys.argv if argv is None else argv)
     args = build_parser().parse_args(remove_ros_args(argv)[1:])
@@ -69,21 +119,31 @@ def main(argv: Sequence[str] | None = None) -> int:
     stop = {'requested': False}
     signal.signal(signal.SIGTERM, lambda *_: stop.update(requested=True))
     writer = None
+    out = Path(args.out)
+    failure: list[str] = []
     try:
+        # Wait for the publishers: the type of every topic without --type (required), and a publisher
+        # of every topic to adapt the reliability to (--reliability auto; bounded by the timeout).
         deadline = time.monotonic() + args.discovery_timeout
-        while any(t not in types for t in topics):
+        resolved = {t: node.resolve_topic_name(t) for t in topics}
+        while True:
             graph = dict(node.get_topic_names_and_types())
             for t in topics:
-                if t not in types and graph.get(t):
-                    types[t] = graph[t][0]
+                if t not in types and graph.get(resolved[t]):
+                    types[t] = graph[resolved[t]][0]
+            untyped = [t for t in topics if t not in types]
+            silent = [t for t in topics if not node.get_publishers_info_by_topic(resolved[t])]
+            if not untyped and (args.reliability != 'auto' or not silent):
+                break
             if time.monotonic() > deadline:
-                missing = [t for t in topics if t not in types]
-                return fail(f'no publisher of {", ".join(missing)} appeared within '
-                            f'{args.discovery_timeout} s (give --type TOPIC=TYPE to record anyway)')
+                if untyped:
+                    return fail(f'no publisher of {", ".join(untyped)} appeared within '
+                                f'{args.discovery_timeout} s (give --type TOPIC=TYPE to record anyway)')
+                break
             executor.spin_once(timeout_sec=0.05)
         try:
             classes.update({t: message_class(types[t]) for t in topics if t not in classes})
-            writer = BagWriter(args.out, overwrite=args.overwrite)
+            writer = BagWriter(out, overwrite=args.overwrite)
             writer.__enter__()
         except BagError as err:
             return fail(str(err))
@@ -92,32 +152,56 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         def make_callback(topic: str):
             def on_message(raw: bytes) -> None:
-                writer.write_raw(topic, types[topic], raw, node.get_clock().now().nanoseconds)
+                if failure:
+                    return
+                try:
+                    writer.write_raw(topic, types[topic], raw, node.get_clock().now().nanoseconds)
+                except Exception as err:  # noqa: BLE001 - OSError, or rosbags' own errors on a broken file
+                    failure.append(f'writing {topic} failed ({type(err).__name__}: {err})')
+                    return
                 total['n'] += 1
             return on_message
 
-        for t in topics:
-            node.create_subscription(classes[t], t, make_callback(t), RECORDER_QOS, raw=True)
+        chosen = {t: offered_reliability(node.get_publishers_info_by_topic(resolved[t]))
+                  if args.reliability == 'auto' else (args.reliability, '--reliability') for t in topics}
+        for t, (reliability, _) in chosen.items():  # all at once: a player waits for them together
+            node.create_subscription(classes[t], t, make_callback(t), subscription_qos(reliability), raw=True)
+        for t, (reliability, why) in chosen.items():
+            print(f'record: {t}: {reliability.replace("_", " ")} subscription ({why})', flush=True)
         end = time.monotonic() + args.duration if args.duration > 0 else None
-        while not stop['requested']:
+        next_check = 0.0
+        while not stop['requested'] and not failure:
             executor.spin_once(timeout_sec=0.1)
+            if time.monotonic() >= next_check:  # a write to a deleted folder succeeds (unlinked file): look
+                next_check = time.monotonic() + 0.2
+                if not out.is_dir() or not any(out.glob('*.mcap')):
+                    failure.append(f'the output folder {out} (or its mcap file) disappeared')
             if args.max_messages and total['n'] >= args.max_messages:
                 break
             if end is not None and time.monotonic() > end:
                 break
-        return 0
     except (KeyboardInterrupt, ExternalShutdownException):
-        return 0
+        pass
     finally:
         if writer is not None:
-            writer.__exit__(None, None, None)
+            try:
+                writer.__exit__(None, None, None)
+            except Exception as err:  # noqa: BLE001 - metadata.yaml cannot be written into a vanished folder
+                if not failure:
+                    failure.append(f'closing the bag in {out} failed ({type(err).__name__}: {err})')
             width = max(len(t) for t in topics)
             for t in topics:
                 print(f'{t:<{width}}  {types.get(t, "?"):<34} {writer.counts.get(t, 0):>9}')
-            print(f'record: wrote {sum(writer.counts.values())} messages to {args.out}')
+            written = sum(writer.counts.values())
+            if failure:
+                print(f'record: error: {failure[0]}; {written} messages had been written to {out} before, and '
+                      f'the bag there is {"gone" if not out.is_dir() else "incomplete"}', file=sys.stderr)
+            else:
+                print(f'record: wrote {written} messages to {out}')
         executor.remove_node(node)
         node.destroy_node()
         rclpy.try_shutdown()
+    return EXIT_FAILED if failure else 0
 
 
 if __name__ == '__main__':

@@ -7,8 +7,12 @@ has taken every message published on its topic so far (inputs and the nodes' own
 chain monitor -> fusion settles too). It knows this because it counts: each subscription's
 callback and each publisher's ``publish`` of the given nodes is wrapped with a counter. The order
 in which callbacks see messages is therefore the bag's order whatever the replay speed, and the
-outputs of a replay at 1x and at maximum rate are identical. Nothing is dropped: the data path is
-reliable with depth 1000 and the harness never lets more than one input message be in flight.
+outputs of a replay at 1x and at maximum rate are identical. Nothing is dropped silently: the
+harness never lets more than one input message be in flight, and a message that a subscription
+never takes stops the replay (:class:`ReplayStalled`) instead of going missing. (The nodes'
+inputs are best effort by default; ``run`` makes them reliable with the
+``qos_overrides.<topic>.subscription.reliability`` parameter; the tests' replays over DDS in one
+process have lost nothing either way.)
 
 Two transports:
 
@@ -25,6 +29,13 @@ Two transports:
 
 Timers are not fired by the harness: nodes in this suite compute (and report diagnostics) from
 message stamps, never from the wall clock.
+
+End of input: after the last message, :meth:`ReplayHarness.run` tells every node that has it that
+the input has ended (:func:`end_input`: ``node.end_of_input()``, or ``node.flush()`` for a node
+that only has that), so a node that holds messages back (the fusion node's 0.1 s re-ordering
+buffer) processes them, and settles the graph again so that what they produce is collected. A
+replay of N GNSS and UWB messages therefore gives N fusion outputs, not those of all but the last
+0.1 s.
 """
 
 from __future__ import annotations
@@ -52,6 +63,21 @@ TRANSPORTS = ('dds', 'direct')
 """Ways the harness moves messages between publishers and subscriptions (module docstring)."""
 
 
+END_OF_INPUT_METHODS = ('end_of_input', 'flush')
+"""Methods a node may offer to be told that its input has ended, in order of preference."""
+
+
+def end_input(node: Any) -> str | None:
+    """Tell ``node`` that its input has ended: call its ``end_of_input()``, or ``flush()`` if it has
+    only that; return the name of the method called (None: the node has neither)."""
+    for name in END_OF_INPUT_METHODS:
+        method = getattr(node, name, None)
+        if callable(method):
+            method()
+            return name
+    return None
+
+
 class ReplayStalled(RuntimeError):
     """The graph did not settle after an input message (a node lost or never took a message)."""
 
@@ -66,13 +92,16 @@ class ReplayResult:
             or bytes where the node published bytes); :meth:`messages` gives objects either way.
         output_types: topic -> message type name.
         inputs: topic -> number of bag messages published.
-        wall_time_s: wall-clock duration of the replay, s.
+        ended: node name -> the end-of-input method called on it after the last input
+            (``end_of_input`` or ``flush``; nodes with neither are not listed).
+        wall_time_s: wall-clock duration of the replay, s (end of input included).
         bag_duration_s: span of the replayed messages' log times, s.
     """
 
     outputs: dict[str, list[tuple[int, Any]]] = field(default_factory=dict)
     output_types: dict[str, str] = field(default_factory=dict)
     inputs: dict[str, int] = field(default_factory=dict)
+    ended: dict[str, str] = field(default_factory=dict)
     wall_time_s: float = 0.0
     bag_duration_s: float = 0.0
 
@@ -104,9 +133,11 @@ class ReplayHarness:
         if transport not in TRANSPORTS:
             raise ValueError(f'transport must be one of {", ".join(TRANSPORTS)}, got {transport!r}')
         self._direct = transport == 'direct'
-        # topic -> (what the receiver takes: 'bytes', 'object' or 'as published', callback)
-        self._routes: dict[str, list[tuple[str, Callable[[Any], None]]]] = defaultdict(list)
-        self._queue: deque[tuple[str, Any]] = deque()
+        # topic -> (what the receiver takes: 'bytes', 'object' or 'as published', callback); the
+        # callback of 'bytes' and 'object' also takes the publisher's sequence number
+        self._routes: dict[str, list[tuple[str, Callable[..., None]]]] = defaultdict(list)
+        self._queue: deque[tuple[str, Any, int]] = deque()  # (topic, message, publisher's sequence number)
+        self._bag_sequence: dict[str, itertools.count] = {}  # the harness's own publisher per topic
         self._types: dict[str, type] = {}
         self._context = context
         self._nodes = list(nodes)
@@ -149,39 +180,42 @@ class ReplayHarness:
                     pub.publish = self._direct_publish(pub.topic_name)
 
     @staticmethod
-    def _direct_delivery(sub: Any) -> Callable[[Any], None]:
+    def _direct_delivery(sub: Any) -> Callable[[Any, int], None]:
+        """The subscription's callback, given a MessageInfo as the middleware fills it: the
+        publisher's sequence number (1, 2, ... per publisher), which the nodes count losses from."""
         callback, with_info = sub.callback, sub._callback_type.name != 'MessageOnly'
-        info = {'source_timestamp': 0, 'received_timestamp': 0}
 
-        def deliver(msg: Any) -> None:
+        def deliver(msg: Any, sequence_number: int) -> None:
             if with_info:
-                callback(msg, info)
+                callback(msg, {'source_timestamp': 0, 'received_timestamp': 0,
+                               'publication_sequence_number': sequence_number, 'reception_sequence_number': 0})
             else:
                 callback(msg)
         return deliver
 
     def _direct_publish(self, topic: str) -> Callable[[Any], None]:
         queue = self._queue
+        sequence = itertools.count(1)
 
         def publish(msg: Any) -> None:
-            queue.append((topic, msg))
+            queue.append((topic, msg, next(sequence)))
         return publish
 
     def _drain(self) -> None:
         """Hand every queued message to the subscriptions of its topic, first in first out."""
         while self._queue:
-            topic, payload = self._queue.popleft()
+            topic, payload, sequence_number = self._queue.popleft()
             as_bytes = payload if isinstance(payload, bytes) else None
             as_object = None if isinstance(payload, bytes) else payload
             for takes, deliver in self._routes.get(topic, ()):
                 if takes == 'bytes':
                     if as_bytes is None:
                         as_bytes = serialize(as_object)
-                    deliver(as_bytes)
+                    deliver(as_bytes, sequence_number)
                 elif takes == 'object':
                     if as_object is None:
                         as_object = deserialize_message(as_bytes, self._types[topic])
-                    deliver(as_object)
+                    deliver(as_object, sequence_number)
                 else:
                     deliver(payload)
 
@@ -250,7 +284,7 @@ class ReplayHarness:
 
         if self._direct:
             self._types.setdefault(topic, message_class(msgtype))
-            self._routes[topic].append(('as published', on_message))
+            self._routes[topic].append(('as published', on_message))  # called with the message only
             return
         self._node.create_subscription(message_class(msgtype), topic, on_message, DATA_QOS, raw=True)
 
@@ -276,7 +310,8 @@ class ReplayHarness:
     def publish(self, message: BagMessage) -> None:
         """Publish one bag message on its topic and wait until the graph has settled."""
         if self._direct:
-            self._queue.append((message.topic, message.raw))
+            sequence = self._bag_sequence.setdefault(message.topic, itertools.count(1))
+            self._queue.append((message.topic, message.raw, next(sequence)))
             self._drain()
             return
         pub = self._publishers.get(message.topic)
@@ -297,9 +332,27 @@ class ReplayHarness:
             if time.monotonic() > deadline:
                 raise ReplayStalled(f'{topic}: {pub.get_subscription_count()} of {expected} subscriptions matched')
 
+    def end_of_input(self) -> dict[str, str]:
+        """Tell every node that its input has ended (:func:`end_input`), then deliver what they
+        publish in response (direct) or settle the graph (dds). Returns node name -> method called.
+
+        Raises:
+            ReplayStalled: the graph did not settle afterwards.
+        """
+        ended = {}
+        for node in self._nodes:
+            method = end_input(node)
+            if method is not None:
+                ended[node.get_name()] = method
+                if self._direct:
+                    self._drain()  # a node's outputs may be another node's input: in node order
+        if not self._direct:
+            self.settle()
+        return ended
+
     def run(self, bag: str | os.PathLike[str], *, topics: Iterable[str] | None = None,
             rate: float | None = None, progress: Callable[[int, int], None] | None = None,
-            window_s: tuple[float, float] | None = None) -> ReplayResult:
+            window_s: tuple[float, float] | None = None, end_of_input: bool = True) -> ReplayResult:
         """Replay ``bag`` (all topics, or ``topics``) through the nodes.
 
         Args:
@@ -309,6 +362,9 @@ class ReplayHarness:
             progress: called as ``progress(done, total)`` after each message.
             window_s: replay only the messages whose log time lies in [start, stop) seconds after
                 the bag's first message.
+            end_of_input: after the last message, tell the nodes that the input has ended
+                (:meth:`end_of_input`) and collect what they publish then (default); False leaves
+                what the nodes hold back unprocessed (to inspect a node mid-stream).
         """
         if rate is not None and not rate > 0:
             raise ValueError(f'rate must be > 0 or None, got {rate}')
@@ -337,6 +393,8 @@ class ReplayHarness:
                 counts[message.topic] += 1
                 if progress is not None:
                     progress(i + 1, total)
+            if end_of_input:
+                result.ended = self.end_of_input()
             result.wall_time_s = time.monotonic() - wall_start
             result.bag_duration_s = 0.0 if first is None else (last - first) * 1e-9
         result.inputs = dict(counts)

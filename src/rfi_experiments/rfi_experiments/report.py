@@ -12,6 +12,11 @@ what it needs:
   positioning and the GNSS-only filter, Cao et al.'s SPP and "GNSS Filter"); errors per J/S phase;
 - carrier: /carrier/estimates (IMM and PLL) against /truth/carrier: residual phase error and
   cycle slips (half-cycle for both) per satellite.
+
+A report on a window of the bag (``window_ns``) scores every row on that window: the baselines are
+computed from the window's GNSS epochs only, and every positioning method skips the same first
+``CONVERGENCE_S`` of it. A figure that has no sample (a window too short for it) is written as
+"not scored" with the reason, never left out silently.
 """
 
 from __future__ import annotations
@@ -37,6 +42,13 @@ METHOD_NAMES = {1: 'IMM', 2: 'PLL', 3: 'KF'}
 DETECTABLE_JN_DB = 6.0
 """Truth J/N from which a jammer counts as detectable, dB: below it the three-sample frequency
 measurement is dominated by noise and the monitor is expected to report NONE (docs/rfi_monitor)."""
+
+CONVERGENCE_S = 10.0
+"""Time after the replay's first GNSS epoch that no positioning method is scored on (filter
+convergence), s. The same for every method, so that every row covers the same span."""
+
+FUSED = 'GNSS+UWB (fusion_node)'
+"""Name of the fusion node's row in the positioning tables."""
 
 PAPER_FIGURES = {
     'rfi_rmse': 0.0071,        # Kang et al.: proposed filter frequency RMSE at J/S 30 dB, cycles/sample
@@ -65,12 +77,17 @@ def _stamp_s(header: Any) -> float:
     return header.stamp.sec + header.stamp.nanosec * NS
 
 
-def _read_truth(bag: str | os.PathLike[str]) -> dict[str, list[Any]]:
+def _read_truth(bag: str | os.PathLike[str], window_ns: tuple[int | None, int | None] = (None, None),
+                ) -> dict[str, list[Any]]:
+    """The truth topics of the bag (whole: they are looked up by stamp) and its /gnss/measurements
+    with log time in ``window_ns`` (the replayed ones: the baselines' input)."""
     truth: dict[str, list[Any]] = defaultdict(list)
     with BagReader(bag) as reader:
-        wanted = [t for t in reader.topics if t.startswith('/truth/') or t == '/gnss/measurements']
-        for message in reader.messages(wanted):
+        for message in reader.messages([t for t in reader.topics if t.startswith('/truth/')]):
             truth[message.topic].append(message.decode())
+        if '/gnss/measurements' in reader.topics:
+            for message in reader.messages(['/gnss/measurements'], start_ns=window_ns[0], stop_ns=window_ns[1]):
+                truth[message.topic].append(message.decode())
     return truth
 
 
@@ -216,35 +233,53 @@ def _phase_labels(jammer_truth: list[Any], t: np.ndarray) -> list[str]:
 
 def _fusion_section(truth: Mapping[str, list[Any]], odometry: list[Any], out: Path,
                     summary: ReportSummary) -> list[str]:
+    """Positioning errors of the fusion node and of the two baselines, over the same span.
+
+    ``truth['/gnss/measurements']`` holds the GNSS epochs that were replayed (the run's window):
+    the baselines are computed from those only, and every method is scored from the replay's
+    first GNSS epoch (or first output) plus :data:`CONVERGENCE_S`. A method with no sample there
+    gets a row that says so.
+    """
     truth_pos = truth.get('/truth/position', [])
     if not truth_pos or truth_pos[0].header.frame_id != 'earth':
         return ['## Positioning', '', 'No ECEF /truth/position in the bag: no error figures.', '']
     truth_t = np.array([_stamp_s(m.header) for m in truth_pos])
     truth_p = np.array([[m.point.x, m.point.y, m.point.z] for m in truth_pos])
     series: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    if truth.get('/gnss/measurements'):
-        series.update(_baselines(truth['/gnss/measurements']))
+    gnss = truth.get('/gnss/measurements', [])
+    if gnss:
+        series.update(_baselines(gnss))
     earth = [m for m in odometry if m.header.frame_id == 'earth']
-    if earth:
-        series['GNSS+UWB (fusion_node)'] = (
-            np.array([_stamp_s(m.header) for m in earth]),
-            np.array([[m.pose.pose.position.x, m.pose.pose.position.y, m.pose.pose.position.z] for m in earth]))
-    t0 = truth_t[0]
+    positions = [[m.pose.pose.position.x, m.pose.pose.position.y, m.pose.pose.position.z] for m in earth]
+    series[FUSED] = (np.array([_stamp_s(m.header) for m in earth]), np.array(positions).reshape(-1, 3))
+    # the replay's start: its first GNSS epoch, else the node's first output
+    t0 = _stamp_s(gnss[0].header) if gnss else float(series[FUSED][0][0]) if earth else float(truth_t[0])
+    stops = [float(t[-1]) for t, _ in series.values() if len(t)]
+    span_s = (max(stops) - t0) if stops else 0.0
     lines = ['## Positioning (uwb_gnss_fusion)', '',
              'GNSS+UWB is the node\'s /fusion/odometry. SPP and the GNSS filter are computed by the report from the '
-             'same /gnss/measurements with the package cores (Cao et al.\'s baselines). Horizontal RMS per '
-             'jamming phase, m (first 10 s of the run excluded: convergence):', '']
+             'same replayed /gnss/measurements with the package cores (Cao et al.\'s baselines). Every method is '
+             f'scored on the same span: from {CONVERGENCE_S:g} s after the replay\'s first GNSS epoch (convergence '
+             f'excluded) to its end ({span_s:.1f} s of data replayed). Horizontal RMS per jamming phase, m:', '']
     jammer_truth = truth.get('/truth/jammer', [])
     per_phase: dict[str, dict[str, float]] = {}
     errors: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+    missing: dict[str, str] = {}
     order: list[str] = []
     for name, (t, p) in series.items():
         if len(t) == 0:
+            missing[name] = 'no estimate in the replay' if name == FUSED else 'no valid solution in the replay'
             continue
         enu = ecef_errors_enu(p, _truth_at(truth_t, truth_p, t))
         h, e3 = horizontal_error_m(enu), error_3d_m(enu)
-        keep = t - t0 >= 10.0
+        keep = (t - t0 >= CONVERGENCE_S) & np.isfinite(h)
+        if not keep.any():
+            missing[name] = (f'no sample after the first {CONVERGENCE_S:g} s (convergence) of a {span_s:.1f} s '
+                             'replay: replay a longer window')
+            summary.values[f'positioning_samples[{name}]'] = 0
+            continue
         errors[name] = (t[keep] - t0, h[keep], e3[keep])
+        summary.values[f'positioning_samples[{name}]'] = int(keep.sum())
         labels = _phase_labels(jammer_truth, t[keep])
         for label in labels:
             if label not in order:
@@ -252,26 +287,37 @@ def _fusion_section(truth: Mapping[str, list[Any]], odometry: list[Any], out: Pa
         for label in set(labels):
             sel = np.array([lab == label for lab in labels])
             per_phase.setdefault(name, {})[label] = error_stats(h[keep][sel]).rms_m
-    lines.append('| method | ' + ' | '.join(order) + ' |')
-    lines.append('|---' * (len(order) + 1) + '|')
-    for name in errors:
-        lines.append(f'| {name} | ' + ' | '.join(
-            f'{per_phase[name].get(lab, math.nan):.3f}' for lab in order) + ' |')
-    lines += ['', '| method | horizontal RMS | horizontal 95 % | horizontal max | 3D RMS | 3D 95 % |',
-              '|---|---|---|---|---|---|']
+    summary.values['positioning_scored_from_s'] = t0 + CONVERGENCE_S
+    if order:
+        lines.append('| method | ' + ' | '.join(order) + ' |')
+        lines.append('|---' * (len(order) + 1) + '|')
+        for name in errors:
+            lines.append(f'| {name} | ' + ' | '.join(
+                f'{per_phase[name][lab]:.3f}' if lab in per_phase[name] else 'no sample' for lab in order) + ' |')
+        lines += ['', '| method | horizontal RMS | horizontal 95 % | horizontal max | 3D RMS | 3D 95 % |',
+                  '|---|---|---|---|---|---|']
     for name, (_, h, e3) in errors.items():
         sh, s3 = error_stats(h), error_stats(e3)
         lines.append(f'| {name} | {sh.rms_m:.3f} | {sh.p95_m:.3f} | {sh.max_m:.3f} | {s3.rms_m:.3f} | {s3.p95_m:.3f} |')
         summary.values[f'horizontal_rms_m[{name}]'] = sh.rms_m
-    fused = 'GNSS+UWB (fusion_node)'
-    if fused in errors:
-        worst = max((v for k, v in per_phase[fused].items() if not k.endswith('+30 dB')), default=math.nan)
+    if missing:
+        lines += ['', '| method | not scored |', '|---|---|']
+        lines += [f'| {name} | {why} |' for name, why in missing.items()]
+    if FUSED in errors:
+        worst = max((v for k, v in per_phase[FUSED].items() if not k.endswith('+30 dB')), default=math.nan)
         summary.add('GNSS+UWB horizontal RMS, worst phase up to 22 dB', f'{worst:.3f} m',
                     f'< {PAPER_FIGURES["fusion_goal_m"]} m (issue goal, 3 anchors)', '')
         summary.values['fusion_worst_phase_rms_up_to_22db_m'] = worst
+    else:
+        summary.add('GNSS+UWB horizontal RMS, worst phase up to 22 dB', 'not scored',
+                    f'< {PAPER_FIGURES["fusion_goal_m"]} m (issue goal, 3 anchors)', missing.get(FUSED, ''))
     if 'SPP' in errors:
-        summary.add('SPP horizontal RMS (whole run)', f'{error_stats(errors["SPP"][1]).rms_m:.2f} m', '',
-                    'the unaided baseline')
+        summary.add('SPP horizontal RMS (all phases)', f'{error_stats(errors["SPP"][1]).rms_m:.2f} m', '',
+                    'the unaided baseline, same span')
+    elif gnss:
+        summary.add('SPP horizontal RMS (all phases)', 'not scored', '', missing.get('SPP', ''))
+    if not errors:
+        return lines + ['']
 
     plt = _plt()
     fig, axes = plt.subplots(1, 2, figsize=(13, 4.5))
@@ -334,6 +380,9 @@ def _carrier_section(truth_msgs: list[Any], estimates: list[Any], out: Path, sum
         results[(svid, name)] = (keys, slips, std_deg)
         lines.append(f'| {svid} | {name} | {len(keys)} | {100.0 * locked[(svid, method)] / len(series):.0f} % '
                      f'| {std_deg:.1f} | {slips.count} |')
+    if not results:
+        return lines[:2] + ['No satellite has 60 estimates matched with /truth/carrier in this replay (1.2 s at '
+                            '50 Hz): the carrier figures need a longer window.', '']
     imm = {sv: r for (sv, m), r in results.items() if m == 'IMM'}
     pll = {sv: r for (sv, m), r in results.items() if m == 'PLL'}
     if imm:
@@ -379,7 +428,7 @@ def _carrier_section(truth_msgs: list[Any], estimates: list[Any], out: Path, sum
 
 
 def write_report(bag: str | os.PathLike[str], outputs: Mapping[str, list[Any]], out_dir: str | os.PathLike[str],
-                 *, header: str = '') -> ReportSummary:
+                 *, header: str = '', window_ns: tuple[int | None, int | None] = (None, None)) -> ReportSummary:
     """Write index.md, figures and summary.json for a replay of ``bag`` into ``out_dir``.
 
     Args:
@@ -387,10 +436,13 @@ def write_report(bag: str | os.PathLike[str], outputs: Mapping[str, list[Any]], 
         outputs: topic -> deserialised messages the nodes published (ReplayResult.messages).
         out_dir: report folder (created).
         header: Markdown put at the top (run statistics).
+        window_ns: the log times [start, stop) that were replayed, ns (None: unbounded); the
+            positioning baselines are computed from the GNSS epochs of that window only, so that
+            every row covers what the nodes saw.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    truth = _read_truth(bag)
+    truth = _read_truth(bag, window_ns)
     summary = ReportSummary()
     lines = [f'# Jamming experiment: {Path(bag).name}', '', header, '']
     body: list[str] = []

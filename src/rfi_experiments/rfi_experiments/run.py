@@ -8,16 +8,24 @@ their topics exactly as on a robot, in one of three ways (``--transport``):
   handed over in-process (the same callbacks, much faster) or over the middleware on one
   SingleThreadedExecutor;
 - ``processes``: the three node executables run as separate processes (resolved through the
-  ament index as ``ros2 run`` does, ``--ros-args --params-file`` for the parameters files and the
-  caller's ``--ros-args``), ``play`` feeds them the bag at ``--rate`` (after a slow warm-up, see
-  :func:`run_processes`), and this process records their outputs (reliable, keep-all
-  subscriptions) until every node has handled its last input; then the nodes are stopped with
-  SIGINT (killed if they do not exit), also on Ctrl-C, SIGTERM or an error.
+  ament index as ``ros2 run`` does, ``--ros-args --params-file`` for the parameters files, each
+  input subscription made reliable with ``qos_overrides.<topic>.subscription.reliability``, then
+  the caller's ``--ros-args``), ``play`` feeds them the bag at ``--rate`` once each input topic has
+  its subscriber (after a slow warm-up, see :func:`run_processes`), and this process records their
+  outputs (reliable, keep-all subscriptions) until every node has answered its last input; then the
+  nodes are stopped with SIGINT (killed if they do not exit), also on Ctrl-C, SIGTERM or an error,
+  and what they publish while stopping is still recorded.
+
+After the last input the in-process transports call each node's ``end_of_input()`` (the fusion
+node then processes what its re-ordering buffer holds); a node process does the same by itself
+when its input stops (the fusion's ``idle_flush_s``).
 
 A window of the bag can be replayed (``--start``, ``--duration``). At the end a summary table is
-printed and a report folder written: ``index.md`` with figures (rfi_experiments.report),
-``summary.json`` and ``replay.md`` (per-topic counts, the nodes' final diagnostics, where the
-time went); with ``processes`` also ``logs/`` (the output of each process).
+printed and a report folder written: ``index.md`` with figures (rfi_experiments.report, scored on
+the replayed window), ``summary.json`` and ``replay.md`` (per-topic counts, the nodes' final
+diagnostics, where the time went); with ``processes`` also ``logs/`` (the output of each process).
+The summary and the report end with a warning when the fusion node rejected messages as later than
+its re-ordering window, or a node counted input messages lost (:func:`delivery_warnings`).
 """
 
 from __future__ import annotations
@@ -35,7 +43,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from rfi_experiments.bag_io import BagError, BagReader
-from rfi_experiments.play import add_window_arguments, window_ns, window_s
+from rfi_experiments.play import LATE_REASON, add_window_arguments, window_ns, window_s
 
 EXIT_USAGE = 2
 EXIT_FAILED = 1
@@ -71,17 +79,23 @@ OUTPUT_TYPES = {
 }
 """Every topic the three nodes publish, and its type: what ``processes`` records."""
 
-STAMPED_ONE_TO_ONE = (('rfi_monitor', '/rfi/if_samples', '/rfi/jammer_state'),
-                      ('imm_carrier', '/gnss/correlators', '/carrier/estimates'))
-"""(node, input, output): the node publishes the output with the header stamp of each input it
-accepts, in input order. An output stamped at the last input's stamp shows that the node is done.
-The fusion has no such output (its outputs lag by its re-ordering window and its last inputs stay
-in that window), so its end is seen as quiescence."""
+ANSWERED_BY_STAMP = (('rfi_monitor', ('/rfi/if_samples',), '/rfi/jammer_state'),
+                     ('uwb_gnss_fusion', ('/gnss/measurements', '/uwb/ranges'), '/fusion/status'),
+                     ('imm_carrier', ('/gnss/correlators',), '/carrier/estimates'))
+"""(node, inputs, output): the node publishes the output with the header stamp of each input it
+processes, in stamp order, so an output stamped at its last input's stamp shows that the node is
+done. The fusion processes its last inputs (those in its re-ordering window) at the end of input:
+when none has arrived for its ``idle_flush_s`` (wall time, 1 s by default)."""
 
 DISCOVERY_SETTLE_S = 1.0
 """Wait after this process sees every node's endpoints, and after play's publishers are matched, s:
 the other side of each match (the subscriber's) completes a little later, and until then the
 middleware delivers the first messages only by retransmission, up to seconds late."""
+
+RELIABLE_INPUTS = 'reliable'
+"""What ``processes`` sets each node's input subscriptions to (``qos_overrides.<topic>.subscription.
+reliability``): the nodes' inputs are best effort by default (sensor drivers), which would let a
+replay lose messages silently; reliable, every message of play reaches the node or play waits."""
 
 SYNCED = (('rfi_monitor', '/rfi/if_samples', '/rfi/jammer_state'),)
 """(node, input, output) that ``play`` paces on (``--sync``): after each IF block it waits for the
@@ -212,6 +226,55 @@ def ros_arguments(argv: Sequence[str]) -> list[str]:
     return out
 
 
+def reliable_input_arguments(topics: Sequence[str], resolve: Any = None) -> list[str]:
+    """``-p qos_overrides.<topic>.subscription.reliability:=reliable`` for each input topic of a node
+    (and for its remapped name, which is what the node's override is declared under, when ``resolve``
+    maps it elsewhere): see :data:`RELIABLE_INPUTS`."""
+    names: list[str] = []
+    for topic in topics:
+        for name in (topic, resolve(topic) if resolve is not None else topic):
+            if name not in names:
+                names.append(name)
+    out: list[str] = []
+    for name in names:
+        out += ['-p', f'qos_overrides.{name}.subscription.reliability:={RELIABLE_INPUTS}']
+    return out
+
+
+def delivery_warnings(result: Any) -> list[str]:
+    """What the nodes say they lost or rejected for coming too late, from their last /fusion/status and
+    /diagnostics (empty: nothing): the fusion's rejections of messages that came after its re-ordering
+    window, and the input messages each node counted lost (publisher sequence gaps, middleware)."""
+    warnings = []
+    diagnostics = diagnostics_summary(result.messages('/diagnostics')) if '/diagnostics' in result.outputs else {}
+    fusion = diagnostics.get('uwb_gnss_fusion', {})
+    late = int(fusion.get(f'rejected.{LATE_REASON}', 0))
+    statuses = result.outputs.get('/fusion/status')
+    if statuses:
+        last = result.messages('/fusion/status')[-1]
+        late = max(late, dict(zip(last.rejection_reasons, last.rejection_counts, strict=False)).get(LATE_REASON, 0))
+    if late:
+        window = fusion.get('reorder_window_s')
+        grown = f' (its window is now {float(window):g} s)' if window is not None else ''
+        warnings.append(f'the fusion node rejected {late} messages that reached it later than its re-ordering '
+                        f'window{grown}: the nodes lagged behind the replay (load, or a --rate too high), so the '
+                        'outputs differ from a replay in one process')
+    lost: dict[str, int] = {}
+    for values in diagnostics.values():
+        for key, value in values.items():
+            if key.startswith('input.') and key.endswith(('.lost', '.middleware_lost')):
+                topic = key[len('input.'):].rsplit('.', 1)[0]
+                try:
+                    lost[topic] = lost.get(topic, 0) + int(value)
+                except ValueError:
+                    continue
+    lost = {t: n for t, n in lost.items() if n}
+    if lost:
+        warnings.append('the nodes counted input messages lost before reaching them: '
+                        + ', '.join(f'{t} {n}' for t, n in sorted(lost.items())))
+    return warnings
+
+
 def executable_path(package: str, name: str) -> str:
     """Where ``ros2 run package name`` looks: ``<prefix of package>/lib/<package>/<name>`` (as tools/ros2_run).
 
@@ -265,15 +328,19 @@ class ChildProcesses:
                 raise RunError(f'{name} exited early with code {code}; the end of {self.log_dir / name}.log:\n'
                                + self.log_tail(name))
 
-    def stop(self, timeout_s: float = 10.0) -> dict[str, int]:
+    def stop(self, timeout_s: float = 10.0, while_waiting: Any = None) -> dict[str, int]:
         """SIGINT to every process still running, then SIGKILL to those not gone after ``timeout_s``;
-        return each process's exit code (negative: killed by that signal)."""
+        return each process's exit code (negative: killed by that signal). ``while_waiting()`` is called
+        repeatedly until they have exited (e.g. to keep recording what they publish while stopping)."""
         for proc in self.procs.values():
             if proc.poll() is None:
                 proc.send_signal(signal.SIGINT)
         deadline = time.monotonic() + timeout_s
         codes: dict[str, int] = {}
         try:
+            while while_waiting is not None and time.monotonic() < deadline and any(
+                    p.poll() is None for p in self.procs.values()):
+                while_waiting()
             for name, proc in self.procs.items():
                 try:
                     codes[name] = proc.wait(timeout=max(0.0, deadline - time.monotonic()))
@@ -307,7 +374,7 @@ class Segment:
     counts: dict[str, int]
     first_ns: int | None  # log times of its first and last input
     last_ns: int | None
-    last_input: dict[str, int]  # node -> header stamp of its last one-to-one input, ns
+    last_input: dict[str, int]  # node -> latest header stamp of its inputs (ANSWERED_BY_STAMP), ns
 
 
 def _segment(reader: BagReader, inputs: list[str], start_s: float, duration_s: float | None) -> Segment:
@@ -315,17 +382,18 @@ def _segment(reader: BagReader, inputs: list[str], start_s: float, duration_s: f
     counts = {t: 0 for t in inputs}
     first = last = None
     last_raw: dict[str, Any] = {}
-    stamped = {topic: node for node, topic, _ in STAMPED_ONE_TO_ONE}
+    stamped = {topic: node for node, topics, _ in ANSWERED_BY_STAMP for topic in topics}
     for message in reader.messages(inputs, start_ns=start_ns, stop_ns=stop_ns):
         counts[message.topic] += 1
         first = message.stamp_ns if first is None else first
         last = message.stamp_ns
         if message.topic in stamped:
             last_raw[message.topic] = message
-    last_input = {}
+    last_input: dict[str, int] = {}
     for topic, message in last_raw.items():
         stamp = message.decode().header.stamp
-        last_input[stamped[topic]] = stamp.sec * 1_000_000_000 + stamp.nanosec
+        node = stamped[topic]
+        last_input[node] = max(last_input.get(node, 0), stamp.sec * 1_000_000_000 + stamp.nanosec)
     return Segment(start_s, duration_s, counts, first, last, last_input)
 
 
@@ -399,7 +467,8 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
                 command += ['--params-file', str(Path(params_file).resolve())]
             if name == 'imm_carrier':  # run's default, unless a parameters file sets it
                 command += ['-p', f'method:={params["imm_carrier"]["method"]}']
-            command += forwarded[1:] if forwarded else []
+            command += reliable_input_arguments(NODE_ENDPOINTS[name][0], node.resolve_topic_name)
+            command += forwarded[1:] if forwarded else []  # after ours: the caller's own -p wins
             children.start(name, command)
         _wait_for_graph(node, executor, subs, children, args.timeout)
         node_names = list(paths)
@@ -414,6 +483,8 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
                      # cold cache: 15-30 s per node with three starting at once on two cores)
                      '--sync-timeout', repr(args.timeout)]
         play_cmd += [f'--sync={inp}:{out}' for _, inp, out in SYNCED if inp in inputs]
+        subscribers = {t: sum(t in subscribes for subscribes, _ in NODE_ENDPOINTS.values()) for t in inputs}
+        play_cmd += [f'--expect-subscribers={t}:{n}' for t, n in subscribers.items()]
         if args.no_progress:
             play_cmd.append('--no-progress')
         play_cmd += forwarded
@@ -428,7 +499,8 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
                                             args)
         wall_time_s = received['at'] - wall_start  # the first play's start to the last output
     finally:
-        exit_codes = children.stop()
+        # keep recording while the nodes stop: what they publish on the way out is theirs too
+        exit_codes = children.stop(while_waiting=lambda: executor.spin_once(timeout_sec=0.05))
         for sig, handler in previous.items():
             signal.signal(sig, handler)
         executor.remove_node(node)
@@ -498,13 +570,13 @@ def _wait_for_last_outputs(executor: Any, recorded: dict[str, list[tuple[int, by
 
     from rfi_experiments.bag_io import message_class
 
-    classes = {topic: message_class(OUTPUT_TYPES[topic]) for _, _, topic in STAMPED_ONE_TO_ONE}
+    classes = {topic: message_class(OUTPUT_TYPES[topic]) for _, _, topic in ANSWERED_BY_STAMP}
     start = time.monotonic()
     while True:
         executor.spin_once(timeout_sec=0.05)
         children.check_alive(node_names)
         waiting = []
-        for name, _, topic in STAMPED_ONE_TO_ONE:
+        for name, _, topic in ANSWERED_BY_STAMP:
             expected = last_input.get(name)
             if expected is None:
                 continue
@@ -516,7 +588,7 @@ def _wait_for_last_outputs(executor: Any, recorded: dict[str, list[tuple[int, by
                 waiting.append(f'{name}: last {topic} stamped {got} ns, its last input {expected} ns')
         quiet_s = time.monotonic() - max(received['at'], start)
         if not waiting and quiet_s >= args.settle:
-            return (f'every node answered its last input (rfi_monitor, imm_carrier: by stamp) and nothing was '
+            return (f'every node answered its last input (an output with that stamp) and nothing was '
                     f'published for {args.settle:g} s')
         if waiting and quiet_s >= 5 * args.settle:
             return (f'nothing was published for {5 * args.settle:g} s; not answered by stamp (last input rejected?): '
@@ -551,6 +623,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         with BagReader(args.bag) as reader:
             topics = reader.topics
+            replayed_ns = window_ns(reader.start_ns, window)
     except BagError as err:
         return fail(str(err))
     inputs = sorted(t for t in topics if not t.startswith('/truth/'))
@@ -575,15 +648,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         notes.append(f'Completion: {run.completion}.')
         notes.append('Exit codes after SIGINT: ' + ', '.join(f'{n} {c}' for n, c in run.exit_codes.items())
                      + '. Output of each process: [logs/](logs/).')
-        fusion = diagnostics_summary(result.messages('/diagnostics')).get('uwb_gnss_fusion', {}) \
-            if '/diagnostics' in result.outputs else {}
-        late = int(fusion.get('rejected.late_beyond_reorder_window', 0))
-        if late:
-            warning = (f'{late} messages reached the fusion node later than its re-ordering window and were '
-                       'rejected: the processes lagged (load, or a --rate too high), so the outputs differ from a '
-                       'replay in one process')
-            notes.append(f'Warning: {warning}.')
-            print(f'run: warning: {warning}', file=sys.stderr)
         bad = {n: c for n, c in run.exit_codes.items() if c != 0}
         if bad:
             print(f'run: warning: processes did not exit cleanly: {bad} (logs in {out / "logs"})', file=sys.stderr)
@@ -595,6 +659,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         except (BagError, RuntimeError) as err:
             return fail(str(err))
         how = f'{args.transport} transport'
+    warnings = delivery_warnings(result)
+    for warning in warnings:
+        notes.append(f'Warning: {warning}.')
+        print(f'run: warning: {warning}', file=sys.stderr)
     if args.record_outputs:
         try:
             write_outputs_bag(result, args.record_outputs)
@@ -622,12 +690,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         lines += [f'| {k} | {v} |' for k, v in values.items()]
     (out / 'replay.md').write_text('\n'.join(lines) + '\n')
     start = time.monotonic()
-    summary = write_report(args.bag, outputs, out,
-                           header=replay_line + ' Counts and diagnostics: [replay.md](replay.md).')
+    header = replay_line + ' Counts and diagnostics: [replay.md](replay.md).'
+    if warnings:
+        header += ''.join(f'\n\n**Warning**: {w}.' for w in warnings)
+    summary = write_report(args.bag, outputs, out, window_ns=replayed_ns, header=header)
     print(replay_line)
     print()
     print(summary.table())
     print()
+    for warning in warnings:
+        print(f'warning: {warning}')
     print(f'report written to {out / "index.md"} (figures and tables; evaluation took '
           f'{time.monotonic() - start:.1f} s)')
     return 0
@@ -655,8 +727,12 @@ def run_in_process(args: argparse.Namespace, argv: Sequence[str], inputs: list[s
     try:
         for name, cls in (('rfi_monitor', RfiMonitorNode), ('uwb_gnss_fusion', FusionNode),
                           ('imm_carrier', ImmCarrierNode)):
+            # reliable inputs (dds: over the middleware), unless a parameters file says otherwise
+            reliable = reliable_input_arguments(NODE_ENDPOINTS[name][0])[1::2]
+            defaults = {k: v for k, _, v in (a.partition(':=') for a in reliable) if k not in params.get('**', {})}
             try:
-                nodes.append(cls(context=context, parameter_overrides=overrides_for(name, params)))
+                nodes.append(cls(context=context, parameter_overrides=overrides_for(
+                    name, {**params, name: {**defaults, **params.get(name, {})}})))
             except ValueError as err:
                 raise ValueError(f'{name}: {err}') from None
         harness = ReplayHarness(nodes, context=context, transport=args.transport)
