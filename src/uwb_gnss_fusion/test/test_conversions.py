@@ -198,3 +198,68 @@ def test_uwb_range_cdr_decoder_equals_rclpy():
         # cut short anywhere, or big-endian: declined (the node then uses rclpy, which reports it)
         assert decode_uwb_range_cdr(raw[: int(rng.integers(0, len(raw) - 8))]) is None
         assert decode_uwb_range_cdr(b"\x00\x00" + raw[2:]) is None
+
+
+def _fuzzed_uwb_payloads(seed: int, count: int):
+    """Seeded byte strings around a serialised UwbRange: random bytes, bit flips, overwritten bytes,
+    truncations and extensions, absurd string lengths."""
+    from rclpy.serialization import serialize_message
+
+    msg = UwbRange()
+    msg.header.stamp.sec, msg.header.frame_id, msg.anchor_id = 1_700_000_000, "earth", "A1"
+    msg.anchor_position.x, msg.range_m, msg.range_std_m = 6.4e6, 12.0, math.nan
+    raw = serialize_message(msg)
+    rng = np.random.default_rng(seed)
+    yield b""
+    yield b"\x00\x01\x00\x00"
+    yield b"\x00\x01\x00\x00" + b"\xff" * 12   # string length 2^32 - 1
+    for n in range(len(raw) + 1):
+        yield raw[:n]
+    for at in (8, 20):  # payload offsets of the frame_id and anchor_id lengths: every small length
+        for n in range(16):
+            changed = bytearray(raw)
+            changed[4 + at:8 + at] = n.to_bytes(4, "little")
+            yield bytes(changed)
+    for k in range(count):
+        kind = k % 4
+        if kind == 0:
+            yield rng.integers(0, 256, int(rng.integers(0, 160)), dtype=np.uint8).tobytes()
+        elif kind == 1:
+            flipped = bytearray(raw)
+            for _ in range(int(rng.integers(1, 4))):
+                flipped[int(rng.integers(0, len(raw)))] ^= 1 << int(rng.integers(0, 8))
+            yield bytes(flipped)
+        elif kind == 2:
+            changed = bytearray(raw)
+            changed[int(rng.integers(0, len(raw)))] = int(rng.integers(0, 256))
+            yield bytes(changed[: int(rng.integers(0, len(raw) + 16))]) + b"\x00" * int(rng.integers(0, 9))
+        else:
+            at = int(rng.choice([8, 20]))  # a string length: frame_id or anchor_id
+            changed = bytearray(raw)
+            changed[4 + at:8 + at] = int(rng.integers(0, 2**32)).to_bytes(4, "little")
+            yield bytes(changed)
+
+
+def test_uwb_range_cdr_decoder_never_raises_and_agrees_with_rclpy_on_fuzzed_bytes():
+    """Any byte string: the decoder returns None or a well-formed result, never raises; whenever
+    rclpy deserialises the same bytes, the two agree field for field."""
+    from rclpy.serialization import deserialize_message
+
+    from uwb_gnss_fusion.conversions import decode_uwb_range_cdr
+
+    decoded = 0
+    for raw in _fuzzed_uwb_payloads(seed=2024, count=4000):
+        out = decode_uwb_range_cdr(raw)
+        assert (decode_uwb_range_cdr(raw, {"earth": "earth"}) is None) == (out is None)
+        if out is None:
+            continue
+        decoded += 1
+        stamp_ns, frame, meas = out
+        assert isinstance(stamp_ns, int) and isinstance(frame, str) and meas is not None
+        assert meas.anchor_position_m.shape == (3,) and isinstance(meas.range_m, float)
+        msg = deserialize_message(raw, UwbRange)  # what the decoder takes, rclpy takes too
+        ref = msg_to_uwb(msg)
+        assert (stamp_ns, frame, meas.anchor_id) == (ref.stamp_ns, msg.header.frame_id, ref.anchor_id)
+        assert np.asarray(meas.anchor_position_m).tobytes() == ref.anchor_position_m.tobytes()
+        assert _same_float(meas.range_m, ref.range_m) and _same_float(meas.range_std_m, ref.range_std_m)
+    assert decoded > 500

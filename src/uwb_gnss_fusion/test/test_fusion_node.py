@@ -56,12 +56,19 @@ def clean_stream():
     return np.array([truth.x, truth.y, truth.z]), inputs
 
 
+WALL_CLOCK_OFF = {'idle_flush_s': 0.0, 'input_timeout_s': 0.0}
+"""The rig's defaults: no wall-clock behaviour (idle flush, stale report) unless a test asks for it,
+so that what the node publishes depends on the inputs only."""
+
+
 class Rig:
     """The node under test plus a test node that publishes inputs and collects every output."""
 
     def __init__(self, params: dict | None = None, args: list[str] | None = None) -> None:
         self.context = Context()
         rclpy.init(args=args, context=self.context)
+        if args is None:
+            params = {**WALL_CLOCK_OFF, **(params or {})}
         overrides = [Parameter(k, value=v) for k, v in (params or {}).items()]
         try:
             self.node = FusionNode(context=self.context, parameter_overrides=overrides)
@@ -98,11 +105,17 @@ class Rig:
             assert time.monotonic() < deadline, 'graph did not settle'
             self.executor.spin_once(timeout_sec=0.05)
 
-    def send(self, msg) -> None:
-        """Publish one input and spin until the node has taken it and all its outputs have arrived."""
-        kind = KIND[type(msg)]
-        self.pubs[type(msg)].publish(msg)
+    def send(self, msg, cls=None) -> None:
+        """Publish one input (a message, or serialised bytes of type ``cls``) and spin until the node
+        has taken it and all its outputs have arrived."""
+        cls = type(msg) if cls is None else cls
+        kind = KIND[cls]
+        self.pubs[cls].publish(msg)
         self.sent[kind] += 1
+        self.settle(kind)
+
+    def settle(self, kind: str) -> None:
+        """Spin until the node has received every ``kind`` input sent and its outputs have arrived."""
         self._spin_until(lambda: self.node.counts[f'{kind}_received'] == self.sent[kind]
                          and all(len(v) == self.published[k] for k, v in self.out.items()))
 
@@ -316,7 +329,7 @@ def test_reorder_window_and_late_messages(rig_factory, clean_stream):
     # Released = every message at least 0.1 s older than the newest.
     newest = max(s for s, _, _ in head)
     assert stamps == [s for s, _, _ in head if s <= newest - 10**8]
-    late = restamped(head[5][2], head[5][0])   # older than what has been released
+    late = restamped(head[5][2], head[5][0] + 1)   # older than what has been released (not a duplicate)
     rig.send(late)
     assert rig.node.reasons['late_beyond_reorder_window'] == 1
     rig.node.flush()
@@ -388,10 +401,10 @@ def test_uwb_only_in_map_frame(rig_factory):
     assert np.sqrt(np.mean(np.sum((p[:, :2] - tag[:2]) ** 2, axis=1))) < 0.1
     assert np.sqrt(np.mean((p[:, 2] - tag[2]) ** 2)) < 0.3
     assert_no_nan_published(rig)
-    # An ECEF-framed range cannot join a filter running in 'map'.
+    # An ECEF-framed range (anchor on the Earth's surface) cannot join a filter running in 'map'.
     rig.send(uwb_to_msg(UwbRangeMeasurement(stamp_ns=t0 + 200 * 50_000_000, anchor_id='A1',
-                                            anchor_position_m=anchors['A1'], frame_id='earth', range_m=3.0,
-                                            range_std_m=0.05)))
+                                            anchor_position_m=np.array([-740e3, -5457e3, 3207e3]), frame_id='earth',
+                                            range_m=3.0, range_std_m=0.05)))
     assert rig.reasons()['uwb_frame_mismatch'] == 1
 
 
@@ -436,3 +449,390 @@ def test_invalid_parameters_are_refused(params, words):
             FusionNode(context=context, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
     finally:
         rclpy.shutdown(context=context)
+
+
+# ---------------------------------------------------------------------------------- hostile input
+def test_malformed_uwb_bytes_are_counted_and_the_node_keeps_running(rig_factory, clean_stream):
+    from rclpy.serialization import serialize_message
+
+    _, inputs = clean_stream
+    rig = rig_factory({'reorder_window_s': 0.0, 'diagnostics_period_s': 0.01})
+    for _, _, msg in inputs[:30]:
+        rig.send(msg)
+    raw = serialize_message(next(m for _, t, m in reversed(inputs[:30]) if t == '/uwb/ranges'))
+    # rclpy's deserialize_message raises RMWError on each (the node's own decoder declines them first)
+    bad = [b'\x00\x01\x00\x00', raw[:40], raw[:-1], b'\x00\x00\x00\x00' + raw[4:60], b'\x00\x01\x00\x00' + b'\xff' * 12]
+    for payload in bad:
+        rig.send(payload, UwbRange)
+    assert rig.node.reasons['malformed_message'] == len(bad)
+    assert rig.node.health.callback_errors_total() == 0   # handled by the node, not by the last net
+    reports = len(rig.out['/diagnostics'])
+    following = iter(inputs[30:60])
+    while len(rig.out['/diagnostics']) == reports:   # the next report, timed by the next accepted stamp
+        rig.send(next(following)[2])
+    status = rig.out['/diagnostics'][reports].status[0]
+    assert status.level == DiagnosticStatus.WARN and 'rejections' in status.message
+    for _, _, msg in following:
+        rig.send(msg)
+    values = diag_values(rig)
+    assert values['rejected.malformed_message'] == str(len(bad)) and int(values['uwb_rejected']) == len(bad)
+    assert values['accounting_ok'] == 'True' and values['input./uwb/ranges.callback_errors'] == '0'
+    assert int(values['input./uwb/ranges.received']) == rig.sent['uwb']
+    assert rig.last_status().initialized and stamp_of(rig.last_status()) == inputs[59][0]
+
+
+def test_fuzzed_uwb_bytes_never_stop_the_node(rig_factory, clean_stream):
+    """Seeded random, truncated and bit-flipped /uwb/ranges payloads: every one is received and
+    accounted for under a named reason (or processed), no handler raises, nothing invalid is published."""
+    from rclpy.serialization import serialize_message
+
+    _, inputs = clean_stream
+    rig = rig_factory({'reorder_window_s': 0.1})
+    for _, _, msg in inputs[:40]:
+        rig.send(msg)
+    raw = serialize_message(next(m for _, t, m in reversed(inputs[:40]) if t == '/uwb/ranges'))
+    rng = np.random.default_rng(99)
+    for k in range(300):
+        if k % 3 == 0:
+            payload = rng.integers(0, 256, int(rng.integers(1, 120)), dtype=np.uint8).tobytes()
+        elif k % 3 == 1:
+            payload = raw[:int(rng.integers(1, len(raw)))]
+        else:
+            flipped = bytearray(raw)
+            for _ in range(int(rng.integers(1, 4))):
+                flipped[int(rng.integers(4, len(raw)))] ^= 1 << int(rng.integers(0, 8))
+            payload = bytes(flipped)
+        rig.send(payload, UwbRange)
+    rig.node.end_of_input()
+    values = rig.node.accounting()
+    assert values['accounting_ok'] and values['input./uwb/ranges.callback_errors'] == 0
+    assert values['uwb_received'] == rig.sent['uwb'] == values['input./uwb/ranges.received']
+    assert values['uwb_rejected'] >= 200 and rig.node.reasons['malformed_message'] >= 100
+    assert rig.node.counts.get('core_exceptions', 0) == 0
+    assert_no_nan_published(rig)
+
+
+def _epoch_with(msg: GnssMeasurementArray, stamp_ns: int, index: int, **fields) -> GnssMeasurementArray:
+    out = restamped(msg, stamp_ns)
+    for name, value in fields.items():
+        if name in ('satellite_position_ecef_m', 'satellite_velocity_ecef_mps'):
+            getattr(out.measurements[index], name)[:] = value
+        else:
+            setattr(out.measurements[index], name, value)
+    return out
+
+
+def test_impossible_field_values_are_rejected_and_counted_never_applied(rig_factory, clean_stream):
+    truth, inputs = clean_stream
+    rig = rig_factory({'reorder_window_s': 0.0, 'diagnostics_period_s': 0.01})
+    first_half = [(s, t, m) for s, t, m in inputs if s < inputs[0][0] + 10 * 10**9]
+    for _, _, msg in first_half:
+        rig.send(msg)
+    t_ns = first_half[-1][0]
+    good_epoch = next(m for s, t, m in reversed(first_half) if t == '/gnss/measurements')
+    good_uwb = next(m for s, t, m in reversed(first_half) if t == '/uwb/ranges')
+    n_sats = len(good_epoch.measurements)
+    before = dict(rig.node.counts)
+    # UWB: only NaN means "use the default 1-sigma"; impossible anchors are rejected
+    uwb_cases = [('range_std_m', -math.inf), ('range_std_m', math.inf), ('range_std_m', 0.0),
+                 ('range_std_m', -0.5), ('range_std_m', 1e6)]
+    uwb_anchor_cases = [(1e300, 0.0, 0.0), (0.0, 0.0, 0.0), (6.4e6, 1e7, 0.0)]
+    k = 0
+    for name, value in uwb_cases:
+        k += 1
+        msg = restamped(good_uwb, t_ns + k * 10**6)
+        setattr(msg, name, value)
+        rig.send(msg)
+    for x, y, z in uwb_anchor_cases:
+        k += 1
+        msg = restamped(good_uwb, t_ns + k * 10**6)
+        msg.anchor_position.x, msg.anchor_position.y, msg.anchor_position.z = x, y, z
+        rig.send(msg)
+    assert rig.node.counts['uwb_processed'] == before['uwb_processed']   # none reached the filter
+    assert rig.node.counts['uwb_rejected'] == before['uwb_rejected'] + len(uwb_cases) + len(uwb_anchor_cases)
+    k += 1
+    nan_std = restamped(good_uwb, t_ns + k * 10**6)
+    nan_std.range_std_m = math.nan
+    rig.send(nan_std)                                                      # NaN: the default, applied
+    assert rig.node.counts['uwb_processed'] == before['uwb_processed'] + 1 and rig.last_status().uwb_used == 1
+    # GNSS: the satellite is dropped, the rest of the epoch is used
+    gnss_cases = [
+        ('nonphysical_cn0', {'cn0_dbhz': -math.inf}), ('nonphysical_cn0', {'cn0_dbhz': math.inf}),
+        ('nonphysical_cn0', {'cn0_dbhz': 1e3}),
+        ('invalid_measurement_std', {'pseudorange_std_m': -math.inf}),
+        ('invalid_measurement_std', {'pseudorange_std_m': 0.0}),
+        ('invalid_measurement_std', {'pseudorange_std_m': -1.0}),
+        ('invalid_measurement_std', {'pseudorange_std_m': 1e9}),
+        ('invalid_measurement_std', {'pseudorange_rate_std_mps': math.inf}),
+        ('nonphysical_satellite_state', {'satellite_velocity_ecef_mps': [1e300, 0.0, 0.0]}),
+        ('nonphysical_satellite_state', {'satellite_clock_bias_m': 1e300}),
+        ('nonphysical_satellite_state', {'satellite_clock_drift_mps': -1e9}),
+        ('nonphysical_atmospheric_delay', {'ionosphere_delay_m': 1e6}),
+        ('nonphysical_atmospheric_delay', {'troposphere_delay_m': 1e6}),
+    ]
+    for reason, fields in gnss_cases:
+        k += 1
+        rig.send(_epoch_with(good_epoch, t_ns + k * 10**6, 1, **fields))
+        status = rig.last_status()
+        assert stamp_of(status) == t_ns + k * 10**6, reason
+        assert status.satellites_rejected >= 1 and status.satellites_used + status.satellites_rejected == n_sats
+    expected = Counter({'invalid_range_std': 5, 'nonphysical_anchor_position': 3})
+    expected.update(reason for reason, _ in gnss_cases)
+    values = rig.node.accounting()
+    for reason, count in expected.items():
+        assert rig.node.rejection_reasons()[reason] == count and values[f'rejected.{reason}'] == count, reason
+    assert rig.node.counts['gnss_processed'] == before['gnss_processed'] + len(gnss_cases)
+    assert values['accounting_ok']
+    # the filter carries on as if the impossible values had never been sent
+    for s, _, msg in inputs[len(first_half):]:
+        if s > t_ns + (k + 1) * 10**6:
+            rig.send(msg)
+    assert rig.last_status().initialized and rig.last_status().reinitializations == 0
+    assert_no_nan_published(rig)
+    t, p = positions(rig.out['/fusion/odometry'])
+    tail = t > t_ns + 5 * 10**9
+    assert np.sqrt(np.mean(horizontal_error_m(ecef_errors_enu(p[tail], truth)) ** 2)) < GOAL_HORIZONTAL_RMS_M
+
+
+@pytest.mark.parametrize('window_s', [0.0, 0.1])
+def test_exact_duplicates_are_rejected_and_counted(rig_factory, clean_stream, window_s):
+    _, inputs = clean_stream
+    rig = rig_factory({'reorder_window_s': window_s})
+    head = inputs[:60]
+    for _, _, msg in head:
+        rig.send(msg)
+        rig.send(copy.deepcopy(msg))   # the same message again, right behind it
+    n_gnss = sum(1 for _, t, _ in head if t == '/gnss/measurements')
+    n_uwb = len(head) - n_gnss
+    assert rig.node.reasons['duplicate_gnss_epoch'] == n_gnss
+    assert rig.node.reasons['duplicate_uwb_range'] == n_uwb
+    # the same stamp with another content is a duplicate epoch too; another anchor is another range
+    last_epoch = next(m for _, t, m in reversed(head) if t == '/gnss/measurements')
+    other = copy.deepcopy(last_epoch)
+    other.measurements = other.measurements[:5]
+    rig.send(other)
+    assert rig.node.reasons['duplicate_gnss_epoch'] == n_gnss + 1
+    last_uwb = next(m for _, t, m in reversed(head) if t == '/uwb/ranges')
+    other_anchor = copy.deepcopy(last_uwb)
+    other_anchor.anchor_id = 'another'
+    rig.send(other_anchor)
+    assert rig.node.reasons['duplicate_uwb_range'] == n_uwb
+    rig.node.end_of_input()
+    rig.settle('uwb')
+    values = rig.node.accounting()
+    assert values['accounting_ok'] and values['gnss_processed'] == n_gnss and values['uwb_processed'] == n_uwb + 1
+    statuses = rig.out['/fusion/status']
+    assert len(statuses) == len(head) + 1
+    assert [stamp_of(s) for s in statuses[:len(head)]] == [s for s, _, _ in head]
+
+
+def test_jammer_state_of_unknown_type_is_rejected(rig_factory, clean_stream):
+    _, inputs = clean_stream
+    rig = rig_factory({'reorder_window_s': 0.0})
+    for _, _, msg in inputs[:20]:
+        rig.send(msg)
+    t = inputs[19][0]
+    odd = JammerState(type=200, jammer_to_signal_db=22.0)
+    odd.header.stamp = ns_to_stamp(t + 1)
+    rig.send(odd)
+    rig.send(restamped(inputs[20][2], t + 2))
+    assert rig.node.reasons['jammer_state_unknown_type'] == 1 and rig.node.counts['jammer_processed'] == 0
+    assert math.isnan(rig.last_status().jammer_to_signal_db)   # not used
+    for jammer_type in (JammerState.CW, JammerState.CHIRP, JammerState.WIDEBAND, JammerState.UNKNOWN):
+        known = JammerState(type=jammer_type, jammer_to_signal_db=10.0 + jammer_type)
+        t += 10
+        known.header.stamp = ns_to_stamp(t)
+        rig.send(known)
+        rig.send(restamped(inputs[20][2], t + 1))
+        assert rig.last_status().jammer_to_signal_db == 10.0 + jammer_type
+    values = rig.node.accounting()
+    assert values['jammer_rejected'] == 1 and values['jammer_processed'] == 4 and values['accounting_ok']
+
+
+# ---------------------------------------------------------------------------------- end of input
+def fields(msg):
+    """A message as nested tuples, NaN-safe, for comparing outputs field for field."""
+    if hasattr(msg, 'get_fields_and_field_types'):
+        return tuple((name, fields(getattr(msg, name))) for name in msg.get_fields_and_field_types())
+    if isinstance(msg, (list, tuple)) or type(msg).__name__ == 'array' or hasattr(msg, 'tolist'):
+        return tuple(fields(v) for v in (msg.tolist() if hasattr(msg, 'tolist') else msg))
+    if isinstance(msg, float) and math.isnan(msg):
+        return 'nan'
+    return msg
+
+
+def test_end_of_input_processes_the_buffer_in_order_with_the_same_results(rig_factory, clean_stream):
+    _, inputs = clean_stream
+    head = inputs[:80]
+    reference = rig_factory({'reorder_window_s': 0.0})   # in-order input: processed at once
+    for _, _, msg in head:
+        reference.send(msg)
+    rig = rig_factory({'reorder_window_s': 0.1})
+    for _, _, msg in head:
+        rig.send(msg)
+    newest = head[-1][0]
+    held = sum(1 for s, _, _ in head if s > newest - 10**8)
+    assert sum(rig.node.buffered.values()) == held > 0
+    assert rig.node.end_of_input() == held
+    rig.settle('gnss')
+    assert sum(rig.node.buffered.values()) == 0 and rig.node.counts['end_of_input_flushes'] == 1
+    for topic in ('/fusion/status', '/fusion/odometry', '/fusion/fix'):
+        assert [fields(m) for m in rig.out[topic]] == [fields(m) for m in reference.out[topic]], topic
+    assert rig.node.end_of_input() == 0
+    # a message older than the last one processed is late afterwards, as any late message
+    rig.send(restamped(head[-3][2], head[-3][0] - 1))
+    assert rig.node.reasons['late_beyond_reorder_window'] == 1
+    assert rig.node.accounting()['accounting_ok']
+
+
+def test_idle_input_flushes_the_buffer(rig_factory, clean_stream):
+    _, inputs = clean_stream
+    rig = rig_factory({'reorder_window_s': 0.1, 'idle_flush_s': 1.0})
+    assert rig.node.idle_flush_timer is not None
+    for _, _, msg in inputs[:30]:
+        rig.send(msg)
+    held = sum(rig.node.buffered.values())
+    assert held > 0
+    assert rig.node.flush_if_idle() == 0            # input arrived just now: not idle
+    rig.node.health.last_activity_s -= 10.0         # as if 10 s of wall time had passed without input
+    assert rig.node.flush_if_idle() == held
+    rig.settle('uwb')
+    assert sum(rig.node.buffered.values()) == 0 and rig.node.counts['idle_flushes'] == 1
+    assert len(rig.out['/fusion/status']) == 30 and rig.node.accounting()['accounting_ok']
+    # the timer does it by itself: spin (bounded) until a short idle time has drained the buffer
+    quick = rig_factory({'reorder_window_s': 0.1, 'idle_flush_s': 0.05})
+    for _, _, msg in inputs[:30]:
+        quick.send(msg)
+    quick._spin_until(lambda: sum(quick.node.buffered.values()) == 0
+                      and len(quick.out['/fusion/status']) == quick.published['/fusion/status'] == 30)
+    # off: nothing is processed without newer input
+    off = rig_factory({'reorder_window_s': 0.1, 'idle_flush_s': 0.0})
+    assert off.node.idle_flush_timer is None
+
+
+def test_buffer_is_processed_when_the_node_is_destroyed(clean_stream):
+    _, inputs = clean_stream
+    rig = Rig({'reorder_window_s': 0.1})
+    try:
+        for _, _, msg in inputs[:30]:
+            rig.send(msg)
+        held = sum(rig.node.buffered.values())
+        processed = rig.node.counts['uwb_processed'] + rig.node.counts['gnss_processed']
+    finally:
+        rig.close()
+    assert held > 0 and sum(rig.node.buffered.values()) == 0
+    assert rig.node.counts['uwb_processed'] + rig.node.counts['gnss_processed'] == processed + held
+
+
+# ---------------------------------------------------------------------------------- late input
+def test_reorder_window_grows_after_late_arrivals_up_to_its_maximum(rig_factory, clean_stream):
+    _, inputs = clean_stream
+    rig = rig_factory({'reorder_window_s': 0.1, 'reorder_window_max_s': 1.0})
+    uwb = [(s, m) for s, t, m in inputs if t == '/uwb/ranges']
+    t0 = uwb[0][0]
+    sent = [(s, m) for s, m in uwb if s < t0 + 2 * 10**9]
+    for _, msg in sent:
+        rig.send(msg)
+    newest = sent[-1][0]
+    # 0.3 s late: older than what was released, rejected; the window grows to 0.45 s
+    rig.send(restamped(sent[0][1], newest - 3 * 10**8))
+    assert rig.node.reasons['late_beyond_reorder_window'] == 1
+    assert rig.node.reorder_window_s == pytest.approx(0.45)
+    assert rig.node.counts['reorder_window_growths'] == 1
+    # from now on ranges 0.3 s late are taken and applied in stamp order
+    later = [(s, m) for s, m in uwb if newest < s < newest + 2 * 10**9]
+    statuses_before = len(rig.out['/fusion/status'])
+    for i, (s, msg) in enumerate(later):
+        rig.send(msg)
+        if i % 10 == 9:
+            rig.send(restamped(msg, s - 3 * 10**8 + 1))
+    assert rig.node.reasons['late_beyond_reorder_window'] == 1
+    stamps = [stamp_of(st) for st in rig.out['/fusion/status'][statuses_before:]]
+    assert stamps == sorted(stamps) and len(stamps) > 0
+    assert rig.node.accounting()['reorder_window_s'] == pytest.approx(0.45)
+    # 0.9 s late: the window stops at the maximum; far later than the maximum: rejected, no change
+    rig.send(restamped(sent[0][1], later[-1][0] - 9 * 10**8))
+    assert rig.node.reasons['late_beyond_reorder_window'] == 2 and rig.node.reorder_window_s == 1.0
+    small = rig_factory({'reorder_window_s': 0.1, 'reorder_window_max_s': 0.5})
+    for _, msg in sent:
+        small.send(msg)
+    small.send(restamped(sent[0][1], newest - 6 * 10**8))
+    assert small.node.reasons['late_beyond_reorder_window'] == 1 and small.node.reorder_window_s == 0.1
+    assert rig.node.accounting()['accounting_ok'] and small.node.accounting()['accounting_ok']
+
+
+def test_reorder_window_stays_fixed_when_its_maximum_is_not_above_it(rig_factory, clean_stream):
+    _, inputs = clean_stream
+    rig = rig_factory({'reorder_window_s': 0.1, 'reorder_window_max_s': 0.0})
+    for _, _, msg in inputs[:40]:
+        rig.send(msg)
+    rig.send(restamped(inputs[5][2], inputs[5][0]))
+    assert rig.node.reasons['late_beyond_reorder_window'] == 1 and rig.node.reorder_window_s == 0.1
+
+
+# ---------------------------------------------------------------------------------- drivers, STALE
+def test_best_effort_publisher_reaches_the_node(rig_factory, clean_stream):
+    """A sensor driver publishes with qos_profile_sensor_data (best effort): accepted and processed."""
+    from rclpy.qos import qos_profile_sensor_data
+
+    _, inputs = clean_stream
+    rig = rig_factory({'reorder_window_s': 0.0})
+    for cls in (GnssMeasurementArray, UwbRange):
+        rig.pubs[cls] = rig.io.create_publisher(cls, TOPICS[cls], qos_profile_sensor_data)
+    rig._spin_until(lambda: all(rig.pubs[c].get_subscription_count() >= 1 for c in (GnssMeasurementArray, UwbRange)))
+    for _, _, msg in inputs[:20]:
+        rig.send(msg)
+    assert len(rig.out['/fusion/status']) == 20 and rig.last_status().initialized
+    values = rig.node.accounting()
+    assert values['input./uwb/ranges.received'] == values['uwb_received'] == rig.sent['uwb']
+    assert values['input./gnss/measurements.received'] == values['gnss_received'] == rig.sent['gnss']
+
+
+def test_silent_node_reports_stale(rig_factory, clean_stream):
+    _, inputs = clean_stream
+    rig = rig_factory({'reorder_window_s': 0.0, 'input_timeout_s': 5.0})
+    assert rig.node.stale_watch.timer is not None
+    assert not rig.node.stale_watch.check()         # just started: not silent yet
+    rig.node.health.started_s -= 60.0               # as if a minute had passed with no input
+    before_ns = rig.node.get_clock().now().nanoseconds
+    assert rig.node.stale_watch.check()
+    rig._spin_until(lambda: len(rig.out['/diagnostics']) == rig.published['/diagnostics'] == 1)
+    stale = rig.out['/diagnostics'][-1]
+    status = stale.status[0]
+    assert status.level == DiagnosticStatus.STALE and status.message.startswith('no input for 6')
+    assert stamp_of(stale) >= before_ns                   # the node clock's now, not a message stamp
+    values = {kv.key: kv.value for kv in status.values}
+    assert values['input./uwb/ranges.received'] == '0' and values['accounting_ok'] == 'True'
+    # input arrives: the stamp-timed reports resume, and the node is not stale
+    for _, _, msg in inputs[:5]:
+        rig.send(msg)
+    assert rig.out['/diagnostics'][-1].status[0].level != DiagnosticStatus.STALE
+    assert not rig.node.stale_watch.check()
+    # the timer does it by itself (bounded spin)
+    quick = rig_factory({'reorder_window_s': 0.0, 'input_timeout_s': 0.05})
+    quick._spin_until(lambda: any(a.status[0].level == DiagnosticStatus.STALE for a in quick.out['/diagnostics']))
+
+
+def test_handler_errors_and_lost_messages_set_the_diagnostics_level(rig_factory, clean_stream):
+    _, inputs = clean_stream
+    rig = rig_factory({'reorder_window_s': 0.0, 'diagnostics_period_s': 0.01})
+    for _, _, msg in inputs[:20]:
+        rig.send(msg)
+    # lost before the node (a sequence gap or the middleware's event): WARN
+    rig.node.health.middleware_lost('/uwb/ranges', 3)
+    rig.send(inputs[20][2])
+    status = rig.out['/diagnostics'][-1].status[0]
+    assert status.level == DiagnosticStatus.WARN and '3 input messages lost' in status.message
+    # a handler that raises (a bug): counted by the subscription's guard, ERROR, and the node goes on
+    accept = rig.node._accept_uwb
+    rig.node._accept_uwb = lambda *args: (_ for _ in ()).throw(RuntimeError('bug'))
+    rig.pubs[UwbRange].publish(next(m for s, t, m in inputs[21:] if t == '/uwb/ranges'))
+    rig._spin_until(lambda: rig.node.health.callback_errors_total() == 1)
+    rig.node._accept_uwb = accept
+    for _, _, msg in inputs[22:30]:
+        rig.send(msg)
+    levels = [a.status[0].level for a in rig.out['/diagnostics'][-8:]]
+    assert levels.count(DiagnosticStatus.ERROR) == 1 and levels[-1] != DiagnosticStatus.ERROR
+    error = next(a.status[0] for a in rig.out['/diagnostics'] if a.status[0].level == DiagnosticStatus.ERROR)
+    assert 'handler' in error.message
+    assert diag_values(rig)['input./uwb/ranges.callback_errors'] == '1'

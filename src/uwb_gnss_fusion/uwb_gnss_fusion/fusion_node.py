@@ -8,19 +8,63 @@ filter of Cao et al.) and publishes what the core returns. Each GNSS epoch or UW
 predict-to-stamp + update of the core and gives one /fusion/status; /fusion/odometry and
 /fusion/fix follow whenever the filter is initialised.
 
-Time. All time is message time (``header.stamp``, integer ns); the node never reads a clock, so a
-bag replayed at any speed gives identical outputs. Inputs pass through a re-ordering buffer
-(:class:`uwb_gnss_fusion.fusion_filter.ReorderBuffer`) of ``reorder_window_s``: a message is
-processed once a message stamped ``reorder_window_s`` later has arrived, so measurements that
-arrive up to that much out of order are applied in stamp order (the outputs lag by the window).
-Later arrivals are rejected and counted (``late_beyond_reorder_window``). A stamp more than
-``max_stamp_jump_s`` away from the latest accepted one is rejected (``stamp_far_future`` /
-``stamp_far_past``) unless ``stamp_jump_confirmations`` messages in a row agree on the jump (a
-clock or bag restart): then the pending messages are processed and the filter restarts
-(``time_jump_restarts``). Stamps <= 0 are rejected (``stamp_not_positive``: an unset header).
+Time. All time is message time (``header.stamp``, integer ns); no estimate depends on a clock, so
+a bag replayed at any speed gives identical outputs. Inputs pass through a re-ordering buffer
+(:class:`uwb_gnss_fusion.fusion_filter.ReorderBuffer`): a message is processed once a message
+stamped the window later has arrived, so measurements that arrive up to that much out of order are
+applied in stamp order (the outputs lag by the window). Later arrivals are rejected and counted
+(``late_beyond_reorder_window``). Stamps pass :class:`rfi_node_common.input_checks.StampGate`
+first: a stamp more than ``max_stamp_jump_s`` away from the latest accepted one is rejected
+(``stamp_far_future`` / ``stamp_far_past``) unless ``stamp_jump_confirmations`` messages in a row
+agree on the jump (a clock or bag restart): then the pending messages are processed and the filter
+restarts (``time_jump_restarts``). Stamps <= 0 are rejected (``stamp_not_positive``: an unset header).
+
+Re-ordering window: latency against late rejections. The window starts at ``reorder_window_s``
+(0.1 s: a GNSS receiver delivers its epoch 50-100 ms after the measurement time) and every output
+lags the newest input by it. On a loaded computer the inputs also arrive late relative to each
+other: the executor takes one message per topic and turn, so a UWB backlog (60 ranges/s) falls
+behind the GNSS epochs by about as long as the node was starved (566 ranges of one 1x replay through
+separate processes came later than 0.1 s). So the window adapts: a late arrival is still rejected,
+but the window grows to 1.5 times how late it was (``reorder_window_growths``), up to
+``reorder_window_max_s`` (1 s of outputs lag at most; it never shrinks while the node runs; a
+message later than that maximum leaves the window as it is: no window would have taken it).
+Measured with the node as its own process fed 20 s of bags/default at 1x and stopped twice (SIGSTOP)
+to mimic a starved CPU: the ranges came up to 0.9 times the stop late; stops of 0.6 s: a fixed
+0.1 s window rejected 44 ranges, the adaptive one 10 (in the first stop only); stops of 1.5 s: 140
+and 40 (window at its 1 s maximum). With in-order input (a bag replayed in one process) nothing is
+late and the window stays where it started; the order of processing never depends on the window,
+only the lag of the outputs does. ``reorder_window_max_s`` <= ``reorder_window_s`` keeps the
+window fixed.
+
+End of input. What the buffer holds is processed (in stamp order, exactly as a newer message would
+have released it) when :meth:`FusionNode.end_of_input` is called (a replay's end), when no input at
+all has arrived for ``idle_flush_s`` of wall time (a steady-clock timer; a node running as its own
+process at the end of a bag or when its sensors stop; ``idle_flush_s`` 0: never), and when the node
+is destroyed while its context can still publish. This changes only when buffered messages are
+processed, never their order or the results; a message that arrives afterwards with a stamp older
+than the last one processed is rejected as late, as any late message.
+
+Input checks. Every input is subscribed by :func:`rfi_node_common.inputs.subscribe_input` (best
+effort: sensor drivers and reliable publishers alike; ``qos_overrides.<topic>.subscription.*``
+parameters; arrivals and lost messages counted as ``input.<topic>.*``; a handler that raises is
+counted, not fatal). Before the buffer the node rejects and counts, besides the stamps above:
+
+* bytes that rclpy cannot deserialise (``malformed_message``; every input is subscribed raw and
+  deserialised by the node, so that such a message is received and counted, not lost unseen);
+* a frame_id that is not the earth / map frame (``gnss_frame_id``, ``uwb_frame_id``);
+* an exact duplicate: a GNSS epoch with the stamp of an epoch already accepted
+  (``duplicate_gnss_epoch``), a UWB range with the stamp and anchor id of a range already accepted
+  (``duplicate_uwb_range``);
+* a UWB range whose ``range_std_m`` is not NaN ("use uwb_range_std_m") and not finite, > 0 and
+  plausible (``invalid_range_std``), or whose anchor position is off the Earth / beyond any local
+  frame (``nonphysical_anchor_position``); per satellite of an epoch (the satellite is dropped, the
+  epoch goes on): ``nonphysical_cn0``, ``invalid_measurement_std``, ``nonphysical_satellite_state``,
+  ``nonphysical_atmospheric_delay`` (:mod:`uwb_gnss_fusion.message_checks` has the bounds). The core
+  checks the rest (non-finite or impossible pseudoranges, satellite positions, ranges).
 
 Jammer information. /rfi/jammer_state feeds ``JammerState.jammer_to_signal_db`` to the core's
-measurement weighting (Cao et al., eq. 4), in stamp order with the measurements:
+measurement weighting (Cao et al., eq. 4), in stamp order with the measurements. A ``type`` that
+is none of the message's constants is rejected (``jammer_state_unknown_type``). Then:
 
 * ``type`` NONE: the monitor sees no interference; the J/S is cleared (weights from the reported
   C/N0 only), whatever ``jammer_to_signal_db`` holds.
@@ -65,9 +109,16 @@ Outputs.
   initialisation or after a reset to uninitialised: a consumer must not read a NaN position as
   a fix, and ``STATUS_NO_FIX`` with NaN fields would be exactly that for a careless one. The loss
   is visible on /fusion/status (``initialized`` false) and /diagnostics (WARN).
-* /diagnostics: every ``diagnostics_period_s`` of stamp time, the node's counters, the core's
-  counters (``filter.<reason>``) and ``accounting_ok``: for GNSS, UWB and jammer messages,
-  received == rejected by the node + processed + still buffered.
+* /diagnostics: every ``diagnostics_period_s`` of stamp time (timed by accepted stamps only), the
+  node's counters, the core's counters (``filter.<reason>``), the subscriptions' counters
+  (``input.<topic>.received`` / ``lost`` / ``middleware_lost`` / ``callback_errors``), the current
+  ``reorder_window_s`` and ``accounting_ok``: for GNSS, UWB and jammer messages, received ==
+  rejected by the node + processed + still buffered (lost messages never arrived: counted apart).
+  Level ERROR if the accounting does not add up, or since the last report the core raised or an
+  input handler raised; WARN if the filter is not initialised, or since the last report messages
+  were lost or input was rejected; else OK. When no input has arrived for ``input_timeout_s`` of
+  wall time, a STALE status ("no input for N s", with the counters) is published instead, stamped
+  with the node clock's now: the only use of the wall clock besides ``idle_flush_s``.
 
 A core exception on an input (it should not happen; the core counts bad input itself) is caught,
 counted (``core_exception``), logged and reported as ERROR; the node keeps running.
@@ -76,6 +127,7 @@ counted (``core_exception``), logged and reported as ERROR; the node keeps runni
 from __future__ import annotations
 
 import dataclasses
+import heapq
 import math
 from collections import Counter, deque
 from dataclasses import dataclass
@@ -84,16 +136,29 @@ from typing import Any
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import NavSatFix
 
 from gnss_common.observations import GnssEpoch, UwbRangeMeasurement
 from rfi_msgs.msg import FusionStatus, GnssMeasurementArray, JammerState, UwbRange
-from rfi_node_common.diagnostics import ERROR, OK, WARN, StampTimer, diagnostic_array
+from rfi_node_common.diagnostics import (
+    ERROR,
+    OK,
+    STALE,
+    WARN,
+    StampTimer,
+    diagnostic_array,
+    input_timeout_parameter,
+    max_stamp_jump_parameter,
+    stamp_jump_confirmations_parameter,
+)
+from rfi_node_common.input_checks import STAMP_NOT_POSITIVE, StampGate
+from rfi_node_common.inputs import InputHealth, StaleInputWatch, subscribe_input
 from rfi_node_common.main import run_node
 from rfi_node_common.params import declare, parameter, validate_ranges
-from rfi_node_common.qos import DATA_QOS
+from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS
 from rfi_node_common.stamps import stamp_to_ns
 from uwb_gnss_fusion import uwb_update
 from uwb_gnss_fusion.conversions import decode_uwb_range_cdr, msg_to_observation, msg_to_uwb
@@ -106,6 +171,7 @@ from uwb_gnss_fusion.fusion_filter import (
     ReorderBuffer,
 )
 from uwb_gnss_fusion.jamming_weights import TrackingLoopParams
+from uwb_gnss_fusion.message_checks import satellite_reason, uwb_range_reason
 from uwb_gnss_fusion.output_messages import (  # noqa: F401 (re-exported: the node's output contract)
     ORIENTATION_UNKNOWN_VARIANCE_RAD2,
     fix_msg,
@@ -123,6 +189,14 @@ TOPICS = """topics:
 
 JSR_VALID_RANGE_DB = (-100.0, 150.0)
 """J/S accepted from /rfi/jammer_state, dB."""
+
+JAMMER_TYPES = frozenset((JammerState.NONE, JammerState.CW, JammerState.CHIRP, JammerState.WIDEBAND,
+                          JammerState.UNKNOWN))
+"""The ``type`` constants of rfi_msgs/JammerState; any other value is rejected (``jammer_state_unknown_type``)."""
+
+REORDER_WINDOW_GROWTH = 1.5
+"""After a late arrival the re-ordering window grows to this many times how late it was (up to
+``reorder_window_max_s``)."""
 
 _NS = 1_000_000_000
 KINDS = ('gnss', 'uwb', 'jammer')
@@ -156,15 +230,19 @@ class FusionNodeParams:
     child_frame_id: str = parameter(
         'gnss_antenna', 'Odometry child_frame_id and NavSatFix frame_id: the point estimated (the GNSS antenna).')
     reorder_window_s: float = parameter(
-        0.1, 'Re-ordering window: inputs are processed in stamp order once a message this much newer has '
-        'arrived; later arrivals are rejected. The outputs lag by it, s (0: process at once).',
+        0.1, 'Re-ordering window at start: inputs are processed in stamp order once a message this much newer '
+        'has arrived; later arrivals are rejected. The outputs lag by it, s (0: process at once).',
         minimum=0.0, maximum=10.0)
-    max_stamp_jump_s: float = parameter(
-        120.0, 'A stamp further than this from the latest accepted stamp is rejected (unless confirmed, see '
-        'stamp_jump_confirmations), s.', minimum=0.01, maximum=1.0e6)
-    stamp_jump_confirmations: int = parameter(
-        5, 'Consecutive messages that must agree on a stamp jump before the node accepts it and restarts the '
-        'filter (a clock or bag restart).', minimum=1, maximum=100000)
+    reorder_window_max_s: float = parameter(
+        1.0, 'After a late arrival (still rejected) the window grows to 1.5 times its lateness, up to this, s; '
+        'the outputs then lag by up to this (<= reorder_window_s: fixed window).', minimum=0.0, maximum=10.0)
+    idle_flush_s: float = parameter(
+        1.0, 'Process what the re-ordering buffer holds once no input has arrived for this long, s (wall '
+        'time, steady clock: the end of a bag or a sensor stop; changes when, never what, is processed; '
+        '0: never).', minimum=0.0, maximum=3600.0)
+    max_stamp_jump_s: float = max_stamp_jump_parameter(120.0)
+    stamp_jump_confirmations: int = stamp_jump_confirmations_parameter(5)
+    input_timeout_s: float = input_timeout_parameter()
     use_spp_reference: bool = parameter(
         True, 'Re-initialise after a divergence from the newest valid single-point (SPP) fix of the last '
         'reference_max_age_s of GNSS epochs (solved on demand).')
@@ -308,6 +386,7 @@ class _Item:
     stamp_ns: int
     kind: str
     payload: Any
+    dropped_satellites: int = 0
 
 
 class FusionNode(Node):
@@ -321,30 +400,72 @@ class FusionNode(Node):
         self.filter = self._new_filter()
         self.counts: Counter[str] = Counter({f'{k}_{what}': 0 for k in KINDS
                                              for what in ('received', 'rejected', 'processed')})
+        for name in ('reorder_window_growths', 'idle_flushes', 'end_of_input_flushes', 'publish_exceptions'):
+            self.counts[name] = 0
         self.reasons: Counter[str] = Counter()
         self._retired_filter_counts: Counter[str] = Counter()
         self._buffer = ReorderBuffer(round(self.params.reorder_window_s * _NS))
+        self._window_max_ns = round(self.params.reorder_window_max_s * _NS)
         self._buffered: Counter[str] = Counter()
-        self._latest_ns: int | None = None
-        self._jump_streak = 0
+        self._gate = StampGate(self.params.max_stamp_jump_s, self.params.stamp_jump_confirmations,
+                               strictly_increasing=False)
+        self._released_ns: int | None = None  # stamp of the last message released to the core
+        # exact duplicates: keys of the accepted messages, kept while a copy could still be buffered
+        self._seen: set[tuple[str, int, str]] = set()
+        self._seen_order: list[tuple[int, tuple[str, int, str]]] = []  # heap by stamp, for pruning
         self._diag_timer = StampTimer(self.params.diagnostics_period_s)
-        self._rejections_at_last_report = 0
-        self._faults_at_last_report = 0
+        self._at_last_report = {'rejections': 0, 'faults': 0, 'handler_errors': 0, 'lost': 0}
         self._reasons_cache: tuple[tuple, dict[str, int], tuple[list[str], list[int]]] | None = None
         self._uwb_core_frames = {self.params.earth_frame_id: FRAME_EARTH, self.params.map_frame_id: FRAME_MAP}
         self._fix_frames = {FRAME_EARTH: self.params.earth_frame_id, FRAME_MAP: self.params.map_frame_id}
         self.odom_pub = self.create_publisher(Odometry, '/fusion/odometry', DATA_QOS)
         self.fix_pub = self.create_publisher(NavSatFix, '/fusion/fix', DATA_QOS)
         self.status_pub = self.create_publisher(FusionStatus, '/fusion/status', DATA_QOS)
-        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DATA_QOS)
+        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         uwb_update.warm_up()  # compile before subscribing: the node appears when it can keep up
-        self.create_subscription(GnssMeasurementArray, '/gnss/measurements', self.on_gnss, DATA_QOS)
-        # raw: the ranges (20 Hz per anchor) are decoded by conversions.decode_uwb_range_cdr, not
-        # by rclpy's deserialisation (about 10x cheaper); anything it cannot decode goes through rclpy
-        self.create_subscription(UwbRange, '/uwb/ranges', self.on_uwb_raw, DATA_QOS, raw=True)
-        self.create_subscription(JammerState, '/rfi/jammer_state', self.on_jammer, DATA_QOS)
+        # created after the compilation, so that its silence clock starts when the node can listen
+        self.health = InputHealth()
+        throttle = self.params.warning_throttle_s
+        # Every input is taken raw and deserialised here: bytes that cannot be deserialised are then
+        # received and counted (malformed_message); a typed subscription would lose them unseen.
+        subscribe_input(self, GnssMeasurementArray, '/gnss/measurements', self.on_gnss_raw, self.health, raw=True,
+                        warning_throttle_s=throttle)
+        # the ranges (20 Hz per anchor) are decoded by conversions.decode_uwb_range_cdr, not by
+        # rclpy's deserialisation (about 10x cheaper); anything it cannot decode goes through rclpy
+        subscribe_input(self, UwbRange, '/uwb/ranges', self.on_uwb_raw, self.health, raw=True,
+                        warning_throttle_s=throttle)
+        subscribe_input(self, JammerState, '/rfi/jammer_state', self.on_jammer_raw, self.health, raw=True,
+                        warning_throttle_s=throttle)
+        self.stale_watch = StaleInputWatch(self, self.health, self.params.input_timeout_s, self._publish_stale)
+        self.idle_flush_timer = None
+        if self.params.idle_flush_s > 0:
+            self.idle_flush_timer = self.create_timer(self.params.idle_flush_s / 4.0, self.flush_if_idle,
+                                                      clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     # ------------------------------------------------------------------ callbacks
+    def _deserialize(self, raw: bytes, cls: Any, kind: str) -> Any:
+        """``raw`` as a ``cls`` message, or None after counting it received and rejected
+        (``malformed_message``) when rclpy cannot deserialise it."""
+        try:
+            return deserialize_message(raw, cls)
+        except Exception as err:  # rclpy raises RMWError (and may raise others) on malformed bytes
+            self.counts[f'{kind}_received'] += 1
+            text = str(err).splitlines()[0] if str(err) else ''
+            self._reject(kind, 'malformed_message', f'{kind} message of {len(raw)} bytes cannot be deserialised '
+                         f'({type(err).__name__}: {text})')
+            self._report()
+            return None
+
+    def on_gnss_raw(self, raw: bytes) -> None:
+        msg = self._deserialize(raw, GnssMeasurementArray, 'gnss')
+        if msg is not None:
+            self.on_gnss(msg)
+
+    def on_jammer_raw(self, raw: bytes) -> None:
+        msg = self._deserialize(raw, JammerState, 'jammer')
+        if msg is not None:
+            self.on_jammer(msg)
+
     def on_gnss(self, msg: GnssMeasurementArray) -> None:
         stamp_ns = stamp_to_ns(msg.header.stamp)
         self.counts['gnss_received'] += 1
@@ -354,11 +475,25 @@ class FusionNode(Node):
                          f'{self.params.earth_frame_id!r}')
         else:
             # Built field by field (not msg_to_epoch, which raises on a duplicate satellite) so that the
-            # core drops only the duplicated satellites and counts them (duplicate_svid).
+            # core drops only the duplicated satellites and counts them (duplicate_svid). Satellites
+            # with a value the core would apply although impossible are dropped here (message_checks).
+            observations = []
+            dropped: Counter[str] = Counter()
+            for m in msg.measurements:
+                obs = msg_to_observation(m)
+                reason = satellite_reason(obs)
+                if reason is None:
+                    observations.append(obs)
+                else:
+                    dropped[reason] += 1
             epoch = GnssEpoch(stamp_ns=stamp_ns, gps_week=int(msg.gps_week),
-                              gps_time_of_week_s=float(msg.gps_time_of_week_s),
-                              observations=tuple(msg_to_observation(m) for m in msg.measurements))
-            self._enqueue(_Item(stamp_ns, 'gnss', epoch))
+                              gps_time_of_week_s=float(msg.gps_time_of_week_s), observations=tuple(observations))
+            if self._enqueue(_Item(stamp_ns, 'gnss', epoch, sum(dropped.values())), ('gnss', stamp_ns, '')) \
+                    and dropped:
+                self.reasons.update(dropped)
+                self.get_logger().warn(
+                    f'GNSS epoch {stamp_ns} ns: satellites dropped ({", ".join(sorted(dropped))})',
+                    throttle_duration_sec=self.params.warning_throttle_s)
         self._report()
 
     def on_uwb(self, msg: UwbRange) -> None:
@@ -370,28 +505,40 @@ class FusionNode(Node):
 
     def on_uwb_raw(self, raw: bytes) -> None:
         """A serialised UWB range: decoded without rclpy (conversions.decode_uwb_range_cdr), or by
-        rclpy when that decoder declines (not little-endian CDR, malformed)."""
+        rclpy when that decoder declines (not little-endian CDR, malformed); bytes that rclpy cannot
+        deserialise either are counted as received and rejected (``malformed_message``)."""
         decoded = decode_uwb_range_cdr(raw, self._uwb_core_frames)
-        if decoded is None:
-            self.on_uwb(deserialize_message(raw, UwbRange))
-        else:
+        if decoded is not None:
             self._accept_uwb(*decoded)
+            return
+        msg = self._deserialize(raw, UwbRange, 'uwb')
+        if msg is not None:
+            self.on_uwb(msg)
 
     def _accept_uwb(self, stamp_ns: int, frame: str, meas: UwbRangeMeasurement | None) -> None:
-        """Count a range and buffer it; ``meas`` None: its frame_id is not a core frame (rejected)."""
+        """Count a range, check it and buffer it; ``meas`` None: its frame_id is not a core frame."""
         self.counts['uwb_received'] += 1
         if meas is None:
             self._reject('uwb', 'uwb_frame_id', f'UWB frame_id {frame!r} is neither '
                          f'{self.params.earth_frame_id!r} nor {self.params.map_frame_id!r}')
         else:
-            self._enqueue(_Item(stamp_ns, 'uwb', meas))
+            key = ('uwb', stamp_ns, meas.anchor_id)
+            reason = None if key in self._seen else uwb_range_reason(meas)
+            if reason is not None:
+                self._reject('uwb', reason, f'UWB range from anchor {meas.anchor_id!r} at {stamp_ns} ns: '
+                             f'std {meas.range_std_m} m, anchor {meas.anchor_position_m.tolist()} m')
+            else:
+                self._enqueue(_Item(stamp_ns, 'uwb', meas), key)
         self._report()
 
     def on_jammer(self, msg: JammerState) -> None:
         stamp_ns = stamp_to_ns(msg.header.stamp)
         self.counts['jammer_received'] += 1
         js = float(msg.jammer_to_signal_db)
-        if msg.type == JammerState.NONE:
+        if msg.type not in JAMMER_TYPES:
+            self._reject('jammer', 'jammer_state_unknown_type', f'JammerState type {msg.type} is not a JammerState '
+                         'constant: ignored')
+        elif msg.type == JammerState.NONE:
             self._enqueue(_Item(stamp_ns, 'jammer', math.nan))
         elif math.isnan(js):
             self._reject('jammer', 'jammer_state_nan', 'JammerState with a jammer type but a NaN J/S ignored')
@@ -407,54 +554,134 @@ class FusionNode(Node):
         self.reasons[reason] += 1
         self.get_logger().warn(f'{text} ({reason})', throttle_duration_sec=self.params.warning_throttle_s)
 
-    def _enqueue(self, item: _Item) -> None:
-        """Admit the stamp, buffer the item and process everything the buffer releases."""
+    def _enqueue(self, item: _Item, key: tuple[str, int, str] | None = None) -> bool:
+        """Admit the item (duplicate, stamp, lateness), buffer it and process everything the buffer
+        releases. ``key``: what makes it an exact duplicate (kind, stamp, anchor id). Returns whether
+        it was buffered."""
         stamp_ns = item.stamp_ns
-        if stamp_ns <= 0:
-            self._reject(item.kind, 'stamp_not_positive', f'{item.kind} message with stamp {stamp_ns} ns')
-            return
-        if self._latest_ns is not None and abs(stamp_ns - self._latest_ns) > self.params.max_stamp_jump_s * _NS:
-            self._jump_streak += 1
-            if self._jump_streak < self.params.stamp_jump_confirmations:
-                reason = 'stamp_far_future' if stamp_ns > self._latest_ns else 'stamp_far_past'
-                self._reject(item.kind, reason, f'{item.kind} stamp {stamp_ns} ns is '
-                             f'{(stamp_ns - self._latest_ns) / _NS:+.3f} s from the latest {self._latest_ns} ns')
-                return
-            self._restart(stamp_ns)
-        self._jump_streak = 0
+        if key is not None and key in self._seen:
+            self._reject(item.kind, f'duplicate_{"gnss_epoch" if item.kind == "gnss" else "uwb_range"}',
+                         f'{item.kind} message stamped {stamp_ns} ns{f" from anchor {key[2]!r}" if key[2] else ""} '
+                         'was already accepted')
+            return False
+        previous_ns = self._gate.latest_ns
+        decision = self._gate.admit(stamp_ns)
+        if not decision.accepted:
+            reason = str(decision.reason)
+            if reason == STAMP_NOT_POSITIVE:
+                text = f'{item.kind} message with stamp {stamp_ns} ns'
+            else:
+                text = (f'{item.kind} stamp {stamp_ns} ns is {(stamp_ns - (previous_ns or 0)) / _NS:+.3f} s from the '
+                        f'latest {previous_ns} ns')
+            self._reject(item.kind, reason, text)
+            return False
+        if decision.restart:
+            self._restart(stamp_ns, previous_ns)
         if not self._buffer.push(item):
-            self._reject(item.kind, 'late_beyond_reorder_window',
-                         f'{item.kind} stamp {stamp_ns} ns arrived after newer messages were processed')
-            return
+            self._late(item)
+            return False
+        if key is not None:
+            self._seen.add(key)
+            heapq.heappush(self._seen_order, (stamp_ns, key))
         self._buffered[item.kind] += 1
-        self._latest_ns = stamp_ns if self._latest_ns is None else max(self._latest_ns, stamp_ns)
-        self._release(self._buffer.pop_ready(self._latest_ns))
+        self._release(self._buffer.pop_ready(self._gate.latest_ns))
+        return True
+
+    def _late(self, item: _Item) -> None:
+        """Reject a message older than one already processed, and widen the window to cover such lateness."""
+        late_ns = (self._gate.latest_ns or item.stamp_ns) - item.stamp_ns
+        window_ns = self._buffer.window_ns
+        self._reject(item.kind, 'late_beyond_reorder_window',
+                     f'{item.kind} stamp {item.stamp_ns} ns arrived {late_ns / _NS:.3f} s after a newer message, '
+                     f'later than the re-ordering window {window_ns / _NS:.3f} s')
+        wanted_ns = min(self._window_max_ns, int(math.ceil(REORDER_WINDOW_GROWTH * late_ns)))
+        if wanted_ns > window_ns and late_ns <= self._window_max_ns:  # later than the maximum: no use
+            self._buffer.window_ns = wanted_ns
+            self.counts['reorder_window_growths'] += 1
+            self.get_logger().warn(f're-ordering window widened to {wanted_ns / _NS:.3f} s (inputs arrive late; '
+                                   f'maximum reorder_window_max_s {self._window_max_ns / _NS:g} s)')
 
     def _release(self, items: list) -> None:
         for ready in items:
             self._buffered[ready.kind] -= 1
+            self._released_ns = ready.stamp_ns
             self._process(ready)
+        if items:
+            self._forget_released()
 
-    def _restart(self, stamp_ns: int) -> None:
+    def _forget_released(self) -> None:
+        """Drop the duplicate keys stamped more than the largest window before the last released
+        message: a copy that late is rejected as late (and would not widen the window); a copy
+        less late is recognised as a duplicate (and does not widen it either)."""
+        order, released = self._seen_order, self._released_ns
+        if released is None:
+            return
+        oldest = released - max(self._window_max_ns, self._buffer.window_ns)
+        while order and order[0][0] < oldest:
+            self._seen.discard(heapq.heappop(order)[1])
+
+    def _restart(self, stamp_ns: int, previous_ns: int | None) -> None:
         """A confirmed stamp jump: finish the pending messages, then start a fresh filter."""
         self._release(self._buffer.flush())
         self.counts['time_jump_restarts'] += 1
-        self.get_logger().warn(f'stamps jumped to {stamp_ns} ns (from {self._latest_ns} ns): filter restarted')
+        self.get_logger().warn(f'stamps jumped to {stamp_ns} ns (from {previous_ns} ns): filter restarted')
         self._retired_filter_counts.update(self.filter.rejection_counts)
         self.filter = self._new_filter()
         self.spp.reset()
         self._spp_epochs.clear()
         self._buffer = ReorderBuffer(self._buffer.window_ns)
-        self._latest_ns = None
+        self._released_ns = None
+        self._seen.clear()
+        self._seen_order.clear()
 
     @property
     def buffered(self) -> dict[str, int]:
         """Messages waiting in the re-ordering buffer, per kind."""
         return {kind: self._buffered[kind] for kind in KINDS}
 
-    def flush(self) -> None:
-        """Process every buffered message now (e.g. at the end of a bag); not needed in normal running."""
-        self._release(self._buffer.flush())
+    @property
+    def reorder_window_s(self) -> float:
+        """The re-ordering window now, s (``reorder_window_s`` at start, widened by late arrivals)."""
+        return self._buffer.window_ns / _NS
+
+    def end_of_input(self) -> int:
+        """No more input will come (a replay's end): process every buffered message now, in stamp order.
+
+        Returns:
+            the number of messages processed. A message arriving afterwards with a stamp older than
+            the last one processed is rejected as late.
+        """
+        return self._flush_buffer('end_of_input_flushes')
+
+    def flush(self) -> int:
+        """The same as :meth:`end_of_input`."""
+        return self.end_of_input()
+
+    def flush_if_idle(self) -> int:
+        """The idle timer (steady clock): process the buffer if no input has arrived for ``idle_flush_s``.
+
+        Returns:
+            the number of messages processed (0 if not idle or nothing buffered).
+        """
+        if not any(self._buffered.values()) or self.health.silent_for_s() < self.params.idle_flush_s:
+            return 0
+        return self._flush_buffer('idle_flushes')
+
+    def _flush_buffer(self, counter: str) -> int:
+        items = self._buffer.flush()
+        if items:
+            self.counts[counter] += 1
+            self._release(items)
+        return len(items)
+
+    def destroy_node(self) -> None:
+        """Process what is still buffered if the context can still publish, then destroy the node."""
+        if getattr(self, '_buffer', None) is not None and self.context.ok():
+            try:
+                self.end_of_input()
+            except Exception as err:  # shutting down: never fail here
+                self.get_logger().error(f'buffered input not processed at shutdown: {type(err).__name__}: {err}')
+        super().destroy_node()
 
     # ------------------------------------------------------------------ core
     def _process(self, item: _Item) -> None:
@@ -466,9 +693,12 @@ class FusionNode(Node):
             if item.kind == 'gnss':
                 self._supply_reference(item.payload)
                 out = self.filter.process_gnss(item.payload)
+                if item.dropped_satellites:  # dropped by the node's checks: rejected satellites too
+                    out = dataclasses.replace(
+                        out, satellites_rejected=out.satellites_rejected + item.dropped_satellites)
             else:
                 out = self.filter.process_uwb(item.payload)
-        except (ValueError, TypeError, ArithmeticError, np.linalg.LinAlgError) as err:
+        except Exception as err:
             # The core validates its input and counts rejections; an exception here is a core bug.
             self.counts[f'{item.kind}_processed'] += 1
             self.counts['core_exceptions'] += 1
@@ -478,7 +708,13 @@ class FusionNode(Node):
                 throttle_duration_sec=self.params.warning_throttle_s)
             return
         self.counts[f'{item.kind}_processed'] += 1
-        self._publish(out, item.stamp_ns)
+        try:
+            self._publish(out, item.stamp_ns)
+        except Exception as err:  # e.g. the context is shutting down: the next message still gets its turn
+            self.counts['publish_exceptions'] += 1
+            self.get_logger().error(
+                f'publishing the output of a {item.kind} message at {item.stamp_ns} ns failed: '
+                f'{type(err).__name__}: {err}', throttle_duration_sec=self.params.warning_throttle_s)
 
     def _new_filter(self) -> FusionFilter:
         use_spp = self.params.use_spp_reference and self.params.use_gnss
@@ -564,9 +800,11 @@ class FusionNode(Node):
 
     # ------------------------------------------------------------------ diagnostics
     def accounting(self) -> dict[str, object]:
-        """Counters of the node and the core, and whether every input adds up.
+        """Counters of the node, the core and the input subscriptions, and whether every input adds up.
 
-        For each kind: ``<kind>_received == <kind>_rejected + <kind>_processed + <kind>_buffered``.
+        For each kind: ``<kind>_received == <kind>_rejected + <kind>_processed + <kind>_buffered``
+        (messages lost before the node, ``input.<topic>.lost`` / ``middleware_lost``, never arrived
+        and are counted apart).
         """
         values: dict[str, object] = dict(sorted(self.counts.items()))
         buffered = self.buffered
@@ -575,30 +813,35 @@ class FusionNode(Node):
             values[f'{kind}_buffered'] = buffered[kind]
             ok = ok and self.counts[f'{kind}_received'] == (
                 self.counts[f'{kind}_rejected'] + self.counts[f'{kind}_processed'] + buffered[kind])
+        values['reorder_window_s'] = self.reorder_window_s
         values.update({f'rejected.{k}': v for k, v in sorted(self.reasons.items())})
         values.update({f'filter.{k}': v for k, v in sorted(self.filter_counts().items())})
+        values.update(self.health.values())
         values['initialized'] = self.filter.initialized
         values['accounting_ok'] = ok
         return values
 
     def diagnostics(self, stamp_ns: int) -> DiagnosticArray:
-        """The /diagnostics message: ERROR if the accounting fails or the core raised since the last
-        report, WARN if the filter is not initialised or input was rejected since the last report."""
+        """The /diagnostics message (levels: module docstring); the counts "since the last report"
+        restart here."""
         values = self.accounting()
-        rejections = sum(self.rejection_reasons().values())
-        new = rejections - self._rejections_at_last_report
-        self._rejections_at_last_report = rejections
-        faults = self.counts['core_exceptions']
-        new_faults = faults - self._faults_at_last_report
-        self._faults_at_last_report = faults
+        now = {'rejections': sum(self.rejection_reasons().values()),
+               'faults': self.counts['core_exceptions'] + self.counts['publish_exceptions'],
+               'handler_errors': self.health.callback_errors_total(), 'lost': self.health.lost_total()}
+        new = {k: v - self._at_last_report[k] for k, v in now.items()}
+        self._at_last_report = now
         if not values['accounting_ok']:
             level, text = ERROR, 'input accounting does not add up'
-        elif new_faults:
-            level, text = ERROR, f'{new_faults} core exceptions since the last report'
+        elif new['faults']:
+            level, text = ERROR, f'{new["faults"]} core or publishing exceptions since the last report'
+        elif new['handler_errors']:
+            level, text = ERROR, f'{new["handler_errors"]} input handler exceptions since the last report'
         elif not self.filter.initialized:
             level, text = WARN, 'filter not initialised'
-        elif new:
-            level, text = WARN, f'{new} rejections since the last report'
+        elif new['lost']:
+            level, text = WARN, f'{new["lost"]} input messages lost since the last report'
+        elif new['rejections']:
+            level, text = WARN, f'{new["rejections"]} rejections since the last report'
         else:
             level, text = OK, 'fusing'
         return diagnostic_array(stamp_ns, 'uwb_gnss_fusion', self.get_name(), level, text, values)
@@ -606,9 +849,16 @@ class FusionNode(Node):
     def _report(self) -> None:
         """Publish /diagnostics when due, timed by the latest accepted stamp (a rejected stamp never
         drives the timer)."""
-        if self._latest_ns is not None and self._diag_timer.due(self._latest_ns):
-            self.diag_pub.publish(self.diagnostics(self._latest_ns))
+        latest = self._gate.latest_ns
+        if latest is not None and self._diag_timer.due(latest):
+            self.diag_pub.publish(self.diagnostics(latest))
 
+    def _publish_stale(self, silent_s: float) -> None:
+        """StaleInputWatch: no input for ``silent_s`` of wall time; a STALE status stamped with the
+        node clock's now (the stamp-timed reports resume with the next accepted input)."""
+        self.diag_pub.publish(diagnostic_array(
+            self.get_clock().now().nanoseconds, 'uwb_gnss_fusion', self.get_name(), STALE,
+            f'no input for {silent_s:.1f} s', self.accounting()))
 
 def main(argv=None) -> int:
     return run_node(FusionNode, executable='fusion_node', params_cls=FusionNodeParams, topics=TOPICS,

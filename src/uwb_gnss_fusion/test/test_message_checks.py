@@ -1,0 +1,100 @@
+"""The node's plausibility checks (message_checks): every bound, both sides, and real values pass."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from gnss_common.observations import GPS, SatelliteObservation, UwbRangeMeasurement
+from uwb_gnss_fusion import message_checks as mc
+
+ARL1_ECEF_M = np.array([-740289.9, -5457071.7, 3207245.5])
+
+
+def _range(**kw) -> UwbRangeMeasurement:
+    base = dict(stamp_ns=1, anchor_id='A1', anchor_position_m=ARL1_ECEF_M + 10.0, frame_id='earth', range_m=12.0,
+                range_std_m=math.nan)
+    base.update(kw)
+    return UwbRangeMeasurement(**base)
+
+
+def _satellite(**kw) -> SatelliteObservation:
+    """Values as in bags/default and bags/arl1_jammed (real broadcast ephemeris)."""
+    base = dict(constellation=GPS, svid=5, pseudorange_m=2.2e7, pseudorange_rate_mps=-420.0, cn0_dbhz=44.0,
+                satellite_position_ecef_m=np.array([1.5e7, -2.0e7, 0.8e7]),
+                satellite_velocity_ecef_mps=np.array([-1200.0, 2500.0, 1500.0]), satellite_clock_bias_m=186820.3,
+                satellite_clock_drift_mps=0.0015, ionosphere_delay_m=9.0, troposphere_delay_m=13.2)
+    base.update(kw)
+    return SatelliteObservation(**base)
+
+
+def test_valid_values_pass():
+    assert mc.uwb_range_reason(_range()) is None
+    assert mc.uwb_range_reason(_range(range_std_m=0.05)) is None
+    assert mc.uwb_range_reason(_range(range_std_m=mc.UWB_RANGE_STD_MAX_M)) is None
+    assert mc.uwb_range_reason(_range(frame_id='map', anchor_position_m=np.array([5e5, 4.2e6, 30.0]))) is None
+    assert mc.satellite_reason(_satellite()) is None
+    assert mc.satellite_reason(_satellite(cn0_dbhz=math.nan, pseudorange_std_m=3.0,
+                                          pseudorange_rate_std_mps=0.1)) is None
+
+
+@pytest.mark.parametrize('std', [-math.inf, math.inf, 0.0, -0.0, -1.0, 100.0001, 1e300])
+def test_uwb_range_std_only_nan_means_default(std):
+    assert mc.uwb_range_reason(_range(range_std_m=std)) == 'invalid_range_std'
+
+
+@pytest.mark.parametrize('frame, position', [
+    ('earth', [0.0, 0.0, 0.0]), ('earth', [1e300, 0.0, 0.0]), ('earth', [5.9e6, 0.0, 0.0]),
+    ('earth', [7.1e6, 0.0, 0.0]), ('map', [0.0, 0.0, 1.1e7]), ('map', [-1e300, 0.0, 0.0]),
+])
+def test_uwb_anchor_off_the_earth_or_beyond_any_local_frame(frame, position):
+    meas = _range(frame_id=frame, anchor_position_m=np.array(position))
+    assert mc.uwb_range_reason(meas) == 'nonphysical_anchor_position'
+
+
+def test_uwb_nonfinite_anchor_is_left_to_the_core():
+    assert mc.uwb_range_reason(_range(anchor_position_m=np.array([math.nan, 0.0, 0.0]))) is None
+
+
+@pytest.mark.parametrize('fields, reason', [
+    ({'cn0_dbhz': math.inf}, 'nonphysical_cn0'), ({'cn0_dbhz': -math.inf}, 'nonphysical_cn0'),
+    ({'cn0_dbhz': 100.5}, 'nonphysical_cn0'),
+    ({'pseudorange_std_m': -math.inf}, 'invalid_measurement_std'),
+    ({'pseudorange_std_m': 0.0}, 'invalid_measurement_std'),
+    ({'pseudorange_std_m': -2.0}, 'invalid_measurement_std'), ({'pseudorange_std_m': 2e4}, 'invalid_measurement_std'),
+    ({'pseudorange_rate_std_mps': math.inf}, 'invalid_measurement_std'),
+    ({'pseudorange_rate_std_mps': 0.0}, 'invalid_measurement_std'),
+    ({'pseudorange_rate_std_mps': 2e3}, 'invalid_measurement_std'),
+    ({'satellite_velocity_ecef_mps': np.array([1e300, 0.0, 0.0])}, 'nonphysical_satellite_state'),
+    ({'satellite_velocity_ecef_mps': np.array([8e3, 8e3, 0.0])}, 'nonphysical_satellite_state'),
+    ({'satellite_clock_bias_m': 1e300}, 'nonphysical_satellite_state'),
+    ({'satellite_clock_bias_m': -1.1e6}, 'nonphysical_satellite_state'),
+    ({'satellite_clock_drift_mps': 1e9}, 'nonphysical_satellite_state'),
+    ({'ionosphere_delay_m': 1e6}, 'nonphysical_atmospheric_delay'),
+    ({'troposphere_delay_m': 1.1e3}, 'nonphysical_atmospheric_delay'),
+])
+def test_satellite_with_an_impossible_value_is_dropped(fields, reason):
+    assert mc.satellite_reason(_satellite(**fields)) == reason
+
+
+@pytest.mark.parametrize('fields', [
+    {'satellite_velocity_ecef_mps': np.array([math.nan, 0.0, 0.0])}, {'satellite_clock_drift_mps': math.inf},
+    {'satellite_clock_bias_m': math.nan}, {'ionosphere_delay_m': math.inf}, {'pseudorange_m': math.nan},
+])
+def test_nonfinite_values_are_left_to_the_core(fields):
+    """The core counts them (nonfinite_pseudorange, invalid_doppler): no second reason for one fault."""
+    assert mc.satellite_reason(_satellite(**fields)) is None
+
+
+def test_reasons_are_listed():
+    sat = _satellite()
+    seen = {mc.satellite_reason(replace(sat, cn0_dbhz=math.inf)),
+            mc.satellite_reason(replace(sat, pseudorange_std_m=-1.0)),
+            mc.satellite_reason(replace(sat, satellite_clock_bias_m=1e9)),
+            mc.satellite_reason(replace(sat, troposphere_delay_m=1e9))}
+    assert seen == set(mc.SATELLITE_REASONS)
+    assert {mc.uwb_range_reason(_range(range_std_m=-1.0)),
+            mc.uwb_range_reason(_range(anchor_position_m=np.zeros(3)))} == set(mc.UWB_REASONS)
