@@ -86,7 +86,8 @@ def fusion_report_without_arrivals(entry):
     """A fusion /diagnostics entry (header, status) without the level, message and jammer counters."""
     header, status = entry
     values = dict(status)['values']
-    kept = tuple(kv for kv in values if not (kv[0][1].startswith('jammer_') or kv[0][1].startswith('rejected.jammer')))
+    arrival_timed = ('jammer_', 'rejected.jammer', 'input./rfi/jammer_state.')
+    kept = tuple(kv for kv in values if not kv[0][1].startswith(arrival_timed))
     return header, tuple(item for item in status if item[0] not in ('level', 'message', 'values')), kept
 
 

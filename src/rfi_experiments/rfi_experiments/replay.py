@@ -126,6 +126,9 @@ class ReplayHarness:
             except /rosout and /parameter_events).
         transport: 'dds' (middleware, executor) or 'direct' (in-process hand-over); see module doc.
         settle_timeout_s: longest wall time to wait for the graph to settle after one input, s.
+
+    The nodes' steady-clock timers (stale-input reports, idle flush) are cancelled: a replay is driven
+    by the stamps only (:meth:`_cancel_wall_clock_timers`).
     """
 
     def __init__(self, nodes: Sequence[Node], *, context: Context, collect: Iterable[str] | None = None,
@@ -146,6 +149,7 @@ class ReplayHarness:
         self._executor = SingleThreadedExecutor(context=context)
         for node in self._nodes + [self._node]:
             self._executor.add_node(node)
+        self.wall_clock_timers_cancelled = self._cancel_wall_clock_timers()
         self._published: dict[str, int] = defaultdict(int)
         self._taken: dict[int, int] = defaultdict(int)
         self._subscriptions: list[tuple[int, str, str]] = []  # (key, topic, node name)
@@ -168,6 +172,24 @@ class ReplayHarness:
                         self._wait_matched(pub, pub.topic_name)
 
     # -- direct transport --------------------------------------------------------------------
+    def _cancel_wall_clock_timers(self) -> int:
+        """Cancel the nodes' steady-clock timers (stale-input reports, the fusion node's idle flush).
+
+        They measure the machine that replays, not the data: a long first call of one node (a cold numba
+        compile) would make another node look silent, and the dds transport, which spins the executor,
+        would then publish a STALE report or flush a re-ordering buffer early where the direct transport,
+        which never spins timers, does not. Stamp-driven behaviour is untouched. Returns the count.
+        """
+        from rclpy.clock import ClockType
+
+        cancelled = 0
+        for node in self._nodes:
+            for timer in list(node.timers):
+                if timer.clock.clock_type == ClockType.STEADY_TIME and not timer.is_canceled():
+                    timer.cancel()
+                    cancelled += 1
+        return cancelled
+
     def _wire_direct(self) -> None:
         for node in self._nodes:
             for sub in node.subscriptions:
