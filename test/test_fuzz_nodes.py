@@ -47,6 +47,8 @@ BAG = ROOT / 'bags' / 'default'
 FUZZ_COUNT = int(os.environ.get('RFI_FUZZ_COUNT', '1000'))
 SEED = 20261201
 IF_TEMPLATE_SAMPLES = 4096
+SETTLE_S = 120.0 + 0.05 * FUZZ_COUNT
+"""Longest wait for a node to take what was sent, s (the long variant queues minutes of work)."""
 
 NODES = {
     'rfi_monitor_node': ('rfi_monitor', ['/rfi/if_samples'], ['/rfi/jammer_state'], 8.0),
@@ -254,7 +256,7 @@ def test_node_survives_hostile_input_and_accounts_for_every_message(name):
             send(topic, msg)
             latest[topic] = msg
             rig.spin(0.001)
-        rig.settle(pubs, timeout_s=120.0)
+        rig.settle(pubs, timeout_s=SETTLE_S)
         streams = {}
         for topic in inputs:
             templates = [m for t, m in valid if t == topic]
@@ -279,11 +281,11 @@ def test_node_survives_hostile_input_and_accounts_for_every_message(name):
                 send(nxt[0], nxt[1])
                 latest[nxt[0]] = nxt[1]
             rig.spin(0.005)  # take the outputs as they come
-        rig.settle(pubs, timeout_s=120.0)
+        rig.settle(pubs, timeout_s=SETTLE_S)
         for topic, msg in [*rest, *valid[2 * prime_count:]]:
             send(topic, msg)
             rig.spin(0.001)
-        rig.settle(pubs, timeout_s=120.0)
+        rig.settle(pubs, timeout_s=SETTLE_S)
         values = rig.latest_values(time.monotonic() + 1.0, level=DiagnosticStatus.STALE)
         alive = rig.alive()
     finally:
