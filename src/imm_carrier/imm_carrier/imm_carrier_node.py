@@ -102,7 +102,7 @@ TOPICS = """topics:
   publishes  /carrier/estimates (rfi_msgs/CarrierPhaseArray), /diagnostics (diagnostic_msgs/DiagnosticArray)"""
 
 CUSTOM_CLOCK = 'custom'
-"""clock_preset value that takes the clock from clock_h0 and clock_h_minus2."""
+"""clock_preset value that takes the clock from clock_h0_s and clock_h_minus2_hz."""
 
 INPUT_TOPIC = '/gnss/correlators'
 MALFORMED = 'malformed'
@@ -128,11 +128,11 @@ class CarrierNodeParams:
                             choices=('imm', 'pll', 'both'))
     clock_preset: str = parameter(
         'rubidium', 'Receiver clock model (h-coefficients) of the IMM: a preset of gnss_common.clock_model, or '
-        'custom to use clock_h0 and clock_h_minus2.', choices=(*PRESETS, CUSTOM_CLOCK))
-    clock_h0: float = parameter(
+        'custom to use clock_h0_s and clock_h_minus2_hz.', choices=(*PRESETS, CUSTOM_CLOCK))
+    clock_h0_s: float = parameter(
         RUBIDIUM_LPFRS.h0, 'White-FM coefficient h0 of the custom clock, s (1/Hz). Only with clock_preset custom.',
         minimum=0.0, maximum=1e-15)
-    clock_h_minus2: float = parameter(
+    clock_h_minus2_hz: float = parameter(
         RUBIDIUM_LPFRS.h_minus2, 'Random-walk-FM coefficient h_-2 of the custom clock, 1/s (Hz). Only with '
         'clock_preset custom.', minimum=0.0, maximum=1e-15)
     process_noise_form: str = parameter(
@@ -204,8 +204,7 @@ class CarrierNodeParams:
     def __post_init__(self) -> None:
         validate_ranges(self)
         if self.clock_preset != CUSTOM_CLOCK:
-            for name in ('clock_h0', 'clock_h_minus2'):
-                default = getattr(RUBIDIUM_LPFRS, name[len('clock_'):])
+            for name, default in (('clock_h0_s', RUBIDIUM_LPFRS.h0), ('clock_h_minus2_hz', RUBIDIUM_LPFRS.h_minus2)):
                 if getattr(self, name) != default:
                     raise ValueError(f'parameter {name} is only used with clock_preset {CUSTOM_CLOCK} '
                                      f'(clock_preset is {self.clock_preset})')
@@ -224,7 +223,7 @@ class CarrierNodeParams:
     def clock(self) -> ClockHCoefficients:
         """The IMM's clock model."""
         if self.clock_preset == CUSTOM_CLOCK:
-            return ClockHCoefficients(h0=self.clock_h0, h_minus2=self.clock_h_minus2, name='custom')
+            return ClockHCoefficients(h0=self.clock_h0_s, h_minus2=self.clock_h_minus2_hz, name='custom')
         return PRESETS[self.clock_preset]
 
     def tracker_params(self, method: str) -> TrackerParams:
