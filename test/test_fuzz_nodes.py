@@ -34,6 +34,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from fuzz_inputs import HostileStream, issue_faults
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.serialization import deserialize_message
 from ros_fixtures import make_context
@@ -171,6 +172,17 @@ class NodeProcess:
         self.spin(0.5)  # the subscriber's side of discovery
         return pubs
 
+    def publish(self, pub, payload, timeout_s: float = SETTLE_S) -> None:
+        """Publish, waiting while the keep-all writer's history is full (the node is behind)."""
+        end = time.monotonic() + timeout_s
+        while True:
+            try:
+                pub.publish(payload)
+                return
+            except _rclpy.RCLError:
+                assert time.monotonic() < end, f'{self.name} stopped taking messages'
+                self.spin(0.05)
+
     def spin(self, seconds: float) -> None:
         end = time.monotonic() + seconds
         while time.monotonic() < end:
@@ -249,7 +261,7 @@ def test_node_survives_hostile_input_and_accounts_for_every_message(name):
         latest: dict[str, object] = {}
 
         def send(topic: str, payload) -> None:
-            pubs[topic].publish(payload)
+            rig.publish(pubs[topic], payload)
             sent[topic] += 1
 
         for topic, msg in valid[:prime_count]:
