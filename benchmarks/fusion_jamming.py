@@ -29,7 +29,7 @@ import numpy as np  # noqa: E402
 
 from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic  # noqa: E402
 from gnss_common.observations import GnssEpoch, UwbRangeMeasurement  # noqa: E402
-from rfi_experiments.sim.gnss_uwb import (  # noqa: E402
+from rfi_sim.gnss_uwb import (  # noqa: E402
     JSR_SCENARIOS_DB,
     BroadcastGeometry,
     GnssUwbScenario,

@@ -31,7 +31,7 @@ from imm_carrier.cycle_slips import count_cycle_slips  # noqa: E402
 from imm_carrier.imm import ImmCarrierFilter, ImmParams  # noqa: E402
 from imm_carrier.measurement_model import iq_amplitude_and_noise_std  # noqa: E402
 from imm_carrier.pll import CostasPll, PllParams  # noqa: E402
-from rfi_experiments.sim.correlators import CorrelatorScenario, simulate_correlators  # noqa: E402
+from rfi_sim.correlators import CorrelatorScenario, simulate_correlators  # noqa: E402
 
 OUT_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "docs", "imm_carrier")
 TWO_PI = 2 * math.pi

@@ -32,13 +32,6 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from rfi_experiments.sim.if_signal import (  # noqa: E402
-    ChirpJammer,
-    CwJammer,
-    FrontEndConfig,
-    IfSimulator,
-    NoiseJammer,
-)
 from rfi_monitor.classifier import CHIRP, CW, NONE, WIDEBAND  # noqa: E402
 from rfi_monitor.if_measurement import measure_if  # noqa: E402
 from rfi_monitor.monitor import RfiMonitor, RfiMonitorParams  # noqa: E402
@@ -48,6 +41,13 @@ from rfi_monitor.tracking_filters import (  # noqa: E402
     MODE_KF,
     TrackingFilterParams,
     run_tracking_filter,
+)
+from rfi_sim.if_signal import (  # noqa: E402
+    ChirpJammer,
+    CwJammer,
+    FrontEndConfig,
+    IfSimulator,
+    NoiseJammer,
 )
 
 OUT = Path(__file__).resolve().parent.parent / "docs" / "rfi_monitor"

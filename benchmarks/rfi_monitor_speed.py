@@ -20,13 +20,13 @@ from pathlib import Path
 
 import numpy as np
 
-from rfi_experiments.sim.if_signal import ChirpJammer, FrontEndConfig, IfSimulator
 from rfi_monitor.classifier import ClassifierParams, block_features
 from rfi_monitor.if_measurement import measure_if
 from rfi_monitor.monitor import RfiMonitor, RfiMonitorParams
 from rfi_monitor.sweep_analysis import SweepAnalysisParams, analyse
 from rfi_monitor.sweep_period import SweepPeriodParams, estimate_sweep_period
 from rfi_monitor.tracking_filters import TrackingFilterParams, run_tracking_filter
+from rfi_sim.if_signal import ChirpJammer, FrontEndConfig, IfSimulator
 
 PAPER_FS = 38.192e6
 NOT_KEPT = """Tracking mode (kept; round 6, monitor.RfiMonitorParams.confirm_fits, tracker module docstring):

@@ -25,8 +25,8 @@ import rclpy
 from ros_fixtures import make_context
 
 from rfi_experiments.bag_io import BagReader
-from rfi_experiments.evaluation import ecef_errors_enu, error_stats, horizontal_error_m
 from rfi_experiments.replay import ReplayHarness
+from rfi_sim.evaluation import ecef_errors_enu, error_stats, horizontal_error_m
 from uwb_gnss_fusion.fusion_node import FusionNode
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -24,9 +24,9 @@ from rclpy.parameter import Parameter
 from ros_fixtures import make_context
 
 from rfi_experiments.bag_io import BagReader
-from rfi_experiments.evaluation import ecef_errors_enu, error_stats, horizontal_error_m, interpolate_truth
 from rfi_experiments.replay import ReplayHarness
 from rfi_experiments.scenario import load_scenario, write_scenario_bag
+from rfi_sim.evaluation import ecef_errors_enu, error_stats, horizontal_error_m, interpolate_truth
 from uwb_gnss_fusion.fusion_node import FusionNode
 
 SCENARIO = """

@@ -1,6 +1,6 @@
 """Prompt correlator measurement model and the plain data types of the carrier trackers.
 
-Convention (shared with rfi_experiments.sim.correlators): the correlator's replica is open loop,
+Convention (shared with rfi_sim.correlators): the correlator's replica is open loop,
 so the angle of the prompt correlator of interval k is the accumulated satellite-motion phase
 ``Phi_sm,k = sum_{j<=k} predicted_phase_change_rad_j`` (known to the receiver from ephemeris)
 plus the residual phase ``phi_k`` (receiver clock phase plus the channel's constant initial phase),

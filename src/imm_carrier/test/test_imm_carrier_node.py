@@ -7,7 +7,6 @@ and everything it published has arrived (counted, never slept for).
 from __future__ import annotations
 
 import math
-import time
 from collections import Counter
 from pathlib import Path
 
@@ -17,16 +16,16 @@ import rclpy
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from gnss_common.gps_time import gps_to_stamp_ns
 from imm_carrier import tracker as tracker_module
 from imm_carrier.imm_carrier_node import CarrierNodeParams, ImmCarrierNode
 from rfi_msgs.msg import CarrierPhase, CarrierPhaseArray, Correlator, CorrelatorArray
+from rfi_node_common import testing
 from rfi_node_common.qos import DATA_QOS
 from rfi_node_common.stamps import ns_to_stamp
+from rfi_node_common.testing import NodeRig
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'imm_carrier.yaml'
 START_NS = gps_to_stamp_ns(2300, 345600.0)  # on the 20 ms GPS bit grid
@@ -36,79 +35,39 @@ SPIN_DEADLINE_S = 10.0
 TOPIC = '/gnss/correlators'
 
 
-class Rig:
+class Rig(NodeRig):
     """The node under test plus a test node that publishes correlators and collects the outputs."""
 
     def __init__(self, params: dict | None = None, args: list[str] | None = None, *, reliable: bool = True,
                  publisher_qos=DATA_QOS) -> None:
-        self.context = Context()
-        rclpy.init(args=args, context=self.context)
         params = dict(params or {})
         if args is None:
             params.setdefault('input_timeout_s', 0.0)  # no wall-clock STALE report in the middle of a test
         if reliable:  # the tests count every message: make the (best-effort by default) input reliable
             params.setdefault(f'qos_overrides.{TOPIC}.subscription.reliability', 'reliable')
-        overrides = [Parameter(k, value=v) for k, v in params.items()]
-        self.node = ImmCarrierNode(context=self.context, parameter_overrides=overrides)
-        self.io = Node('imm_carrier_test_io', context=self.context)
-        self.pub = self.io.create_publisher(CorrelatorArray, TOPIC, publisher_qos)
-        self.estimates: list[CarrierPhaseArray] = []
-        self.diagnostics: list[DiagnosticArray] = []
-        self.io.create_subscription(CarrierPhaseArray, '/carrier/estimates', self.estimates.append, DATA_QOS)
-        self.io.create_subscription(DiagnosticArray, '/diagnostics', self.diagnostics.append, DATA_QOS)
-        self.published: Counter[str] = Counter()
-        for pub in (self.node.estimates_pub, self.node.diag_pub):
-            pub.publish = self._counting(pub.publish, pub.topic_name)
+        super().__init__(lambda context, overrides: ImmCarrierNode(context=context, parameter_overrides=overrides),
+                         inputs={TOPIC: (CorrelatorArray, publisher_qos)},
+                         outputs={'/carrier/estimates': CarrierPhaseArray, '/diagnostics': DiagnosticArray},
+                         params=params, args=args, name='imm_carrier_test_io', spin_deadline_s=SPIN_DEADLINE_S)
+        self.pub = self.pubs[TOPIC]
+        self.estimates: list[CarrierPhaseArray] = self.out['/carrier/estimates']
+        self.diagnostics: list[DiagnosticArray] = self.out['/diagnostics']
         self.sent = 0
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.executor.add_node(self.io)
-        self._spin_until(lambda: self.pub.get_subscription_count() >= 1
-                         and self.node.estimates_pub.get_subscription_count() >= 1
-                         and self.node.diag_pub.get_subscription_count() >= 1)
-
-    def _counting(self, publish, topic):
-        def counted(msg):
-            self.published[topic] += 1
-            publish(msg)
-        return counted
-
-    def _spin_until(self, done) -> None:
-        deadline = time.monotonic() + SPIN_DEADLINE_S
-        while not done():
-            assert time.monotonic() < deadline, 'graph did not settle'
-            self.executor.spin_once(timeout_sec=0.05)
 
     def send(self, msg: CorrelatorArray) -> None:
         """Publish one array and spin until the node has answered it completely."""
         self.pub.publish(msg)
         self.sent += 1
-        self._spin_until(lambda: self.node.counts['arrays_received'] == self.sent
-                         and len(self.estimates) == self.published['/carrier/estimates']
-                         and len(self.diagnostics) == self.published['/diagnostics'])
+        self.settle_until(lambda: self.node.counts['arrays_received'] == self.sent)
 
     def last_values(self) -> dict[str, str]:
         return {kv.key: kv.value for kv in self.diagnostics[-1].status[0].values}
 
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.io.destroy_node()
-        rclpy.shutdown(context=self.context)
-
 
 @pytest.fixture
 def rig_factory():
-    rigs = []
-
-    def make(params=None, args=None, **kwargs):
-        rig = Rig(params, args, **kwargs)
-        rigs.append(rig)
-        return rig
-
-    yield make
-    for rig in rigs:
-        rig.close()
+    with testing.rig_factory(Rig) as make:
+        yield make
 
 
 def correlator(svid, i=1.0, q=0.0, t=T_S, cn0=45.0, dphi=0.3) -> Correlator:
@@ -309,9 +268,9 @@ def test_a_core_fault_is_counted_and_the_node_keeps_going(rig_factory, monkeypat
 
 
 def test_half_cycle_glitch_at_high_cn0_and_1ms_does_not_stop_the_node(rig_factory):
-    """T = 1 ms at 60 dB-Hz with one sign-flipped correlator inside a data bit (up to commit 8350ac4 the IMM core
-    raised ZeroDivisionError here: see imm._imm_step). The node must answer every array, account for every
-    correlator, never publish a non-finite locked estimate, and (since the fix) see no core fault."""
+    """T = 1 ms at 60 dB-Hz with one sign-flipped correlator inside a data bit (a mode probability that
+    underflows to 0 must not make the IMM core divide by zero: see imm.imm_step). The node must answer every
+    array, account for every correlator, never publish a non-finite locked estimate, and see no core fault."""
     rig = rig_factory({'method': 'imm', 'diagnostics_period_s': 0.01})
     rng = np.random.default_rng(5)
     sigma = 1.0 / math.sqrt(2 * 0.001 * 1e6)
@@ -524,7 +483,7 @@ def test_a_best_effort_publisher_reaches_the_node_and_is_processed(rig_factory):
 
 def test_a_silent_node_reports_stale_with_its_counters(rig_factory):
     rig = rig_factory({'input_timeout_s': 0.2, 'diagnostics_period_s': 0.01})
-    rig._spin_until(lambda: any(d.status[0].level == DiagnosticStatus.STALE for d in rig.diagnostics))
+    rig.spin_until(lambda: any(d.status[0].level == DiagnosticStatus.STALE for d in rig.diagnostics))
     stale = next(d for d in rig.diagnostics if d.status[0].level == DiagnosticStatus.STALE)
     values = {kv.key: kv.value for kv in stale.status[0].values}
     assert 'no input' in stale.status[0].message and stale.status[0].name == 'imm_carrier'

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from rfi_experiments.bag_io import BagReader
-from rfi_experiments.evaluation import ecef_errors_enu, empirical_cdf, error_3d_m, error_stats, horizontal_error_m
+from rfi_sim.evaluation import ecef_errors_enu, empirical_cdf, error_3d_m, error_stats, horizontal_error_m
 
 NS = 1e-9
 TYPE_NAMES = {0: 'NONE', 1: 'CW', 2: 'CHIRP', 3: 'WIDEBAND', 4: 'UNKNOWN'}

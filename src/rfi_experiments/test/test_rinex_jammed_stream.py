@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gnss_common.jamming_weights import dll_jitter_m, effective_cn0_dbhz
 from rfi_experiments.rinex_to_bag import convert_rinex
 from rfi_experiments.scenario import STREAMS, Scenario, ScenarioError, load_scenario
-from rfi_experiments.sim.gnss_uwb import JammingEffect
 from rfi_experiments.streams import rinex_jammed
-from uwb_gnss_fusion.jamming_weights import dll_jitter_m, effective_cn0_dbhz
+from rfi_sim.gnss_uwb import JammingEffect
 
 PKG = Path(__file__).resolve().parents[1]
 DATA = PKG / 'data'

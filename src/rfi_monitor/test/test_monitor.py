@@ -6,9 +6,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rfi_experiments.sim.if_signal import ChirpJammer, CwJammer, FrontEndConfig, IfSimulator, NoiseJammer
 from rfi_monitor.classifier import CHIRP, CW, NONE, UNKNOWN, WIDEBAND
 from rfi_monitor.monitor import RfiMonitor, RfiMonitorParams
+from rfi_sim.if_signal import ChirpJammer, CwJammer, FrontEndConfig, IfSimulator, NoiseJammer
 
 DATA = Path(__file__).parent / "data"
 BLOCK = 38192  # 1 ms at the paper's 38.192 MHz

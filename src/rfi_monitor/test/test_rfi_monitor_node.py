@@ -1,6 +1,6 @@
 """In-process tests of rfi_monitor_node: one Context per test, a SingleThreadedExecutor, bounded spins.
 
-Blocks are simulated with rfi_experiments.sim.if_signal (seeded) and sent over DDS to the node; a
+Blocks are simulated with rfi_sim.if_signal (seeded) and sent over DDS to the node; a
 probe node collects /rfi/jammer_state and /diagnostics. With diagnostics_period_s = 1 ms and block
 stamps at least 1 ms apart every block gives exactly one /diagnostics message, so the probe knows how
 many outputs to wait for (no sleeps: ``spin_once`` until the counts are reached, with a deadline).
@@ -16,7 +16,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import time
 from collections import Counter
 from pathlib import Path
 
@@ -26,17 +25,17 @@ import rclpy
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message, serialize_message
 
-from rfi_experiments.sim.if_signal import ChirpJammer, CwJammer, FrontEndConfig, IfBlock, IfSimulator
 from rfi_monitor.monitor import RfiMonitorParams
 from rfi_monitor.rfi_monitor_node import NESTED, MonitorNodeParams, RfiMonitorNode, decode_samples
 from rfi_msgs.msg import IfSamples, JammerState
+from rfi_node_common import testing
 from rfi_node_common.qos import DATA_QOS
 from rfi_node_common.stamps import ns_to_stamp, stamp_to_ns
+from rfi_node_common.testing import NodeRig
+from rfi_sim.if_signal import ChirpJammer, CwJammer, FrontEndConfig, IfBlock, IfSimulator
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'rfi_monitor.yaml'
 START_NS = 1_700_000_000_000_000_000
@@ -56,57 +55,36 @@ def _parameters(**overrides) -> list[Parameter]:
     return [Parameter(k, value=v) for k, v in base.items()]
 
 
-class Probe:
+class Probe(NodeRig):
     """The node under test, a publisher of IF blocks and collectors of its outputs, in one executor."""
 
     def __init__(self, **overrides) -> None:
-        self.context = Context()
-        rclpy.init(context=self.context)
-        self.node = RfiMonitorNode(context=self.context, parameter_overrides=_parameters(**overrides))
-        self.probe = Node('rfi_monitor_probe', context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.executor.add_node(self.probe)
-        self.diagnostics_published = 0
-        publish = self.node.diag_pub.publish
-
-        def counted(msg: DiagnosticArray) -> None:
-            self.diagnostics_published += 1
-            publish(msg)
-        self.node.diag_pub.publish = counted
-        self.states: list[JammerState] = []
-        self.diagnostics: list[DiagnosticArray] = []
-        self.pub = self.probe.create_publisher(IfSamples, '/rfi/if_samples', DATA_QOS)
+        params = {p.name: p.value for p in _parameters(**overrides)}
         # keep only this node's outputs: another process on the same ROS domain may publish on these topics
-        self.probe.create_subscription(JammerState, '/rfi/jammer_state', self._on_state, DATA_QOS)
-        self.probe.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, DATA_QOS)
-        self._spin_until(lambda: self.pub.get_subscription_count() >= 1
-                         and self.node.state_pub.get_subscription_count() >= 1
-                         and self.node.diag_pub.get_subscription_count() >= 1, 'discovery')
+        super().__init__(lambda context, ov: RfiMonitorNode(context=context, parameter_overrides=ov),
+                         inputs={'/rfi/if_samples': (IfSamples, DATA_QOS)},
+                         outputs={'/rfi/jammer_state': (JammerState, self._own_state),
+                                  '/diagnostics': (DiagnosticArray, self._own_diagnostics)},
+                         params=params, name='rfi_monitor_probe', spin_deadline_s=SPIN_DEADLINE_S)
+        self.probe = self.io
+        self.pub = self.pubs['/rfi/if_samples']
+        self.states: list[JammerState] = self.out['/rfi/jammer_state']
+        self.diagnostics: list[DiagnosticArray] = self.out['/diagnostics']
 
-    def _on_state(self, msg: JammerState) -> None:
-        if msg.header.frame_id == FRAME_ID:
-            self.states.append(msg)
+    @staticmethod
+    def _own_state(msg: JammerState) -> bool:
+        return msg.header.frame_id == FRAME_ID
 
-    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
-        if msg.status and msg.status[0].name == 'rfi_monitor' and msg.status[0].hardware_id == self.node.get_name():
-            self.diagnostics.append(msg)
-
-    def _spin_until(self, done, what: str) -> None:
-        deadline = time.monotonic() + SPIN_DEADLINE_S
-        while not done():
-            self.executor.spin_once(timeout_sec=0.05)
-            if time.monotonic() > deadline:
-                raise AssertionError(f'{what} did not complete within {SPIN_DEADLINE_S} s')
+    def _own_diagnostics(self, msg: DiagnosticArray) -> bool:
+        return bool(msg.status) and msg.status[0].name == 'rfi_monitor' \
+            and msg.status[0].hardware_id == self.node.get_name()
 
     def send(self, msg: IfSamples) -> JammerState | None:
         """Publish one block; return the JammerState it produced (None if it produced none)."""
         received = self.node.counts['blocks_received']
         before = len(self.states)
         self.pub.publish(msg)
-        self._spin_until(lambda: self.node.counts['blocks_received'] == received + 1, 'block delivery')
-        self._spin_until(lambda: len(self.states) == self.node.counts['states_published']
-                         and len(self.diagnostics) == self.diagnostics_published, 'output delivery')
+        self.settle_until(lambda: self.node.counts['blocks_received'] == received + 1, 'block delivery')
         assert len(self.states) - before in (0, 1)
         if len(self.states) == before:
             return None
@@ -119,24 +97,11 @@ class Probe:
     def values(self) -> dict[str, str]:
         return {kv.key: kv.value for kv in self.diagnostics[-1].status[0].values}
 
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.probe.destroy_node()
-        rclpy.shutdown(context=self.context)
-
 
 @pytest.fixture
 def probe_factory():
-    probes: list[Probe] = []
-
-    def make(**overrides) -> Probe:
-        p = Probe(**overrides)
-        probes.append(p)
-        return p
-    yield make
-    for p in probes:
-        p.close()
+    with testing.rig_factory(Probe) as make:
+        yield make
 
 
 def block_msg(blk: IfBlock, first_index: int, stamp_ns: int, *, bits: int | None = None) -> IfSamples:
@@ -586,7 +551,7 @@ def test_best_effort_publisher_reaches_the_node(probe_factory):
     p = probe_factory()
     assert p.node.subscription.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
     sensor = p.probe.create_publisher(IfSamples, '/rfi/if_samples', qos_profile_sensor_data)
-    p._spin_until(lambda: sensor.get_subscription_count() >= 1, 'best-effort discovery')
+    p.spin_until(lambda: sensor.get_subscription_count() >= 1, 'best-effort discovery')
     p.pub = sensor
     states = p.send_all(msgs)
     assert [s.type for s in states] == [JammerState.UNKNOWN] * CALIBRATION + [JammerState.NONE] * 2
@@ -620,7 +585,7 @@ def test_malformed_bytes_are_counted_as_malformed(probe_factory):
     for size in (0, 4, 40, 200):
         p.pub.publish(b'\x00\x01\x00\x00' + rng.integers(0, 256, size=size, dtype=np.uint8).tobytes())
     p.pub.publish(b'')
-    p._spin_until(lambda: p.node.counts['rejected_malformed_message'] == 5, 'malformed delivery')
+    p.spin_until(lambda: p.node.counts['rejected_malformed_message'] == 5, 'malformed delivery')
     assert p.send(msgs[CALIBRATION + 1]) is not None, dict(p.node.counts)
     v = p.values()
     assert v['input./rfi/if_samples.lost'] == '0' and v['accounting_ok'] == 'True', v
@@ -631,7 +596,7 @@ def test_malformed_bytes_are_counted_as_malformed(probe_factory):
 def test_stale_input_is_reported_on_the_wall_clock(probe_factory):
     """Issue 12: with no input /diagnostics stayed silent (its timer runs on received stamps only)."""
     p = probe_factory(input_timeout_s=0.05)
-    p._spin_until(lambda: any(d.status[0].level == b'\x03' for d in p.diagnostics), 'a STALE report')
+    p.spin_until(lambda: any(d.status[0].level == b'\x03' for d in p.diagnostics), 'a STALE report')
     stale = next(d for d in p.diagnostics if d.status[0].level == b'\x03')
     assert 'no input on /rfi/if_samples' in stale.status[0].message
     values = {kv.key: kv.value for kv in stale.status[0].values}

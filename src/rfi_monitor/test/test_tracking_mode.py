@@ -11,10 +11,10 @@ import math
 import numpy as np
 import pytest
 
-from rfi_experiments.sim.if_signal import ChirpJammer, CwJammer, FrontEndConfig, IfSimulator
 from rfi_monitor.classifier import CHIRP, CW, NONE
 from rfi_monitor.monitor import RfiMonitor, RfiMonitorParams
 from rfi_monitor.sweep_analysis import SweepAnalysisParams
+from rfi_sim.if_signal import ChirpJammer, CwJammer, FrontEndConfig, IfSimulator
 
 FS = 38.192e6
 FIF = 9.548e6

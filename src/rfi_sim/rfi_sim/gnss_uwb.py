@@ -27,9 +27,9 @@ from gnss_common.constants import EARTH_ROTATION_RATE_RADPS, SPEED_OF_LIGHT_MPS
 from gnss_common.coordinates import azimuth_elevation, ecef_to_enu_rotation, ecef_to_geodetic
 from gnss_common.ephemeris import EphemerisArrays, EphemerisStore, pack_ephemerides, satellite_states
 from gnss_common.gps_time import gps_to_stamp_ns
+from gnss_common.jamming_weights import TrackingLoopParams, measurement_sigmas
 from gnss_common.observations import GPS, GnssEpoch, SatelliteObservation, UwbRangeMeasurement
 from gnss_common.rinex import read_rinex_nav
-from uwb_gnss_fusion.jamming_weights import TrackingLoopParams, measurement_sigmas
 
 JSR_SCENARIOS_DB = (None, -10.0, -2.0, 6.0, 14.0, 22.0, 30.0)
 """The paper's scenarios: no jamming, then J/S in dB (Cao et al., Table 1)."""

@@ -40,7 +40,7 @@ from gnss_common.constants import (
     GPS_L1_FREQUENCY_HZ,
     GPS_NAV_BIT_RATE_HZ,
 )
-from rfi_experiments.sim.gps_ca import G2_DELAY_CHIPS, ca_code
+from rfi_sim.gps_ca import G2_DELAY_CHIPS, ca_code
 
 PAPER_SAMPLE_RATE_HZ = 38.192e6
 """Kang et al. front-end sample rate, Hz (Sec. 2.1)."""

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from gnss_common.clock_model import ClockHCoefficients, allan_variance, allan_variance_from_phase
-from rfi_experiments.sim.correlators import CorrelatorScenario, simulate_correlators
+from rfi_sim.correlators import CorrelatorScenario, simulate_correlators
 
 TWO_PI = 2 * math.pi
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic
-from rfi_experiments.evaluation import (
+from rfi_sim.evaluation import (
     ecef_errors_enu,
     empirical_cdf,
     error_3d_m,

@@ -3,23 +3,19 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from gnss_common.constants import EARTH_GM_M3PS2, EARTH_ROTATION_RATE_RADPS, SPEED_OF_LIGHT_MPS
+from gnss_common.jamming_weights import effective_cn0_dbhz
 from gnss_common.observations import GnssEpoch
-from rfi_experiments.sim.gnss_uwb import (
+from rfi_sim.gnss_uwb import (
     PAPER_ANCHOR_RANGES_M,
-    BroadcastGeometry,
     GnssUwbScenario,
     SatelliteSnapshot,
     simulate,
 )
-from uwb_gnss_fusion.jamming_weights import effective_cn0_dbhz
-
-NAV = Path(__file__).resolve().parents[2] / "gnss_common" / "test" / "data" / "arlm2000.15n"
 
 
 def circular_geometry(week: int, tow_s: float) -> SatelliteSnapshot:
@@ -119,18 +115,6 @@ def test_scenario_validation():
         GnssUwbScenario(jsr_db=float("nan"))
 
 
-@pytest.mark.skipif(not NAV.exists(), reason="ARL1 broadcast ephemeris not in gnss_common/test/data")
-def test_broadcast_geometry_run_and_fusion_filter_consume_it():
-    from uwb_gnss_fusion.fusion_filter import FusionFilter, FusionParams
-
-    geo = BroadcastGeometry(NAV)
-    run = simulate(GnssUwbScenario(duration_s=30.0, seed=1), geo, geo.iono_alpha, geo.iono_beta)
-    assert min(run.truth.satellites_tracked) >= 6
-    f = FusionFilter(FusionParams(accel_psd_m2ps3=0.01))
-    for m in run.messages():
-        out = f.process(m)
-    assert out.initialized
-    assert np.linalg.norm(out.position_m - run.truth.receiver_ecef_m) < 2.0
 
 
 def test_outlier_free_twin_differs_only_inside_bursts():

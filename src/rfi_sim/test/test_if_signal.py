@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from rfi_experiments.sim.gps_ca import ca_code, ca_code_bits
-from rfi_experiments.sim.if_signal import (
+from rfi_sim.gps_ca import ca_code, ca_code_bits
+from rfi_sim.if_signal import (
     CHIRP,
     CW,
     ChirpJammer,

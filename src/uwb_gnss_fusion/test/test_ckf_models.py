@@ -9,8 +9,7 @@ import pytest
 from scipy.linalg import expm
 
 from gnss_common.constants import EARTH_ROTATION_RATE_RADPS, GPS_CA_CHIP_RATE_HZ, SPEED_OF_LIGHT_MPS
-from uwb_gnss_fusion.ckf import CholeskyError, CubatureKalmanFilter, cubature_unit_points, robust_cholesky
-from uwb_gnss_fusion.jamming_weights import (
+from gnss_common.jamming_weights import (
     CA_CHIP_LENGTH_M,
     TrackingLoopParams,
     dll_jitter_m,
@@ -18,6 +17,7 @@ from uwb_gnss_fusion.jamming_weights import (
     fll_jitter_mps,
     measurement_sigmas,
 )
+from uwb_gnss_fusion.ckf import CholeskyError, CubatureKalmanFilter, cubature_unit_points, robust_cholesky
 from uwb_gnss_fusion.measurement_models import (
     constant_velocity_transition,
     pseudorange_model,

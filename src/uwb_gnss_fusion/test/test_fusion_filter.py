@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic, enu_to_ecef
+from gnss_common.jamming_weights import dll_jitter_m
 from gnss_common.observations import GnssEpoch, SatelliteObservation, UwbRangeMeasurement
 from uwb_gnss_fusion.fusion_filter import (
     MODE_GNSS,
@@ -18,7 +19,6 @@ from uwb_gnss_fusion.fusion_filter import (
     FusionParams,
     ReorderBuffer,
 )
-from uwb_gnss_fusion.jamming_weights import dll_jitter_m
 
 RX = np.array([-740289.918, -5457071.734, 3207245.542])
 LAT, LON, _ = ecef_to_geodetic(RX)

@@ -2,15 +2,15 @@
 
 Each test publishes inputs from a test node and spins until the node has taken every one and every
 message it published has arrived (counted, never slept for). The GNSS/UWB inputs come from the
-``gnss_uwb`` scenario stream (half-simulated: real ARL1 broadcast ephemeris, static receiver,
-three UWB anchors at the paper's ranges; rfi_experiments/streams/gnss_uwb.py).
+GNSS/UWB simulator of rfi_sim (half-simulated: real ARL1 broadcast ephemeris, static receiver,
+three UWB anchors at the paper's ranges; rfi_sim/gnss_uwb.py), run for one jammer-free phase as
+the ``gnss_uwb`` scenario stream of rfi_experiments runs it.
 """
 
 from __future__ import annotations
 
 import copy
 import math
-import time
 from collections import Counter
 from pathlib import Path
 
@@ -21,23 +21,24 @@ import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from nav_msgs.msg import Odometry
 from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import NavSatFix
 
 from gnss_common.coordinates import ecef_to_geodetic
 from gnss_common.observations import UwbRangeMeasurement
-from rfi_experiments.evaluation import ecef_errors_enu, horizontal_error_m
-from rfi_experiments.scenario import Scenario
-from rfi_experiments.streams import gnss_uwb
 from rfi_msgs.msg import FusionStatus, GnssMeasurementArray, JammerState, UwbRange
+from rfi_node_common import testing
 from rfi_node_common.qos import DATA_QOS
 from rfi_node_common.stamps import ns_to_stamp, stamp_to_ns
-from uwb_gnss_fusion.conversions import uwb_to_msg
+from rfi_node_common.testing import NodeRig
+from rfi_sim.evaluation import ecef_errors_enu, horizontal_error_m
+from rfi_sim.gnss_uwb import BroadcastGeometry, GnssUwbScenario, simulate
+from uwb_gnss_fusion.conversions import epoch_to_msg, uwb_to_msg
 from uwb_gnss_fusion.fusion_node import ORIENTATION_UNKNOWN_VARIANCE_RAD2, FusionNode, FusionNodeParams
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'fusion.yaml'
+NAV_FILE = Path(__file__).resolve().parents[2] / 'gnss_common' / 'test' / 'data' / 'arlm2000.15n'
+"""ARL1 broadcast ephemeris, 2015-07-19 (the copy of the gnss_common tests)."""
 SPIN_DEADLINE_S = 10.0
 GOAL_HORIZONTAL_RMS_M = 0.2
 """Issue goal (Cao et al. scenario, 3 anchors): horizontal RMS below 0.2 m."""
@@ -49,11 +50,15 @@ KIND = {GnssMeasurementArray: 'gnss', UwbRange: 'uwb', JammerState: 'jammer'}
 @pytest.fixture(scope='module')
 def clean_stream():
     """20 s, no jamming, UWB 10 Hz per anchor: (truth ECEF (3,), [(stamp_ns, topic, msg), ...])."""
-    scenario = Scenario(name='node_test', description='', seed=3, duration_s=20.0, streams={})
-    items = list(gnss_uwb.build(scenario, {'uwb_rate_hz': 10.0, 'truth_jammer_state': False}, seed=17))
-    truth = next(m for _, t, m in items if t == '/truth/position').point
-    inputs = [(s, t, m) for s, t, m in items if t in ('/gnss/measurements', '/uwb/ranges')]
-    return np.array([truth.x, truth.y, truth.z]), inputs
+    geometry = BroadcastGeometry(NAV_FILE)
+    # The seed the scenario stream gives its only phase (stream seed 17): the same run as before.
+    phase_seed = int(np.random.default_rng(17).integers(0, 2**31 - 1, size=1)[0])
+    run = simulate(GnssUwbScenario(duration_s=20.0, seed=phase_seed, uwb_rate_hz=10.0), geometry,
+                   geometry.iono_alpha, geometry.iono_beta)
+    items = [(e.stamp_ns, 0, '/gnss/measurements', epoch_to_msg(e)) for e in run.gnss_epochs]
+    items += [(u.stamp_ns, 1, '/uwb/ranges', uwb_to_msg(u)) for u in run.uwb_ranges]
+    items.sort(key=lambda item: (item[0], item[1]))
+    return np.array(GnssUwbScenario().receiver_ecef_m), [(s, t, m) for s, _, t, m in items]
 
 
 WALL_CLOCK_OFF = {'idle_flush_s': 0.0, 'input_timeout_s': 0.0}
@@ -61,63 +66,31 @@ WALL_CLOCK_OFF = {'idle_flush_s': 0.0, 'input_timeout_s': 0.0}
 so that what the node publishes depends on the inputs only."""
 
 
-class Rig:
+class Rig(NodeRig):
     """The node under test plus a test node that publishes inputs and collects every output."""
 
     def __init__(self, params: dict | None = None, args: list[str] | None = None) -> None:
-        self.context = Context()
-        rclpy.init(args=args, context=self.context)
         if args is None:
             params = {**WALL_CLOCK_OFF, **(params or {})}
-        overrides = [Parameter(k, value=v) for k, v in (params or {}).items()]
-        try:
-            self.node = FusionNode(context=self.context, parameter_overrides=overrides)
-        except Exception:
-            rclpy.shutdown(context=self.context)
-            raise
-        self.io = Node('fusion_test_io', context=self.context)
-        self.pubs = {cls: self.io.create_publisher(cls, topic, DATA_QOS) for cls, topic in TOPICS.items()}
-        self.out: dict[str, list] = {'/fusion/odometry': [], '/fusion/fix': [], '/fusion/status': [],
-                                     '/diagnostics': []}
-        for cls, topic in ((Odometry, '/fusion/odometry'), (NavSatFix, '/fusion/fix'),
-                           (FusionStatus, '/fusion/status'), (DiagnosticArray, '/diagnostics')):
-            self.io.create_subscription(cls, topic, self.out[topic].append, DATA_QOS)
-        self.published: Counter[str] = Counter()
-        for pub in (self.node.odom_pub, self.node.fix_pub, self.node.status_pub, self.node.diag_pub):
-            pub.publish = self._counting(pub.publish, pub.topic_name)
+        super().__init__(lambda context, overrides: FusionNode(context=context, parameter_overrides=overrides),
+                         inputs={topic: (cls, DATA_QOS) for cls, topic in TOPICS.items()},
+                         outputs={'/fusion/odometry': Odometry, '/fusion/fix': NavSatFix,
+                                  '/fusion/status': FusionStatus, '/diagnostics': DiagnosticArray},
+                         params=params, args=args, name='fusion_test_io', spin_deadline_s=SPIN_DEADLINE_S)
         self.sent: Counter[str] = Counter()
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.executor.add_node(self.io)
-        self._spin_until(lambda: all(p.get_subscription_count() >= 1 for p in self.pubs.values())
-                         and all(p.get_subscription_count() >= 1 for p in (
-                             self.node.odom_pub, self.node.fix_pub, self.node.status_pub, self.node.diag_pub)))
-
-    def _counting(self, publish, topic):
-        def counted(msg):
-            self.published[topic] += 1
-            publish(msg)
-        return counted
-
-    def _spin_until(self, done) -> None:
-        deadline = time.monotonic() + SPIN_DEADLINE_S
-        while not done():
-            assert time.monotonic() < deadline, 'graph did not settle'
-            self.executor.spin_once(timeout_sec=0.05)
 
     def send(self, msg, cls=None) -> None:
         """Publish one input (a message, or serialised bytes of type ``cls``) and spin until the node
         has taken it and all its outputs have arrived."""
         cls = type(msg) if cls is None else cls
         kind = KIND[cls]
-        self.pubs[cls].publish(msg)
+        self.pubs[TOPICS[cls]].publish(msg)
         self.sent[kind] += 1
         self.settle(kind)
 
     def settle(self, kind: str) -> None:
         """Spin until the node has received every ``kind`` input sent and its outputs have arrived."""
-        self._spin_until(lambda: self.node.counts[f'{kind}_received'] == self.sent[kind]
-                         and all(len(v) == self.published[k] for k, v in self.out.items()))
+        self.settle_until(lambda: self.node.counts[f'{kind}_received'] == self.sent[kind])
 
     def last_status(self) -> FusionStatus:
         return self.out['/fusion/status'][-1]
@@ -126,25 +99,12 @@ class Rig:
         s = self.last_status()
         return dict(zip(s.rejection_reasons, s.rejection_counts, strict=True))
 
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.io.destroy_node()
-        rclpy.shutdown(context=self.context)
 
 
 @pytest.fixture
 def rig_factory():
-    rigs = []
-
-    def make(params=None, args=None):
-        rig = Rig(params, args)
-        rigs.append(rig)
-        return rig
-
-    yield make
-    for rig in rigs:
-        rig.close()
+    with testing.rig_factory(Rig) as make:
+        yield make
 
 
 def stamp_of(msg) -> int:
@@ -424,8 +384,8 @@ def test_config_file_values_equal_the_dataclass_defaults(rig_factory):
 def test_every_filter_parameter_is_a_node_parameter():
     import dataclasses
 
+    from gnss_common.jamming_weights import TrackingLoopParams
     from uwb_gnss_fusion.fusion_filter import FusionParams
-    from uwb_gnss_fusion.jamming_weights import TrackingLoopParams
 
     node_fields = set(FusionNodeParams.__dataclass_fields__)
     core = {f.name for f in dataclasses.fields(FusionParams)} - {'loop', 'anchors'}
@@ -703,8 +663,8 @@ def test_idle_input_flushes_the_buffer(rig_factory, clean_stream):
     quick = rig_factory({'reorder_window_s': 0.1, 'idle_flush_s': 0.05})
     for _, _, msg in inputs[:30]:
         quick.send(msg)
-    quick._spin_until(lambda: sum(quick.node.buffered.values()) == 0
-                      and len(quick.out['/fusion/status']) == quick.published['/fusion/status'] == 30)
+    quick.spin_until(lambda: sum(quick.node.buffered.values()) == 0
+                     and len(quick.out['/fusion/status']) == quick.published['/fusion/status'] == 30)
     # off: nothing is processed without newer input
     off = rig_factory({'reorder_window_s': 0.1, 'idle_flush_s': 0.0})
     assert off.node.idle_flush_timer is None
@@ -778,8 +738,9 @@ def test_best_effort_publisher_reaches_the_node(rig_factory, clean_stream):
     _, inputs = clean_stream
     rig = rig_factory({'reorder_window_s': 0.0})
     for cls in (GnssMeasurementArray, UwbRange):
-        rig.pubs[cls] = rig.io.create_publisher(cls, TOPICS[cls], qos_profile_sensor_data)
-    rig._spin_until(lambda: all(rig.pubs[c].get_subscription_count() >= 1 for c in (GnssMeasurementArray, UwbRange)))
+        rig.pubs[TOPICS[cls]] = rig.io.create_publisher(cls, TOPICS[cls], qos_profile_sensor_data)
+    rig.spin_until(lambda: all(rig.pubs[TOPICS[c]].get_subscription_count() >= 1
+                               for c in (GnssMeasurementArray, UwbRange)))
     for _, _, msg in inputs[:20]:
         rig.send(msg)
     assert len(rig.out['/fusion/status']) == 20 and rig.last_status().initialized
@@ -796,7 +757,7 @@ def test_silent_node_reports_stale(rig_factory, clean_stream):
     rig.node.health.started_s -= 60.0               # as if a minute had passed with no input
     before_ns = rig.node.get_clock().now().nanoseconds
     assert rig.node.stale_watch.check()
-    rig._spin_until(lambda: len(rig.out['/diagnostics']) == rig.published['/diagnostics'] == 1)
+    rig.spin_until(lambda: len(rig.out['/diagnostics']) == rig.published['/diagnostics'] == 1)
     stale = rig.out['/diagnostics'][-1]
     status = stale.status[0]
     assert status.level == DiagnosticStatus.STALE and status.message.startswith('no input for 6')
@@ -810,7 +771,7 @@ def test_silent_node_reports_stale(rig_factory, clean_stream):
     assert not rig.node.stale_watch.check()
     # the timer does it by itself (bounded spin)
     quick = rig_factory({'reorder_window_s': 0.0, 'input_timeout_s': 0.05})
-    quick._spin_until(lambda: any(a.status[0].level == DiagnosticStatus.STALE for a in quick.out['/diagnostics']))
+    quick.spin_until(lambda: any(a.status[0].level == DiagnosticStatus.STALE for a in quick.out['/diagnostics']))
 
 
 def test_handler_errors_and_lost_messages_set_the_diagnostics_level(rig_factory, clean_stream):
@@ -826,8 +787,8 @@ def test_handler_errors_and_lost_messages_set_the_diagnostics_level(rig_factory,
     # a handler that raises (a bug): counted by the subscription's guard, ERROR, and the node goes on
     accept = rig.node._accept_uwb
     rig.node._accept_uwb = lambda *args: (_ for _ in ()).throw(RuntimeError('bug'))
-    rig.pubs[UwbRange].publish(next(m for s, t, m in inputs[21:] if t == '/uwb/ranges'))
-    rig._spin_until(lambda: rig.node.health.callback_errors_total() == 1)
+    rig.pubs[TOPICS[UwbRange]].publish(next(m for s, t, m in inputs[21:] if t == '/uwb/ranges'))
+    rig.spin_until(lambda: rig.node.health.callback_errors_total() == 1)
     rig.node._accept_uwb = accept
     for _, _, msg in inputs[22:30]:
         rig.send(msg)

@@ -30,10 +30,10 @@ from gnss_common.coordinates import (
     ecef_to_geodetic_scalar,
     rotate_covariance_ecef_to_enu_scalar,
 )
+from gnss_common.jamming_weights import TrackingLoopParams, measurement_sigmas
 from gnss_common.observations import GPS, GnssEpoch, SatelliteObservation, UwbRangeMeasurement
 
 from .ckf import CholeskyError, CubatureKalmanFilter
-from .jamming_weights import TrackingLoopParams, measurement_sigmas
 from .measurement_models import (
     STATE_DIM,
     constant_velocity_transition,

@@ -141,6 +141,7 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import NavSatFix
 
+from gnss_common.jamming_weights import TrackingLoopParams
 from gnss_common.observations import GnssEpoch, UwbRangeMeasurement
 from rfi_msgs.msg import FusionStatus, GnssMeasurementArray, JammerState, UwbRange
 from rfi_node_common.diagnostics import (
@@ -170,7 +171,6 @@ from uwb_gnss_fusion.fusion_filter import (
     FusionParams,
     ReorderBuffer,
 )
-from uwb_gnss_fusion.jamming_weights import TrackingLoopParams
 from uwb_gnss_fusion.message_checks import satellite_reason, uwb_range_reason
 from uwb_gnss_fusion.output_messages import (  # noqa: F401 (re-exported: the node's output contract)
     ORIENTATION_UNKNOWN_VARIANCE_RAD2,

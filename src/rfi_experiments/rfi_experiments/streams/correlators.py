@@ -31,7 +31,7 @@ of ``onset_s``) puts the onset at the start of the first phase of that type and 
 (rfi_experiments.scenario resolves it); a key written here overrides the shared one.
 
 The duration is the scenario's ``duration_s``. The builder runs
-:func:`rfi_experiments.sim.correlators.simulate_correlators` (one receiver clock shared by all
+:func:`rfi_sim.correlators.simulate_correlators` (one receiver clock shared by all
 satellites) and yields, for each interval k (stamp = end of the interval, GPS time scale as in
 gnss_common.gps_time), ``(stamp_ns, '/gnss/correlators', CorrelatorArray)`` and then
 ``(stamp_ns, '/truth/carrier', CarrierPhaseArray)``.
@@ -57,7 +57,7 @@ from gnss_common.clock_model import PRESETS, ClockHCoefficients
 from gnss_common.constants import GPS_NAV_BIT_RATE_HZ
 from gnss_common.gps_time import gps_to_stamp_ns
 from rfi_experiments.scenario import Scenario, ScenarioError
-from rfi_experiments.sim.correlators import CorrelatorScenario, simulate_correlators
+from rfi_sim.correlators import CorrelatorScenario, simulate_correlators
 
 CORRELATORS_TOPIC = '/gnss/correlators'
 TRUTH_TOPIC = '/truth/carrier'

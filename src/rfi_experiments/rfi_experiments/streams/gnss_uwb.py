@@ -31,7 +31,7 @@ rooftop set-up moved to the ARL1 station, Cao et al., Sec. IV-1 and Table 1)::
 Each phase's ``duration_s`` must be a whole number of GNSS and UWB periods, and the phases must
 cover the scenario's ``duration_s`` exactly.
 
-Simulation. :func:`rfi_experiments.sim.gnss_uwb.simulate` takes one J/S per run, so the builder
+Simulation. :func:`rfi_sim.gnss_uwb.simulate` takes one J/S per run, so the builder
 simulates each phase as its own run (seeded from ``seed`` and the phase index) and joins them:
 the stamps continue on the same GNSS/UWB grid, the receiver clock of a phase starts where the
 previous one ended (bias extrapolated by one GNSS period with the last drift), the geometry, anchors
@@ -82,7 +82,7 @@ import numpy as np
 from gnss_common.constants import SPEED_OF_LIGHT_MPS
 from gnss_common.gps_time import gps_to_stamp_ns
 from rfi_experiments.scenario import Scenario, ScenarioError, data_path
-from rfi_experiments.sim.gnss_uwb import (
+from rfi_sim.gnss_uwb import (
     ARL1_ECEF_M,
     PAPER_ANCHOR_RANGES_M,
     BroadcastGeometry,

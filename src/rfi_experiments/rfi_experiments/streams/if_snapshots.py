@@ -38,7 +38,7 @@ fs and IF), ``sweep_rate_hz_per_s`` (default 1e12, may be negative) and ``sweep_
 must lie inside the sampled band. A snapshot belongs to the phase that contains its first sample;
 put phase boundaries between snapshots.
 
-Each snapshot is simulated by a fresh :class:`rfi_experiments.sim.if_signal.IfSimulator` (seeded
+Each snapshot is simulated by a fresh :class:`rfi_sim.if_signal.IfSimulator` (seeded
 from ``(seed, k)``) whose jammers and satellites are shifted to the snapshot's time: the chirp's
 position inside its sweep, the CW's and the satellites' carrier and code phases are those of the
 continuous stream. Noise is independent between snapshots (as it is over a one-second gap). The
@@ -73,8 +73,8 @@ import numpy as np
 
 from gnss_common.constants import GPS_CA_CHIP_RATE_HZ, GPS_CA_CODE_LENGTH_CHIPS, GPS_L1_FREQUENCY_HZ
 from rfi_experiments.scenario import Scenario, ScenarioError
-from rfi_experiments.sim.gps_ca import G2_DELAY_CHIPS
-from rfi_experiments.sim.if_signal import (
+from rfi_sim.gps_ca import G2_DELAY_CHIPS
+from rfi_sim.if_signal import (
     CHIRP,
     CW,
     NONE,

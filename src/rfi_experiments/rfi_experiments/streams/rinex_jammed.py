@@ -40,15 +40,15 @@ nothing is resampled, so GNSS is sparse here, 30 s apart for the ARL1 file, whil
 * simulated, only in a phase with a jammer (a phase with ``jsr_db: null`` passes the real
   observations through untouched):
 
-  - effective C/N0 of eq. 4 (``uwb_gnss_fusion.jamming_weights.effective_cn0_dbhz``) from the
+  - effective C/N0 of eq. 4 (``gnss_common.jamming_weights.effective_cn0_dbhz``) from the
     real C/N0, plus the receiver's C/N0 estimation error
-    (``rfi_experiments.sim.gnss_uwb.JammingEffect.cn0_estimate_std_db``); this is the C/N0 written
+    (``rfi_sim.gnss_uwb.JammingEffect.cn0_estimate_std_db``); this is the C/N0 written
     (NaN stays NaN for a file without S1);
   - loss of lock: satellites whose estimated effective C/N0 is below
     ``JammingEffect.loss_of_lock_dbhz`` are dropped;
   - the *extra* tracking jitter, the real data already holding the jammer-free jitter:
     ``sqrt(sigma(C/N0_eff)^2 - sigma(C/N0)^2)`` with the DLL (code) and FLL (Doppler) formulas of
-    ``uwb_gnss_fusion.jamming_weights`` (without their floors, which are already in the real
+    ``gnss_common.jamming_weights`` (without their floors, which are already in the real
     errors);
   - outlier bursts from ``JammingEffect.outlier_onset_jsr_db`` (6 dB) on, with the simulator's
     rate, growth, duration and magnitudes. The simulator draws a burst start per 0.2 s epoch;
@@ -58,7 +58,7 @@ nothing is resampled, so GNSS is sparse here, 30 s apart for the ARL1 file, whil
     epoch carries the error of a burst that covers it. The fraction of time in a burst is the
     simulator's.
 
-* ``/uwb/ranges``: anchors placed by ``rfi_experiments.sim.gnss_uwb.anchor_positions_ecef`` around
+* ``/uwb/ranges``: anchors placed by ``rfi_sim.gnss_uwb.anchor_positions_ecef`` around
   the header position, Gaussian noise, anchors interleaved within each UWB period as in the
   simulator.
 * ``/truth/position``: the header APPROX POSITION XYZ (the station's published coordinate) at
@@ -94,16 +94,16 @@ import numpy as np
 
 from gnss_common.coordinates import azimuth_elevation
 from gnss_common.ephemeris import earth_rotation_correction
-from gnss_common.observations import GnssEpoch, SatelliteObservation, UwbRangeMeasurement
-from gnss_common.rinex import RinexFormatError
-from rfi_experiments.scenario import Scenario, ScenarioError, data_path
-from rfi_experiments.sim.gnss_uwb import PAPER_ANCHOR_RANGES_M, GnssUwbScenario, JammingEffect, anchor_positions_ecef
-from uwb_gnss_fusion.jamming_weights import (
+from gnss_common.jamming_weights import (
     TrackingLoopParams,
     dll_jitter_m,
     effective_cn0_dbhz,
     fll_jitter_mps,
 )
+from gnss_common.observations import GnssEpoch, SatelliteObservation, UwbRangeMeasurement
+from gnss_common.rinex import RinexFormatError
+from rfi_experiments.scenario import Scenario, ScenarioError, data_path
+from rfi_sim.gnss_uwb import PAPER_ANCHOR_RANGES_M, GnssUwbScenario, JammingEffect, anchor_positions_ecef
 
 GNSS_TOPIC = '/gnss/measurements'
 UWB_TOPIC = '/uwb/ranges'
@@ -274,7 +274,7 @@ def burst_rate_per_s(jamming: JammingEffect, jsr_db: float | None) -> float:
         jsr_db: J/S, dB (None: no jammer).
 
     Notes:
-        The rate law of :func:`rfi_experiments.sim.gnss_uwb.simulate`:
+        The rate law of :func:`rfi_sim.gnss_uwb.simulate`:
         ``rate = rate_onset * 10^(growth (J/S - onset) / 10)`` from the onset J/S on (Cao et al.,
         Sec. IV-2: outliers from 6 dB).
     """
