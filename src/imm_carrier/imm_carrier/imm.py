@@ -25,29 +25,12 @@ from gnss_common.clock_model import (
     ClockHCoefficients,
 )
 from gnss_common.constants import GPS_L1_FREQUENCY_HZ
+from imm_carrier.layout import IMM_OUT_LEN, IMM_STATE_LEN, ImmOut, ImmState
 from imm_carrier.measurement_model import CN0_MAX_DBHZ, CN0_MIN_DBHZ, IQ_SCALINGS
 
 TWO_PI = 2.0 * math.pi
 
-# Layout of the compiled filter's state vector.
-# Slots 10-11 hold the natural logarithms of the mode probabilities (log mu_1, log mu_2).
-_ST_X1, _ST_P1, _ST_X2, _ST_P2, _ST_LOGMU, _ST_SAT = 0, 2, 5, 7, 10, 12
-_ST_LEN = 13
-# Layout of the compiled step's output vector.
-(
-    _O_PHI,
-    _O_OMEGA,
-    _O_P11,
-    _O_P12,
-    _O_P22,
-    _O_MU1,
-    _O_MU2,
-    _O_PRIOR_P11,
-    _O_PRIOR_P22,
-    _O_PRIOR_PHI,
-    _O_USED,
-) = range(11)
-_OUT_LEN = 11
+# The state and output layouts of the compiled step: imm_carrier.layout (ImmState, ImmOut).
 
 
 @dataclass(frozen=True)
@@ -124,7 +107,7 @@ def _process_noise(q_f: float, q_g: float, t: float, form_code: int) -> tuple[fl
 
 
 @njit(cache=True)
-def _wrap(a: float) -> float:
+def wrap_phase(a: float) -> float:
     return a - TWO_PI * math.floor((a + math.pi) / TWO_PI)
 
 
@@ -144,7 +127,7 @@ def _logaddexp(a: float, b: float) -> float:
 
 
 @njit(cache=True)
-def _imm_step(st, zi, zq, amp, sig, t, dphi, p_change, prior_plus, q_f, q_g, form_code, out):
+def imm_step(st, zi, zq, amp, sig, t, dphi, p_change, prior_plus, q_f, q_g, form_code, out):
     """One IMM cycle (mixing, mode-matched EKF prediction and update, mode probabilities, combination).
 
     st: state, float64[13], updated in place; out: float64[11], written. Zhao et al., Fig. 2-3;
@@ -158,8 +141,8 @@ def _imm_step(st, zi, zq, amp, sig, t, dphi, p_change, prior_plus, q_f, q_g, for
     (a floor would change the filter's answer, e.g. let a glitch flip a bit that cannot change), and
     equals the linear IMM to rounding wherever that one is defined (tested against the reference).
     """
-    l1 = st[_ST_LOGMU]
-    l2 = st[_ST_LOGMU + 1]
+    l1 = st[ImmState.LOGMU]
+    l2 = st[ImmState.LOGMU + 1]
     # 1. Mixing probabilities, transition matrix [[1-p, p], [p, 1-p]], in the log domain:
     # log c_j = log sum_i Pi[i, j] mu_i, log mu_{i|j} = log Pi[i, j] + log mu_i - log c_j.
     ls = _log0(1.0 - p_change)
@@ -184,13 +167,13 @@ def _imm_step(st, zi, zq, amp, sig, t, dphi, p_change, prior_plus, q_f, q_g, for
         c1 = min(max(prior_plus, 1e-12), 1.0 - 1e-12)
         lc1 = math.log(c1)
         lc2 = math.log1p(-c1)
-    x1p, x1w = st[_ST_X1], st[_ST_X1 + 1]
-    x2p, x2w = st[_ST_X2], st[_ST_X2 + 1]
-    p1a, p1b, p1c = st[_ST_P1], st[_ST_P1 + 1], st[_ST_P1 + 2]
-    p2a, p2b, p2c = st[_ST_P2], st[_ST_P2 + 1], st[_ST_P2 + 2]
+    x1p, x1w = st[ImmState.X1], st[ImmState.X1 + 1]
+    x2p, x2w = st[ImmState.X2], st[ImmState.X2 + 1]
+    p1a, p1b, p1c = st[ImmState.P1], st[ImmState.P1 + 1], st[ImmState.P1 + 2]
+    p2a, p2b, p2c = st[ImmState.P2], st[ImmState.P2 + 1], st[ImmState.P2 + 2]
     w11, w12, w22 = _process_noise(q_f, q_g, t, form_code)
-    sat = _wrap(st[_ST_SAT] + dphi)
-    st[_ST_SAT] = sat
+    sat = wrap_phase(st[ImmState.SAT] + dphi)
+    st[ImmState.SAT] = sat
     valid = zi == zi and zq == zq and abs(zi) < math.inf and abs(zq) < math.inf
     ll = np.empty(2)
     pr = np.empty((2, 4))  # predicted phi, omega, p11, p22 per mode
@@ -265,26 +248,26 @@ def _imm_step(st, zi, zq, amp, sig, t, dphi, p_change, prior_plus, q_f, q_g, for
     phi = mu1 * n1p + mu2 * n2p
     om = mu1 * n1w + mu2 * n2w
     e1p, e1w, e2p, e2w = n1p - phi, n1w - om, n2p - phi, n2w - om
-    out[_O_PHI] = phi
-    out[_O_OMEGA] = om
-    out[_O_P11] = mu1 * (n1a + e1p * e1p) + mu2 * (n2a + e2p * e2p)
-    out[_O_P12] = mu1 * (n1b + e1p * e1w) + mu2 * (n2b + e2p * e2w)
-    out[_O_P22] = mu1 * (n1c + e1w * e1w) + mu2 * (n2c + e2w * e2w)
-    out[_O_MU1] = mu1
-    out[_O_MU2] = mu2
-    out[_O_PRIOR_PHI] = prior_phi
-    out[_O_PRIOR_P11] = prior_p11
-    out[_O_PRIOR_P22] = prior_p22
-    out[_O_USED] = 1.0 if valid else 0.0
-    st[_ST_X1], st[_ST_X1 + 1] = n1p, n1w
-    st[_ST_P1], st[_ST_P1 + 1], st[_ST_P1 + 2] = n1a, n1b, n1c
-    st[_ST_X2], st[_ST_X2 + 1] = n2p, n2w
-    st[_ST_P2], st[_ST_P2 + 1], st[_ST_P2 + 2] = n2a, n2b, n2c
-    st[_ST_LOGMU], st[_ST_LOGMU + 1] = l1, l2
+    out[ImmOut.PHI] = phi
+    out[ImmOut.OMEGA] = om
+    out[ImmOut.P11] = mu1 * (n1a + e1p * e1p) + mu2 * (n2a + e2p * e2p)
+    out[ImmOut.P12] = mu1 * (n1b + e1p * e1w) + mu2 * (n2b + e2p * e2w)
+    out[ImmOut.P22] = mu1 * (n1c + e1w * e1w) + mu2 * (n2c + e2w * e2w)
+    out[ImmOut.MU1] = mu1
+    out[ImmOut.MU2] = mu2
+    out[ImmOut.PRIOR_PHI] = prior_phi
+    out[ImmOut.PRIOR_P11] = prior_p11
+    out[ImmOut.PRIOR_P22] = prior_p22
+    out[ImmOut.USED] = 1.0 if valid else 0.0
+    st[ImmState.X1], st[ImmState.X1 + 1] = n1p, n1w
+    st[ImmState.P1], st[ImmState.P1 + 1], st[ImmState.P1 + 2] = n1a, n1b, n1c
+    st[ImmState.X2], st[ImmState.X2 + 1] = n2p, n2w
+    st[ImmState.P2], st[ImmState.P2 + 1], st[ImmState.P2 + 2] = n2a, n2b, n2c
+    st[ImmState.LOGMU], st[ImmState.LOGMU + 1] = l1, l2
 
 
 @njit(cache=True)
-def _amp_sigma(cn0_dbhz: float, t: float, unit_noise: bool) -> tuple[float, float]:
+def amp_sigma(cn0_dbhz: float, t: float, unit_noise: bool) -> tuple[float, float]:
     ratio = math.sqrt(2.0 * t * 10.0 ** (cn0_dbhz / 10.0))
     if unit_noise:
         return ratio, 1.0
@@ -294,13 +277,13 @@ def _amp_sigma(cn0_dbhz: float, t: float, unit_noise: bool) -> tuple[float, floa
 @njit(cache=True)
 def _imm_run(st, zi, zq, cn0, t, dphi, p_change, prior_plus, q_f, q_g, form_code, unit_noise, out):
     """Batch of IMM steps for one channel; out: float64[n, 11]."""
-    row = np.empty(_OUT_LEN)
+    row = np.empty(IMM_OUT_LEN)
     for k in range(zi.shape[0]):
-        amp, sig = _amp_sigma(cn0[k], t[k], unit_noise)
-        _imm_step(
+        amp, sig = amp_sigma(cn0[k], t[k], unit_noise)
+        imm_step(
             st, zi[k], zq[k], amp, sig, t[k], dphi[k], p_change[k], prior_plus[k], q_f, q_g, form_code, row
         )
-        for m in range(_OUT_LEN):
+        for m in range(IMM_OUT_LEN):
             out[k, m] = row[m]
 
 
@@ -387,8 +370,8 @@ class ImmCarrierFilter:
         self._q_f, self._q_g = params.q_phase
         self._form_code = PROCESS_NOISE_FORMS.index(params.process_noise_form)
         self._unit_noise = params.iq_scaling == "unit_noise"
-        self._st = np.zeros(_ST_LEN)
-        self._out = np.zeros(_OUT_LEN)
+        self._st = np.zeros(IMM_STATE_LEN)
+        self._out = np.zeros(IMM_OUT_LEN)
         self._initialized = False
 
     @property
@@ -399,13 +382,13 @@ class ImmCarrierFilter:
     @property
     def residual_phase_rad(self) -> float:
         """Current combined residual phase, rad."""
-        mu1, mu2 = math.exp(self._st[_ST_LOGMU]), math.exp(self._st[_ST_LOGMU + 1])
-        return float(mu1 * self._st[_ST_X1] + mu2 * self._st[_ST_X2])
+        mu1, mu2 = math.exp(self._st[ImmState.LOGMU]), math.exp(self._st[ImmState.LOGMU + 1])
+        return float(mu1 * self._st[ImmState.X1] + mu2 * self._st[ImmState.X2])
 
     @property
     def satellite_phase_rad(self) -> float:
         """Accumulated satellite-motion phase (wrapped), rad."""
-        return float(self._st[_ST_SAT])
+        return float(self._st[ImmState.SAT])
 
     def initialize(
         self,
@@ -435,12 +418,12 @@ class ImmCarrierFilter:
         pa = phase_std_rad**2
         pc = (TWO_PI * frequency_std_hz) ** 2
         st = self._st
-        st[_ST_X1], st[_ST_X1 + 1], st[_ST_X2], st[_ST_X2 + 1] = phase_rad, omega, phase_rad, omega
-        st[_ST_P1], st[_ST_P1 + 1], st[_ST_P1 + 2] = pa, 0.0, pc
-        st[_ST_P2], st[_ST_P2 + 1], st[_ST_P2 + 2] = pa, 0.0, pc
-        st[_ST_LOGMU] = math.log(mode_probability_plus) if mode_probability_plus > 0.0 else -math.inf
-        st[_ST_LOGMU + 1] = math.log1p(-mode_probability_plus) if mode_probability_plus < 1.0 else -math.inf
-        st[_ST_SAT] = satellite_phase_rad
+        st[ImmState.X1], st[ImmState.X1 + 1], st[ImmState.X2], st[ImmState.X2 + 1] = phase_rad, omega, phase_rad, omega
+        st[ImmState.P1], st[ImmState.P1 + 1], st[ImmState.P1 + 2] = pa, 0.0, pc
+        st[ImmState.P2], st[ImmState.P2 + 1], st[ImmState.P2 + 2] = pa, 0.0, pc
+        st[ImmState.LOGMU] = math.log(mode_probability_plus) if mode_probability_plus > 0.0 else -math.inf
+        st[ImmState.LOGMU + 1] = math.log1p(-mode_probability_plus) if mode_probability_plus < 1.0 else -math.inf
+        st[ImmState.SAT] = satellite_phase_rad
         self._initialized = True
 
     def initialize_from_correlator(
@@ -455,7 +438,7 @@ class ImmCarrierFilter:
             math.isfinite(v) for v in (in_phase, quadrature, predicted_phase_change_rad, frequency_hz)
         ):
             raise ValueError("cannot initialise from non-finite correlator values")
-        sat = float(_wrap(predicted_phase_change_rad))
+        sat = float(wrap_phase(predicted_phase_change_rad))
         self.initialize(
             math.atan2(quadrature, in_phase) - sat,
             frequency_hz,
@@ -514,9 +497,9 @@ class ImmCarrierFilter:
         )
         if not 0.0 <= p <= 1.0:
             raise ValueError("bit_transition_probability must be in [0, 1]")
-        amp, sig = _amp_sigma(cn0_dbhz, integration_time_s, self._unit_noise)
+        amp, sig = amp_sigma(cn0_dbhz, integration_time_s, self._unit_noise)
         out = self._out
-        _imm_step(
+        imm_step(
             self._st,
             float(in_phase),
             float(quadrature),
@@ -535,27 +518,27 @@ class ImmCarrierFilter:
 
     def _result(self, out: np.ndarray) -> ImmStepResult:
         o = out.tolist()  # plain floats: much cheaper than numpy scalar indexing
-        phase = o[_O_PHI]
-        omega = o[_O_OMEGA]
-        mu1 = o[_O_MU1]
-        mu2 = o[_O_MU2]
-        phase_std = math.sqrt(max(o[_O_P11], 0.0))
+        phase = o[ImmOut.PHI]
+        omega = o[ImmOut.OMEGA]
+        mu1 = o[ImmOut.MU1]
+        mu2 = o[ImmOut.MU2]
+        phase_std = math.sqrt(max(o[ImmOut.P11], 0.0))
         finite = math.isfinite(phase) and math.isfinite(omega) and math.isfinite(phase_std)
         bit = 1 if mu1 > mu2 else (-1 if mu2 > mu1 else 0)
-        prior_phase = o[_O_PRIOR_PHI]
+        prior_phase = o[ImmOut.PRIOR_PHI]
         return ImmStepResult(
             phase_rad=phase,
             phase_std_rad=phase_std,
             frequency_hz=omega / TWO_PI,
-            frequency_std_hz=math.sqrt(max(o[_O_P22], 0.0)) / TWO_PI,
-            phase_frequency_cov_rad_hz=o[_O_P12] / TWO_PI,
+            frequency_std_hz=math.sqrt(max(o[ImmOut.P22], 0.0)) / TWO_PI,
+            phase_frequency_cov_rad_hz=o[ImmOut.P12] / TWO_PI,
             mode_probabilities=(mu1, mu2),
             data_bit=bit,
             data_bit_probability=max(mu1, mu2),
             prior_phase_rad=prior_phase,
-            prior_phase_std_rad=math.sqrt(max(o[_O_PRIOR_P11], 0.0)),
-            prior_frequency_std_hz=math.sqrt(max(o[_O_PRIOR_P22], 0.0)) / TWO_PI,
-            measurement_used=o[_O_USED] > 0.5,
+            prior_phase_std_rad=math.sqrt(max(o[ImmOut.PRIOR_P11], 0.0)),
+            prior_frequency_std_hz=math.sqrt(max(o[ImmOut.PRIOR_P22], 0.0)) / TWO_PI,
+            measurement_used=o[ImmOut.USED] > 0.5,
             locked=finite and phase_std < self.params.lock_phase_std_max_rad,
             slip_detected=finite and abs(phase - prior_phase) > self.params.slip_jump_threshold_rad,
         )
@@ -621,9 +604,9 @@ class ImmCarrierFilter:
             "coasted_nonfinite_iq": int(np.sum(coast)),
         }
         idx = np.flatnonzero(accepted)
-        raw = np.full((n, _OUT_LEN), np.nan)
+        raw = np.full((n, IMM_OUT_LEN), np.nan)
         if idx.size:
-            sub = np.empty((idx.size, _OUT_LEN))
+            sub = np.empty((idx.size, IMM_OUT_LEN))
             _imm_run(
                 self._st,
                 np.ascontiguousarray(zi[idx]),
@@ -640,18 +623,18 @@ class ImmCarrierFilter:
                 sub,
             )
             raw[idx] = sub
-        phase_std = np.sqrt(np.maximum(raw[:, _O_P11], 0.0))
-        finite = np.isfinite(raw[:, _O_PHI]) & np.isfinite(raw[:, _O_OMEGA]) & np.isfinite(phase_std)
+        phase_std = np.sqrt(np.maximum(raw[:, ImmOut.P11], 0.0))
+        finite = np.isfinite(raw[:, ImmOut.PHI]) & np.isfinite(raw[:, ImmOut.OMEGA]) & np.isfinite(phase_std)
         return ImmBatchResult(
-            phase_rad=raw[:, _O_PHI],
+            phase_rad=raw[:, ImmOut.PHI],
             phase_std_rad=phase_std,
-            frequency_hz=raw[:, _O_OMEGA] / TWO_PI,
-            frequency_std_hz=np.sqrt(np.maximum(raw[:, _O_P22], 0.0)) / TWO_PI,
-            mode_probability_plus=raw[:, _O_MU1],
-            prior_phase_rad=raw[:, _O_PRIOR_PHI],
-            prior_phase_std_rad=np.sqrt(np.maximum(raw[:, _O_PRIOR_P11], 0.0)),
-            prior_frequency_std_hz=np.sqrt(np.maximum(raw[:, _O_PRIOR_P22], 0.0)) / TWO_PI,
-            measurement_used=raw[:, _O_USED] > 0.5,
+            frequency_hz=raw[:, ImmOut.OMEGA] / TWO_PI,
+            frequency_std_hz=np.sqrt(np.maximum(raw[:, ImmOut.P22], 0.0)) / TWO_PI,
+            mode_probability_plus=raw[:, ImmOut.MU1],
+            prior_phase_rad=raw[:, ImmOut.PRIOR_PHI],
+            prior_phase_std_rad=np.sqrt(np.maximum(raw[:, ImmOut.PRIOR_P11], 0.0)),
+            prior_frequency_std_hz=np.sqrt(np.maximum(raw[:, ImmOut.PRIOR_P22], 0.0)) / TWO_PI,
+            measurement_used=raw[:, ImmOut.USED] > 0.5,
             accepted=accepted,
             locked=accepted & finite & (phase_std < self.params.lock_phase_std_max_rad),
             counters=counters,

@@ -51,12 +51,11 @@ arrived for ``input_timeout_s`` of wall time, a STALE report (stamped with the n
 with the same counters (:class:`rfi_node_common.inputs.StaleInputWatch`); no estimate depends on the
 wall clock.
 
-Core faults: should a tracker raise (it should not; up to commit 8350ac4 the IMM's mode-probability
-normalisation divided 0 by 0 when one mode's probability had underflowed to 0 and a correlator
-favoured that mode by more than ~745 in log-likelihood, fixed by keeping the mode probabilities as
-logarithms), the node counts it (``<method>.core_faults``), drops that tracker's answer for the array
-(its correlators counted as ``<method>.dropped_core_fault``), restarts that tracker's channels, reports
-ERROR and keeps running.
+Core faults: should a tracker raise (it should not: the IMM keeps its mode probabilities as
+logarithms, so that a mode whose probability underflowed to 0 and a correlator that favours it by
+more than ~745 in log-likelihood cannot make it divide 0 by 0), the node counts it
+(``<method>.core_faults``), drops that tracker's answer for the array (its correlators counted as
+``<method>.dropped_core_fault``), restarts that tracker's channels, reports ERROR and keeps running.
 
 /rfi/jammer_state is not subscribed: the trackers take the signal level from the correlators'
 C/N0 (which already reflects the jamming), and CarrierPhase has no field a jammer state would fill.

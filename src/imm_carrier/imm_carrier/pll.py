@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+from imm_carrier.layout import PLL_OUT_LEN, PLL_STATE_LEN, PllOut, PllState
 from imm_carrier.measurement_model import CN0_MAX_DBHZ, CN0_MIN_DBHZ, IQ_SCALINGS
 
 TWO_PI = 2.0 * math.pi
@@ -99,15 +100,11 @@ class PllParams:
             raise ValueError("PllParams.lock_threshold must be in (0, 1)")
 
 
-# State: 0 residual NCO phase (rad), 1 NCO rate (rad/s), 2 velocity integrator (rad/s),
-# 3 acceleration integrator (rad/s^2), 4 accumulated satellite phase (rad, wrapped),
-# 5 elapsed time (s), 6 EMA of I'^2 - Q'^2, 7 EMA of I'^2 + Q'^2.
-_PLL_ST_LEN = 8
-_PLL_OUT_LEN = 5  # phase estimate, frequency (rad/s), discriminator, bandwidth, lock metric
+# The state and output layouts of the compiled step: imm_carrier.layout (PllState, PllOut).
 
 
 @njit(cache=True)
-def _bandwidth_hz(elapsed_s, start_hz, end_hz, duration_s):
+def scheduled_bandwidth_hz(elapsed_s, start_hz, end_hz, duration_s):
     """Scalar compiled form of :func:`bandwidth_schedule_hz` (same polynomial, same Horner order)."""
     t = min(max(elapsed_s, 0.0), duration_s)
     u = t * (70.0 / duration_s)
@@ -120,19 +117,19 @@ def _bandwidth_hz(elapsed_s, start_hz, end_hz, duration_s):
 
 
 @njit(cache=True)
-def _pll_step(st, zi, zq, tk, dphi, bn, amp, alpha, out):
+def pll_step(st, zi, zq, tk, dphi, bn, amp, alpha, out):
     """One Costas PLL step on scalars; st: float64[8] in place; out: float64[5] written.
 
     NaN or infinite I/Q: the NCO free-runs (no discriminator update).
     """
-    sat = st[4] + dphi
+    sat = st[PllState.SAT_PHASE] + dphi
     sat = sat - TWO_PI * math.floor((sat + math.pi) / TWO_PI)
-    st[4] = sat
-    st[0] += tk * st[1]
-    st[5] += tk
+    st[PllState.SAT_PHASE] = sat
+    st[PllState.NCO_PHASE] += tk * st[PllState.NCO_RATE]
+    st[PllState.ELAPSED] += tk
     e = 0.0
     if zi == zi and zq == zq and abs(zi) < math.inf and abs(zq) < math.inf:
-        th = sat + st[0]
+        th = sat + st[PllState.NCO_PHASE]
         c = math.cos(th)
         s = math.sin(th)
         ir = zi * c + zq * s
@@ -142,26 +139,26 @@ def _pll_step(st, zi, zq, tk, dphi, bn, amp, alpha, out):
         elif qr != 0.0:
             e = math.copysign(0.5 * math.pi, qr)
         w0 = bn / THIRD_ORDER_BN_TO_W0
-        st[3] += tk * w0 * w0 * w0 * e
-        st[2] += tk * (st[3] + THIRD_ORDER_A3 * w0 * w0 * e)
-        st[1] = st[2] + THIRD_ORDER_B3 * w0 * e
+        st[PllState.ACCELERATION] += tk * w0 * w0 * w0 * e
+        st[PllState.VELOCITY] += tk * (st[PllState.ACCELERATION] + THIRD_ORDER_A3 * w0 * w0 * e)
+        st[PllState.NCO_RATE] = st[PllState.VELOCITY] + THIRD_ORDER_B3 * w0 * e
         a2 = amp * amp
-        st[6] += alpha * ((ir * ir - qr * qr) / a2 - st[6])
-        st[7] += alpha * ((ir * ir + qr * qr) / a2 - st[7])
-    out[0] = st[0] + e
-    out[1] = st[2]
-    out[2] = e
-    out[3] = bn
-    out[4] = st[6]
+        st[PllState.EMA_DIFF] += alpha * ((ir * ir - qr * qr) / a2 - st[PllState.EMA_DIFF])
+        st[PllState.EMA_SUM] += alpha * ((ir * ir + qr * qr) / a2 - st[PllState.EMA_SUM])
+    out[PllOut.PHASE] = st[PllState.NCO_PHASE] + e
+    out[PllOut.FREQUENCY] = st[PllState.VELOCITY]
+    out[PllOut.DISCRIMINATOR] = e
+    out[PllOut.BANDWIDTH] = bn
+    out[PllOut.LOCK_METRIC] = st[PllState.EMA_DIFF]
 
 
 @njit(cache=True)
 def _pll_run(st, zi, zq, t, dphi, bn, amp, alpha, out):
-    """Costas PLL over a batch (:func:`_pll_step` per sample); out: float64[n, 5]."""
-    row = np.empty(_PLL_OUT_LEN)
+    """Costas PLL over a batch (:func:`pll_step` per sample); out: float64[n, 5]."""
+    row = np.empty(PLL_OUT_LEN)
     for k in range(zi.shape[0]):
-        _pll_step(st, zi[k], zq[k], t[k], dphi[k], bn[k], amp[k], alpha[k], row)
-        for m in range(_PLL_OUT_LEN):
+        pll_step(st, zi[k], zq[k], t[k], dphi[k], bn[k], amp[k], alpha[k], row)
+        for m in range(PLL_OUT_LEN):
             out[k, m] = row[m]
 
 
@@ -207,8 +204,8 @@ class CostasPll:
         if not isinstance(params, PllParams):
             raise ValueError("params must be a PllParams")
         self.params = params
-        self._st = np.zeros(_PLL_ST_LEN)
-        self._out = np.zeros(_PLL_OUT_LEN)
+        self._st = np.zeros(PLL_STATE_LEN)
+        self._out = np.zeros(PLL_OUT_LEN)
         self._initialized = False
 
     @property
@@ -219,28 +216,28 @@ class CostasPll:
     @property
     def elapsed_s(self) -> float:
         """Time since the loop started (sum of integration times), s."""
-        return float(self._st[5])
+        return float(self._st[PllState.ELAPSED])
 
     @property
     def residual_phase_rad(self) -> float:
         """Current NCO residual phase, rad."""
-        return float(self._st[0])
+        return float(self._st[PllState.NCO_PHASE])
 
     @property
     def satellite_phase_rad(self) -> float:
         """Accumulated satellite-motion phase (wrapped), rad."""
-        return float(self._st[4])
+        return float(self._st[PllState.SAT_PHASE])
 
     def initialize(self, phase_rad: float, frequency_hz: float, satellite_phase_rad: float = 0.0) -> None:
         """Set the NCO residual phase (rad), frequency (Hz) and the accumulated satellite phase (rad)."""
         if not all(math.isfinite(v) for v in (phase_rad, frequency_hz, satellite_phase_rad)):
             raise ValueError("PLL initial values must be finite")
         self._st[:] = 0.0
-        self._st[0] = phase_rad
-        self._st[1] = self._st[2] = TWO_PI * frequency_hz
-        self._st[4] = satellite_phase_rad
-        self._st[6] = 1.0
-        self._st[7] = 1.0
+        self._st[PllState.NCO_PHASE] = phase_rad
+        self._st[PllState.NCO_RATE] = self._st[PllState.VELOCITY] = TWO_PI * frequency_hz
+        self._st[PllState.SAT_PHASE] = satellite_phase_rad
+        self._st[PllState.EMA_DIFF] = 1.0
+        self._st[PllState.EMA_SUM] = 1.0
         self._initialized = True
 
     def initialize_from_correlator(
@@ -301,10 +298,10 @@ class CostasPll:
             "coasted_nonfinite_iq": int(np.sum(accepted & ~(np.isfinite(zi) & np.isfinite(zq)))),
         }
         idx = np.flatnonzero(accepted)
-        raw = np.full((n, _PLL_OUT_LEN), np.nan)
+        raw = np.full((n, PLL_OUT_LEN), np.nan)
         if idx.size:
             ta = t[idx]
-            elapsed = self._st[5] + np.cumsum(ta)
+            elapsed = self._st[PllState.ELAPSED] + np.cumsum(ta)
             bn = bandwidth_schedule_hz(
                 elapsed - ta,
                 self.params.start_bandwidth_hz,
@@ -314,7 +311,7 @@ class CostasPll:
             ratio = np.sqrt(2.0 * ta * 10.0 ** (cn0[idx] / 10.0))
             amp = ratio if self.params.iq_scaling == "unit_noise" else np.ones_like(ratio)
             alpha = np.minimum(ta / self.params.lock_time_constant_s, 1.0)
-            sub = np.empty((idx.size, _PLL_OUT_LEN))
+            sub = np.empty((idx.size, PLL_OUT_LEN))
             _pll_run(self._st, np.ascontiguousarray(zi[idx]), zq[idx], ta, dphi[idx], bn, amp, alpha, sub)
             raw[idx] = sub
         finite = np.isfinite(raw[:, 0]) & np.isfinite(raw[:, 1])
@@ -355,13 +352,13 @@ class CostasPll:
             raise ValueError("PLL not initialised")
         p = self.params
         t = float(integration_time_s)
-        bn = _bandwidth_hz(
-            self._st[5], p.start_bandwidth_hz, p.end_bandwidth_hz, p.tightening_duration_s
+        bn = scheduled_bandwidth_hz(
+            self._st[PllState.ELAPSED], p.start_bandwidth_hz, p.end_bandwidth_hz, p.tightening_duration_s
         )
         amp = math.sqrt(2.0 * t * 10.0 ** (cn0_dbhz / 10.0)) if p.iq_scaling == "unit_noise" else 1.0
         alpha = min(t / p.lock_time_constant_s, 1.0)
         out = self._out
-        _pll_step(
+        pll_step(
             self._st, float(in_phase), float(quadrature), t, float(predicted_phase_change_rad), bn, amp, alpha, out
         )
         o = out.tolist()

@@ -8,7 +8,7 @@ integration interval); no clock is read.
 
 Speed: all channels of one interval go through ONE compiled call (:func:`_track_epoch`): channel
 look-up, life cycle (start, timeout, gap restart), every input check and counter, and the filter steps
-(the IMM's :func:`imm_carrier.imm._imm_step`, the PLL's :func:`imm_carrier.pll._pll_step`). The
+(the IMM's :func:`imm_carrier.imm.imm_step`, the PLL's :func:`imm_carrier.pll.pll_step`). The
 channel states live in a 2-D array, one row per slot, and the (constellation, svid) -> slot map is a
 65536-entry table, so no Python object is created per channel.
 """
@@ -23,25 +23,23 @@ import numpy as np
 from numba import njit
 
 from gnss_common.clock_model import PROCESS_NOISE_FORMS
-from imm_carrier.imm import (
-    _O_MU1,
-    _O_MU2,
-    _O_OMEGA,
-    _O_P11,
-    _O_P22,
-    _O_PHI,
-    _O_PRIOR_PHI,
-    _OUT_LEN,
-    _ST_LOGMU,
-    _ST_P1,
-    _ST_P2,
-    _ST_SAT,
-    _ST_X1,
-    _ST_X2,
-    ImmParams,
-    _amp_sigma,
-    _imm_step,
-    _wrap,
+from imm_carrier.imm import ImmParams, amp_sigma, imm_step, wrap_phase
+from imm_carrier.layout import (
+    BATCH_COLUMNS,
+    COUNTER_KEYS,
+    IMM_OUT_LEN,
+    IMM_STATE_LEN,
+    KERNEL_CONFIG_LEN,
+    N_BATCH_COLUMNS,
+    PLL_OUT_LEN,
+    PLL_STATE_LEN,
+    BatchColumn,
+    Counter,
+    ImmOut,
+    ImmState,
+    KernelConfig,
+    PllOut,
+    PllState,
 )
 from imm_carrier.measurement_model import (
     CN0_MAX_DBHZ,
@@ -55,114 +53,18 @@ from imm_carrier.measurement_model import (
     CarrierPhaseEstimate,
     CorrelatorSample,
 )
-from imm_carrier.pll import _PLL_OUT_LEN, PllParams, _bandwidth_hz, _pll_step
+from imm_carrier.pll import PllParams, pll_step, scheduled_bandwidth_hz
 
 METHODS = ("imm", "pll")
 MAX_SVID = 255
 MAX_CONSTELLATION = 255
 
-COUNTER_KEYS = (
-    "processed",
-    "channels_started",
-    "channels_dropped_timeout",
-    "channels_restarted_gap",
-    "rejected_nonfinite_iq",
-    "rejected_integration_time",
-    "rejected_cn0_range",
-    "cn0_missing_used_last",
-    "rejected_cn0_missing",
-    "rejected_predicted_phase",
-    "rejected_stamp_backwards",
-    "rejected_invalid_svid",
-    "rejected_duplicate_channel",
-    "slips_detected",
-    "channels_restarted_nonfinite",
-    "rejected_iq_magnitude",
-    "locked_suppressed_invalid",
-    "channels_restarted_diverged",
-    "channels_restarted_stamp_jump",
-)
-"""Keys of CarrierTracker.counters (their order is the compiled kernel's counter index)."""
-(
-    _K_PROCESSED,
-    _K_STARTED,
-    _K_DROPPED,
-    _K_RESTARTED_GAP,
-    _K_NONFINITE_IQ,
-    _K_INTEGRATION_TIME,
-    _K_CN0_RANGE,
-    _K_CN0_USED_LAST,
-    _K_CN0_MISSING,
-    _K_PREDICTED_PHASE,
-    _K_STAMP_BACKWARDS,
-    _K_INVALID_SVID,
-    _K_DUPLICATE,
-    _K_SLIPS,
-    _K_RESTARTED_NONFINITE,
-    _K_IQ_MAGNITUDE,
-    _K_LOCK_SUPPRESSED,
-    _K_RESTARTED_DIVERGED,
-    _K_RESTARTED_STAMP_JUMP,
-) = range(len(COUNTER_KEYS))
 _REJECTED_INDICES = np.array([i for i, k in enumerate(COUNTER_KEYS) if k.startswith("rejected_")])
 
-BATCH_COLUMNS = (
-    "constellation",
-    "svid",
-    "phase_rad",
-    "phase_std_rad",
-    "frequency_hz",
-    "frequency_std_hz",
-    "data_bit",
-    "data_bit_probability",
-    "mode_probability_plus",
-    "mode_probability_minus",
-    "locked",
-    "cycle_slips",
-)
-"""Columns of CarrierPhaseBatch.values, in order (the fields of rfi_msgs/CarrierPhase)."""
-(
-    _V_CONST,
-    _V_SVID,
-    _V_PHASE,
-    _V_PHASE_STD,
-    _V_FREQ,
-    _V_FREQ_STD,
-    _V_BIT,
-    _V_BIT_PROB,
-    _V_MU1,
-    _V_MU2,
-    _V_LOCKED,
-    _V_SLIPS,
-) = range(len(BATCH_COLUMNS))
-N_BATCH_COLUMNS = len(BATCH_COLUMNS)
-
 _M_IMM, _M_PLL = 0, 1
-# Layout of the kernel's float configuration vector.
-(
-    _C_QF,
-    _C_QG,
-    _C_FORM,
-    _C_UNIT_NOISE,
-    _C_P_BIT,
-    _C_BIT_PERIOD,
-    _C_INIT_PHASE_STD,
-    _C_INIT_FREQ_STD,
-    _C_LOCK_STD,
-    _C_SLIP_THR,
-    _C_MAX_GAP,
-    _C_BW_START,
-    _C_BW_END,
-    _C_BW_DURATION,
-    _C_LOCK_TC,
-    _C_LOCK_THR,
-    _C_T_MIN,
-    _C_T_MAX,
-    _C_IQ_RATIO,
-) = range(19)
-_CFG_LEN = 19
-_STATE_WIDTH = 16  # >= the IMM's 13 and the PLL's 8 state slots
+_STATE_WIDTH = 16  # >= IMM_STATE_LEN and PLL_STATE_LEN
 _KEY_TABLE_SIZE = (MAX_CONSTELLATION + 1) * 256
+assert _STATE_WIDTH >= max(IMM_STATE_LEN, PLL_STATE_LEN)
 
 
 @dataclass(frozen=True)
@@ -245,28 +147,29 @@ class CarrierPhaseBatch:
     @property
     def locked(self) -> np.ndarray:
         """Lock flags, bool, shape (n,)."""
-        return self.values[:, _V_LOCKED] > 0.5
+        return self.values[:, BatchColumn.LOCKED] > 0.5
 
     def to_estimates(self) -> tuple[CarrierPhaseEstimate, ...]:
         """The rows as CarrierPhaseEstimate dataclasses (convenient, not for the hot path)."""
         out = []
         for r in self.values.tolist():
-            modes = (r[_V_MU1], r[_V_MU2]) if self.method == METHOD_IMM else ()
+            modes = ((r[BatchColumn.MODE_PROBABILITY_PLUS], r[BatchColumn.MODE_PROBABILITY_MINUS])
+                     if self.method == METHOD_IMM else ())
             out.append(
                 CarrierPhaseEstimate(
                     stamp_ns=self.stamp_ns,
-                    constellation=int(r[_V_CONST]),
-                    svid=int(r[_V_SVID]),
+                    constellation=int(r[BatchColumn.CONSTELLATION]),
+                    svid=int(r[BatchColumn.SVID]),
                     method=self.method,
-                    phase_rad=r[_V_PHASE],
-                    phase_std_rad=r[_V_PHASE_STD],
-                    frequency_hz=r[_V_FREQ],
-                    frequency_std_hz=r[_V_FREQ_STD],
-                    data_bit=int(r[_V_BIT]),
-                    data_bit_probability=r[_V_BIT_PROB],
+                    phase_rad=r[BatchColumn.PHASE_RAD],
+                    phase_std_rad=r[BatchColumn.PHASE_STD_RAD],
+                    frequency_hz=r[BatchColumn.FREQUENCY_HZ],
+                    frequency_std_hz=r[BatchColumn.FREQUENCY_STD_HZ],
+                    data_bit=int(r[BatchColumn.DATA_BIT]),
+                    data_bit_probability=r[BatchColumn.DATA_BIT_PROBABILITY],
                     mode_probabilities=modes,
-                    locked=r[_V_LOCKED] > 0.5,
-                    cycle_slips=int(r[_V_SLIPS]),
+                    locked=r[BatchColumn.LOCKED] > 0.5,
+                    cycle_slips=int(r[BatchColumn.CYCLE_SLIPS]),
                 )
             )
         return tuple(out)
@@ -294,41 +197,41 @@ def _sane(phase_rad, frequency_hz, t_s):
 def _init_channel(method, st, zi, zq, dphi, cfg, row):
     """Start a channel from its first correlator (IMM: initialize_from_correlator; PLL: the same) and
     write its first, unlocked estimate into row."""
-    sat = _wrap(dphi)
+    sat = wrap_phase(dphi)
     phase = math.atan2(zq, zi) - sat
     for m in range(st.shape[0]):
         st[m] = 0.0
-    row[_V_PHASE] = phase
-    row[_V_FREQ] = 0.0
-    row[_V_BIT] = 0.0
-    row[_V_BIT_PROB] = 0.5
-    row[_V_LOCKED] = 0.0
-    row[_V_SLIPS] = 0.0
+    row[BatchColumn.PHASE_RAD] = phase
+    row[BatchColumn.FREQUENCY_HZ] = 0.0
+    row[BatchColumn.DATA_BIT] = 0.0
+    row[BatchColumn.DATA_BIT_PROBABILITY] = 0.5
+    row[BatchColumn.LOCKED] = 0.0
+    row[BatchColumn.CYCLE_SLIPS] = 0.0
     if method == _M_IMM:
-        pa = cfg[_C_INIT_PHASE_STD] ** 2
-        pc = (2.0 * math.pi * cfg[_C_INIT_FREQ_STD]) ** 2
-        st[_ST_X1] = phase
-        st[_ST_X2] = phase
-        st[_ST_P1] = pa
-        st[_ST_P1 + 2] = pc
-        st[_ST_P2] = pa
-        st[_ST_P2 + 2] = pc
-        st[_ST_LOGMU] = math.log(0.5)
-        st[_ST_LOGMU + 1] = math.log(0.5)
-        st[_ST_SAT] = sat
-        row[_V_PHASE_STD] = cfg[_C_INIT_PHASE_STD]
-        row[_V_FREQ_STD] = cfg[_C_INIT_FREQ_STD]
-        row[_V_MU1] = 0.5
-        row[_V_MU2] = 0.5
+        pa = cfg[KernelConfig.INIT_PHASE_STD] ** 2
+        pc = (2.0 * math.pi * cfg[KernelConfig.INIT_FREQ_STD]) ** 2
+        st[ImmState.X1] = phase
+        st[ImmState.X2] = phase
+        st[ImmState.P1] = pa
+        st[ImmState.P1 + 2] = pc
+        st[ImmState.P2] = pa
+        st[ImmState.P2 + 2] = pc
+        st[ImmState.LOGMU] = math.log(0.5)
+        st[ImmState.LOGMU + 1] = math.log(0.5)
+        st[ImmState.SAT] = sat
+        row[BatchColumn.PHASE_STD_RAD] = cfg[KernelConfig.INIT_PHASE_STD]
+        row[BatchColumn.FREQUENCY_STD_HZ] = cfg[KernelConfig.INIT_FREQ_STD]
+        row[BatchColumn.MODE_PROBABILITY_PLUS] = 0.5
+        row[BatchColumn.MODE_PROBABILITY_MINUS] = 0.5
     else:
-        st[0] = phase
-        st[4] = sat
-        st[6] = 1.0
-        st[7] = 1.0
-        row[_V_PHASE_STD] = math.nan
-        row[_V_FREQ_STD] = math.nan
-        row[_V_MU1] = math.nan
-        row[_V_MU2] = math.nan
+        st[PllState.NCO_PHASE] = phase
+        st[PllState.SAT_PHASE] = sat
+        st[PllState.EMA_DIFF] = 1.0
+        st[PllState.EMA_SUM] = 1.0
+        row[BatchColumn.PHASE_STD_RAD] = math.nan
+        row[BatchColumn.FREQUENCY_STD_HZ] = math.nan
+        row[BatchColumn.MODE_PROBABILITY_PLUS] = math.nan
+        row[BatchColumn.MODE_PROBABILITY_MINUS] = math.nan
 
 
 @njit(cache=True)
@@ -366,63 +269,63 @@ def _track_epoch(
         if key >= 0 and stamp_ns - last_stamp[s] > timeout_ns:
             slot_of_key[key] = -1
             key_of_slot[s] = -1
-            counters[_K_DROPPED] += 1
-    imm_out = np.empty(_OUT_LEN)
-    pll_out = np.empty(_PLL_OUT_LEN)
-    unit_noise = cfg[_C_UNIT_NOISE] > 0.5
+            counters[Counter.CHANNELS_DROPPED_TIMEOUT] += 1
+    imm_out = np.empty(IMM_OUT_LEN)
+    pll_out = np.empty(PLL_OUT_LEN)
+    unit_noise = cfg[KernelConfig.UNIT_NOISE] > 0.5
     n_out = 0
     for k in range(const.shape[0]):
         c = const[k]
         sv = svid[k]
         if c < 0 or c > MAX_CONSTELLATION or sv <= 0 or sv > MAX_SVID:
-            counters[_K_INVALID_SVID] += 1
+            counters[Counter.REJECTED_INVALID_SVID] += 1
             continue
         key = c * 256 + sv
         if seen[key] == call_id:
-            counters[_K_DUPLICATE] += 1
+            counters[Counter.REJECTED_DUPLICATE_CHANNEL] += 1
             continue
         seen[key] = call_id
         tk = t[k]
-        if not (cfg[_C_T_MIN] <= tk <= cfg[_C_T_MAX]):  # NaN fails too
-            counters[_K_INTEGRATION_TIME] += 1
+        if not (cfg[KernelConfig.T_MIN] <= tk <= cfg[KernelConfig.T_MAX]):  # NaN fails too
+            counters[Counter.REJECTED_INTEGRATION_TIME] += 1
             continue
         i_k = zi[k]
         q_k = zq[k]
         if not (abs(i_k) < math.inf and abs(q_k) < math.inf):
-            counters[_K_NONFINITE_IQ] += 1
+            counters[Counter.REJECTED_NONFINITE_IQ] += 1
             continue
         d_k = dphi[k]
         if not abs(d_k) <= 2.0 * math.pi * MAX_PREDICTED_DOPPLER_HZ * tk:  # absurd or not finite
-            counters[_K_PREDICTED_PHASE] += 1
+            counters[Counter.REJECTED_PREDICTED_PHASE] += 1
             continue
         slot = slot_of_key[key]
         c0 = cn0[k]
         if c0 != c0:
             if slot < 0:
-                counters[_K_CN0_MISSING] += 1
+                counters[Counter.REJECTED_CN0_MISSING] += 1
                 continue
             c0 = last_cn0[slot]
-            counters[_K_CN0_USED_LAST] += 1
+            counters[Counter.CN0_MISSING_USED_LAST] += 1
         elif not (CN0_MIN_DBHZ <= c0 <= CN0_MAX_DBHZ):
-            counters[_K_CN0_RANGE] += 1
+            counters[Counter.REJECTED_CN0_RANGE] += 1
             continue
-        amp, sig = _amp_sigma(c0, tk, unit_noise)
-        if math.hypot(i_k, q_k) > cfg[_C_IQ_RATIO] * math.sqrt(amp * amp + 2.0 * sig * sig):
-            counters[_K_IQ_MAGNITUDE] += 1
+        amp, sig = amp_sigma(c0, tk, unit_noise)
+        if math.hypot(i_k, q_k) > cfg[KernelConfig.IQ_RATIO] * math.sqrt(amp * amp + 2.0 * sig * sig):
+            counters[Counter.REJECTED_IQ_MAGNITUDE] += 1
             continue
         if slot >= 0 and stamp_ns <= last_stamp[slot]:
-            counters[_K_STAMP_BACKWARDS] += 1
+            counters[Counter.REJECTED_STAMP_BACKWARDS] += 1
             continue
-        if slot >= 0 and float(stamp_ns - last_stamp[slot]) > cfg[_C_MAX_GAP] * tk * 1e9:
+        if slot >= 0 and float(stamp_ns - last_stamp[slot]) > cfg[KernelConfig.MAX_GAP] * tk * 1e9:
             slot_of_key[key] = -1
             key_of_slot[slot] = -1
-            counters[_K_RESTARTED_GAP] += 1
+            counters[Counter.CHANNELS_RESTARTED_GAP] += 1
             slot = -1
-        counters[_K_PROCESSED] += 1
+        counters[Counter.PROCESSED] += 1
         row = values[n_out]
         n_out += 1
-        row[_V_CONST] = c
-        row[_V_SVID] = sv
+        row[BatchColumn.CONSTELLATION] = c
+        row[BatchColumn.SVID] = sv
         if slot < 0:
             for s in range(key_of_slot.shape[0]):  # the caller guarantees a free slot
                 if key_of_slot[s] < 0:
@@ -435,80 +338,83 @@ def _track_epoch(
             slips[slot] = 0
             was_locked[slot] = False
             _init_channel(method, state[slot], i_k, q_k, d_k, cfg, row)
-            counters[_K_STARTED] += 1
+            counters[Counter.CHANNELS_STARTED] += 1
             continue
         last_stamp[slot] = stamp_ns
         last_cn0[slot] = c0
         st = state[slot]
         if method == _M_IMM:
-            p = _transition_probability(stamp_ns, tk, cfg[_C_P_BIT], cfg[_C_BIT_PERIOD])
-            _imm_step(
-                st, i_k, q_k, amp, sig, tk, d_k, p, math.nan, cfg[_C_QF], cfg[_C_QG], int(cfg[_C_FORM]), imm_out
+            p = _transition_probability(stamp_ns, tk, cfg[KernelConfig.P_BIT], cfg[KernelConfig.BIT_PERIOD])
+            imm_step(
+                st, i_k, q_k, amp, sig, tk, d_k, p, math.nan, cfg[KernelConfig.QF], cfg[KernelConfig.QG],
+                int(cfg[KernelConfig.FORM]), imm_out
             )
-            phase = imm_out[_O_PHI]
-            omega = imm_out[_O_OMEGA]
-            std = math.sqrt(max(imm_out[_O_P11], 0.0))
-            freq_std = math.sqrt(max(imm_out[_O_P22], 0.0)) / (2.0 * math.pi)
-            mu1 = imm_out[_O_MU1]
-            mu2 = imm_out[_O_MU2]
+            phase = imm_out[ImmOut.PHI]
+            omega = imm_out[ImmOut.OMEGA]
+            std = math.sqrt(max(imm_out[ImmOut.P11], 0.0))
+            freq_std = math.sqrt(max(imm_out[ImmOut.P22], 0.0)) / (2.0 * math.pi)
+            mu1 = imm_out[ImmOut.MU1]
+            mu2 = imm_out[ImmOut.MU2]
             finite = abs(phase) < math.inf and abs(omega) < math.inf and std < math.inf and freq_std < math.inf
-            if finite and abs(phase - imm_out[_O_PRIOR_PHI]) > cfg[_C_SLIP_THR]:
+            if finite and abs(phase - imm_out[ImmOut.PRIOR_PHI]) > cfg[KernelConfig.SLIP_THR]:
                 slips[slot] += 1
-                counters[_K_SLIPS] += 1
+                counters[Counter.SLIPS_DETECTED] += 1
             freq = omega / (2.0 * math.pi)
             # A covariance that collapsed to 0 (cancellation) or a state beyond any trackable value: diverged.
             valid = finite and std > 0.0 and freq_std > 0.0 and _sane(phase, freq, tk)
-            locked = finite and std < cfg[_C_LOCK_STD]
+            locked = finite and std < cfg[KernelConfig.LOCK_STD]
             if locked and not valid:  # final check at the output: locked only if valid
                 locked = False
-                counters[_K_LOCK_SUPPRESSED] += 1
-            row[_V_PHASE] = phase
-            row[_V_PHASE_STD] = std
-            row[_V_FREQ] = freq
-            row[_V_FREQ_STD] = freq_std
-            row[_V_BIT] = 1.0 if mu1 > mu2 else (-1.0 if mu2 > mu1 else 0.0)
-            row[_V_BIT_PROB] = max(mu1, mu2)
-            row[_V_MU1] = mu1
-            row[_V_MU2] = mu2
+                counters[Counter.LOCKED_SUPPRESSED_INVALID] += 1
+            row[BatchColumn.PHASE_RAD] = phase
+            row[BatchColumn.PHASE_STD_RAD] = std
+            row[BatchColumn.FREQUENCY_HZ] = freq
+            row[BatchColumn.FREQUENCY_STD_HZ] = freq_std
+            row[BatchColumn.DATA_BIT] = 1.0 if mu1 > mu2 else (-1.0 if mu2 > mu1 else 0.0)
+            row[BatchColumn.DATA_BIT_PROBABILITY] = max(mu1, mu2)
+            row[BatchColumn.MODE_PROBABILITY_PLUS] = mu1
+            row[BatchColumn.MODE_PROBABILITY_MINUS] = mu2
         else:
-            bn = _bandwidth_hz(st[5], cfg[_C_BW_START], cfg[_C_BW_END], cfg[_C_BW_DURATION])
-            alpha = min(tk / cfg[_C_LOCK_TC], 1.0)
-            _pll_step(st, i_k, q_k, tk, d_k, bn, amp, alpha, pll_out)
-            phase = pll_out[0]
-            freq = pll_out[1] / (2.0 * math.pi)
-            finite = abs(phase) < math.inf and abs(pll_out[1]) < math.inf
-            finite = finite and abs(pll_out[4]) < math.inf and abs(st[7]) < math.inf  # lock averages too
+            bn = scheduled_bandwidth_hz(st[PllState.ELAPSED], cfg[KernelConfig.BW_START], cfg[KernelConfig.BW_END],
+                                        cfg[KernelConfig.BW_DURATION])
+            alpha = min(tk / cfg[KernelConfig.LOCK_TC], 1.0)
+            pll_step(st, i_k, q_k, tk, d_k, bn, amp, alpha, pll_out)
+            phase = pll_out[PllOut.PHASE]
+            freq = pll_out[PllOut.FREQUENCY] / (2.0 * math.pi)
+            finite = abs(phase) < math.inf and abs(pll_out[PllOut.FREQUENCY]) < math.inf
+            # the lock averages too
+            finite = finite and abs(pll_out[PllOut.LOCK_METRIC]) < math.inf and abs(st[PllState.EMA_SUM]) < math.inf
             valid = finite and _sane(phase, freq, tk)  # the PLL has no std (NaN by definition)
-            locked = finite and pll_out[4] > cfg[_C_LOCK_THR]
+            locked = finite and pll_out[PllOut.LOCK_METRIC] > cfg[KernelConfig.LOCK_THR]
             if locked and not valid:  # final check at the output: locked only if valid
                 locked = False
-                counters[_K_LOCK_SUPPRESSED] += 1
+                counters[Counter.LOCKED_SUPPRESSED_INVALID] += 1
             if was_locked[slot] and not locked:
                 slips[slot] += 1
-                counters[_K_SLIPS] += 1
+                counters[Counter.SLIPS_DETECTED] += 1
             was_locked[slot] = locked
             # Costas loop: the bit is the sign of the rotated prompt I (phase error within +-pi/2).
-            th = st[4] + phase
+            th = st[PllState.SAT_PHASE] + phase
             i_rot = i_k * math.cos(th) + q_k * math.sin(th)
             bit = 1.0 if i_rot > 0.0 else (-1.0 if i_rot < 0.0 else 0.0)
-            row[_V_PHASE] = phase
-            row[_V_PHASE_STD] = math.nan
-            row[_V_FREQ] = freq
-            row[_V_FREQ_STD] = math.nan
-            row[_V_BIT] = bit
-            row[_V_BIT_PROB] = 0.5 if bit == 0.0 else 1.0
-            row[_V_MU1] = math.nan
-            row[_V_MU2] = math.nan
-        row[_V_LOCKED] = 1.0 if locked else 0.0
-        row[_V_SLIPS] = slips[slot]
+            row[BatchColumn.PHASE_RAD] = phase
+            row[BatchColumn.PHASE_STD_RAD] = math.nan
+            row[BatchColumn.FREQUENCY_HZ] = freq
+            row[BatchColumn.FREQUENCY_STD_HZ] = math.nan
+            row[BatchColumn.DATA_BIT] = bit
+            row[BatchColumn.DATA_BIT_PROBABILITY] = 0.5 if bit == 0.0 else 1.0
+            row[BatchColumn.MODE_PROBABILITY_PLUS] = math.nan
+            row[BatchColumn.MODE_PROBABILITY_MINUS] = math.nan
+        row[BatchColumn.LOCKED] = 1.0 if locked else 0.0
+        row[BatchColumn.CYCLE_SLIPS] = slips[slot]
         if not finite:  # the filter overflowed: restart on the next sample (answer published unlocked)
             slot_of_key[key] = -1
             key_of_slot[slot] = -1
-            counters[_K_RESTARTED_NONFINITE] += 1
+            counters[Counter.CHANNELS_RESTARTED_NONFINITE] += 1
         elif not valid:  # numerically wild (collapsed covariance, aliased frequency, runaway phase): restart
             slot_of_key[key] = -1
             key_of_slot[slot] = -1
-            counters[_K_RESTARTED_DIVERGED] += 1
+            counters[Counter.CHANNELS_RESTARTED_DIVERGED] += 1
     return n_out
 
 
@@ -562,26 +468,26 @@ class CarrierTracker:
         self._timeout_ns = int(params.channel_timeout_s * 1e9)
         imm, pll = params.imm, params.pll
         q_f, q_g = imm.q_phase
-        cfg = np.zeros(_CFG_LEN)
-        cfg[_C_QF], cfg[_C_QG] = q_f, q_g
-        cfg[_C_FORM] = PROCESS_NOISE_FORMS.index(imm.process_noise_form)
+        cfg = np.zeros(KERNEL_CONFIG_LEN)
+        cfg[KernelConfig.QF], cfg[KernelConfig.QG] = q_f, q_g
+        cfg[KernelConfig.FORM] = PROCESS_NOISE_FORMS.index(imm.process_noise_form)
         unit_noise = imm.iq_scaling == "unit_noise" if params.method == "imm" else pll.iq_scaling == "unit_noise"
-        cfg[_C_UNIT_NOISE] = 1.0 if unit_noise else 0.0
-        cfg[_C_P_BIT] = imm.bit_transition_probability
-        cfg[_C_BIT_PERIOD] = params.bit_period_s
-        cfg[_C_INIT_PHASE_STD] = imm.initial_phase_std_rad
-        cfg[_C_INIT_FREQ_STD] = imm.initial_frequency_std_hz
-        cfg[_C_LOCK_STD] = imm.lock_phase_std_max_rad
-        cfg[_C_SLIP_THR] = imm.slip_jump_threshold_rad
-        cfg[_C_MAX_GAP] = params.max_gap_intervals
-        cfg[_C_BW_START] = pll.start_bandwidth_hz
-        cfg[_C_BW_END] = pll.end_bandwidth_hz
-        cfg[_C_BW_DURATION] = pll.tightening_duration_s
-        cfg[_C_LOCK_TC] = pll.lock_time_constant_s
-        cfg[_C_LOCK_THR] = pll.lock_threshold
-        cfg[_C_T_MIN] = params.min_integration_time_s
-        cfg[_C_T_MAX] = params.max_integration_time_s
-        cfg[_C_IQ_RATIO] = params.max_iq_magnitude_ratio
+        cfg[KernelConfig.UNIT_NOISE] = 1.0 if unit_noise else 0.0
+        cfg[KernelConfig.P_BIT] = imm.bit_transition_probability
+        cfg[KernelConfig.BIT_PERIOD] = params.bit_period_s
+        cfg[KernelConfig.INIT_PHASE_STD] = imm.initial_phase_std_rad
+        cfg[KernelConfig.INIT_FREQ_STD] = imm.initial_frequency_std_hz
+        cfg[KernelConfig.LOCK_STD] = imm.lock_phase_std_max_rad
+        cfg[KernelConfig.SLIP_THR] = imm.slip_jump_threshold_rad
+        cfg[KernelConfig.MAX_GAP] = params.max_gap_intervals
+        cfg[KernelConfig.BW_START] = pll.start_bandwidth_hz
+        cfg[KernelConfig.BW_END] = pll.end_bandwidth_hz
+        cfg[KernelConfig.BW_DURATION] = pll.tightening_duration_s
+        cfg[KernelConfig.LOCK_TC] = pll.lock_time_constant_s
+        cfg[KernelConfig.LOCK_THR] = pll.lock_threshold
+        cfg[KernelConfig.T_MIN] = params.min_integration_time_s
+        cfg[KernelConfig.T_MAX] = params.max_integration_time_s
+        cfg[KernelConfig.IQ_RATIO] = params.max_iq_magnitude_ratio
         self._cfg = cfg
         self._slot_of_key = np.full(_KEY_TABLE_SIZE, -1, dtype=np.int64)
         self._seen = np.zeros(_KEY_TABLE_SIZE, dtype=np.int64)
@@ -631,7 +537,7 @@ class CarrierTracker:
         n = int(np.count_nonzero(live))
         self._slot_of_key[self._key_of_slot[live]] = -1
         self._key_of_slot[live] = -1
-        self._counters[_K_RESTARTED_STAMP_JUMP] += n
+        self._counters[Counter.CHANNELS_RESTARTED_STAMP_JUMP] += n
         return n
 
     @property

@@ -207,7 +207,7 @@ def _one_bit_correlators(n, flip_at, cn0, t, seed):
 
 
 def test_sign_flipped_correlator_inside_a_bit_at_high_cn0_does_not_crash():
-    # Regression (commit 6ecd153): T = 1 ms, 60 dB-Hz, bit change forbidden inside the bit (p = 0). The
+    # Regression: T = 1 ms, 60 dB-Hz, bit change forbidden inside the bit (p = 0). The
     # bit -1 mode's probability underflows to exactly 0; one sign-flipped correlator then favours that
     # mode by 2 (2 T C/N0) = 4000 in log-likelihood, and normalising 0 * 1 + 1 * exp(-4000) divided by zero.
     t, cn0, n = 0.001, 60.0, 60
@@ -230,8 +230,8 @@ def test_sign_flipped_correlator_inside_a_bit_at_high_cn0_does_not_crash():
 def test_bit_change_with_zero_transition_probability_stays_finite_and_consistent():
     # bit_transition_probability = 0 (a pilot-signal setting) on a signal whose bit does change: the model is
     # wrong, so the filter is not expected to track after the change (it loses the phase by several rad),
-    # but it must neither crash nor return NaN or probabilities outside [0, 1] (at commit 6ecd153 the first
-    # sample after the change raised ZeroDivisionError).
+    # but it must neither crash nor return NaN or probabilities outside [0, 1] (nor divide by zero on the
+    # first sample after the change).
     t, cn0, n = 0.001, 60.0, 400
     theta, zi, zq = _one_bit_correlators(n, slice(100, None), cn0, t, seed=6)
     f = ImmCarrierFilter(ImmParams(bit_transition_probability=0.0))

@@ -60,12 +60,10 @@ Example
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any
 
 import numpy as np
 from numba import njit
@@ -76,7 +74,6 @@ from rfi_monitor.classifier import (
     CW,
     NONE,
     UNKNOWN,
-    ClassifierParams,
     block_features,
     classify,
     smooth_template,
@@ -88,49 +85,20 @@ from rfi_monitor.if_measurement import (
     STATUS_NON_FINITE,
     STATUS_OK,
 )
-from rfi_monitor.sweep_analysis import SweepAnalysis, SweepAnalysisParams, analyse
-from rfi_monitor.sweep_period import J_LOCKED, S_PERIOD, SweepPeriodParams
-from rfi_monitor.tracker import (
+from rfi_monitor.params import RfiMonitorParams
+from rfi_monitor.sweep_analysis import SweepAnalysis, analyse
+from rfi_monitor.sweep_period import J_LOCKED, S_PERIOD
+from rfi_monitor.tracker import MAX_ABS_RATE, lattice_init, track_block
+from rfi_monitor.tracker_state import (
     DEC_HISTORY,
-    K_FITAT,
-    K_LAST_START,
-    K_LATSRC,
-    K_MISSES,
-    K_NCONS,
-    K_NDEC,
-    K_NFIT,
-    K_NRESETS,
-    K_NSUSP,
-    K_TRACK,
     LAT_COARSE,
-    M_F0,
-    M_FLOOR,
-    M_L11,
-    M_L12,
-    M_L22,
-    M_NEXT,
-    M_TLAT,
-    MAX_ABS_RATE,
-    MAX_REFINE_WINDOW,
-    N_MPAR,
-    P_CHIRP_CORR,
-    P_CONFIRM,
-    P_DOMAIN,
-    P_LAT_DRIFT,
-    P_MAX_DF,
-    P_MIN_ABS,
-    P_NOISE_COMP,
-    P_PHASE_GAIN,
-    P_POW_LAMBDA,
-    P_REFINE_W,
-    P_RESET,
-    P_RESET_CROSS,
-    P_WRAP,
-    TrackerState,
-    lattice_init,
-    track_block,
+    MonitorFloat,
+    MonitorInt,
+    MonitorParam,
+    new_trace_buffers,
+    new_tracker_state,
 )
-from rfi_monitor.tracking_filters import F_DF, F_F, F_P11, F_P22, MODE_AFKF, TrackingFilterParams
+from rfi_monitor.tracking_filters import F_DF, F_F, F_P11, F_P22
 
 
 @njit(cache=True)
@@ -153,113 +121,6 @@ def _count_bad_samples(v: np.ndarray, step: int, full_scale: float) -> tuple[int
             n_bad += not fin
             n_sat += fin and a >= full_scale
     return n_bad, n_sat
-
-
-@dataclass(frozen=True)
-class RfiMonitorParams:
-    """Validated parameters of the monitor.
-
-    Attributes:
-        tracker: TrackingFilterParams (default: the proposed adaptive fading KF).
-        sweep: SweepPeriodParams (default here: with lattice voting, ours; ``paper_method()``
-            switches it off).
-        classifier: ClassifierParams.
-        chirp_correction: use eq. 10 (real samples) with the tracker's sweep estimate.
-        reset_at_sweep_start: reset the filter at estimated sweep starts (eq. 21-22).
-        min_abs_ratio: near-zero guard, |x_n| <= ratio * running RMS rejects a sample, >= 0.
-        domain_margin: arccos domain margin, >= 0.
-        power_time_constant: samples of the running RMS used by the guard, >= 1.
-        phase_gain: gain of the sweep-start lattice phase correction, (0, 1].
-        noise_floor_power: fixed noise power (sample units^2); 0: learn it (see module docstring).
-        calibration_blocks: blocks used to learn the noise floor and shape, >= 1.
-        signal_power_dbm: nominal GNSS signal power S for J/S, dBm (Kang et al.: -130).
-        noise_density_dbm_per_mhz: nominal noise density for J/S, dBm/MHz (Kang et al.: -114).
-        noise_bandwidth_hz: bandwidth of the nominal noise power, Hz; 0: the sampled band.
-        max_invalid_fraction: a block with more non-finite or saturated samples than this
-            fraction is rejected (result valid=False, type UNKNOWN), in [0, 1].
-        min_block_samples: shorter blocks raise ValueError (>= the classifier's nfft).
-        refine_window: half-window W (samples) of the sweep-start step fit that refines the reset
-            lattice (ours, tracker module docstring), 0..MAX_REFINE_WINDOW; 0 runs the paper's
-            lattice (LPD peaks only).
-        lattice_period_drift: random walk of the sweep period per sweep, relative, of the
-            step-fit lattice filter (ours; tracker module docstring), in [0, 0.01]. Larger: the
-            lattice follows a drifting sweep period faster, with more reset jitter.
-        noise_compensation: divide the real three-sample ratio by kappa = 1 - N / P (running power
-            P, calibrated noise floor N), which removes eq. 8's bias towards fs/4 at moderate J/N
-            (ours; if_measurement module docstring). No effect on complex samples or before the
-            noise floor is known.
-        reset_cross_covariance: at a sweep reset keep the exact covariance of eq. 21's linear map
-            instead of eq. 22's uncorrelated P(1,1) (ours; tracking_filters.kf_sweep_reset).
-        confirm_fits: tracking mode (ours; tracker module docstring): after this many consecutive
-            successful sweep-start fits the lattice is confirmed and the LPD / AR(10) / peak pass is
-            suspended until the lattice drops (MAX_MISSES failed fits), then resumed from its initial
-            state; 0: the period search always runs (the paper). Needs refine_window > 0, >= 0.
-        analysis: SweepAnalysisParams of the block-level periodicity detector (ours).
-    """
-
-    tracker: TrackingFilterParams = field(default_factory=lambda: TrackingFilterParams(mode=MODE_AFKF))
-    sweep: SweepPeriodParams = field(default_factory=lambda: SweepPeriodParams(lattice_voting=True))
-    classifier: ClassifierParams = field(default_factory=ClassifierParams)
-    chirp_correction: bool = True
-    reset_at_sweep_start: bool = True
-    min_abs_ratio: float = 0.02
-    domain_margin: float = 0.05
-    power_time_constant: float = 1024.0
-    phase_gain: float = 0.3
-    noise_floor_power: float = 0.0
-    calibration_blocks: int = 5
-    signal_power_dbm: float = -130.0
-    noise_density_dbm_per_mhz: float = -114.0
-    noise_bandwidth_hz: float = 0.0
-    max_invalid_fraction: float = 0.05
-    min_block_samples: int = 1024
-    refine_window: int = 24
-    lattice_period_drift: float = 1e-5
-    noise_compensation: bool = True
-    reset_cross_covariance: bool = True
-    confirm_fits: int = 4
-    analysis: SweepAnalysisParams = field(default_factory=SweepAnalysisParams)
-
-    def __post_init__(self) -> None:
-        for name in ("min_abs_ratio", "domain_margin", "noise_floor_power", "noise_bandwidth_hz"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0):
-                raise ValueError(f"{name} must be finite and >= 0, got {v}")
-        if not self.power_time_constant >= 1:
-            raise ValueError("power_time_constant must be >= 1")
-        if not 0 < self.phase_gain <= 1:
-            raise ValueError("phase_gain must be in (0, 1]")
-        if int(self.calibration_blocks) < 1:
-            raise ValueError("calibration_blocks must be >= 1")
-        for name in ("signal_power_dbm", "noise_density_dbm_per_mhz"):
-            if not math.isfinite(getattr(self, name)):
-                raise ValueError(f"{name} must be finite")
-        if not 0 <= self.max_invalid_fraction <= 1:
-            raise ValueError("max_invalid_fraction must be in [0, 1]")
-        if self.min_block_samples < self.classifier.nfft:
-            raise ValueError("min_block_samples must be >= classifier.nfft")
-        if not 0 <= int(self.refine_window) <= MAX_REFINE_WINDOW:
-            raise ValueError(f"refine_window must be in 0..{MAX_REFINE_WINDOW}")
-        if int(self.confirm_fits) < 0:
-            raise ValueError("confirm_fits must be >= 0")
-        if not 0.0 <= self.lattice_period_drift <= 0.01:
-            raise ValueError("lattice_period_drift must be in [0, 0.01]")
-
-    @staticmethod
-    def paper_method(**kw: Any) -> RfiMonitorParams:
-        """Parameters that run Kang et al.'s method only (no step-fit lattice, no periodicity
-        detector, the period from successive peak intervals) at its best setting found: the AR
-        enhancement at decimation 2; keyword arguments set the other fields.
-
-        Decimation (benchmarks/rfi_monitor_paper.py, 1e12 Hz/s, median of 3-5 seeds, RMSE in
-        cycles/sample at J/N 11.2 / 21.2 / 31.2 dB): D = 1 (the paper's full rate) 0.018 / 0.030 /
-        0.027 (at high J/N the period locks in 2/3 seeds only); D = 2 0.019 / 0.017 / 0.012;
-        D = 4 0.027 / 0.012 / 0.010 with 4/5 locks at 11.2 dB (the peak times jitter by +-D/2).
-        """
-        base = RfiMonitorParams(**kw)
-        return dataclasses.replace(base, refine_window=0, analysis=SweepAnalysisParams(enabled=False),
-                                   noise_compensation=False, reset_cross_covariance=False, confirm_fits=0,
-                                   sweep=dataclasses.replace(base.sweep, lattice_voting=False, decimation=2))
 
 
 @dataclass(frozen=True)
@@ -387,7 +248,7 @@ class RfiMonitor:
             keep_calibration: keep the learned noise floor and shape (False: learn again).
         """
         fst, ist, ring = self.params.tracker.initial_state()
-        self._state = TrackerState(fst, ist, ring, sp.initial_state())
+        self._state = new_tracker_state(fst, ist, ring, sp.initial_state())
         self._analysis: SweepAnalysis | None = None
         self._stream_first: int | None = None
         self._next_index: int | None = None
@@ -408,9 +269,9 @@ class RfiMonitor:
         d = dict(self._block_counters)
         for code, name in _STATUS_NAMES.items():
             d[name] = int(self._state.counters[code])
-        d["sweep_resets"] = int(self._state.mist[K_NRESETS])
-        d["sweep_start_fits"] = int(self._state.mist[K_NFIT])
-        d["period_search_suspensions"] = int(self._state.mist[K_NSUSP])
+        d["sweep_resets"] = int(self._state.mist[MonitorInt.NRESETS])
+        d["sweep_start_fits"] = int(self._state.mist[MonitorInt.NFIT])
+        d["period_search_suspensions"] = int(self._state.mist[MonitorInt.NSUSP])
         return MappingProxyType(d)
 
     def _to_rel_hz(self, f_dig: float, fs: float, fif: float, cplx: bool) -> float:
@@ -494,11 +355,11 @@ class RfiMonitor:
         self._block_counters["non_finite_samples"] += n_bad
         self._block_counters["saturated_samples"] += n_sat
         # --- per-sample loop (always run: keeps the state continuous) ---------------------------
-        resets_before = int(self._state.mist[K_NRESETS])
+        resets_before = int(self._state.mist[MonitorInt.NRESETS])
         if self._stream_first is None:
             self._stream_first = int(first_sample_index)
         traces = self._run_chunks(xc, cplx, int(first_sample_index), float(sample_rate_hz), return_traces)
-        self._resets_in_block = int(self._state.mist[K_NRESETS]) - resets_before
+        self._resets_in_block = int(self._state.mist[MonitorInt.NRESETS]) - resets_before
         if n_bad + n_sat > self.params.max_invalid_fraction * n:
             return self._rejected(SATURATED, int(stamp_ns), float(sample_rate_hz), int(first_sample_index), n,
                                   traces)
@@ -530,7 +391,7 @@ class RfiMonitor:
             if (first + i1) % hop == 0:
                 # tracking mode (confirmed lattice): the detector has nothing to seed, and the
                 # identification takes the confirmed lattice as the periodicity evidence
-                if not (ap.skip_while_tracking and int(self._state.mist[K_TRACK]) == 1):
+                if not (ap.skip_while_tracking and int(self._state.mist[MonitorInt.TRACK]) == 1):
                     self._run_analysis(first + i1)
         if not store:
             return None
@@ -542,7 +403,7 @@ class RfiMonitor:
         """Periodicity detector on the decimated history; seeds the reset lattice when none runs."""
         st = self._state
         dec = int(self.params.sweep.decimation)
-        ndec = int(st.mist[K_NDEC])
+        ndec = int(st.mist[MonitorInt.NDEC])
         L = min(ndec, DEC_HISTORY)
         if L < self.params.analysis.min_window or self._stream_first is None:
             return
@@ -554,18 +415,19 @@ class RfiMonitor:
         a = analyse(w, dec, first_centre, at_index, self.params.analysis)
         self._analysis = a
         if (a.periodic and self.params.refine_window > 0 and self.params.reset_at_sweep_start
-                and st.mst[M_NEXT] < 0.0):
+                and st.mst[MonitorFloat.NEXT] < 0.0):
             per = a.period_samples
             k = math.ceil((at_index - a.start_index) / per)
-            st.mst[M_NEXT] = a.start_index + k * per
-            st.mst[M_TLAT] = per
-            st.mist[K_LATSRC] = LAT_COARSE
-            st.mst[M_L11], st.mst[M_L12], st.mst[M_L22] = lattice_init(per, float(self.params.refine_window))
-            st.mist[K_MISSES] = 0
-            st.mist[K_NCONS] = 0
-            st.mist[K_FITAT] = -1
-            if int(st.mist[K_NRESETS]) == 0:
-                st.mist[K_LAST_START] = int(math.floor(st.mst[M_NEXT] - per))
+            st.mst[MonitorFloat.NEXT] = a.start_index + k * per
+            st.mst[MonitorFloat.TLAT] = per
+            st.mist[MonitorInt.LATSRC] = LAT_COARSE
+            l11, l12, l22 = lattice_init(per, float(self.params.refine_window))
+            st.mst[MonitorFloat.L11], st.mst[MonitorFloat.L12], st.mst[MonitorFloat.L22] = l11, l12, l22
+            st.mist[MonitorInt.MISSES] = 0
+            st.mist[MonitorInt.NCONS] = 0
+            st.mist[MonitorInt.FITAT] = -1
+            if int(st.mist[MonitorInt.NRESETS]) == 0:
+                st.mist[MonitorInt.LAST_START] = int(math.floor(st.mst[MonitorFloat.NEXT] - per))
 
     def _packed_params(self, cplx: bool) -> tuple[np.ndarray, np.ndarray]:
         """Packed sweep-period and monitor parameters of the fused loop for real / complex input
@@ -576,41 +438,34 @@ class RfiMonitor:
         p = self.params
         band = 1.0 if cplx else 0.5
         spar = p.sweep.as_array(band)
-        mpar = np.zeros(N_MPAR)
-        mpar[P_CHIRP_CORR] = 1.0 if (p.chirp_correction and not cplx) else 0.0
-        mpar[P_MIN_ABS] = p.min_abs_ratio
-        mpar[P_DOMAIN] = p.domain_margin
-        mpar[P_POW_LAMBDA] = 1.0 / p.power_time_constant
-        mpar[P_RESET] = 1.0 if p.reset_at_sweep_start else 0.0
-        mpar[P_PHASE_GAIN] = p.phase_gain
-        mpar[P_WRAP] = 1.0 if cplx else 0.0
-        mpar[P_MAX_DF] = MAX_ABS_RATE
-        mpar[P_REFINE_W] = float(p.refine_window)
-        mpar[P_LAT_DRIFT] = p.lattice_period_drift
-        mpar[P_NOISE_COMP] = 1.0 if (p.noise_compensation and not cplx) else 0.0
-        mpar[P_RESET_CROSS] = 1.0 if p.reset_cross_covariance else 0.0
-        mpar[P_CONFIRM] = float(p.confirm_fits)
+        mpar = np.zeros(len(MonitorParam))
+        mpar[MonitorParam.CHIRP_CORR] = 1.0 if (p.chirp_correction and not cplx) else 0.0
+        mpar[MonitorParam.MIN_ABS] = p.min_abs_ratio
+        mpar[MonitorParam.DOMAIN] = p.domain_margin
+        mpar[MonitorParam.POW_LAMBDA] = 1.0 / p.power_time_constant
+        mpar[MonitorParam.RESET] = 1.0 if p.reset_at_sweep_start else 0.0
+        mpar[MonitorParam.PHASE_GAIN] = p.phase_gain
+        mpar[MonitorParam.WRAP] = 1.0 if cplx else 0.0
+        mpar[MonitorParam.MAX_DF] = MAX_ABS_RATE
+        mpar[MonitorParam.REFINE_W] = float(p.refine_window)
+        mpar[MonitorParam.LAT_DRIFT] = p.lattice_period_drift
+        mpar[MonitorParam.NOISE_COMP] = 1.0 if (p.noise_compensation and not cplx) else 0.0
+        mpar[MonitorParam.RESET_CROSS] = 1.0 if p.reset_cross_covariance else 0.0
+        mpar[MonitorParam.CONFIRM] = float(p.confirm_fits)
         self._packed[cplx] = (spar, mpar)
         return spar, mpar
 
     def _run_tracker(self, xc: np.ndarray, cplx: bool, first: int, store: bool) -> BlockTraces | None:
         st = self._state
         spar, mpar = self._packed_params(cplx)
-        n = xc.size
-        m = n if store else 1
-        o_idx = np.empty(m, dtype=np.int64)
-        o_z, o_f, o_df, o_p11, o_zar = (np.empty(m) for _ in range(5))
-        o_reset = np.empty(m, dtype=np.bool_)
+        out = new_trace_buffers(xc.size) if store else None
         xr = np.ascontiguousarray(xc.real, dtype=np.float64)
         xi = np.ascontiguousarray(xc.imag, dtype=np.float64) if cplx else xr
-        st.mst[M_FLOOR] = self._floor if math.isfinite(self._floor) else 0.0
-        k = track_block(xr, xi, cplx, first, self._tpar, spar, mpar, st.fst, st.ist, st.ring, st.sf, st.si,
-                        st.zhist, st.gam, st.pmat, st.hist, st.peaks, st.mst, st.mist, st.counters,
-                        st.dfring, st.zring, st.zdec, st.lev, st.pdev, store,
-                        o_idx, o_z, o_f, o_df, o_p11, o_zar, o_reset)
-        if not store:
+        st.mst[MonitorFloat.FLOOR] = self._floor if math.isfinite(self._floor) else 0.0
+        k = track_block(xr, xi, cplx, first, self._tpar, spar, mpar, st, out)
+        if out is None:
             return None
-        return BlockTraces(o_idx[:k], o_z[:k], o_f[:k], o_df[:k], o_p11[:k], o_zar[:k], o_reset[:k])
+        return BlockTraces(out.idx[:k], out.z[:k], out.f[:k], out.df[:k], out.p11[:k], out.zar[:k], out.reset[:k])
 
     def _rejected(self, reason: str, stamp_ns: int, fs: float, first: int, n: int,
                   traces: BlockTraces | None) -> JammerEstimate:
@@ -678,16 +533,16 @@ class RfiMonitor:
         # a chirp's swept band |df| T must explain the occupied band (a lock on noise peaks does not)
         band = 1.0 if cplx else 0.5
         per_s = float(st.sf[S_PERIOD])
-        lattice = float(st.mst[M_NEXT]) >= 0.0 and int(st.mist[K_LATSRC]) > 0
-        if lattice and float(st.mst[M_TLAT]) > 0:
-            per_s = float(st.mst[M_TLAT])
+        lattice = float(st.mst[MonitorFloat.NEXT]) >= 0.0 and int(st.mist[MonitorInt.LATSRC]) > 0
+        if lattice and float(st.mst[MonitorFloat.TLAT]) > 0:
+            per_s = float(st.mst[MonitorFloat.TLAT])
         swept = abs(df) * per_s if per_s > 0 else 0.0
         chirp_ok = (locked or lattice or self._resets_in_block > 0) and swept >= 0.5 * feat.occupancy * band
         an = self._analysis
         hop = max(1, int(round(p.analysis.hop_s * fs)))
         periodic = (p.analysis.enabled and an is not None and an.periodic
                     and an.sample_index >= first + xs.size - 2 * hop)
-        if int(st.mist[K_TRACK]) == 1:
+        if int(st.mist[MonitorInt.TRACK]) == 1:
             # tracking mode: confirm_fits significant sweep-start steps in a row at the lattice's
             # period are the periodicity evidence (the detector may not run then)
             chirp_ok = True
@@ -721,8 +576,8 @@ class RfiMonitor:
                 if locked:
                     per = per_s / fs
                     bw = abs(rate) * per
-                    if math.isfinite(st.mst[M_F0]):
-                        f0 = self._to_rel_hz(float(st.mst[M_F0]), fs, fif, cplx)
+                    if math.isfinite(st.mst[MonitorFloat.F0]):
+                        f0 = self._to_rel_hz(float(st.mst[MonitorFloat.F0]), fs, fif, cplx)
         if not math.isfinite(jn):
             jn = nan
         return JammerEstimate(stamp_ns, int(jtype), float(conf), float(jn), float(js), freq, fstd, rate, per,
@@ -734,11 +589,13 @@ class RfiMonitor:
     def state_summary(self) -> dict[str, float]:
         """Current tracker state: frequency (cycles/sample), rate, P, period (samples), last start."""
         st = self._state
-        lattice = float(st.mst[M_NEXT]) >= 0.0 and int(st.mist[K_LATSRC]) > 0
-        per = float(st.mst[M_TLAT]) if lattice else float(st.sf[S_PERIOD])
+        lattice = float(st.mst[MonitorFloat.NEXT]) >= 0.0 and int(st.mist[MonitorInt.LATSRC]) > 0
+        per = float(st.mst[MonitorFloat.TLAT]) if lattice else float(st.sf[S_PERIOD])
         locked = lattice or int(st.si[J_LOCKED]) == 1
         return {"f": float(st.fst[F_F]), "df": float(st.fst[F_DF]), "p11": float(st.fst[F_P11]),
                 "p22": float(st.fst[F_P22]), "period_samples": per if locked else math.nan,
                 "locked": float(locked), "lpd_locked": float(st.si[J_LOCKED]),
-                "lpd_period_samples": float(st.sf[S_PERIOD]), "lattice_source": float(st.mist[K_LATSRC]),
-                "last_start": float(st.mist[K_LAST_START]), "tracking_mode": float(st.mist[K_TRACK])}
+                "lpd_period_samples": float(st.sf[S_PERIOD]),
+                "lattice_source": float(st.mist[MonitorInt.LATSRC]),
+                "last_start": float(st.mist[MonitorInt.LAST_START]),
+                "tracking_mode": float(st.mist[MonitorInt.TRACK])}

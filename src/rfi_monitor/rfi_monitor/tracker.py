@@ -33,7 +33,7 @@ Speed (see docs/rfi_monitor/speed.md):
   a non-finite sample contributes p_j = P instead of being skipped), without a per-sample serial
   recursion in the measurement loop. The deviations are kept in ``pdev`` and summed in a fixed
   order, so block splitting cannot change the result; the guard's threshold lags by < CHUNK
-  samples of a 1024-sample average (round 8, docs/rfi_monitor/speed.md);
+  samples of a 1024-sample average (docs/rfi_monitor/speed.md);
 * the hot state lives in local variables, the per-status counters too; per-sample helpers take
   scalars only (an array argument costs reference counting on every call).
 
@@ -71,7 +71,7 @@ Additions on top ("ours", switchable, reported separately in the benchmarks):
 * Tracking mode (``confirm_fits`` > 0, needs the step fit; speed, as acquisition vs tracking in a
   GNSS receiver; the paper keeps everything running): while a lattice exists, the LPD peaks are
   not read (they only acquire a lattice), so after ``confirm_fits`` successful fits in a row
-  (``K_TRACK``) the LPD / AR(10) / peak pass is suspended; only the decimated history of the
+  (``MonitorInt.TRACK``) the LPD / AR(10) / peak pass is suspended; only the decimated history of the
   periodicity detector (``zdec``) is kept up, and the monitor skips that detector too
   (``SweepAnalysisParams.skip_while_tracking``). ``RESUME_MISSES`` = 2 failed fits in a row end
   the tracking mode: the pass resumes with a warm restart (``_period_search_resume``: peaks,
@@ -83,7 +83,7 @@ Additions on top ("ours", switchable, reported separately in the benchmarks):
   locked twice that period at J/N 8 dB; test_tracking_mode.py). While suspended the zAR trace is
   NaN and ``sweep_period``'s lock and period are frozen (the lattice gives the period). The switch
   is decided at the end of an aligned CHUNK window and acts on the LPD pass from the next window
-  on (``K_SWAT``, ``K_SWMODE``; the LPD pass of a window always runs after the filter of the
+  on (``MonitorInt.SWAT``, ``MonitorInt.SWMODE``; the LPD pass of a window always runs after the filter of the
   window before it), so block splitting cannot change it (tested).
 
 Sample alignment: the measurement for sample n needs x_{n+1}, so a block of samples
@@ -100,7 +100,6 @@ import numpy as np
 from numba import njit
 
 from rfi_monitor.if_measurement import (
-    N_STATUS,
     STATUS_CORRECTION,
     STATUS_DOMAIN,
     STATUS_NEAR_ZERO,
@@ -111,13 +110,9 @@ from rfi_monitor.if_measurement import (
 )
 from rfi_monitor.sweep_period import (
     _AR_FASTMATH,
-    AR_ORDER,
     J_LOCKED,
     J_NDEC,
     LPD_LAG,
-    N_SFSTATE,
-    N_SISTATE,
-    PEAK_RING,
     Q_A,
     Q_ARK,
     Q_DEC,
@@ -133,6 +128,14 @@ from rfi_monitor.sweep_period import (
     ar_step,
     peak_step,
 )
+from rfi_monitor.tracker_state import (
+    CHUNK,
+    MonitorFloat,
+    MonitorInt,
+    MonitorParam,
+    TraceBuffers,
+    TrackerState,
+)
 from rfi_monitor.tracking_filters import (
     F_DF,
     F_F,
@@ -146,33 +149,13 @@ from rfi_monitor.tracking_filters import (
     kf_sweep_reset,
 )
 
-# monitor float state
-(M_RE2, M_IM2, M_RE1, M_IM1, M_POW, M_NEXT, M_F0, M_P11_0, M_TLAT, M_PPRED, M_ZG, M_ACC,
- M_ZACC, M_FLOOR, M_L11, M_L12, M_L22, M_IKAP) = range(18)
-N_MSTATE = 18
-# monitor int state
-(K_NBUF, K_LAST_START, K_NRESETS, K_STARTED, K_NMEAS, K_FITAT, K_MISSES, K_DECN, K_LATSRC, K_NDEC,
- K_NFIT, K_ZPOS, K_NLEV, K_NCONS, K_TRACK, K_SWAT, K_SWMODE, K_LPDOFF, K_NSUSP) = range(19)
-N_MISTATE = 19
-# lattice sources
-LAT_NONE, LAT_LPD, LAT_COARSE = 0, 1, 2
-# packed monitor parameters
-(P_CHIRP_CORR, P_MIN_ABS, P_DOMAIN, P_POW_LAMBDA, P_RESET, P_PHASE_GAIN, P_WRAP, P_MAX_DF, P_REFINE_W,
- P_LAT_DRIFT, P_NOISE_COMP, P_RESET_CROSS, P_CONFIRM) = range(13)
-N_MPAR = 13
+MF, MI, MP = MonitorFloat, MonitorInt, MonitorParam
+"""Short names of the packed layouts (tracker_state) in the kernel."""
 
 MAX_ABS_RATE = 0.02
 """Clamp of |df| used inside the chirp correction, cycles/sample^2 (guards a diverged estimate)."""
-CHUNK = 16
-"""Length of the aligned chunks whose measurements are computed ahead in a vectorised loop (power of two)."""
-DF_LAG = 2 * CHUNK
-"""Samples by which the df used in the chirp correction lags the filter (measured one chunk ahead)."""
-Z_RING = 64
-"""Recent measurements kept for the sweep-start fit (power of two, > 2 * max refine window)."""
 MAX_REFINE_WINDOW = 24
 """Largest half-window W of the sweep-start fit, samples."""
-DEC_HISTORY = 4096
-"""Decimated measurements kept for the block-level periodicity detector (power of two)."""
 MAX_MISSES = 4
 """Consecutive failed sweep-start fits that drop the lattice."""
 RESUME_MISSES = 2
@@ -214,31 +197,6 @@ MIN_KAPPA = 0.8
 applied; below it the measurement is mostly noise, the compensation would only push more ratios
 out of the arccos domain (measured on bags/default: with a floor of 0.5 instead, 14 fewer of the
 chirp snapshots at J/N < 0 dB were identified as chirps), and the ratio is used as it is."""
-
-
-class TrackerState:
-    """All per-sample state of the fused loop (arrays, mutated in place by ``track_block``)."""
-
-    def __init__(self, fst: np.ndarray, ist: np.ndarray, ring: np.ndarray, sp_state: tuple) -> None:
-        self.fst, self.ist, self.ring = fst, ist, ring
-        (self.sf, self.si, self.zhist, self.gam, self.pmat, self.hist, self.peaks) = sp_state
-        assert self.sf.size == N_SFSTATE and self.si.size == N_SISTATE
-        assert self.zhist.size == LPD_LAG and self.gam.size == AR_ORDER and self.peaks.size == PEAK_RING
-        self.mst = np.zeros(N_MSTATE)
-        self.mst[M_NEXT] = -1.0
-        self.mst[M_F0] = math.nan
-        self.mst[M_P11_0] = math.nan
-        self.mst[M_TLAT] = math.nan
-        self.mst[M_IKAP] = 1.0
-        self.mist = np.zeros(N_MISTATE, dtype=np.int64)
-        self.mist[K_FITAT] = -1
-        self.mist[K_SWAT] = -1
-        self.counters = np.zeros(N_STATUS, dtype=np.int64)
-        self.dfring = np.zeros(DF_LAG)
-        self.zring = np.zeros(Z_RING)
-        self.zdec = np.zeros(DEC_HISTORY)
-        self.lev = np.zeros(4 * CHUNK)
-        self.pdev = np.zeros(CHUNK)
 
 
 @njit(cache=True, inline="always")
@@ -312,39 +270,51 @@ def _period_search_resume(sf: np.ndarray, si: np.ndarray, peaks: np.ndarray) -> 
     peaks[:] = 0
 
 
-@njit(cache=True, fastmath=_AR_FASTMATH, error_model="numpy")
+_NO_TRACES = TraceBuffers(np.empty(1, dtype=np.int64), np.empty(1), np.empty(1), np.empty(1), np.empty(1),
+                         np.empty(1), np.empty(1, dtype=np.bool_))
+
+
 def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: int, tpar: np.ndarray,
-                spar: np.ndarray, mpar: np.ndarray, fst: np.ndarray, ist: np.ndarray, ring: np.ndarray,
-                sf: np.ndarray, si: np.ndarray, zhist: np.ndarray, gam: np.ndarray, pmat: np.ndarray,
-                hist: np.ndarray, peaks: np.ndarray, mst: np.ndarray, mist: np.ndarray, counters: np.ndarray,
-                dfring: np.ndarray, zring: np.ndarray, zdec: np.ndarray, lev: np.ndarray, pdev: np.ndarray,
-                store: bool, o_idx: np.ndarray, o_z: np.ndarray, o_f: np.ndarray, o_df: np.ndarray,
-                o_p11: np.ndarray, o_zar: np.ndarray, o_reset: np.ndarray) -> int:
+                spar: np.ndarray, mpar: np.ndarray, state: TrackerState, out: TraceBuffers | None) -> int:
     """Run the fused loop over one block; returns the number of estimates produced.
 
     Args:
         xr, xi: real part and imaginary part (complex only; else any array) of the block, shape (N,).
         is_complex: I/Q input.
         first_index: absolute index of xr[0].
-        tpar, spar, mpar: packed filter, sweep-period and monitor parameters.
-        fst ... lev: state (see TrackerState), updated in place.
-        store: write per-sample outputs o_* (each shape (N,)); else they may have size 1.
+        tpar, spar, mpar: packed filter, sweep-period and monitor (``MonitorParam``) parameters.
+        state: updated in place.
+        out: per-sample outputs (each shape (N,)), or None for none.
     """
+    store = out is not None
+    return _track_block(xr, xi, is_complex, first_index, tpar, spar, mpar, *state, store,
+                        *(out if out is not None else _NO_TRACES))
+
+
+@njit(cache=True, fastmath=_AR_FASTMATH, error_model="numpy")
+def _track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: int, tpar: np.ndarray,
+                spar: np.ndarray, mpar: np.ndarray, fst: np.ndarray, ist: np.ndarray, ring: np.ndarray,
+                sf: np.ndarray, si: np.ndarray, zhist: np.ndarray, gam: np.ndarray, pmat: np.ndarray,
+                hist: np.ndarray, peaks: np.ndarray, mst: np.ndarray, mist: np.ndarray, counters: np.ndarray,
+                dfring: np.ndarray, zring: np.ndarray, zdec: np.ndarray, lev: np.ndarray, pdev: np.ndarray,
+                store: bool, o_idx: np.ndarray, o_z: np.ndarray, o_f: np.ndarray, o_df: np.ndarray,
+                o_p11: np.ndarray, o_zar: np.ndarray, o_reset: np.ndarray) -> int:
+    """The compiled loop of ``track_block``: the fields of TrackerState and TraceBuffers unpacked, in order."""
     mode = int(tpar[0])
     r, q_f, q_df = tpar[1], tpar[2], tpar[3]
-    chirp_corr = mpar[P_CHIRP_CORR] > 0.5
-    min_abs_ratio = mpar[P_MIN_ABS]
-    margin = mpar[P_DOMAIN]
-    lam = mpar[P_POW_LAMBDA]
-    reset_on = mpar[P_RESET] > 0.5
-    phase_gain = mpar[P_PHASE_GAIN]
-    wrap = mpar[P_WRAP] > 0.5
-    refine_w = int(mpar[P_REFINE_W])
-    lat_drift = mpar[P_LAT_DRIFT]
-    reset_cross = mpar[P_RESET_CROSS] > 0.5
-    confirm_n = int(mpar[P_CONFIRM]) if refine_w > 0 else 0
+    chirp_corr = mpar[MP.CHIRP_CORR] > 0.5
+    min_abs_ratio = mpar[MP.MIN_ABS]
+    margin = mpar[MP.DOMAIN]
+    lam = mpar[MP.POW_LAMBDA]
+    reset_on = mpar[MP.RESET] > 0.5
+    phase_gain = mpar[MP.PHASE_GAIN]
+    wrap = mpar[MP.WRAP] > 0.5
+    refine_w = int(mpar[MP.REFINE_W])
+    lat_drift = mpar[MP.LAT_DRIFT]
+    reset_cross = mpar[MP.RESET_CROSS] > 0.5
+    confirm_n = int(mpar[MP.CONFIRM]) if refine_w > 0 else 0
     # noise compensation (if_measurement): kappa = 1 - floor / running power, floor 0 (unknown) -> 1
-    floor = mst[M_FLOOR] if (mpar[P_NOISE_COMP] > 0.5 and not is_complex) else 0.0
+    floor = mst[MF.FLOOR] if (mpar[MP.NOISE_COMP] > 0.5 and not is_complex) else 0.0
     tol = spar[Q_TOL]
     gamma, norm, dec = spar[Q_GAMMA], spar[Q_NORM], int(spar[Q_DEC])
     a_ar, q_ar, r_ar, k_ar = spar[Q_A], spar[Q_QAR], spar[Q_RAR], int(spar[Q_ARK])
@@ -365,18 +335,18 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
     # ---- load the hot state into locals ---------------------------------------------------------
     f, df, p11, p12, p22, wsum = fst[F_F], fst[F_DF], fst[F_P11], fst[F_P12], fst[F_P22], fst[F_WSUM]
     wcount, wpos = ist[I_WCOUNT], ist[I_WPOS]
-    re2, im2, re1, im1 = mst[M_RE2], mst[M_IM2], mst[M_RE1], mst[M_IM1]
-    pw = mst[M_POW]
-    ikap_w = mst[M_IKAP]
-    nxt, tlat, ppred = mst[M_NEXT], mst[M_TLAT], mst[M_PPRED]
-    l11, l12, l22 = mst[M_L11], mst[M_L12], mst[M_L22]
-    zg, acc, zacc = mst[M_ZG], mst[M_ACC], mst[M_ZACC]
-    nbuf, last_start, nresets, started = mist[K_NBUF], mist[K_LAST_START], mist[K_NRESETS], mist[K_STARTED]
-    fitat, misses, decn, latsrc, ndec = mist[K_FITAT], mist[K_MISSES], mist[K_DECN], mist[K_LATSRC], mist[K_NDEC]
-    zpos = mist[K_ZPOS]
-    nmeas = mist[K_NMEAS]
-    nlev = mist[K_NLEV]
-    ncons, trk, swat, swmode, lpdoff = mist[K_NCONS], mist[K_TRACK], mist[K_SWAT], mist[K_SWMODE], mist[K_LPDOFF]
+    re2, im2, re1, im1 = mst[MF.RE2], mst[MF.IM2], mst[MF.RE1], mst[MF.IM1]
+    pw = mst[MF.POW]
+    ikap_w = mst[MF.IKAP]
+    nxt, tlat, ppred = mst[MF.NEXT], mst[MF.TLAT], mst[MF.PPRED]
+    l11, l12, l22 = mst[MF.L11], mst[MF.L12], mst[MF.L22]
+    zg, acc, zacc = mst[MF.ZG], mst[MF.ACC], mst[MF.ZACC]
+    nbuf, last_start, nresets, started = mist[MI.NBUF], mist[MI.LAST_START], mist[MI.NRESETS], mist[MI.STARTED]
+    fitat, misses, decn, latsrc, ndec = mist[MI.FITAT], mist[MI.MISSES], mist[MI.DECN], mist[MI.LATSRC], mist[MI.NDEC]
+    zpos = mist[MI.ZPOS]
+    nmeas = mist[MI.NMEAS]
+    nlev = mist[MI.NLEV]
+    ncons, trk, swat, swmode, lpdoff = mist[MI.NCONS], mist[MI.TRACK], mist[MI.SWAT], mist[MI.SWMODE], mist[MI.LPDOFF]
     zmask = zring.size - 1
     dmask = zdec.size - 1
     dfmask = dfring.size - 1
@@ -472,7 +442,7 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
                 zpos = 0
                 zg = 0.0
             else:
-                mist[K_NSUSP] += 1
+                mist[MI.NSUSP] += 1
             acc = 0.0
             lpdoff = swmode
         lpd_on = lpdoff == 0
@@ -492,8 +462,8 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
                                                  reset_cross)
                     if wrap:
                         f = f - math.floor(f + 0.5)
-                    mst[M_F0] = f
-                    mst[M_P11_0] = p11
+                    mst[MF.F0] = f
+                    mst[MF.P11_0] = p11
                     last_start = m
                     nresets += 1
                     ppred = nxt
@@ -536,7 +506,7 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
                                 tlat += k2 * e
                                 l11, l12, l22 = l11 - k1 * l11, l12 - k1 * l12, l22 - k2 * l12
                                 misses = 0
-                                mist[K_NFIT] += 1
+                                mist[MI.NFIT] += 1
                                 ncons += 1
                                 if confirm_n > 0 and ncons >= confirm_n:
                                     trk = 1
@@ -674,19 +644,19 @@ def track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: i
     # ---- store the state -------------------------------------------------------------------------
     fst[F_F], fst[F_DF], fst[F_P11], fst[F_P12], fst[F_P22], fst[F_WSUM] = f, df, p11, p12, p22, wsum
     ist[I_WCOUNT], ist[I_WPOS] = wcount, wpos
-    mst[M_RE2], mst[M_IM2], mst[M_RE1], mst[M_IM1] = re2, im2, re1, im1
-    mst[M_POW] = pw
-    mst[M_IKAP] = ikap_w
-    mst[M_NEXT], mst[M_TLAT], mst[M_PPRED] = nxt, tlat, ppred
-    mst[M_L11], mst[M_L12], mst[M_L22] = l11, l12, l22
-    mst[M_ZG], mst[M_ACC], mst[M_ZACC] = zg, acc, zacc
-    mist[K_NBUF], mist[K_LAST_START], mist[K_NRESETS], mist[K_STARTED] = nbuf, last_start, nresets, started
-    mist[K_FITAT], mist[K_MISSES], mist[K_DECN], mist[K_LATSRC], mist[K_NDEC] = fitat, misses, decn, latsrc, ndec
-    mist[K_ZPOS] = zpos
-    mist[K_NMEAS] = nmeas
-    mist[K_NLEV] = nlev
+    mst[MF.RE2], mst[MF.IM2], mst[MF.RE1], mst[MF.IM1] = re2, im2, re1, im1
+    mst[MF.POW] = pw
+    mst[MF.IKAP] = ikap_w
+    mst[MF.NEXT], mst[MF.TLAT], mst[MF.PPRED] = nxt, tlat, ppred
+    mst[MF.L11], mst[MF.L12], mst[MF.L22] = l11, l12, l22
+    mst[MF.ZG], mst[MF.ACC], mst[MF.ZACC] = zg, acc, zacc
+    mist[MI.NBUF], mist[MI.LAST_START], mist[MI.NRESETS], mist[MI.STARTED] = nbuf, last_start, nresets, started
+    mist[MI.FITAT], mist[MI.MISSES], mist[MI.DECN], mist[MI.LATSRC], mist[MI.NDEC] = fitat, misses, decn, latsrc, ndec
+    mist[MI.ZPOS] = zpos
+    mist[MI.NMEAS] = nmeas
+    mist[MI.NLEV] = nlev
     sf[S_ZAR] = zprev                                # the held zAR trace value (NaN while suspended)
-    mist[K_NCONS], mist[K_TRACK], mist[K_SWAT], mist[K_SWMODE], mist[K_LPDOFF] = ncons, trk, swat, swmode, lpdoff
+    mist[MI.NCONS], mist[MI.TRACK], mist[MI.SWAT], mist[MI.SWMODE], mist[MI.LPDOFF] = ncons, trk, swat, swmode, lpdoff
     counters[STATUS_OK] += n_ok
     counters[STATUS_NEAR_ZERO] += n_near
     counters[STATUS_DOMAIN] += n_dom

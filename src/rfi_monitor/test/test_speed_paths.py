@@ -1,4 +1,4 @@
-"""Compiled fast paths of the monitor (speed round 8): same results as the plain formulas."""
+"""Compiled fast paths of the monitor: same results as the plain formulas."""
 
 import math
 
@@ -6,7 +6,7 @@ import numpy as np
 
 from rfi_monitor.classifier import ClassifierParams, block_features, welch_psd
 from rfi_monitor.monitor import RfiMonitor, RfiMonitorParams, _count_bad_samples
-from rfi_monitor.tracker import M_POW
+from rfi_monitor.tracker_state import MonitorFloat
 
 
 def test_count_bad_samples_matches_numpy():
@@ -60,4 +60,25 @@ def test_windowed_running_power_follows_the_exponential_average():
     pw = x[1] ** 2                                     # the stream starts from the first power
     for m in range(2, 4096):
         pw += lam * (x[m] ** 2 - pw)
-    assert math.isclose(float(mon._state.mst[M_POW]), pw, rel_tol=1e-9)
+    assert math.isclose(float(mon._state.mst[MonitorFloat.POW]), pw, rel_tol=1e-9)
+
+
+def test_tracker_state_fields_are_the_kernel_arguments():
+    """track_block unpacks TrackerState and TraceBuffers into the compiled kernel's arguments in order."""
+    import inspect
+
+    from rfi_monitor.tracker import _track_block
+    from rfi_monitor.tracker_state import TraceBuffers, TrackerState
+
+    names = list(inspect.signature(_track_block.py_func).parameters)
+    i = names.index(TrackerState._fields[0])
+    assert names[i:i + len(TrackerState._fields)] == list(TrackerState._fields)
+    assert names[-len(TraceBuffers._fields):] == ['o_' + f for f in TraceBuffers._fields]
+
+
+def test_method_table_paper_and_ours():
+    from rfi_monitor.params import Method
+
+    assert RfiMonitorParams().method == Method.ours()
+    assert RfiMonitorParams.paper_method().method == Method.paper()
+    assert Method.ours().apply(RfiMonitorParams.paper_method()) == RfiMonitorParams()

@@ -8,7 +8,8 @@ import pytest
 from rfi_monitor.if_measurement import acos_fast
 from rfi_monitor.sweep_analysis import SweepAnalysisParams, analyse
 from rfi_monitor.sweep_period import SweepPeriodParams, estimate_sweep_period
-from rfi_monitor.tracker import STEP_FALSE_ALARM, Z_RING, _step_fit, step_threshold
+from rfi_monitor.tracker import STEP_FALSE_ALARM, _step_fit, step_threshold
+from rfi_monitor.tracker_state import Z_RING
 
 
 def _decimated_saw(T, s, n_dec, dec, sign=1.0, noise=0.0, seed=0):

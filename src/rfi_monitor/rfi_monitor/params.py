@@ -1,0 +1,189 @@
+"""Parameters of the RFI monitor, and the table of its "paper method vs ours" switches.
+
+:class:`Method` is the one table of the switches that choose between Kang et al.'s method and the
+additions of this package (each documented in the module named in its row, and in
+docs/rfi_monitor/README.md, "Paper method vs ours"):
+
+=========================== ======= ====== ===============================================================
+switch (RfiMonitorParams)   paper   ours   what "ours" does
+=========================== ======= ====== ===============================================================
+chirp_correction            on      on     eq. 10 (real samples) with the filter's sweep estimate
+reset_at_sweep_start        on      on     filter reset at the predicted sweep starts, eq. 21-22
+sweep.lattice_voting        off     on     period by voting over the last peaks (sweep_period)
+sweep.decimation            2       4      samples per AR(10) step (paper: its best setting, 2)
+refine_window               0       24     sweep-start step fit + lattice Kalman filter (tracker)
+noise_compensation          off     on     eq. 8's ratio divided by kappa = 1 - N / P (if_measurement)
+reset_cross_covariance      off     on     exact covariance of eq. 21 at a reset (tracking_filters)
+analysis.enabled            off     on     block-level periodicity detector (sweep_analysis)
+confirm_fits                0       4      tracking mode: period search suspended (tracker)
+=========================== ======= ====== ===============================================================
+
+``RfiMonitorParams()`` is "ours"; ``RfiMonitorParams.paper_method()`` = ``Method.paper().apply(...)``.
+The node's parameters keep their names (``sweep_lattice_voting``, ``sweep_decimation``,
+``analysis_enabled``, the others as above).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from rfi_monitor.classifier import ClassifierParams
+from rfi_monitor.sweep_analysis import SweepAnalysisParams
+from rfi_monitor.sweep_period import SweepPeriodParams
+from rfi_monitor.tracker import MAX_REFINE_WINDOW
+from rfi_monitor.tracking_filters import MODE_AFKF, TrackingFilterParams
+
+
+@dataclass(frozen=True)
+class Method:
+    """The "paper method vs ours" switches of :class:`RfiMonitorParams` (the table in the module
+    docstring). ``Method()`` is "ours"; :meth:`paper` is Kang et al.'s method.
+
+    Decimation of the paper method (benchmarks/rfi_monitor_paper.py, 1e12 Hz/s, median of 3-5 seeds,
+    RMSE in cycles/sample at J/N 11.2 / 21.2 / 31.2 dB): D = 1 (the paper's full rate) 0.018 / 0.030 /
+    0.027 (at high J/N the period locks in 2/3 seeds only); D = 2 0.019 / 0.017 / 0.012; D = 4 0.027 /
+    0.012 / 0.010 with 4/5 locks at 11.2 dB (the peak times jitter by +-D/2).
+    """
+
+    chirp_correction: bool = True
+    reset_at_sweep_start: bool = True
+    lattice_voting: bool = True
+    decimation: int = 4
+    refine_window: int = 24
+    noise_compensation: bool = True
+    reset_cross_covariance: bool = True
+    analysis_enabled: bool = True
+    confirm_fits: int = 4
+
+    @staticmethod
+    def ours() -> Method:
+        """The default: the paper's method plus every addition."""
+        return Method()
+
+    @staticmethod
+    def paper() -> Method:
+        """Kang et al.'s method only, at its best decimation."""
+        return Method(lattice_voting=False, decimation=2, refine_window=0, noise_compensation=False,
+                      reset_cross_covariance=False, analysis_enabled=False, confirm_fits=0)
+
+    @staticmethod
+    def of(p: RfiMonitorParams) -> Method:
+        """The switches of the parameters p."""
+        return Method(p.chirp_correction, p.reset_at_sweep_start, p.sweep.lattice_voting, int(p.sweep.decimation),
+                      int(p.refine_window), p.noise_compensation, p.reset_cross_covariance, p.analysis.enabled,
+                      int(p.confirm_fits))
+
+    def apply(self, p: RfiMonitorParams) -> RfiMonitorParams:
+        """p with these switches (its other fields kept)."""
+        return dataclasses.replace(
+            p, chirp_correction=self.chirp_correction, reset_at_sweep_start=self.reset_at_sweep_start,
+            sweep=dataclasses.replace(p.sweep, lattice_voting=self.lattice_voting, decimation=self.decimation),
+            refine_window=self.refine_window, noise_compensation=self.noise_compensation,
+            reset_cross_covariance=self.reset_cross_covariance,
+            analysis=dataclasses.replace(p.analysis, enabled=self.analysis_enabled), confirm_fits=self.confirm_fits)
+
+
+@dataclass(frozen=True)
+class RfiMonitorParams:
+    """Validated parameters of the monitor.
+
+    Attributes:
+        tracker: TrackingFilterParams (default: the proposed adaptive fading KF).
+        sweep: SweepPeriodParams (default here: with lattice voting and decimation 4, ours;
+            ``paper_method()`` switches voting off and uses decimation 2).
+        classifier: ClassifierParams.
+        chirp_correction: use eq. 10 (real samples) with the tracker's sweep estimate.
+        reset_at_sweep_start: reset the filter at estimated sweep starts (eq. 21-22).
+        min_abs_ratio: near-zero guard, |x_n| <= ratio * running RMS rejects a sample, >= 0.
+        domain_margin: arccos domain margin, >= 0.
+        power_time_constant: samples of the running RMS used by the guard, >= 1.
+        phase_gain: gain of the sweep-start lattice phase correction, (0, 1].
+        noise_floor_power: fixed noise power (sample units^2); 0: learn it (see module docstring).
+        calibration_blocks: blocks used to learn the noise floor and shape, >= 1.
+        signal_power_dbm: nominal GNSS signal power S for J/S, dBm (Kang et al.: -130).
+        noise_density_dbm_per_mhz: nominal noise density for J/S, dBm/MHz (Kang et al.: -114).
+        noise_bandwidth_hz: bandwidth of the nominal noise power, Hz; 0: the sampled band.
+        max_invalid_fraction: a block with more non-finite or saturated samples than this
+            fraction is rejected (result valid=False, type UNKNOWN), in [0, 1].
+        min_block_samples: shorter blocks raise ValueError (>= the classifier's nfft).
+        refine_window: half-window W (samples) of the sweep-start step fit that refines the reset
+            lattice (ours, tracker module docstring), 0..MAX_REFINE_WINDOW; 0 runs the paper's
+            lattice (LPD peaks only).
+        lattice_period_drift: random walk of the sweep period per sweep, relative, of the
+            step-fit lattice filter (ours; tracker module docstring), in [0, 0.01]. Larger: the
+            lattice follows a drifting sweep period faster, with more reset jitter.
+        noise_compensation: divide the real three-sample ratio by kappa = 1 - N / P (running power
+            P, calibrated noise floor N), which removes eq. 8's bias towards fs/4 at moderate J/N
+            (ours; if_measurement module docstring). No effect on complex samples or before the
+            noise floor is known.
+        reset_cross_covariance: at a sweep reset keep the exact covariance of eq. 21's linear map
+            instead of eq. 22's uncorrelated P(1,1) (ours; tracking_filters.kf_sweep_reset).
+        confirm_fits: tracking mode (ours; tracker module docstring): after this many consecutive
+            successful sweep-start fits the lattice is confirmed and the LPD / AR(10) / peak pass is
+            suspended until the lattice drops (MAX_MISSES failed fits), then resumed from its initial
+            state; 0: the period search always runs (the paper). Needs refine_window > 0, >= 0.
+        analysis: SweepAnalysisParams of the block-level periodicity detector (ours).
+    """
+
+    tracker: TrackingFilterParams = field(default_factory=lambda: TrackingFilterParams(mode=MODE_AFKF))
+    sweep: SweepPeriodParams = field(default_factory=lambda: SweepPeriodParams(lattice_voting=True))
+    classifier: ClassifierParams = field(default_factory=ClassifierParams)
+    chirp_correction: bool = True
+    reset_at_sweep_start: bool = True
+    min_abs_ratio: float = 0.02
+    domain_margin: float = 0.05
+    power_time_constant: float = 1024.0
+    phase_gain: float = 0.3
+    noise_floor_power: float = 0.0
+    calibration_blocks: int = 5
+    signal_power_dbm: float = -130.0
+    noise_density_dbm_per_mhz: float = -114.0
+    noise_bandwidth_hz: float = 0.0
+    max_invalid_fraction: float = 0.05
+    min_block_samples: int = 1024
+    refine_window: int = 24
+    lattice_period_drift: float = 1e-5
+    noise_compensation: bool = True
+    reset_cross_covariance: bool = True
+    confirm_fits: int = 4
+    analysis: SweepAnalysisParams = field(default_factory=SweepAnalysisParams)
+
+    def __post_init__(self) -> None:
+        for name in ("min_abs_ratio", "domain_margin", "noise_floor_power", "noise_bandwidth_hz"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be finite and >= 0, got {v}")
+        if not self.power_time_constant >= 1:
+            raise ValueError("power_time_constant must be >= 1")
+        if not 0 < self.phase_gain <= 1:
+            raise ValueError("phase_gain must be in (0, 1]")
+        if int(self.calibration_blocks) < 1:
+            raise ValueError("calibration_blocks must be >= 1")
+        for name in ("signal_power_dbm", "noise_density_dbm_per_mhz"):
+            if not math.isfinite(getattr(self, name)):
+                raise ValueError(f"{name} must be finite")
+        if not 0 <= self.max_invalid_fraction <= 1:
+            raise ValueError("max_invalid_fraction must be in [0, 1]")
+        if self.min_block_samples < self.classifier.nfft:
+            raise ValueError("min_block_samples must be >= classifier.nfft")
+        if not 0 <= int(self.refine_window) <= MAX_REFINE_WINDOW:
+            raise ValueError(f"refine_window must be in 0..{MAX_REFINE_WINDOW}")
+        if int(self.confirm_fits) < 0:
+            raise ValueError("confirm_fits must be >= 0")
+        if not 0.0 <= self.lattice_period_drift <= 0.01:
+            raise ValueError("lattice_period_drift must be in [0, 0.01]")
+
+    @staticmethod
+    def paper_method(**kw: Any) -> RfiMonitorParams:
+        """Parameters that run Kang et al.'s method only (``Method.paper()``: no step-fit lattice, no
+        periodicity detector, the period from successive peak intervals, the AR enhancement at
+        decimation 2); keyword arguments set the other fields."""
+        return Method.paper().apply(RfiMonitorParams(**kw))
+
+    @property
+    def method(self) -> Method:
+        """The paper-vs-ours switches of these parameters."""
+        return Method.of(self)
