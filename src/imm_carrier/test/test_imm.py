@@ -7,7 +7,8 @@ import pytest
 
 from gnss_common.clock_model import ClockHCoefficients, clock_process_noise_phase
 from imm_carrier.covariance_analysis import covariance_analysis, phase_measurement_variance_rad2
-from imm_carrier.imm import ImmCarrierFilter, ImmParams, imm_step_reference
+from imm_carrier.imm import ImmCarrierFilter, ImmParams
+from imm_carrier.imm_reference import imm_step_reference
 from imm_carrier.measurement_model import iq_amplitude_and_noise_std
 
 CLOCK = ClockHCoefficients(h0=1e-22, h_minus2=1e-22)  # lively enough that W matters in a short test
