@@ -1,31 +1,17 @@
-"""Compiled CDR codec of the two messages on the node's hot path (CorrelatorArray in, CarrierPhaseArray out).
+"""The node's hot-path messages (CorrelatorArray in, CarrierPhaseArray out) through the suite's CDR codec.
 
 At 32 satellites and 1 kHz, letting rclpy turn each serialised CorrelatorArray into 32 Python
 ``Correlator`` objects, and each answer into 32 ``CarrierPhase`` objects that rclpy then converts
 back to C structures, costs more than the filters themselves. The node therefore subscribes with
-``raw=True`` and publishes ``bytes``: this module reads the correlator fields straight into numpy
-arrays and writes the CarrierPhaseArray payload from the tracker's result table, in one compiled
-call each. No rclpy or rfi_msgs import here; the tests check both directions byte for byte against
-``rclpy.serialization`` on the real message types, so a change of the .msg files fails loudly.
+``raw=True`` and publishes ``bytes``. The bytes are read and written by :mod:`rfi_node_common.cdr`,
+whose layouts come from the generated message classes: this module only names the streams (which
+stream entry is which field, found by field name in the layout) and says where each CarrierPhase
+field comes from (:data:`ESTIMATE_SOURCES`, one entry per field of rfi_msgs/CarrierPhase). A field
+added to CarrierPhase.msg without an entry there fails at import; a field added to Correlator.msg is
+decoded and ignored; no byte offset is written here.
 
-Format (OMG CDR version 1 as written by ROS 2 middlewares, little endian): a 4-byte encapsulation
-header ``00 01 00 00`` (CDR_LE), then the fields in declaration order, each primitive aligned to its
-own size counted from the end of the encapsulation header; strings are a uint32 length (with the
-terminating NUL) and the bytes; sequences a uint32 count and the elements (an empty float64
-sequence adds no alignment padding). We write zeros where the middleware leaves padding
-uninitialised, and end at the last field: rmw_fastrtps reports the length of its size estimate,
-which aligns even an empty float64 sequence, so its buffers can end with up to 4 bytes per empty
-sequence of unused trailing bytes; deserialisers ignore them. Only little-endian
-input is decoded here (``decode_correlator_array`` returns None otherwise, and the caller falls back
-to rclpy).
-
-Messages (src/rfi_msgs/msg): CorrelatorArray = Header header, Correlator[] correlators; Correlator =
-uint8 constellation, uint16 svid, float64 integration_time_s, in_phase, quadrature, cn0_dbhz,
-predicted_phase_change_rad. CarrierPhaseArray = Header header, CarrierPhase[] estimates; CarrierPhase
-= uint8 constellation, uint16 svid, uint8 method, float64 phase_rad, phase_std_rad, frequency_hz,
-frequency_std_hz, int8 data_bit, float64 data_bit_probability, float64[] mode_probabilities, bool
-locked, uint32 cycle_slips. Header = builtin_interfaces/Time stamp (int32 sec, uint32 nanosec),
-string frame_id.
+Little-endian CDR only: ``decode_correlator_array`` returns None otherwise (the node then lets rclpy
+re-serialise the message), and for malformed bytes.
 """
 
 from __future__ import annotations
@@ -36,14 +22,31 @@ import numpy as np
 from numba import njit
 
 from imm_carrier.measurement_model import METHOD_IMM
+from imm_carrier.tracker import BATCH_COLUMNS
+from rfi_msgs.msg import CarrierPhaseArray, CorrelatorArray
+from rfi_node_common.cdr import CDR_LE, ENCODE_BUFFER_FULL, encode_program, layout
 
-CDR_LE = b"\x00\x01"
-"""First two bytes of a little-endian CDR payload (encapsulation kind)."""
+__all__ = ["CDR_LE", "DecodedCorrelatorArray", "ESTIMATE_SOURCES", "decode_correlator_array",
+           "encode_carrier_phase_array"]
+
 UINT32_MAX = 2**32 - 1
-_ENCAPSULATION = 4
-_N_CORRELATOR_FIELDS = 7
-_MAX_ESTIMATE_BYTES = 104  # upper bound of one CarrierPhase with two mode probabilities, padding included
-_ERR = -1
+
+# ---------------------------------------------------------------- CorrelatorArray: stream positions by name
+_IN = layout(CorrelatorArray)
+_SEC, _ = _IN.position("header.stamp.sec")
+_NANOSEC, _ = _IN.position("header.stamp.nanosec")
+_HEADER_FIELD = [f.name for f in _IN.fields].index("header")
+_COUNT, _FIRST_FLOAT = _IN.position("correlators")  # the count, then the elements
+_CORRELATOR = _IN.element("correlators")
+_entries = _CORRELATOR.entries()
+if _entries is None or _IN.fields[-1].name != "correlators":
+    raise ImportError("imm_carrier.cdr expects CorrelatorArray = header, ..., Correlator[] correlators "
+                      "with Correlator of fixed-size fields: update decode_correlator_array")
+_INTS_PER_ELEMENT, _FLOATS_PER_ELEMENT = _entries
+_INT_FIELDS = ("constellation", "svid")
+_FLOAT_FIELDS = ("integration_time_s", "in_phase", "quadrature", "cn0_dbhz", "predicted_phase_change_rad")
+_INT_AT = [_CORRELATOR.position(name)[0] for name in _INT_FIELDS]
+_FLOAT_AT = [_CORRELATOR.position(name)[1] for name in _FLOAT_FIELDS]
 
 
 @dataclass(frozen=True)
@@ -72,73 +75,12 @@ class DecodedCorrelatorArray:
     predicted_phase_change_rad: np.ndarray
 
 
-@njit(cache=True)
-def _align(offset, size):
-    return (offset + size - 1) // size * size
-
-
-@njit(cache=True)
-def _u32(buf, p):
-    return buf[p] | (buf[p + 1] << 8) | (buf[p + 2] << 16) | (np.int64(buf[p + 3]) << 24)
-
-
-@njit(cache=True)
-def _decode(buf, ints, floats, meta):
-    """Decode a CDR_LE CorrelatorArray payload (buf includes the encapsulation header).
-
-    Writes meta = [sec, nanosec, header_end, n]; ints (n, 2) constellation, svid; floats (n, 5).
-    Returns n, or -1 if the buffer is too short for what it announces, the frame_id is not a CDR string
-    (length >= 1 with its terminating NUL) or there are too many elements. Every read is bounds-checked
-    first: any byte string gives n or -1, never a read outside buf.
-    """
-    size = buf.shape[0] - _ENCAPSULATION
-    b = buf[_ENCAPSULATION:]
-    if size < 12:
-        return _ERR
-    sec = _u32(b, 0)
-    if sec >= 2**31:
-        sec -= 2**32
-    meta[0] = sec
-    meta[1] = _u32(b, 4)
-    slen = _u32(b, 8)
-    o = 12 + slen
-    if slen < 1 or o > size or b[o - 1] != 0:
-        return _ERR
-    meta[2] = o
-    o = _align(o, 4)
-    if o + 4 > size:
-        return _ERR
-    n = _u32(b, o)
-    o += 4
-    if n > ints.shape[0]:
-        return _ERR
-    tmp = np.empty(1, dtype=np.float64)
-    tb = tmp.view(np.uint8)
-    for k in range(n):
-        if o + 1 > size:
-            return _ERR
-        ints[k, 0] = b[o]
-        o = _align(o + 1, 2)
-        if o + 2 > size:
-            return _ERR
-        ints[k, 1] = b[o] | (np.int64(b[o + 1]) << 8)
-        o = _align(o + 2, 8)
-        if o + 40 > size:
-            return _ERR
-        for f in range(5):
-            for m in range(8):
-                tb[m] = b[o + m]
-            floats[k, f] = tmp[0]
-            o += 8
-    meta[3] = n
-    return n
-
-
 def decode_correlator_array(raw: bytes) -> DecodedCorrelatorArray | None:
     """Serialised rfi_msgs/CorrelatorArray -> arrays, or None if not little-endian CDR or malformed.
 
     Safe on any byte string (fuzz-tested): a truncated, overwritten or random payload gives None or the
-    fields that its bytes encode, never an error or a read out of bounds.
+    fields that its bytes encode, never an error or a read out of bounds. A frame_id with a NUL inside
+    is accepted (the header is copied verbatim into the answer).
 
     Args:
         raw: the serialised message, as a raw subscription delivers it.
@@ -146,103 +88,140 @@ def decode_correlator_array(raw: bytes) -> DecodedCorrelatorArray | None:
     Returns:
         DecodedCorrelatorArray, or None (the caller then uses rclpy's deserialisation).
     """
-    if len(raw) < 8 or raw[:2] != CDR_LE:
+    if len(raw) < 8:
         return None
-    buf = np.frombuffer(raw, dtype=np.uint8)
-    n_max = max(0, (len(raw) - 20) // 44)  # an element takes at least 44 bytes
-    ints = np.empty((n_max, 2), dtype=np.int64)
-    floats = np.empty((n_max, 5))
-    meta = np.zeros(4, dtype=np.int64)
-    n = _decode(buf, ints, floats, meta)
-    if n < 0:
+    d = _IN.decode(raw, strict_strings=False)
+    if d is None:
         return None
+    ints, floats = d.ints, d.floats
+    n = int(ints[_COUNT])
+    elements = ints[_COUNT + 1:_COUNT + 1 + n * _INTS_PER_ELEMENT].reshape(n, _INTS_PER_ELEMENT)
+    values = floats[_FIRST_FLOAT:_FIRST_FLOAT + n * _FLOATS_PER_ELEMENT].reshape(n, _FLOATS_PER_ELEMENT)
+    nanosec = int(ints[_NANOSEC])
     return DecodedCorrelatorArray(
-        stamp_ns=int(meta[0]) * 1_000_000_000 + int(meta[1]),
-        stamp_nanosec=int(meta[1]),
-        header_end=int(meta[2]),
-        constellation=ints[:n, 0],
-        svid=ints[:n, 1],
-        integration_time_s=floats[:n, 0],
-        in_phase=floats[:n, 1],
-        quadrature=floats[:n, 2],
-        cn0_dbhz=floats[:n, 3],
-        predicted_phase_change_rad=floats[:n, 4],
+        stamp_ns=int(ints[_SEC]) * 1_000_000_000 + nanosec,
+        stamp_nanosec=nanosec,
+        header_end=int(d.marks[_HEADER_FIELD]),
+        constellation=elements[:, _INT_AT[0]],
+        svid=elements[:, _INT_AT[1]],
+        integration_time_s=values[:, _FLOAT_AT[0]],
+        in_phase=values[:, _FLOAT_AT[1]],
+        quadrature=values[:, _FLOAT_AT[2]],
+        cn0_dbhz=values[:, _FLOAT_AT[3]],
+        predicted_phase_change_rad=values[:, _FLOAT_AT[4]],
     )
 
 
-@njit(cache=True)
-def _put_f8(out, o, x, tmp, tb):
-    o = _align(o, 8)
-    tmp[0] = x
-    for m in range(8):
-        out[_ENCAPSULATION + o + m] = tb[m]
-    return o + 8
+# ---------------------------------------------------------------- CarrierPhaseArray: where each field comes from
+SOURCE_METHOD = -1
+SOURCE_LOCKED = -2
+SOURCE_CYCLE_SLIPS = -3
+SOURCE_MODE_PROBABILITIES = -4
+_COLUMN = {name: k for k, name in enumerate(BATCH_COLUMNS)}
+
+ESTIMATE_SOURCES: dict[str, int] = {
+    "constellation": _COLUMN["constellation"],
+    "svid": _COLUMN["svid"],
+    "method": SOURCE_METHOD,
+    "phase_rad": _COLUMN["phase_rad"],
+    "phase_std_rad": _COLUMN["phase_std_rad"],
+    "frequency_hz": _COLUMN["frequency_hz"],
+    "frequency_std_hz": _COLUMN["frequency_std_hz"],
+    "data_bit": _COLUMN["data_bit"],
+    "data_bit_probability": _COLUMN["data_bit_probability"],
+    "mode_probabilities": SOURCE_MODE_PROBABILITIES,
+    "locked": SOURCE_LOCKED,
+    "cycle_slips": SOURCE_CYCLE_SLIPS,
+}
+"""Source of each rfi_msgs/CarrierPhase field: a column of the tracker's result table
+(imm_carrier.tracker.BATCH_COLUMNS; an integer field takes the column's integer part), or a rule:
+SOURCE_METHOD the table's method; SOURCE_MODE_PROBABILITIES the two mode probabilities for the IMM,
+none for the PLL; SOURCE_LOCKED the lock flag, written true only with a finite phase and frequency
+(and for the IMM finite standard deviations > 0: a last net behind the tracker's own check);
+SOURCE_CYCLE_SLIPS the count clipped to uint32."""
+
+_OUT = layout(CarrierPhaseArray)
+if [f.name for f in _OUT.fields] != ["header", "estimates"]:
+    raise ImportError("imm_carrier.cdr expects CarrierPhaseArray = header, CarrierPhase[] estimates: "
+                      "say where its new fields come from in encode_carrier_phase_array")
+_ESTIMATE = _OUT.element("estimates")
+_missing = [f.name for f in _ESTIMATE.fields if f.name not in ESTIMATE_SOURCES]
+if _missing:
+    raise ImportError(f"rfi_msgs/CarrierPhase fields without a source in imm_carrier.cdr.ESTIMATE_SOURCES: {_missing}")
+_SLOT_INT, _SLOT_FLOAT, _SLOT_FLOAT_SEQUENCE = 0, 1, 2
+
+
+def _slot(f) -> list[int]:
+    source = ESTIMATE_SOURCES[f.name]
+    if f.kind == "int":
+        return [_SLOT_INT, source]
+    if f.kind == "float":
+        return [_SLOT_FLOAT, source]
+    if f.kind == "sequence" and f.element_kind == "float" and source == SOURCE_MODE_PROBABILITIES:
+        return [_SLOT_FLOAT_SEQUENCE, source]
+    raise ImportError(f"imm_carrier.cdr cannot write CarrierPhase.{f.name} ({f.kind})")
+
+
+_SLOTS = np.array([_slot(f) for f in _ESTIMATE.fields], dtype=np.int64)
+_ESTIMATES_START = _OUT.field_ops[1]
+_V_PHASE, _V_PHASE_STD = _COLUMN["phase_rad"], _COLUMN["phase_std_rad"]
+_V_FREQ, _V_FREQ_STD = _COLUMN["frequency_hz"], _COLUMN["frequency_std_hz"]
+_V_MU1, _V_MU2 = _COLUMN["mode_probability_plus"], _COLUMN["mode_probability_minus"]
+_V_LOCKED, _V_SLIPS = _COLUMN["locked"], _COLUMN["cycle_slips"]
 
 
 @njit(cache=True)
-def _put_u32(out, o, v):
-    o = _align(o, 4)
-    for m in range(4):
-        out[_ENCAPSULATION + o + m] = (v >> (8 * m)) & 0xFF
-    return o + 4
+def _rule(r, method, source):
+    """Integer value of a rule source for one table row r."""
+    if source == SOURCE_METHOD:
+        return method
+    if source == SOURCE_LOCKED:
+        valid = abs(r[_V_PHASE]) < np.inf and abs(r[_V_FREQ]) < np.inf
+        if method == METHOD_IMM:  # the IMM's standard deviations must be usable too
+            valid = valid and 0.0 < r[_V_PHASE_STD] < np.inf and 0.0 < r[_V_FREQ_STD] < np.inf
+        return 1 if (r[_V_LOCKED] > 0.5 and valid) else 0
+    slips = int(r[_V_SLIPS])
+    return min(max(slips, 0), UINT32_MAX)
 
 
 @njit(cache=True)
-def _put_rows(out, o, values, method, tmp, tb):
-    """Append the CarrierPhase elements of one tracker's result table (columns of tracker.BATCH_COLUMNS)."""
+def _put_rows(values, method, slots, ints, floats, ni, nf):
     for k in range(values.shape[0]):
         r = values[k]
-        e = _ENCAPSULATION
-        out[e + o] = np.uint8(int(r[0]) & 0xFF)
-        o = _align(o + 1, 2)
-        sv = int(r[1])
-        out[e + o] = sv & 0xFF
-        out[e + o + 1] = (sv >> 8) & 0xFF
-        o += 2
-        out[e + o] = method
-        o += 1
-        o = _put_f8(out, o, r[2], tmp, tb)
-        o = _put_f8(out, o, r[3], tmp, tb)
-        o = _put_f8(out, o, r[4], tmp, tb)
-        o = _put_f8(out, o, r[5], tmp, tb)
-        out[e + o] = np.uint8(int(r[6]) & 0xFF)  # int8 data_bit, two's complement
-        o += 1
-        o = _put_f8(out, o, r[7], tmp, tb)
-        if method == METHOD_IMM:
-            o = _put_u32(out, o, 2)
-            o = _put_f8(out, o, r[8], tmp, tb)
-            o = _put_f8(out, o, r[9], tmp, tb)
-        else:
-            o = _put_u32(out, o, 0)
-        valid = abs(r[2]) < np.inf and abs(r[4]) < np.inf
-        if method == METHOD_IMM:  # the IMM's standard deviations must be usable too
-            valid = valid and 0.0 < r[3] < np.inf and 0.0 < r[5] < np.inf
-        out[e + o] = 1 if (r[10] > 0.5 and valid) else 0
-        o += 1
-        slips = int(r[11])
-        o = _put_u32(out, o, min(max(slips, 0), UINT32_MAX))
-    return o
+        for s in range(slots.shape[0]):
+            kind = slots[s, 0]
+            source = slots[s, 1]
+            if kind == _SLOT_INT:
+                ints[ni] = int(r[source]) if source >= 0 else _rule(r, method, source)
+                ni += 1
+            elif kind == _SLOT_FLOAT:
+                floats[nf] = r[source]
+                nf += 1
+            elif method == METHOD_IMM:  # mode probabilities
+                ints[ni] = 2
+                floats[nf] = r[_V_MU1]
+                floats[nf + 1] = r[_V_MU2]
+                ni += 1
+                nf += 2
+            else:
+                ints[ni] = 0
+                ni += 1
+    return ni, nf
 
 
 @njit(cache=True)
-def _encode(header, values_a, method_a, values_b, method_b, out):
-    """Write a CarrierPhaseArray payload: header bytes (encapsulation included) then the estimates."""
-    for m in range(header.shape[0]):
-        out[m] = header[m]
-    out[0] = 0
-    out[1] = 1
-    out[2] = 0
-    out[3] = 0
-    o = header.shape[0] - _ENCAPSULATION
-    o = _put_u32(out, o, values_a.shape[0] + values_b.shape[0])
-    tmp = np.empty(1, dtype=np.float64)
-    tb = tmp.view(np.uint8)
-    o = _put_rows(out, o, values_a, method_a, tmp, tb)
-    o = _put_rows(out, o, values_b, method_b, tmp, tb)
-    return o + _ENCAPSULATION
+def _encode(program, start, head, values_a, method_a, values_b, method_b, slots, out):
+    n = values_a.shape[0] + values_b.shape[0]
+    width = slots.shape[0] + 2
+    ints = np.empty(1 + n * width, dtype=np.int64)
+    floats = np.empty(n * width)
+    ints[0] = n
+    ni, nf = _put_rows(values_a, method_a, slots, ints, floats, 1, 0)
+    ni, nf = _put_rows(values_b, method_b, slots, ints, floats, ni, nf)
+    return encode_program(program, start, head, ints[:ni], floats[:nf], head[:0], out)
 
 
-_EMPTY_TABLE = np.empty((0, 12))
+_EMPTY_TABLE = np.empty((0, len(BATCH_COLUMNS)))
 
 
 def encode_carrier_phase_array(header: bytes, tables: list[tuple[np.ndarray, int]]) -> bytes:
@@ -256,15 +235,23 @@ def encode_carrier_phase_array(header: bytes, tables: list[tuple[np.ndarray, int
             (none), in output order.
 
     Returns:
-        The serialised message (little-endian CDR), ready for ``Publisher.publish``. ``locked`` is
-        written true only with a finite phase and frequency (and, for the IMM, finite standard deviations
-        > 0: a last net behind the tracker's own check); cycle_slips is clipped to uint32.
+        The serialised message (little-endian CDR), ready for ``Publisher.publish``; each field as
+        :data:`ESTIMATE_SOURCES` says.
     """
     if len(tables) > 2:
         raise ValueError("at most two tables (one per method)")
     pairs = list(tables) + [(_EMPTY_TABLE, 0)] * (2 - len(tables))
     n = sum(v.shape[0] for v, _ in pairs)
-    hdr = np.frombuffer(header, dtype=np.uint8)
-    out = np.zeros(hdr.size + 8 + _MAX_ESTIMATE_BYTES * n, dtype=np.uint8)
-    end = _encode(hdr, pairs[0][0], int(pairs[0][1]), pairs[1][0], int(pairs[1][1]), out)
+    head = np.frombuffer(header, dtype=np.uint8)
+    size = head.size + 8 + 128 * n
+    while True:
+        out = np.zeros(size, dtype=np.uint8)
+        end = _encode(_OUT.program, _ESTIMATES_START, head, np.ascontiguousarray(pairs[0][0], dtype=np.float64),
+                      int(pairs[0][1]), np.ascontiguousarray(pairs[1][0], dtype=np.float64), int(pairs[1][1]),
+                      _SLOTS, out)
+        if end != ENCODE_BUFFER_FULL:
+            break
+        size *= 2
+    if end < 0:
+        raise ValueError("tables do not fit rfi_msgs/CarrierPhaseArray")
     return out[:end].tobytes()

@@ -1,5 +1,5 @@
-"""The output message builders: the fast path (generated slots written directly) against the
-public constructors and setters, field by field, in storage type and in serialised bytes."""
+"""The output message builders: the generated constructors (rfi_node_common.message_builder)
+against the public constructors, field by field, in storage type and in serialised bytes."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ from rclpy.serialization import serialize_message
 
 import uwb_gnss_fusion.output_messages as om
 from gnss_common.coordinates import ecef_to_geodetic, rotate_covariance_ecef_to_enu
+from rfi_node_common.message_builder import builders_agree, messages_equal
 from uwb_gnss_fusion.fusion_filter import FRAME_EARTH, MODE_GNSS_UWB, FusionOutput
 
 ARL1_ECEF_M = np.array([-740289.9, -5457071.7, 3207245.5])
@@ -41,26 +42,26 @@ def test_fast_builders_equal_public_ones(out):
     names, counts = om.reason_lists(reasons)
     assert names == ['duplicate_svid', 'innovation_gate_pseudorange'] and counts == [om.UINT32_MAX, 3]
     pairs = [
-        (om._status_fast(out, out.stamp_ns, 'earth', names, counts),
-         om._status_public(out, out.stamp_ns, 'earth', names, counts)),
-        (om._odometry_fast(out, 'earth', 'gnss_antenna'), om._odometry_public(out, 'earth', 'gnss_antenna')),
-        (om._fix_fast(out, 'gnss_antenna'), om._fix_public(out, 'gnss_antenna')),
+        (om._status(om._FAST, out, out.stamp_ns, 'earth', names, counts),
+         om._status(om._PUBLIC, out, out.stamp_ns, 'earth', names, counts)),
+        (om._odometry(om._FAST, out, 'earth', 'gnss_antenna'), om._odometry(om._PUBLIC, out, 'earth', 'gnss_antenna')),
+        (om._fix(om._FAST, out, 'gnss_antenna'), om._fix(om._PUBLIC, out, 'gnss_antenna')),
     ]
     for fast, public in pairs:
-        assert om._messages_equal(fast, public), type(fast).__name__
+        assert messages_equal(fast, public), type(fast).__name__
         assert serialize_message(fast) == serialize_message(public), type(fast).__name__
 
 
 def test_messages_equal_detects_differences():
     out = CASES[0]
-    a = om._odometry_fast(out, 'earth', 'gnss_antenna')
-    b = om._odometry_fast(out, 'earth', 'gnss_antenna')
-    assert om._messages_equal(a, b)
+    a = om._odometry(om._FAST, out, 'earth', 'gnss_antenna')
+    b = om._odometry(om._FAST, out, 'earth', 'gnss_antenna')
+    assert messages_equal(a, b)
     b.pose.pose.orientation.x = 1e-300
-    assert not om._messages_equal(a, b)
-    c = om._status_fast(out, out.stamp_ns, 'earth', ['x'], [1])
-    d = om._status_fast(out, out.stamp_ns, 'earth', ['x'], [2])
-    assert not om._messages_equal(c, d)
+    assert not messages_equal(a, b)
+    c = om._status(om._FAST, out, out.stamp_ns, 'earth', ['x'], [1])
+    d = om._status(om._FAST, out, out.stamp_ns, 'earth', ['x'], [2])
+    assert not messages_equal(c, d)
 
 
 def test_contents_against_reference_functions():
@@ -106,11 +107,10 @@ def test_negative_stamp_raises():
 
 
 def test_fast_path_selected_here_and_refused_with_field_checks(monkeypatch):
-    # This environment's generated messages have the expected layout: the fast path is in use.
+    # This environment's generated messages have the expected layout: the generated constructors are in use.
     assert om.FAST_CONSTRUCTION
-    monkeypatch.setenv('ROS_PYTHON_CHECK_FIELDS', '1')
-    assert not om._choose_fast()
-    monkeypatch.delenv('ROS_PYTHON_CHECK_FIELDS')
-    assert om._choose_fast()
-    monkeypatch.setitem(om._EXPECTED_SLOTS, om.Odometry, ('header', 'pose', 'twist'))
-    assert not om._choose_fast()
+    assert om._FAST.Odometry is not om._PUBLIC.Odometry
+    import nav_msgs.msg._odometry as module
+
+    monkeypatch.setattr(module, 'ros_python_check_fields', '1')  # as if ROS_PYTHON_CHECK_FIELDS=1 at import
+    assert not builders_agree.__wrapped__(om.Odometry)

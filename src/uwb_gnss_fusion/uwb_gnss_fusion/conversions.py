@@ -10,9 +10,9 @@ by field, with no arithmetic on the values:
 * :func:`point_to_msg` / :func:`msg_to_point`: (stamp_ns, xyz) <-> ``geometry_msgs/PointStamped``
   (truth and reference positions in bags).
 * :func:`decode_uwb_range_cdr`: the serialised ``rfi_msgs/UwbRange`` (CDR bytes, as a ``raw=True``
-  subscription or a bag delivers them) straight to a ``UwbRangeMeasurement``, without rclpy's
-  deserialisation (which builds the message and its nested Header, Time and Point objects; about
-  30 us per range against about 3 us here, at 20 Hz per anchor).
+  subscription or a bag delivers them) straight to a ``UwbRangeMeasurement`` through the suite's
+  codec (:mod:`rfi_node_common.cdr`), without rclpy's deserialisation (which builds the message and
+  its nested Header, Time and Point objects; about 30 us per range, at 20 Hz per anchor).
 
 Round trips are exact: every float is a float64 on both sides (NaN stays NaN, -0.0 stays -0.0),
 stamps are integer nanoseconds (``builtin_interfaces/Time`` holds them exactly for stamps >= 0).
@@ -31,7 +31,6 @@ rfi_msgs/UwbRange.msg (Cao et al., eq. 7 two-way range).
 from __future__ import annotations
 
 import math
-import struct
 from collections.abc import Sequence
 
 import numpy as np
@@ -40,6 +39,7 @@ from std_msgs.msg import Header
 
 from gnss_common.observations import GnssEpoch, SatelliteObservation, UwbRangeMeasurement
 from rfi_msgs.msg import GnssMeasurement, GnssMeasurementArray, UwbRange
+from rfi_node_common.cdr import layout
 from rfi_node_common.stamps import ns_to_stamp, stamp_to_ns
 
 EARTH_FRAME_ID = "earth"
@@ -279,65 +279,53 @@ def msg_to_point(msg: PointStamped) -> tuple[int, np.ndarray, str]:
     return stamp_to_ns(msg.header.stamp), np.array([p.x, p.y, p.z], dtype=float), str(msg.header.frame_id)
 
 
-_CDR_LE = b"\x00\x01"
-_U32 = struct.Struct("<I")
-_STAMP = struct.Struct("<iI")
-_TAIL = struct.Struct("<6d")
-
-
-def _cdr_string(raw: bytes, pos: int) -> tuple[str, int]:
-    """A CDR string at payload offset ``pos`` (after alignment to 4): (text, offset after it).
-
-    Raises:
-        struct.error: the length is cut short.
-        ValueError: length 0, text beyond the end, no terminating NUL or a NUL inside (rclpy reads
-            such a string up to its first NUL: the caller lets rclpy decode it).
-        UnicodeDecodeError: not UTF-8.
-    """
-    pos = (pos + 3) & ~3
-    (n,) = _U32.unpack_from(raw, 4 + pos)
-    start = 4 + pos + 4
-    if n == 0 or start + n > len(raw) or raw[start + n - 1] != 0 or raw.find(b"\x00", start, start + n - 1) >= 0:
-        raise ValueError("bad CDR string")
-    return raw[start:start + n - 1].decode("utf-8"), pos + 4 + n
+_UWB = layout(UwbRange)
+_UWB_SEC, _ = _UWB.position("header.stamp.sec")
+_UWB_NANOSEC, _ = _UWB.position("header.stamp.nanosec")
+_UWB_FRAME_ID, _ = _UWB.position("header.frame_id")
+_UWB_ANCHOR_ID, _ = _UWB.position("anchor_id")
+_, _UWB_POSITION = _UWB.position("anchor_position")
+_, _UWB_RANGE = _UWB.position("range_m")
+_, _UWB_RANGE_STD = _UWB.position("range_std_m")
 
 
 def decode_uwb_range_cdr(raw: bytes, frame_map: dict[str, str] | None = None
                          ) -> tuple[int, str, UwbRangeMeasurement | None] | None:
     """Decode a serialised ``rfi_msgs/UwbRange`` (little-endian CDR) without rclpy.
 
-    Args:
-        raw: the serialised message: a 4-byte encapsulation header (``00 01 00 00``, CDR little
-            endian), then header.stamp (int32 sec, uint32 nanosec), header.frame_id (string),
-            anchor_id (string), anchor_position (3 float64), range_m, range_std_m, rssi_dbm
-            (float64), each primitive aligned to its size from the end of the encapsulation header,
-            strings as uint32 length (with the NUL) and bytes.
+    The bytes are read by the suite's codec (:mod:`rfi_node_common.cdr`, layout from the generated
+    UwbRange class); the fields are found in its value streams by name.
 
+    Args:
+        raw: the serialised message, as a ``raw=True`` subscription or a bag delivers it.
         frame_map: optional header.frame_id -> measurement frame_id (the node's names of the core
             frames); a frame_id not in it gives no measurement. None: the measurement keeps
             header.frame_id (as :func:`msg_to_uwb`).
 
     Returns:
         ``(stamp_ns, header.frame_id, measurement or None)``; None if ``raw`` is not little-endian
-        CDR or is cut short or malformed (the caller then deserialises it with rclpy, which reports
-        the error). Equal field for field to ``msg_to_uwb(deserialize_message(raw, UwbRange))``
-        whenever both decode the bytes (tested, also on fuzzed bytes). Never raises and never reads
-        outside ``raw``, whatever it holds (every read is bounds-checked by struct or by slicing).
+        CDR or is cut short or malformed, or a string is not UTF-8 or has a NUL inside (the caller
+        then deserialises it with rclpy, which reports the error). Equal field for field to
+        ``msg_to_uwb(deserialize_message(raw, UwbRange))`` whenever both decode the bytes (tested,
+        also on fuzzed bytes). Never raises and never reads outside ``raw``, whatever it holds.
     """
-    if len(raw) < 4 or raw[:2] != _CDR_LE:
+    d = _UWB.decode(raw)
+    if d is None:
         return None
+    ints = d.ints.tolist()
+    f = d.floats.tolist()
+    start, length = ints[_UWB_FRAME_ID], ints[_UWB_FRAME_ID + 1]
+    anchor_start, anchor_length = ints[_UWB_ANCHOR_ID], ints[_UWB_ANCHOR_ID + 1]
     try:
-        sec, nanosec = _STAMP.unpack_from(raw, 4)
-        frame_id, pos = _cdr_string(raw, 8)
-        anchor_id, pos = _cdr_string(raw, pos)
-        pos = (pos + 7) & ~7
-        x, y, z, rng, std, _rssi = _TAIL.unpack_from(raw, 4 + pos)
-    except (struct.error, ValueError, UnicodeDecodeError):
+        frame_id = raw[start:start + length].decode("utf-8")
+        anchor_id = raw[anchor_start:anchor_start + anchor_length].decode("utf-8")
+    except UnicodeDecodeError:
         return None
-    stamp_ns = sec * 1_000_000_000 + nanosec
+    stamp_ns = ints[_UWB_SEC] * 1_000_000_000 + ints[_UWB_NANOSEC]
     target = frame_id if frame_map is None else frame_map.get(frame_id)
     if target is None:
         return stamp_ns, frame_id, None
-    meas = UwbRangeMeasurement(stamp_ns=stamp_ns, anchor_id=anchor_id, anchor_position_m=np.array([x, y, z]),
-                               frame_id=target, range_m=rng, range_std_m=std)
+    meas = UwbRangeMeasurement(stamp_ns=stamp_ns, anchor_id=anchor_id,
+                               anchor_position_m=np.array(f[_UWB_POSITION:_UWB_POSITION + 3]), frame_id=target,
+                               range_m=f[_UWB_RANGE], range_std_m=f[_UWB_RANGE_STD])
     return stamp_ns, frame_id, meas

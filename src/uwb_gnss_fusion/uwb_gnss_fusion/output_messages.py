@@ -4,31 +4,20 @@
 nav_msgs/Odometry and sensor_msgs/NavSatFix (contents: see :mod:`uwb_gnss_fusion.fusion_node`).
 They run for every input (up to 20 Hz UWB + 5 Hz GNSS), so their cost matters in a replay.
 
-Construction. A generated rosidl message ``__init__`` builds a default for every field, nested
-messages included (``kwargs.get('pose', Pose())`` evaluates ``Pose()`` even when a pose is
-given), imports its sub-message classes on every call, and copies each array. An Odometry is 12
-messages (9 of them nested), so building it through the constructors took about 40 us here and
-the three outputs together about half of the node's time per input. Messages cannot be reused
-between publications: the in-process replay (``ReplayHarness(transport='direct')``) hands the
-published object itself to subscribers and collectors. So the builders here allocate each message
-with ``cls.__new__`` and write the generated slots (``_x``, ``_header`` ...) directly, each exactly
-once, with values of the slot's storage type (float, int, bool, str, float64 ``ndarray`` of the
-right size, ``array('I')``, list of str), which is what the generated setters store when field
-checks are off.
-
-This depends on the layout rosidl_generator_py generates (one ``_<field>`` slot per field plus
-``_check_fields``). :data:`FAST_CONSTRUCTION` is decided once at import: it is True only if every
-message class used has exactly the expected slots, field checks are off
-(``ROS_PYTHON_CHECK_FIELDS`` not ``1``), and a message built each way compares equal with
-``==`` for every type. Otherwise the builders use the public constructors and setters (the
-reference path, also used by the tests to check the fast one field by field).
+The messages stay Python objects (the node checks a fix before publishing it, and the in-process
+replay hands the published object to the subscribers). A generated rosidl ``__init__`` builds a
+default for every field, nested messages included, and imports its sub-message classes on every
+call: an Odometry (12 messages) through the constructors took about 40 us. So each message is built
+with :func:`rfi_node_common.message_builder.message_builder`, the suite's codec layer's constructor generated
+from the class's own field description (``get_fields_and_field_types`` / ``SLOT_TYPES``), which fills
+each field once. It is used only where it agrees with the public constructor (checked once per
+class, see :func:`rfi_node_common.message_builder.builders_agree`); otherwise the public constructors are used
+(:data:`FAST_CONSTRUCTION` says which). This module only says which value goes into which field.
 """
 
 from __future__ import annotations
 
-import math
-import os
-from array import array
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -39,6 +28,7 @@ from sensor_msgs.msg import NavSatFix, NavSatStatus
 from std_msgs.msg import Header
 
 from rfi_msgs.msg import FusionStatus
+from rfi_node_common.message_builder import builders_agree, message_builder
 from uwb_gnss_fusion.fusion_filter import FusionOutput
 
 ORIENTATION_UNKNOWN_VARIANCE_RAD2 = 1.0e6
@@ -47,28 +37,6 @@ ORIENTATION_UNKNOWN_VARIANCE_RAD2 = 1.0e6
 UINT16_MAX = 2**16 - 1
 UINT32_MAX = 2**32 - 1
 _NS = 1_000_000_000
-
-_EXPECTED_SLOTS: dict[type, tuple[str, ...]] = {
-    Time: ('sec', 'nanosec'),
-    Header: ('stamp', 'frame_id'),
-    Point: ('x', 'y', 'z'),
-    Quaternion: ('x', 'y', 'z', 'w'),
-    Vector3: ('x', 'y', 'z'),
-    Pose: ('position', 'orientation'),
-    Twist: ('linear', 'angular'),
-    PoseWithCovariance: ('pose', 'covariance'),
-    TwistWithCovariance: ('twist', 'covariance'),
-    Odometry: ('header', 'child_frame_id', 'pose', 'twist'),
-    NavSatStatus: ('status', 'service'),
-    NavSatFix: ('header', 'status', 'latitude', 'longitude', 'altitude', 'position_covariance',
-                'position_covariance_type'),
-    FusionStatus: ('header', 'mode', 'initialized', 'diverged', 'reinitializations', 'satellites_used',
-                   'satellites_rejected', 'uwb_used', 'uwb_rejected', 'normalized_innovation_squared',
-                   'clock_bias_m', 'clock_drift_mps', 'jammer_to_signal_db', 'rejection_reasons',
-                   'rejection_counts'),
-}
-"""Fields of each message class written by the fast builders (their slots are ``_<field>``)."""
-
 
 def _odometry_covariance_index() -> tuple[np.ndarray, np.ndarray]:
     """Flat indices into ``[covariance_pv.ravel() (36), 0.0, ORIENTATION_UNKNOWN_VARIANCE_RAD2]``
@@ -113,211 +81,60 @@ def _source_covariances(out: FusionOutput) -> tuple[np.ndarray, np.ndarray]:
     return source.take(_POSE_COV_INDEX), source.take(_TWIST_COV_INDEX)
 
 
-def _status_values(out: FusionOutput) -> tuple:
-    """FusionStatus scalar fields (counts clamped to their integer types), in slot order."""
-    return (int(out.mode), bool(out.initialized), bool(out.diverged),
-            min(int(out.reinitializations), UINT32_MAX), min(int(out.satellites_used), UINT16_MAX),
-            min(int(out.satellites_rejected), UINT16_MAX), min(int(out.uwb_used), UINT16_MAX),
-            min(int(out.uwb_rejected), UINT16_MAX), float(out.normalized_innovation_squared),
-            float(out.clock_bias_m), float(out.clock_drift_mps), float(out.jammer_to_signal_db))
+_CLASSES = (Time, Header, Point, Quaternion, Vector3, Pose, Twist, PoseWithCovariance, TwistWithCovariance,
+            Odometry, NavSatStatus, NavSatFix, FusionStatus)
 
 
-# ---------------------------------------------------------------- reference path (public API)
-def _status_public(out: FusionOutput, stamp_ns: int, frame_id: str, names: list[str], counts: list[int]) -> Any:
-    m = FusionStatus()
-    m.header.stamp.sec, m.header.stamp.nanosec = _split_stamp(stamp_ns)
-    m.header.frame_id = frame_id
-    (m.mode, m.initialized, m.diverged, m.reinitializations, m.satellites_used, m.satellites_rejected,
-     m.uwb_used, m.uwb_rejected, m.normalized_innovation_squared, m.clock_bias_m, m.clock_drift_mps,
-     m.jammer_to_signal_db) = _status_values(out)
-    m.rejection_reasons = list(names)
-    m.rejection_counts = counts  # the setter copies into its own array('I')
-    return m
+def _builders(fast: bool) -> Any:
+    """One constructor per message class, by class name (generated if ``fast``, else the public one)."""
+    return SimpleNamespace(**{cls.__name__: message_builder(cls, fast) for cls in _CLASSES})
 
 
-def _odometry_public(out: FusionOutput, frame_id: str, child_frame_id: str) -> Any:
-    m = Odometry()
-    m.header.stamp.sec, m.header.stamp.nanosec = _split_stamp(out.stamp_ns)
-    m.header.frame_id = frame_id
-    m.child_frame_id = child_frame_id
-    position = m.pose.pose.position
-    position.x, position.y, position.z = out.position_m.tolist()
-    m.pose.pose.orientation.w = 1.0
-    m.pose.covariance, m.twist.covariance = _source_covariances(out)
-    linear = m.twist.twist.linear
-    linear.x, linear.y, linear.z = out.velocity_mps.tolist()
-    return m
-
-
-def _fix_public(out: FusionOutput, frame_id: str) -> Any:
-    m = NavSatFix()
-    m.header.stamp.sec, m.header.stamp.nanosec = _split_stamp(out.stamp_ns)
-    m.header.frame_id = frame_id
-    m.status.status = NavSatStatus.STATUS_FIX
-    m.status.service = NavSatStatus.SERVICE_GPS
-    m.latitude, m.longitude, m.altitude = out.geodetic
-    m.position_covariance = out.position_covariance_enu_m2.reshape(9).copy()
-    m.position_covariance_type = NavSatFix.COVARIANCE_TYPE_KNOWN
-    return m
-
-
-# ---------------------------------------------------------------- fast path (generated slots)
-_new = object.__new__
-
-
-def _header_fast(stamp_ns: int, frame_id: str) -> Any:
-    t = _new(Time)
-    t._check_fields = False
-    t._sec, t._nanosec = _split_stamp(stamp_ns)
-    h = _new(Header)
-    h._check_fields = False
-    h._stamp = t
-    h._frame_id = frame_id
-    return h
-
-
-def _xyz_fast(cls: type, x: float, y: float, z: float) -> Any:
-    v: Any = _new(cls)
-    v._check_fields = False
-    v._x = x
-    v._y = y
-    v._z = z
-    return v
-
-
-def _status_fast(out: FusionOutput, stamp_ns: int, frame_id: str, names: list[str], counts: list[int]) -> Any:
-    m = _new(FusionStatus)
-    m._check_fields = False
-    m._header = _header_fast(stamp_ns, frame_id)
-    (m._mode, m._initialized, m._diverged, m._reinitializations, m._satellites_used, m._satellites_rejected,
-     m._uwb_used, m._uwb_rejected, m._normalized_innovation_squared, m._clock_bias_m, m._clock_drift_mps,
-     m._jammer_to_signal_db) = _status_values(out)
-    m._rejection_reasons = list(names)
-    m._rejection_counts = array('I', counts)
-    return m
-
-
-def _odometry_fast(out: FusionOutput, frame_id: str, child_frame_id: str) -> Any:
-    pose_cov, twist_cov = _source_covariances(out)
-    q = _new(Quaternion)
-    q._check_fields = False
-    q._x = q._y = q._z = 0.0
-    q._w = 1.0
-    pose = _new(Pose)
-    pose._check_fields = False
-    pose._position = _xyz_fast(Point, *out.position_m.tolist())
-    pose._orientation = q
-    pwc = _new(PoseWithCovariance)
-    pwc._check_fields = False
-    pwc._pose = pose
-    pwc._covariance = pose_cov
-    twist = _new(Twist)
-    twist._check_fields = False
-    twist._linear = _xyz_fast(Vector3, *out.velocity_mps.tolist())
-    twist._angular = _xyz_fast(Vector3, 0.0, 0.0, 0.0)
-    twc = _new(TwistWithCovariance)
-    twc._check_fields = False
-    twc._twist = twist
-    twc._covariance = twist_cov
-    m = _new(Odometry)
-    m._check_fields = False
-    m._header = _header_fast(out.stamp_ns, frame_id)
-    m._child_frame_id = child_frame_id
-    m._pose = pwc
-    m._twist = twc
-    return m
-
+_PUBLIC = _builders(False)
+_FAST = _builders(True)
+FAST_CONSTRUCTION = all(builders_agree(cls) for cls in _CLASSES)
+"""True if every output message is built by its generated constructor (see the module docstring)."""
 
 _STATUS_FIX, _SERVICE_GPS = int(NavSatStatus.STATUS_FIX), int(NavSatStatus.SERVICE_GPS)
 _COVARIANCE_TYPE_KNOWN = int(NavSatFix.COVARIANCE_TYPE_KNOWN)
 
 
-def _fix_fast(out: FusionOutput, frame_id: str) -> Any:
-    status = _new(NavSatStatus)
-    status._check_fields = False
-    status._status = _STATUS_FIX
-    status._service = _SERVICE_GPS
-    m = _new(NavSatFix)
-    m._check_fields = False
-    m._header = _header_fast(out.stamp_ns, frame_id)
-    m._status = status
-    m._latitude, m._longitude, m._altitude = (float(v) for v in out.geodetic)
-    m._position_covariance = np.array(out.position_covariance_enu_m2, dtype=np.float64).reshape(9)
-    m._position_covariance_type = _COVARIANCE_TYPE_KNOWN
-    return m
+def _header(b: Any, stamp_ns: int, frame_id: str) -> Any:
+    sec, nanosec = _split_stamp(stamp_ns)
+    return b.Header(stamp=b.Time(sec=sec, nanosec=nanosec), frame_id=frame_id)
 
 
-# ---------------------------------------------------------------- selection
-def _layout_matches() -> bool:
-    """Every class has exactly the slots ``_<field>`` of :data:`_EXPECTED_SLOTS` + ``_check_fields``."""
-    for cls, fields in _EXPECTED_SLOTS.items():
-        expected = {f'_{f}' for f in fields} | {'_check_fields'}
-        declared = set(getattr(cls, 'get_fields_and_field_types', dict)())
-        if set(getattr(cls, '__slots__', ())) != expected or declared != set(fields):
-            return False
-    return True
+def _status(b: Any, out: FusionOutput, stamp_ns: int, frame_id: str, names: list[str], counts: list[int]) -> Any:
+    return b.FusionStatus(
+        header=_header(b, stamp_ns, frame_id), mode=int(out.mode), initialized=bool(out.initialized),
+        diverged=bool(out.diverged), reinitializations=min(int(out.reinitializations), UINT32_MAX),
+        satellites_used=min(int(out.satellites_used), UINT16_MAX),
+        satellites_rejected=min(int(out.satellites_rejected), UINT16_MAX),
+        uwb_used=min(int(out.uwb_used), UINT16_MAX), uwb_rejected=min(int(out.uwb_rejected), UINT16_MAX),
+        normalized_innovation_squared=float(out.normalized_innovation_squared),
+        clock_bias_m=float(out.clock_bias_m), clock_drift_mps=float(out.clock_drift_mps),
+        jammer_to_signal_db=float(out.jammer_to_signal_db),
+        rejection_reasons=list(names), rejection_counts=counts)  # the setter copies counts into array('I')
 
 
-def _probe_output() -> _ProbeOutput:
-    """A FusionOutput with distinct values in every field the builders read (for the self-check)."""
-    cov = np.arange(1.0, 37.0).reshape(6, 6)
-    return _ProbeOutput(stamp_ns=1_700_000_000_123_456_789, position_m=np.array([1.0e6, -5.0e6, 3.0e6]),
-                        velocity_mps=np.array([0.25, -0.5, 0.125]), covariance_pv=cov + cov.T)
+def _odometry(b: Any, out: FusionOutput, frame_id: str, child_frame_id: str) -> Any:
+    pose_cov, twist_cov = _source_covariances(out)
+    x, y, z = out.position_m.tolist()
+    vx, vy, vz = out.velocity_mps.tolist()
+    pose = b.Pose(position=b.Point(x=x, y=y, z=z), orientation=b.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0))
+    twist = b.Twist(linear=b.Vector3(x=vx, y=vy, z=vz), angular=b.Vector3(x=0.0, y=0.0, z=0.0))
+    return b.Odometry(header=_header(b, out.stamp_ns, frame_id), child_frame_id=child_frame_id,
+                      pose=b.PoseWithCovariance(pose=pose, covariance=pose_cov),
+                      twist=b.TwistWithCovariance(twist=twist, covariance=twist_cov))
 
 
-class _ProbeOutput:
-    """Duck-typed stand-in for :class:`FusionOutput` in the import-time self-check."""
-
-    def __init__(self, stamp_ns: int, position_m: np.ndarray, velocity_mps: np.ndarray,
-                 covariance_pv: np.ndarray) -> None:
-        self.stamp_ns = stamp_ns
-        self.position_m = position_m
-        self.velocity_mps = velocity_mps
-        self.covariance_pv = covariance_pv
-        self.mode, self.initialized, self.diverged, self.reinitializations = 3, True, False, 2
-        self.satellites_used, self.satellites_rejected, self.uwb_used, self.uwb_rejected = 9, 1, 1, 0
-        self.normalized_innovation_squared, self.clock_bias_m = 1.5, 12.25
-        self.clock_drift_mps, self.jammer_to_signal_db = -0.5, math.nan
-        self.geodetic = (38.5, -97.25, 312.5)
-        self.position_covariance_enu_m2 = covariance_pv[:3, :3] + 0.5
-
-
-def _messages_equal(a: Any, b: Any) -> bool:
-    """Field-by-field equality, NaN equal to NaN (generated ``__eq__`` says NaN != NaN)."""
-    if type(a) is not type(b):
-        return False
-    if hasattr(type(a), 'get_fields_and_field_types'):
-        return all(_messages_equal(getattr(a, f), getattr(b, f)) for f in type(a).get_fields_and_field_types())
-    if isinstance(a, (np.ndarray, array)):
-        return (len(a) == len(b) and np.asarray(a).dtype == np.asarray(b).dtype
-                and bool(np.array_equal(np.asarray(a), np.asarray(b), equal_nan=True)))
-    if isinstance(a, float) and math.isnan(a):
-        return math.isnan(b)
-    return bool(a == b)
-
-
-def _fast_path_agrees() -> bool:
-    """The fast builders give messages equal, field by field and in storage type, to the public path."""
-    out: Any = _probe_output()
-    names, counts = ['a_reason', 'b_reason'], [3, UINT32_MAX]
-    pairs = [(_status_fast(out, out.stamp_ns, 'earth', names, counts),
-              _status_public(out, out.stamp_ns, 'earth', names, counts)),
-             (_odometry_fast(out, 'earth', 'gnss_antenna'), _odometry_public(out, 'earth', 'gnss_antenna')),
-             (_fix_fast(out, 'gnss_antenna'), _fix_public(out, 'gnss_antenna'))]
-    return all(_messages_equal(f, p) for f, p in pairs)
-
-
-def _choose_fast() -> bool:
-    if os.environ.get('ROS_PYTHON_CHECK_FIELDS', '') == '1' or not _layout_matches():
-        return False
-    try:
-        return _fast_path_agrees()
-    except (AttributeError, TypeError, ValueError):
-        return False
-
-
-FAST_CONSTRUCTION = _choose_fast()
-"""True if the builders write the generated slots directly (see the module docstring)."""
+def _fix(b: Any, out: FusionOutput, frame_id: str) -> Any:
+    latitude, longitude, altitude = (float(v) for v in out.geodetic)
+    return b.NavSatFix(header=_header(b, out.stamp_ns, frame_id),
+                       status=b.NavSatStatus(status=_STATUS_FIX, service=_SERVICE_GPS),
+                       latitude=latitude, longitude=longitude, altitude=altitude,
+                       position_covariance=np.asarray(out.position_covariance_enu_m2, dtype=np.float64).reshape(9),
+                       position_covariance_type=_COVARIANCE_TYPE_KNOWN)
 
 
 def status_msg(out: FusionOutput, stamp_ns: int, frame_id: str, reasons: dict[str, int],
@@ -328,15 +145,14 @@ def status_msg(out: FusionOutput, stamp_ns: int, frame_id: str, reasons: dict[st
     never shared between messages).
     """
     names, counts = reason_lists(reasons) if lists is None else lists
-    build = _status_fast if FAST_CONSTRUCTION else _status_public
-    return build(out, stamp_ns, frame_id, names, counts)
+    return _status(_FAST, out, stamp_ns, frame_id, names, counts)
 
 
 def odometry_msg(out: FusionOutput, frame_id: str, child_frame_id: str) -> Any:
     """FusionOutput (initialised, finite) -> nav_msgs/Odometry (see the fusion_node docstring)."""
-    return (_odometry_fast if FAST_CONSTRUCTION else _odometry_public)(out, frame_id, child_frame_id)
+    return _odometry(_FAST, out, frame_id, child_frame_id)
 
 
 def fix_msg(out: FusionOutput, frame_id: str) -> Any:
     """FusionOutput (initialised, finite, earth frame) -> sensor_msgs/NavSatFix."""
-    return (_fix_fast if FAST_CONSTRUCTION else _fix_public)(out, frame_id)
+    return _fix(_FAST, out, frame_id)

@@ -1,0 +1,605 @@
+"""The suite's one CDR codec: byte layouts derived from the generated message classes themselves.
+
+A raw subscription delivers a message as its serialised bytes, and a publisher takes bytes too. Where
+rclpy's conversion of a message to Python objects costs more than the work done with it (32
+correlators at 1 kHz, UWB ranges at 20 Hz per anchor), the nodes read and write the bytes with this
+module instead of hand-counting offsets. Nothing here is written per message type:
+
+* :func:`layout` walks ``MsgClass.SLOT_TYPES`` / ``get_fields_and_field_types()`` of a generated
+  rosidl class (nested messages, strings, fixed arrays, bounded and unbounded sequences) once, and
+  compiles the walk into a small program (:class:`CdrLayout`). Changing a ``.msg`` file and
+  rebuilding ``rfi_msgs`` changes the program; no offset is written anywhere.
+* Two compiled interpreters run any program: :func:`decode_program` turns CDR bytes into two flat value
+  streams in wire order (``ints``: every integer, bool, sequence count and string position;
+  ``floats``: every float32/float64), and :func:`encode_program` writes the bytes back from such streams.
+  Adapters in the node packages give those streams names (:meth:`CdrLayout.position`,
+  :meth:`CdrLayout.element`).
+* :mod:`rfi_node_common.message_builder` makes fast constructors of message objects from the same
+  description (for outputs that must stay Python objects).
+
+Format (OMG CDR version 1 as the ROS 2 middlewares write it, little endian): a 4-byte encapsulation
+header ``00 01 00 00`` (CDR_LE), then the fields in declaration order, each primitive aligned to its
+own size counted from the end of the encapsulation header; a string is a uint32 length (with the
+terminating NUL) and the bytes; a sequence a uint32 count and the elements (an empty sequence adds
+no alignment for its element type); a fixed array just its elements; a nested message its fields.
+The encoder writes zeros where the middleware leaves padding uninitialised and ends at the last
+field (rmw_fastrtps's buffers may carry up to 4 unused trailing bytes per empty float64 sequence,
+which deserialisers ignore). Only little-endian input is decoded; anything else, and any byte string
+that is cut short or malformed, is declined (None), and every read is bounds-checked first.
+
+No rclpy import: the message classes come from the rosidl-generated packages (rosidl_parser types).
+The tests check decoding and encoding byte for byte against ``rclpy.serialization`` for random
+messages of every type on the nodes' hot paths, and fuzz the decoder.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from functools import cache
+from typing import Any, NamedTuple
+
+import numpy as np
+from numba import njit
+
+CDR_LE = b"\x00\x01"
+"""First two bytes of a little-endian CDR payload (encapsulation kind)."""
+ENCAPSULATION = b"\x00\x01\x00\x00"
+"""The 4-byte encapsulation header written by :meth:`CdrLayout.encode`."""
+
+# Opcodes of a layout program: one row [opcode, a, b] per operation.
+OP_PRIM = 0  # a = size in bytes (1, 2, 4, 8), b = kind (KIND_*)
+OP_STRING = 1  # a = bound in bytes (0: unbounded); streams: ints += [start in buffer, length without NUL]
+OP_SEQUENCE = 2  # a = row of its OP_END, b = bound (0: unbounded); streams: ints += [count]; body once per element
+OP_ARRAY = 3  # a = row of its OP_END, b = fixed count (>= 1); body once per element
+OP_END = 4  # a = row of its OP_SEQUENCE / OP_ARRAY
+OP_MARK = 5  # a = top-level field index: the decoder records the payload offset where that field ends
+
+KIND_UNSIGNED = 0
+KIND_SIGNED = 1
+KIND_FLOAT = 2
+KIND_BOOL = 3
+
+PRIMITIVES = {
+    "boolean": (1, KIND_BOOL), "octet": (1, KIND_UNSIGNED), "char": (1, KIND_UNSIGNED),
+    "uint8": (1, KIND_UNSIGNED), "int8": (1, KIND_SIGNED), "uint16": (2, KIND_UNSIGNED), "int16": (2, KIND_SIGNED),
+    "uint32": (4, KIND_UNSIGNED), "int32": (4, KIND_SIGNED), "uint64": (8, KIND_UNSIGNED), "int64": (8, KIND_SIGNED),
+    "float": (4, KIND_FLOAT), "double": (8, KIND_FLOAT),
+}
+"""rosidl basic type name -> (CDR size and alignment in bytes, kind)."""
+
+_MAX_DEPTH = 16
+_ERR = -1
+ENCODE_BUFFER_FULL = -2
+"""Return value of :func:`encode_program` when ``out`` is too small (retry with a larger one)."""
+_FULL = ENCODE_BUFFER_FULL
+
+
+# ---------------------------------------------------------------- layout from the message class
+@dataclass(frozen=True)
+class FieldLayout:
+    """One field of a message as the codec sees it.
+
+    Attributes:
+        name: field name.
+        kind: 'int' (integer types, bool included), 'float', 'string', 'message', 'sequence' or 'array'.
+        primitive: rosidl basic type name for 'int' / 'float' (and of the elements of a primitive
+            sequence or array), else ''.
+        element: layout of the element message of a 'message', or of a sequence / array of messages.
+        element_kind: for 'sequence' / 'array': 'int', 'float', 'string' or 'message'.
+        size: fixed count of an 'array'; bound of a bounded 'sequence' or 'string' (0: unbounded).
+    """
+
+    name: str
+    kind: str
+    primitive: str = ""
+    element: CdrLayout | None = None
+    element_kind: str = ""
+    size: int = 0
+
+
+@dataclass(frozen=True, eq=False)
+class CdrLayout:
+    """CDR layout of one message class, computed from its generated description (see :func:`layout`).
+
+    Attributes:
+        msg_class: the generated message class.
+        fields: one :class:`FieldLayout` per field, in declaration (= wire) order.
+        program: int64 array (n_ops, 3) run by the compiled codec.
+        field_ops: row of ``program`` where each top-level field starts (``len(fields)`` entries).
+    """
+
+    msg_class: Any
+    fields: tuple[FieldLayout, ...]
+    program: np.ndarray
+    field_ops: tuple[int, ...]
+
+    @property
+    def name(self) -> str:
+        return f"{self.msg_class.__module__.split('.')[0]}/{self.msg_class.__name__}"
+
+    def field(self, name: str) -> FieldLayout:
+        """The field called ``name`` (KeyError if the message has none)."""
+        for f in self.fields:
+            if f.name == name:
+                return f
+        raise KeyError(f"{self.name} has no field {name!r}")
+
+    def element(self, name: str) -> CdrLayout:
+        """Layout of the messages inside the message, sequence or array field ``name``."""
+        f = self.field(name)
+        if f.element is None:
+            raise KeyError(f"{self.name}.{name} holds no messages")
+        return f.element
+
+    def entries(self) -> tuple[int, int] | None:
+        """(ints, floats) stream entries of one message, or None if a sequence makes it vary."""
+        n_int = n_float = 0
+        for f in self.fields:
+            e = _field_entries(f)
+            if e is None:
+                return None
+            n_int, n_float = n_int + e[0], n_float + e[1]
+        return n_int, n_float
+
+    def position(self, path: str) -> tuple[int, int]:
+        """(ints, floats) stream positions where the field ``path`` ('header.stamp.sec') starts.
+
+        Raises:
+            KeyError: no such field.
+            ValueError: a sequence before the field makes its position vary.
+        """
+        head, _, rest = path.partition(".")
+        n_int = n_float = 0
+        for f in self.fields:
+            if f.name == head:
+                if not rest:
+                    return n_int, n_float
+                if f.kind != "message" or f.element is None:
+                    raise KeyError(f"{self.name}.{head} is not a message")
+                i, j = f.element.position(rest)
+                return n_int + i, n_float + j
+            e = _field_entries(f)
+            if e is None:
+                raise ValueError(f"{self.name}.{f.name} (a sequence) comes before {path!r}: its position varies")
+            n_int, n_float = n_int + e[0], n_float + e[1]
+        raise KeyError(f"{self.name} has no field {head!r}")
+
+    def decode(self, raw: bytes, *, strict_strings: bool = True) -> DecodedCdr | None:
+        """CDR bytes -> value streams, or None if not little-endian CDR of this message or malformed.
+
+        Args:
+            raw: the serialised message (encapsulation header included).
+            strict_strings: also decline a string with a NUL before its terminating one (rclpy reads
+                such a string only up to its first NUL, so a decoder that turns it into text would differ).
+
+        Returns:
+            :class:`DecodedCdr`; never raises and never reads outside ``raw``, whatever it holds.
+        """
+        if len(raw) < 4 or raw[:2] != CDR_LE:
+            return None
+        buf = np.frombuffer(raw, dtype=np.uint8)
+        ints = np.empty(len(raw) + 8, dtype=np.int64)  # every int entry consumes >= 1 byte (a string 2 per 5)
+        floats = np.empty(len(raw) // 4 + 1)
+        marks = np.zeros(len(self.fields), dtype=np.int64)
+        counts = np.zeros(2, dtype=np.int64)
+        if decode_program(self.program, buf, ints, floats, marks, counts, strict_strings) < 0:
+            return None
+        return DecodedCdr(ints[:counts[0]], floats[:counts[1]], marks)
+
+    def encode(self, ints: np.ndarray, floats: np.ndarray, text: bytes = b"", *, prefix: bytes = b"",
+               after: str | None = None) -> bytes:
+        """Value streams -> CDR bytes (the inverse of :meth:`decode`).
+
+        Args:
+            ints: int64 stream (integers, bools as 0/1, sequence counts, strings as [start, length]
+                into ``text``), in wire order.
+            floats: float64 stream, in wire order (float32 fields are rounded).
+            text: the bytes the strings point into (UTF-8, without NULs).
+            prefix: encapsulation header and the serialised top-level fields up to and including
+                ``after``, copied verbatim (e.g. the header of an input message); the streams then
+                start at the field after it.
+            after: name of the last top-level field in ``prefix``.
+
+        Returns:
+            The serialised message.
+
+        Raises:
+            ValueError: streams shorter than the layout needs, a negative count, a string outside
+                ``text``, a count above a bound.
+        """
+        start = 0
+        if after is not None:
+            start = self.field_ops[[f.name for f in self.fields].index(after) + 1] \
+                if after != self.fields[-1].name else self.program.shape[0]
+            if len(prefix) < 4:
+                raise ValueError("prefix must hold the encapsulation header")
+        elif prefix:
+            raise ValueError("prefix needs the name of its last field (after=...)")
+        head = np.frombuffer(prefix or ENCAPSULATION, dtype=np.uint8)
+        ints = np.ascontiguousarray(ints, dtype=np.int64)
+        floats = np.ascontiguousarray(floats, dtype=np.float64)
+        chars = np.frombuffer(text, dtype=np.uint8)
+        size = head.size + 16 * (ints.size + floats.size) + chars.size + 64
+        while True:
+            out = np.zeros(size, dtype=np.uint8)
+            end = encode_program(self.program, start, head, ints, floats, chars, out)
+            if end != _FULL:
+                break
+            size *= 2
+        if end < 0:
+            raise ValueError(f"value streams do not fit the layout of {self.name}")
+        return out[:end].tobytes()
+
+
+class DecodedCdr(NamedTuple):
+    """Value streams of one decoded message (see :meth:`CdrLayout.decode`).
+
+    Attributes:
+        ints: int64, every integer / bool / sequence count / string [start, length] in wire order
+            (a string's start is its offset in the raw bytes, encapsulation included; a uint64 above
+            2**63 - 1 appears as its int64 bit pattern).
+        floats: float64, every float in wire order.
+        marks: payload offset (after the encapsulation header) where each top-level field ends;
+            ``raw[:4 + marks[k]]`` is the encapsulation and the fields up to k.
+    """
+
+    ints: np.ndarray
+    floats: np.ndarray
+    marks: np.ndarray
+
+
+def _field_entries(f: FieldLayout) -> tuple[int, int] | None:
+    if f.kind == "int":
+        return 1, 0
+    if f.kind == "float":
+        return 0, 1
+    if f.kind == "string":
+        return 2, 0
+    if f.kind == "message":
+        assert f.element is not None
+        return f.element.entries()
+    if f.kind == "array":
+        one = _element_entries(f)
+        return None if one is None else (one[0] * f.size, one[1] * f.size)
+    return None
+
+
+def _element_entries(f: FieldLayout) -> tuple[int, int] | None:
+    if f.element_kind == "message":
+        assert f.element is not None
+        return f.element.entries()
+    return {"int": (1, 0), "float": (0, 1), "string": (2, 0)}[f.element_kind]
+
+
+def message_class(t: Any) -> Any:
+    """The generated class of a rosidl_parser NamespacedType (e.g. std_msgs/msg/Header)."""
+    module = importlib.import_module(".".join(t.namespaces))
+    return getattr(module, t.name)
+
+
+def _nestable(t: Any) -> tuple[str, str, CdrLayout | None, int]:
+    """(kind, primitive, element layout, string bound) of a rosidl nestable type."""
+    cls = type(t).__name__
+    if cls == "BasicType":
+        if t.typename not in PRIMITIVES:
+            raise NotImplementedError(f"CDR codec: basic type {t.typename!r} is not supported")
+        return ("float" if PRIMITIVES[t.typename][1] == KIND_FLOAT else "int"), t.typename, None, 0
+    if cls in ("UnboundedString", "BoundedString"):
+        return "string", "", None, int(getattr(t, "maximum_size", 0))
+    if cls == "NamespacedType":
+        return "message", "", layout(message_class(t)), 0
+    raise NotImplementedError(f"CDR codec: type {cls} is not supported (wide strings)")
+
+
+def _emit(rows: list[list[int]], kind: str, primitive: str, element: CdrLayout | None, bound: int) -> None:
+    if kind in ("int", "float"):
+        size, k = PRIMITIVES[primitive]
+        rows.append([OP_PRIM, size, k])
+    elif kind == "string":
+        rows.append([OP_STRING, bound, 0])
+    else:
+        assert element is not None
+        base = len(rows)
+        for r in element.program:
+            a = int(r[1])
+            if r[0] in (OP_SEQUENCE, OP_ARRAY, OP_END):
+                a += base  # jump targets are rows of the program: shift them with the inlined body
+            rows.append([int(r[0]), a, int(r[2])])
+        # inner marks would overwrite the outer ones: nested messages keep none
+        rows[base:] = [r for r in rows[base:] if r[0] != OP_MARK]
+        _retarget(rows, base)
+
+
+def _retarget(rows: list[list[int]], base: int) -> None:
+    """Recompute the jump targets of rows[base:] after rows were removed (pairs matched by nesting)."""
+    stack: list[int] = []
+    for i in range(base, len(rows)):
+        if rows[i][0] in (OP_SEQUENCE, OP_ARRAY):
+            stack.append(i)
+        elif rows[i][0] == OP_END:
+            begin = stack.pop()
+            rows[begin][1] = i
+            rows[i][1] = begin
+
+
+@cache
+def layout(msg_class: Any) -> CdrLayout:
+    """The CDR layout of a generated rosidl message class (computed once per class).
+
+    Args:
+        msg_class: e.g. ``rfi_msgs.msg.CorrelatorArray``.
+
+    Returns:
+        Its :class:`CdrLayout`, from ``get_fields_and_field_types()`` (names) and ``SLOT_TYPES``
+        (rosidl_parser types) of the class and, recursively, of every nested message class.
+
+    Raises:
+        NotImplementedError: a wide string or a ``long double`` (not used by the suite).
+    """
+    names = list(msg_class.get_fields_and_field_types())
+    slot_types = msg_class.SLOT_TYPES
+    if len(names) != len(slot_types):
+        raise ValueError(f"{msg_class.__name__}: field names and SLOT_TYPES disagree")
+    rows: list[list[int]] = []
+    fields: list[FieldLayout] = []
+    field_ops: list[int] = []
+    for index, (name, t) in enumerate(zip(names, slot_types, strict=True)):
+        field_ops.append(len(rows))
+        cls = type(t).__name__
+        if cls in ("Array", "BoundedSequence", "UnboundedSequence"):
+            kind, primitive, element, bound = _nestable(t.value_type)
+            if cls == "Array":
+                n = int(t.size)
+                rows.append([OP_ARRAY, 0, n])
+                fields.append(FieldLayout(name, "array", primitive, element, kind, n))
+            else:
+                n = int(getattr(t, "maximum_size", 0))
+                rows.append([OP_SEQUENCE, 0, n])
+                fields.append(FieldLayout(name, "sequence", primitive, element, kind, n))
+            begin = len(rows) - 1
+            _emit(rows, kind, primitive, element, bound)
+            rows.append([OP_END, begin, 0])
+            rows[begin][1] = len(rows) - 1
+        else:
+            kind, primitive, element, bound = _nestable(t)
+            _emit(rows, kind, primitive, element, bound)
+            fields.append(FieldLayout(name, kind, primitive, element, size=bound))
+        _retarget(rows, 0)
+        rows.append([OP_MARK, index, 0])
+    program = np.array(rows, dtype=np.int64).reshape(-1, 3)
+    return CdrLayout(msg_class, tuple(fields), program, tuple(field_ops))
+
+
+# ---------------------------------------------------------------- compiled interpreters
+@njit(cache=True)
+def _align(o, size):
+    """Absolute offset ``o`` aligned to ``size`` counted from the end of the 4-byte encapsulation."""
+    return 4 + (o - 4 + size - 1) // size * size
+
+
+@njit(cache=True)
+def _read_uint(buf, o, size):
+    v = np.int64(0)
+    for m in range(size):
+        v |= np.int64(buf[o + m]) << (8 * m)
+    return v
+
+
+@njit(cache=True)
+def decode_program(program, buf, ints, floats, marks, counts, strict_strings):  # noqa: C901 - one dispatch loop
+    """Run a layout program over CDR bytes ``buf`` (encapsulation included): fill the streams.
+
+    Writes counts = [entries in ints, entries in floats] and marks (payload offsets where the top-level
+    fields end). Returns 0, or -1 if the bytes are too short for what they announce, a string is not a
+    CDR string (length >= 1 with its terminating NUL; with strict_strings no NUL inside), a bool byte
+    is not 0 or 1, a count exceeds its bound or the bytes left, or the streams would overflow. Every
+    read is bounds-checked first: any byte string gives 0 or -1, never a read outside buf.
+    """
+    n = buf.shape[0]
+    o = 4
+    ni = 0
+    nf = 0
+    left = np.zeros(_MAX_DEPTH, dtype=np.int64)
+    depth = 0
+    tmp8 = np.empty(1, dtype=np.float64)
+    b8 = tmp8.view(np.uint8)
+    tmp4 = np.empty(1, dtype=np.float32)
+    b4 = tmp4.view(np.uint8)
+    pc = 0
+    n_ops = program.shape[0]
+    while pc < n_ops:
+        op = program[pc, 0]
+        if op == OP_PRIM:
+            size = program[pc, 1]
+            kind = program[pc, 2]
+            o = _align(o, size)
+            if o + size > n:
+                return _ERR
+            if kind == KIND_FLOAT:
+                if nf >= floats.shape[0]:
+                    return _ERR
+                if size == 8:
+                    for m in range(8):
+                        b8[m] = buf[o + m]
+                    floats[nf] = tmp8[0]
+                else:
+                    for m in range(4):
+                        b4[m] = buf[o + m]
+                    floats[nf] = tmp4[0]
+                nf += 1
+            else:
+                if ni >= ints.shape[0]:
+                    return _ERR
+                v = _read_uint(buf, o, size)
+                if kind == KIND_SIGNED and size < 8 and v >= np.int64(1) << (8 * size - 1):
+                    v -= np.int64(1) << (8 * size)
+                elif kind == KIND_BOOL and v > 1:
+                    return _ERR
+                ints[ni] = v
+                ni += 1
+            o += size
+        elif op == OP_STRING:
+            o = _align(o, 4)
+            if o + 4 > n:
+                return _ERR
+            length = _read_uint(buf, o, 4)
+            o += 4
+            if length < 1 or length > n - o or buf[o + length - 1] != 0:
+                return _ERR
+            if program[pc, 1] > 0 and length - 1 > program[pc, 1]:
+                return _ERR
+            if strict_strings:
+                for m in range(length - 1):
+                    if buf[o + m] == 0:
+                        return _ERR
+            if ni + 2 > ints.shape[0]:
+                return _ERR
+            ints[ni] = o
+            ints[ni + 1] = length - 1
+            ni += 2
+            o += length
+        elif op == OP_SEQUENCE or op == OP_ARRAY:
+            if op == OP_SEQUENCE:
+                o = _align(o, 4)
+                if o + 4 > n:
+                    return _ERR
+                count = _read_uint(buf, o, 4)
+                o += 4
+                if program[pc, 2] > 0 and count > program[pc, 2]:
+                    return _ERR
+                if ni >= ints.shape[0]:
+                    return _ERR
+                ints[ni] = count
+                ni += 1
+                if count == 0:
+                    pc = program[pc, 1] + 1
+                    continue
+                if count > n - o:  # every element takes at least one byte
+                    return _ERR
+            else:
+                count = program[pc, 2]
+            if depth >= _MAX_DEPTH:
+                return _ERR
+            left[depth] = count
+            depth += 1
+        elif op == OP_END:
+            left[depth - 1] -= 1
+            if left[depth - 1] > 0:
+                pc = program[pc, 1] + 1
+                continue
+            depth -= 1
+        elif op == OP_MARK:
+            marks[program[pc, 1]] = o - 4
+        pc += 1
+    counts[0] = ni
+    counts[1] = nf
+    return 0
+
+
+@njit(cache=True)
+def encode_program(program, start, head, ints, floats, text, out):  # noqa: C901 - one dispatch loop
+    """Write ``head`` (encapsulation + any verbatim prefix) then run the program from row ``start`` over
+    the streams into ``out`` (zeroed). Returns the end offset, -2 if ``out`` is too small, -1 if the
+    streams do not fit the program (too short, negative count, string outside text, bound exceeded)."""
+    n = out.shape[0]
+    if head.shape[0] > n:
+        return _FULL
+    for m in range(head.shape[0]):
+        out[m] = head[m]
+    out[0] = 0
+    out[1] = 1
+    out[2] = 0
+    out[3] = 0
+    o = head.shape[0]
+    ni = 0
+    nf = 0
+    left = np.zeros(_MAX_DEPTH, dtype=np.int64)
+    depth = 0
+    tmp8 = np.empty(1, dtype=np.float64)
+    b8 = tmp8.view(np.uint8)
+    tmp4 = np.empty(1, dtype=np.float32)
+    b4 = tmp4.view(np.uint8)
+    pc = start
+    n_ops = program.shape[0]
+    while pc < n_ops:
+        op = program[pc, 0]
+        if op == OP_PRIM:
+            size = program[pc, 1]
+            kind = program[pc, 2]
+            o = _align(o, size)
+            if o + size > n:
+                return _FULL
+            if kind == KIND_FLOAT:
+                if nf >= floats.shape[0]:
+                    return _ERR
+                if size == 8:
+                    tmp8[0] = floats[nf]
+                    for m in range(8):
+                        out[o + m] = b8[m]
+                else:
+                    tmp4[0] = floats[nf]
+                    for m in range(4):
+                        out[o + m] = b4[m]
+                nf += 1
+            else:
+                if ni >= ints.shape[0]:
+                    return _ERR
+                v = ints[ni]
+                if kind == KIND_BOOL:
+                    v = 1 if v != 0 else 0
+                for m in range(size):
+                    out[o + m] = (v >> (8 * m)) & 0xFF
+                ni += 1
+            o += size
+        elif op == OP_STRING:
+            if ni + 2 > ints.shape[0]:
+                return _ERR
+            first = ints[ni]
+            length = ints[ni + 1]
+            ni += 2
+            if first < 0 or length < 0 or first + length > text.shape[0]:
+                return _ERR
+            if program[pc, 1] > 0 and length > program[pc, 1]:
+                return _ERR
+            o = _align(o, 4)
+            if o + 5 + length > n:
+                return _FULL
+            for m in range(4):
+                out[o + m] = ((length + 1) >> (8 * m)) & 0xFF
+            o += 4
+            for m in range(length):
+                out[o + m] = text[first + m]
+            out[o + length] = 0
+            o += length + 1
+        elif op == OP_SEQUENCE or op == OP_ARRAY:
+            if op == OP_SEQUENCE:
+                if ni >= ints.shape[0]:
+                    return _ERR
+                count = ints[ni]
+                ni += 1
+                if count < 0 or count >= 2**32 or (program[pc, 2] > 0 and count > program[pc, 2]):
+                    return _ERR
+                o = _align(o, 4)
+                if o + 4 > n:
+                    return _FULL
+                for m in range(4):
+                    out[o + m] = (count >> (8 * m)) & 0xFF
+                o += 4
+                if count == 0:
+                    pc = program[pc, 1] + 1
+                    continue
+            else:
+                count = program[pc, 2]
+            if depth >= _MAX_DEPTH:
+                return _ERR
+            left[depth] = count
+            depth += 1
+        elif op == OP_END:
+            left[depth - 1] -= 1
+            if left[depth - 1] > 0:
+                pc = program[pc, 1] + 1
+                continue
+            depth -= 1
+        pc += 1
+    return o
