@@ -223,8 +223,8 @@ def _valid_if_locked(e):
 
 @pytest.mark.parametrize("method", ["imm", "pll"])
 def test_physically_impossible_correlators_are_rejected_and_counted(method):
-    """The faults found by fuzzing (issue 12): T = 1e6 s gave the IMM a phase jump of -6062 rad with
-    phase_std 0 and locked, and the PLL a frequency of -2.8e14 Hz for good. Each impossible value is now
+    """Faults found by fuzzing (issue 12): unchecked, T = 1e6 s gives the IMM a phase jump of -6062 rad
+    with phase_std 0 and locked, and the PLL a frequency of -2.8e14 Hz for good. Each impossible value is
     rejected before the filter, under its own counter, and the channel goes on locked and sane."""
     tr = CarrierTracker(TrackerParams(method=method))
     rng = np.random.default_rng(4)

@@ -24,8 +24,8 @@ slow to lock for long periods. This detector looks at the whole recent frequency
    / 2 pi`` and ``|B| ~ 2 pi |c_1| / N`` (compressed at low J/N, where the measurement is biased
    towards fs/4). ``|c_2| / |c_1|`` is 1/2 for a saw-tooth and ~0 for a triangular sweep.
 
-Cost: one real FFT pair of ~1.5 L points (6144 for L = 4096; was 2L = 8192, same r at the lags
-read) per analysis (the monitor runs it every ``hop_s`` at absolute sample boundaries, so block
+Cost: one real FFT pair of ~1.5 L points (6144 for L = 4096; a 2L = 8192-point pair gives the same
+r at the lags read) per analysis (the monitor runs it every ``hop_s`` at absolute sample boundaries, so block
 splitting cannot change the result); the peak search (``_best_lag``) and the two Fourier
 coefficients (``_fourier_12``, a rotating phasor instead of a complex exponential per value) are
 compiled (numba): ~0.09 ms per analysis of L = 4096 on this machine (0.11 ms with the 8192-point

@@ -59,8 +59,8 @@ Additions on top ("ours", switchable, reported separately in the benchmarks):
   filter: predicted by one period at each reset (process noise ``LATTICE_PHASE_Q`` on the start,
   a relative random walk ``lattice_period_drift`` on the period), updated by the measured start
   with the variance ``2 s^2 / B^2 + 1/12`` samples^2 (s^2 the fit's residual variance, 1/12 the
-  integer start), so that its gains shrink as sweeps accumulate (the fixed-gain loop it replaces
-  left the reset one sample early or late in 29 % of the sweeps at J/N 11 dB; now 20 %). A fit
+  integer start), so that its gains shrink as sweeps accumulate (at J/N 11 dB the reset falls one
+  sample early or late in 20 % of the sweeps, against 29 % with a fixed-gain loop). A fit
   is a miss when it lies outside the window half, fails the filter's 4-sigma gate, or shows no
   significant step of the expected sign (``step_threshold``: a lattice locked on noise must not
   be confirmed by it); four misses in a row drop the lattice. This removes the group-delay bias
