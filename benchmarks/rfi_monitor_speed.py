@@ -29,17 +29,17 @@ from rfi_monitor.tracking_filters import TrackingFilterParams, run_tracking_filt
 from rfi_sim.if_signal import ChirpJammer, FrontEndConfig, IfSimulator
 
 PAPER_FS = 38.192e6
-NOT_KEPT = """Tracking mode (kept; round 6, monitor.RfiMonitorParams.confirm_fits, tracker module docstring):
+NOT_KEPT = """Tracking mode (kept; monitor.RfiMonitorParams.confirm_fits, tracker module docstring):
 once 4 sweep-start fits in a row succeed, the LPD / AR(10) / peak pass is suspended (only the
 decimated history of the periodicity detector is kept up) and the periodicity detector is not
 run (``SweepAnalysisParams.skip_while_tracking``); two failed fits in a row resume the search
-(warm restart). The rows 'ours without tracking mode' (the chain before round 6) and 'ours,
+(warm restart). The rows 'ours without tracking mode' (the chain without it) and 'ours,
 tracking mode, detector every hop' in the table above isolate the two parts. The benchmark stream
 is tracked from ~0.1 ms on, so the whole-chain rows are close to the steady state. The per-sample
 frequency track is unchanged while the lattice is held (the step-fit lattice does not read the
 LPD peaks then; tested): the RMSE tables of paper_results.md did not move.
 
-Round 8 (kept; old vs new package alternately in one session, steady-state blocks 20-59 of the
+Compiled per-block passes (kept; old vs new package alternately, steady-state blocks 20-59 of the
 benchmark stream, CPU time per 1 ms block, medians of 5 monitors, on the quieter runs; the machine
 was shared and some runs were 2-25x slower for both, those are not quoted):
 
@@ -57,12 +57,12 @@ was shared and some runs were 2-25x slower for both, those are not quoted):
   np.isfinite, count_nonzero, abs, masking (17 us per block before).
 * Whole chain, steady state: 998 -> 860-905 us per 1 ms block (1.00 -> 1.10-1.16x real time).
 
-Measured and not kept (fused loop over 20 ms, best of 21, same session; ns per sample):
+Measured and not kept (fused loop over 20 ms, best of 21, in one run; ns per sample):
 
-* Welch features with at most 64 frames instead of all 149 of a 1 ms block (round 6): block
+* Welch features with at most 64 frames instead of all 149 of a 1 ms block: block
   features 167 -> 127 us per block in isolation (~1 ns per sample), not measurable in the whole
   chain on this machine (within the run-to-run noise); not adopted (noisier spectral J/N).
-* Resuming the period search at the first failed fit instead of the second (round 6): at high
+* Resuming the period search at the first failed fit instead of the second: at high
   J/N ~3 % of fits fail singly (116 resumptions in the 20 ms stream), the fused loop costs
   23.0 instead of 21.0 ns per sample (profiling run).
 
