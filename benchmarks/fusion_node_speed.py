@@ -424,7 +424,7 @@ its nested Header, Time and Point for each of the 20 Hz-per-anchor ranges (in a 
 the 360 s bag the rclpy_deserialize calls went from 23,400 to 1,800 and the wall time from 7.6 to
 6.5 s); the per-satellite checks of a GNSS epoch run on arrays; the common-mode screen's median is
 cheaper. Earlier: the time update and the UWB measurement
-update compiled (`uwb_update.py`, numba), SPP solved only when the filter asks for its
+update compiled (`ckf_kernels.py`, numba), SPP solved only when the filter asks for its
 re-initialisation reference.
 
 Method change: the timed repeats no longer keep the published messages (before this table they

@@ -32,6 +32,11 @@ from gnss_common.constants import (
     SECONDS_PER_WEEK,
     SPEED_OF_LIGHT_MPS,
 )
+from gnss_common.earth_rotation import (  # noqa: F401 (sagnac_range_correction_m re-exported)
+    rotate_about_z,
+    sagnac_range_correction_m,
+    sagnac_rotate,
+)
 from gnss_common.gps_time import wrap_week_crossover_s
 
 KEPLER_MAX_ITERATIONS = 30
@@ -287,30 +292,6 @@ def satellite_states_at_transmit(
     return satellite_states(eph, week_rx, t, include_tgd=include_tgd), t
 
 
-def sagnac_rotation(travel_time_s: np.ndarray | float) -> np.ndarray:
-    """Rotation matrices R3(omega_e tau) taking ECEF-at-transmit to ECEF-at-receive.
-
-    Args:
-        travel_time_s: signal travel time(s) tau, s, scalar or shape (N,).
-
-    Returns:
-        shape (3, 3) for a scalar, else (N, 3, 3).
-
-    Notes
-    -----
-    Earth rotation during signal flight (IS-GPS-200, 20.3.3.4.3.3.2; Kaplan & Hegarty 3rd ed.
-    sec. 11.2): x_rx = R3(omega_e tau) x_tx with R3(a) = [[cos a, sin a, 0], [-sin a, cos a, 0],
-    [0, 0, 1]].
-    """
-    ang = EARTH_ROTATION_RATE_RADPS * np.asarray(travel_time_s, dtype=float)
-    c, s = np.cos(ang), np.sin(ang)
-    zero, one = np.zeros_like(ang), np.ones_like(ang)
-    rot = np.stack(
-        [np.stack([c, s, zero], -1), np.stack([-s, c, zero], -1), np.stack([zero, zero, one], -1)], -2
-    )
-    return rot
-
-
 def earth_rotation_correction(
     satellite_ecef_m: np.ndarray,
     receiver_ecef_m: np.ndarray,
@@ -332,40 +313,20 @@ def earth_rotation_correction(
 
     Notes
     -----
-    The geometric range of Cao et al., eq. 5 is D_Ecd(R3(w tau) p_G, p_r); the Sagnac range term
-    is about omega_e (x_s y_r - y_s x_r) / c, up to ~30 m. Velocities are rotated with the same
+    The geometric range of Cao et al., eq. 5 is D_Ecd(R3(w tau) p_G, p_r)
+    (:func:`gnss_common.earth_rotation.sagnac_rotate`). Velocities are rotated with the same
     matrix (the d tau / dt term is below 1e-9 of the velocity and is neglected).
     """
     sat = np.asarray(satellite_ecef_m, dtype=float)
     single = sat.ndim == 1
-    sat2 = sat.reshape(-1, 3)
     rx = np.asarray(receiver_ecef_m, dtype=float).reshape(3)
-    tau = np.linalg.norm(sat2 - rx, axis=1) / SPEED_OF_LIGHT_MPS
-    rotated = sat2
-    for _ in range(max(1, iterations)):
-        rot = sagnac_rotation(tau)
-        rotated = np.einsum("nij,nj->ni", rot, sat2)
-        tau = np.linalg.norm(rotated - rx, axis=1) / SPEED_OF_LIGHT_MPS
+    rotated, c, s, tau = sagnac_rotate(sat.reshape(-1, 3), rx, iterations)
     vel = None
     if satellite_velocity_ecef_mps is not None:
-        v2 = np.asarray(satellite_velocity_ecef_mps, dtype=float).reshape(-1, 3)
-        vel = np.einsum("nij,nj->ni", rot, v2)
+        vel = rotate_about_z(np.asarray(satellite_velocity_ecef_mps, dtype=float).reshape(-1, 3), c, s)
     if single:
         return rotated[0], (vel[0] if vel is not None else None), tau[0]
     return rotated, vel, tau
-
-
-def sagnac_range_correction_m(satellite_ecef_m: np.ndarray, receiver_ecef_m: np.ndarray) -> np.ndarray:
-    """First-order Sagnac range correction omega_e (x_s y_r - y_s x_r) / c, m (N,) or scalar.
-
-    Notes
-    -----
-    Kaplan & Hegarty 3rd ed., eq. 11.18 (Ashby). Add it to the straight-line range in the
-    transmit-time frame; agrees with :func:`earth_rotation_correction` to a few mm.
-    """
-    s = np.asarray(satellite_ecef_m, dtype=float)
-    r = np.asarray(receiver_ecef_m, dtype=float)
-    return EARTH_ROTATION_RATE_RADPS * (s[..., 0] * r[..., 1] - s[..., 1] * r[..., 0]) / SPEED_OF_LIGHT_MPS
 
 
 class EphemerisStore:

@@ -37,6 +37,7 @@ from gnss_common.ephemeris import (
 )
 from gnss_common.gps_time import gps_to_stamp_ns
 from gnss_common.observations import GPS, GnssEpoch, SatelliteObservation
+from gnss_common.positioning import CONVERGED, least_squares_position
 from gnss_common.rinex import RinexNav, RinexObs, RinexObsEpoch
 
 SKIP_REASONS = (
@@ -139,7 +140,8 @@ def coarse_position_fix(
 
     Notes
     -----
-    Linearised Cao et al., eq. 5 with T = I = 0; range with the Earth-rotation correction
+    Linearised Cao et al., eq. 5 with T = I = 0, solved by
+    :func:`gnss_common.positioning.least_squares_position`; range with the Earth-rotation correction
     (:func:`gnss_common.ephemeris.earth_rotation_correction`). Used only to place the receiver
     for the atmosphere models (tens of metres suffice there).
     """
@@ -147,23 +149,17 @@ def coarse_position_fix(
     rho = np.asarray(pseudorange_m, dtype=float)
     if sat.shape[0] < 4:
         return None
-    x = np.zeros(4)
-    for _ in range(max_iterations):
-        rot, _, _ = earth_rotation_correction(sat, x[:3])
-        diff = rot - x[:3]
+    unit_weights = np.ones(sat.shape[0])
+
+    def model(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        diff = earth_rotation_correction(sat, x[:3])[0] - x[:3]
         rng = np.linalg.norm(diff, axis=1)
-        h = np.hstack([-diff / rng[:, None], np.ones((sat.shape[0], 1))])
-        resid = rho - (rng + x[3])
-        try:
-            dx, *_ = np.linalg.lstsq(h, resid, rcond=None)
-        except np.linalg.LinAlgError:
-            return None
-        x = x + dx
-        if np.linalg.norm(dx[:3]) < 1.0e-3:
-            if np.linalg.norm(x[:3]) < 6.0e6:
-                return None
-            return x[:3].copy()
-    return None
+        return rng + x[3], diff / rng[:, None], unit_weights
+
+    sol = least_squares_position(model, rho, np.zeros(4), max_iterations, 1.0e-3, max_variance_m2=np.inf)
+    if sol.status != CONVERGED or np.linalg.norm(sol.x[:3]) < 6.0e6:
+        return None
+    return sol.x[:3].copy()
 
 
 class GnssEpochBuilder:

@@ -393,7 +393,7 @@ def test_uwb_latency_back_propagates_with_velocity():
     ],
 )
 def test_compiled_uwb_step_equals_generic_ckf_update(latency_s, offset_m, prior_std_m, huber_k, huber_k_positive):
-    from uwb_gnss_fusion.uwb_update import STATUS_APPLIED, STATUS_GATED, predict_inplace, range_update_inplace
+    from uwb_gnss_fusion.ckf_kernels import STATUS_APPLIED, STATUS_GATED, predict_inplace, range_update_inplace
 
     rng = np.random.default_rng(5)
     p0 = _random_spd(rng, 8) * 0.01 + np.diag([prior_std_m**2] * 3 + [0.01] * 5)
@@ -431,7 +431,7 @@ def test_compiled_uwb_step_equals_generic_ckf_update(latency_s, offset_m, prior_
 
 
 def test_compiled_uwb_update_reports_a_covariance_without_cholesky_factor():
-    from uwb_gnss_fusion.uwb_update import STATUS_CHOLESKY_FAILED, range_update_inplace
+    from uwb_gnss_fusion.ckf_kernels import STATUS_CHOLESKY_FAILED, range_update_inplace
 
     p = np.eye(8)
     p[0, 0] = -1.0

@@ -19,6 +19,7 @@ from uwb_gnss_fusion.fusion_filter import (
     FusionParams,
     ReorderBuffer,
 )
+from uwb_gnss_fusion.input_checks import validate_satellites
 
 RX = np.array([-740289.918, -5457071.734, 3207245.542])
 LAT, LON, _ = ecef_to_geodetic(RX)
@@ -540,6 +541,52 @@ def test_common_mode_screen_catches_an_outlier_the_clock_variance_hides():
     assert vel_err[True] < 0.01 < 0.3 < vel_err[False]
 
 
+def _validate_satellites_reference(obs, params, count):
+    """Test oracle: the per-satellite checks of input_checks.validate_satellites, one observation at a time."""
+    rows = []
+    for o in obs:
+        try:
+            sp = np.asarray(o.satellite_position_ecef_m, dtype=float).reshape(3)
+            sv = np.asarray(o.satellite_velocity_ecef_mps, dtype=float).reshape(3)
+        except (ValueError, TypeError):
+            count("malformed_observation", 1)
+            continue
+        scalars = (o.pseudorange_m, o.satellite_clock_bias_m, o.ionosphere_delay_m, o.troposphere_delay_m)
+        if not (np.isfinite(sp).all() and all(math.isfinite(float(v)) for v in scalars)):
+            count("nonfinite_pseudorange", 1)
+            continue
+        if not (1.0e7 < float(np.linalg.norm(sp)) < 5.0e7):
+            count("nonphysical_satellite_position", 1)
+            continue
+        if not (1.0e6 < o.pseudorange_m < 1.0e8) or o.ionosphere_delay_m < 0.0 or o.troposphere_delay_m < 0.0:
+            count("nonphysical_pseudorange", 1)
+            continue
+        if math.isfinite(o.cn0_dbhz) and o.cn0_dbhz < params.min_cn0_dbhz:
+            count("low_cn0", 1)
+            continue
+        rate_ok = (
+            params.use_doppler
+            and math.isfinite(o.pseudorange_rate_mps)
+            and np.isfinite(sv).all()
+            and math.isfinite(o.satellite_clock_drift_mps)
+            and abs(o.pseudorange_rate_mps) < 2.0e4
+        )
+        if params.use_doppler and not rate_ok:
+            count("invalid_doppler", 1)
+        rows.append((o, sp, sv, bool(rate_ok)))
+    return rows
+
+
+def _counter():
+    counts: dict[str, int] = {}
+
+    def count(reason: str, n: int = 1) -> None:
+        if n > 0:
+            counts[reason] = counts.get(reason, 0) + n
+
+    return counts, count
+
+
 def test_vectorised_satellite_checks_equal_the_per_observation_loop():
     # every rejection reason, alone and mixed, in random epochs: same rows, same counts
     rng = np.random.default_rng(33)
@@ -556,24 +603,24 @@ def test_vectorised_satellite_checks_equal_the_per_observation_loop():
         lambda o: dataclasses.replace(o, pseudorange_rate_mps=math.nan),
         lambda o: dataclasses.replace(o, pseudorange_rate_mps=3.0e4),
         lambda o: dataclasses.replace(o, satellite_velocity_ecef_mps=np.array([math.nan, 0.0, 0.0])),
+        lambda o: dataclasses.replace(o, satellite_position_ecef_m=np.zeros(2)),
+        lambda o: dataclasses.replace(o, satellite_velocity_ecef_mps=np.zeros((1, 3))),
         lambda o: o,
     ]
     for use_doppler in (True, False):
         for _ in range(50):
             obs = [spoil[int(rng.integers(len(spoil)))](o) for o in base]
             params = FusionParams(use_doppler=use_doppler)
-            a, b = FusionFilter(params), FusionFilter(params)
-            fast = a._validate_satellites_vectorised(obs)
-            slow = b._validate_satellites_loop(obs)
-            assert fast is not None
+            (counts_a, a), (counts_b, b) = _counter(), _counter()
+            fast = validate_satellites(obs, params, a)
+            slow = _validate_satellites_reference(obs, params, b)
             assert [(r[0].svid, r[3]) for r in fast] == [(r[0].svid, r[3]) for r in slow]
             for rf, rs in zip(fast, slow, strict=True):
                 np.testing.assert_array_equal(rf[1], rs[1])
                 np.testing.assert_array_equal(rf[2], rs[2])
-            assert a.rejection_counts == b.rejection_counts
-    # a position that is not a 3-vector: the loop counts it as malformed
+            assert counts_a == counts_b
+    # a position that is not a 3-vector is counted as malformed, the others still checked
     bad = [dataclasses.replace(base[0], satellite_position_ecef_m=np.zeros(2))] + base[1:]
-    f = FusionFilter()
-    assert f._validate_satellites_vectorised(bad) is None
-    assert len(f._validate_satellites_loop(bad)) == len(base) - 1
-    assert f.rejection_counts == {"malformed_observation": 1}
+    counts, count = _counter()
+    assert len(validate_satellites(bad, FusionParams(), count)) == len(base) - 1
+    assert counts == {"malformed_observation": 1}

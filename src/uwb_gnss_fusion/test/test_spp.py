@@ -20,6 +20,7 @@ from uwb_gnss_fusion.spp import (
     SinglePointPositioner,
     SppParams,
 )
+from uwb_gnss_fusion.spp_reference import SppReferenceCache
 
 DATA = Path(__file__).resolve().parents[2] / "gnss_common" / "test" / "data"
 RX = np.array([-740289.918, -5457071.734, 3207245.542])
@@ -272,3 +273,32 @@ def test_replay_is_deterministic(real_runs):
     assert all(np.array_equal(x.position_ecef_m, y.position_ecef_m) for x, y in zip(r1, r2, strict=True))
     assert np.linalg.norm(a[0].position_ecef_m - r1[0].position_ecef_m) == 0.0
     assert enu_to_ecef(np.zeros(3), r1[0].position_ecef_m) == pytest.approx(r1[0].position_ecef_m)
+
+
+# ----------------------------------------------------------------------------- SPP reference cache
+_T0 = 1_437_264_000_000_000_000
+_NS = 1_000_000_000
+
+
+def _at(stamp_ns: int, valid: bool = True):
+    epoch = _synthetic_epoch()
+    if not valid:  # three satellites: no fix
+        epoch = replace(epoch, observations=epoch.observations[:3])
+    return replace(epoch, stamp_ns=stamp_ns)
+
+
+def test_reference_is_the_newest_valid_fix_within_the_age_and_each_epoch_is_solved_once():
+    solved = []
+    cache = SppReferenceCache(SinglePointPositioner(), 5.0, solved.append)
+    for k in range(8):
+        cache.add(_at(_T0 + k * _NS, valid=k != 6))
+    assert len(cache) == 6  # the last 5 s: stamps _T0 + 2 s .. _T0 + 7 s
+    assert cache.reference(_T0 + 7 * _NS - 1) is not None and solved == [False, True]  # 6 s invalid, then 5 s
+    stamp, pos, std, clock = cache.reference(_T0 + 7 * _NS - 1)
+    assert stamp == _T0 + 5 * _NS and solved == [False, True]  # nothing solved twice
+    assert np.linalg.norm(pos - RX) < 1e-3 and 0.0 < std < 10.0 and math.isfinite(clock)
+    assert cache.reference(_T0 + 7 * _NS)[0] == _T0 + 7 * _NS
+    assert cache.reference(_T0 + 20 * _NS) is None  # every kept epoch is older than 5 s before that
+    assert cache.reference(_T0) is None  # dropped already
+    cache.clear()
+    assert len(cache) == 0 and cache.reference(_T0 + 7 * _NS) is None

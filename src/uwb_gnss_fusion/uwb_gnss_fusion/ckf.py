@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .ckf_kernels import predict_inplace, range_update_inplace
 from .measurement_models import MeasurementModel
 
 
@@ -183,6 +184,81 @@ class CubatureKalmanFilter:
         """
         self.x = phi @ self.x
         self.p = phi @ self.p @ phi.T + q
+
+    def predict_with_nominal(self, nominal: np.ndarray, phi: np.ndarray, q: np.ndarray) -> None:
+        """Error-state time update, compiled and in place, moving the caller's nominal state too.
+
+        Args:
+            nominal: nominal state, shape (n,), replaced by ``Phi nominal`` in place.
+            phi: state transition, shape (n, n).
+            q: process noise covariance, shape (n, n).
+
+        Notes:
+            Cao et al., eq. 15-16 (:func:`.ckf_kernels.predict_inplace`). The error mean is zero
+            after every correction (:meth:`reset_error_state`) and is set to zero here, so only the
+            nominal and the covariance move; the same arithmetic as :meth:`predict_linear`.
+        """
+        self.x[:] = 0.0
+        predict_inplace(nominal, self.p, phi, q)
+
+    def reset_error_state(self) -> np.ndarray:
+        """Return the error-state mean and set it to zero (the status correction of Cao et al.,
+        eq. 25 adds it to the nominal)."""
+        x = self.x
+        self.x = np.zeros(self.n)
+        return x
+
+    def reset_block(self, indices: slice, variances: np.ndarray) -> None:
+        """Decorrelate states ``indices`` from all others and give them new variances.
+
+        Args:
+            indices: the states, a slice (e.g. ``slice(6, 8)`` for the receiver clock).
+            variances: their new variances, shape (len,), in the states' units squared.
+
+        Used when a state block is (re)initialised from outside information, e.g. the receiver
+        clock set from pseudorange residuals while the position is kept.
+        """
+        self.p[indices, :] = 0.0
+        self.p[:, indices] = 0.0
+        idx = np.arange(self.n)[indices]
+        self.p[idx, idx] = variances
+
+    def update_range_compiled(
+        self,
+        nominal: np.ndarray,
+        anchor: np.ndarray,
+        lever: np.ndarray,
+        latency_s: float,
+        active_dims: int,
+        z: float,
+        r: float,
+        gate_nis: float,
+        huber_k: float,
+        huber_k_positive: float,
+        max_iterations: int,
+        nonlinearity_threshold: float,
+        scratch: np.ndarray,
+    ) -> int:
+        """The compiled cubature update of one UWB range (:func:`.ckf_kernels.range_update_inplace`).
+
+        Same equations and arguments as :meth:`update` with ``k = 1`` and ``active_dims``, with the
+        range model of :func:`.measurement_models.uwb_range_model` (anchor ``anchor`` in the
+        state frame, ``lever`` the tag lever arm, ``latency_s`` the range age) and the status
+        correction folded into ``nominal`` in place. The error mean must be zero (it is after
+        :meth:`reset_error_state`). ``scratch`` (6,) receives the diagnostics (``scratch[2]``:
+        the NIS).
+
+        Returns:
+            ``ckf_kernels.STATUS_APPLIED``, ``STATUS_GATED`` or ``STATUS_CHOLESKY_FAILED`` (nothing
+            changed: call :meth:`update`, which symmetrises, adds jitter or raises).
+
+        Notes:
+            Cao et al., eq. 7, 17-25.
+        """
+        return int(range_update_inplace(
+            nominal, self.p, anchor, lever, latency_s, active_dims, z, r, gate_nis, huber_k,
+            huber_k_positive, max_iterations, nonlinearity_threshold, scratch,
+        ))
 
     def predict(self, fx, q: np.ndarray) -> None:
         """Cubature time update for a nonlinear transition.

@@ -127,9 +127,8 @@ counted (``core_exception``), logged and reported as ERROR; the node keeps runni
 from __future__ import annotations
 
 import dataclasses
-import heapq
 import math
-from collections import Counter, deque
+from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 
@@ -141,7 +140,6 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import NavSatFix
 
-from gnss_common.jamming_weights import TrackingLoopParams
 from gnss_common.observations import GnssEpoch, UwbRangeMeasurement
 from rfi_msgs.msg import FusionStatus, GnssMeasurementArray, JammerState, UwbRange
 from rfi_node_common.diagnostics import (
@@ -151,26 +149,24 @@ from rfi_node_common.diagnostics import (
     WARN,
     StampTimer,
     diagnostic_array,
-    input_timeout_parameter,
-    max_stamp_jump_parameter,
-    stamp_jump_confirmations_parameter,
 )
 from rfi_node_common.input_checks import STAMP_NOT_POSITIVE, StampGate
 from rfi_node_common.inputs import InputHealth, StaleInputWatch, subscribe_input
 from rfi_node_common.main import run_node
-from rfi_node_common.params import declare, parameter, validate_ranges
+from rfi_node_common.params import declare
 from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS
 from rfi_node_common.stamps import stamp_to_ns
-from uwb_gnss_fusion import uwb_update
+from uwb_gnss_fusion import ckf_kernels
 from uwb_gnss_fusion.conversions import decode_uwb_range_cdr, msg_to_observation, msg_to_uwb
 from uwb_gnss_fusion.fusion_filter import (
     FRAME_EARTH,
     FRAME_MAP,
     FusionFilter,
     FusionOutput,
-    FusionParams,
     ReorderBuffer,
 )
+from uwb_gnss_fusion.fusion_node_params import FusionNodeParams
+from uwb_gnss_fusion.input_admission import DuplicateFilter, admit_jammer_state
 from uwb_gnss_fusion.message_checks import satellite_reason, uwb_range_reason
 from uwb_gnss_fusion.output_messages import (  # noqa: F401 (re-exported: the node's output contract)
     ORIENTATION_UNKNOWN_VARIANCE_RAD2,
@@ -179,7 +175,9 @@ from uwb_gnss_fusion.output_messages import (  # noqa: F401 (re-exported: the no
     reason_lists,
     status_msg,
 )
+from uwb_gnss_fusion.reorder_buffer import widened_window_ns
 from uwb_gnss_fusion.spp import SinglePointPositioner
+from uwb_gnss_fusion.spp_reference import SppReferenceCache
 
 TOPICS = """topics:
   subscribes /gnss/measurements (rfi_msgs/GnssMeasurementArray), /uwb/ranges (rfi_msgs/UwbRange),
@@ -187,197 +185,13 @@ TOPICS = """topics:
   publishes  /fusion/odometry (nav_msgs/Odometry), /fusion/fix (sensor_msgs/NavSatFix),
              /fusion/status (rfi_msgs/FusionStatus), /diagnostics (diagnostic_msgs/DiagnosticArray)"""
 
-JSR_VALID_RANGE_DB = (-100.0, 150.0)
-"""J/S accepted from /rfi/jammer_state, dB."""
-
 JAMMER_TYPES = frozenset((JammerState.NONE, JammerState.CW, JammerState.CHIRP, JammerState.WIDEBAND,
                           JammerState.UNKNOWN))
 """The ``type`` constants of rfi_msgs/JammerState; any other value is rejected (``jammer_state_unknown_type``)."""
 
-REORDER_WINDOW_GROWTH = 1.5
-"""After a late arrival the re-ordering window grows to this many times how late it was (up to
-``reorder_window_max_s``)."""
-
 _NS = 1_000_000_000
 KINDS = ('gnss', 'uwb', 'jammer')
 """Input kinds, as used in the counter names (``<kind>_received`` ...)."""
-
-_FP = FusionParams()
-_LOOP = TrackingLoopParams()
-
-
-@dataclass(frozen=True)
-class FusionNodeParams:
-    """Parameters of fusion_node (documented for users in config/fusion.yaml).
-
-    The filter fields mirror :class:`uwb_gnss_fusion.fusion_filter.FusionParams` (same names,
-    ``loop_*`` = its ``loop`` :class:`TrackingLoopParams`), with the same defaults; the UWB anchor
-    registry of FusionParams is not a parameter: anchor positions come in each UwbRange message.
-
-    Notes:
-        Cao et al.: constant-velocity model (eq. 8-10) driven by ``accel_psd_m2ps3``, pseudorange
-        / Doppler / UWB models (eq. 5-7), effective C/N0 under J/S (eq. 4) with the quality
-        factor ``jammer_quality_factor``; tracking jitter of Kaplan & Hegarty (``loop_*``).
-    """
-
-    # --- node ------------------------------------------------------------------------------
-    earth_frame_id: str = parameter(
-        FRAME_EARTH, 'Frame id of ECEF (REP 105 earth): expected on /gnss/measurements and on UwbRange '
-        'messages with ECEF anchors; header.frame_id of the outputs in ECEF.')
-    map_frame_id: str = parameter(
-        FRAME_MAP, 'Frame id of the anchors\' local frame (UWB-only mode, axes taken as ENU): UwbRange '
-        'messages in this frame run the filter in it; header.frame_id of the outputs then.')
-    child_frame_id: str = parameter(
-        'gnss_antenna', 'Odometry child_frame_id and NavSatFix frame_id: the point estimated (the GNSS antenna).')
-    reorder_window_s: float = parameter(
-        0.1, 'Re-ordering window at start: inputs are processed in stamp order once a message this much newer '
-        'has arrived; later arrivals are rejected. The outputs lag by it, s (0: process at once).',
-        minimum=0.0, maximum=10.0)
-    reorder_window_max_s: float = parameter(
-        1.0, 'After a late arrival (still rejected) the window grows to 1.5 times its lateness, up to this, s; '
-        'the outputs then lag by up to this (<= reorder_window_s: fixed window).', minimum=0.0, maximum=10.0)
-    idle_flush_s: float = parameter(
-        1.0, 'Process what the re-ordering buffer holds once no input has arrived for this long, s (wall '
-        'time, steady clock: the end of a bag or a sensor stop; changes when, never what, is processed; '
-        '0: never).', minimum=0.0, maximum=3600.0)
-    max_stamp_jump_s: float = max_stamp_jump_parameter(120.0)
-    stamp_jump_confirmations: int = stamp_jump_confirmations_parameter(5)
-    input_timeout_s: float = input_timeout_parameter()
-    use_spp_reference: bool = parameter(
-        True, 'Re-initialise after a divergence from the newest valid single-point (SPP) fix of the last '
-        'reference_max_age_s of GNSS epochs (solved on demand).')
-    diagnostics_period_s: float = parameter(
-        1.0, 'Period of /diagnostics in message (stamp) time, s.', minimum=0.01, maximum=3600.0)
-    warning_throttle_s: float = parameter(
-        5.0, 'Shortest interval between two warnings about rejected input, s (wall time; logging only).',
-        minimum=0.0, maximum=3600.0)
-    # --- filter (FusionParams) -------------------------------------------------------------
-    use_gnss: bool = parameter(_FP.use_gnss, 'Apply GNSS pseudoranges (false: UWB-only filter).')
-    use_doppler: bool = parameter(_FP.use_doppler, 'Apply pseudorange rates (Doppler) as well as pseudoranges.')
-    use_uwb: bool = parameter(_FP.use_uwb, 'Apply UWB ranges (false: the GNSS-only baseline filter).')
-    accel_psd_m2ps3: float = parameter(
-        _FP.accel_psd_m2ps3, 'White-acceleration PSD per axis of the constant-velocity model, m^2/s^3.',
-        minimum=1e-9, maximum=1e4)
-    clock_h0_s: float = parameter(
-        _FP.clock_h0_s, 'Receiver clock white-FM coefficient h0, s.', minimum=1e-30, maximum=1e-12)
-    clock_h_minus2_hz: float = parameter(
-        _FP.clock_h_minus2_hz, 'Receiver clock random-walk-FM coefficient h_-2, 1/s.', minimum=0.0, maximum=1e-12)
-    uwb_range_std_m: float = parameter(
-        _FP.uwb_range_std_m, 'UWB range 1-sigma used when a message gives NaN range_std_m, m.',
-        minimum=1e-4, maximum=100.0)
-    uwb_lever_arm_m: tuple = parameter(
-        _FP.uwb_lever_arm_m, 'UWB tag minus GNSS antenna, in the state frame (ECEF or map), m, [x, y, z].')
-    uwb_max_range_m: float = parameter(
-        _FP.uwb_max_range_m, 'Longest physical UWB range; longer ranges are rejected, m.', minimum=1.0, maximum=1e5)
-    gate_probability: float = parameter(
-        _FP.gate_probability, 'Per-measurement innovation gate, probability of the 1-dof chi-square (1: no gating).',
-        minimum=0.5, maximum=1.0)
-    common_mode_screen: bool = parameter(
-        _FP.common_mode_screen, 'Drop pseudoranges / rates whose innovation departs from the epoch median '
-        '(common clock) beyond the gate with the clock-free variance, before the CKF update (beyond the paper).')
-    elevation_mask_deg: float = parameter(
-        _FP.elevation_mask_deg, 'Satellites below this elevation are rejected, deg.', minimum=-90.0, maximum=89.0)
-    min_cn0_dbhz: float = parameter(
-        _FP.min_cn0_dbhz, 'Pseudoranges with a lower reported C/N0 are rejected, dB-Hz.', minimum=0.0, maximum=70.0)
-    nominal_cn0_dbhz: float = parameter(
-        _FP.nominal_cn0_dbhz, 'Jammer-free C/N0 fed to eq. 4 when a J/S is known, dB-Hz.', minimum=0.0, maximum=70.0)
-    jammer_quality_factor: float = parameter(
-        _FP.jammer_quality_factor, 'Jamming resistance quality factor Q of eq. 4 (1: narrowband/swept jammer).',
-        minimum=0.01, maximum=100.0)
-    jammer_info_timeout_s: float = parameter(
-        _FP.jammer_info_timeout_s, 'A J/S older than this is ignored, s.', minimum=0.01, maximum=3600.0)
-    loop_dll_bandwidth_hz: float = parameter(
-        _LOOP.dll_bandwidth_hz, 'Code loop (DLL) noise bandwidth of the receiver, Hz.', minimum=0.001, maximum=100.0)
-    loop_correlator_spacing_chips: float = parameter(
-        _LOOP.correlator_spacing_chips, 'Early-late correlator spacing, chips.', minimum=0.001, maximum=1.0)
-    loop_integration_time_s: float = parameter(
-        _LOOP.integration_time_s, 'Predetection integration time, s.', minimum=1e-4, maximum=1.0)
-    loop_fll_bandwidth_hz: float = parameter(
-        _LOOP.fll_bandwidth_hz, 'Frequency loop noise bandwidth, Hz.', minimum=0.001, maximum=100.0)
-    loop_code_floor_m: float = parameter(
-        _LOOP.code_floor_m, 'Pseudorange 1-sigma floor added in quadrature (multipath, atmosphere, orbit), m.',
-        minimum=0.0, maximum=100.0)
-    loop_rate_floor_mps: float = parameter(
-        _LOOP.rate_floor_mps, 'Pseudorange-rate 1-sigma floor added in quadrature, m/s.', minimum=0.0, maximum=100.0)
-    min_satellites_init: int = parameter(
-        _FP.min_satellites_init, 'Satellites needed to initialise from GNSS alone.', minimum=4, maximum=64)
-    init_position_std_m: float = parameter(
-        _FP.init_position_std_m, 'Initial position 1-sigma per axis, m.', minimum=1e-3, maximum=1e7)
-    init_velocity_std_mps: float = parameter(
-        _FP.init_velocity_std_mps, 'Initial velocity 1-sigma per axis, m/s.', minimum=1e-4, maximum=1e4)
-    init_clock_bias_std_m: float = parameter(
-        _FP.init_clock_bias_std_m, 'Initial receiver clock bias 1-sigma, m.', minimum=1e-3, maximum=1e7)
-    init_clock_drift_std_mps: float = parameter(
-        _FP.init_clock_drift_std_mps, 'Initial receiver clock drift 1-sigma, m/s.', minimum=1e-4, maximum=1e4)
-    init_clock_drift_unobserved_std_mps: float = parameter(
-        _FP.init_clock_drift_unobserved_std_mps, 'Clock drift 1-sigma at an initialisation without Doppler and '
-        'without an earlier drift estimate, m/s.', minimum=1e-4, maximum=1e5)
-    max_prediction_s: float = parameter(
-        _FP.max_prediction_s, 'A measurement further than this after the filter time resets the filter, s.',
-        minimum=0.01, maximum=3600.0)
-    max_position_std_m: float = parameter(
-        _FP.max_position_std_m, 'A larger position 1-sigma (any axis) is declared divergence, m.',
-        minimum=0.01, maximum=1e7)
-    divergence_gnss_epochs: int = parameter(
-        _FP.divergence_gnss_epochs, 'Consecutive GNSS epochs with at least half of >= 4 pseudoranges gated out '
-        'that declare divergence.', minimum=1, maximum=100000)
-    divergence_uwb_ranges: int = parameter(
-        _FP.divergence_uwb_ranges, 'Window of recent UWB ranges (all anchors) examined for divergence.',
-        minimum=1, maximum=100000)
-    divergence_uwb_gated_fraction: float = parameter(
-        _FP.divergence_uwb_gated_fraction, 'Divergence is declared when at least this fraction of the last '
-        'divergence_uwb_ranges ranges was gated out (1.0: that many consecutive gated ranges).',
-        minimum=0.01, maximum=1.0)
-    reference_max_age_s: float = parameter(
-        _FP.reference_max_age_s, 'A reference (SPP) solution older than this is not used to re-initialise, s.',
-        minimum=0.01, maximum=3600.0)
-    uwb_init_window_s: float = parameter(
-        _FP.uwb_init_window_s, 'Ranges used for UWB multilateration must lie within this window, s.',
-        minimum=0.01, maximum=3600.0)
-    uwb_latency_s: float = parameter(
-        _FP.uwb_latency_s, 'Age of a UWB range at its stamp (modelled by constant-velocity back-propagation), s.',
-        minimum=0.0, maximum=1.0)
-    max_update_iterations: int = parameter(
-        _FP.max_update_iterations, 'Gauss-Newton refinement steps allowed after a cubature update with a '
-        'significant linearisation error (0: the plain CKF update of the paper).', minimum=0, maximum=50)
-    nonlinearity_threshold: float = parameter(
-        _FP.nonlinearity_threshold, 'Refine an update when its linearisation-error variance exceeds this '
-        'fraction of the measurement noise variance.', minimum=1e-6, maximum=1e6)
-    uwb_huber_k: float = parameter(
-        _FP.uwb_huber_k, 'Huber threshold on the normalised UWB innovation (.inf: off).', minimum=0.01)
-    uwb_huber_k_positive: float = parameter(
-        _FP.uwb_huber_k_positive, 'Huber threshold for positive UWB innovations (NLOS direction; .inf: not '
-        'down-weighted).', minimum=0.01)
-
-    def __post_init__(self) -> None:
-        validate_ranges(self)
-        for name in ('earth_frame_id', 'map_frame_id', 'child_frame_id'):
-            if not isinstance(getattr(self, name), str) or not getattr(self, name):
-                raise ValueError(f'parameter {name} must be a non-empty string')
-        if self.earth_frame_id == self.map_frame_id:
-            raise ValueError('parameters earth_frame_id and map_frame_id must differ')
-        if len(self.uwb_lever_arm_m) != 3:
-            raise ValueError(f'parameter uwb_lever_arm_m must have 3 elements, got {list(self.uwb_lever_arm_m)}')
-        try:
-            self.fusion_params()
-        except (TypeError, ValueError) as err:
-            raise ValueError(f'invalid filter parameters: {err}') from None
-
-    def fusion_params(self) -> FusionParams:
-        """The core's parameters.
-
-        Raises:
-            ValueError: a combination the core rejects (e.g. use_gnss and use_uwb both false).
-        """
-        loop = TrackingLoopParams(
-            dll_bandwidth_hz=self.loop_dll_bandwidth_hz, correlator_spacing_chips=self.loop_correlator_spacing_chips,
-            integration_time_s=self.loop_integration_time_s, fll_bandwidth_hz=self.loop_fll_bandwidth_hz,
-            code_floor_m=self.loop_code_floor_m, rate_floor_mps=self.loop_rate_floor_mps)
-        names = {f.name for f in dataclasses.fields(FusionParams)} - {'loop', 'anchors'}
-        values: dict[str, Any] = {n: getattr(self, n) for n in names}
-        values['uwb_lever_arm_m'] = tuple(float(v) for v in self.uwb_lever_arm_m)
-        return FusionParams(loop=loop, **values)
-
 
 @dataclass(frozen=True)
 class _Item:
@@ -396,7 +210,7 @@ class FusionNode(Node):
         super().__init__('uwb_gnss_fusion', **kwargs)
         self.params = declare(self, FusionNodeParams)
         self.spp = SinglePointPositioner()
-        self._spp_epochs: deque[list] = deque()  # [epoch, solved result or None], oldest first
+        self.spp_cache = SppReferenceCache(self.spp, self.params.reference_max_age_s, self._count_spp)
         self.filter = self._new_filter()
         self.counts: Counter[str] = Counter({f'{k}_{what}': 0 for k in KINDS
                                              for what in ('received', 'rejected', 'processed')})
@@ -410,9 +224,7 @@ class FusionNode(Node):
         self._gate = StampGate(self.params.max_stamp_jump_s, self.params.stamp_jump_confirmations,
                                strictly_increasing=False)
         self._released_ns: int | None = None  # stamp of the last message released to the core
-        # exact duplicates: keys of the accepted messages, kept while a copy could still be buffered
-        self._seen: set[tuple[str, int, str]] = set()
-        self._seen_order: list[tuple[int, tuple[str, int, str]]] = []  # heap by stamp, for pruning
+        self._seen = DuplicateFilter()  # exact duplicates: keys kept while a copy could still be buffered
         self._diag_timer = StampTimer(self.params.diagnostics_period_s)
         self._at_last_report = {'rejections': 0, 'faults': 0, 'handler_errors': 0, 'lost': 0}
         self._reasons_cache: tuple[tuple, dict[str, int], tuple[list[str], list[int]]] | None = None
@@ -422,7 +234,7 @@ class FusionNode(Node):
         self.fix_pub = self.create_publisher(NavSatFix, '/fusion/fix', DATA_QOS)
         self.status_pub = self.create_publisher(FusionStatus, '/fusion/status', DATA_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
-        uwb_update.warm_up()  # compile before subscribing: the node appears when it can keep up
+        ckf_kernels.warm_up()  # compile before subscribing: the node appears when it can keep up
         # created after the compilation, so that its silence clock starts when the node can listen
         self.health = InputHealth()
         throttle = self.params.warning_throttle_s
@@ -534,18 +346,15 @@ class FusionNode(Node):
     def on_jammer(self, msg: JammerState) -> None:
         stamp_ns = stamp_to_ns(msg.header.stamp)
         self.counts['jammer_received'] += 1
-        js = float(msg.jammer_to_signal_db)
-        if msg.type not in JAMMER_TYPES:
-            self._reject('jammer', 'jammer_state_unknown_type', f'JammerState type {msg.type} is not a JammerState '
-                         'constant: ignored')
-        elif msg.type == JammerState.NONE:
-            self._enqueue(_Item(stamp_ns, 'jammer', math.nan))
-        elif math.isnan(js):
-            self._reject('jammer', 'jammer_state_nan', 'JammerState with a jammer type but a NaN J/S ignored')
-        elif not (math.isfinite(js) and JSR_VALID_RANGE_DB[0] <= js <= JSR_VALID_RANGE_DB[1]):
-            self._reject('jammer', 'jammer_state_nonphysical', f'JammerState J/S {js} dB ignored')
-        else:
+        js, reason = admit_jammer_state(msg.type, msg.jammer_to_signal_db, JammerState.NONE, JAMMER_TYPES)
+        if js is not None:
             self._enqueue(_Item(stamp_ns, 'jammer', js))
+        elif reason == 'jammer_state_unknown_type':
+            self._reject('jammer', reason, f'JammerState type {msg.type} is not a JammerState constant: ignored')
+        elif reason == 'jammer_state_nan':
+            self._reject('jammer', reason, 'JammerState with a jammer type but a NaN J/S ignored')
+        else:
+            self._reject('jammer', str(reason), f'JammerState J/S {float(msg.jammer_to_signal_db)} dB ignored')
         self._report()
 
     # ------------------------------------------------------------------ ordering
@@ -581,8 +390,7 @@ class FusionNode(Node):
             self._late(item)
             return False
         if key is not None:
-            self._seen.add(key)
-            heapq.heappush(self._seen_order, (stamp_ns, key))
+            self._seen.add(key, stamp_ns)
         self._buffered[item.kind] += 1
         self._release(self._buffer.pop_ready(self._gate.latest_ns))
         return True
@@ -594,8 +402,8 @@ class FusionNode(Node):
         self._reject(item.kind, 'late_beyond_reorder_window',
                      f'{item.kind} stamp {item.stamp_ns} ns arrived {late_ns / _NS:.3f} s after a newer message, '
                      f'later than the re-ordering window {window_ns / _NS:.3f} s')
-        wanted_ns = min(self._window_max_ns, int(math.ceil(REORDER_WINDOW_GROWTH * late_ns)))
-        if wanted_ns > window_ns and late_ns <= self._window_max_ns:  # later than the maximum: no use
+        wanted_ns = widened_window_ns(window_ns, late_ns, self._window_max_ns)
+        if wanted_ns is not None:
             self._buffer.window_ns = wanted_ns
             self.counts['reorder_window_growths'] += 1
             self.get_logger().warn(f're-ordering window widened to {wanted_ns / _NS:.3f} s (inputs arrive late; '
@@ -613,12 +421,8 @@ class FusionNode(Node):
         """Drop the duplicate keys stamped more than the largest window before the last released
         message: a copy that late is rejected as late (and would not widen the window); a copy
         less late is recognised as a duplicate (and does not widen it either)."""
-        order, released = self._seen_order, self._released_ns
-        if released is None:
-            return
-        oldest = released - max(self._window_max_ns, self._buffer.window_ns)
-        while order and order[0][0] < oldest:
-            self._seen.discard(heapq.heappop(order)[1])
+        if self._released_ns is not None:
+            self._seen.forget_older_than(self._released_ns - max(self._window_max_ns, self._buffer.window_ns))
 
     def _restart(self, stamp_ns: int, previous_ns: int | None) -> None:
         """A confirmed stamp jump: finish the pending messages, then start a fresh filter."""
@@ -627,12 +431,10 @@ class FusionNode(Node):
         self.get_logger().warn(f'stamps jumped to {stamp_ns} ns (from {previous_ns} ns): filter restarted')
         self._retired_filter_counts.update(self.filter.rejection_counts)
         self.filter = self._new_filter()
-        self.spp.reset()
-        self._spp_epochs.clear()
+        self.spp_cache.clear()
         self._buffer = ReorderBuffer(self._buffer.window_ns)
         self._released_ns = None
         self._seen.clear()
-        self._seen_order.clear()
 
     @property
     def buffered(self) -> dict[str, int]:
@@ -691,7 +493,8 @@ class FusionNode(Node):
                 self.counts['jammer_processed'] += 1
                 return
             if item.kind == 'gnss':
-                self._supply_reference(item.payload)
+                if self.params.use_spp_reference and self.params.use_gnss:
+                    self.spp_cache.add(item.payload)
                 out = self.filter.process_gnss(item.payload)
                 if item.dropped_satellites:  # dropped by the node's checks: rejected satellites too
                     out = dataclasses.replace(
@@ -718,36 +521,11 @@ class FusionNode(Node):
 
     def _new_filter(self) -> FusionFilter:
         use_spp = self.params.use_spp_reference and self.params.use_gnss
-        return FusionFilter(self.params.fusion_params(), reference_provider=self._spp_reference if use_spp else None)
+        provider = self.spp_cache.reference if use_spp else None
+        return FusionFilter(self.params.fusion_params(), reference_provider=provider)
 
-    def _supply_reference(self, epoch: GnssEpoch) -> None:
-        """Keep the epoch for an SPP solution on demand (:meth:`_spp_reference`), within the
-        reference age window."""
-        if not (self.params.use_spp_reference and self.params.use_gnss):
-            return
-        epochs = self._spp_epochs
-        epochs.append([epoch, None])
-        oldest = epoch.stamp_ns - self.params.reference_max_age_s * _NS
-        while epochs[0][0].stamp_ns < oldest:
-            epochs.popleft()
-
-    def _spp_reference(self, stamp_ns: int) -> tuple[int, np.ndarray, float, float] | None:
-        """The core's reference provider: the newest valid SPP fix of the kept epochs stamped at
-        most ``stamp_ns`` and at least ``stamp_ns - reference_max_age_s`` (each epoch solved once)."""
-        oldest = stamp_ns - self.params.reference_max_age_s * _NS
-        for entry in reversed(self._spp_epochs):
-            epoch, res = entry
-            if epoch.stamp_ns > stamp_ns:
-                continue
-            if epoch.stamp_ns < oldest:
-                break
-            if res is None:
-                res = entry[1] = self.spp.process(epoch)
-                self.counts['spp_valid' if res.valid else 'spp_invalid'] += 1
-            if res.valid:
-                std_m = math.sqrt(float(np.max(np.diag(res.covariance)[:3])))
-                return epoch.stamp_ns, res.position_ecef_m, std_m, res.clock_bias_m
-        return None
+    def _count_spp(self, valid: bool) -> None:
+        self.counts['spp_valid' if valid else 'spp_invalid'] += 1
 
     def filter_counts(self) -> dict[str, int]:
         """The core's cumulative counts (including filters replaced after a stamp jump)."""

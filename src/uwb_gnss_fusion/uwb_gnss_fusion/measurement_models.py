@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from gnss_common.constants import EARTH_ROTATION_RATE_RADPS, SPEED_OF_LIGHT_MPS
+from gnss_common.earth_rotation import sagnac_range_correction_m, sagnac_range_rate_correction_mps
 
 MeasurementModel = Callable[[np.ndarray], np.ndarray]
 """hx(X): X (m, 8) states -> (m, k) predicted measurements."""
@@ -22,7 +22,6 @@ MeasurementModel = Callable[[np.ndarray], np.ndarray]
 STATE_DIM = 8
 """Size of the navigation (and error) state [p(3), v(3), c*dt, c*ddt]."""
 
-_OMEGA_OVER_C = EARTH_ROTATION_RATE_RADPS / SPEED_OF_LIGHT_MPS
 _EYE8 = np.eye(STATE_DIM)
 _PP = np.zeros((6, 6))
 _PP[0:3, 0:3] = np.eye(3)
@@ -53,8 +52,8 @@ def pseudorange_model(
     Notes:
         Cao et al., eq. 5: ``rho = |p_s - p_r| + T + I + c (dt_r - dt_s)``. The Earth-rotation
         (Sagnac) correction is the first-order closed form
-        ``omega_e / c (x_s y_r - y_s x_r)`` (IS-GPS-200 20.3.3.4.3.4 rotation to first order; the
-        neglected second-order term is below 1 mm for GNSS ranges).
+        ``omega_e / c (x_s y_r - y_s x_r)`` of :func:`gnss_common.earth_rotation.sagnac_range_correction_m`
+        (the neglected second-order term is below 1 mm for GNSS ranges).
     """
     ps = np.asarray(sat_pos_ecef_m, dtype=float)
     const = (
@@ -62,14 +61,12 @@ def pseudorange_model(
         + np.asarray(tropo_delay_m, float)
         - np.asarray(sat_clock_bias_m, float)
     )
-    xs = ps[:, 0]
-    ys = ps[:, 1]
+    ps_b = ps[None, :, :]
 
     def hx(states: np.ndarray) -> np.ndarray:
         p = states[:, None, 0:3]
-        geom = np.sqrt(((ps[None, :, :] - p) ** 2).sum(axis=2))
-        sagnac = _OMEGA_OVER_C * (xs[None, :] * states[:, 1:2] - ys[None, :] * states[:, 0:1])
-        return geom + sagnac + states[:, 6:7] + const[None, :]
+        geom = np.sqrt(((ps_b - p) ** 2).sum(axis=2))
+        return geom + sagnac_range_correction_m(ps_b, p) + states[:, 6:7] + const[None, :]
 
     return hx
 
@@ -102,11 +99,8 @@ def pseudorange_rate_model(
         r = np.sqrt((d * d).sum(axis=2))
         dv = vs[None, :, :] - states[:, None, 3:6]
         rate = (d * dv).sum(axis=2) / r
-        sagnac_rate = _OMEGA_OVER_C * (
-            vs[None, :, 0] * states[:, 1:2]
-            - vs[None, :, 1] * states[:, 0:1]
-            + ps[None, :, 0] * states[:, 4:5]
-            - ps[None, :, 1] * states[:, 3:4]
+        sagnac_rate = sagnac_range_rate_correction_mps(
+            ps[None, :, :], vs[None, :, :], states[:, None, 0:3], states[:, None, 3:6]
         )
         return rate + sagnac_rate + states[:, 7:8] - drift[None, :]
 

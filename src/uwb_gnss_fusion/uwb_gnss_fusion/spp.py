@@ -34,14 +34,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import chi2
 
-from gnss_common.constants import (
-    EARTH_ROTATION_RATE_RADPS,
-    SPEED_OF_LIGHT_MPS,
-    WGS84_ECCENTRICITY_SQUARED,
-    WGS84_SEMI_MAJOR_AXIS_M,
-)
+from gnss_common.constants import WGS84_ECCENTRICITY_SQUARED, WGS84_SEMI_MAJOR_AXIS_M
 from gnss_common.coordinates import ecef_to_enu_rotation
+from gnss_common.earth_rotation import rotate_about_z, sagnac_rotate
 from gnss_common.observations import GPS, GnssEpoch
+from gnss_common.positioning import CONVERGED, SINGULAR, least_squares_position, weighted_least_squares
 
 STATUS_OK = "ok"
 STATUS_OK_WITH_EXCLUSIONS = "ok_with_exclusions"
@@ -233,16 +230,41 @@ def _geodetic_up_and_rotation(pos: np.ndarray) -> np.ndarray:
     return ecef_to_enu_rotation(lat, math.atan2(y, x))
 
 
-def _sagnac(sat: np.ndarray, rx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Rotate (N, 3) transmit-frame satellite positions to the receive frame; return rotated, cos, sin."""
-    tau = np.sqrt(np.sum((sat - rx) ** 2, axis=1)) / SPEED_OF_LIGHT_MPS
-    ang = EARTH_ROTATION_RATE_RADPS * tau
-    c, s = np.cos(ang), np.sin(ang)
-    out = np.empty_like(sat)
-    out[:, 0] = c * sat[:, 0] + s * sat[:, 1]
-    out[:, 1] = -s * sat[:, 0] + c * sat[:, 1]
-    out[:, 2] = sat[:, 2]
-    return out, c, s
+@dataclass(frozen=True)
+class _PositionFix:
+    """One weighted least-squares position solution of :meth:`SinglePointPositioner._solve_position`.
+
+    Attributes:
+        status: ``ok``, ``not_converged``, ``too_few_satellites`` or ``singular_geometry``; the
+            arrays below are empty (shape 0) unless ``ok`` or ``not_converged``.
+        below_mask: satellites (all N, not only the active ones) below the elevation mask at a
+            converged solution, bool (N,).
+        iterations: Gauss-Newton iterations.
+        x: ``[x, y, z, c dt]``, m, (4,).
+        covariance: ``(H^T W H)^-1``, m^2, (4, 4).
+        h: design matrix at the solution, (n_active, 4).
+        residuals_m: post-fit residuals of the active satellites, m.
+        sse: weighted sum of squared residuals (chi-square with n - 4 dof).
+        standardised_residuals: ``r_i / sqrt(Qr_ii)`` (Baarda's w-test statistics).
+        enu_rotation: ECEF->ENU rotation at the solution, (3, 3); None far from the surface.
+        el_all: elevations, rad, (N,) (NaN for inactive satellites).
+        los_all: receiver-to-satellite unit vectors, (N, 3) (NaN for inactive satellites).
+        scale_all: C/N0 and elevation factor of the sigmas, (N,) (NaN for inactive satellites).
+    """
+
+    status: str
+    below_mask: np.ndarray
+    iterations: int
+    x: np.ndarray = field(default_factory=lambda: np.full(4, math.nan))
+    covariance: np.ndarray = field(default_factory=lambda: np.full((4, 4), math.nan))
+    h: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    residuals_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    sse: float = math.nan
+    standardised_residuals: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    enu_rotation: np.ndarray | None = None
+    el_all: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    los_all: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    scale_all: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 class SinglePointPositioner:
@@ -392,7 +414,7 @@ class SinglePointPositioner:
         mask_rad = math.radians(p.elevation_mask_deg)
         if n > 0 and float(np.linalg.norm(x0)) > _NEAR_SURFACE_R_M:
             # Elevation mask from the starting point (the previous fix); re-checked at convergence.
-            rs, _, _ = _sagnac(sat_pos, x0)
+            rs = sagnac_rotate(sat_pos, x0)[0]
             d = rs - x0
             sin_el0 = (d @ _geodetic_up_and_rotation(x0)[2]) / np.sqrt(np.sum(d * d, axis=1))
             below0 = sin_el0 < math.sin(mask_rad)
@@ -401,35 +423,35 @@ class SinglePointPositioner:
             active &= ~below0
         while True:
             sol = self._solve_position(sat_pos, y_corr, cn0, iono_m, pr_std, active, x0, mask_rad)
-            below = sol["below_mask"]
+            status = sol.status
+            below = sol.below_mask
             if np.any(below):
                 for i in np.flatnonzero(below):
                     reject(int(svids[i]), "below_elevation_mask")
                 active &= ~below
-                if sol["status"] == STATUS_OK:
+                if status == STATUS_OK:
                     # re-solve without the masked satellites (the mask can only shrink the set)
                     continue
-            if sol["status"] != STATUS_OK:
+            if status != STATUS_OK:
                 break
             used = np.flatnonzero(active)
             dof = used.size - 4
             if dof <= 0:
                 break
-            t = sol["sse"]
+            t = sol.sse
             thr = self._threshold(dof)
             if t <= thr:
                 break
             # FDE: exclude the largest standardised residual while enough satellites remain
             if exclusions >= p.max_exclusions or used.size - 1 < p.min_satellites_for_exclusion:
-                sol["status"] = STATUS_RAIM_FAILED
+                status = STATUS_RAIM_FAILED
                 break
-            worst = used[int(np.argmax(np.abs(sol["w"])))]
+            worst = used[int(np.argmax(np.abs(sol.standardised_residuals)))]
             reject(int(svids[worst]), "outlier")
             active[worst] = False
             exclusions += 1
-            x0 = sol["x"][:3]
+            x0 = sol.x[:3]
 
-        status = sol["status"]
         used = np.flatnonzero(active)
         self.totals["epochs"] += 1
         for reason, count in counts.items():
@@ -455,13 +477,13 @@ class SinglePointPositioner:
                 counts,
                 np.full(used.size, math.nan),
                 np.full(used.size, math.nan),
-                int(sol["iterations"]),
+                sol.iterations,
                 math.nan,
                 math.nan,
                 extra,
             )
 
-        x = sol["x"]
+        x = sol.x
         valid = status == STATUS_OK
         if valid and exclusions > 0:
             status = STATUS_OK_WITH_EXCLUSIONS
@@ -469,12 +491,12 @@ class SinglePointPositioner:
             self._last_position = x[:3].copy()
             self.totals["valid_epochs"] += 1
         dof = used.size - 4
-        rot = sol["enu_rotation"]
-        cov = sol["cov"]
+        rot = sol.enu_rotation
+        cov = sol.covariance
         cov_enu = rot @ cov[:3, :3] @ rot.T if rot is not None else np.full((3, 3), math.nan)
         dop = _NAN_DOP
         if rot is not None:
-            g = sol["h"].copy()
+            g = sol.h.copy()
             g[:, :3] = g[:, :3] @ rot.T
             try:
                 q = np.linalg.inv(g.T @ g)
@@ -496,27 +518,16 @@ class SinglePointPositioner:
         if valid:
             rv = used[np.isfinite(rate_corr[used])]
             if rv.size >= 4:
-                los = sol["los_all"][rv]
-                _, c, s = _sagnac(sat_pos[rv], x[:3])
-                vs = np.empty((rv.size, 3))
-                vs[:, 0] = c * sat_vel[rv, 0] + s * sat_vel[rv, 1]
-                vs[:, 1] = -s * sat_vel[rv, 0] + c * sat_vel[rv, 1]
-                vs[:, 2] = sat_vel[rv, 2]
+                los = sol.los_all[rv]
+                _, c, s, _ = sagnac_rotate(sat_pos[rv], x[:3])
+                vs = rotate_about_z(sat_vel[rv], c, s)
                 yv = rate_corr[rv] - np.sum(vs * los, axis=1)
                 hv = np.hstack([-los, np.ones((rv.size, 1))])
-                sig_v = p.sigma_rate_mps * sol["scale_all"][rv]
+                sig_v = p.sigma_rate_mps * sol.scale_all[rv]
                 sig_v = np.where(np.isfinite(rate_std[rv]) & (rate_std[rv] > 0), rate_std[rv], sig_v)
-                wv = 1.0 / sig_v**2
-                nmat = hv.T @ (hv * wv[:, None])
-                try:
-                    vcov = np.linalg.inv(nmat)
-                    sv = vcov @ (hv.T @ (wv * yv))
-                    if np.all(np.isfinite(sv)):
-                        v, drift, vel_valid = sv[:3], float(sv[3]), True
-                    else:
-                        vcov = np.full((4, 4), math.nan)
-                except np.linalg.LinAlgError:
-                    vcov = np.full((4, 4), math.nan)
+                solved = weighted_least_squares(hv, yv, 1.0 / sig_v**2)
+                if solved is not None and np.all(np.isfinite(solved[0])):
+                    v, drift, vel_valid, vcov = solved[0][:3], float(solved[0][3]), True, solved[1]
 
         return SppResult(
             stamp_ns=epoch.stamp_ns,
@@ -534,10 +545,10 @@ class SinglePointPositioner:
             used_svids=tuple(int(s) for s in svids[used]),
             rejected=tuple(rejected),
             rejection_counts=counts,
-            residuals_m=sol["resid"],
-            elevations_rad=sol["el_all"][used],
-            iterations=int(sol["iterations"]),
-            test_statistic=float(sol["sse"]) if dof > 0 else math.nan,
+            residuals_m=sol.residuals_m,
+            elevations_rad=sol.el_all[used],
+            iterations=sol.iterations,
+            test_statistic=float(sol.sse) if dof > 0 else math.nan,
             test_threshold=self._threshold(dof) if dof > 0 else math.nan,
             extra=extra,
         )
@@ -553,36 +564,36 @@ class SinglePointPositioner:
         active: np.ndarray,
         x0: np.ndarray,
         mask_rad: float,
-    ) -> dict:
-        """Iterated WLS for [x, y, z, c dt] on the active satellites (see module docstring)."""
+    ) -> _PositionFix:
+        """Iterated WLS for [x, y, z, c dt] on the active satellites (see module docstring).
+
+        Notes
+        -----
+        Cao et al., eq. 5 linearised, solved by :func:`gnss_common.positioning.least_squares_position`
+        with the range rotated by :func:`gnss_common.earth_rotation.sagnac_rotate`.
+        """
         p = self.params
         n = sat_pos.shape[0]
         idx = np.flatnonzero(active)
-        out: dict = {"status": STATUS_TOO_FEW, "below_mask": np.zeros(n, dtype=bool), "iterations": 0}
         if idx.size < 4:
-            return out
-        x = np.zeros(4)
-        x[:3] = x0
+            return _PositionFix(STATUS_TOO_FEW, np.zeros(n, dtype=bool), 0)
         sp, yc = sat_pos[idx], y_corr[idx]
         cn0_factor = np.ones(idx.size)
         if p.use_cn0_weighting:
             ok = np.isfinite(cn0[idx])
             cn0_factor[ok] = np.maximum(1.0, 10.0 ** ((p.cn0_reference_dbhz - cn0[idx][ok]) / 10.0))
-        near_surface_r = _NEAR_SURFACE_R_M
-        rot = None
-        converged = False
-        it = 0
+        given = np.isfinite(pr_std[idx]) & (pr_std[idx] > 0)
         sin_el = np.ones(idx.size)
-        for it in range(1, p.max_iterations + 1):
-            rs, _, _ = _sagnac(sp, x[:3])
+
+        def model(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            nonlocal sin_el
+            rs = sagnac_rotate(sp, x[:3])[0]
             diff = rs - x[:3]
             rng = np.sqrt(np.sum(diff * diff, axis=1))
             los = diff / rng[:, None]
-            if np.linalg.norm(x[:3]) > near_surface_r:
-                rot = _geodetic_up_and_rotation(x[:3])
-                sin_el = np.clip(los @ rot[2], -1.0, 1.0)
+            if np.linalg.norm(x[:3]) > _NEAR_SURFACE_R_M:
+                sin_el = np.clip(los @ _geodetic_up_and_rotation(x[:3])[2], -1.0, 1.0)
             else:
-                rot = None
                 sin_el = np.ones(idx.size)
             s_el = np.maximum(sin_el, 0.05)
             var = (
@@ -591,36 +602,23 @@ class SinglePointPositioner:
                 + (p.sigma_tropo_zenith_m / (s_el + 0.1)) ** 2
                 + p.sigma_broadcast_m**2
             )
-            given = np.isfinite(pr_std[idx]) & (pr_std[idx] > 0)
-            var = np.where(given, pr_std[idx] ** 2, var)
-            w = 1.0 / var
-            h = np.empty((idx.size, 4))
-            h[:, :3] = -los
-            h[:, 3] = 1.0
-            resid = yc - (rng + x[3])
-            nmat = h.T @ (h * w[:, None])
-            try:
-                cov = np.linalg.inv(nmat)
-            except np.linalg.LinAlgError:
-                out.update(status=STATUS_SINGULAR, iterations=it)
-                return out
-            dcov = np.diag(cov)
-            if not (np.all(np.isfinite(dcov)) and np.all(dcov > 0.0)) or float(np.max(dcov)) > 1.0e10:
-                out.update(status=STATUS_SINGULAR, iterations=it)
-                return out
-            dx = cov @ (h.T @ (w * resid))
-            x = x + dx
-            if np.linalg.norm(dx) < p.convergence_m:
-                converged = True
-                break
+            return rng + x[3], los, 1.0 / np.where(given, pr_std[idx] ** 2, var)
+
+        start = np.zeros(4)
+        start[:3] = x0
+        ls = least_squares_position(model, yc, start, p.max_iterations, p.convergence_m)
+        if ls.status == SINGULAR:
+            return _PositionFix(STATUS_SINGULAR, np.zeros(n, dtype=bool), ls.iterations)
+        converged = ls.status == CONVERGED
+        x, cov, h, w = ls.x, ls.covariance, ls.h, ls.weights
         # final linearisation at the converged point
-        rs, _, _ = _sagnac(sp, x[:3])
+        rs = sagnac_rotate(sp, x[:3])[0]
         diff = rs - x[:3]
         rng = np.sqrt(np.sum(diff * diff, axis=1))
         los = diff / rng[:, None]
         resid = yc - (rng + x[3])
         h[:, :3] = -los
-        rot = _geodetic_up_and_rotation(x[:3]) if np.linalg.norm(x[:3]) > near_surface_r else None
+        rot = _geodetic_up_and_rotation(x[:3]) if np.linalg.norm(x[:3]) > _NEAR_SURFACE_R_M else None
         el_all = np.full(n, math.nan)
         los_all = np.full((n, 3), math.nan)
         scale_all = np.full(n, math.nan)
@@ -632,25 +630,21 @@ class SinglePointPositioner:
         below = np.zeros(n, dtype=bool)
         if rot is not None and converged:
             below[idx] = el_all[idx] < mask_rad
-        sse = float(np.sum(w * resid**2))
         # standardised residuals: r_i / sqrt(Qr_ii), Qr = W^-1 - H cov H^T
         qr_diag = 1.0 / w - np.einsum("ij,jk,ik->i", h, cov, h)
-        wstat = resid / np.sqrt(np.maximum(qr_diag, 1e-12))
-        out.update(
-            status=STATUS_OK if converged else STATUS_NOT_CONVERGED,
-            x=x,
-            cov=cov,
-            h=h,
-            resid=resid,
-            sse=sse,
-            w=wstat,
+        # converged far from the Earth's surface (rot None): not a fix
+        return _PositionFix(
+            status=STATUS_OK if converged and rot is not None else STATUS_NOT_CONVERGED,
             below_mask=below,
-            iterations=it,
+            iterations=ls.iterations,
+            x=x,
+            covariance=cov,
+            h=h,
+            residuals_m=resid,
+            sse=float(np.sum(w * resid**2)),
+            standardised_residuals=resid / np.sqrt(np.maximum(qr_diag, 1e-12)),
             enu_rotation=rot,
             el_all=el_all,
             los_all=los_all,
             scale_all=scale_all,
         )
-        if converged and rot is None:
-            out["status"] = STATUS_NOT_CONVERGED  # converged far from the Earth's surface: not a fix
-        return out

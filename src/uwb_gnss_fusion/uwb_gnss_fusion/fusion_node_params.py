@@ -1,0 +1,198 @@
+"""Parameters of fusion_node: one frozen dataclass, declared as ROS parameters by the node.
+
+Pure (no rclpy): :func:`rfi_node_common.params.declare` turns :class:`FusionNodeParams` into
+parameter declarations with descriptors; :meth:`FusionNodeParams.fusion_params` gives the core's
+:class:`uwb_gnss_fusion.fusion_params.FusionParams`. Documented for users in config/fusion.yaml.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+from gnss_common.jamming_weights import TrackingLoopParams
+from rfi_node_common.diagnostics import (
+    input_timeout_parameter,
+    max_stamp_jump_parameter,
+    stamp_jump_confirmations_parameter,
+)
+from rfi_node_common.params import parameter, validate_ranges
+from uwb_gnss_fusion.fusion_params import FRAME_EARTH, FRAME_MAP, FusionParams
+
+_FP = FusionParams()
+_LOOP = TrackingLoopParams()
+
+
+@dataclass(frozen=True)
+class FusionNodeParams:
+    """Parameters of fusion_node (documented for users in config/fusion.yaml).
+
+    The filter fields mirror :class:`uwb_gnss_fusion.fusion_filter.FusionParams` (same names,
+    ``loop_*`` = its ``loop`` :class:`TrackingLoopParams`), with the same defaults; the UWB anchor
+    registry of FusionParams is not a parameter: anchor positions come in each UwbRange message.
+
+    Notes:
+        Cao et al.: constant-velocity model (eq. 8-10) driven by ``accel_psd_m2ps3``, pseudorange
+        / Doppler / UWB models (eq. 5-7), effective C/N0 under J/S (eq. 4) with the quality
+        factor ``jammer_quality_factor``; tracking jitter of Kaplan & Hegarty (``loop_*``).
+    """
+
+    # --- node ------------------------------------------------------------------------------
+    earth_frame_id: str = parameter(
+        FRAME_EARTH, 'Frame id of ECEF (REP 105 earth): expected on /gnss/measurements and on UwbRange '
+        'messages with ECEF anchors; header.frame_id of the outputs in ECEF.')
+    map_frame_id: str = parameter(
+        FRAME_MAP, 'Frame id of the anchors\' local frame (UWB-only mode, axes taken as ENU): UwbRange '
+        'messages in this frame run the filter in it; header.frame_id of the outputs then.')
+    child_frame_id: str = parameter(
+        'gnss_antenna', 'Odometry child_frame_id and NavSatFix frame_id: the point estimated (the GNSS antenna).')
+    reorder_window_s: float = parameter(
+        0.1, 'Re-ordering window at start: inputs are processed in stamp order once a message this much newer '
+        'has arrived; later arrivals are rejected. The outputs lag by it, s (0: process at once).',
+        minimum=0.0, maximum=10.0)
+    reorder_window_max_s: float = parameter(
+        1.0, 'After a late arrival (still rejected) the window grows to 1.5 times its lateness, up to this, s; '
+        'the outputs then lag by up to this (<= reorder_window_s: fixed window).', minimum=0.0, maximum=10.0)
+    idle_flush_s: float = parameter(
+        1.0, 'Process what the re-ordering buffer holds once no input has arrived for this long, s (wall '
+        'time, steady clock: the end of a bag or a sensor stop; changes when, never what, is processed; '
+        '0: never).', minimum=0.0, maximum=3600.0)
+    # the shared helpers return the dataclass field as an object
+    max_stamp_jump_s: float = max_stamp_jump_parameter(120.0)  # type: ignore[assignment]
+    stamp_jump_confirmations: int = stamp_jump_confirmations_parameter(5)  # type: ignore[assignment]
+    input_timeout_s: float = input_timeout_parameter()  # type: ignore[assignment]
+    use_spp_reference: bool = parameter(
+        True, 'Re-initialise after a divergence from the newest valid single-point (SPP) fix of the last '
+        'reference_max_age_s of GNSS epochs (solved on demand).')
+    diagnostics_period_s: float = parameter(
+        1.0, 'Period of /diagnostics in message (stamp) time, s.', minimum=0.01, maximum=3600.0)
+    warning_throttle_s: float = parameter(
+        5.0, 'Shortest interval between two warnings about rejected input, s (wall time; logging only).',
+        minimum=0.0, maximum=3600.0)
+    # --- filter (FusionParams) -------------------------------------------------------------
+    use_gnss: bool = parameter(_FP.use_gnss, 'Apply GNSS pseudoranges (false: UWB-only filter).')
+    use_doppler: bool = parameter(_FP.use_doppler, 'Apply pseudorange rates (Doppler) as well as pseudoranges.')
+    use_uwb: bool = parameter(_FP.use_uwb, 'Apply UWB ranges (false: the GNSS-only baseline filter).')
+    accel_psd_m2ps3: float = parameter(
+        _FP.accel_psd_m2ps3, 'White-acceleration PSD per axis of the constant-velocity model, m^2/s^3.',
+        minimum=1e-9, maximum=1e4)
+    clock_h0_s: float = parameter(
+        _FP.clock_h0_s, 'Receiver clock white-FM coefficient h0, s.', minimum=1e-30, maximum=1e-12)
+    clock_h_minus2_hz: float = parameter(
+        _FP.clock_h_minus2_hz, 'Receiver clock random-walk-FM coefficient h_-2, 1/s.', minimum=0.0, maximum=1e-12)
+    uwb_range_std_m: float = parameter(
+        _FP.uwb_range_std_m, 'UWB range 1-sigma used when a message gives NaN range_std_m, m.',
+        minimum=1e-4, maximum=100.0)
+    uwb_lever_arm_m: tuple = parameter(
+        _FP.uwb_lever_arm_m, 'UWB tag minus GNSS antenna, in the state frame (ECEF or map), m, [x, y, z].')
+    uwb_max_range_m: float = parameter(
+        _FP.uwb_max_range_m, 'Longest physical UWB range; longer ranges are rejected, m.', minimum=1.0, maximum=1e5)
+    gate_probability: float = parameter(
+        _FP.gate_probability, 'Per-measurement innovation gate, probability of the 1-dof chi-square (1: no gating).',
+        minimum=0.5, maximum=1.0)
+    common_mode_screen: bool = parameter(
+        _FP.common_mode_screen, 'Drop pseudoranges / rates whose innovation departs from the epoch median '
+        '(common clock) beyond the gate with the clock-free variance, before the CKF update (beyond the paper).')
+    elevation_mask_deg: float = parameter(
+        _FP.elevation_mask_deg, 'Satellites below this elevation are rejected, deg.', minimum=-90.0, maximum=89.0)
+    min_cn0_dbhz: float = parameter(
+        _FP.min_cn0_dbhz, 'Pseudoranges with a lower reported C/N0 are rejected, dB-Hz.', minimum=0.0, maximum=70.0)
+    nominal_cn0_dbhz: float = parameter(
+        _FP.nominal_cn0_dbhz, 'Jammer-free C/N0 fed to eq. 4 when a J/S is known, dB-Hz.', minimum=0.0, maximum=70.0)
+    jammer_quality_factor: float = parameter(
+        _FP.jammer_quality_factor, 'Jamming resistance quality factor Q of eq. 4 (1: narrowband/swept jammer).',
+        minimum=0.01, maximum=100.0)
+    jammer_info_timeout_s: float = parameter(
+        _FP.jammer_info_timeout_s, 'A J/S older than this is ignored, s.', minimum=0.01, maximum=3600.0)
+    loop_dll_bandwidth_hz: float = parameter(
+        _LOOP.dll_bandwidth_hz, 'Code loop (DLL) noise bandwidth of the receiver, Hz.', minimum=0.001, maximum=100.0)
+    loop_correlator_spacing_chips: float = parameter(
+        _LOOP.correlator_spacing_chips, 'Early-late correlator spacing, chips.', minimum=0.001, maximum=1.0)
+    loop_integration_time_s: float = parameter(
+        _LOOP.integration_time_s, 'Predetection integration time, s.', minimum=1e-4, maximum=1.0)
+    loop_fll_bandwidth_hz: float = parameter(
+        _LOOP.fll_bandwidth_hz, 'Frequency loop noise bandwidth, Hz.', minimum=0.001, maximum=100.0)
+    loop_code_floor_m: float = parameter(
+        _LOOP.code_floor_m, 'Pseudorange 1-sigma floor added in quadrature (multipath, atmosphere, orbit), m.',
+        minimum=0.0, maximum=100.0)
+    loop_rate_floor_mps: float = parameter(
+        _LOOP.rate_floor_mps, 'Pseudorange-rate 1-sigma floor added in quadrature, m/s.', minimum=0.0, maximum=100.0)
+    min_satellites_init: int = parameter(
+        _FP.min_satellites_init, 'Satellites needed to initialise from GNSS alone.', minimum=4, maximum=64)
+    init_position_std_m: float = parameter(
+        _FP.init_position_std_m, 'Initial position 1-sigma per axis, m.', minimum=1e-3, maximum=1e7)
+    init_velocity_std_mps: float = parameter(
+        _FP.init_velocity_std_mps, 'Initial velocity 1-sigma per axis, m/s.', minimum=1e-4, maximum=1e4)
+    init_clock_bias_std_m: float = parameter(
+        _FP.init_clock_bias_std_m, 'Initial receiver clock bias 1-sigma, m.', minimum=1e-3, maximum=1e7)
+    init_clock_drift_std_mps: float = parameter(
+        _FP.init_clock_drift_std_mps, 'Initial receiver clock drift 1-sigma, m/s.', minimum=1e-4, maximum=1e4)
+    init_clock_drift_unobserved_std_mps: float = parameter(
+        _FP.init_clock_drift_unobserved_std_mps, 'Clock drift 1-sigma at an initialisation without Doppler and '
+        'without an earlier drift estimate, m/s.', minimum=1e-4, maximum=1e5)
+    max_prediction_s: float = parameter(
+        _FP.max_prediction_s, 'A measurement further than this after the filter time resets the filter, s.',
+        minimum=0.01, maximum=3600.0)
+    max_position_std_m: float = parameter(
+        _FP.max_position_std_m, 'A larger position 1-sigma (any axis) is declared divergence, m.',
+        minimum=0.01, maximum=1e7)
+    divergence_gnss_epochs: int = parameter(
+        _FP.divergence_gnss_epochs, 'Consecutive GNSS epochs with at least half of >= 4 pseudoranges gated out '
+        'that declare divergence.', minimum=1, maximum=100000)
+    divergence_uwb_ranges: int = parameter(
+        _FP.divergence_uwb_ranges, 'Window of recent UWB ranges (all anchors) examined for divergence.',
+        minimum=1, maximum=100000)
+    divergence_uwb_gated_fraction: float = parameter(
+        _FP.divergence_uwb_gated_fraction, 'Divergence is declared when at least this fraction of the last '
+        'divergence_uwb_ranges ranges was gated out (1.0: that many consecutive gated ranges).',
+        minimum=0.01, maximum=1.0)
+    reference_max_age_s: float = parameter(
+        _FP.reference_max_age_s, 'A reference (SPP) solution older than this is not used to re-initialise, s.',
+        minimum=0.01, maximum=3600.0)
+    uwb_init_window_s: float = parameter(
+        _FP.uwb_init_window_s, 'Ranges used for UWB multilateration must lie within this window, s.',
+        minimum=0.01, maximum=3600.0)
+    uwb_latency_s: float = parameter(
+        _FP.uwb_latency_s, 'Age of a UWB range at its stamp (modelled by constant-velocity back-propagation), s.',
+        minimum=0.0, maximum=1.0)
+    max_update_iterations: int = parameter(
+        _FP.max_update_iterations, 'Gauss-Newton refinement steps allowed after a cubature update with a '
+        'significant linearisation error (0: the plain CKF update of the paper).', minimum=0, maximum=50)
+    nonlinearity_threshold: float = parameter(
+        _FP.nonlinearity_threshold, 'Refine an update when its linearisation-error variance exceeds this '
+        'fraction of the measurement noise variance.', minimum=1e-6, maximum=1e6)
+    uwb_huber_k: float = parameter(
+        _FP.uwb_huber_k, 'Huber threshold on the normalised UWB innovation (.inf: off).', minimum=0.01)
+    uwb_huber_k_positive: float = parameter(
+        _FP.uwb_huber_k_positive, 'Huber threshold for positive UWB innovations (NLOS direction; .inf: not '
+        'down-weighted).', minimum=0.01)
+
+    def __post_init__(self) -> None:
+        validate_ranges(self)
+        for name in ('earth_frame_id', 'map_frame_id', 'child_frame_id'):
+            if not isinstance(getattr(self, name), str) or not getattr(self, name):
+                raise ValueError(f'parameter {name} must be a non-empty string')
+        if self.earth_frame_id == self.map_frame_id:
+            raise ValueError('parameters earth_frame_id and map_frame_id must differ')
+        if len(self.uwb_lever_arm_m) != 3:
+            raise ValueError(f'parameter uwb_lever_arm_m must have 3 elements, got {list(self.uwb_lever_arm_m)}')
+        try:
+            self.fusion_params()
+        except (TypeError, ValueError) as err:
+            raise ValueError(f'invalid filter parameters: {err}') from None
+
+    def fusion_params(self) -> FusionParams:
+        """The core's parameters.
+
+        Raises:
+            ValueError: a combination the core rejects (e.g. use_gnss and use_uwb both false).
+        """
+        loop = TrackingLoopParams(
+            dll_bandwidth_hz=self.loop_dll_bandwidth_hz, correlator_spacing_chips=self.loop_correlator_spacing_chips,
+            integration_time_s=self.loop_integration_time_s, fll_bandwidth_hz=self.loop_fll_bandwidth_hz,
+            code_floor_m=self.loop_code_floor_m, rate_floor_mps=self.loop_rate_floor_mps)
+        names = {f.name for f in dataclasses.fields(FusionParams)} - {'loop', 'anchors'}
+        values: dict[str, Any] = {n: getattr(self, n) for n in names}
+        values['uwb_lever_arm_m'] = tuple(float(v) for v in self.uwb_lever_arm_m)
+        return FusionParams(loop=loop, **values)

@@ -1,0 +1,205 @@
+"""Parameters of the GNSS/UWB fusion filter, and its frame and mode codes.
+
+Pure core (no rclpy). :class:`FusionParams` is validated on construction; the node builds it from
+its ROS parameters (``fusion_node.FusionNodeParams.fusion_params``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import cached_property
+
+from scipy.stats import chi2
+
+from gnss_common.clock_model import ClockHCoefficients
+from gnss_common.jamming_weights import TrackingLoopParams
+
+MODE_NONE = 0
+MODE_GNSS = 1
+MODE_UWB = 2
+MODE_GNSS_UWB = 3
+"""Mode codes, identical to rfi_msgs/FusionStatus.msg."""
+
+FRAME_EARTH = "earth"
+FRAME_MAP = "map"
+
+
+@dataclass(frozen=True)
+class FusionParams:
+    """Parameters of :class:`FusionFilter` (validated on construction).
+
+    Attributes:
+        use_gnss: apply GNSS pseudoranges (False: UWB-only filter).
+        use_doppler: apply pseudorange rates as well as pseudoranges.
+        use_uwb: apply UWB ranges (False: the GNSS-only baseline filter).
+        accel_psd_m2ps3: white-acceleration PSD per axis, m^2/s^3 (constant-velocity model).
+        clock_h0_s: receiver clock h_0, s (default: compensated crystal of Brown & Hwang, as
+            ``gnss_common.clock_model.COMPENSATED_CRYSTAL_BROWN_HWANG``).
+        clock_h_minus2_hz: receiver clock h_-2, 1/s. The clock-state process noise is
+            ``gnss_common.clock_model.clock_process_noise_m`` (Brown & Hwang two-state model).
+        uwb_range_std_m: UWB range 1-sigma used when a message gives NaN, m.
+        uwb_lever_arm_m: UWB tag minus GNSS antenna, in the state frame, m.
+        uwb_max_range_m: longest physical UWB range, m.
+        anchors: optional registry ``((anchor_id, x, y, z), ...)`` in the anchors' frame, m. If
+            non-empty, ranges from other anchor ids are rejected ("unknown_anchor") and the
+            registered position is used.
+        gate_probability: per-measurement innovation gate, probability of the 1-dof chi-square
+            (1.0 disables gating).
+        elevation_mask_deg: satellites below are rejected, deg.
+        min_cn0_dbhz: pseudoranges with a lower reported C/N0 are rejected, dB-Hz.
+        nominal_cn0_dbhz: jammer-free C/N0 fed to eq. 4 when a J/S is known, dB-Hz.
+        jammer_quality_factor: Q of eq. 4 (1: narrowband/swept jammer, Kaplan & Hegarty).
+        jammer_info_timeout_s: a J/S older than this is ignored, s.
+        loop: tracking-loop parameters for the jitter-based weights.
+        min_satellites_init: satellites needed to initialise from GNSS alone.
+        init_position_std_m / init_velocity_std_mps / init_clock_bias_std_m /
+        init_clock_drift_std_mps: initial 1-sigmas when the solver gives none.
+        init_clock_drift_unobserved_std_mps: clock-drift 1-sigma at an initialisation where the
+            drift is unobserved (no Doppler in the fix) and no earlier drift estimate exists, m/s
+            (1000 m/s covers a crystal's +-3 ppm; GEONET receivers drift by +418 and -330 m/s). On a
+            reinitialisation the drift of the lost state is kept (the oscillator did not change).
+        max_prediction_s: a stamp further than this after the filter time resets the filter, s.
+        max_position_std_m: a larger position 1-sigma (per axis) is declared divergence, m.
+        divergence_gnss_epochs: consecutive GNSS epochs with at least half of >= 4 pseudoranges
+            gated out that declare divergence.
+        divergence_uwb_ranges: length of the window of recent UWB ranges (all anchors) examined
+            for divergence.
+        divergence_uwb_gated_fraction: divergence is declared when at least this fraction of the
+            last ``divergence_uwb_ranges`` ranges was gated out, in (0, 1] (1: that many
+            consecutive gated ranges, the original rule).
+        reference_max_age_s: a caller-supplied reference (SPP) older than this is not used, s.
+        uwb_init_window_s: ranges used for UWB multilateration must lie within this window, s.
+        uwb_latency_s: age of a UWB range at its stamp, s (>= 0; 0: the paper's model). The range
+            is modelled as the distance at ``stamp - uwb_latency_s`` (constant-velocity
+            back-propagation). Beyond the paper; set it from the ranging hardware / time-base
+            calibration, not per data set.
+        max_update_iterations: Gauss-Newton (iterated) refinement steps allowed after a cubature
+            update whose linearisation error is significant (0: the plain CKF update of Cao et al.
+            eq. 17-24). Beyond the paper; see :meth:`.ckf.CubatureKalmanFilter.update`.
+        nonlinearity_threshold: refine when the cubature linearisation-error variance exceeds this
+            fraction of the measurement noise variance (> 0).
+        uwb_huber_k: Huber threshold on the normalised UWB innovation (inf: off). Beyond the paper.
+        uwb_huber_k_positive: Huber threshold for positive UWB innovations (measured range longer
+            than predicted, the non-line-of-sight direction); inf: positive innovations are not
+            down-weighted.
+        common_mode_screen: before the CKF update, drop pseudoranges and pseudorange rates whose
+            innovation departs from the epoch's median (common clock) innovation by more than the
+            gate allows with the clock-free variance (:mod:`.robust_screen`; beyond the paper).
+            Counted as ``common_mode_pseudorange`` / ``common_mode_doppler``; they count as gated
+            for the divergence rule.
+    """
+
+    use_gnss: bool = True
+    use_doppler: bool = True
+    use_uwb: bool = True
+    accel_psd_m2ps3: float = 0.1
+    clock_h0_s: float = 2.0e-19
+    clock_h_minus2_hz: float = 2.0e-20
+    uwb_range_std_m: float = 0.1
+    uwb_lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    uwb_max_range_m: float = 500.0
+    anchors: tuple[tuple[str, float, float, float], ...] = ()
+    gate_probability: float = 0.9999
+    elevation_mask_deg: float = 10.0
+    min_cn0_dbhz: float = 20.0
+    nominal_cn0_dbhz: float = 45.0
+    jammer_quality_factor: float = 1.0
+    jammer_info_timeout_s: float = 2.0
+    loop: TrackingLoopParams = field(default_factory=TrackingLoopParams)
+    min_satellites_init: int = 5
+    init_position_std_m: float = 10.0
+    init_velocity_std_mps: float = 1.0
+    init_clock_bias_std_m: float = 10.0
+    init_clock_drift_std_mps: float = 1.0
+    init_clock_drift_unobserved_std_mps: float = 1000.0
+    max_prediction_s: float = 120.0
+    max_position_std_m: float = 200.0
+    divergence_gnss_epochs: int = 5
+    divergence_uwb_ranges: int = 40
+    reference_max_age_s: float = 5.0
+    uwb_init_window_s: float = 1.0
+    uwb_latency_s: float = 0.0
+    divergence_uwb_gated_fraction: float = 0.5
+    max_update_iterations: int = 5
+    nonlinearity_threshold: float = 0.05
+    uwb_huber_k: float = math.inf
+    uwb_huber_k_positive: float = math.inf
+    common_mode_screen: bool = True
+
+    def __post_init__(self) -> None:
+        pos = {
+            "accel_psd_m2ps3": self.accel_psd_m2ps3,
+            "clock_h0_s": self.clock_h0_s,
+            "uwb_range_std_m": self.uwb_range_std_m,
+            "uwb_max_range_m": self.uwb_max_range_m,
+            "jammer_quality_factor": self.jammer_quality_factor,
+            "jammer_info_timeout_s": self.jammer_info_timeout_s,
+            "init_position_std_m": self.init_position_std_m,
+            "init_velocity_std_mps": self.init_velocity_std_mps,
+            "init_clock_bias_std_m": self.init_clock_bias_std_m,
+            "init_clock_drift_std_mps": self.init_clock_drift_std_mps,
+            "init_clock_drift_unobserved_std_mps": self.init_clock_drift_unobserved_std_mps,
+            "max_prediction_s": self.max_prediction_s,
+            "max_position_std_m": self.max_position_std_m,
+            "reference_max_age_s": self.reference_max_age_s,
+            "uwb_init_window_s": self.uwb_init_window_s,
+            "nonlinearity_threshold": self.nonlinearity_threshold,
+            # inf switches the Huber weighting off; anything else must be finite and > 0
+            "uwb_huber_k": 1.0 if self.uwb_huber_k == math.inf else self.uwb_huber_k,
+            "uwb_huber_k_positive": 1.0 if self.uwb_huber_k_positive == math.inf else self.uwb_huber_k_positive,
+        }
+        for name, value in pos.items():
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
+                raise ValueError(f"FusionParams.{name} must be a finite number > 0, got {value!r}")
+        if not (math.isfinite(self.clock_h_minus2_hz) and self.clock_h_minus2_hz >= 0.0):
+            raise ValueError(f"FusionParams.clock_h_minus2_hz must be >= 0, got {self.clock_h_minus2_hz!r}")
+        if not (0.0 < self.gate_probability <= 1.0):
+            raise ValueError(
+                f"FusionParams.gate_probability must be in (0, 1], got {self.gate_probability!r}"
+            )
+        if not (-90.0 <= self.elevation_mask_deg < 90.0):
+            raise ValueError(
+                f"FusionParams.elevation_mask_deg must be in [-90, 90), got {self.elevation_mask_deg!r}"
+            )
+        for name in ("min_cn0_dbhz", "nominal_cn0_dbhz"):
+            if not math.isfinite(getattr(self, name)):
+                raise ValueError(f"FusionParams.{name} must be finite")
+        if len(self.uwb_lever_arm_m) != 3 or not all(math.isfinite(v) for v in self.uwb_lever_arm_m):
+            raise ValueError("FusionParams.uwb_lever_arm_m must be three finite numbers")
+        if not (isinstance(self.uwb_latency_s, (int, float)) and 0.0 <= self.uwb_latency_s <= 1.0):
+            raise ValueError(f"FusionParams.uwb_latency_s must be in [0, 1] s, got {self.uwb_latency_s!r}")
+        if not (isinstance(self.max_update_iterations, int) and 0 <= self.max_update_iterations <= 50):
+            raise ValueError(
+                f"FusionParams.max_update_iterations must be an int in [0, 50], got {self.max_update_iterations!r}"
+            )
+        if not (0.0 < self.divergence_uwb_gated_fraction <= 1.0):
+            raise ValueError(
+                "FusionParams.divergence_uwb_gated_fraction must be in (0, 1], "
+                f"got {self.divergence_uwb_gated_fraction!r}"
+            )
+        if self.min_satellites_init < 4:
+            raise ValueError(f"FusionParams.min_satellites_init must be >= 4, got {self.min_satellites_init}")
+        if self.divergence_gnss_epochs < 1 or self.divergence_uwb_ranges < 1:
+            raise ValueError("FusionParams.divergence_gnss_epochs and divergence_uwb_ranges must be >= 1")
+        if not (self.use_gnss or self.use_uwb):
+            raise ValueError("FusionParams: at least one of use_gnss, use_uwb must be True")
+        ids = [a[0] for a in self.anchors]
+        if len(set(ids)) != len(ids):
+            raise ValueError("FusionParams.anchors has duplicate anchor ids")
+        for a in self.anchors:
+            if len(a) != 4 or not all(math.isfinite(float(v)) for v in a[1:]):
+                raise ValueError(
+                    f"FusionParams.anchors entry {a!r} must be (id, x, y, z) with finite x, y, z"
+                )
+
+    @cached_property
+    def clock(self) -> ClockHCoefficients:
+        """Receiver clock h-coefficients for the process noise."""
+        return ClockHCoefficients(h0=self.clock_h0_s, h_minus2=self.clock_h_minus2_hz, name="fusion receiver")
+
+    @cached_property
+    def gate_nis(self) -> float:
+        """Per-measurement NIS threshold (inf when gating is disabled)."""
+        return math.inf if self.gate_probability >= 1.0 else float(chi2.ppf(self.gate_probability, 1))
+

@@ -1,0 +1,220 @@
+"""Initialisation and re-initialisation policy of the fusion filter: where a first state comes from.
+
+Pure core (no rclpy). Three sources, each a function here:
+
+* a GNSS snapshot fix (:func:`snapshot_fix`): robust least squares on one epoch (Cao et al., eq. 5
+  and 6), refused when the recent UWB ranges contradict it (:func:`fix_agrees_with_uwb`);
+* UWB multilateration (:func:`multilaterate`), multi-start because three anchors leave two mirror
+  solutions (:func:`uwb_init_ready` waits for a fourth anchor or a whole window);
+* the caller's reference solution (the node's SPP), chosen by the filter itself.
+
+The clock drift of a lost state is kept across a re-initialisation (:func:`initial_drift`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+from scipy.stats import chi2
+
+from gnss_common.positioning import SINGULAR, least_squares_position, weighted_least_squares
+
+from .fusion_params import FRAME_EARTH, FusionParams
+from .input_checks import PreparedEpoch
+from .measurement_models import STATE_DIM, pseudorange_model
+
+NS_PER_S = 1_000_000_000
+
+RecentRanges = Mapping[str, tuple[int, np.ndarray, float, str]]
+"""anchor id -> (stamp ns, anchor position m (3,), range m, frame id) of its latest range."""
+
+
+def snapshot_fix(prep: PreparedEpoch, min_satellites: int) -> tuple[np.ndarray, float, np.ndarray, float] | None:
+    """Robust snapshot least squares (position, clock; then velocity, drift) for initialisation.
+
+    Args:
+        prep: the validated satellites of one epoch with their 1-sigmas.
+        min_satellites: fewest satellites a fix may rest on (``min_satellites_init``).
+
+    Returns:
+        ``(position_m (3,), clock_bias_m, velocity_mps (3,), clock_drift_mps)`` (velocity zero and
+        drift NaN without four pseudorange rates), or None (also with fewer than ``min_satellites``).
+
+    Notes:
+        Gauss-Newton on Cao et al., eq. 5 from the Earth's centre
+        (:func:`gnss_common.positioning.least_squares_position`, weights 1 / sigma^2), then
+        iterative exclusion of the largest normalised residual while the weighted sum of squares
+        fails a 0.999 chi-square test; the velocity and drift from eq. 6 in one least-squares step.
+    """
+    if prep.pr.size < min_satellites:
+        return None
+    keep = np.ones(prep.pr.size, dtype=bool)
+    while keep.sum() >= 4:
+        idx = np.flatnonzero(keep)
+        hx = pseudorange_model(prep.sat_pos[idx], prep.sat_clk[idx], prep.iono[idx], prep.tropo[idx])
+        sp = prep.sat_pos[idx]
+        w = 1.0 / prep.sigma_pr[idx]
+        w2 = w * w
+
+        def model(x4: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            d = sp - x4[0:3]  # noqa: B023 (used within this iteration only)
+            return hx(_full_state(x4))[0], d / np.linalg.norm(d, axis=1)[:, None], w2  # noqa: B023
+
+        sol = least_squares_position(model, prep.pr[idx], np.zeros(4), 10, 1e-4, max_variance_m2=math.inf)
+        if sol.status == SINGULAR:
+            return None
+        x = sol.x
+        res = (prep.pr[idx] - hx(_full_state(x))[0]) * w
+        dof = idx.size - 4
+        if not np.isfinite(res).all() or np.linalg.norm(x[0:3]) < 6.0e6:
+            return None
+        if dof == 0 or float(res @ res) <= chi2.ppf(0.999, dof):
+            if dof == 0 and idx.size < min_satellites:
+                return None
+            break
+        if idx.size - 1 < min_satellites:
+            return None
+        keep[idx[int(np.argmax(np.abs(res)))]] = False
+    else:
+        return None
+    vel = np.zeros(3)
+    drift = math.nan  # unobserved without >= 4 Dopplers
+    ridx = np.flatnonzero(keep & np.isfinite(prep.rate))
+    if ridx.size >= 4:
+        d = prep.sat_pos[ridx] - x[0:3]
+        e = d / np.linalg.norm(d, axis=1)[:, None]
+        h = np.hstack([-e, np.ones((ridx.size, 1))])
+        y = prep.rate[ridx] - np.einsum("ij,ij->i", prep.sat_vel[ridx], e) + prep.sat_drift[ridx]
+        solved = weighted_least_squares(h, y, np.ones(ridx.size))
+        if solved is not None:
+            vel, drift = solved[0][0:3], float(solved[0][3])
+    return x[0:3].copy(), float(x[3]), vel, drift
+
+
+def _full_state(x4: np.ndarray) -> np.ndarray:
+    """The (1, 8) navigation state of ``[x, y, z, c dt]`` (zero velocity and drift)."""
+    x = np.zeros((1, STATE_DIM))
+    x[0, 0:3] = x4[0:3]
+    x[0, 6] = x4[3]
+    return x
+
+
+def fix_agrees_with_uwb(
+    recent: RecentRanges,
+    stamp_ns: int,
+    position_m: np.ndarray,
+    position_std_m: float,
+    lever_m: np.ndarray,
+    gate_nis: float,
+    params: FusionParams,
+) -> bool:
+    """Consistency of a GNSS snapshot fix with the recent UWB ranges (ECEF anchors only).
+
+    Every range of the last ``uwb_init_window_s`` must pass the filter's chi-square gate with
+    the variance ``position_std_m^2 + uwb_range_std_m^2`` (the fix's 1-sigma projected on the
+    line of sight plus the range noise). A jammed epoch whose outliers the snapshot could not
+    exclude (few satellites) is refused instead of replacing a state the UWB still supports.
+    """
+    if not params.use_uwb or math.isinf(gate_nis):
+        return True
+    win = params.uwb_init_window_s * NS_PER_S
+    var = position_std_m**2 + params.uwb_range_std_m**2
+    for t, anchor, rng, frame in recent.values():
+        if frame != FRAME_EARTH or abs(stamp_ns - t) > win:
+            continue
+        res = rng - float(np.linalg.norm(position_m + lever_m - anchor))
+        if res * res > gate_nis * var:
+            return False
+    return True
+
+
+def initial_drift(clock_drift_mps: float, drift_memory_mps: float | None, params: FusionParams) -> tuple[float, float]:
+    """(drift m/s, 1-sigma m/s) for a (re)initialisation: the given value, else the drift of
+    the previous state, else zero with the wide unobserved-drift sigma."""
+    if math.isfinite(clock_drift_mps):
+        return float(clock_drift_mps), params.init_clock_drift_std_mps
+    if drift_memory_mps is not None:
+        return drift_memory_mps, params.init_clock_drift_std_mps
+    return 0.0, params.init_clock_drift_unobserved_std_mps
+
+
+def uwb_init_ready(recent: RecentRanges, stamp_ns: int, frame: str, waiting_since_ns: int, window_s: float) -> bool:
+    """Whether multilateration may be tried now. Three anchors leave two mirror solutions (across
+    the anchors' plane) with zero residual, so with fewer than four anchors in the window the
+    filter waits until ranges have been collected for a whole ``window_s`` (every anchor of a
+    >= 1 Hz set has then reported) before accepting a three-anchor solution."""
+    win = window_s * NS_PER_S
+    n_recent = sum(1 for (t, _, _, f) in recent.values() if f == frame and stamp_ns - t <= win)
+    return not (n_recent < 4 and stamp_ns - waiting_since_ns < win)
+
+
+def multilaterate(
+    recent: RecentRanges,
+    stamp_ns: int,
+    frame: str,
+    window_s: float,
+    lever_m: np.ndarray,
+    guess: np.ndarray | None = None,
+) -> np.ndarray | None:
+    """Gauss-Newton multilateration from the latest range of each anchor within the window.
+
+    Starts from ``guess`` (e.g. the diverged estimate, which keeps the solution on the right
+    side of a flat anchor cluster). Without a guess it is multi-start: the anchors' centroid
+    and the centroid moved by the mean range along +-x and +-y of the frame (the tag is usually
+    around the anchors, not at their centroid), keeping the solution with the smallest
+    residual. A single start from the centroid converged to a local minimum 12 m from the tag
+    on the Hanyang NLOS case (the first second of the run then dominated its RMS error).
+
+    Returns:
+        The tag position minus the lever arm, m, (3,), or None (fewer than three anchors, or an
+        RMS residual above 1 m).
+
+    Notes:
+        Cao et al., eq. 7 (UWB range) solved for the position alone.
+    """
+    win = window_s * NS_PER_S
+    ranged = [(a, r) for (t, a, r, f) in recent.values() if f == frame and stamp_ns - t <= win]
+    if len(ranged) < 3:
+        return None
+    anchors = np.array([a for a, _ in ranged])
+    ranges = np.array([r for _, r in ranged])
+    if guess is not None:
+        starts = [np.asarray(guess, float).copy()]
+    else:
+        c = anchors.mean(axis=0)
+        rm = float(np.mean(ranges))
+        starts = [c + np.array([0.1, 0.1, 0.0])] + [
+            c + rm * np.array(u) for u in ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0))
+        ]
+    best: tuple[float, np.ndarray] | None = None
+    for x0 in starts:
+        x = _gauss_newton_multilateration(x0, anchors, ranges, lever_m)
+        if x is None:
+            continue
+        res = ranges - np.linalg.norm(x + lever_m - anchors, axis=1)
+        rms = float(np.sqrt(np.mean(res**2)))
+        if math.isfinite(rms) and (best is None or rms < best[0] - 1e-9):
+            best = (rms, x)
+    if best is None or best[0] > 1.0:
+        return None
+    return best[1]
+
+
+def _gauss_newton_multilateration(
+    x0: np.ndarray, anchors: np.ndarray, ranges: np.ndarray, lever_m: np.ndarray
+) -> np.ndarray | None:
+    """Gauss-Newton on the ranges from ``x0`` (m, (3,)); None if it meets an anchor or NaN."""
+    x = x0.copy()
+    for _ in range(20):
+        d = x + lever_m - anchors
+        r = np.linalg.norm(d, axis=1)
+        if np.any(r < 1e-9):
+            return None
+        h = d / r[:, None]
+        dx, *_ = np.linalg.lstsq(h, ranges - r, rcond=None)
+        x = x + dx
+        if np.linalg.norm(dx) < 1e-6:
+            break
+    return x if np.isfinite(x).all() else None
