@@ -227,7 +227,7 @@ def test_phases_join_on_one_grid_with_a_continuous_receiver_clock():
     jam = [m for _, t, m in items if t == '/truth/jammer_state']
     assert [(m.type, m.jammer_to_signal_db) for m in jam[::2]] == [(0, pytest.approx(math.nan, nan_ok=True)),
                                                                    (2, -10.0)]
-    rx = np.array(gnss_uwb.DEFAULTS['receiver_ecef_m'])
+    rx = np.array(gnss_uwb.GnssUwbSection().receiver_ecef_m)
     state = np.concatenate([rx, np.zeros(5)])[None, :]
     clock = []
     for e in gnss:

@@ -42,8 +42,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from rfi_experiments.bag_io import BagError, BagReader, message_class
+from rfi_experiments.cli import error_reporter
 
-EXIT_USAGE = 2
+fail = error_reporter('play')
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -122,11 +123,6 @@ def due_offset_s(offset_s: float, rate: float, warmup_s: float = 0.0, warmup_rat
     the first ``warmup_s`` of bag time at ``warmup_rate``, the rest at ``rate``."""
     slow = min(offset_s, warmup_s)
     return slow / warmup_rate + (offset_s - slow) / rate
-
-
-def fail(message: str) -> int:
-    print(f'play: error: {message}', file=sys.stderr)
-    return EXIT_USAGE
 
 
 def parse_expectations(items: Sequence[str], topics: Sequence[str]) -> dict[str, int] | None:

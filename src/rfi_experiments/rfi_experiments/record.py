@@ -26,9 +26,9 @@ from pathlib import Path
 from typing import Any
 
 from rfi_experiments.bag_io import BagError, BagWriter, message_class
+from rfi_experiments.cli import EXIT_FAILED, error_reporter
 
-EXIT_USAGE = 2
-EXIT_FAILED = 1
+fail = error_reporter('record')
 
 RELIABILITY_CHOICES = ('auto', 'reliable', 'best_effort')
 
@@ -53,11 +53,6 @@ def build_parser() -> argparse.ArgumentParser:
                         help='stop after this many seconds (default: no limit)')
     parser.add_argument('--overwrite', action='store_true', help='replace an existing bag')
     return parser
-
-
-def fail(message: str, code: int = EXIT_USAGE) -> int:
-    print(f'record: error: {message}', file=sys.stderr)
-    return code
 
 
 def offered_reliability(publishers: Sequence[Any]) -> tuple[str, str]:

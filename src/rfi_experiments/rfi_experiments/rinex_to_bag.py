@@ -39,10 +39,11 @@ from gnss_common.measurements import SKIP_REASONS, EpochBuildResult, GnssEpochBu
 from gnss_common.observations import GnssEpoch
 from gnss_common.rinex import RinexFormatError, read_rinex_nav, read_rinex_obs
 from rfi_experiments.bag_io import BagError, BagWriter
+from rfi_experiments.cli import error_reporter
 from uwb_gnss_fusion.conversions import epoch_to_msg, point_to_msg
 
 PROG = "rinex_to_bag"
-EXIT_ERROR = 2
+_fail = error_reporter(PROG)
 MEASUREMENTS_TOPIC = "/gnss/measurements"
 TRUTH_TOPIC = "/truth/position"
 EARTH_FRAME_ID = "earth"
@@ -189,11 +190,6 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--elevation-mask-deg", type=float, default=0.0, metavar="X",
                         help="drop satellites below X degrees of elevation (default 0: below the horizon)")
     return parser
-
-
-def _fail(message: str) -> int:
-    print(f"{PROG}: error: {' '.join(str(message).split())}", file=sys.stderr)
-    return EXIT_ERROR
 
 
 def main(argv: Sequence[str] | None = None) -> int:

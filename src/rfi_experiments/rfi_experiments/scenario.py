@@ -45,7 +45,6 @@ from __future__ import annotations
 
 import heapq
 import importlib
-import math
 import os
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -53,10 +52,7 @@ from pathlib import Path
 from typing import Any
 
 from rfi_experiments.bag_io import BagWriter
-
-
-class ScenarioError(Exception):
-    """A scenario file is missing or invalid; the message says which key and why."""
+from rfi_experiments.schema import JAMMING_TYPES, ScenarioError, number, parse_phases
 
 
 @dataclass(frozen=True)
@@ -71,10 +67,6 @@ class Scenario:
     source: Path | None = None
     start: tuple[int, float] | None = None  # (GPS week, time of week s) of the top-level ``start``
     jamming: tuple[Mapping[str, Any], ...] | None = None  # the top-level phases, validated
-
-
-JAMMING_TYPES = ('none', 'cw', 'chirp', 'wideband')
-"""Phase types of the top-level jamming schedule (those of streams/if_snapshots.py)."""
 
 
 Builder = Callable[[Scenario, Mapping[str, Any], int], Iterator[tuple[int, str, Any]]]
@@ -137,14 +129,6 @@ def scenario_path(name_or_path: str) -> Path:
     raise ScenarioError(f'no scenario file {name_or_path!r} (shipped scenarios: {known})')
 
 
-def _finite(value: Any, where: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        hint = ' (YAML reads 1.0e12 as a string: write the exponent sign, 1.0e+12)' \
-            if isinstance(value, str) and 'e' in value.lower() else ''
-        raise ScenarioError(f'{where} must be a finite number, got {value!r}{hint}')
-    return float(value)
-
-
 def parse_start(value: Any, where: str = 'start') -> tuple[int, float]:
     """Validate ``start: {gps_week, tow_s}``; return (week, time of week s).
 
@@ -157,7 +141,7 @@ def parse_start(value: Any, where: str = 'start') -> tuple[int, float]:
     week = value['gps_week']
     if isinstance(week, bool) or not isinstance(week, int) or not 0 <= week <= 10_000:
         raise ScenarioError(f'{where}.gps_week must be an integer in [0, 10000], got {week!r}')
-    tow_s = _finite(value['tow_s'], f'{where}.tow_s')
+    tow_s = number(value['tow_s'], f'{where}.tow_s')
     if not 0.0 <= tow_s < 604800.0:
         raise ScenarioError(f'{where}.tow_s must be in [0, 604800) s, got {tow_s}')
     return week, tow_s
@@ -169,37 +153,7 @@ def parse_jamming(value: Any, duration_s: float, where: str = 'jamming') -> tupl
     Raises:
         ScenarioError: the message names the phase and the key.
     """
-    from rfi_experiments.streams.if_snapshots import PHASE_KEYS
-
-    if not isinstance(value, (list, tuple)) or not value:
-        raise ScenarioError(f'{where} must be a non-empty list of phases {{start_s, end_s, type, jsr_db, ...}}')
-    phases: list[dict[str, Any]] = []
-    for i, p in enumerate(value):
-        at = f'{where}[{i}]'
-        if not isinstance(p, Mapping):
-            raise ScenarioError(f'{at} must be a mapping, got {p!r}')
-        kind = p.get('type')
-        if kind not in JAMMING_TYPES:
-            raise ScenarioError(f'{at}.type must be one of {", ".join(JAMMING_TYPES)}, got {kind!r}')
-        allowed = {'start_s', 'end_s', 'type'} | set(PHASE_KEYS[kind]) | ({'jsr_db'} if kind != 'none' else set())
-        unknown = set(p) - allowed
-        if unknown:
-            raise ScenarioError(f'{at}: unknown key(s) {", ".join(sorted(map(str, unknown)))} for type {kind} '
-                                f'(known: {", ".join(sorted(allowed))})')
-        for key in ('start_s', 'end_s') + (('jsr_db',) if kind != 'none' else ()):
-            if key not in p:
-                raise ScenarioError(f'{at}.{key} is required')
-        for key in set(p) - {'type'}:
-            _finite(p[key], f'{at}.{key}')
-        start_s, end_s = float(p['start_s']), float(p['end_s'])
-        if not 0.0 <= start_s < end_s <= duration_s:
-            raise ScenarioError(f'{at}: need 0 <= start_s < end_s <= duration_s ({duration_s}), got {start_s}, '
-                                f'{end_s}')
-        if phases and start_s < phases[-1]['end_s']:
-            raise ScenarioError(f'{at}: phases must be sorted and not overlap (starts at {start_s} s, the previous '
-                                f'one ends at {phases[-1]["end_s"]} s)')
-        phases.append(dict(p))
-    return tuple(phases)
+    return tuple(dict(p.given) for p in parse_phases(value, duration_s, where, non_empty=True))
 
 
 def _jsr_schedule(jamming: Sequence[Mapping[str, Any]], duration_s: float) -> list[dict[str, Any]]:
@@ -222,7 +176,7 @@ def _onset_s(jamming: Sequence[Mapping[str, Any]] | None, value: Any, stream: st
     where = f'{stream}.onset_phase'
     if not isinstance(value, Mapping) or set(value) != {'type', 'jsr_db'} or value['type'] not in JAMMING_TYPES[1:]:
         raise ScenarioError(f'{where} must be a mapping {{type: cw|chirp|wideband, jsr_db: J/S dB}}, got {value!r}')
-    jsr_db = _finite(value['jsr_db'], f'{where}.jsr_db')
+    jsr_db = number(value['jsr_db'], f'{where}.jsr_db')
     if jamming is None:
         raise ScenarioError(f'{where} needs the top-level jamming schedule (or give onset_s)')
     for p in jamming:

@@ -16,9 +16,10 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from rfi_experiments.bag_io import BagError
+from rfi_experiments.cli import error_reporter
 from rfi_experiments.scenario import ScenarioError, load_scenario, scenario_path, write_scenario_bag
 
-EXIT_USAGE = 2
+fail = error_reporter('simulate')
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -40,8 +41,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         counts = write_scenario_bag(scenario, Path(args.out), overwrite=args.overwrite,
                                     progress=not args.no_progress)
     except (ScenarioError, BagError) as err:
-        print(f'simulate: error: {err}', file=sys.stderr)
-        return EXIT_USAGE
+        return fail(err)
     width = max((len(t) for t in counts), default=5)
     for topic, n in sorted(counts.items()):
         print(f'{topic:<{width}}  {n:>8}')

@@ -71,10 +71,11 @@ import numpy as np
 
 from gnss_common.observations import UwbRangeMeasurement
 from rfi_experiments.bag_io import BagError, BagWriter
+from rfi_experiments.cli import error_reporter
 from uwb_gnss_fusion.conversions import point_to_msg, uwb_to_msg
 
 PROG = "uwb_dataset_to_bag"
-EXIT_ERROR = 2
+_fail = error_reporter(PROG)
 MAP_FRAME_ID = "map"
 UWB_TOPIC = "/uwb/ranges"
 TRUTH_TOPIC = "/truth/position"
@@ -503,11 +504,6 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--range-std-m", type=float, default=math.nan, metavar="S",
                         help="1-sigma written into every range, m (default: NaN, the filter decides)")
     return parser
-
-
-def _fail(message: str) -> int:
-    print(f"{PROG}: error: {' '.join(str(message).split())}", file=sys.stderr)
-    return EXIT_ERROR
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -10,7 +10,7 @@ import pytest
 
 from rfi_experiments.bag_io import BagReader
 from rfi_experiments.play import due_offset_s, window_ns, window_s
-from rfi_experiments.run import _segment, reliable_input_arguments, ros_arguments
+from rfi_experiments.processes import _segment, reliable_input_arguments, ros_arguments
 
 BAG = Path(__file__).resolve().parents[3] / 'bags' / 'default'
 INPUTS = ['/gnss/correlators', '/gnss/measurements', '/rfi/if_samples', '/uwb/ranges']

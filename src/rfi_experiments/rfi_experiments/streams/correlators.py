@@ -49,14 +49,14 @@ at T = 1 ms is about 0.8 GB; split long 1 kHz runs).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator, Mapping
 from typing import Any
 
 from gnss_common.clock_model import PRESETS, ClockHCoefficients
 from gnss_common.constants import GPS_NAV_BIT_RATE_HZ
 from gnss_common.gps_time import gps_to_stamp_ns
-from rfi_experiments.scenario import Scenario, ScenarioError
+from rfi_experiments.scenario import Scenario
+from rfi_experiments.schema import ScenarioError, integer, number
 from rfi_sim.correlators import CorrelatorScenario, simulate_correlators
 
 CORRELATORS_TOPIC = '/gnss/correlators'
@@ -91,17 +91,11 @@ _CLOCK_KEYS = ('h0', 'h_minus2', 'h_minus1', 'h1', 'h2')
 
 
 def _number(section: Mapping[str, Any], key: str) -> float:
-    value = section[key]
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ScenarioError(f'correlators.{key} must be a finite number, got {value!r}')
-    return float(value)
+    return number(section[key], f'correlators.{key}')
 
 
 def _integer(section: Mapping[str, Any], key: str, low: int, high: int) -> int:
-    value = section[key]
-    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
-        raise ScenarioError(f'correlators.{key} must be an integer in [{low}, {high}], got {value!r}')
-    return value
+    return integer(section[key], f'correlators.{key}', low, high)
 
 
 def _clock(value: Any) -> ClockHCoefficients:

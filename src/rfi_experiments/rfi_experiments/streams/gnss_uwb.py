@@ -74,6 +74,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -81,7 +82,17 @@ import numpy as np
 
 from gnss_common.constants import SPEED_OF_LIGHT_MPS
 from gnss_common.gps_time import gps_to_stamp_ns
-from rfi_experiments.scenario import Scenario, ScenarioError, data_path
+from rfi_experiments.scenario import Scenario, data_path
+from rfi_experiments.schema import (
+    JsrPhases,
+    ScenarioError,
+    anchors,
+    boolean,
+    integer,
+    jsr_phases,
+    number,
+    optional_std,
+)
 from rfi_sim.gnss_uwb import (
     ARL1_ECEF_M,
     PAPER_ANCHOR_RANGES_M,
@@ -103,31 +114,81 @@ NAV_FILE_NAME = 'arlm2000.15n'
 
 _DEFAULT_SIM = GnssUwbScenario()
 
-DEFAULTS: dict[str, Any] = {
-    'start_gps_week': _DEFAULT_SIM.start_week,
-    'start_gps_tow_s': _DEFAULT_SIM.start_tow_s,
-    'receiver_ecef_m': list(ARL1_ECEF_M),
-    'gnss_rate_hz': _DEFAULT_SIM.gnss_rate_hz,
-    'uwb_rate_hz': _DEFAULT_SIM.uwb_rate_hz,
-    'anchors': [{'range_m': r, 'azimuth_deg': a, 'up_m': u} for r, a, u in zip(
-        PAPER_ANCHOR_RANGES_M, _DEFAULT_SIM.anchor_azimuths_deg, _DEFAULT_SIM.anchor_up_m, strict=True)],
-    'uwb_noise_std_m': _DEFAULT_SIM.uwb_noise_std_m,
-    'uwb_reported_std_m': None,
-    'elevation_mask_deg': _DEFAULT_SIM.elevation_mask_deg,
-    'cn0_zenith_dbhz': _DEFAULT_SIM.cn0_zenith_dbhz,
-    'cn0_horizon_dbhz': _DEFAULT_SIM.cn0_horizon_dbhz,
-    'correlated_error_std_m': _DEFAULT_SIM.correlated_error_std_m,
-    'correlated_error_tau_s': _DEFAULT_SIM.correlated_error_tau_s,
-    'report_sigmas': _DEFAULT_SIM.report_sigmas,
-    'ionosphere': True,
-    'nav_file': None,
-    'truth_jammer_state': True,
-    'jamming': [{'jsr_db': None}],
-}
-"""Every section key and its default (no jamming over the whole scenario)."""
+_PAPER_ANCHORS = tuple({'range_m': r, 'azimuth_deg': a, 'up_m': u} for r, a, u in zip(
+    PAPER_ANCHOR_RANGES_M, _DEFAULT_SIM.anchor_azimuths_deg, _DEFAULT_SIM.anchor_up_m, strict=True))
 
-JSR_RANGE_DB = (-60.0, 80.0)
-"""Accepted J/S of a phase, dB (beyond: certainly a typo)."""
+
+@dataclass(frozen=True)
+class GnssUwbSection:
+    """The ``gnss_uwb`` section: every key with its default (the simulator's; no jamming), validated
+    and converted on construction (module docstring for each key).
+
+    After construction ``anchors`` is ``(ranges m, azimuths deg, ups m)``, ``receiver_ecef_m`` a
+    tuple of 3 floats and ``uwb_reported_std_m`` NaN when not given; ``jamming`` and ``nav_file``
+    stay as written (they depend on the scenario: :func:`parse_section` resolves them).
+
+    Raises:
+        ScenarioError: wrong type or non-physical value (the message names the key).
+    """
+
+    start_gps_week: int = _DEFAULT_SIM.start_week
+    start_gps_tow_s: float = _DEFAULT_SIM.start_tow_s
+    receiver_ecef_m: Any = ARL1_ECEF_M
+    gnss_rate_hz: float = _DEFAULT_SIM.gnss_rate_hz
+    uwb_rate_hz: float = _DEFAULT_SIM.uwb_rate_hz
+    anchors: Any = _PAPER_ANCHORS
+    uwb_noise_std_m: float = _DEFAULT_SIM.uwb_noise_std_m
+    uwb_reported_std_m: float | None = None
+    elevation_mask_deg: float = _DEFAULT_SIM.elevation_mask_deg
+    cn0_zenith_dbhz: float = _DEFAULT_SIM.cn0_zenith_dbhz
+    cn0_horizon_dbhz: float = _DEFAULT_SIM.cn0_horizon_dbhz
+    correlated_error_std_m: float = _DEFAULT_SIM.correlated_error_std_m
+    correlated_error_tau_s: float = _DEFAULT_SIM.correlated_error_tau_s
+    report_sigmas: bool = _DEFAULT_SIM.report_sigmas
+    ionosphere: bool = True
+    nav_file: str | None = None
+    truth_jammer_state: bool = True
+    jamming: Any = ({'jsr_db': None},)
+
+    def __post_init__(self) -> None:
+        def put(key: str, value: Any) -> None:
+            object.__setattr__(self, key, value)
+
+        put('start_gps_week', integer(self.start_gps_week, 'gnss_uwb.start_gps_week', 0, 10_000))
+        put('start_gps_tow_s', number(self.start_gps_tow_s, 'gnss_uwb.start_gps_tow_s', 0.0, 604800.0))
+        rx = self.receiver_ecef_m
+        if not isinstance(rx, (list, tuple)) or len(rx) != 3:
+            raise ScenarioError(f'gnss_uwb.receiver_ecef_m must be a list of 3 numbers, m, got {rx!r}')
+        rx = tuple(number(v, 'gnss_uwb.receiver_ecef_m', -1e7, 1e7) for v in rx)
+        if not 6.0e6 < math.hypot(*rx) < 6.5e6:
+            raise ScenarioError(f'gnss_uwb.receiver_ecef_m {rx} is not near the Earth surface')
+        put('receiver_ecef_m', rx)
+        put('gnss_rate_hz', number(self.gnss_rate_hz, 'gnss_uwb.gnss_rate_hz', 0.0, 100.0, low_open=True))
+        put('uwb_rate_hz', number(self.uwb_rate_hz, 'gnss_uwb.uwb_rate_hz', 0.0, 1000.0, low_open=True))
+        put('anchors', anchors(self.anchors, 'gnss_uwb.anchors'))
+        put('uwb_noise_std_m', number(self.uwb_noise_std_m, 'gnss_uwb.uwb_noise_std_m', 0.0, 100.0))
+        put('uwb_reported_std_m', optional_std(self.uwb_reported_std_m, 'gnss_uwb.uwb_reported_std_m'))
+        put('elevation_mask_deg', number(self.elevation_mask_deg, 'gnss_uwb.elevation_mask_deg', -10.0, 60.0))
+        put('cn0_zenith_dbhz', number(self.cn0_zenith_dbhz, 'gnss_uwb.cn0_zenith_dbhz', 0.0, 70.0))
+        put('cn0_horizon_dbhz', number(self.cn0_horizon_dbhz, 'gnss_uwb.cn0_horizon_dbhz', 0.0, 70.0))
+        put('correlated_error_std_m',
+            number(self.correlated_error_std_m, 'gnss_uwb.correlated_error_std_m', 0.0, 100.0))
+        put('correlated_error_tau_s',
+            number(self.correlated_error_tau_s, 'gnss_uwb.correlated_error_tau_s', 0.0, 1e6, low_open=True))
+        for key in ('report_sigmas', 'ionosphere', 'truth_jammer_state'):
+            boolean(getattr(self, key), f'gnss_uwb.{key}')
+        if self.nav_file is not None and not isinstance(self.nav_file, str):
+            raise ScenarioError(f'gnss_uwb.nav_file must be a path or null, got {self.nav_file!r}')
+
+    @classmethod
+    def from_mapping(cls, section: Mapping[str, Any]) -> GnssUwbSection:
+        """The section as written in the scenario (unknown keys rejected), defaults for the rest."""
+        known = [f.name for f in fields(cls)]
+        unknown = set(section) - set(known)
+        if unknown:
+            raise ScenarioError(f'gnss_uwb: unknown key(s) {", ".join(sorted(map(str, unknown)))} '
+                                f'(known: {", ".join(known)})')
+        return cls(**section)
 
 
 def default_nav_path() -> Path:
@@ -139,144 +200,32 @@ def default_nav_path() -> Path:
     return data_path(NAV_FILE_NAME)
 
 
-def _number(value: Any, key: str, low: float = -math.inf, high: float = math.inf, *,
-            low_open: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ScenarioError(f'gnss_uwb.{key} must be a finite number, got {value!r}')
-    value = float(value)
-    if value < low or value > high or (low_open and value == low):
-        rng = f'{"(" if low_open else "["}{low}, {high}]'
-        raise ScenarioError(f'gnss_uwb.{key} must be in {rng}, got {value}')
-    return value
-
-
-def _integer(value: Any, key: str, low: int, high: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
-        raise ScenarioError(f'gnss_uwb.{key} must be an integer in [{low}, {high}], got {value!r}')
-    return value
-
-
-def _boolean(value: Any, key: str) -> bool:
-    if not isinstance(value, bool):
-        raise ScenarioError(f'gnss_uwb.{key} must be true or false, got {value!r}')
-    return value
-
-
-def _whole_periods(duration_s: float, rate_hz: float) -> bool:
-    n = duration_s * rate_hz
-    return abs(n - round(n)) < 1e-6 and round(n) >= 1
-
-
-def _anchors(value: Any) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
-    if not isinstance(value, (list, tuple)) or not value:
-        raise ScenarioError('gnss_uwb.anchors must be a non-empty list of {range_m, azimuth_deg, up_m}')
-    ranges, azimuths, ups = [], [], []
-    for i, a in enumerate(value):
-        if not isinstance(a, Mapping) or set(a) != {'range_m', 'azimuth_deg', 'up_m'}:
-            raise ScenarioError(f'gnss_uwb.anchors[{i}] must be a mapping with exactly range_m, azimuth_deg, '
-                                f'up_m, got {a!r}')
-        r = _number(a['range_m'], f'anchors[{i}].range_m', 0.0, 1000.0, low_open=True)
-        u = _number(a['up_m'], f'anchors[{i}].up_m', -1000.0, 1000.0)
-        if not r > abs(u):
-            raise ScenarioError(f'gnss_uwb.anchors[{i}]: range_m {r} must exceed |up_m| {abs(u)}')
-        ranges.append(r)
-        azimuths.append(_number(a['azimuth_deg'], f'anchors[{i}].azimuth_deg', -360.0, 360.0))
-        ups.append(u)
-    return tuple(ranges), tuple(azimuths), tuple(ups)
-
-
-def _phases(value: Any, duration_s: float, gnss_rate_hz: float,
-            uwb_rate_hz: float) -> list[tuple[float | None, float]]:
-    if not isinstance(value, (list, tuple)) or not value:
-        raise ScenarioError('gnss_uwb.jamming must be a non-empty list of phases {jsr_db, duration_s}')
-    phases: list[tuple[float | None, float]] = []
-    elapsed = 0.0
-    for i, ph in enumerate(value):
-        key = f'jamming[{i}]'
-        last = i == len(value) - 1
-        if not isinstance(ph, Mapping) or 'jsr_db' not in ph or not set(ph) <= {'jsr_db', 'duration_s'}:
-            raise ScenarioError(f'gnss_uwb.{key} must be a mapping with jsr_db (null: no jammer) and '
-                                f'duration_s (optional on the last phase), got {ph!r}')
-        jsr = ph['jsr_db']
-        jsr = None if jsr is None else _number(jsr, f'{key}.jsr_db', *JSR_RANGE_DB)
-        if 'duration_s' in ph:
-            dur = _number(ph['duration_s'], f'{key}.duration_s', 0.0, 1e6, low_open=True)
-        elif last:
-            dur = duration_s - elapsed
-            if dur <= 1e-9:
-                raise ScenarioError(f'gnss_uwb.{key}: the earlier phases already fill duration_s {duration_s}')
-        else:
-            raise ScenarioError(f'gnss_uwb.{key}.duration_s is required (only the last phase may omit it)')
-        if not (_whole_periods(dur, gnss_rate_hz) and _whole_periods(dur, uwb_rate_hz)):
-            raise ScenarioError(f'gnss_uwb.{key}.duration_s {dur} must be a whole number of GNSS '
-                                f'(1/{gnss_rate_hz} s) and UWB (1/{uwb_rate_hz} s) periods')
-        phases.append((jsr, dur))
-        elapsed += dur
-    if abs(elapsed - duration_s) > 1e-6:
-        raise ScenarioError(f'gnss_uwb.jamming: the phases last {elapsed} s but the scenario lasts {duration_s} s')
-    return phases
-
-
-def parse_section(scenario: Scenario, section: Mapping[str, Any]) -> tuple[dict[str, Any], list, Path]:
+def parse_section(scenario: Scenario, section: Mapping[str, Any]) -> tuple[GnssUwbSection, JsrPhases, Path]:
     """Validate the section.
 
     Returns:
-        ``(settings, phases, nav_path)``: the resolved settings (every key of :data:`DEFAULTS`,
-        validated), the phases ``[(jsr_db or None, duration_s), ...]`` and the nav file.
+        ``(settings, phases, nav_path)``: the validated settings, the phases
+        ``((jsr_db or None, duration_s), ...)`` and the nav file.
 
     Raises:
         ScenarioError: unknown key, wrong type, non-physical value (the message names the key).
     """
-    unknown = set(section) - set(DEFAULTS)
-    if unknown:
-        raise ScenarioError(f'gnss_uwb: unknown key(s) {", ".join(sorted(map(str, unknown)))} '
-                            f'(known: {", ".join(DEFAULTS)})')
-    s = {**DEFAULTS, **section}
-    out: dict[str, Any] = {}
-    out['start_gps_week'] = _integer(s['start_gps_week'], 'start_gps_week', 0, 10_000)
-    out['start_gps_tow_s'] = _number(s['start_gps_tow_s'], 'start_gps_tow_s', 0.0, 604800.0)
-    rx = s['receiver_ecef_m']
-    if not isinstance(rx, (list, tuple)) or len(rx) != 3:
-        raise ScenarioError(f'gnss_uwb.receiver_ecef_m must be a list of 3 numbers, m, got {rx!r}')
-    rx = tuple(_number(v, 'receiver_ecef_m', -1e7, 1e7) for v in rx)
-    if not 6.0e6 < math.hypot(*rx) < 6.5e6:
-        raise ScenarioError(f'gnss_uwb.receiver_ecef_m {rx} is not near the Earth surface')
-    out['receiver_ecef_m'] = rx
-    out['gnss_rate_hz'] = _number(s['gnss_rate_hz'], 'gnss_rate_hz', 0.0, 100.0, low_open=True)
-    out['uwb_rate_hz'] = _number(s['uwb_rate_hz'], 'uwb_rate_hz', 0.0, 1000.0, low_open=True)
-    out['anchors'] = _anchors(s['anchors'])
-    out['uwb_noise_std_m'] = _number(s['uwb_noise_std_m'], 'uwb_noise_std_m', 0.0, 100.0)
-    rep = s['uwb_reported_std_m']
-    if rep is None or (isinstance(rep, float) and math.isnan(rep)):
-        out['uwb_reported_std_m'] = math.nan
-    else:
-        out['uwb_reported_std_m'] = _number(rep, 'uwb_reported_std_m', 0.0, 100.0, low_open=True)
-    out['elevation_mask_deg'] = _number(s['elevation_mask_deg'], 'elevation_mask_deg', -10.0, 60.0)
-    out['cn0_zenith_dbhz'] = _number(s['cn0_zenith_dbhz'], 'cn0_zenith_dbhz', 0.0, 70.0)
-    out['cn0_horizon_dbhz'] = _number(s['cn0_horizon_dbhz'], 'cn0_horizon_dbhz', 0.0, 70.0)
-    out['correlated_error_std_m'] = _number(s['correlated_error_std_m'], 'correlated_error_std_m', 0.0, 100.0)
-    out['correlated_error_tau_s'] = _number(s['correlated_error_tau_s'], 'correlated_error_tau_s', 0.0, 1e6,
-                                            low_open=True)
-    for key in ('report_sigmas', 'ionosphere', 'truth_jammer_state'):
-        out[key] = _boolean(s[key], key)
-    if s['nav_file'] is None:
+    s = GnssUwbSection.from_mapping(section)
+    if s.nav_file is None:
         nav = default_nav_path()
     else:
-        if not isinstance(s['nav_file'], str):
-            raise ScenarioError(f'gnss_uwb.nav_file must be a path or null, got {s["nav_file"]!r}')
-        nav = Path(s['nav_file'])
+        nav = Path(s.nav_file)
         if not nav.is_absolute() and scenario.source is not None:
             nav = scenario.source.parent / nav
         if not nav.is_file():
             raise ScenarioError(f'gnss_uwb.nav_file {nav} does not exist')
-    out['nav_file'] = str(nav)
-    phases = _phases(s['jamming'], scenario.duration_s, out['gnss_rate_hz'], out['uwb_rate_hz'])
-    out['jamming'] = phases
-    end_tow = out['start_gps_tow_s'] + scenario.duration_s
+    phases = jsr_phases(s.jamming, scenario.duration_s, 'gnss_uwb.jamming',
+                        {'GNSS': s.gnss_rate_hz, 'UWB': s.uwb_rate_hz})
+    end_tow = s.start_gps_tow_s + scenario.duration_s
     if end_tow >= 604800.0:
-        raise ScenarioError(f'gnss_uwb: the scenario runs past the end of GPS week {out["start_gps_week"]} '
+        raise ScenarioError(f'gnss_uwb: the scenario runs past the end of GPS week {s.start_gps_week} '
                             f'(start_gps_tow_s + duration_s = {end_tow} s)')
-    return out, phases, nav
+    return s, phases, nav
 
 
 def _jammer_truth(stamp_ns: int, jsr_db: float | None):
@@ -313,7 +262,7 @@ def build(scenario: Scenario, section: Mapping[str, Any], seed: int) -> Iterator
         geometry = BroadcastGeometry(nav)
     except (OSError, ValueError) as err:
         raise ScenarioError(f'gnss_uwb.nav_file {nav}: cannot read ({err})') from None
-    week, tow0 = s['start_gps_week'], s['start_gps_tow_s']
+    week, tow0 = s.start_gps_week, s.start_gps_tow_s
     for t in (tow0, tow0 + scenario.duration_s):
         if geometry(week, t).prn.size < 4:
             raise ScenarioError(f'gnss_uwb: {nav.name} has fewer than 4 valid ephemerides at GPS week {week}, '
@@ -321,30 +270,30 @@ def build(scenario: Scenario, section: Mapping[str, Any], seed: int) -> Iterator
     return _generate(s, phases, geometry, seed)
 
 
-def _generate(s: dict[str, Any], phases: list, geometry: BroadcastGeometry, seed: int
+def _generate(s: GnssUwbSection, phases: JsrPhases, geometry: BroadcastGeometry, seed: int
               ) -> Iterator[tuple[int, str, Any]]:
     from uwb_gnss_fusion.conversions import epoch_to_msg, point_to_msg, uwb_to_msg
 
-    week, tow0 = s['start_gps_week'], s['start_gps_tow_s']
-    alpha = geometry.iono_alpha if s['ionosphere'] else None
-    beta = geometry.iono_beta if s['ionosphere'] else None
+    week, tow0 = s.start_gps_week, s.start_gps_tow_s
+    alpha = geometry.iono_alpha if s.ionosphere else None
+    beta = geometry.iono_beta if s.ionosphere else None
     phase_seeds = np.random.default_rng(seed).integers(0, 2**31 - 1, size=len(phases))
-    ranges, azimuths, ups = s['anchors']
+    ranges, azimuths, ups = s.anchors
     bias0_s, drift0 = _DEFAULT_SIM.clock_bias0_s, _DEFAULT_SIM.clock_drift0
-    dt_g = 1.0 / s['gnss_rate_hz']
-    n_jam = max(1, round(TRUTH_JAMMER_PERIOD_S * s['gnss_rate_hz']))
-    rx = np.asarray(s['receiver_ecef_m'], dtype=float)
+    dt_g = 1.0 / s.gnss_rate_hz
+    n_jam = max(1, round(TRUTH_JAMMER_PERIOD_S * s.gnss_rate_hz))
+    rx = np.asarray(s.receiver_ecef_m, dtype=float)
     t_start = 0.0
     for (jsr, dur), phase_seed in zip(phases, phase_seeds, strict=True):
         sim = GnssUwbScenario(
             jsr_db=jsr, duration_s=dur, seed=int(phase_seed), start_week=week, start_tow_s=tow0 + t_start,
-            receiver_ecef_m=tuple(rx), gnss_rate_hz=s['gnss_rate_hz'], uwb_rate_hz=s['uwb_rate_hz'],
+            receiver_ecef_m=tuple(rx), gnss_rate_hz=s.gnss_rate_hz, uwb_rate_hz=s.uwb_rate_hz,
             anchor_ranges_m=ranges, anchor_azimuths_deg=azimuths, anchor_up_m=ups,
-            uwb_noise_std_m=s['uwb_noise_std_m'], uwb_reported_std_m=s['uwb_reported_std_m'],
-            elevation_mask_deg=s['elevation_mask_deg'], cn0_zenith_dbhz=s['cn0_zenith_dbhz'],
-            cn0_horizon_dbhz=s['cn0_horizon_dbhz'], correlated_error_std_m=s['correlated_error_std_m'],
-            correlated_error_tau_s=s['correlated_error_tau_s'], clock_bias0_s=bias0_s, clock_drift0=drift0,
-            report_sigmas=s['report_sigmas'])
+            uwb_noise_std_m=s.uwb_noise_std_m, uwb_reported_std_m=s.uwb_reported_std_m,
+            elevation_mask_deg=s.elevation_mask_deg, cn0_zenith_dbhz=s.cn0_zenith_dbhz,
+            cn0_horizon_dbhz=s.cn0_horizon_dbhz, correlated_error_std_m=s.correlated_error_std_m,
+            correlated_error_tau_s=s.correlated_error_tau_s, clock_bias0_s=bias0_s, clock_drift0=drift0,
+            report_sigmas=s.report_sigmas)
         run = simulate(sim, geometry, alpha, beta)
         # The next phase's clock starts where this one ends (one GNSS period later).
         drift0 = float(run.truth.clock_drift_mps[-1]) / SPEED_OF_LIGHT_MPS
@@ -353,7 +302,7 @@ def _generate(s: dict[str, Any], phases: list, geometry: BroadcastGeometry, seed
         for k, epoch in enumerate(run.gnss_epochs):
             items.append((epoch.stamp_ns, 0, GNSS_TOPIC, epoch_to_msg(epoch)))
             items.append((epoch.stamp_ns, 1, TRUTH_POSITION_TOPIC, point_to_msg(epoch.stamp_ns, rx, EARTH_FRAME)))
-            if s['truth_jammer_state'] and k % n_jam == 0:
+            if s.truth_jammer_state and k % n_jam == 0:
                 items.append((epoch.stamp_ns, 2, TRUTH_JAMMER_TOPIC, _jammer_truth(epoch.stamp_ns, jsr)))
         items += [(u.stamp_ns, 3, UWB_TOPIC, uwb_to_msg(u)) for u in run.uwb_ranges]
         items.sort(key=lambda item: (item[0], item[1]))
@@ -364,5 +313,5 @@ def _generate(s: dict[str, Any], phases: list, geometry: BroadcastGeometry, seed
 
 def start_stamp_ns(section: Mapping[str, Any]) -> int:
     """Stamp of the first GNSS epoch of a section (defaults applied), ns."""
-    s = {**DEFAULTS, **section}
-    return gps_to_stamp_ns(int(s['start_gps_week']), float(s['start_gps_tow_s']))
+    s = GnssUwbSection.from_mapping(section)
+    return gps_to_stamp_ns(s.start_gps_week, s.start_gps_tow_s)

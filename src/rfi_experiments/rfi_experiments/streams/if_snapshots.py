@@ -28,15 +28,10 @@ Section keys (all optional; defaults: Kang et al.'s front end, Sec. 2.1 and 4, n
         - {start_s: 14.0, end_s: 20.0, type: chirp, jsr_db: 30.0, sweep_rate_hz_per_s: 1.0e+12}
         - {start_s: 20.0, end_s: 24.0, type: wideband, jsr_db: 30.0, bandwidth_hz: 2.0e+6}
 
-Phase keys: ``start_s``, ``end_s`` (required, 0 <= start_s < end_s <= duration_s, phases sorted and
-not overlapping; where no phase applies there is no jammer), ``type`` (none, cw, chirp, wideband),
-``jsr_db`` (J/S, dB; required except for none), and per type: cw ``frequency_hz`` (relative to
-the RF centre, default 0); chirp ``start_frequency_hz`` (default: digital 0.1832 at the paper's
-fs and IF), ``sweep_rate_hz_per_s`` (default 1e12, may be negative) and ``sweep_period_s``
-(default: the symmetric sweep about the IF, 5.10 us), sweeps starting at ``start_s``; wideband
-``center_frequency_hz`` (default 0) and ``bandwidth_hz`` (default 2 MHz). Every tone frequency
-must lie inside the sampled band. A snapshot belongs to the phase that contains its first sample;
-put phase boundaries between snapshots.
+Phase keys: those of a jamming phase (:mod:`rfi_experiments.schema`, the same as the scenario's
+top-level ``jamming``; where no phase applies there is no jammer), sweeps starting at ``start_s``.
+Every tone frequency must lie inside the sampled band. A snapshot belongs to the phase that contains
+its first sample; put phase boundaries between snapshots.
 
 Each snapshot is simulated by a fresh :class:`rfi_sim.if_signal.IfSimulator` (seeded
 from ``(seed, k)``) whose jammers and satellites are shifted to the snapshot's time: the chirp's
@@ -66,13 +61,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from gnss_common.constants import GPS_CA_CHIP_RATE_HZ, GPS_CA_CODE_LENGTH_CHIPS, GPS_L1_FREQUENCY_HZ
-from rfi_experiments.scenario import Scenario, ScenarioError
+from rfi_experiments.scenario import Scenario
+from rfi_experiments.schema import Phase, ScenarioError, number, parse_phases
 from rfi_sim.gps_ca import G2_DELAY_CHIPS
 from rfi_sim.if_signal import (
     CHIRP,
@@ -80,7 +75,6 @@ from rfi_sim.if_signal import (
     NONE,
     PAPER_IF_HZ,
     PAPER_SAMPLE_RATE_HZ,
-    PAPER_SWEEP_RATE_HZ_PER_S,
     WIDEBAND,
     ChirpJammer,
     CwJammer,
@@ -96,8 +90,6 @@ TRUTH_TOPIC = '/truth/jammer'
 
 TYPES = {'none': NONE, 'cw': CW, 'chirp': CHIRP, 'wideband': WIDEBAND}
 """Phase type name -> rfi_msgs/JammerState type code."""
-
-_CHIRP_DEFAULT = ChirpJammer()
 
 DEFAULTS: dict[str, Any] = {
     'start_stamp_ns': 1_700_000_000_000_000_000,
@@ -118,69 +110,16 @@ DEFAULTS: dict[str, Any] = {
 }
 """Every section key and its default."""
 
-PHASE_KEYS: dict[str, dict[str, float]] = {
-    'none': {},
-    'cw': {'frequency_hz': 0.0},
-    'chirp': {'start_frequency_hz': _CHIRP_DEFAULT.start_frequency_hz,
-              'sweep_rate_hz_per_s': PAPER_SWEEP_RATE_HZ_PER_S,
-              'sweep_period_s': _CHIRP_DEFAULT.sweep_period_s},
-    'wideband': {'center_frequency_hz': 0.0, 'bandwidth_hz': 2.0e6},
-}
-"""Phase type -> its optional keys and their defaults (besides start_s, end_s, type, jsr_db)."""
-
-
-@dataclass(frozen=True)
-class Phase:
-    """One validated phase of the jamming schedule (see the module docstring for the keys)."""
-
-    start_s: float
-    end_s: float
-    type: str
-    jsr_db: float
-    settings: Mapping[str, float]
-
 
 def _number(where: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        hint = ''
-        if isinstance(value, str) and 'e' in value.lower():
-            hint = ' (YAML reads 1.0e12 as a string: write the exponent sign, 1.0e+12)'
-        raise ScenarioError(f'if_snapshots.{where} must be a finite number, got {value!r}{hint}')
-    return float(value)
+    return number(value, f'if_snapshots.{where}')
 
 
 def _phases(value: Any, duration_s: float, fe: FrontEndConfig) -> tuple[Phase, ...]:
-    if not isinstance(value, (list, tuple)):
-        raise ScenarioError(f'if_snapshots.phases must be a list of phases, got {value!r}')
-    phases: list[Phase] = []
-    for i, p in enumerate(value):
-        where = f'phases[{i}]'
-        if not isinstance(p, Mapping):
-            raise ScenarioError(f'if_snapshots.{where} must be a mapping, got {p!r}')
-        kind = p.get('type')
-        if kind not in PHASE_KEYS:
-            raise ScenarioError(f'if_snapshots.{where}.type must be one of {", ".join(PHASE_KEYS)}, got {kind!r}')
-        allowed = {'start_s', 'end_s', 'type'} | set(PHASE_KEYS[kind]) | ({'jsr_db'} if kind != 'none' else set())
-        unknown = set(p) - allowed
-        if unknown:
-            raise ScenarioError(f'if_snapshots.{where}: unknown key(s) {", ".join(sorted(map(str, unknown)))} for '
-                                f'type {kind} (known: {", ".join(sorted(allowed))})')
-        for key in ('start_s', 'end_s') + (('jsr_db',) if kind != 'none' else ()):
-            if key not in p:
-                raise ScenarioError(f'if_snapshots.{where}.{key} is required')
-        start_s, end_s = _number(f'{where}.start_s', p['start_s']), _number(f'{where}.end_s', p['end_s'])
-        if not 0.0 <= start_s < end_s <= duration_s:
-            raise ScenarioError(f'if_snapshots.{where}: need 0 <= start_s < end_s <= duration_s ({duration_s}), '
-                                f'got {start_s}, {end_s}')
-        if phases and start_s < phases[-1].end_s:
-            raise ScenarioError(f'if_snapshots.{where}: phases must be sorted and not overlap '
-                                f'(starts at {start_s} s, the previous one ends at {phases[-1].end_s} s)')
-        jsr_db = _number(f'{where}.jsr_db', p['jsr_db']) if kind != 'none' else math.nan
-        settings = {k: _number(f'{where}.{k}', p.get(k, d)) for k, d in PHASE_KEYS[kind].items()}
-        phase = Phase(start_s, end_s, kind, jsr_db, settings)
-        _check_band(phase, where, fe)
-        phases.append(phase)
-    return tuple(phases)
+    phases = parse_phases(value, duration_s, 'if_snapshots.phases', non_empty=False)
+    for i, phase in enumerate(phases):
+        _check_band(phase, f'phases[{i}]', fe)
+    return phases
 
 
 def _check_band(phase: Phase, where: str, fe: FrontEndConfig) -> None:

@@ -86,7 +86,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import InitVar, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -102,7 +102,8 @@ from gnss_common.jamming_weights import (
 )
 from gnss_common.observations import GnssEpoch, SatelliteObservation, UwbRangeMeasurement
 from gnss_common.rinex import RinexFormatError
-from rfi_experiments.scenario import Scenario, ScenarioError, data_path
+from rfi_experiments.scenario import Scenario, data_path
+from rfi_experiments.schema import JsrPhases, ScenarioError, anchors, boolean, jsr_phases, number, optional_std
 from rfi_sim.gnss_uwb import PAPER_ANCHOR_RANGES_M, GnssUwbScenario, JammingEffect, anchor_positions_ecef
 
 GNSS_TOPIC = '/gnss/measurements'
@@ -118,47 +119,20 @@ OBS_FILE_NAME = 'arlm200a.15o'
 NAV_FILE_NAME = 'arlm2000.15n'
 """Default ephemeris: the matching ARL1 broadcast navigation file."""
 
-JSR_RANGE_DB = (-60.0, 80.0)
-"""Accepted J/S of a phase, dB (as gnss_uwb)."""
-
 _SIM = GnssUwbScenario()
 
-DEFAULTS: dict[str, Any] = {
-    'obs_file': None,
-    'nav_file': None,
-    'start_offset_s': 0.0,
-    'elevation_mask_deg': _SIM.elevation_mask_deg,
-    'uwb_rate_hz': _SIM.uwb_rate_hz,
-    'anchors': [{'range_m': r, 'azimuth_deg': a, 'up_m': u} for r, a, u in zip(
-        PAPER_ANCHOR_RANGES_M, _SIM.anchor_azimuths_deg, _SIM.anchor_up_m, strict=True)],
-    'uwb_noise_std_m': _SIM.uwb_noise_std_m,
-    'uwb_reported_std_m': None,
-    'cn0_zenith_dbhz': _SIM.cn0_zenith_dbhz,
-    'cn0_horizon_dbhz': _SIM.cn0_horizon_dbhz,
-    'truth_jammer_state': True,
-    'jamming': [{'jsr_db': None}],
-}
-"""Every section key and its default (the simulator's defaults; no jamming over the whole scenario)."""
+_PAPER_ANCHORS = tuple({'range_m': r, 'azimuth_deg': a, 'up_m': u} for r, a, u in zip(
+    PAPER_ANCHOR_RANGES_M, _SIM.anchor_azimuths_deg, _SIM.anchor_up_m, strict=True))
 
 
 def _error(message: str) -> ScenarioError:
     return ScenarioError(f'rinex_jammed.{message}')
 
 
-def _number(value: Any, key: str, low: float = -math.inf, high: float = math.inf, *,
-            low_open: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise _error(f'{key} must be a finite number, got {value!r}')
-    value = float(value)
-    if value < low or value > high or (low_open and value == low):
-        raise _error(f'{key} must be in {"(" if low_open else "["}{low}, {high}], got {value}')
-    return value
-
-
 def _file(value: Any, key: str, default: str, scenario: Scenario) -> Path:
     if value is None:
         return data_path(default)
-    if not isinstance(value, str):
+    if not isinstance(value, (str, Path)):
         raise _error(f'{key} must be a path or null, got {value!r}')
     path = Path(value)
     if not path.is_absolute() and scenario.source is not None:
@@ -168,102 +142,71 @@ def _file(value: Any, key: str, default: str, scenario: Scenario) -> Path:
     return path
 
 
-def _anchors(value: Any) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
-    if not isinstance(value, (list, tuple)) or not value:
-        raise _error('anchors must be a non-empty list of {range_m, azimuth_deg, up_m}')
-    ranges, azimuths, ups = [], [], []
-    for i, a in enumerate(value):
-        if not isinstance(a, Mapping) or set(a) != {'range_m', 'azimuth_deg', 'up_m'}:
-            raise _error(f'anchors[{i}] must be a mapping with exactly range_m, azimuth_deg, up_m, got {a!r}')
-        r = _number(a['range_m'], f'anchors[{i}].range_m', 0.0, 1000.0, low_open=True)
-        u = _number(a['up_m'], f'anchors[{i}].up_m', -1000.0, 1000.0)
-        if not r > abs(u):
-            raise _error(f'anchors[{i}]: range_m {r} must exceed |up_m| {abs(u)}')
-        ranges.append(r)
-        azimuths.append(_number(a['azimuth_deg'], f'anchors[{i}].azimuth_deg', -360.0, 360.0))
-        ups.append(u)
-    return tuple(ranges), tuple(azimuths), tuple(ups)
-
-
-def _phases(value: Any, duration_s: float, uwb_rate_hz: float) -> list[tuple[float | None, float]]:
-    if not isinstance(value, (list, tuple)) or not value:
-        raise _error('jamming must be a non-empty list of phases {jsr_db, duration_s}')
-    phases: list[tuple[float | None, float]] = []
-    elapsed = 0.0
-    for i, ph in enumerate(value):
-        key = f'jamming[{i}]'
-        if not isinstance(ph, Mapping) or 'jsr_db' not in ph or not set(ph) <= {'jsr_db', 'duration_s'}:
-            raise _error(f'{key} must be a mapping with jsr_db (null: no jammer) and duration_s (optional on '
-                         f'the last phase), got {ph!r}')
-        jsr = None if ph['jsr_db'] is None else _number(ph['jsr_db'], f'{key}.jsr_db', *JSR_RANGE_DB)
-        if 'duration_s' in ph:
-            dur = _number(ph['duration_s'], f'{key}.duration_s', 0.0, 1e6, low_open=True)
-        elif i == len(value) - 1:
-            dur = duration_s - elapsed
-            if dur <= 1e-9:
-                raise _error(f'{key}: the earlier phases already fill duration_s {duration_s}')
-        else:
-            raise _error(f'{key}.duration_s is required (only the last phase may omit it)')
-        n = dur * uwb_rate_hz
-        if abs(n - round(n)) > 1e-6 or round(n) < 1:
-            raise _error(f'{key}.duration_s {dur} must be a whole number of UWB periods (1/{uwb_rate_hz} s)')
-        phases.append((jsr, dur))
-        elapsed += dur
-    if abs(elapsed - duration_s) > 1e-6:
-        raise _error(f'jamming: the phases last {elapsed} s but the scenario lasts {duration_s} s')
-    return phases
-
-
 @dataclass(frozen=True)
 class Section:
-    """The validated section (see the module docstring for each key)."""
+    """The ``rinex_jammed`` section: every key with its default (the simulator's; no jamming over the
+    whole scenario), validated and converted on construction (module docstring for each key).
 
-    obs_file: Path
-    nav_file: Path
-    start_offset_s: float
-    elevation_mask_deg: float
-    uwb_rate_hz: float
-    anchors: tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]
-    uwb_noise_std_m: float
-    uwb_reported_std_m: float
-    cn0_zenith_dbhz: float
-    cn0_horizon_dbhz: float
-    truth_jammer_state: bool
-    phases: tuple[tuple[float | None, float], ...]
+    After construction ``anchors`` is ``(ranges m, azimuths deg, ups m)`` and ``uwb_reported_std_m``
+    NaN when not given. Given the ``scenario`` (as :func:`parse_section` does), ``obs_file`` and
+    ``nav_file`` are resolved to existing paths and ``jamming`` becomes the phases
+    ``((jsr_db or None, duration_s), ...)`` covering the scenario.
+
+    Raises:
+        ScenarioError: wrong type or non-physical value (the message names the key).
+    """
+
+    obs_file: Any = None
+    nav_file: Any = None
+    start_offset_s: float = 0.0
+    elevation_mask_deg: float = _SIM.elevation_mask_deg
+    uwb_rate_hz: float = _SIM.uwb_rate_hz
+    anchors: Any = _PAPER_ANCHORS
+    uwb_noise_std_m: float = _SIM.uwb_noise_std_m
+    uwb_reported_std_m: float | None = None
+    cn0_zenith_dbhz: float = _SIM.cn0_zenith_dbhz
+    cn0_horizon_dbhz: float = _SIM.cn0_horizon_dbhz
+    truth_jammer_state: bool = True
+    jamming: Any = ({'jsr_db': None},)
+    scenario: InitVar[Scenario | None] = None
+
+    def __post_init__(self, scenario: Scenario | None) -> None:
+        def put(key: str, value: Any) -> None:
+            object.__setattr__(self, key, value)
+
+        put('uwb_reported_std_m', optional_std(self.uwb_reported_std_m, 'rinex_jammed.uwb_reported_std_m'))
+        boolean(self.truth_jammer_state, 'rinex_jammed.truth_jammer_state')
+        put('uwb_rate_hz', number(self.uwb_rate_hz, 'rinex_jammed.uwb_rate_hz', 0.0, 1000.0, low_open=True))
+        if scenario is not None:
+            put('obs_file', _file(self.obs_file, 'obs_file', OBS_FILE_NAME, scenario))
+            put('nav_file', _file(self.nav_file, 'nav_file', NAV_FILE_NAME, scenario))
+        put('start_offset_s', number(self.start_offset_s, 'rinex_jammed.start_offset_s', 0.0, 1e7))
+        put('elevation_mask_deg', number(self.elevation_mask_deg, 'rinex_jammed.elevation_mask_deg', -10.0, 60.0))
+        put('anchors', anchors(self.anchors, 'rinex_jammed.anchors'))
+        put('uwb_noise_std_m', number(self.uwb_noise_std_m, 'rinex_jammed.uwb_noise_std_m', 0.0, 100.0))
+        put('cn0_zenith_dbhz', number(self.cn0_zenith_dbhz, 'rinex_jammed.cn0_zenith_dbhz', 0.0, 70.0))
+        put('cn0_horizon_dbhz', number(self.cn0_horizon_dbhz, 'rinex_jammed.cn0_horizon_dbhz', 0.0, 70.0))
+        if scenario is not None:
+            put('jamming', jsr_phases(self.jamming, scenario.duration_s, 'rinex_jammed.jamming',
+                                      {'UWB': self.uwb_rate_hz}))
+
+    @property
+    def phases(self) -> JsrPhases:
+        """The validated J/S schedule (after :func:`parse_section`)."""
+        return self.jamming
 
 
 def parse_section(scenario: Scenario, section: Mapping[str, Any]) -> Section:
-    """Validate the section (defaults applied).
+    """Validate the section (defaults applied, files resolved against the scenario).
 
     Raises:
         ScenarioError: unknown key, wrong type, non-physical value (the message names the key).
     """
-    unknown = set(section) - set(DEFAULTS)
+    known = [f.name for f in fields(Section)]
+    unknown = set(section) - set(known)
     if unknown:
-        raise _error(f'unknown key(s) {", ".join(sorted(map(str, unknown)))} (known: {", ".join(DEFAULTS)})')
-    s = {**DEFAULTS, **section}
-    rep = s['uwb_reported_std_m']
-    if rep is None or (isinstance(rep, float) and math.isnan(rep)):
-        reported = math.nan
-    else:
-        reported = _number(rep, 'uwb_reported_std_m', 0.0, 100.0, low_open=True)
-    if not isinstance(s['truth_jammer_state'], bool):
-        raise _error(f'truth_jammer_state must be true or false, got {s["truth_jammer_state"]!r}')
-    uwb_rate = _number(s['uwb_rate_hz'], 'uwb_rate_hz', 0.0, 1000.0, low_open=True)
-    return Section(
-        obs_file=_file(s['obs_file'], 'obs_file', OBS_FILE_NAME, scenario),
-        nav_file=_file(s['nav_file'], 'nav_file', NAV_FILE_NAME, scenario),
-        start_offset_s=_number(s['start_offset_s'], 'start_offset_s', 0.0, 1e7),
-        elevation_mask_deg=_number(s['elevation_mask_deg'], 'elevation_mask_deg', -10.0, 60.0),
-        uwb_rate_hz=uwb_rate,
-        anchors=_anchors(s['anchors']),
-        uwb_noise_std_m=_number(s['uwb_noise_std_m'], 'uwb_noise_std_m', 0.0, 100.0),
-        uwb_reported_std_m=reported,
-        cn0_zenith_dbhz=_number(s['cn0_zenith_dbhz'], 'cn0_zenith_dbhz', 0.0, 70.0),
-        cn0_horizon_dbhz=_number(s['cn0_horizon_dbhz'], 'cn0_horizon_dbhz', 0.0, 70.0),
-        truth_jammer_state=s['truth_jammer_state'],
-        phases=tuple(_phases(s['jamming'], scenario.duration_s, uwb_rate)),
-    )
+        raise _error(f'unknown key(s) {", ".join(sorted(map(str, unknown)))} (known: {", ".join(known)})')
+    return Section(**section, scenario=scenario)
 
 
 def burst_rate_per_s(jamming: JammingEffect, jsr_db: float | None) -> float:

@@ -1,0 +1,439 @@
+"""The ``processes`` transport of ``run``: the three node executables as separate processes fed by ``play``.
+
+The nodes are resolved through the ament index as ``ros2 run`` does (:func:`executable_path`), given
+``--ros-args --params-file`` for the parameters files, each input subscription made reliable with
+``qos_overrides.<topic>.subscription.reliability`` (:func:`reliable_input_arguments`), then the
+caller's ``--ros-args`` (:func:`ros_arguments`). ``play`` feeds them the bag once each input topic
+has its subscriber (after a slow warm-up, see :func:`run_processes`), and this process records their
+outputs (reliable, keep-all subscriptions) until every node has answered its last input; then the
+nodes are stopped with SIGINT (killed if they do not exit), also on Ctrl-C, SIGTERM or an error
+(:class:`ChildProcesses`), and what they publish while stopping is still recorded.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import signal
+import subprocess
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TextIO
+
+from rfi_experiments.bag_io import BagReader
+from rfi_experiments.play import window_ns, window_s
+
+PROCESSES_DEFAULT_RATE = 1.0
+"""Default pace of ``--transport processes``, x real time. Measured on the whole of bags/default
+(2 shared cores, two runs each): at 1x every output equals the direct transport's, field for
+field; at 3x (2.3-2.6x real time end to end) one or two of 11694 /fusion/status messages carried a
+cumulative rejection count one lower (a jammer state that the fusion rejects on arrival came after
+them), all else equal. Faster still, messages can reach the fusion after its 0.1 s re-ordering
+window and be rejected."""
+
+NODE_EXECUTABLES = (('rfi_monitor', 'rfi_monitor', 'rfi_monitor_node'),
+                    ('uwb_gnss_fusion', 'uwb_gnss_fusion', 'fusion_node'),
+                    ('imm_carrier', 'imm_carrier', 'imm_carrier_node'))
+"""(node name, package, executable) of the three nodes."""
+
+NODE_ENDPOINTS = {
+    'rfi_monitor': (('/rfi/if_samples',), ('/rfi/jammer_state', '/diagnostics')),
+    'uwb_gnss_fusion': (('/gnss/measurements', '/uwb/ranges', '/rfi/jammer_state'),
+                        ('/fusion/odometry', '/fusion/fix', '/fusion/status', '/diagnostics')),
+    'imm_carrier': (('/gnss/correlators',), ('/carrier/estimates', '/diagnostics')),
+}
+"""Node name -> (topics it subscribes, topics it publishes), before remapping."""
+
+OUTPUT_TYPES = {
+    '/rfi/jammer_state': 'rfi_msgs/msg/JammerState',
+    '/fusion/odometry': 'nav_msgs/msg/Odometry',
+    '/fusion/fix': 'sensor_msgs/msg/NavSatFix',
+    '/fusion/status': 'rfi_msgs/msg/FusionStatus',
+    '/carrier/estimates': 'rfi_msgs/msg/CarrierPhaseArray',
+    '/diagnostics': 'diagnostic_msgs/msg/DiagnosticArray',
+}
+"""Every topic the three nodes publish, and its type: what ``processes`` records."""
+
+ANSWERED_BY_STAMP = (('rfi_monitor', ('/rfi/if_samples',), '/rfi/jammer_state'),
+                     ('uwb_gnss_fusion', ('/gnss/measurements', '/uwb/ranges'), '/fusion/status'),
+                     ('imm_carrier', ('/gnss/correlators',), '/carrier/estimates'))
+"""(node, inputs, output): the node publishes the output with the header stamp of each input it
+processes, in stamp order, so an output stamped at its last input's stamp shows that the node is
+done. The fusion processes its last inputs (those in its re-ordering window) at the end of input:
+when none has arrived for its ``idle_flush_s`` (wall time, 1 s by default)."""
+
+DISCOVERY_SETTLE_S = 1.0
+"""Wait after this process sees every node's endpoints, and after play's publishers are matched, s:
+the other side of each match (the subscriber's) completes a little later, and until then the
+middleware delivers the first messages only by retransmission, up to seconds late."""
+
+RELIABLE_INPUTS = 'reliable'
+"""What ``processes`` sets each node's input subscriptions to (``qos_overrides.<topic>.subscription.
+reliability``): the nodes' inputs are best effort by default (sensor drivers), which would let a
+replay lose messages silently; reliable, every message of play reaches the node or play waits."""
+
+SYNCED = (('rfi_monitor', '/rfi/if_samples', '/rfi/jammer_state'),)
+"""(node, input, output) that ``play`` paces on (``--sync``): after each IF block it waits for the
+monitor's jammer state, so the fusion gets it before the GNSS and UWB messages that follow the
+block in the bag, as in a replay in one process, however long the monitor takes for a block."""
+
+class RunError(RuntimeError):
+    """A replay could not be completed; the message says what is missing and where to look."""
+
+
+def ros_arguments(argv: Sequence[str]) -> list[str]:
+    """The ``--ros-args ... [--]`` parts of ``argv`` (remaps, parameters), to pass on to other processes."""
+    out: list[str] = []
+    inside = False
+    for arg in argv:
+        if arg == '--ros-args':
+            inside = True
+            out.append(arg)
+        elif inside and arg == '--':
+            inside = False
+            out.append(arg)
+        elif inside:
+            out.append(arg)
+    return out
+
+
+def reliable_input_arguments(topics: Sequence[str], resolve: Any = None) -> list[str]:
+    """``-p qos_overrides.<topic>.subscription.reliability:=reliable`` for each input topic of a node
+    (and for its remapped name, which is what the node's override is declared under, when ``resolve``
+    maps it elsewhere): see :data:`RELIABLE_INPUTS`."""
+    names: list[str] = []
+    for topic in topics:
+        for name in (topic, resolve(topic) if resolve is not None else topic):
+            if name not in names:
+                names.append(name)
+    out: list[str] = []
+    for name in names:
+        out += ['-p', f'qos_overrides.{name}.subscription.reliability:={RELIABLE_INPUTS}']
+    return out
+
+
+def executable_path(package: str, name: str) -> str:
+    """Where ``ros2 run package name`` looks: ``<prefix of package>/lib/<package>/<name>`` (as tools/ros2_run).
+
+    Raises:
+        RunError: the package is not in the ament index or has no such executable.
+    """
+    from ament_index_python.packages import PackageNotFoundError, get_package_prefix
+
+    try:
+        prefix = get_package_prefix(package)
+    except PackageNotFoundError:
+        raise RunError(f'package {package!r} not found (is install/setup.bash sourced?)') from None
+    path = os.path.join(prefix, 'lib', package, name)
+    if not os.access(path, os.X_OK):
+        raise RunError(f'no executable {name!r} in package {package!r} ({path})')
+    return path
+
+
+class ChildProcesses:
+    """The processes a ``processes`` run starts: each in its own session (a Ctrl-C reaches only this
+    process, which then stops them in order), its output in ``log_dir/<name>.log``."""
+
+    def __init__(self, log_dir: Path) -> None:
+        self.log_dir = log_dir
+        self.procs: dict[str, subprocess.Popen] = {}
+        self._logs: dict[str, TextIO] = {}
+
+    def start(self, name: str, command: list[str], *, stderr_to_terminal: bool = False) -> subprocess.Popen:
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        log = open(self.log_dir / f'{name}.log', 'w')  # noqa: SIM115 (closed in stop())
+        self._logs[name] = log
+        log.write('$ ' + ' '.join(command) + '\n')
+        log.flush()
+        proc = subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=log,
+                                stderr=None if stderr_to_terminal else subprocess.STDOUT, start_new_session=True)
+        self.procs[name] = proc
+        return proc
+
+    def log_tail(self, name: str, lines: int = 8) -> str:
+        try:
+            text = (self.log_dir / f'{name}.log').read_text(errors='replace').splitlines()
+        except OSError:
+            return ''
+        return '\n'.join('    ' + line for line in text[-lines:])
+
+    def check_alive(self, names: Sequence[str]) -> None:
+        """Raise RunError if one of ``names`` has exited (with the end of its log)."""
+        for name in names:
+            code = self.procs[name].poll()
+            if code is not None:
+                raise RunError(f'{name} exited early with code {code}; the end of {self.log_dir / name}.log:\n'
+                               + self.log_tail(name))
+
+    def stop(self, timeout_s: float = 10.0, while_waiting: Any = None) -> dict[str, int]:
+        """SIGINT to every process still running, then SIGKILL to those not gone after ``timeout_s``;
+        return each process's exit code (negative: killed by that signal). ``while_waiting()`` is called
+        repeatedly until they have exited (e.g. to keep recording what they publish while stopping)."""
+        for proc in self.procs.values():
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+        deadline = time.monotonic() + timeout_s
+        codes: dict[str, int] = {}
+        try:
+            while while_waiting is not None and time.monotonic() < deadline and any(
+                    p.poll() is None for p in self.procs.values()):
+                while_waiting()
+            for name, proc in self.procs.items():
+                try:
+                    codes[name] = proc.wait(timeout=max(0.0, deadline - time.monotonic()))
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    codes[name] = proc.wait()
+        finally:  # also on a second Ctrl-C while waiting: no process is left behind
+            for name, proc in self.procs.items():
+                if proc.poll() is None:
+                    proc.kill()
+                    codes[name] = proc.wait()
+            for log in self._logs.values():
+                log.close()
+        return codes
+
+
+@dataclass
+class ProcessesRun:
+    """What a ``processes`` run measured besides the recorded outputs."""
+
+    exit_codes: dict[str, int]
+    completion: str
+
+
+@dataclass
+class Segment:
+    """The window of the bag that a ``processes`` run plays, and what it holds."""
+
+    start_s: float
+    duration_s: float | None  # None: to the end of the bag
+    counts: dict[str, int]
+    first_ns: int | None  # log times of its first and last input
+    last_ns: int | None
+    last_input: dict[str, int]  # node -> latest header stamp of its inputs (ANSWERED_BY_STAMP), ns
+
+
+def _segment(reader: BagReader, inputs: list[str], start_s: float, duration_s: float | None) -> Segment:
+    start_ns, stop_ns = window_ns(reader.start_ns, window_s(start_s, duration_s) or (0.0, math.inf))
+    counts = {t: 0 for t in inputs}
+    first = last = None
+    last_raw: dict[str, Any] = {}
+    stamped = {topic: node for node, topics, _ in ANSWERED_BY_STAMP for topic in topics}
+    for message in reader.messages(inputs, start_ns=start_ns, stop_ns=stop_ns):
+        counts[message.topic] += 1
+        first = message.stamp_ns if first is None else first
+        last = message.stamp_ns
+        if message.topic in stamped:
+            last_raw[message.topic] = message
+    last_input: dict[str, int] = {}
+    for topic, message in last_raw.items():
+        stamp = message.decode().header.stamp
+        node = stamped[topic]
+        last_input[node] = max(last_input.get(node, 0), stamp.sec * 1_000_000_000 + stamp.nanosec)
+    return Segment(start_s, duration_s, counts, first, last, last_input)
+
+
+def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[str],
+                  params: dict[str, dict[str, object]], window: tuple[float, float] | None,
+                  out: Path) -> tuple[Any, ProcessesRun]:
+    """Replay ``inputs`` of the bag through the node executables as separate processes fed by ``play``.
+
+    ``play`` plays the first ``--warmup`` seconds at ``--warmup-rate`` and the rest at ``--rate``,
+    and after each IF block waits for the monitor's jammer state (``--sync``). Without the slow
+    start, the nodes' first-call costs (numba compilation or cache loading, imports) pile up a
+    backlog at a real-time pace; the fusion node's executor then takes GNSS, UWB and jammer
+    messages out of arrival order and rejects those later than its re-ordering window. Neither
+    changes anything else: the nodes take their time from the stamps.
+
+    Returns:
+        ``(ReplayResult, ProcessesRun)``: the recorded outputs (CDR bytes, in arrival order per topic)
+        and input counts as the in-process transports give them, and the exit codes of the processes.
+
+    Raises:
+        RunError: an executable is missing, a process died, discovery or the last outputs did not
+            come within ``--timeout``, or ``play`` failed (the message names it and its log).
+    """
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    from rfi_experiments.bag_io import message_class
+    from rfi_experiments.replay import ReplayResult
+    from rfi_node_common.qos import RECORDER_QOS
+
+    rate = PROCESSES_DEFAULT_RATE if args.rate is None else args.rate
+    paths = {name: executable_path(package, exe) for name, package, exe in NODE_EXECUTABLES}
+    play = executable_path('rfi_experiments', 'play')
+    forwarded = ros_arguments(argv)
+    start_s, stop_s = window if window is not None else (0.0, math.inf)
+    with BagReader(args.bag) as reader:
+        seg = _segment(reader, inputs, start_s, None if math.isinf(stop_s) else stop_s - start_s)
+    if seg.first_ns is None or seg.last_ns is None:
+        raise RunError(f'no input message in the selected window of {args.bag}')
+
+    children = ChildProcesses(out / 'logs')
+    context = rclpy.context.Context()
+    # Ctrl-C is ours, not rclpy's: its handler would shut the context down under the executor and
+    # leave the outcome to timing (an exception from spin_once, or loops waiting for the children);
+    # ours raises KeyboardInterrupt, and the finally below stops the children in order.
+    rclpy.init(args=list(argv), context=context, signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node('rfi_run_recorder', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    recorded: dict[str, list[tuple[int, bytes]]] = {t: [] for t in OUTPUT_TYPES}
+    received: dict[str, Any] = {'n': 0, 'at': time.monotonic()}  # messages so far, time of the last
+
+    def recorder(topic: str):
+        messages = recorded[topic]
+
+        def on_message(raw: bytes) -> None:
+            received['n'] += 1
+            received['at'] = time.monotonic()
+            messages.append((received['n'], raw))
+        return on_message
+
+    previous = {sig: signal.signal(sig, _raise_interrupt) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
+    exit_codes: dict[str, int] = {}
+    try:
+        subs = {t: node.create_subscription(message_class(m), t, recorder(t), RECORDER_QOS, raw=True)
+                for t, m in OUTPUT_TYPES.items()}
+        for name, path in paths.items():
+            command = [path, '--ros-args']
+            for params_file in args.params_file:
+                command += ['--params-file', str(Path(params_file).resolve())]
+            if name == 'imm_carrier':  # run's default, unless a parameters file sets it
+                command += ['-p', f'method:={params["imm_carrier"]["method"]}']
+            command += reliable_input_arguments(NODE_ENDPOINTS[name][0], node.resolve_topic_name)
+            command += forwarded[1:] if forwarded else []  # after ours: the caller's own -p wins
+            children.start(name, command)
+        _wait_for_graph(node, executor, subs, children, args.timeout)
+        node_names = list(paths)
+        wall_start = time.monotonic()
+        play_cmd = [play, str(args.bag), '--topics', *inputs, '--rate', repr(rate), '--start', repr(seg.start_s)]
+        if seg.duration_s is not None:
+            play_cmd += ['--duration', repr(seg.duration_s)]
+        play_cmd += ['--warmup', repr(args.warmup), '--warmup-rate', repr(args.warmup_rate),
+                     '--wait-subscribers', repr(args.timeout), '--start-delay', repr(DISCOVERY_SETTLE_S),
+                     '--ack-timeout', repr(args.timeout),
+                     # the first answers include each node's first-call cost (numba compilation on a
+                     # cold cache: 15-30 s per node with three starting at once on two cores)
+                     '--sync-timeout', repr(args.timeout)]
+        play_cmd += [f'--sync={inp}:{out}' for _, inp, out in SYNCED if inp in inputs]
+        subscribers = {t: sum(t in subscribes for subscribes, _ in NODE_ENDPOINTS.values()) for t in inputs}
+        play_cmd += [f'--expect-subscribers={t}:{n}' for t, n in subscribers.items()]
+        if args.no_progress:
+            play_cmd.append('--no-progress')
+        play_cmd += forwarded
+        player = children.start('play', play_cmd, stderr_to_terminal=not args.no_progress)
+        while player.poll() is None:
+            executor.spin_once(timeout_sec=0.05)
+            children.check_alive(node_names)
+        if player.returncode != 0:
+            raise RunError(f'play exited with code {player.returncode}; the end of {children.log_dir}/play.log:\n'
+                           + children.log_tail('play'))
+        completion = _wait_for_last_outputs(executor, recorded, seg.last_input, received, children, node_names,
+                                            args)
+        wall_time_s = received['at'] - wall_start  # the first play's start to the last output
+    finally:
+        # keep recording while the nodes stop: what they publish on the way out is theirs too
+        exit_codes = children.stop(while_waiting=lambda: executor.spin_once(timeout_sec=0.05))
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        executor.remove_node(node)
+        node.destroy_node()
+        executor.shutdown()
+        rclpy.try_shutdown(context=context)
+    result = ReplayResult(outputs={t: v for t, v in recorded.items() if v},
+                          output_types={t: OUTPUT_TYPES[t] for t, v in recorded.items() if v},
+                          inputs={t: n for t, n in seg.counts.items() if n}, wall_time_s=wall_time_s,
+                          bag_duration_s=(seg.last_ns - seg.first_ns) * 1e-9)
+    return result, ProcessesRun(exit_codes=exit_codes, completion=completion)
+
+
+def _raise_interrupt(signum: int, _frame: Any) -> None:
+    raise KeyboardInterrupt(f'signal {signum}')
+
+
+def _wait_for_graph(node: Any, executor: Any, subs: dict[str, Any], children: ChildProcesses,
+                    timeout_s: float) -> None:
+    """Wait until every node shows its endpoints in the graph and the recorder has matched every
+    publisher of the recorded topics."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        children.check_alive([n for n, _, _ in NODE_EXECUTABLES])
+        missing = []
+        for name, (subscribes, publishes) in NODE_ENDPOINTS.items():
+            for topic in subscribes:
+                resolved = node.resolve_topic_name(topic)
+                if not any(i.node_name == name for i in node.get_subscriptions_info_by_topic(resolved)):
+                    missing.append(f'{name} subscribing {resolved}')
+            for topic in publishes:
+                resolved = node.resolve_topic_name(topic)
+                if not any(i.node_name == name for i in node.get_publishers_info_by_topic(resolved)):
+                    missing.append(f'{name} publishing {resolved}')
+        for sub in subs.values():
+            n_graph = len(node.get_publishers_info_by_topic(sub.topic_name))
+            if sub.get_publisher_count() < n_graph:
+                missing.append(f'the recorder matched {sub.get_publisher_count()} of {n_graph} publishers of '
+                               f'{sub.topic_name}')
+        if not missing:
+            # Our view of the graph is complete; the nodes' views of each other follow within the
+            # discovery round trip. Give it that, so the monitor's first jammer state is not late.
+            settle = time.monotonic() + DISCOVERY_SETTLE_S
+            while time.monotonic() < settle:
+                executor.spin_once(timeout_sec=0.05)
+            return
+        if time.monotonic() > deadline:
+            raise RunError(f'the node processes did not come up within {timeout_s} s (ROS_DOMAIN_ID '
+                           f'{os.environ.get("ROS_DOMAIN_ID", "0")}, ROS_AUTOMATIC_DISCOVERY_RANGE '
+                           f'{os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "unset")}); not seen: '
+                           + '; '.join(missing) + f'. Logs: {children.log_dir}')
+        executor.spin_once(timeout_sec=0.05)
+
+
+def _wait_for_last_outputs(executor: Any, recorded: dict[str, list[tuple[int, bytes]]],
+                           last_input: dict[str, int], received: dict[str, Any],
+                           children: ChildProcesses, node_names: list[str], args: argparse.Namespace) -> str:
+    """After ``play`` has finished (every input acknowledged by its subscriber), wait until each node
+    with a one-to-one stamped output has published it for its last input and nothing has been
+    published for ``--settle`` s; a node whose last input was rejected (no output for it) is taken as
+    done after five times that quiet time. Return how completion was decided.
+
+    Raises:
+        RunError: not complete within ``--timeout`` s.
+    """
+    from rclpy.serialization import deserialize_message
+
+    from rfi_experiments.bag_io import message_class
+
+    classes = {topic: message_class(OUTPUT_TYPES[topic]) for _, _, topic in ANSWERED_BY_STAMP}
+    start = time.monotonic()
+    while True:
+        executor.spin_once(timeout_sec=0.05)
+        children.check_alive(node_names)
+        waiting = []
+        for name, _, topic in ANSWERED_BY_STAMP:
+            expected = last_input.get(name)
+            if expected is None:
+                continue
+            got = None
+            if recorded[topic]:
+                stamp = deserialize_message(recorded[topic][-1][1], classes[topic]).header.stamp
+                got = stamp.sec * 1_000_000_000 + stamp.nanosec
+            if got is None or got < expected:
+                waiting.append(f'{name}: last {topic} stamped {got} ns, its last input {expected} ns')
+        quiet_s = time.monotonic() - max(received['at'], start)
+        if not waiting and quiet_s >= args.settle:
+            return (f'every node answered its last input (an output with that stamp) and nothing was '
+                    f'published for {args.settle:g} s')
+        if waiting and quiet_s >= 5 * args.settle:
+            return (f'nothing was published for {5 * args.settle:g} s; not answered by stamp (last input rejected?): '
+                    + '; '.join(waiting))
+        if time.monotonic() - start > args.timeout:
+            raise RunError(f'outputs still coming or incomplete {args.timeout:g} s after play finished: '
+                           + ('; '.join(waiting) or f'messages still arriving ({received["n"]} so far)')
+                           + f'. Logs: {children.log_dir}')
