@@ -90,6 +90,7 @@ class FusionParams:
             for the divergence rule.
     """
 
+    # sensors and models (.measurement_models, .gnss_update, .uwb_update)
     use_gnss: bool = True
     use_doppler: bool = True
     use_uwb: bool = True
@@ -107,18 +108,21 @@ class FusionParams:
     jammer_quality_factor: float = 1.0
     jammer_info_timeout_s: float = 2.0
     loop: TrackingLoopParams = field(default_factory=TrackingLoopParams)
+    # initialisation (.initialisation)
     min_satellites_init: int = 5
     init_position_std_m: float = 10.0
     init_velocity_std_mps: float = 1.0
     init_clock_bias_std_m: float = 10.0
     init_clock_drift_std_mps: float = 1.0
     init_clock_drift_unobserved_std_mps: float = 1000.0
+    # time gaps and divergence (.divergence), re-initialisation
     max_prediction_s: float = 120.0
     max_position_std_m: float = 200.0
     divergence_gnss_epochs: int = 5
     divergence_uwb_ranges: int = 40
     reference_max_age_s: float = 5.0
     uwb_init_window_s: float = 1.0
+    # beyond the paper: UWB latency, divergence window, iterated update, Huber, common-mode screen
     uwb_latency_s: float = 0.0
     divergence_uwb_gated_fraction: float = 0.5
     max_update_iterations: int = 5

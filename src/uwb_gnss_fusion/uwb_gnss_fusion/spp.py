@@ -35,7 +35,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from gnss_common.constants import WGS84_ECCENTRICITY_SQUARED, WGS84_SEMI_MAJOR_AXIS_M
-from gnss_common.coordinates import ecef_to_enu_rotation
+from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic_scalar
 from gnss_common.earth_rotation import rotate_about_z, sagnac_rotate
 from gnss_common.observations import GPS, GnssEpoch
 from gnss_common.positioning import CONVERGED, SINGULAR, least_squares_position, weighted_least_squares
@@ -215,19 +215,9 @@ class SppResult:
 
 
 def _geodetic_up_and_rotation(pos: np.ndarray) -> np.ndarray:
-    """ECEF->ENU rotation at a near-surface ECEF point (scalar Bowring, 2 steps: < 1e-10 rad)."""
-    x, y, z = float(pos[0]), float(pos[1]), float(pos[2])
-    a, e2 = WGS84_SEMI_MAJOR_AXIS_M, WGS84_ECCENTRICITY_SQUARED
-    b = a * math.sqrt(1.0 - e2)
-    ep2 = e2 / (1.0 - e2)
-    p = math.hypot(x, y)
-    beta = math.atan2(z * a, p * b)
-    lat = beta
-    for _ in range(2):
-        sb, cb = math.sin(beta), math.cos(beta)
-        lat = math.atan2(z + ep2 * b * sb**3, p - e2 * a * cb**3)
-        beta = math.atan2(math.sqrt(1.0 - e2) * math.sin(lat), math.cos(lat))
-    return ecef_to_enu_rotation(lat, math.atan2(y, x))
+    """ECEF->ENU rotation at a near-surface ECEF point (row 2: the local up)."""
+    lat, lon, _ = ecef_to_geodetic_scalar(float(pos[0]), float(pos[1]), float(pos[2]))
+    return ecef_to_enu_rotation(lat, lon)
 
 
 @dataclass(frozen=True)
