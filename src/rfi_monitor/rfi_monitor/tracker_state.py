@@ -69,7 +69,7 @@ class MonitorInt(IntEnum):
     NBUF = 0           # samples of the three-sample window filled at stream start (0..2)
     LAST_START = 1     # sample of the last sweep reset
     NRESETS = 2        # sweep resets so far
-    STARTED = 3        # (reserved: stream started)
+    STARTED = 3        # not used by the loop (carried unchanged)
     NMEAS = 4          # measurements so far
     FITAT = 5          # sample at which the next sweep-start fit runs; -1 none
     MISSES = 6         # consecutive failed sweep-start fits
