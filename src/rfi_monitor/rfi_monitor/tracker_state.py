@@ -17,6 +17,10 @@ The filter's and the sweep-period estimator's packed states keep their layouts i
 outputs; ``track_block`` unpacks both once, at the call of the compiled kernel, so that its
 arguments are never listed by a caller. A new scalar state variable is one new enum member (and its
 initial value in :func:`new_tracker_state` if that is not 0).
+
+After editing this module delete the numba cache of ``tracker`` (``rfi_monitor/__pycache__/*.nbi``,
+``*.nbc``): the cached kernel holds the old slot indices as constants, and numba invalidates a cache
+only when the cached function's own file changes.
 """
 
 from __future__ import annotations
