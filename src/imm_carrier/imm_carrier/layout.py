@@ -9,6 +9,10 @@ output, counter or batch column is one new member:
 * :class:`Counter`: the tracker's counters (``CarrierTracker.counters`` keys are the lower-case names);
 * :class:`BatchColumn`: the columns of ``CarrierPhaseBatch.values`` (the fields of rfi_msgs/CarrierPhase);
 * :class:`KernelConfig`: the tracker kernel's float configuration vector.
+
+After editing this module delete the numba caches of imm, pll and tracker
+(``imm_carrier/__pycache__/*.nbi``, ``*.nbc``): the cached kernels hold the slot indices as
+constants, and numba invalidates a cache only when the cached function's own file changes.
 """
 
 from __future__ import annotations
