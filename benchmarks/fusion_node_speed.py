@@ -438,7 +438,7 @@ the table; no throttling).
 Goal (issue #3): 100x real time for a 6-minute scenario. The harness's own cost (bag reading and
 rclpy deserialisation of every input, outside the node) is reported separately above; the node's
 cost is the callbacks' total. Remaining large items: process_gnss (about 0.5 ms per 5 Hz epoch:
-the per-satellite checks of `FusionFilter._prepare_epoch`, the common-mode screen, the numpy CKF
+the per-satellite checks of `gnss_update.prepare_epoch`, the common-mode screen, the numpy CKF
 update) and the geodetic + ENU covariance of each fix (about 8 us).
 """
 

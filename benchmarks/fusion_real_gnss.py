@@ -215,7 +215,7 @@ def main() -> None:
         "q dt^3/3 = 900 m^2 of position variance per 30 s step, so on a 30 s station the filter keeps\n"
         "little memory and gains over SPP mostly by its weighting. A static station can say so:\n\n"
         "| parameter | value |\n|---|---|\n" + params_md + "\n\n"
-        "One change in the core as well (`fusion_filter.py`, `_prepare_epoch`): a satellite without a\n"
+        "One change in the core as well (`gnss_update.py`, `prepare_epoch`): a satellite without a\n"
         "reported C/N0 had the sigma of the nominal C/N0 whatever its elevation, so all GEONET satellites\n"
         "weighed the same and the low ones (larger troposphere and multipath errors) pulled the solution\n"
         "(3D RMS 1.2-1.5 m, worse than SPP, even with the parameters above). Such a satellite now gets the\n"
