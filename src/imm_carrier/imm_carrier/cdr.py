@@ -210,7 +210,8 @@ def _put_rows(values, method, slots, ints, floats, ni, nf):
 
 
 @njit(cache=True)
-def _encode(program, start, head, values_a, method_a, values_b, method_b, slots, out):
+def _streams(values_a, method_a, values_b, method_b, slots):
+    """The value streams of the estimates sequence (count, then each row's fields in wire order)."""
     n = values_a.shape[0] + values_b.shape[0]
     width = slots.shape[0] + 2
     ints = np.empty(1 + n * width, dtype=np.int64)
@@ -218,10 +219,11 @@ def _encode(program, start, head, values_a, method_a, values_b, method_b, slots,
     ints[0] = n
     ni, nf = _put_rows(values_a, method_a, slots, ints, floats, 1, 0)
     ni, nf = _put_rows(values_b, method_b, slots, ints, floats, ni, nf)
-    return encode_program(program, start, head, ints[:ni], floats[:nf], head[:0], out)
+    return ints[:ni].copy(), floats[:nf].copy()
 
 
 _EMPTY_TABLE = np.empty((0, len(BATCH_COLUMNS)))
+_NO_TEXT = np.empty(0, dtype=np.uint8)
 
 
 def encode_carrier_phase_array(header: bytes, tables: list[tuple[np.ndarray, int]]) -> bytes:
@@ -243,12 +245,14 @@ def encode_carrier_phase_array(header: bytes, tables: list[tuple[np.ndarray, int
     pairs = list(tables) + [(_EMPTY_TABLE, 0)] * (2 - len(tables))
     n = sum(v.shape[0] for v, _ in pairs)
     head = np.frombuffer(header, dtype=np.uint8)
+    # Two compiled calls, not one: a cached numba function that called the codec of another package would
+    # keep a stale copy of it after that package changes (numba checks only the caller's own file).
+    ints, floats = _streams(np.ascontiguousarray(pairs[0][0], dtype=np.float64), int(pairs[0][1]),
+                            np.ascontiguousarray(pairs[1][0], dtype=np.float64), int(pairs[1][1]), _SLOTS)
     size = head.size + 8 + 128 * n
     while True:
         out = np.zeros(size, dtype=np.uint8)
-        end = _encode(_OUT.program, _ESTIMATES_START, head, np.ascontiguousarray(pairs[0][0], dtype=np.float64),
-                      int(pairs[0][1]), np.ascontiguousarray(pairs[1][0], dtype=np.float64), int(pairs[1][1]),
-                      _SLOTS, out)
+        end = encode_program(_OUT.program, _ESTIMATES_START, head, ints, floats, _NO_TEXT, out)
         if end != ENCODE_BUFFER_FULL:
             break
         size *= 2

@@ -47,8 +47,8 @@ CDR_LE = b"\x00\x01"
 ENCAPSULATION = b"\x00\x01\x00\x00"
 """The 4-byte encapsulation header written by :meth:`CdrLayout.encode`."""
 
-# Opcodes of a layout program: one row [opcode, a, b] per operation.
-OP_PRIM = 0  # a = size in bytes (1, 2, 4, 8), b = kind (KIND_*)
+# Opcodes of a layout program: one row [opcode, a, b, c] per operation.
+OP_PRIM = 0  # a = size in bytes (1, 2, 4, 8), b = kind (KIND_*), c = count of consecutive ones (a run)
 OP_STRING = 1  # a = bound in bytes (0: unbounded); streams: ints += [start in buffer, length without NUL]
 OP_SEQUENCE = 2  # a = row of its OP_END, b = bound (0: unbounded); streams: ints += [count]; body once per element
 OP_ARRAY = 3  # a = row of its OP_END, b = fixed count (>= 1); body once per element
@@ -105,7 +105,7 @@ class CdrLayout:
     Attributes:
         msg_class: the generated message class.
         fields: one :class:`FieldLayout` per field, in declaration (= wire) order.
-        program: int64 array (n_ops, 3) run by the compiled codec.
+        program: int64 array (n_ops, 4) run by the compiled codec.
         field_ops: row of ``program`` where each top-level field starts (``len(fields)`` entries).
     """
 
@@ -295,9 +295,9 @@ def _nestable(t: Any) -> tuple[str, str, CdrLayout | None, int]:
 def _emit(rows: list[list[int]], kind: str, primitive: str, element: CdrLayout | None, bound: int) -> None:
     if kind in ("int", "float"):
         size, k = PRIMITIVES[primitive]
-        rows.append([OP_PRIM, size, k])
+        rows.append([OP_PRIM, size, k, 1])
     elif kind == "string":
-        rows.append([OP_STRING, bound, 0])
+        rows.append([OP_STRING, bound, 0, 0])
     else:
         assert element is not None
         base = len(rows)
@@ -305,7 +305,7 @@ def _emit(rows: list[list[int]], kind: str, primitive: str, element: CdrLayout |
             a = int(r[1])
             if r[0] in (OP_SEQUENCE, OP_ARRAY, OP_END):
                 a += base  # jump targets are rows of the program: shift them with the inlined body
-            rows.append([int(r[0]), a, int(r[2])])
+            rows.append([int(r[0]), a, int(r[2]), int(r[3])])
         # inner marks would overwrite the outer ones: nested messages keep none
         rows[base:] = [r for r in rows[base:] if r[0] != OP_MARK]
         _retarget(rows, base)
@@ -351,31 +351,51 @@ def layout(msg_class: Any) -> CdrLayout:
             kind, primitive, element, bound = _nestable(t.value_type)
             if cls == "Array":
                 n = int(t.size)
-                rows.append([OP_ARRAY, 0, n])
+                rows.append([OP_ARRAY, 0, n, 0])
                 fields.append(FieldLayout(name, "array", primitive, element, kind, n))
             else:
                 n = int(getattr(t, "maximum_size", 0))
-                rows.append([OP_SEQUENCE, 0, n])
+                rows.append([OP_SEQUENCE, 0, n, 0])
                 fields.append(FieldLayout(name, "sequence", primitive, element, kind, n))
             begin = len(rows) - 1
             _emit(rows, kind, primitive, element, bound)
-            rows.append([OP_END, begin, 0])
+            rows.append([OP_END, begin, 0, 0])
             rows[begin][1] = len(rows) - 1
         else:
             kind, primitive, element, bound = _nestable(t)
             _emit(rows, kind, primitive, element, bound)
             fields.append(FieldLayout(name, kind, primitive, element, size=bound))
         _retarget(rows, 0)
-        rows.append([OP_MARK, index, 0])
-    program = np.array(rows, dtype=np.int64).reshape(-1, 3)
+        rows.append([OP_MARK, index, 0, 0])
+    rows = _compact(rows)
+    field_ops = [0] + [i + 1 for i, r in enumerate(rows) if r[0] == OP_MARK][:-1]
+    program = np.array(rows, dtype=np.int64).reshape(-1, 4)
     return CdrLayout(msg_class, tuple(fields), program, tuple(field_ops))
+
+
+def _compact(rows: list[list[int]]) -> list[list[int]]:
+    """Merge consecutive primitives of one size and kind into one run (a fixed array of primitives
+    included): the first one aligned makes the others aligned, so a run is aligned and bounds-checked
+    once. Marks (top-level field ends) are kept, so runs never cross them."""
+    out: list[list[int]] = []
+    for r in rows:
+        r = list(r)
+        if r[0] == OP_END and len(out) >= 2 and out[-2][0] == OP_ARRAY and out[-1][0] == OP_PRIM:
+            prim, array = out.pop(), out.pop()
+            r = [OP_PRIM, prim[1], prim[2], prim[3] * array[2]]
+        if r[0] == OP_PRIM and out and out[-1][0] == OP_PRIM and out[-1][1:3] == r[1:3]:
+            out[-1][3] += r[3]
+        else:
+            out.append(r)
+    _retarget(out, 0)
+    return out
 
 
 # ---------------------------------------------------------------- compiled interpreters
 @njit(cache=True)
 def _align(o, size):
     """Absolute offset ``o`` aligned to ``size`` counted from the end of the 4-byte encapsulation."""
-    return 4 + (o - 4 + size - 1) // size * size
+    return 4 + ((o - 4 + size - 1) & ~(size - 1))  # sizes are powers of two
 
 
 @njit(cache=True)
@@ -413,32 +433,39 @@ def decode_program(program, buf, ints, floats, marks, counts, strict_strings):  
         if op == OP_PRIM:
             size = program[pc, 1]
             kind = program[pc, 2]
+            count = program[pc, 3]
             o = _align(o, size)
-            if o + size > n:
+            if o + size * count > n:
                 return _ERR
             if kind == KIND_FLOAT:
-                if nf >= floats.shape[0]:
+                if nf + count > floats.shape[0]:
                     return _ERR
                 if size == 8:
-                    for m in range(8):
-                        b8[m] = buf[o + m]
-                    floats[nf] = tmp8[0]
+                    for _ in range(count):
+                        for m in range(8):
+                            b8[m] = buf[o + m]
+                        floats[nf] = tmp8[0]
+                        nf += 1
+                        o += 8
                 else:
-                    for m in range(4):
-                        b4[m] = buf[o + m]
-                    floats[nf] = tmp4[0]
-                nf += 1
+                    for _ in range(count):
+                        for m in range(4):
+                            b4[m] = buf[o + m]
+                        floats[nf] = tmp4[0]
+                        nf += 1
+                        o += 4
             else:
-                if ni >= ints.shape[0]:
+                if ni + count > ints.shape[0]:
                     return _ERR
-                v = _read_uint(buf, o, size)
-                if kind == KIND_SIGNED and size < 8 and v >= np.int64(1) << (8 * size - 1):
-                    v -= np.int64(1) << (8 * size)
-                elif kind == KIND_BOOL and v > 1:
-                    return _ERR
-                ints[ni] = v
-                ni += 1
-            o += size
+                for _ in range(count):
+                    v = _read_uint(buf, o, size)
+                    if kind == KIND_SIGNED and size < 8 and v >= np.int64(1) << (8 * size - 1):
+                        v -= np.int64(1) << (8 * size)
+                    elif kind == KIND_BOOL and v > 1:
+                        return _ERR
+                    ints[ni] = v
+                    ni += 1
+                    o += size
         elif op == OP_STRING:
             o = _align(o, 4)
             if o + 4 > n:
@@ -527,31 +554,38 @@ def encode_program(program, start, head, ints, floats, text, out):  # noqa: C901
         if op == OP_PRIM:
             size = program[pc, 1]
             kind = program[pc, 2]
+            count = program[pc, 3]
             o = _align(o, size)
-            if o + size > n:
+            if o + size * count > n:
                 return _FULL
             if kind == KIND_FLOAT:
-                if nf >= floats.shape[0]:
+                if nf + count > floats.shape[0]:
                     return _ERR
                 if size == 8:
-                    tmp8[0] = floats[nf]
-                    for m in range(8):
-                        out[o + m] = b8[m]
+                    for _ in range(count):
+                        tmp8[0] = floats[nf]
+                        for m in range(8):
+                            out[o + m] = b8[m]
+                        nf += 1
+                        o += 8
                 else:
-                    tmp4[0] = floats[nf]
-                    for m in range(4):
-                        out[o + m] = b4[m]
-                nf += 1
+                    for _ in range(count):
+                        tmp4[0] = floats[nf]
+                        for m in range(4):
+                            out[o + m] = b4[m]
+                        nf += 1
+                        o += 4
             else:
-                if ni >= ints.shape[0]:
+                if ni + count > ints.shape[0]:
                     return _ERR
-                v = ints[ni]
-                if kind == KIND_BOOL:
-                    v = 1 if v != 0 else 0
-                for m in range(size):
-                    out[o + m] = (v >> (8 * m)) & 0xFF
-                ni += 1
-            o += size
+                for _ in range(count):
+                    v = ints[ni]
+                    if kind == KIND_BOOL:
+                        v = 1 if v != 0 else 0
+                    for m in range(size):
+                        out[o + m] = (v >> (8 * m)) & 0xFF
+                    ni += 1
+                    o += size
         elif op == OP_STRING:
             if ni + 2 > ints.shape[0]:
                 return _ERR

@@ -23,67 +23,107 @@ from rfi_node_common.cdr import KIND_BOOL, KIND_FLOAT, KIND_SIGNED, PRIMITIVES, 
 _MISSING: Any = object()
 
 
-def _slot_storage(cls: Any, name: str) -> str:
-    """'direct' if the generated setter of ``name`` stores the value as given (checks off), else 'setter'."""
-    t = cls.SLOT_TYPES[list(cls.get_fields_and_field_types()).index(name)]
-    return "direct" if type(t).__name__ in ("BasicType", "UnboundedString", "BoundedString", "NamespacedType") \
-        else "setter"
+_DIRECT = ("BasicType", "UnboundedString", "BoundedString")
+"""rosidl types whose generated setter stores the value as given when field checks are off."""
+
+
+def _fields(msg_class: Any) -> list[tuple[str, Any]]:
+    return list(zip(msg_class.get_fields_and_field_types(), msg_class.SLOT_TYPES, strict=True))
 
 
 @cache
 def _generated_builder(msg_class: Any) -> Callable[..., Any]:
-    names = list(msg_class.get_fields_and_field_types())
-    env: dict[str, Any] = {"_new": object.__new__, "_cls": msg_class, "_MISSING": _MISSING, "_copy": copy.copy}
-    default = msg_class()
-    params, body = [], ["    m = _new(_cls)", "    m._check_fields = False"]
-    for k, (name, t) in enumerate(zip(names, msg_class.SLOT_TYPES, strict=True)):
-        if _slot_storage(msg_class, name) == "direct":
-            if type(t).__name__ == "NamespacedType":
-                env[f"_b{k}"] = message_builder(message_class(t))
-                params.append(f"{name}=_MISSING")
-                body.append(f"    m._{name} = _b{k}() if {name} is _MISSING else {name}")
-            else:
-                env[f"_d{k}"] = getattr(default, name)  # immutable: int, float, bool or str
-                params.append(f"{name}=_d{k}")
-                body.append(f"    m._{name} = {name}")
-        else:  # arrays and sequences: the generated setter's conversion; a default is a fresh copy
-            env[f"_s{k}"] = getattr(msg_class, name).fset
-            env[f"_d{k}"] = getattr(default, name)
-            params.append(f"{name}=_MISSING")
-            body.append(f"    _s{k}(m, _copy(_d{k}) if {name} is _MISSING else {name})")
-    source = f"def build(*, {', '.join(params)}):\n" + "\n".join(body) + "\n    return m\n"
-    exec(compile(source, f"<cdr.message_builder {msg_class.__name__}>", "exec"), env)  # noqa: S102 - generated
+    """Source of ``build(**leaves)`` for the whole message tree, generated and compiled once."""
+    env: dict[str, Any] = {"_new": object.__new__, "_MISSING": _MISSING, "_copy": copy.copy}
+    params: list[str] = []
+    body: list[str] = []
+
+    def emit(cls: Any, prefix: str) -> str:
+        var = f"m{len(env)}"
+        env[f"_c{var}"] = cls
+        default = cls()
+        body.append(f"    {var} = _new(_c{var})")
+        body.append(f"    {var}._check_fields = False")
+        for name, t in _fields(cls):
+            path = prefix + name
+            kind = type(t).__name__
+            if kind == "NamespacedType":
+                body.append(f"    {var}._{name} = {emit(message_class(t), path + '__')}")
+            elif kind in _DIRECT:
+                env[f"_d_{path}"] = getattr(default, name)  # immutable: int, float, bool or str
+                params.append(f"{path}=_d_{path}")
+                body.append(f"    {var}._{name} = {path}")
+            else:  # arrays and sequences: the generated setter's conversion; a default is a fresh copy
+                env[f"_s_{path}"] = getattr(cls, name).fset
+                env[f"_d_{path}"] = getattr(default, name)
+                params.append(f"{path}=_MISSING")
+                body.append(f"    _s_{path}({var}, _copy(_d_{path}) if {path} is _MISSING else {path})")
+        return var
+
+    top = emit(msg_class, "")
+    source = f"def build(*, {', '.join(params)}):\n" + "\n".join(body) + f"\n    return {top}\n"
+    exec(compile(source, f"<message_builder {msg_class.__name__}>", "exec"), env)  # noqa: S102 - generated
     return env["build"]
 
 
+def _construct(msg_class: Any, leaves: dict[str, Any]) -> Any:
+    """The public constructors, nested, from leaf keywords (the reference path)."""
+    direct: dict[str, Any] = {}
+    nested: dict[str, dict[str, Any]] = {}
+    for key, value in leaves.items():
+        head, sep, rest = key.partition("__")
+        if sep:
+            nested.setdefault(head, {})[rest] = value
+        else:
+            direct[key] = value
+    types = dict(_fields(msg_class))
+    for head, sub in nested.items():
+        direct[head] = _construct(message_class(types[head]), sub)
+    return msg_class(**direct)
+
+
 def _public_builder(msg_class: Any) -> Callable[..., Any]:
-    def build(**values: Any) -> Any:
-        return msg_class(**values)
+    def build(**leaves: Any) -> Any:
+        return _construct(msg_class, leaves)
     return build
+
+
+def leaf_values(msg: Any, prefix: str = "") -> dict[str, Any]:
+    """The keywords of :func:`message_builder` that rebuild ``msg``: every leaf field by its path
+    (nested message fields joined by ``__``, e.g. ``header__stamp__sec``)."""
+    out: dict[str, Any] = {}
+    for name, t in _fields(type(msg)):
+        value = getattr(msg, name)
+        if type(t).__name__ == "NamespacedType":
+            out.update(leaf_values(value, f"{prefix}{name}__"))
+        else:
+            out[prefix + name] = value
+    return out
 
 
 @cache
 def message_builder(msg_class: Any, fast: bool = True) -> Callable[..., Any]:
-    """A constructor of ``msg_class`` taking the fields as keywords, generated from its description.
+    """A constructor of ``msg_class`` taking its leaf fields as keywords, generated from its description.
 
-    For every field of
-    ``get_fields_and_field_types()``, by ``SLOT_TYPES``, a scalar, string or nested message is
-    stored in its slot as given (what the generated setter does with field checks off), an array or
-    sequence goes through the generated setter (which makes its fresh copy); a field not given gets
-    its default, a nested message a fresh one built the same way.
+    The keywords are the paths of the leaf fields, nested messages joined by ``__``
+    (``header__stamp__sec``, ``pose__pose__position__x``; rosidl forbids ``__`` in field names).
+    The generated function builds the whole tree in one call: walking ``get_fields_and_field_types()``
+    and ``SLOT_TYPES`` of the class and of every nested class, it creates each nested message once and
+    stores a scalar or string in its slot as given (what the generated setter does with field checks
+    off); an array or sequence goes through the generated setter (which makes its fresh copy). A leaf
+    not given gets the field's default.
 
     Args:
         msg_class: generated message class.
-        fast: False gives the public constructor ``msg_class(**fields)`` instead.
+        fast: False gives the public constructors instead (nested, from the same keywords).
 
     Returns:
-        ``build(**fields) -> message``. Values must already have the field's type (float for a
-        double, int for an integer, a message for a nested field); arrays and sequences take
-        anything the setter takes.
+        ``build(**leaves) -> message``. Values must already have the field's type (float for a
+        double, int for an integer); arrays and sequences take anything the setter takes.
 
-    The fast constructor is used only if :func:`builders_agree` holds for the class (the generated
-    layout is ``_<field>`` slots, field checks are off, and it builds messages equal to the public
-    constructor's); otherwise this returns the public one.
+    The generated constructor is used only if :func:`builders_agree` holds for the class (the
+    generated classes have ``_<field>`` slots, field checks are off, and it builds messages equal to
+    the public constructors'); otherwise this returns the public one.
     """
     if fast and builders_agree(msg_class):
         return _generated_builder(msg_class)
@@ -95,27 +135,31 @@ def builders_agree(msg_class: Any) -> bool:
     """True if the generated constructor of ``msg_class`` can be used (see :func:`message_builder`).
 
     Checks that field checks are off (``ROS_PYTHON_CHECK_FIELDS`` not ``1`` when the message
-    module was imported), that the class has exactly the slots ``_<field>`` + ``_check_fields``, and
-    that a message built with distinct non-default values (and one with every field defaulted)
-    equals the public constructor's, field by field and in storage type, for the class and every
-    nested class.
+    module was imported) and that the class and every nested class have exactly the slots
+    ``_<field>`` + ``_check_fields``, then that a message built from random leaf values (and one with
+    every field defaulted) equals the public constructors', field by field and in storage type.
     """
     try:
-        names = list(msg_class.get_fields_and_field_types())
-        if set(getattr(msg_class, "__slots__", ())) != {f"_{n}" for n in names} | {"_check_fields"}:
+        if not _slots_as_expected(msg_class):
             return False
-        if msg_class()._check_fields:
-            return False
-        for t in msg_class.SLOT_TYPES:
-            value_type = getattr(t, "value_type", t)
-            if type(value_type).__name__ == "NamespacedType" and not builders_agree(message_class(value_type)):
-                return False
         build = _generated_builder(msg_class)
-        values = probe_values(msg_class, np.random.default_rng(7))
-        return (messages_equal(build(**values), msg_class(**values))
+        probe = msg_class(**probe_values(msg_class, np.random.default_rng(7)))
+        return (messages_equal(build(**leaf_values(probe)), probe)
                 and messages_equal(build(), msg_class()))
     except (AttributeError, TypeError, ValueError, AssertionError, NotImplementedError):
         return False
+
+
+def _slots_as_expected(msg_class: Any) -> bool:
+    names = list(msg_class.get_fields_and_field_types())
+    if set(getattr(msg_class, "__slots__", ())) != {f"_{n}" for n in names} | {"_check_fields"}:
+        return False
+    if msg_class()._check_fields:
+        return False
+    for _, t in _fields(msg_class):
+        if type(t).__name__ == "NamespacedType" and not _slots_as_expected(message_class(t)):
+            return False
+    return True
 
 
 def probe_values(msg_class: Any, rng: np.random.Generator, max_sequence: int = 3) -> dict[str, Any]:

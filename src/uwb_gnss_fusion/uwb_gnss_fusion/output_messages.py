@@ -8,10 +8,11 @@ The messages stay Python objects (the node checks a fix before publishing it, an
 replay hands the published object to the subscribers). A generated rosidl ``__init__`` builds a
 default for every field, nested messages included, and imports its sub-message classes on every
 call: an Odometry (12 messages) through the constructors took about 40 us. So each message is built
-with :func:`rfi_node_common.message_builder.message_builder`, the suite's codec layer's constructor generated
-from the class's own field description (``get_fields_and_field_types`` / ``SLOT_TYPES``), which fills
-each field once. It is used only where it agrees with the public constructor (checked once per
-class, see :func:`rfi_node_common.message_builder.builders_agree`); otherwise the public constructors are used
+with :func:`rfi_node_common.message_builder.message_builder`, the suite's codec layer's constructor
+generated from the class's own field description (``get_fields_and_field_types`` / ``SLOT_TYPES``),
+which builds the whole tree in one call and fills each field once. It is used only where it agrees
+with the public constructors (checked once per class, see
+:func:`rfi_node_common.message_builder.builders_agree`); otherwise the public constructors are used
 (:data:`FAST_CONSTRUCTION` says which). This module only says which value goes into which field.
 """
 
@@ -21,11 +22,8 @@ from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
-from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Point, Pose, PoseWithCovariance, Quaternion, Twist, TwistWithCovariance, Vector3
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import NavSatFix, NavSatStatus
-from std_msgs.msg import Header
 
 from rfi_msgs.msg import FusionStatus
 from rfi_node_common.message_builder import builders_agree, message_builder
@@ -81,12 +79,12 @@ def _source_covariances(out: FusionOutput) -> tuple[np.ndarray, np.ndarray]:
     return source.take(_POSE_COV_INDEX), source.take(_TWIST_COV_INDEX)
 
 
-_CLASSES = (Time, Header, Point, Quaternion, Vector3, Pose, Twist, PoseWithCovariance, TwistWithCovariance,
-            Odometry, NavSatStatus, NavSatFix, FusionStatus)
+_CLASSES = (Odometry, NavSatFix, FusionStatus)
 
 
 def _builders(fast: bool) -> Any:
-    """One constructor per message class, by class name (generated if ``fast``, else the public one)."""
+    """One constructor per output message class, by class name (generated if ``fast``, else the public
+    constructors); keywords are the leaf fields' paths (``header__stamp__sec``)."""
     return SimpleNamespace(**{cls.__name__: message_builder(cls, fast) for cls in _CLASSES})
 
 
@@ -99,15 +97,12 @@ _STATUS_FIX, _SERVICE_GPS = int(NavSatStatus.STATUS_FIX), int(NavSatStatus.SERVI
 _COVARIANCE_TYPE_KNOWN = int(NavSatFix.COVARIANCE_TYPE_KNOWN)
 
 
-def _header(b: Any, stamp_ns: int, frame_id: str) -> Any:
-    sec, nanosec = _split_stamp(stamp_ns)
-    return b.Header(stamp=b.Time(sec=sec, nanosec=nanosec), frame_id=frame_id)
-
-
 def _status(b: Any, out: FusionOutput, stamp_ns: int, frame_id: str, names: list[str], counts: list[int]) -> Any:
+    sec, nanosec = _split_stamp(stamp_ns)
     return b.FusionStatus(
-        header=_header(b, stamp_ns, frame_id), mode=int(out.mode), initialized=bool(out.initialized),
-        diverged=bool(out.diverged), reinitializations=min(int(out.reinitializations), UINT32_MAX),
+        header__stamp__sec=sec, header__stamp__nanosec=nanosec, header__frame_id=frame_id, mode=int(out.mode),
+        initialized=bool(out.initialized), diverged=bool(out.diverged),
+        reinitializations=min(int(out.reinitializations), UINT32_MAX),
         satellites_used=min(int(out.satellites_used), UINT16_MAX),
         satellites_rejected=min(int(out.satellites_rejected), UINT16_MAX),
         uwb_used=min(int(out.uwb_used), UINT16_MAX), uwb_rejected=min(int(out.uwb_rejected), UINT16_MAX),
@@ -118,23 +113,29 @@ def _status(b: Any, out: FusionOutput, stamp_ns: int, frame_id: str, names: list
 
 
 def _odometry(b: Any, out: FusionOutput, frame_id: str, child_frame_id: str) -> Any:
+    sec, nanosec = _split_stamp(out.stamp_ns)
     pose_cov, twist_cov = _source_covariances(out)
     x, y, z = out.position_m.tolist()
     vx, vy, vz = out.velocity_mps.tolist()
-    pose = b.Pose(position=b.Point(x=x, y=y, z=z), orientation=b.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0))
-    twist = b.Twist(linear=b.Vector3(x=vx, y=vy, z=vz), angular=b.Vector3(x=0.0, y=0.0, z=0.0))
-    return b.Odometry(header=_header(b, out.stamp_ns, frame_id), child_frame_id=child_frame_id,
-                      pose=b.PoseWithCovariance(pose=pose, covariance=pose_cov),
-                      twist=b.TwistWithCovariance(twist=twist, covariance=twist_cov))
+    return b.Odometry(  # orientation (0, 0, 0, 1) and angular velocity 0: unestimated
+        header__stamp__sec=sec, header__stamp__nanosec=nanosec, header__frame_id=frame_id,
+        child_frame_id=child_frame_id,
+        pose__pose__position__x=x, pose__pose__position__y=y, pose__pose__position__z=z,
+        pose__pose__orientation__x=0.0, pose__pose__orientation__y=0.0, pose__pose__orientation__z=0.0,
+        pose__pose__orientation__w=1.0, pose__covariance=pose_cov,
+        twist__twist__linear__x=vx, twist__twist__linear__y=vy, twist__twist__linear__z=vz,
+        twist__twist__angular__x=0.0, twist__twist__angular__y=0.0, twist__twist__angular__z=0.0,
+        twist__covariance=twist_cov)
 
 
 def _fix(b: Any, out: FusionOutput, frame_id: str) -> Any:
+    sec, nanosec = _split_stamp(out.stamp_ns)
     latitude, longitude, altitude = (float(v) for v in out.geodetic)
-    return b.NavSatFix(header=_header(b, out.stamp_ns, frame_id),
-                       status=b.NavSatStatus(status=_STATUS_FIX, service=_SERVICE_GPS),
-                       latitude=latitude, longitude=longitude, altitude=altitude,
-                       position_covariance=np.asarray(out.position_covariance_enu_m2, dtype=np.float64).reshape(9),
-                       position_covariance_type=_COVARIANCE_TYPE_KNOWN)
+    return b.NavSatFix(
+        header__stamp__sec=sec, header__stamp__nanosec=nanosec, header__frame_id=frame_id,
+        status__status=_STATUS_FIX, status__service=_SERVICE_GPS, latitude=latitude, longitude=longitude,
+        altitude=altitude, position_covariance=np.asarray(out.position_covariance_enu_m2, dtype=np.float64).reshape(9),
+        position_covariance_type=_COVARIANCE_TYPE_KNOWN)
 
 
 def status_msg(out: FusionOutput, stamp_ns: int, frame_id: str, reasons: dict[str, int],
