@@ -31,7 +31,9 @@ CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'imm_carrier.yaml'
 START_NS = gps_to_stamp_ns(2300, 345600.0)  # on the 20 ms GPS bit grid
 T_S = 0.02
 T_NS = 20_000_000
-SPIN_DEADLINE_S = 10.0
+SPIN_DEADLINE_S = 60.0
+"""Bound of each spin of the rig, s. On a cold numba cache (a fresh clone) the node's first array
+compiles the trackers and the codec: over 20 s on the shared 2-core machine."""
 TOPIC = '/gnss/correlators'
 
 
