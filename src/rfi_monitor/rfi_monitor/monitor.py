@@ -87,7 +87,7 @@ from rfi_monitor.if_measurement import (
 )
 from rfi_monitor.params import RfiMonitorParams
 from rfi_monitor.sweep_analysis import SweepAnalysis, analyse
-from rfi_monitor.sweep_period import J_LOCKED, S_PERIOD
+from rfi_monitor.sweep_period import SweepFloat, SweepInt
 from rfi_monitor.tracker import MAX_ABS_RATE, lattice_init, track_block
 from rfi_monitor.tracker_state import (
     DEC_HISTORY,
@@ -98,7 +98,7 @@ from rfi_monitor.tracker_state import (
     new_trace_buffers,
     new_tracker_state,
 )
-from rfi_monitor.tracking_filters import F_DF, F_F, F_P11, F_P22
+from rfi_monitor.tracking_filters import FilterFloat
 
 
 @njit(cache=True)
@@ -528,11 +528,11 @@ class RfiMonitor:
             return JammerEstimate(stamp_ns, UNKNOWN, 0.5, nan, nan, nan, nan, nan, nan, nan, nan, fs, first,
                                   xs.size, True, self._counters(), traces)
         jn_pow = 10 * math.log10(feat.power / self._floor - 1.0) if feat.power > self._floor else -math.inf
-        locked = bool(st.si[J_LOCKED] == 1)
-        df = float(st.fst[F_DF])
+        locked = bool(st.si[SweepInt.LOCKED] == 1)
+        df = float(st.fst[FilterFloat.DF])
         # a chirp's swept band |df| T must explain the occupied band (a lock on noise peaks does not)
         band = 1.0 if cplx else 0.5
-        per_s = float(st.sf[S_PERIOD])
+        per_s = float(st.sf[SweepFloat.PERIOD])
         lattice = float(st.mst[MonitorFloat.NEXT]) >= 0.0 and int(st.mist[MonitorInt.LATSRC]) > 0
         if lattice and float(st.mst[MonitorFloat.TLAT]) > 0:
             per_s = float(st.mst[MonitorFloat.TLAT])
@@ -561,8 +561,8 @@ class RfiMonitor:
         js = jn + n_dbm - p.signal_power_dbm if math.isfinite(jn) else nan
         freq = fstd = rate = per = f0 = bw = nan
         if jtype in (CW, CHIRP):
-            freq = self._to_rel_hz(float(st.fst[F_F]), fs, fif, cplx)
-            fstd = math.sqrt(max(float(st.fst[F_P11]), 0.0)) * fs
+            freq = self._to_rel_hz(float(st.fst[FilterFloat.F]), fs, fif, cplx)
+            fstd = math.sqrt(max(float(st.fst[FilterFloat.P11]), 0.0)) * fs
             sgn = -1.0 if (not cplx and fif < 0) else 1.0
             if jtype == CW:
                 # the three-sample measurement is biased towards fs/4 at low J/N (arccos of a
@@ -590,12 +590,13 @@ class RfiMonitor:
         """Current tracker state: frequency (cycles/sample), rate, P, period (samples), last start."""
         st = self._state
         lattice = float(st.mst[MonitorFloat.NEXT]) >= 0.0 and int(st.mist[MonitorInt.LATSRC]) > 0
-        per = float(st.mst[MonitorFloat.TLAT]) if lattice else float(st.sf[S_PERIOD])
-        locked = lattice or int(st.si[J_LOCKED]) == 1
-        return {"f": float(st.fst[F_F]), "df": float(st.fst[F_DF]), "p11": float(st.fst[F_P11]),
-                "p22": float(st.fst[F_P22]), "period_samples": per if locked else math.nan,
-                "locked": float(locked), "lpd_locked": float(st.si[J_LOCKED]),
-                "lpd_period_samples": float(st.sf[S_PERIOD]),
+        per = float(st.mst[MonitorFloat.TLAT]) if lattice else float(st.sf[SweepFloat.PERIOD])
+        locked = lattice or int(st.si[SweepInt.LOCKED]) == 1
+        return {"f": float(st.fst[FilterFloat.F]), "df": float(st.fst[FilterFloat.DF]),
+                "p11": float(st.fst[FilterFloat.P11]),
+                "p22": float(st.fst[FilterFloat.P22]), "period_samples": per if locked else math.nan,
+                "locked": float(locked), "lpd_locked": float(st.si[SweepInt.LOCKED]),
+                "lpd_period_samples": float(st.sf[SweepFloat.PERIOD]),
                 "lattice_source": float(st.mist[MonitorInt.LATSRC]),
                 "last_start": float(st.mist[MonitorInt.LAST_START]),
                 "tracking_mode": float(st.mist[MonitorInt.TRACK])}

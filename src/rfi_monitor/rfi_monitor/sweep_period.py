@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import IntEnum
 
 import numpy as np
 from numba import njit
@@ -53,16 +54,59 @@ AR_ORDER = 10
 PEAK_RING = 16
 """Number of recent peak times kept for the period estimate."""
 
-# float state layout
-S_ZG, S_ACC, S_NOISE, S_PKMAX, S_PERIOD, S_ZAR, S_CAND = 0, 1, 2, 3, 4, 5, 6
-N_SFSTATE = 7
-# int state layout
-J_DEC, J_INPEAK, J_PKIDX, J_NPEAKS, J_RPOS, J_RCOUNT, J_LOCKED, J_ZPOS, J_ZCOUNT, J_NDEC = range(10)
-N_SISTATE = 10
-# packed parameters (SweepPeriodParams.as_array)
-(Q_GAMMA, Q_NORM, Q_THR, Q_KAPPA, Q_LAMBDA, Q_DEC, Q_QAR, Q_RAR, Q_A, Q_DELAY, Q_MINSEP, Q_TOL, Q_MINCONS,
- Q_TOLABS, Q_MAXPER, Q_VOTING, Q_ARK) = range(17)
-N_SPAR = 17
+
+class SweepFloat(IntEnum):
+    """Slots of the float state of the sweep-period estimator (``initial_state()[0]``)."""
+
+    ZG = 0
+    ACC = 1
+    NOISE = 2
+    PKMAX = 3
+    PERIOD = 4
+    ZAR = 5
+    CAND = 6
+
+
+class SweepInt(IntEnum):
+    """Slots of its int state (``initial_state()[1]``)."""
+
+    DEC = 0
+    INPEAK = 1
+    PKIDX = 2
+    NPEAKS = 3
+    RPOS = 4
+    RCOUNT = 5
+    LOCKED = 6
+    ZPOS = 7
+    ZCOUNT = 8
+    NDEC = 9
+
+
+class SweepParam(IntEnum):
+    """Slots of the packed parameters (``SweepPeriodParams.as_array``)."""
+
+    GAMMA = 0
+    NORM = 1
+    THR = 2
+    KAPPA = 3
+    LAMBDA = 4
+    DEC = 5
+    QAR = 6
+    RAR = 7
+    A = 8
+    DELAY = 9
+    MINSEP = 10
+    TOL = 11
+    MINCONS = 12
+    TOLABS = 13
+    MAXPER = 14
+    VOTING = 15
+    ARK = 16
+
+
+N_SFSTATE = len(SweepFloat)
+N_SISTATE = len(SweepInt)
+N_SPAR = len(SweepParam)
 
 AR_LR_MAX = 8
 """Most rank-one terms kept by the low-rank AR covariance (see ``ar_step``)."""
@@ -179,8 +223,8 @@ def initial_state() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.
                              np.ndarray]:
     """(float state, int state, z history, AR Gamma, AR P (``ar_step``), AR history, peaks)."""
     sf = np.zeros(N_SFSTATE)
-    sf[S_PERIOD] = math.nan
-    sf[S_CAND] = math.nan
+    sf[SweepFloat.PERIOD] = math.nan
+    sf[SweepFloat.CAND] = math.nan
     return (sf, np.zeros(N_SISTATE, dtype=np.int64), np.zeros(LPD_LAG), np.zeros(AR_ORDER),
             initial_ar_covariance(), np.zeros(AR_ORDER), np.zeros(PEAK_RING, dtype=np.int64))
 
@@ -198,11 +242,11 @@ def _update_period_intervals(sf: np.ndarray, si: np.ndarray, peaks: np.ndarray, 
     """Period from successive peak intervals (step 4, default): d_i consistent when within tol of
     q_i = 1 or 2 times the median interval; T = sum d_i / sum q_i; locked when at least
     min_consistent intervals, and 60 % of them, are consistent."""
-    cnt = si[J_RCOUNT]
+    cnt = si[SweepInt.RCOUNT]
     if cnt < 2:
         return
     k = peaks.size
-    start = (si[J_RPOS] - cnt) % k
+    start = (si[SweepInt.RPOS] - cnt) % k
     d = np.empty(cnt - 1)
     prev = peaks[start]
     for i in range(1, cnt):
@@ -212,7 +256,7 @@ def _update_period_intervals(sf: np.ndarray, si: np.ndarray, peaks: np.ndarray, 
     med = np.median(d)
     if med <= 0:
         return
-    tol = par[Q_TOL]
+    tol = par[SweepParam.TOL]
     sd = 0.0
     sq = 0.0
     nc = 0
@@ -222,11 +266,11 @@ def _update_period_intervals(sf: np.ndarray, si: np.ndarray, peaks: np.ndarray, 
             sd += d[i]
             sq += q
             nc += 1
-    if nc >= int(par[Q_MINCONS]) and 5 * nc >= 3 * d.size:
-        sf[S_PERIOD] = sd / sq
-        si[J_LOCKED] = 1
+    if nc >= int(par[SweepParam.MINCONS]) and 5 * nc >= 3 * d.size:
+        sf[SweepFloat.PERIOD] = sd / sq
+        si[SweepInt.LOCKED] = 1
     else:
-        si[J_LOCKED] = 0
+        si[SweepInt.LOCKED] = 0
 
 
 @njit(cache=True)
@@ -255,15 +299,15 @@ def _update_period(sf: np.ndarray, si: np.ndarray, peaks: np.ndarray, par: np.nd
     q = 1, 2. Each candidate is refined twice by least squares (first on lattice numbers <= 4,
     where its error is small, then on all), then scored.
     """
-    cnt = si[J_RCOUNT]
+    cnt = si[SweepInt.RCOUNT]
     if cnt < 3:
         return
     k = peaks.size
-    newest = peaks[(si[J_RPOS] - 1) % k]
+    newest = peaks[(si[SweepInt.RPOS] - 1) % k]
     d = np.empty(cnt - 1)
     for b in range(1, cnt):
-        d[b - 1] = newest - peaks[(si[J_RPOS] - 1 - b) % k]
-    tol_rel, tol_abs, min_sep = par[Q_TOL], par[Q_TOLABS], par[Q_MINSEP]
+        d[b - 1] = newest - peaks[(si[SweepInt.RPOS] - 1 - b) % k]
+    tol_rel, tol_abs, min_sep = par[SweepParam.TOL], par[SweepParam.TOLABS], par[SweepParam.MINSEP]
     best_score = -1e300
     best_t = math.nan
     best_ok = False
@@ -272,7 +316,7 @@ def _update_period(sf: np.ndarray, si: np.ndarray, peaks: np.ndarray, par: np.nd
             tc = d[a] / q
             if tc < min_sep:
                 break
-            if tc > par[Q_MAXPER]:
+            if tc > par[SweepParam.MAXPER]:
                 continue
             fit, span, tc = _lattice_fit(d, tc, tol_abs, tol_rel, 4)
             fit, span, tc = _lattice_fit(d, tc, tol_abs, tol_rel, 1 << 30)
@@ -288,17 +332,17 @@ def _update_period(sf: np.ndarray, si: np.ndarray, peaks: np.ndarray, par: np.nd
                 best_score, best_t = score, t_ls
                 # significance: peaks that fit by chance, in_span p0, with p0 = 2 tol / T
                 chance = in_span * min(1.0, 2.0 * max(tol_abs, tol_rel * t_ls) / t_ls)
-                best_ok = (fit >= int(par[Q_MINCONS]) + 1 and 3 * fit >= expected
-                           and 5 * fit >= 3 * in_span and t_ls <= par[Q_MAXPER]
+                best_ok = (fit >= int(par[SweepParam.MINCONS]) + 1 and 3 * fit >= expected
+                           and 5 * fit >= 3 * in_span and t_ls <= par[SweepParam.MAXPER]
                            and fit >= chance + 4.0 * math.sqrt(chance) + 2.0)
     # a lattice that fits by chance does not repeat: the previous vote must agree
-    prev = sf[S_CAND]
-    sf[S_CAND] = best_t if best_ok else math.nan
+    prev = sf[SweepFloat.CAND]
+    sf[SweepFloat.CAND] = best_t if best_ok else math.nan
     if best_ok and abs(best_t - prev) <= tol_rel * best_t:
-        sf[S_PERIOD] = best_t
-        si[J_LOCKED] = 1
+        sf[SweepFloat.PERIOD] = best_t
+        si[SweepInt.LOCKED] = 1
     elif not best_ok and not prev > 0:
-        si[J_LOCKED] = 0                       # two failed votes in a row unlock
+        si[SweepInt.LOCKED] = 0                       # two failed votes in a row unlock
 
 
 @njit(cache=True, inline="always", fastmath=_AR_FASTMATH)
@@ -511,41 +555,42 @@ def ar_step(v: float, gam: np.ndarray, pmat: np.ndarray, hist: np.ndarray, a: fl
 def peak_step(n: int, zar: float, sf: np.ndarray, si: np.ndarray, peaks: np.ndarray, par: np.ndarray) -> int:
     """Peak detection on zAR at a decimated step ending at sample n; returns the estimated sweep
     start (sample index, group delay removed) of a newly completed peak, or -1."""
-    dec = int(par[Q_DEC])
-    si[J_NDEC] += 1
-    sf[S_ZAR] = zar
-    thr = max(par[Q_THR], par[Q_KAPPA] * sf[S_NOISE])
+    dec = int(par[SweepParam.DEC])
+    si[SweepInt.NDEC] += 1
+    sf[SweepFloat.ZAR] = zar
+    thr = max(par[SweepParam.THR], par[SweepParam.KAPPA] * sf[SweepFloat.NOISE])
     out = -1
-    if zar > thr and si[J_NDEC] > max(2 * AR_ORDER, 1.0 / par[Q_LAMBDA]):   # after the noise level warms up
-        if si[J_INPEAK] == 0:
-            si[J_INPEAK] = 1
-            sf[S_PKMAX] = zar
-            si[J_PKIDX] = n - dec // 2
-        elif zar > sf[S_PKMAX]:
-            sf[S_PKMAX] = zar
-            si[J_PKIDX] = n - dec // 2
+    # after the noise level warms up
+    if zar > thr and si[SweepInt.NDEC] > max(2 * AR_ORDER, 1.0 / par[SweepParam.LAMBDA]):
+        if si[SweepInt.INPEAK] == 0:
+            si[SweepInt.INPEAK] = 1
+            sf[SweepFloat.PKMAX] = zar
+            si[SweepInt.PKIDX] = n - dec // 2
+        elif zar > sf[SweepFloat.PKMAX]:
+            sf[SweepFloat.PKMAX] = zar
+            si[SweepInt.PKIDX] = n - dec // 2
     else:
-        if si[J_INPEAK] == 1:
-            si[J_INPEAK] = 0
-            t_pk = si[J_PKIDX]
-            last = peaks[(si[J_RPOS] - 1) % peaks.size]
-            min_sep = float(par[Q_MINSEP])
-            if si[J_LOCKED] == 1:
-                min_sep = max(min_sep, 0.3 * sf[S_PERIOD])    # no second peak early in a locked sweep
-            if si[J_RCOUNT] == 0 or t_pk - last >= min_sep:
-                peaks[si[J_RPOS]] = t_pk
-                si[J_RPOS] = (si[J_RPOS] + 1) % peaks.size
-                if si[J_RCOUNT] < peaks.size:
-                    si[J_RCOUNT] += 1
-                si[J_NPEAKS] += 1
-                if par[Q_VOTING] < 0.5:
+        if si[SweepInt.INPEAK] == 1:
+            si[SweepInt.INPEAK] = 0
+            t_pk = si[SweepInt.PKIDX]
+            last = peaks[(si[SweepInt.RPOS] - 1) % peaks.size]
+            min_sep = float(par[SweepParam.MINSEP])
+            if si[SweepInt.LOCKED] == 1:
+                min_sep = max(min_sep, 0.3 * sf[SweepFloat.PERIOD])    # no second peak early in a locked sweep
+            if si[SweepInt.RCOUNT] == 0 or t_pk - last >= min_sep:
+                peaks[si[SweepInt.RPOS]] = t_pk
+                si[SweepInt.RPOS] = (si[SweepInt.RPOS] + 1) % peaks.size
+                if si[SweepInt.RCOUNT] < peaks.size:
+                    si[SweepInt.RCOUNT] += 1
+                si[SweepInt.NPEAKS] += 1
+                if par[SweepParam.VOTING] < 0.5:
                     _update_period_intervals(sf, si, peaks, par)
-                elif si[J_LOCKED] == 0 or si[J_NPEAKS] % 4 == 0:
+                elif si[SweepInt.LOCKED] == 0 or si[SweepInt.NPEAKS] % 4 == 0:
                     _update_period(sf, si, peaks, par)
-                out = t_pk - int(par[Q_DELAY] + 0.5)
+                out = t_pk - int(par[SweepParam.DELAY] + 0.5)
         # noise level: EWMA of |zAR| outside peaks
-        lam = par[Q_LAMBDA]
-        sf[S_NOISE] = (1.0 - lam) * sf[S_NOISE] + lam * abs(zar)
+        lam = par[SweepParam.LAMBDA]
+        sf[SweepFloat.NOISE] = (1.0 - lam) * sf[SweepFloat.NOISE] + lam * abs(zar)
     return out
 
 
@@ -553,8 +598,8 @@ def peak_step(n: int, zar: float, sf: np.ndarray, si: np.ndarray, peaks: np.ndar
 def _run(z: np.ndarray, par: np.ndarray, sign: float, wrap: bool) -> tuple[np.ndarray, np.ndarray,
                                                                            np.ndarray, float, int]:
     sf, si = np.zeros(N_SFSTATE), np.zeros(N_SISTATE, dtype=np.int64)
-    sf[S_PERIOD] = math.nan
-    sf[S_CAND] = math.nan
+    sf[SweepFloat.PERIOD] = math.nan
+    sf[SweepFloat.CAND] = math.nan
     zhist = np.zeros(LPD_LAG)
     gam = np.zeros(AR_ORDER)
     pmat = np.zeros((AR_PMAT_ROWS, AR_ORDER))
@@ -567,7 +612,7 @@ def _run(z: np.ndarray, par: np.ndarray, sign: float, wrap: bool) -> tuple[np.nd
     zar_out = np.empty(z.size)
     starts = np.full(z.size, -1, dtype=np.int64)
     ns = 0
-    gamma, norm, dec = par[Q_GAMMA], par[Q_NORM], int(par[Q_DEC])
+    gamma, norm, dec = par[SweepParam.GAMMA], par[SweepParam.NORM], int(par[SweepParam.DEC])
     zg = 0.0
     acc = 0.0
     ndec = 0
@@ -585,7 +630,8 @@ def _run(z: np.ndarray, par: np.ndarray, sign: float, wrap: bool) -> tuple[np.nd
         acc += zg * sign
         ndec += 1
         if ndec == dec:
-            zar = ar_step(acc / dec, gam, pmat, hist, par[Q_A], par[Q_QAR], par[Q_RAR], int(par[Q_ARK]))
+            zar = ar_step(acc / dec, gam, pmat, hist, par[SweepParam.A], par[SweepParam.QAR], par[SweepParam.RAR],
+                          int(par[SweepParam.ARK]))
             acc = 0.0
             ndec = 0
             s = peak_step(n, zar, sf, si, peaks, par)
@@ -593,8 +639,8 @@ def _run(z: np.ndarray, par: np.ndarray, sign: float, wrap: bool) -> tuple[np.nd
                 starts[ns] = s
                 ns += 1
         zg_out[n] = zg
-        zar_out[n] = sf[S_ZAR]
-    return zg_out, zar_out, starts[:ns], sf[S_PERIOD], si[J_LOCKED]
+        zar_out[n] = sf[SweepFloat.ZAR]
+    return zg_out, zar_out, starts[:ns], sf[SweepFloat.PERIOD], si[SweepInt.LOCKED]
 
 
 def estimate_sweep_period(z: np.ndarray, params: SweepPeriodParams = SweepPeriodParams(), band: float = 0.5,

@@ -110,21 +110,10 @@ from rfi_monitor.if_measurement import (
 )
 from rfi_monitor.sweep_period import (
     _AR_FASTMATH,
-    J_LOCKED,
-    J_NDEC,
     LPD_LAG,
-    Q_A,
-    Q_ARK,
-    Q_DEC,
-    Q_GAMMA,
-    Q_NORM,
-    Q_QAR,
-    Q_RAR,
-    Q_TOL,
-    S_CAND,
-    S_NOISE,
-    S_PERIOD,
-    S_ZAR,
+    SweepFloat,
+    SweepInt,
+    SweepParam,
     ar_step,
     peak_step,
 )
@@ -136,21 +125,12 @@ from rfi_monitor.tracker_state import (
     TraceBuffers,
     TrackerState,
 )
-from rfi_monitor.tracking_filters import (
-    F_DF,
-    F_F,
-    F_P11,
-    F_P12,
-    F_P22,
-    F_WSUM,
-    I_WCOUNT,
-    I_WPOS,
-    filter_step,
-    kf_sweep_reset,
-)
+from rfi_monitor.tracking_filters import FilterFloat, FilterInt, filter_step, kf_sweep_reset
 
 MF, MI, MP = MonitorFloat, MonitorInt, MonitorParam
-"""Short names of the packed layouts (tracker_state) in the kernel."""
+SF, SI, SQ = SweepFloat, SweepInt, SweepParam
+FF, FI = FilterFloat, FilterInt
+"""Short names of the packed layouts (tracker_state, sweep_period, tracking_filters) in the kernel."""
 
 MAX_ABS_RATE = 0.02
 """Clamp of |df| used inside the chirp correction, cycles/sample^2 (guards a diverged estimate)."""
@@ -260,13 +240,13 @@ def _period_search_resume(sf: np.ndarray, si: np.ndarray, peaks: np.ndarray) -> 
     history, the period lock and the peak in progress are forgotten (the jammer may have changed);
     the AR(10) coefficients and covariance, the zAR noise level and the warm-up count are kept, so
     that peaks are detected at once. (The LPD delay line is restarted by the caller.)"""
-    noise, ndec = sf[S_NOISE], si[J_NDEC]
+    noise, ndec = sf[SF.NOISE], si[SI.NDEC]
     sf[:] = 0.0
-    sf[S_PERIOD] = math.nan
-    sf[S_CAND] = math.nan
-    sf[S_NOISE] = noise
+    sf[SF.PERIOD] = math.nan
+    sf[SF.CAND] = math.nan
+    sf[SF.NOISE] = noise
     si[:] = 0
-    si[J_NDEC] = ndec
+    si[SI.NDEC] = ndec
     peaks[:] = 0
 
 
@@ -315,9 +295,9 @@ def _track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: 
     confirm_n = int(mpar[MP.CONFIRM]) if refine_w > 0 else 0
     # noise compensation (if_measurement): kappa = 1 - floor / running power, floor 0 (unknown) -> 1
     floor = mst[MF.FLOOR] if (mpar[MP.NOISE_COMP] > 0.5 and not is_complex) else 0.0
-    tol = spar[Q_TOL]
-    gamma, norm, dec = spar[Q_GAMMA], spar[Q_NORM], int(spar[Q_DEC])
-    a_ar, q_ar, r_ar, k_ar = spar[Q_A], spar[Q_QAR], spar[Q_RAR], int(spar[Q_ARK])
+    tol = spar[SQ.TOL]
+    gamma, norm, dec = spar[SQ.GAMMA], spar[SQ.NORM], int(spar[SQ.DEC])
+    a_ar, q_ar, r_ar, k_ar = spar[SQ.A], spar[SQ.QAR], spar[SQ.RAR], int(spar[SQ.ARK])
     lpd_scale = (1.0 - gamma) / norm
     inv_dec = 1.0 / dec
     min_abs_ratio2 = min_abs_ratio * min_abs_ratio
@@ -333,8 +313,8 @@ def _track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: 
     n_nonfin = 0
     n_corr = 0
     # ---- load the hot state into locals ---------------------------------------------------------
-    f, df, p11, p12, p22, wsum = fst[F_F], fst[F_DF], fst[F_P11], fst[F_P12], fst[F_P22], fst[F_WSUM]
-    wcount, wpos = ist[I_WCOUNT], ist[I_WPOS]
+    f, df, p11, p12, p22, wsum = fst[FF.F], fst[FF.DF], fst[FF.P11], fst[FF.P12], fst[FF.P22], fst[FF.WSUM]
+    wcount, wpos = ist[FI.WCOUNT], ist[FI.WPOS]
     re2, im2, re1, im1 = mst[MF.RE2], mst[MF.IM2], mst[MF.RE1], mst[MF.IM1]
     pw = mst[MF.POW]
     ikap_w = mst[MF.IKAP]
@@ -372,7 +352,7 @@ def _track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: 
     zlb = np.empty(2 * CHUNK)                       # z (or the prior if rejected) of two chunks, for the LPD
     sgb = np.empty(2 * CHUNK)                       # the filter's df after each sample (its sign: LPD sum)
     qh, lq, mq0, qbase = 0, 0, 0, 0                 # LPD queue: half, length, first sample, first output
-    zprev = sf[S_ZAR]
+    zprev = sf[SF.ZAR]
     o0 = 0
     sbuf = np.empty(2 * CHUNK, dtype=np.int64)
     dfc = np.empty(CHUNK)
@@ -568,8 +548,8 @@ def _track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: 
                     start = peak_step(mq0 + i, zar, sf, si, peaks, spar)
                     if start >= 0 and nlev < CHUNK:    # (at most one peak per two decimated steps)
                         lev[4 * nlev] = start
-                        lev[4 * nlev + 1] = sf[S_PERIOD]
-                        lev[4 * nlev + 2] = si[J_LOCKED]
+                        lev[4 * nlev + 1] = sf[SF.PERIOD]
+                        lev[4 * nlev + 2] = si[SI.LOCKED]
                         lev[4 * nlev + 3] = mq0 + i
                         nlev += 1
                     if store:                            # zAR trace: held between decimated steps
@@ -642,8 +622,8 @@ def _track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: 
     if is_complex:
         im2, im1 = xie[n], xie[n + 1]
     # ---- store the state -------------------------------------------------------------------------
-    fst[F_F], fst[F_DF], fst[F_P11], fst[F_P12], fst[F_P22], fst[F_WSUM] = f, df, p11, p12, p22, wsum
-    ist[I_WCOUNT], ist[I_WPOS] = wcount, wpos
+    fst[FF.F], fst[FF.DF], fst[FF.P11], fst[FF.P12], fst[FF.P22], fst[FF.WSUM] = f, df, p11, p12, p22, wsum
+    ist[FI.WCOUNT], ist[FI.WPOS] = wcount, wpos
     mst[MF.RE2], mst[MF.IM2], mst[MF.RE1], mst[MF.IM1] = re2, im2, re1, im1
     mst[MF.POW] = pw
     mst[MF.IKAP] = ikap_w
@@ -655,7 +635,7 @@ def _track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: 
     mist[MI.ZPOS] = zpos
     mist[MI.NMEAS] = nmeas
     mist[MI.NLEV] = nlev
-    sf[S_ZAR] = zprev                                # the held zAR trace value (NaN while suspended)
+    sf[SF.ZAR] = zprev                                # the held zAR trace value (NaN while suspended)
     mist[MI.NCONS], mist[MI.TRACK], mist[MI.SWAT], mist[MI.SWMODE], mist[MI.LPDOFF] = ncons, trk, swat, swmode, lpdoff
     counters[STATUS_OK] += n_ok
     counters[STATUS_NEAR_ZERO] += n_near

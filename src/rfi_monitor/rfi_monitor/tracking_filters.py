@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import IntEnum
 
 import numpy as np
 from numba import njit
@@ -51,12 +52,26 @@ MODE_KF = 0
 MODE_AKF = 1
 MODE_AFKF = 2
 
-# layout of the float state vector of one filter
-F_F, F_DF, F_P11, F_P12, F_P22, F_WSUM = 0, 1, 2, 3, 4, 5
-N_FSTATE = 6
-# layout of the int state vector of one filter
-I_WCOUNT, I_WPOS = 0, 1
-N_ISTATE = 2
+class FilterFloat(IntEnum):
+    """Slots of the float state vector of one filter (cycles/sample, cycles/sample^2)."""
+
+    F = 0
+    DF = 1
+    P11 = 2
+    P12 = 3
+    P22 = 4
+    WSUM = 5
+
+
+class FilterInt(IntEnum):
+    """Slots of the int state vector of one filter (innovation window)."""
+
+    WCOUNT = 0
+    WPOS = 1
+
+
+N_FSTATE = len(FilterFloat)
+N_ISTATE = len(FilterInt)
 
 
 @dataclass(frozen=True)
@@ -109,9 +124,9 @@ class TrackingFilterParams:
     def initial_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(float state, int state, innovation ring buffer) at start."""
         fst = np.zeros(N_FSTATE)
-        fst[F_F] = self.initial_frequency
-        fst[F_P11] = self.initial_frequency_std ** 2
-        fst[F_P22] = self.initial_rate_std ** 2
+        fst[FilterFloat.F] = self.initial_frequency
+        fst[FilterFloat.P11] = self.initial_frequency_std ** 2
+        fst[FilterFloat.P22] = self.initial_rate_std ** 2
         return fst, np.zeros(N_ISTATE, dtype=np.int64), np.zeros(int(self.window))
 
 
@@ -287,8 +302,9 @@ def _run(z: np.ndarray, valid: np.ndarray, reset: np.ndarray, par: np.ndarray, f
     n = z.size
     mode = int(par[0])
     r, q_f, q_df = par[1], par[2], par[3]
-    f, df, p11, p12, p22, wsum = fst[F_F], fst[F_DF], fst[F_P11], fst[F_P12], fst[F_P22], fst[F_WSUM]
-    count, pos = ist[I_WCOUNT], ist[I_WPOS]
+    f, df, p11 = fst[FilterFloat.F], fst[FilterFloat.DF], fst[FilterFloat.P11]
+    p12, p22, wsum = fst[FilterFloat.P12], fst[FilterFloat.P22], fst[FilterFloat.WSUM]
+    count, pos = ist[FilterInt.WCOUNT], ist[FilterInt.WPOS]
     f_out = np.empty(n)
     df_out = np.empty(n)
     p11_out = np.empty(n)
@@ -302,8 +318,9 @@ def _run(z: np.ndarray, valid: np.ndarray, reset: np.ndarray, par: np.ndarray, f
         (f_out[k], df_out[k], p11_out[k], f, df, p11, p12, p22, ring[p0], pos, count,
          wsum) = filter_step(mode, f, df, p11, p12, p22, z[k], valid[k], wrap, ring[pos], pos, count, ring.size,
                              wsum, r, q_f, q_df)
-    fst[F_F], fst[F_DF], fst[F_P11], fst[F_P12], fst[F_P22], fst[F_WSUM] = f, df, p11, p12, p22, wsum
-    ist[I_WCOUNT], ist[I_WPOS] = count, pos
+    fst[FilterFloat.F], fst[FilterFloat.DF], fst[FilterFloat.P11] = f, df, p11
+    fst[FilterFloat.P12], fst[FilterFloat.P22], fst[FilterFloat.WSUM] = p12, p22, wsum
+    ist[FilterInt.WCOUNT], ist[FilterInt.WPOS] = count, pos
     return f_out, df_out, p11_out
 
 
