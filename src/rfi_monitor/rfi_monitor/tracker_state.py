@@ -12,7 +12,8 @@ is the same as with integer literals):
   gains.
 
 The filter's and the sweep-period estimator's packed states keep their layouts in their own modules
-(``tracking_filters.F_*`` / ``I_*``, ``sweep_period.S_*`` / ``J_*`` / ``Q_*``), which run alone too.
+(``tracking_filters.FilterFloat`` / ``FilterInt``, ``sweep_period.SweepFloat`` / ``SweepInt`` /
+``SweepParam``), which run alone too.
 :class:`TrackerState` names every array of the loop's state and :class:`TraceBuffers` its per-sample
 outputs; ``track_block`` unpacks both once, at the call of the compiled kernel, so that its
 arguments are never listed by a caller. A new scalar state variable is one new enum member (and its
@@ -119,11 +120,11 @@ class TrackerState(NamedTuple):
     Field order is the compiled kernel's argument order (tested).
     """
 
-    fst: np.ndarray        # filter floats (tracking_filters.F_*)
-    ist: np.ndarray        # filter ints (tracking_filters.I_*)
+    fst: np.ndarray        # filter floats (tracking_filters.FilterFloat)
+    ist: np.ndarray        # filter ints (tracking_filters.FilterInt)
     ring: np.ndarray       # filter innovation window
-    sf: np.ndarray         # sweep-period floats (sweep_period.S_*)
-    si: np.ndarray         # sweep-period ints (sweep_period.J_*)
+    sf: np.ndarray         # sweep-period floats (sweep_period.SweepFloat)
+    si: np.ndarray         # sweep-period ints (sweep_period.SweepInt)
     zhist: np.ndarray      # LPD delay line, LPD_LAG
     gam: np.ndarray        # AR(10) coefficients
     pmat: np.ndarray       # AR(10) covariance (low-rank form)
