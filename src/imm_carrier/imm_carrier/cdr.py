@@ -219,7 +219,7 @@ def _streams(values_a, method_a, values_b, method_b, slots):
     ints[0] = n
     ni, nf = _put_rows(values_a, method_a, slots, ints, floats, 1, 0)
     ni, nf = _put_rows(values_b, method_b, slots, ints, floats, ni, nf)
-    return ints[:ni].copy(), floats[:nf].copy()
+    return ints[:ni], floats[:nf]
 
 
 _EMPTY_TABLE = np.empty((0, len(BATCH_COLUMNS)))

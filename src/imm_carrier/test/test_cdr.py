@@ -194,3 +194,12 @@ def test_decoder_requires_a_terminated_frame_id():
     assert decode_correlator_array(no_nul) is None
     empty = raw[:12] + bytes(4) + raw[16:]  # string length 0: not a CDR string (the NUL counts)
     assert decode_correlator_array(empty) is None
+
+
+def test_every_carrier_phase_field_has_a_source():
+    """The encoder says where each CarrierPhase field comes from, by name (a field added to the .msg without a
+    source fails at import); the decoder finds the Correlator fields by name in the layout."""
+    from imm_carrier.cdr import ESTIMATE_SOURCES
+
+    assert list(ESTIMATE_SOURCES) == list(CarrierPhase.get_fields_and_field_types())
+    assert {'constellation', 'svid', 'in_phase', 'quadrature'} <= set(Correlator.get_fields_and_field_types())

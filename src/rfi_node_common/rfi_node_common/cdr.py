@@ -17,6 +17,10 @@ module instead of hand-counting offsets. Nothing here is written per message typ
 * :mod:`rfi_node_common.message_builder` makes fast constructors of message objects from the same
   description (for outputs that must stay Python objects).
 
+Call the two interpreters from Python, not from a ``cache=True`` numba function of another package:
+numba's cache checks only the caller's own source file, so such a caller would keep running a stale
+copy of this module's code after it changes.
+
 Format (OMG CDR version 1 as the ROS 2 middlewares write it, little endian): a 4-byte encapsulation
 header ``00 01 00 00`` (CDR_LE), then the fields in declaration order, each primitive aligned to its
 own size counted from the end of the encapsulation header; a string is a uint32 length (with the
