@@ -24,6 +24,7 @@ import math
 import os
 import signal
 import subprocess
+import tempfile
 import time
 from collections import defaultdict
 from pathlib import Path
@@ -38,7 +39,7 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.serialization import deserialize_message
 from ros_fixtures import make_context
-from test_executables import executable, wait_for_line
+from test_executables import executable
 
 from rfi_experiments.bag_io import BagReader, message_class
 from rfi_node_common.qos import DATA_QOS, PLAYER_QOS
@@ -136,9 +137,10 @@ class NodeProcess:
                 args += ['-p', f'qos_overrides.{t}.subscription.reliability:=reliable',
                          '-p', f'qos_overrides.{t}.subscription.history:=keep_all']
         params = ['--params-file', str(ROOT / 'bags' / 'default.params.yaml')]
+        # stderr to a file, not a pipe: a node that logs faster than a pipe is read would block on it
+        self._log = tempfile.TemporaryFile(mode='w+')
         self.proc = subprocess.Popen([executable(package, name), '--ros-args', *params, *args, *extra_args],
-                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-        self.stderr = ''
+                                     stdout=subprocess.DEVNULL, stderr=self._log, text=True)
         self.context = make_context()
         self.node = rclpy.create_node('fuzzer', context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
@@ -150,11 +152,19 @@ class NodeProcess:
             self.node.create_subscription(cls, topic, lambda raw, t=topic, c=cls: self.out[t].append(
                 deserialize_message(raw, c)), DATA_QOS, raw=True)
         self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, DATA_QOS)
-        try:
-            self.stderr += wait_for_line(self.proc.stderr, f'{name} ready', timeout_s=120.0)
-        except AssertionError:
-            self.close()
-            raise
+        deadline = time.monotonic() + 120.0
+        while f'{name} ready' not in self.stderr:
+            if time.monotonic() > deadline or self.proc.poll() is not None:
+                self.close()
+                raise AssertionError(f'{name} did not start:\n{self.stderr[-3000:]}')
+            time.sleep(0.05)
+
+    @property
+    def stderr(self) -> str:
+        """What the node has written to stderr so far."""
+        self._log.flush()
+        self._log.seek(0)
+        return self._log.read()
 
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
         self.diagnostics.extend(s for s in msg.status if s.name and self._mine(s))
@@ -216,15 +226,16 @@ class NodeProcess:
         if self.proc.poll() is None:
             self.proc.send_signal(signal.SIGINT)
         try:
-            _, err = self.proc.communicate(timeout=30)
+            self.proc.wait(timeout=30)
         except subprocess.TimeoutExpired:
             self.proc.kill()
-            _, err = self.proc.communicate()
-        self.stderr += err or ''
+            self.proc.wait()
+        text = self.stderr
+        self._log.close()
         self.executor.remove_node(self.node)
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
-        return self.stderr
+        return text
 
 
 ANSWERS = {'rfi_monitor_node': ('/rfi/if_samples', '/rfi/jammer_state'),
@@ -298,7 +309,7 @@ def test_node_survives_hostile_input_and_accounts_for_every_message(name):
             send(topic, msg)
             rig.spin(0.001)
         rig.settle(pubs, timeout_s=SETTLE_S)
-        values = rig.latest_values(time.monotonic() + 1.0, level=DiagnosticStatus.STALE)
+        values = rig.latest_values(time.monotonic() + 1.0, level=DiagnosticStatus.STALE, timeout_s=SETTLE_S)
         alive = rig.alive()
     finally:
         stderr = rig.close()
