@@ -7,9 +7,11 @@ that started but failed exits with :data:`EXIT_FAILED`.
 
 from __future__ import annotations
 
+import argparse
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from functools import partial
+from pathlib import Path
 
 EXIT_FAILED = 1
 """Exit code of a run that started but failed (a node died, messages were lost)."""
@@ -26,3 +28,33 @@ def fail(prog: str, message: object, code: int = EXIT_USAGE) -> int:
 def error_reporter(prog: str) -> Callable[..., int]:
     """:func:`fail` bound to one tool: ``fail = error_reporter('play')``, then ``return fail('...')``."""
     return partial(fail, prog)
+
+
+def parse(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> argparse.Namespace | int:
+    """Parse a full argument vector (``argv[0]`` is the program name; None: ``sys.argv``): the namespace, or
+    argparse's exit code when it stopped (0 after ``--help``, 2 after a usage error it printed)."""
+    argv = list(sys.argv if argv is None else argv)
+    try:
+        return parser.parse_args(argv[1:])
+    except SystemExit as stop:
+        return int(stop.code or 0)
+
+
+def output_refusal(out: Path, overwrite: bool) -> str | None:
+    """Why a converter must not write ``out`` (it exists and ``--overwrite`` was not given), or None."""
+    if out.exists() and not overwrite:
+        return f"{out} exists already (remove it or pass --overwrite)"
+    return None
+
+
+def converter_start(parser: argparse.ArgumentParser, argv: Sequence[str] | None,
+                    report: Callable[[str], int]) -> tuple[argparse.Namespace, Path] | int:
+    """The start of a converter (``args.out`` is the bag to write, ``args.overwrite`` its flag): parse,
+    then refuse an existing output. Returns ``(args, out)``, or the exit code to return (argparse's, or
+    ``report(reason)``'s)."""
+    args = parse(parser, argv)
+    if isinstance(args, int):
+        return args
+    out = Path(args.out)
+    refusal = output_refusal(out, args.overwrite)
+    return report(refusal) if refusal else (args, out)

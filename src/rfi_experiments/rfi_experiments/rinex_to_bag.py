@@ -38,6 +38,7 @@ from gnss_common.ephemeris import earth_rotation_correction
 from gnss_common.measurements import SKIP_REASONS, EpochBuildResult, GnssEpochBuilder
 from gnss_common.observations import GnssEpoch
 from gnss_common.rinex import RinexFormatError, read_rinex_nav, read_rinex_obs
+from rfi_experiments import cli
 from rfi_experiments.bag_io import BagError, BagWriter
 from rfi_experiments.cli import error_reporter
 from uwb_gnss_fusion.conversions import epoch_to_msg, point_to_msg
@@ -195,14 +196,10 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Console entry point. ``argv`` is a full argument vector (``argv[0]`` is the program name),
     as ``sys.argv``, like the suite's other tools. Returns 0, or 2 on any input error."""
-    argv = list(sys.argv if argv is None else argv)
-    try:
-        args = build_parser().parse_args(argv[1:])
-    except SystemExit as stop:  # --help (0) or a usage error (2, argparse printed one line)
-        return int(stop.code or 0)
-    out = Path(args.out)
-    if out.exists() and not args.overwrite:
-        return _fail(f"{out} exists already (remove it or pass --overwrite)")
+    start = cli.converter_start(build_parser(), argv, _fail)
+    if isinstance(start, int):  # --help (0), a usage error (2, argparse printed it) or an existing output
+        return start
+    args, out = start
     try:
         conversion = convert_rinex(args.obs, args.nav, args.elevation_mask_deg)
         counts = write_bag(conversion, out, overwrite=args.overwrite)
