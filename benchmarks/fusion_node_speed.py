@@ -134,13 +134,15 @@ def replay(bag: Path = BAG, instrument: bool = False, keep_outputs: bool = True)
     deserialize = replay_module.deserialize_message
     if instrument:
         replay_module.deserialize_message = timer.wrap(deserialize, 'deserialize_s')
-        node.on_gnss = timer.wrap(node.on_gnss, 'node_s')  # type: ignore[method-assign]
+        # every input subscription is raw (CDR bytes, decoded by the node): time the node's raw handlers
+        # (set as the callbacks directly, so the input counters of subscribe_input are bypassed here)
+        node.on_gnss_raw = timer.wrap(node.on_gnss_raw, 'node_s')  # type: ignore[method-assign]
         node.on_uwb_raw = timer.wrap(node.on_uwb_raw, 'node_s')  # type: ignore[method-assign]
         for sub in node.subscriptions:
             if sub.topic_name == '/gnss/measurements':
-                sub.callback = node.on_gnss
+                sub.callback = node.on_gnss_raw
             elif sub.topic_name == '/uwb/ranges':
-                sub.callback = node.on_uwb_raw  # raw subscription: CDR bytes, decoded by the node
+                sub.callback = node.on_uwb_raw
         node.spp.process = timer.wrap(node.spp.process, 'spp_s')  # type: ignore[method-assign]
         publish = timer.wrap(node._publish, 'publish_s')
 
