@@ -86,3 +86,31 @@ def test_node_rejects_invalid_parameter_with_one_line(package, name):
     assert done.returncode == 2
     assert 'Traceback' not in done.stderr
     assert 'diagnostics_period_s' in done.stderr
+
+
+@pytest.mark.parametrize('package,name', NODES, ids=[e[1] for e in NODES])
+def test_node_refuses_a_parameter_it_does_not_have(package, name):
+    """A misspelt -p was silently ignored (issue 11, item 4): the node now refuses it at start, naming the
+    closest parameter it has, and exits 2 without a traceback."""
+    done = subprocess.run([executable(package, name), '--ros-args', '-p', 'no_such_param:=3',
+                           '-p', 'diagnostics_period_ss:=2.0'], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2, done.stderr
+    assert 'error: unknown parameters diagnostics_period_ss (did you mean diagnostics_period_s?), no_such_param' \
+        in done.stderr
+    assert 'Traceback' not in done.stderr
+
+
+def test_node_accepts_the_qos_override_of_its_inputs():
+    """qos_overrides.<input>.subscription.* are parameters of the node (declared by rclpy's QoS overriding), so
+    they are not unknown: the node starts and stops cleanly."""
+    proc = subprocess.Popen([executable('rfi_monitor', 'rfi_monitor_node'), '--ros-args', '-p',
+                             'qos_overrides./rfi/if_samples.subscription.reliability:=reliable'],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_for_line(proc.stderr, 'rfi_monitor_node ready', timeout_s=120.0)
+    except AssertionError:
+        proc.kill()
+        raise
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0, err

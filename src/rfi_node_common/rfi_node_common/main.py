@@ -6,7 +6,7 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from rfi_node_common.params import describe
+from rfi_node_common.params import describe, unknown_parameters, unknown_parameters_message
 
 
 def help_text(executable: str, summary: str, params_cls: type | None, topics: str) -> str:
@@ -22,7 +22,9 @@ def run_node(node_factory: Callable[[], Any], *, executable: str, summary: str, 
     """Create the node, spin it on a SingleThreadedExecutor until shutdown, and clean up.
 
     ``--help`` / ``-h`` (outside ``--ros-args``) prints the node's topics and parameters and exits.
-    A configuration error (invalid parameter) prints one line and returns 2.
+    A configuration error (invalid parameter, or a parameter given for this node that it does not have,
+    e.g. a misspelt ``-p``: :func:`rfi_node_common.params.unknown_parameters`) prints one line and
+    returns 2.
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -42,6 +44,9 @@ def run_node(node_factory: Callable[[], Any], *, executable: str, summary: str, 
     node = None
     try:
         node = node_factory()
+        unknown = unknown_parameters(node)
+        if unknown:
+            raise ValueError(unknown_parameters_message(node, unknown))
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         node.get_logger().info(f'{executable} ready')  # after set-up: from here Ctrl-C ends spin cleanly

@@ -128,3 +128,28 @@ def describe(params_cls: type) -> str:
             limits = f' {{{", ".join(doc["choices"])}}}'
         lines.append(f'  {field.name} (default {default!r}){limits}\n      {doc["description"]}')
     return '\n'.join(lines)
+
+
+def unknown_parameters(node: Any) -> list[str]:
+    """Names given to ``node`` (``-p NAME:=VALUE``, its section of a ``--params-file``) that it never declared.
+
+    rclpy ignores such a value silently, so a misspelt parameter would leave the default in force. Call
+    after the node has declared everything (its own parameters and the ``qos_overrides.*`` of its
+    subscriptions).
+    """
+    overrides = getattr(node, '_parameter_overrides', {})
+    return sorted(name for name in overrides if not node.has_parameter(name))
+
+
+def unknown_parameters_message(node: Any, unknown: list[str]) -> str:
+    """One line naming the unknown parameters, each with the closest declared names."""
+    import difflib
+
+    declared = [name for name in node._parameters if not name.startswith('qos_overrides.')] \
+        if hasattr(node, '_parameters') else []
+    parts = []
+    for name in unknown:
+        close = difflib.get_close_matches(name, declared, n=2, cutoff=0.75)
+        parts.append(f'{name} (did you mean {" or ".join(close)}?)' if close else name)
+    return (f'unknown parameter{"s" if len(unknown) > 1 else ""} {", ".join(parts)}: '
+            f'{node.get_name()} has no such parameter (see --help)')
