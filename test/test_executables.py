@@ -114,3 +114,40 @@ def test_node_accepts_the_qos_override_of_its_inputs():
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 0, err
+
+
+@pytest.mark.parametrize('package,name,topics', [
+    ('rfi_monitor', 'rfi_monitor_node', ('rfi/if_samples', 'rfi/jammer_state')),
+    ('uwb_gnss_fusion', 'fusion_node', ('gnss/measurements', 'uwb/ranges', 'rfi/jammer_state', 'fusion/odometry',
+                                        'fusion/fix', 'fusion/status')),
+    ('imm_carrier', 'imm_carrier_node', ('gnss/correlators', 'carrier/estimates')),
+], ids=['rfi_monitor_node', 'fusion_node', 'imm_carrier_node'])
+def test_node_topics_follow_its_namespace(package, name, topics):
+    """Issue 11, item 1: with -r __ns:=/robot1 every data topic moves under /robot1 (two receivers or two robots
+    no longer collide); /diagnostics stays at the root, where diagnostic aggregators listen."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from ros_fixtures import make_context
+
+    proc = subprocess.Popen([executable(package, name), '--ros-args', '-r', '__ns:=/robot1'],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    context = make_context()
+    try:
+        wait_for_line(proc.stderr, f'{name} ready', timeout_s=120.0)
+        probe = rclpy.create_node('namespace_probe', context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(probe)
+        expected = {f'/robot1/{t}' for t in topics} | {'/diagnostics'}
+        deadline = time.monotonic() + 20.0
+        seen: set[str] = set()
+        while not expected <= seen and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.1)
+            seen = {t for t, _ in probe.get_topic_names_and_types()}
+        executor.remove_node(probe)
+        probe.destroy_node()
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=30)
+        rclpy.try_shutdown(context=context)
+    assert expected <= seen, sorted(expected - seen)
+    assert not {f'/{t}' for t in topics} & seen, 'a data topic stayed at the root'

@@ -103,7 +103,8 @@ TOPICS = """topics:
 CUSTOM_CLOCK = 'custom'
 """clock_preset value that takes the clock from clock_h0_s and clock_h_minus2_hz."""
 
-INPUT_TOPIC = '/gnss/correlators'
+INPUT_TOPIC = 'gnss/correlators'
+"""Input topic, relative: /gnss/correlators without a namespace, /<ns>/gnss/correlators with ``-r __ns:=/<ns>``."""
 MALFORMED = 'malformed'
 STAMP_MALFORMED = 'stamp_malformed'
 ARRAY_REJECTION_REASONS = (MALFORMED, STAMP_MALFORMED, *STAMP_REASONS)
@@ -297,7 +298,7 @@ class ImmCarrierNode(Node):
         self._at_last_report: Counter[str] = Counter()
         self._diag_timer = StampTimer(self.params.diagnostics_period_s)
         self.health = InputHealth()
-        self.estimates_pub = self.create_publisher(CarrierPhaseArray, '/carrier/estimates', DATA_QOS)
+        self.estimates_pub = self.create_publisher(CarrierPhaseArray, 'carrier/estimates', DATA_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self.subscription = subscribe_input(self, CorrelatorArray, INPUT_TOPIC, self.on_correlators, self.health,
                                             raw=True, warning_throttle_s=self.params.warning_throttle_s)
@@ -453,7 +454,8 @@ class ImmCarrierNode(Node):
         values = self._values()
         self.diag_pub.publish(diagnostic_array(
             self.get_clock().now().nanoseconds, 'imm_carrier', self.get_name(), STALE,
-            f'no input on {INPUT_TOPIC} for {silent_s:.1f} s (wall clock); {self._channels_text(values)}', values))
+            f'no input on {self.subscription.topic_name} for {silent_s:.1f} s (wall clock); '
+            f'{self._channels_text(values)}', values))
 
 
 def main(argv=None) -> int:

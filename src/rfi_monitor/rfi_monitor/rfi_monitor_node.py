@@ -135,7 +135,8 @@ TOPICS = """topics:
   subscribes /rfi/if_samples (rfi_msgs/IfSamples)
   publishes  /rfi/jammer_state (rfi_msgs/JammerState), /diagnostics (diagnostic_msgs/DiagnosticArray)"""
 
-IF_TOPIC = '/rfi/if_samples'
+IF_TOPIC = 'rfi/if_samples'
+"""Input topic, relative: /rfi/if_samples without a namespace, /<ns>/rfi/if_samples with ``-r __ns:=/<ns>``."""
 
 SAMPLE_RATE_MIN_HZ = 1.0e5
 """Lowest sample rate accepted, Hz (module docstring: a GNSS band needs >= ~1 MS/s)."""
@@ -505,7 +506,7 @@ class RfiMonitorNode(Node):
         self._lost_at_last_report = 0
         self._handler_errors_at_last_report = 0
         self._diag_timer = StampTimer(self.params.diagnostics_period_s)
-        self.state_pub = self.create_publisher(JammerState, '/rfi/jammer_state', DATA_QOS)
+        self.state_pub = self.create_publisher(JammerState, 'rfi/jammer_state', DATA_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         # raw: bytes that rclpy cannot deserialise reach on_raw_block and are counted as malformed
         # (a non-raw subscription would drop them inside rclpy, seen only as a sequence gap)
@@ -598,8 +599,9 @@ class RfiMonitorNode(Node):
     def publish_stale(self, silent_s: float) -> None:
         """StaleInputWatch: a STALE status stamped with the node clock (no input for ``silent_s`` s)."""
         def make() -> DiagnosticArray:
+            topic = self.subscription.topic_name
             return diagnostic_array(max(0, self.get_clock().now().nanoseconds), 'rfi_monitor', self.get_name(),
-                                    STALE, f'no input on {IF_TOPIC} for {silent_s:.1f} s', self.accounting())
+                                    STALE, f'no input on {topic} for {silent_s:.1f} s', self.accounting())
         self._publish(make)
 
     def accounting(self) -> dict[str, object]:
@@ -615,7 +617,7 @@ class RfiMonitorNode(Node):
         values['last_type'] = 'none yet' if self._last_type is None else TYPE_NAMES.get(self._last_type, '?')
         values.update(self.health.values())
         received = self.counts['blocks_received']
-        values['accounting_ok'] = (self.health.counts[f'{IF_TOPIC}.received'] == received
+        values['accounting_ok'] = (self.health.counts[f'{self.subscription.topic_name}.received'] == received
                                    == self.counts['blocks_processed'] + rejected_total(self.counts))
         return values
 

@@ -104,7 +104,8 @@ def subscribe_input(node: Any, msg_type: Any, topic: str, callback: Callable[[An
     Args:
         node: the rclpy node.
         msg_type: message class.
-        topic: topic name.
+        topic: topic name; relative names resolve in the node's namespace, and the counters are keyed on
+            the resolved name (``input./robot1/rfi/if_samples.received`` under ``__ns:=/robot1``).
         callback: the node's handler, called with the message (or its bytes with ``raw``).
         health: the node's :class:`InputHealth`; ``topic`` is added to it.
         raw: deliver the serialised bytes.
@@ -116,6 +117,7 @@ def subscribe_input(node: Any, msg_type: Any, topic: str, callback: Callable[[An
     from rclpy.event_handler import SubscriptionEventCallbacks
     from rclpy.qos_overriding_options import QoSOverridingOptions
 
+    topic = node.resolve_topic_name(topic)  # a relative name lands in the node's namespace (-r __ns:=...)
     health.add_topic(topic)
     logger = node.get_logger()
 

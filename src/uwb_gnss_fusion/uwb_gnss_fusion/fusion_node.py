@@ -230,9 +230,9 @@ class FusionNode(Node):
         self._reasons_cache: tuple[tuple, dict[str, int], tuple[list[str], list[int]]] | None = None
         self._uwb_core_frames = {self.params.earth_frame_id: FRAME_EARTH, self.params.map_frame_id: FRAME_MAP}
         self._fix_frames = {FRAME_EARTH: self.params.earth_frame_id, FRAME_MAP: self.params.map_frame_id}
-        self.odom_pub = self.create_publisher(Odometry, '/fusion/odometry', DATA_QOS)
-        self.fix_pub = self.create_publisher(NavSatFix, '/fusion/fix', DATA_QOS)
-        self.status_pub = self.create_publisher(FusionStatus, '/fusion/status', DATA_QOS)
+        self.odom_pub = self.create_publisher(Odometry, 'fusion/odometry', DATA_QOS)
+        self.fix_pub = self.create_publisher(NavSatFix, 'fusion/fix', DATA_QOS)
+        self.status_pub = self.create_publisher(FusionStatus, 'fusion/status', DATA_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         ckf_kernels.warm_up()  # compile before subscribing: the node appears when it can keep up
         # created after the compilation, so that its silence clock starts when the node can listen
@@ -240,13 +240,13 @@ class FusionNode(Node):
         throttle = self.params.warning_throttle_s
         # Every input is taken raw and deserialised here: bytes that cannot be deserialised are then
         # received and counted (malformed_message); a typed subscription would lose them unseen.
-        subscribe_input(self, GnssMeasurementArray, '/gnss/measurements', self.on_gnss_raw, self.health, raw=True,
+        subscribe_input(self, GnssMeasurementArray, 'gnss/measurements', self.on_gnss_raw, self.health, raw=True,
                         warning_throttle_s=throttle)
         # the ranges (20 Hz per anchor) are decoded by conversions.decode_uwb_range_cdr, not by
         # rclpy's deserialisation (about 10x cheaper); anything it cannot decode goes through rclpy
-        subscribe_input(self, UwbRange, '/uwb/ranges', self.on_uwb_raw, self.health, raw=True,
+        subscribe_input(self, UwbRange, 'uwb/ranges', self.on_uwb_raw, self.health, raw=True,
                         warning_throttle_s=throttle)
-        subscribe_input(self, JammerState, '/rfi/jammer_state', self.on_jammer_raw, self.health, raw=True,
+        subscribe_input(self, JammerState, 'rfi/jammer_state', self.on_jammer_raw, self.health, raw=True,
                         warning_throttle_s=throttle)
         self.stale_watch = StaleInputWatch(self, self.health, self.params.input_timeout_s, self._publish_stale)
         self.idle_flush_timer = None
