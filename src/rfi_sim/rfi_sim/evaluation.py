@@ -6,6 +6,8 @@
 * :func:`error_stats`: RMS, 95th percentile, max (non-finite samples excluded and counted).
 * :func:`empirical_cdf`: sorted errors and their cumulative probabilities.
 * :func:`time_to_recover_s`: recovery time after a jamming burst.
+* :func:`hanyang_authors_rmse`: 3D / 2D RMSE scored as the Hanyang UWB dataset's authors score it
+  (window from the truth path, tag height, truth kept only near the ground plane).
 
 Times are integer ns (``stamp_ns``) or float seconds where named ``_s``.
 
@@ -253,3 +255,121 @@ def time_to_recover_s(
         if not np.any(bad[window]):
             return float(t[i] - burst_end_s)
     return math.inf
+
+
+@dataclass(frozen=True)
+class HanyangWindowRule:
+    """Start/end of the scored window of a Hanyang dynamic case, from the truth path (local frame, m).
+
+    The window starts at the first truth row whose (x, y) satisfies ``start`` and ends at the first
+    later row that satisfies ``end``. Each rule is a pair of half-planes per axis; ``None`` leaves an
+    axis free. Bounds are strict or not as the authors wrote them (see the module constants).
+    """
+
+    start_x_gt_m: float | None = None
+    start_x_lt_m: float | None = None
+    start_y_gt_m: float | None = None
+    start_y_lt_m: float | None = None
+    end_x_le_m: float | None = None
+    end_x_gt_m: float | None = None
+    end_y_gt_m: float | None = None
+    end_y_lt_m: float | None = None
+
+    def starts(self, x: float, y: float) -> bool:
+        return _half_planes(x, y, gt=(self.start_x_gt_m, self.start_y_gt_m), lt=(self.start_x_lt_m, self.start_y_lt_m))
+
+    def ends(self, x: float, y: float) -> bool:
+        if self.end_x_le_m is not None and not x <= self.end_x_le_m:
+            return False
+        return _half_planes(x, y, gt=(self.end_x_gt_m, self.end_y_gt_m), lt=(None, self.end_y_lt_m))
+
+
+def _half_planes(x: float, y: float, gt: tuple[float | None, float | None],
+                 lt: tuple[float | None, float | None]) -> bool:
+    for v, g, le in ((x, gt[0], lt[0]), (y, gt[1], lt[1])):
+        if g is not None and not v > g:
+            return False
+        if le is not None and not v < le:
+            return False
+    return True
+
+
+HANYANG_WINDOWS = {
+    "Trajectory_A": HanyangWindowRule(start_x_gt_m=49.3, start_y_gt_m=-5.0, end_x_le_m=12.0, end_y_gt_m=3.4),
+    "Trajectory_B": HanyangWindowRule(start_x_lt_m=8.6, start_y_lt_m=-7.0, end_x_gt_m=8.6, end_y_lt_m=-7.0),
+}
+"""Scored windows of the dataset's two dynamic trajectories, as the dataset authors' own analysis
+script (``localization_error_analysis.py`` of cucudasluv/UWB-dataset, commit 5701fb04) sets them:
+trajectory A's rule is the script's active one, trajectory B's its commented alternative. With these,
+:func:`hanyang_authors_rmse` reproduces the ``RMSD_results.txt`` of LOS/Trajectory_A/Case_1,
+LOS/Trajectory_B/Case_3 and NLOS/Trajectory_A/Case_1 to the last printed digit."""
+
+HANYANG_TAG_HEIGHT_M = 1.0
+"""Height of the UWB tag above the GNSS truth reference, m: the authors compare estimate z with
+truth z + 1 m (their truth z is near 0, the tag is carried about 1 m up)."""
+
+HANYANG_TRUTH_MAX_ABS_Z_M = 0.5
+"""Truth rows with |z| at or above this (m) are left out by the authors' scoring (RTK height outliers)."""
+
+
+def hanyang_authors_rmse(truth: np.ndarray, stamp_ns: np.ndarray, position_m: np.ndarray,
+                         rule: HanyangWindowRule) -> tuple[float, float, int]:
+    """3D and 2D RMSE of a solution, scored as the Hanyang dataset's authors score LS.csv / ESKF.csv.
+
+    Steps (the authors' analysis, re-implemented; no paper equation):
+
+    1. window ``[t_start, t_end]``: the truth stamps where ``rule`` starts and then ends;
+    2. truth rows inside the window with ``|z| < 0.5 m`` are the reference (times relative to the
+       first truth row of the window, before the z filter);
+    3. each solution row inside the window is compared with the truth linearly interpolated at its
+       time (the nearest end row outside the truth's span), with ``z_truth + 1 m`` as the height;
+    4. RMSE over all those rows: 3D (x, y, z) and 2D (x, y).
+
+    Args:
+        truth: ``trajectory.csv`` as an (M, >=4) array: stamp ns, x, y, z (m, anchors' local frame),
+            in time order.
+        stamp_ns: solution stamps, ns (N,).
+        position_m: solution positions, m, (N, 3), same frame.
+        rule: the case's window rule (:data:`HANYANG_WINDOWS`).
+
+    Returns:
+        ``(rmse_3d_m, rmse_2d_m, n_scored)``.
+
+    Raises:
+        ValueError: bad shapes, a window that never starts or ends, or no solution row inside it.
+    """
+    tr = np.asarray(truth, dtype=float)
+    if tr.ndim != 2 or tr.shape[1] < 4 or tr.shape[0] < 2:
+        raise ValueError(f"truth must have shape (M>=2, >=4), got {tr.shape}")
+    ts = np.asarray(stamp_ns, dtype=float).reshape(-1)
+    xyz = _points(position_m, "position_m")
+    if ts.size != xyz.shape[0]:
+        raise ValueError(f"stamp_ns ({ts.size}) and position_m ({xyz.shape[0]}) differ in length")
+    start = end = None
+    for t, x, y in tr[:, :3]:
+        if start is None and rule.starts(x, y):
+            start = t
+        if start is not None and rule.ends(x, y):
+            end = t
+            break
+    if start is None or end is None:
+        raise ValueError(f"the truth path never {'starts' if start is None else 'ends'} the scored window of {rule}")
+    inside = (tr[:, 0] >= start) & (tr[:, 0] <= end)
+    base = tr[inside][0, 0]
+    ref = tr[inside]
+    ref = ref[np.abs(ref[:, 3]) < HANYANG_TRUTH_MAX_ABS_Z_M]
+    t_ref = ref[:, 0] - base
+    m = (ts >= start) & (ts <= end)
+    if not np.any(m):
+        raise ValueError("no solution row inside the scored window")
+    t_est = ts[m] - base
+    k = np.searchsorted(t_ref, t_est, side="right")
+    lo = np.clip(k - 1, 0, len(t_ref) - 1)
+    hi = np.clip(k, 0, len(t_ref) - 1)
+    span = t_ref[hi] - t_ref[lo]
+    ratio = np.where(span > 0, (t_est - t_ref[lo]) / np.where(span > 0, span, 1.0), 0.0)
+    truth_xyz = ref[lo, 1:4] + ratio[:, None] * (ref[hi, 1:4] - ref[lo, 1:4])
+    d = xyz[m] - truth_xyz
+    sq2 = d[:, 0] ** 2 + d[:, 1] ** 2
+    sq3 = sq2 + (truth_xyz[:, 2] + HANYANG_TAG_HEIGHT_M - xyz[m][:, 2]) ** 2
+    return float(np.sqrt(np.mean(sq3))), float(np.sqrt(np.mean(sq2))), int(sq3.size)
