@@ -54,5 +54,5 @@ SECONDS_PER_WEEK = 604_800.0
 GPS_EPOCH_UNIX_S = 315_964_800
 """The GPS epoch 1980-01-06 00:00:00 UTC as a Unix time, s (IS-GPS-200, 3.3.4)."""
 
-GPS_MINUS_UTC_LEAP_S = 18
-"""GPS - UTC leap seconds since 2017-01-01, s (IERS Bulletin C)."""
+# GPS - UTC leap seconds are not a constant: the one table, with its source and validity, is
+# gnss_common.gps_time.LEAP_SECONDS (leap_seconds_at_gps, gps_to_ros_stamp_ns).

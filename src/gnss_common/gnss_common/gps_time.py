@@ -1,27 +1,53 @@
-"""GPS time: week / time of week, calendar epochs and integer-nanosecond stamps.
+"""GPS time: week / time of week, leap seconds, calendar epochs and ROS header stamps.
 
 Time-base convention used throughout the suite
 ----------------------------------------------
-A *stamp* is GPS time (no leap seconds) expressed on a Unix-like axis, in integer nanoseconds::
+Every header stamp is **ROS time**: UTC-based Unix time in integer nanoseconds, as the system
+clock of a robot gives it (``rclpy`` ``Time``, ``builtin_interfaces/Time``), so GNSS messages line
+up with an IMU, wheel odometry or tf. GPS time is kept exact in the messages' own fields
+(``gps_week``, ``gps_time_of_week_s``). The one conversion between the two is here::
 
-    stamp_ns = (GPS_EPOCH_UNIX_S + week * 604800) * 10**9 + round(tow_s * 10**9)
+    gps_ns   = (GPS_EPOCH_UNIX_S + week * 604800) * 10**9 + round(tow_s * 10**9)
+    stamp_ns = gps_ns - (GPS - UTC)(gps_ns) * 10**9          # gps_to_ros_stamp_ns
 
-i.e. the number of SI nanoseconds since 1970-01-01 00:00:00 *counted in the GPS time scale*.
-It is therefore ahead of a true UTC Unix stamp by the GPS - UTC leap seconds (18 s since 2017).
-No leap-second table is applied anywhere; calendar ``datetime`` objects handled here are labels
-on the GPS time scale (as in RINEX files, whose epochs are GPS time), not UTC.
+``gps_ns`` (the *GPS-scale* axis, what :func:`gps_to_stamp_ns` returns) counts SI seconds since
+1970-01-01 on the GPS time scale; it is continuous and is what simulators step on, but it is not a
+header stamp: it runs ahead of ROS time by the leap seconds (17 s from 2015-07-01, 18 s since
+2017-01-01).
+
+Leap seconds come from one table, :data:`LEAP_SECONDS`, taken from IERS Bulletin C 70 (see
+:data:`LEAP_TABLE_SOURCE`). It is valid to :data:`LEAP_TABLE_VALID_UNTIL_UNIX_S`
+(2026-06-28 00:00 UTC, the expiry the IERS gives its ``leap-seconds.list`` of that bulletin).
+Beyond that date the conversions keep the last offset (18 s) and emit a
+:class:`LeapTableExpiredWarning` (once per call site, Python's default warning filter): a
+receiver on a robot must keep running, and the error is at most the leap seconds announced after
+the table (none since 2017); update the table from the next Bulletin C
+(https://hpiers.obspm.fr/iers/bul/bulc/bulletinc.dat) and its expiry together.
+
+Inside an inserted leap second (UTC 23:59:60) the stamp repeats the last second of the day, as
+the POSIX / Linux system clock does: the stamp steps back by 1 s once, and
+:func:`ros_stamp_ns_to_gps` of such a stamp returns the first occurrence (the real 23:59:59).
+The GPS fields of the message stay exact and unambiguous.
+
+Calendar ``datetime`` objects handled here are labels on the GPS time scale (as in RINEX files,
+whose epochs are GPS time), not UTC.
 
 Notes
 -----
-IS-GPS-200, 3.3.4 (GPS epoch 1980-01-06 00:00:00, week number) and 20.3.3.3.3.1 (week-crossover
-rule for t - t_oe: +-302400 s). The 10-bit broadcast week rolls over every 1024 weeks
-(1999-08-22, 2019-04-07); :func:`resolve_week_rollover` restores the continuous week.
+IS-GPS-200, 3.3.4 (GPS epoch 1980-01-06 00:00:00 UTC, when GPS - UTC = 0; week number),
+20.3.3.5.2.4 (GPS - UTC is an integer number of leap seconds, broadcast as Delta t_LS) and
+20.3.3.3.3.1 (week-crossover rule for t - t_oe: +-302400 s). The 10-bit broadcast week rolls
+over every 1024 weeks (1999-08-22, 2019-04-07); :func:`resolve_week_rollover` restores the
+continuous week.
 """
 
 from __future__ import annotations
 
+import bisect
+import calendar
 import datetime as _dt
 import math
+import warnings
 
 import numpy as np
 
@@ -39,6 +65,78 @@ HALF_WEEK_S = SECONDS_PER_WEEK / 2.0
 """Half a GPS week, s (IS-GPS-200, 20.3.3.3.3.1 crossover threshold 302400 s)."""
 
 
+class LeapTableExpiredWarning(UserWarning):
+    """A time was converted beyond the date the leap-second table is known valid to."""
+
+
+def _utc_unix_s(year: int, month: int, day: int) -> int:
+    return calendar.timegm((year, month, day, 0, 0, 0, 0, 0, 0))
+
+
+LEAP_TABLE_SOURCE = (
+    "IERS Bulletin C 70 (Paris, 7 July 2025): UTC - TAI = -37 s from 2017-01-01 until further "
+    "notice, no leap second at the end of December 2025; GPS - UTC = (TAI - UTC) - 19 s. "
+    "Cross-checked against IERS leap-seconds.list (updated 2025-07-07, expires 2026-06-28)."
+)
+"""Where :data:`LEAP_SECONDS` comes from."""
+
+LEAP_TABLE_VALID_UNTIL_UNIX_S = _utc_unix_s(2026, 6, 28)
+"""UTC instant (Unix s) up to which :data:`LEAP_SECONDS` is known complete: 2026-06-28 00:00 UTC."""
+
+LEAP_SECONDS: tuple[tuple[int, int], ...] = tuple(
+    (_utc_unix_s(y, m, d), gps_minus_utc_s)
+    for (y, m, d), gps_minus_utc_s in (
+        ((1981, 7, 1), 1),
+        ((1982, 7, 1), 2),
+        ((1983, 7, 1), 3),
+        ((1985, 7, 1), 4),
+        ((1988, 1, 1), 5),
+        ((1990, 1, 1), 6),
+        ((1991, 1, 1), 7),
+        ((1992, 7, 1), 8),
+        ((1993, 7, 1), 9),
+        ((1994, 7, 1), 10),
+        ((1996, 1, 1), 11),
+        ((1997, 7, 1), 12),
+        ((1999, 1, 1), 13),
+        ((2006, 1, 1), 14),
+        ((2009, 1, 1), 15),
+        ((2012, 7, 1), 16),
+        ((2015, 7, 1), 17),
+        ((2017, 1, 1), 18),
+    )
+)
+"""(UTC Unix s at 00:00:00 of the day from which it holds, GPS - UTC in s), one row per leap
+second since the GPS epoch (GPS - UTC = 0 s from 1980-01-06 to 1981-06-30). Source:
+:data:`LEAP_TABLE_SOURCE`; valid to :data:`LEAP_TABLE_VALID_UNTIL_UNIX_S`."""
+
+# The same table on the GPS-scale axis: the new offset applies from the start of the inserted
+# second 23:59:60, which is GPS-scale Unix second (T + L - 1) for a row (T, L).
+_LEAP_START_UTC_NS = [t * NS_PER_S for t, _ in LEAP_SECONDS]
+_LEAP_START_GPS_NS = [(t + leap - 1) * NS_PER_S for t, leap in LEAP_SECONDS]
+_LEAP_VALUES_S = [0] + [leap for _, leap in LEAP_SECONDS]
+_VALID_UNTIL_NS = LEAP_TABLE_VALID_UNTIL_UNIX_S * NS_PER_S
+
+
+def _warn_if_beyond_table(utc_ns: int) -> None:
+    if utc_ns >= _VALID_UNTIL_NS:
+        warnings.warn(
+            "time converted beyond the leap-second table's validity (2026-06-28 UTC, "
+            "IERS Bulletin C 70): GPS - UTC = 18 s assumed; update gnss_common.gps_time.LEAP_SECONDS "
+            "from the current IERS Bulletin C",
+            LeapTableExpiredWarning,
+            stacklevel=3,
+        )
+
+
+def _check_stamp(stamp_ns: int, what: str) -> int:
+    if not isinstance(stamp_ns, (int, np.integer)) or isinstance(stamp_ns, bool):
+        raise ValueError(f"{what} must be an integer number of ns, got {stamp_ns!r}")
+    if int(stamp_ns) < _GPS_EPOCH_NS:
+        raise ValueError(f"{what} {stamp_ns} is before the GPS epoch 1980-01-06")
+    return int(stamp_ns)
+
+
 def _check_week_tow(week: int, tow_s: float) -> None:
     if not isinstance(week, (int, np.integer)) or isinstance(week, bool):
         raise ValueError(f"GPS week must be an integer, got {week!r}")
@@ -49,7 +147,10 @@ def _check_week_tow(week: int, tow_s: float) -> None:
 
 
 def gps_to_stamp_ns(week: int, tow_s: float) -> int:
-    """Convert GPS week and time of week to an integer-nanosecond stamp (GPS scale, no leap s).
+    """Convert GPS week and time of week to GPS-scale ns since 1970 (no leap s; NOT a header stamp).
+
+    A header stamp is :func:`gps_to_ros_stamp_ns`; this continuous GPS-scale axis is what
+    simulators step on before converting with :func:`gps_ns_to_ros_stamp_ns`.
 
     Args:
         week: continuous GPS week number (not modulo 1024), >= 0.
@@ -70,10 +171,12 @@ def gps_to_stamp_ns(week: int, tow_s: float) -> int:
 
 
 def stamp_ns_to_gps(stamp_ns: int) -> tuple[int, float]:
-    """Convert an integer-nanosecond stamp (GPS scale) to (GPS week, time of week in s).
+    """Convert GPS-scale ns since 1970 (NOT a header stamp) to (GPS week, time of week in s).
+
+    A header stamp is converted with :func:`ros_stamp_ns_to_gps`.
 
     Args:
-        stamp_ns: stamp, ns, at or after the GPS epoch (>= 315964800e9).
+        stamp_ns: GPS-scale time, ns, at or after the GPS epoch (>= 315964800e9).
 
     Returns:
         ``(week, tow_s)`` with week continuous and tow_s in [0, 604800).
@@ -88,6 +191,129 @@ def stamp_ns_to_gps(stamp_ns: int) -> tuple[int, float]:
         raise ValueError(f"stamp_ns {stamp_ns} is before the GPS epoch 1980-01-06")
     week, rem_ns = divmod(since, _WEEK_NS)
     return int(week), rem_ns / NS_PER_S
+
+
+def _leap_at_gps_ns(gps_ns: int) -> int:
+    return _LEAP_VALUES_S[bisect.bisect_right(_LEAP_START_GPS_NS, gps_ns)]
+
+
+def _leap_at_utc_ns(utc_ns: int) -> int:
+    return _LEAP_VALUES_S[bisect.bisect_right(_LEAP_START_UTC_NS, utc_ns)]
+
+
+def gps_ns_to_ros_stamp_ns(gps_ns: int) -> int:
+    """Convert GPS-scale ns since 1970 (:func:`gps_to_stamp_ns`) to a ROS header stamp, ns (UTC).
+
+    Args:
+        gps_ns: GPS-scale time, ns, at or after the GPS epoch.
+
+    Returns:
+        ``gps_ns - (GPS - UTC) * 1e9`` with GPS - UTC from :data:`LEAP_SECONDS` at that GPS time;
+        inside an inserted leap second the stamp repeats 23:59:59 (module docstring).
+
+    Raises:
+        ValueError: not an integer or before the GPS epoch.
+
+    Warns:
+        LeapTableExpiredWarning: the time is beyond :data:`LEAP_TABLE_VALID_UNTIL_UNIX_S`.
+    """
+    gps_ns = _check_stamp(gps_ns, "gps_ns")
+    stamp_ns = gps_ns - _leap_at_gps_ns(gps_ns) * NS_PER_S
+    _warn_if_beyond_table(stamp_ns)
+    return stamp_ns
+
+
+def ros_stamp_ns_to_gps_ns(stamp_ns: int) -> int:
+    """Convert a ROS header stamp, ns (UTC), to GPS-scale ns since 1970.
+
+    Args:
+        stamp_ns: ROS time, ns, at or after the GPS epoch (1980-01-06, 315964800e9 ns).
+
+    Returns:
+        ``stamp_ns + (GPS - UTC) * 1e9`` with GPS - UTC from :data:`LEAP_SECONDS` at that UTC
+        time; a stamp in the repeated second 23:59:59 of a leap-second day maps to its first
+        occurrence.
+
+    Raises:
+        ValueError: not an integer or before the GPS epoch.
+
+    Warns:
+        LeapTableExpiredWarning: the time is beyond :data:`LEAP_TABLE_VALID_UNTIL_UNIX_S`.
+    """
+    stamp_ns = _check_stamp(stamp_ns, "stamp_ns")
+    _warn_if_beyond_table(stamp_ns)
+    return stamp_ns + _leap_at_utc_ns(stamp_ns) * NS_PER_S
+
+
+def gps_to_ros_stamp_ns(week: int, tow_s: float) -> int:
+    """Convert GPS week and time of week to a ROS header stamp (UTC-based Unix time), ns.
+
+    Args:
+        week: continuous GPS week number (not modulo 1024), >= 0.
+        tow_s: GPS time of week, s, in [0, 604800).
+
+    Returns:
+        Stamp, ns: the GPS-scale time minus GPS - UTC leap seconds at that time (from
+        :data:`LEAP_SECONDS`), e.g. 18 s since 2017-01-01, 17 s from 2015-07-01.
+
+    Raises:
+        ValueError: non-integer or negative week, non-finite or out-of-range tow.
+
+    Warns:
+        LeapTableExpiredWarning: the time is beyond :data:`LEAP_TABLE_VALID_UNTIL_UNIX_S`.
+
+    Notes
+    -----
+    IS-GPS-200, 3.3.4 and 20.3.3.5.2.4. See the module docstring for the time-base convention
+    and the leap second itself.
+    """
+    return gps_ns_to_ros_stamp_ns(gps_to_stamp_ns(week, tow_s))
+
+
+def ros_stamp_ns_to_gps(stamp_ns: int) -> tuple[int, float]:
+    """Convert a ROS header stamp (UTC-based Unix time), ns, to (GPS week, time of week in s).
+
+    Args:
+        stamp_ns: ROS time, ns, at or after the GPS epoch.
+
+    Returns:
+        ``(week, tow_s)`` with week continuous and tow_s in [0, 604800); the inverse of
+        :func:`gps_to_ros_stamp_ns` except inside an inserted leap second (module docstring).
+
+    Raises:
+        ValueError: stamp before the GPS epoch or not an integer.
+
+    Warns:
+        LeapTableExpiredWarning: the time is beyond :data:`LEAP_TABLE_VALID_UNTIL_UNIX_S`.
+    """
+    return stamp_ns_to_gps(ros_stamp_ns_to_gps_ns(stamp_ns))
+
+
+def leap_seconds_at_gps(week: int, tow_s: float) -> int:
+    """GPS - UTC in s at a GPS time (from :data:`LEAP_SECONDS`; 18 since 2017-01-01).
+
+    The offset changes at the start of the inserted second 23:59:60 UTC.
+
+    Warns:
+        LeapTableExpiredWarning: the time is beyond :data:`LEAP_TABLE_VALID_UNTIL_UNIX_S`.
+    """
+    gps_ns = gps_to_stamp_ns(week, tow_s)
+    leap = _leap_at_gps_ns(gps_ns)
+    _warn_if_beyond_table(gps_ns - leap * NS_PER_S)
+    return leap
+
+
+def leap_seconds_at_ros_stamp(stamp_ns: int) -> int:
+    """GPS - UTC in s at a ROS (UTC) stamp, ns (from :data:`LEAP_SECONDS`).
+
+    The offset changes at 00:00:00 UTC of the day after the leap second.
+
+    Warns:
+        LeapTableExpiredWarning: the time is beyond :data:`LEAP_TABLE_VALID_UNTIL_UNIX_S`.
+    """
+    stamp_ns = _check_stamp(stamp_ns, "stamp_ns")
+    _warn_if_beyond_table(stamp_ns)
+    return _leap_at_utc_ns(stamp_ns)
 
 
 def datetime_to_gps(epoch: _dt.datetime) -> tuple[int, float]:
