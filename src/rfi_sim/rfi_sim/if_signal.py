@@ -20,6 +20,15 @@ noise -114 dBm/MHz, chirp sweep rate 1e12 Hz/s starting at digital frequency 0.1
 The paper leaves the sweep period open; the default here sweeps symmetrically about the IF
 (0.1832 .. 0.3168, 5.10 MHz, period 5.10 us = 195 samples).
 
+Real jammers and front ends (issue 14): ``SweepJammer`` (rfi_sim.jammer_waveforms) gives saw-tooth
+up/down, triangular and hooked saw-tooth sweeps with non-linear rates and bands wider than the
+sampled band; every jammer has a switch-on time ``on_time_s``; ``FrontEndConfig`` adds a
+band-limiting filter (``filter_low_hz``/``filter_high_hz``), a gain that clips (``gain_mode``
+"fixed") or settles on the total power (``gain_mode`` "agc"); 1-16 bit quantisation, real IF and
+complex baseband were there before. The truth carries per block the shape, swept band, J/N over the
+block and in band, in-band fraction and clipped fraction. The defaults (``gain_mode`` "ideal", no
+filter, ``on_time_s`` 0) give the earlier streams bit for bit.
+
 Example
 -------
 >>> sim = IfSimulator(FrontEndConfig(), jammers=(ChirpJammer(),), seed=1)
@@ -41,6 +50,7 @@ from gnss_common.constants import (
     GPS_NAV_BIT_RATE_HZ,
 )
 from rfi_sim.gps_ca import G2_DELAY_CHIPS, ca_code
+from rfi_sim.jammer_waveforms import SweepJammer, SweepLaw, sweep_cycles, sweep_law
 
 PAPER_SAMPLE_RATE_HZ = 38.192e6
 """Kang et al. front-end sample rate, Hz (Sec. 2.1)."""
@@ -75,6 +85,30 @@ class FrontEndConfig:
         noise_bandwidth_hz: bandwidth over which the noise power is counted, Hz; None: the whole
             sampled band (fs/2 real, fs complex).
         signal_power_dbm: received power of each GPS signal, dBm (Kang et al.: -130).
+        filter_low_hz, filter_high_hz: pass band of the front end's band-limiting (anti-alias) filter,
+            Hz relative to the RF centre; None (default): no filter. Both or neither. The filter is
+            a Butterworth magnitude ``1 / sqrt(1 + ((f - f_c) / (B / 2))^(2 * filter_order))``
+            applied quasi-statically to the tone jammers (CW, chirp, sweep: amplitude times the gain
+            at the instantaneous frequency; exact for CW, a good approximation while the sweep
+            crosses the filter's edge in many of its impulse-response lengths, i.e. rate << B^2 /
+            filter_order). Thermal noise, GPS and noise jammers are not filtered (the noise is
+            taken as white over the sampled band, as after the ADC's own noise).
+        filter_order: order of that filter, >= 1.
+        gain_mode: how the analog gain in front of the quantiser is set.
+            "ideal" (default): fixed by the configured powers, jammers included (an AGC settled on
+            the total power before the stream starts; the earlier behaviour, unchanged).
+            "fixed": fixed by the thermal noise and GPS powers only (no AGC): a strong jammer clips.
+            "agc": starts as "fixed" plus ``agc_initial_gain_db`` and settles on the total power
+            measured at the quantiser input: every ``agc_update_samples`` samples the gain in dB
+            moves by ``(update duration / agc_time_constant_s)`` times the error between the target
+            power (the one "fixed" is set for) and the measured power (both in dB).
+            In "fixed" and "agc" the block's ``scale`` is the volts per count at the nominal gain
+            (the "fixed" one), so counts * scale is the input divided by the AGC gain, as a front
+            end that does not report its AGC delivers it; ``IfTruth.agc_gain_db`` holds the gain.
+        agc_time_constant_s: AGC time constant, s, > 0.
+        agc_update_samples: AGC update interval, samples (complex: I/Q pairs), >= 1; updates fall on
+            absolute sample indices (multiples of it), so the stream is split-invariant.
+        agc_initial_gain_db: AGC gain at sample 0 relative to the nominal gain, dB.
     """
 
     sample_rate_hz: float = PAPER_SAMPLE_RATE_HZ
@@ -85,6 +119,13 @@ class FrontEndConfig:
     noise_density_dbm_per_mhz: float = -114.0
     noise_bandwidth_hz: float | None = None
     signal_power_dbm: float = -130.0
+    filter_low_hz: float | None = None
+    filter_high_hz: float | None = None
+    filter_order: int = 8
+    gain_mode: str = "ideal"
+    agc_time_constant_s: float = 100e-6
+    agc_update_samples: int = 64
+    agc_initial_gain_db: float = 0.0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.sample_rate_hz) and self.sample_rate_hz > 0):
@@ -100,6 +141,38 @@ class FrontEndConfig:
             raise ValueError("clip_sigma must be > 0")
         if self.noise_bandwidth_hz is not None and not self.noise_bandwidth_hz > 0:
             raise ValueError("noise_bandwidth_hz must be > 0")
+        if (self.filter_low_hz is None) != (self.filter_high_hz is None):
+            raise ValueError("filter_low_hz and filter_high_hz must be given together")
+        if self.filter_low_hz is not None and self.filter_high_hz is not None:
+            if not (math.isfinite(self.filter_low_hz) and math.isfinite(self.filter_high_hz)
+                    and self.filter_high_hz > self.filter_low_hz):
+                raise ValueError("filter band must be finite with filter_high_hz > filter_low_hz")
+        if not int(self.filter_order) >= 1:
+            raise ValueError("filter_order must be >= 1")
+        if self.gain_mode not in ("ideal", "fixed", "agc"):
+            raise ValueError(f"gain_mode must be ideal, fixed or agc, got {self.gain_mode!r}")
+        if not (math.isfinite(self.agc_time_constant_s) and self.agc_time_constant_s > 0):
+            raise ValueError("agc_time_constant_s must be finite and > 0")
+        if not int(self.agc_update_samples) >= 1:
+            raise ValueError("agc_update_samples must be >= 1")
+        if not math.isfinite(self.agc_initial_gain_db):
+            raise ValueError("agc_initial_gain_db must be finite")
+
+    def filter_gain(self, f_rel_hz: np.ndarray | float) -> np.ndarray:
+        """Amplitude gain of the band-limiting filter at RF offsets ``f_rel_hz`` (Hz); 1 without one."""
+        f = np.asarray(f_rel_hz, dtype=np.float64)
+        if self.filter_low_hz is None or self.filter_high_hz is None:
+            return np.ones_like(f)
+        fc = 0.5 * (self.filter_low_hz + self.filter_high_hz)
+        half = 0.5 * (self.filter_high_hz - self.filter_low_hz)
+        return np.asarray(1.0 / np.sqrt(1.0 + np.abs((f - fc) / half) ** (2 * int(self.filter_order))))
+
+    def in_sampled_band(self, f_rel_hz: np.ndarray | float) -> np.ndarray:
+        """True where an RF offset (Hz) falls inside the sampled band without aliasing."""
+        d = np.asarray(self.digital_frequency(f_rel_hz), dtype=np.float64)
+        if self.is_complex:
+            return np.asarray((d >= -0.5) & (d < 0.5))
+        return np.asarray((d > 0.0) & (d < 0.5))
 
     @property
     def band_hz(self) -> float:
@@ -133,11 +206,13 @@ class CwJammer:
         frequency_hz: tone frequency relative to the RF centre, Hz (paper: 0, i.e. at the IF).
         js_db: jammer-to-signal ratio, dB.
         phase_rad: initial phase, rad.
+        on_time_s: switch-on time, s since sample 0 of the stream; 0: on from the first sample.
     """
 
     frequency_hz: float = 0.0
     js_db: float = 30.0
     phase_rad: float = 0.0
+    on_time_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -155,6 +230,8 @@ class ChirpJammer:
         js_db: jammer-to-signal ratio, dB.
         phase_rad: initial phase, rad.
         time_offset_s: position inside the sweep at sample 0, s.
+        on_time_s: switch-on time, s since sample 0 of the stream; 0: on from the first sample.
+            The sweep runs from sample 0 either way (switching on does not restart it).
     """
 
     start_frequency_hz: float = PAPER_CHIRP_F0_DIGITAL * PAPER_SAMPLE_RATE_HZ - PAPER_IF_HZ
@@ -163,6 +240,7 @@ class ChirpJammer:
     js_db: float = 30.0
     phase_rad: float = 0.0
     time_offset_s: float = 0.0
+    on_time_s: float = 0.0
 
     @property
     def bandwidth_hz(self) -> float:
@@ -178,14 +256,16 @@ class NoiseJammer:
         center_frequency_hz: centre relative to the RF centre, Hz.
         bandwidth_hz: two-sided bandwidth, Hz.
         js_db: jammer-to-signal ratio, dB.
+        on_time_s: switch-on time, s since sample 0 of the stream; 0: on from the first sample.
     """
 
     center_frequency_hz: float = 0.0
     bandwidth_hz: float = 2.0e6
     js_db: float = 30.0
+    on_time_s: float = 0.0
 
 
-Jammer = CwJammer | ChirpJammer | NoiseJammer
+Jammer = CwJammer | ChirpJammer | NoiseJammer | SweepJammer
 
 
 @dataclass(frozen=True)
@@ -219,6 +299,22 @@ class IfTruth:
         digital_frequency: the same in cycles/sample of the sampled stream, shape (n_jammers, n).
         sweep_start_indices: absolute sample indices of sweep starts inside the block, per jammer.
         sweep_period_s: sweep period per jammer, s (NaN unless chirp).
+        shape: per jammer: "cw", "saw_up" / "saw_down" (ChirpJammer by the sign of its rate),
+            "triangle", "hooked_saw", "noise".
+        swept_band_hz: per jammer (lowest, highest) frequency it reaches, Hz relative to the RF
+            centre, shape (n_jammers, 2); CW: (f, f); noise: centre -+ bandwidth / 2.
+        jn_block_db: per jammer, the J/N of the jammer as the quantiser sees it over this block
+            (switch-on, front-end filter and AGC gain included: its mean power in the block over N
+            at the same gain), dB; -inf if absent from the whole block.
+        jn_in_band_db: per jammer, the same over the samples where it is in band (on, filter gain
+            >= -3 dB, inside the sampled band), dB; -inf if never in band in the block.
+        in_band_fraction: per jammer, fraction of the block's samples where it is in band.
+        active: per jammer, True if it is on for at least one sample of the block.
+        clipped_fraction: fraction of the block's real values (I and Q counted apart) at the most
+            negative or most positive code (for 1-3 bit front ends that is the outer level, which
+            noise also reaches).
+        agc_gain_db: mean gain in front of the quantiser over the block relative to the nominal
+            gain, dB (0 unless gain_mode is "agc").
     """
 
     jammer_type: int
@@ -227,6 +323,14 @@ class IfTruth:
     digital_frequency: np.ndarray
     sweep_start_indices: tuple[np.ndarray, ...]
     sweep_period_s: np.ndarray
+    shape: tuple[str, ...] = ()
+    swept_band_hz: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    jn_block_db: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    jn_in_band_db: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    in_band_fraction: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    active: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    clipped_fraction: float = 0.0
+    agc_gain_db: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -274,7 +378,7 @@ class IfSimulator:
 
     Args:
         front_end: FrontEndConfig.
-        jammers: tuple of CwJammer / ChirpJammer / NoiseJammer.
+        jammers: tuple of CwJammer / ChirpJammer / NoiseJammer / SweepJammer.
         satellites: tuple of GpsSatellite (default: PRN 1, 1 kHz Doppler).
         seed: int seed for all random streams (noise, noise jammers, navigation bits).
         add_jammer_to: optional float/complex array of real samples (volts) to add the jammers
@@ -292,8 +396,10 @@ class IfSimulator:
                  satellites: tuple[GpsSatellite, ...] = (GpsSatellite(prn=1, doppler_hz=1000.0),),
                  seed: int = 0) -> None:
         for j in jammers:
-            if not isinstance(j, (CwJammer, ChirpJammer, NoiseJammer)):
+            if not isinstance(j, (CwJammer, ChirpJammer, NoiseJammer, SweepJammer)):
                 raise ValueError(f"unknown jammer {j!r}")
+            if not math.isfinite(j.on_time_s):
+                raise ValueError("on_time_s must be finite")
             if isinstance(j, ChirpJammer) and not j.sweep_period_s > 0:
                 raise ValueError("sweep_period_s must be > 0")
             if isinstance(j, NoiseJammer) and not 0 < j.bandwidth_hz <= front_end.sample_rate_hz:
@@ -313,15 +419,24 @@ class IfSimulator:
         self._jam_hist = [np.zeros(self._NOISE_JAMMER_TAPS - 1, dtype=np.complex128) for _ in jammers]
         self._taps = [self._noise_jammer_taps(j) if isinstance(j, NoiseJammer) else None for j in jammers]
         self._codes = [ca_code(s.prn).astype(np.float64) for s in satellites]
+        self._laws: list[SweepLaw | None] = [sweep_law(j) if isinstance(j, SweepJammer) else None
+                                             for j in jammers]
         self._next_index = 0
         fe = front_end
         total = fe.noise_power_mw + sum(self._sat_power(s) for s in satellites)
-        total += sum(self.jammer_power_mw(j) for j in jammers)
+        if fe.gain_mode == "ideal":
+            total += sum(self.jammer_power_mw(j) for j in jammers)
+        self._target_power = total / 2 if fe.is_complex else total
+        """Power per real value the nominal gain is set for, mW (the AGC's target)."""
+        self._agc_gain_db = float(fe.agc_initial_gain_db) if fe.gain_mode == "agc" else 0.0
+        self._agc_acc = 0.0  # power sum of the current, unfinished AGC update interval
+        self._agc_cnt = 0
         per_real = total / 2 if fe.is_complex else total
         clip = fe.clip_sigma if fe.clip_sigma is not None else (2.0 if fe.bits <= 3 else 4.0)
         levels = 2 ** fe.bits
         self.step = 2.0 * clip * math.sqrt(per_real) / levels
-        """Quantiser step (volts). Fixed by the configured powers (an ideal AGC), not by the data."""
+        """Quantiser step (volts) at the nominal gain. "ideal": fixed by the configured powers (an ideal
+        AGC), not by the data; "fixed"/"agc": by the thermal noise and GPS powers."""
         self.scale = self.step / 2 if fe.bits <= 3 else self.step
         """Volts per count."""
 
@@ -416,6 +531,51 @@ class IfSimulator:
             return math.sqrt(p) * y
         return math.sqrt(2.0 * p) * y.real
 
+    def _sweep(self, idx: int, j: SweepJammer, t: np.ndarray,
+               n_idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        law = self._laws[idx]
+        assert law is not None  # set for every SweepJammer in __init__
+        fe = self.front_end
+        cyc, f_rel, k = sweep_cycles(law, t, j.time_offset_s)
+        fif = fe.intermediate_frequency_hz
+        if_cyc = np.mod(abs(fif) / fe.sample_rate_hz * n_idx.astype(np.float64), 1.0)
+        inverted = not fe.is_complex and fif < 0
+        phase = 2 * np.pi * (if_cyc - cyc if inverted else (if_cyc if fif >= 0 else -if_cyc) + cyc)
+        phase = phase + j.phase_rad
+        kprev = np.floor((t - 1.0 / fe.sample_rate_hz + j.time_offset_s) / j.sweep_period_s)
+        return phase, f_rel, n_idx[k != kprev]
+
+    def _apply_gain(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Front-end gain (gain_mode "fixed"/"agc") applied to the quantiser input; returns the
+        scaled samples and the amplitude gain per sample (relative to nominal)."""
+        fe = self.front_end
+        n = x.size
+        g = np.ones(n)
+        if fe.gain_mode != "agc" or n == 0:
+            return x, g
+        L = int(fe.agc_update_samples)
+        fs = fe.sample_rate_hz
+        alpha = min(1.0, L / fs / fe.agc_time_constant_s)
+        p = np.abs(x) ** 2
+        if fe.is_complex:
+            p = p / 2.0  # per real value
+        pos = 0
+        while pos < n:
+            room = L - self._agc_cnt
+            m = min(room, n - pos)
+            lin = 10.0 ** (self._agc_gain_db / 20.0)
+            g[pos:pos + m] = lin
+            self._agc_acc += float(np.sum(p[pos:pos + m])) * lin * lin
+            self._agc_cnt += m
+            pos += m
+            if self._agc_cnt == L:
+                meas = self._agc_acc / L
+                err_db = 10 * math.log10(self._target_power / max(meas, 1e-300))
+                self._agc_gain_db += alpha * err_db
+                self._agc_acc = 0.0
+                self._agc_cnt = 0
+        return x * g, g
+
     def generate(self, n_samples: int, add_to: np.ndarray | None = None) -> IfBlock:
         """Generate the next ``n_samples`` samples of the stream.
 
@@ -452,22 +612,63 @@ class IfSimulator:
         f_true = np.full((nj, n_samples), np.nan)
         starts: list[np.ndarray] = []
         periods = np.full(nj, np.nan)
+        shapes: list[str] = []
+        band = np.full((nj, 2), np.nan)
+        p_block = np.zeros(nj)        # mean jammer power over the block before the AGC, mW
+        p_in_band = np.zeros(nj)      # mean power over its in-band samples, mW
+        in_band_frac = np.zeros(nj)
+        active = np.zeros(nj, dtype=bool)
+        jam_power_t: list[np.ndarray] = []  # per-sample power of each jammer (for the AGC share)
         for i, j in enumerate(self.jammers):
             amp = math.sqrt(self.jammer_power_mw(j))
-            if isinstance(j, CwJammer):
-                phase = 2 * np.pi * self._signed(j.frequency_hz) * t + j.phase_rad
-                x = x + self._phase_to_signal(amp, phase)
-                f_true[i] = j.frequency_hz
+            on = t >= j.on_time_s
+            all_on = bool(on.all())
+            if isinstance(j, NoiseJammer):
+                y = self._noise_jammer(i, j, t)
+                f_rel = None
+                shapes.append("noise")
+                band[i] = (j.center_frequency_hz - j.bandwidth_hz / 2, j.center_frequency_hz + j.bandwidth_hz / 2)
                 starts.append(np.zeros(0, dtype=np.int64))
-            elif isinstance(j, ChirpJammer):
-                phase, f_rel, st = self._chirp(j, t, n_idx)
-                x = x + self._phase_to_signal(amp, phase)
-                f_true[i] = f_rel
-                starts.append(st)
-                periods[i] = j.sweep_period_s
+                gain = np.ones(n_samples)
             else:
-                x = x + self._noise_jammer(i, j, t)
-                starts.append(np.zeros(0, dtype=np.int64))
+                if isinstance(j, CwJammer):
+                    phase = 2 * np.pi * self._signed(j.frequency_hz) * t + j.phase_rad
+                    f_rel = np.full(n_samples, j.frequency_hz)
+                    shapes.append("cw")
+                    band[i] = (j.frequency_hz, j.frequency_hz)
+                    starts.append(np.zeros(0, dtype=np.int64))
+                elif isinstance(j, ChirpJammer):
+                    phase, f_rel, st = self._chirp(j, t, n_idx)
+                    starts.append(st)
+                    periods[i] = j.sweep_period_s
+                    shapes.append("saw_up" if j.sweep_rate_hz_per_s >= 0 else "saw_down")
+                    f_end = j.start_frequency_hz + j.sweep_rate_hz_per_s * j.sweep_period_s
+                    band[i] = (min(j.start_frequency_hz, f_end), max(j.start_frequency_hz, f_end))
+                else:
+                    phase, f_rel, st = self._sweep(i, j, t, n_idx)
+                    starts.append(st)
+                    periods[i] = j.sweep_period_s
+                    shapes.append(j.shape)
+                    band[i] = j.swept_band_hz
+                y = self._phase_to_signal(amp, phase)
+                f_true[i] = f_rel
+                gain = fe.filter_gain(f_rel)
+                if fe.filter_low_hz is not None:
+                    y = y * gain
+            if not all_on:
+                y = y * on
+            x = x + y
+            inb = on & (gain >= 1 / math.sqrt(2.0))
+            if f_rel is not None:
+                inb &= fe.in_sampled_band(f_rel)
+            pw = self.jammer_power_mw(j) * gain ** 2 * on
+            jam_power_t.append(pw)
+            active[i] = bool(on.any())
+            if n_samples:
+                p_block[i] = float(np.mean(pw))
+                in_band_frac[i] = float(np.mean(inb))
+                p_in_band[i] = float(np.mean(pw[inb])) if inb.any() else 0.0
+        x, g_amp = self._apply_gain(x)
         dtype = np.int8 if fe.bits <= 8 else np.int16
         if fe.is_complex:
             c = np.empty(2 * n_samples, dtype=dtype)
@@ -476,19 +677,41 @@ class IfSimulator:
         else:
             c = _quantise(x, fe.bits, self.step).astype(dtype)
         jn = np.array([self.jn_db(j) for j in self.jammers])
-        if nj:
-            strongest = self.jammers[int(np.argmax(jn))]
-            jtype = CW if isinstance(strongest, CwJammer) else CHIRP if isinstance(strongest, ChirpJammer) \
-                else WIDEBAND
+        live = [i for i in range(nj) if active[i]]
+        if live:
+            strongest = self.jammers[max(live, key=lambda i: jn[i])]
+            jtype = CW if isinstance(strongest, CwJammer) else WIDEBAND if isinstance(strongest, NoiseJammer) \
+                else CHIRP
         else:
             jtype = NONE
+        if fe.bits <= 3:
+            top = 2 ** fe.bits - 1
+            lo_code, hi_code = -top, top
+        else:
+            lo_code, hi_code = -(2 ** (fe.bits - 1)), 2 ** (fe.bits - 1) - 1
+        clipped = float(np.mean((c == lo_code) | (c == hi_code))) if c.size else 0.0
+        n0 = fe.noise_power_mw
+        with np.errstate(divide="ignore"):
+            g2 = g_amp ** 2
+            jn_block = np.array([10 * np.log10(np.mean(jp * g2) / (n0 * np.mean(g2))) if n_samples
+                                 else -np.inf for jp in jam_power_t]) if nj else np.zeros(0)
+            jn_in = 10 * np.log10(p_in_band / n0) if nj else np.zeros(0)
+        agc_db = float(10 * np.log10(np.mean(g2))) if n_samples else self._agc_gain_db
         truth = IfTruth(jammer_type=jtype, jn_db=jn, frequency_hz=f_true,
                         digital_frequency=np.asarray(fe.digital_frequency(f_true), dtype=np.float64),
-                        sweep_start_indices=tuple(starts), sweep_period_s=periods)
+                        sweep_start_indices=tuple(starts), sweep_period_s=periods,
+                        shape=tuple(shapes), swept_band_hz=band, jn_block_db=jn_block,
+                        jn_in_band_db=jn_in, in_band_fraction=in_band_frac, active=active,
+                        clipped_fraction=clipped, agc_gain_db=agc_db)
         first = int(n_idx[0]) if n_samples else self._next_index
         return IfBlock(counts=c, scale=self.scale, first_sample_index=first, sample_rate_hz=fs,
                        intermediate_frequency_hz=fe.intermediate_frequency_hz,
                        is_complex=fe.is_complex, bits=fe.bits, truth=truth)
+
+
+def js_for_jn_db(front_end: FrontEndConfig, jn_db: float) -> float:
+    """J/S (dB) that gives a jammer the nominal J/N ``jn_db`` (dB) on ``front_end``: J/N + N - S."""
+    return jn_db + 10 * math.log10(front_end.noise_power_mw / front_end.signal_power_mw)
 
 
 def simulate(n_samples: int, front_end: FrontEndConfig = FrontEndConfig(), jammers: tuple[Jammer, ...] = (),
