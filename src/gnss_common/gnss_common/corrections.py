@@ -1,7 +1,8 @@
 """Broadcast ionosphere (Klobuchar) and a standard-atmosphere Saastamoinen troposphere.
 
 These give the I and T terms of the pseudorange model (Cao et al., eq. 5) for a single-frequency
-GPS L1 user. Both are vectorised over satellites.
+user: the Klobuchar delay is an L1 delay, scaled to another carrier (Galileo E1, BeiDou B1I,
+GLONASS G1 of channel k) by :func:`ionosphere_frequency_scale`. Both are vectorised over satellites.
 
 Notes
 -----
@@ -18,7 +19,7 @@ import math
 
 import numpy as np
 
-from gnss_common.constants import SPEED_OF_LIGHT_MPS
+from gnss_common.constants import GPS_L1_FREQUENCY_HZ, SPEED_OF_LIGHT_MPS
 
 KLOBUCHAR_NIGHT_DELAY_S = 5.0e-9
 """Klobuchar constant night-time vertical delay DC term, s (IS-GPS-200, Figure 20-4)."""
@@ -115,6 +116,26 @@ def klobuchar_delay_m(
     return SPEED_OF_LIGHT_MPS * klobuchar_delay_s(
         alpha, beta, lat_rad, lon_rad, azimuth_rad, elevation_rad, gps_tow_s
     )
+
+
+def ionosphere_frequency_scale(carrier_frequency_hz: np.ndarray | float) -> np.ndarray:
+    """Ratio of the ionospheric group delay on a carrier to that on GPS L1: (f_L1 / f)^2.
+
+    Args:
+        carrier_frequency_hz: carrier(s), Hz, > 0 (e.g. Galileo E1 1575.42e6: 1.0; BeiDou B1I
+            1561.098e6: 1.018; GLONASS G1 channel k: 1602e6 + k 0.5625e6: about 0.97).
+
+    Notes
+    -----
+    First-order ionosphere: the group delay is 40.3 TEC / f^2 (Hofmann-Wellenhof et al. 2008,
+    eq. 5.79), so a delay known on L1 (the Klobuchar model) scales by (f_L1 / f)^2. The broadcast
+    GPS Klobuchar model is used for every system here (as RTKLIB does for single-frequency
+    multi-GNSS); Galileo's NeQuick-G and BeiDou's own Klobuchar set are not implemented.
+    """
+    f = np.asarray(carrier_frequency_hz, dtype=float)
+    if not np.all(np.isfinite(f) & (f > 0.0)):
+        raise ValueError(f"carrier_frequency_hz must be finite and > 0, got {carrier_frequency_hz}")
+    return (GPS_L1_FREQUENCY_HZ / f) ** 2
 
 
 def standard_atmosphere(

@@ -1,4 +1,5 @@
-"""GPS LNAV broadcast ephemeris: satellite position, velocity, clock; selection; transmit time; Sagnac.
+"""Keplerian broadcast ephemerides (GPS LNAV, Galileo I/NAV and F/NAV, BeiDou D1/D2, QZSS LNAV):
+satellite position, velocity, clock; selection; transmit time; Sagnac.
 
 Everything is vectorised over satellites: :func:`pack_ephemerides` turns a sequence of
 :class:`GpsEphemeris` into column arrays once, and :func:`satellite_states` evaluates all of them at
@@ -15,6 +16,20 @@ The velocity is the analytic time derivative of Table 20-IV (as added to IS-GPS-
 Table 20-IV velocity extension and in Remondi, "Computing satellite velocity using the broadcast
 ephemeris", GPS Solutions 8, 2004). Cao et al., eq. 5-6 use these satellite states (p_G, v_G,
 dt^(i), its drift) in the pseudorange and Doppler models.
+
+The other Keplerian systems use the same algorithm with their own constants and time scale
+(``GpsEphemeris.system``):
+
+- Galileo (OS SIS ICD 2.0, 5.1.1-5.1.5): mu = 3.986004418e14, Omega_e = 7.2921151467e-5; GST is
+  aligned to GPST (the GGTO of a few ns is neglected; RINEX 3 numbers Galileo weeks as GPS weeks).
+  ``tgd_s`` holds the BGD of the record's clock (E1/E5b for I/NAV, E1/E5a for F/NAV), so the clock
+  is that of an E1 single-frequency user (ICD 5.1.5).
+- BeiDou (BDS-SIS-ICD-B1I-3.0, 5.2.4.12): CGCS2000 mu = 3.986004418e14, Omega_e = 7.2921150e-5;
+  times of the record (t_oe, t_oc, week) are BDT = GPST - 14 s, so a GPS epoch is shifted by
+  -14 s before t_k is formed. GEO satellites (C01-C05, C59-C63) are computed in the
+  ICD's inclined frame and rotated: x_GK = R_Z(Omega_e t_k) R_X(-5 deg) x_GK' (ICD Table 5-11).
+  ``tgd_s`` holds TGD1 (B1I user).
+- QZSS (IS-QZSS-PNT-004, 4.1.2): the GPS algorithm and constants on GPS time.
 """
 
 from __future__ import annotations
@@ -26,8 +41,14 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from gnss_common.constants import (
+    BEIDOU_EARTH_ROTATION_RATE_RADPS,
+    BEIDOU_GM_M3PS2,
+    BEIDOU_MINUS_GPS_TIME_S,
     EARTH_GM_M3PS2,
     EARTH_ROTATION_RATE_RADPS,
+    GALILEO_EARTH_ROTATION_RATE_RADPS,
+    GALILEO_GM_M3PS2,
+    RELATIVISTIC_F_GALILEO_BEIDOU_S_PER_SQRT_M,
     RELATIVISTIC_F_S_PER_SQRT_M,
     SECONDS_PER_WEEK,
     SPEED_OF_LIGHT_MPS,
@@ -48,14 +69,35 @@ KEPLER_TOLERANCE_RAD = 1.0e-13
 DEFAULT_FIT_INTERVAL_H = 4.0
 """LNAV curve-fit interval when the fit flag is 0 or absent, h (IS-GPS-200, 20.3.3.4.3.1)."""
 
+KEPLER_SYSTEMS = ("G", "E", "C", "J")
+"""RINEX system letters whose broadcast orbit is Keplerian (GPS, Galileo, BeiDou, QZSS)."""
+
+_MAX_SVID = {"G": 63, "E": 36, "C": 63, "J": 10}
+"""Largest satellite number per system (RINEX 3.05, 3.5: Gnn, Enn, Cnn, Jnn = PRN - 192)."""
+
+BEIDOU_GEO_INCLINATION_RAD = math.radians(-5.0)
+"""Rotation about X of the BeiDou GEO orbit frame, rad (BDS-SIS-ICD-B1I-3.0, Table 5-11)."""
+
+
+def is_beidou_geo(prn: int) -> bool:
+    """True for the BeiDou GEO satellites C01-C05 and C59-C63 (BDS-SIS-ICD-B1I-3.0, 5.2.4.12)."""
+    return 1 <= prn <= 5 or 59 <= prn <= 63
+
 
 @dataclass(frozen=True)
 class GpsEphemeris:
-    """One GPS LNAV broadcast ephemeris record (RINEX 2/3 navigation message fields).
+    """One Keplerian broadcast ephemeris record (RINEX 2/3 navigation message fields).
+
+    The name is historical: ``system`` says whose record it is ("G" GPS, the default, "E" Galileo,
+    "C" BeiDou, "J" QZSS), and the evaluation uses that system's constants and time scale.
 
     Times: ``toc_week``/``toc_s`` is the clock reference epoch (week, time of week, s);
-    ``week`` is the continuous GPS week of ``toe_s``. Angles are radians (RINEX stores radians),
-    angular rates rad/s, ``sqrt_a`` is sqrt(m), harmonic corrections m or rad as in IS-GPS-200.
+    ``week`` is the continuous week of ``toe_s``, numbered as GPS weeks for every system (BeiDou:
+    BDT week + 1356). ``toe_s``, ``toc_s`` are seconds of week in the system's own time scale
+    (GPST, GST = GPST, BDT = GPST - 14 s). Angles are radians (RINEX stores radians), angular
+    rates rad/s, ``sqrt_a`` is sqrt(m), harmonic corrections m or rad as in IS-GPS-200.
+    ``tgd_s``: GPS/QZSS T_GD, Galileo BGD of the record's clock, BeiDou TGD1; ``health``: 0 is
+    usable (for Galileo: the E1-B bits DVS and HS only, see :mod:`gnss_common.rinex`).
     """
 
     prn: int
@@ -88,10 +130,15 @@ class GpsEphemeris:
     iodc: int = 0
     transmission_time_s: float = math.nan
     fit_interval_h: float = DEFAULT_FIT_INTERVAL_H
+    system: str = "G"
 
     def __post_init__(self) -> None:
-        if not 1 <= self.prn <= 63:
+        if self.system not in _MAX_SVID:
+            raise ValueError(f"system must be one of {KEPLER_SYSTEMS}, got {self.system!r}")
+        if self.system == "G" and not 1 <= self.prn <= 63:
             raise ValueError(f"GPS PRN must be in [1, 63], got {self.prn}")
+        if not 1 <= self.prn <= _MAX_SVID[self.system]:
+            raise ValueError(f"{self.system} satellite number must be in [1, {_MAX_SVID[self.system]}], got {self.prn}")
         if not 0.0 <= self.e < 1.0:
             raise ValueError(f"PRN {self.prn}: eccentricity must be in [0, 1), got {self.e}")
         if not self.sqrt_a_sqrt_m > 1000.0:
@@ -130,14 +177,33 @@ class EphemerisArrays:
     idot_radps: np.ndarray
     week: np.ndarray
     tgd_s: np.ndarray
+    gm_m3ps2: np.ndarray
+    earth_rotation_radps: np.ndarray
+    relativistic_f_s_per_sqrt_m: np.ndarray
+    system_minus_gps_s: np.ndarray
+    beidou_geo: np.ndarray
 
 
-_ARRAY_FIELDS = tuple(f.name for f in fields(EphemerisArrays))
+_SYSTEM_COLUMNS = ("gm_m3ps2", "earth_rotation_radps", "relativistic_f_s_per_sqrt_m", "system_minus_gps_s")
+_ARRAY_FIELDS = tuple(f.name for f in fields(EphemerisArrays) if f.name not in (*_SYSTEM_COLUMNS, "beidou_geo"))
+_SYSTEM_CONSTANTS = {
+    "G": (EARTH_GM_M3PS2, EARTH_ROTATION_RATE_RADPS, RELATIVISTIC_F_S_PER_SQRT_M, 0.0),
+    "J": (EARTH_GM_M3PS2, EARTH_ROTATION_RATE_RADPS, RELATIVISTIC_F_S_PER_SQRT_M, 0.0),
+    "E": (GALILEO_GM_M3PS2, GALILEO_EARTH_ROTATION_RATE_RADPS, RELATIVISTIC_F_GALILEO_BEIDOU_S_PER_SQRT_M, 0.0),
+    "C": (BEIDOU_GM_M3PS2, BEIDOU_EARTH_ROTATION_RATE_RADPS, RELATIVISTIC_F_GALILEO_BEIDOU_S_PER_SQRT_M,
+          BEIDOU_MINUS_GPS_TIME_S),
+}
+"""system -> (mu m^3/s^2, Omega_e rad/s, F s/sqrt(m), system time - GPST s) of its ephemeris."""
 
 
 def pack_ephemerides(ephemerides: Sequence[GpsEphemeris]) -> EphemerisArrays:
-    """Pack N ephemerides into column arrays (each shape (N,)) for :func:`satellite_states`."""
+    """Pack N ephemerides (any mix of Keplerian systems) into column arrays (each shape (N,)) for
+    :func:`satellite_states`, with each row's system constants."""
     cols = {name: np.array([getattr(e, name) for e in ephemerides], dtype=float) for name in _ARRAY_FIELDS}
+    consts = np.array([_SYSTEM_CONSTANTS[e.system] for e in ephemerides], dtype=float).reshape(-1, 4)
+    for k, name in enumerate(_SYSTEM_COLUMNS):
+        cols[name] = consts[:, k].copy()
+    cols["beidou_geo"] = np.array([e.system == "C" and is_beidou_geo(e.prn) for e in ephemerides], dtype=bool)
     return EphemerisArrays(**cols)
 
 
@@ -195,7 +261,7 @@ def satellite_states(
     E_dot = n / (1 - e cos E) and nu_dot = E_dot sqrt(1 - e^2) / (1 - e cos E).
     """
     week_arr = np.asarray(week, dtype=float)
-    tow = np.asarray(tow_s, dtype=float)
+    tow = np.asarray(tow_s, dtype=float) + eph.system_minus_gps_s  # BDT = GPST - 14 s
     # Exact week arithmetic, then the IS-GPS-200 crossover rule guards against files whose week
     # field refers to the transmission rather than to t_oe.
     tk = wrap_week_crossover_s((week_arr - eph.week) * SECONDS_PER_WEEK + (tow - eph.toe_s))
@@ -203,7 +269,7 @@ def satellite_states(
 
     a = eph.sqrt_a_sqrt_m**2
     e = eph.e
-    n = np.sqrt(EARTH_GM_M3PS2 / a**3) + eph.delta_n_radps
+    n = np.sqrt(eph.gm_m3ps2 / a**3) + eph.delta_n_radps
     mean_anom = eph.m0_rad + n * tk
     ecc = _solve_kepler(mean_anom, e)
     sin_e, cos_e = np.sin(ecc), np.cos(ecc)
@@ -229,8 +295,11 @@ def satellite_states(
     xp_dot = r_dot * np.cos(u) - r * u_dot * np.sin(u)
     yp_dot = r_dot * np.sin(u) + r * u_dot * np.cos(u)
 
-    om_dot = eph.omega_dot_radps - EARTH_ROTATION_RATE_RADPS
-    om = eph.omega0_rad + om_dot * tk - EARTH_ROTATION_RATE_RADPS * eph.toe_s
+    w_e = eph.earth_rotation_radps
+    geo = eph.beidou_geo
+    # BeiDou GEO: Omega in the inertial-like frame of t_oe (no Omega_e t_k term), rotated below.
+    om_dot = eph.omega_dot_radps - np.where(geo, 0.0, w_e)
+    om = eph.omega0_rad + om_dot * tk - w_e * eph.toe_s
     so, co = np.sin(om), np.cos(om)
     si, ci = np.sin(inc), np.cos(inc)
     x = xp * co - yp * ci * so
@@ -239,9 +308,11 @@ def satellite_states(
     vx = xp_dot * co - yp_dot * ci * so + yp * si * so * i_dot - y * om_dot
     vy = xp_dot * so + yp_dot * ci * co - yp * si * co * i_dot + x * om_dot
     vz = yp_dot * si + yp * ci * i_dot
+    if np.any(geo):
+        x, y, z, vx, vy, vz = _beidou_geo_rotation(geo, w_e, np.asarray(tk), x, y, z, vx, vy, vz)
 
-    rel = RELATIVISTIC_F_S_PER_SQRT_M * e * eph.sqrt_a_sqrt_m * sin_e
-    rel_dot = RELATIVISTIC_F_S_PER_SQRT_M * e * eph.sqrt_a_sqrt_m * cos_e * e_dot
+    rel = eph.relativistic_f_s_per_sqrt_m * e * eph.sqrt_a_sqrt_m * sin_e
+    rel_dot = eph.relativistic_f_s_per_sqrt_m * e * eph.sqrt_a_sqrt_m * cos_e * e_dot
     clk = eph.af0_s + eph.af1_s_per_s * tc + eph.af2_s_per_s2 * tc * tc + rel
     if include_tgd:
         clk = clk - eph.tgd_s
@@ -252,6 +323,31 @@ def satellite_states(
         clock_bias_s=clk,
         clock_drift_s_per_s=drift,
         relativistic_s=rel,
+    )
+
+
+def _beidou_geo_rotation(
+    geo: np.ndarray, w_e: np.ndarray, tk: np.ndarray, x: np.ndarray, y: np.ndarray, z: np.ndarray,
+    vx: np.ndarray, vy: np.ndarray, vz: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """x_GK = R_Z(Omega_e t_k) R_X(-5 deg) x_GK' for the GEO rows (BDS-SIS-ICD-B1I-3.0, Table 5-11);
+    velocity: the same rotation of v' plus the derivative of R_Z, i.e. minus Omega_e z_hat x x_GK."""
+    cx, sx = math.cos(BEIDOU_GEO_INCLINATION_RAD), math.sin(BEIDOU_GEO_INCLINATION_RAD)
+    # R_X(phi) = [[1, 0, 0], [0, cos, sin], [0, -sin, cos]] (passive rotation, as in the ICD).
+    y1 = cx * y + sx * z
+    z1 = -sx * y + cx * z
+    vy1 = cx * vy + sx * vz
+    vz1 = -sx * vy + cx * vz
+    ang = w_e * tk
+    cz, sz = np.cos(ang), np.sin(ang)
+    # R_Z(phi) = [[cos, sin, 0], [-sin, cos, 0], [0, 0, 1]].
+    x2 = cz * x + sz * y1
+    y2 = -sz * x + cz * y1
+    vx2 = cz * vx + sz * vy1 + w_e * y2
+    vy2 = -sz * vx + cz * vy1 - w_e * x2
+    return (
+        np.where(geo, x2, x), np.where(geo, y2, y), np.where(geo, z1, z),
+        np.where(geo, vx2, vx), np.where(geo, vy2, vy), np.where(geo, vz1, vz),
     )
 
 
@@ -330,7 +426,7 @@ def earth_rotation_correction(
 
 
 class EphemerisStore:
-    """Holds GPS ephemerides and picks the right one for a satellite and epoch.
+    """Holds Keplerian ephemerides (any systems) and picks the right one for a satellite and epoch.
 
     Selection rule: health == 0, |t - t_oe| <= max_age_s (default: half the record's fit
     interval, 2 h for the 4 h LNAV fit), and the smallest |t - t_oe|; ties go to the later
@@ -345,31 +441,38 @@ class EphemerisStore:
         """Index ephemerides by PRN.
 
         Args:
-            ephemerides: GPS records of any PRNs, any order.
+            ephemerides: records of any systems and satellites, any order.
             max_age_s: override of the validity half-window |t - t_oe|, s (> 0); None: half the fit interval.
         """
         if max_age_s is not None and not (math.isfinite(max_age_s) and max_age_s > 0.0):
             raise ValueError(f"max_age_s must be finite and > 0, got {max_age_s}")
         self._max_age_s = max_age_s
-        self._by_prn: dict[int, list[GpsEphemeris]] = {}
+        self._by_sat: dict[tuple[str, int], list[GpsEphemeris]] = {}
         for eph in ephemerides:
-            self._by_prn.setdefault(eph.prn, []).append(eph)
+            self._by_sat.setdefault((eph.system, eph.prn), []).append(eph)
 
     @property
     def prns(self) -> tuple[int, ...]:
-        """PRNs with at least one record."""
-        return tuple(sorted(self._by_prn))
+        """GPS PRNs with at least one record."""
+        return tuple(sorted(p for s, p in self._by_sat if s == "G"))
 
-    def select(self, prn: int, week: int, tow_s: float) -> tuple[GpsEphemeris | None, str]:
+    @property
+    def satellites(self) -> tuple[tuple[str, int], ...]:
+        """(system letter, satellite number) with at least one record."""
+        return tuple(sorted(self._by_sat))
+
+    def select(self, prn: int, week: int, tow_s: float, system: str = "G") -> tuple[GpsEphemeris | None, str]:
         """Return ``(ephemeris, "ok")`` or ``(None, reason)`` with reason one of
         ``"no_ephemeris"``, ``"unhealthy"``, ``"stale_ephemeris"``.
 
         Args:
-            prn: GPS PRN.
+            prn: satellite number within its system (GPS: PRN).
             week: continuous GPS week of the epoch.
-            tow_s: time of week of the epoch, s.
+            tow_s: GPS time of week of the epoch, s.
+            system: RINEX system letter ("G" default, "E", "C", "J").
         """
-        candidates = self._by_prn.get(int(prn))
+        candidates = self._by_sat.get((system, int(prn)))
+        offset_s = _SYSTEM_CONSTANTS[system][3] if system in _SYSTEM_CONSTANTS else 0.0
         if not candidates:
             return None, "no_ephemeris"
         healthy = [e for e in candidates if e.health == 0]
@@ -378,7 +481,7 @@ class EphemerisStore:
         best: GpsEphemeris | None = None
         best_key: tuple[float, float] | None = None
         for e in healthy:
-            age = abs((week - e.week) * SECONDS_PER_WEEK + (tow_s - e.toe_s))
+            age = abs((week - e.week) * SECONDS_PER_WEEK + (tow_s + offset_s - e.toe_s))
             limit = self._max_age_s if self._max_age_s is not None else 0.5 * e.fit_interval_h * 3600.0
             if age > limit:
                 continue

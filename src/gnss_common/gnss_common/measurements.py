@@ -1,14 +1,21 @@
 """Build :class:`gnss_common.observations.GnssEpoch` objects from RINEX observations and navigation.
 
-For every GPS satellite of an epoch: the L1 C/A code pseudorange (``C1C`` / ``C1``), the
-pseudorange rate from the L1 Doppler (``D1C`` / ``D1``) with the sign of
-rfi_msgs/GnssMeasurement.msg (``-wavelength * doppler_hz``, positive when the range grows), C/N0
-from ``S1C`` / ``S1`` (NaN when absent), the satellite state at transmit time from the broadcast
-ephemeris, and Klobuchar / Saastamoinen delays evaluated at a receiver reference position:
+For every satellite of an epoch whose system has a broadcast orbit model here (GPS, Galileo,
+BeiDou, QZSS: Keplerian, :mod:`gnss_common.ephemeris`; GLONASS: integrated,
+:mod:`gnss_common.glonass`), on one signal per system (:data:`DEFAULT_SIGNALS`: GPS/QZSS L1 C/A,
+Galileo E1, BeiDou B1I, GLONASS G1 C/A): the code pseudorange (GPS: ``C1C`` / ``C1``), the
+pseudorange rate from the Doppler of the same signal with the sign of
+rfi_msgs/GnssMeasurement.msg (``-wavelength * doppler_hz``, positive when the range grows, the
+wavelength that of the signal's carrier, per channel for GLONASS), C/N0 (NaN when absent), the
+satellite state at transmit time from the broadcast ephemeris, and Klobuchar / Saastamoinen
+delays (the Klobuchar L1 delay scaled to the signal's carrier) evaluated at a receiver reference
+position:
 the header APPROX POSITION when present, else a coarse per-epoch single-point fix computed here
 (unweighted Gauss-Newton on the raw pseudoranges with Earth-rotation correction).
 
-Satellites that cannot be modelled are skipped and counted by reason in the result.
+Satellites that cannot be modelled are skipped and counted by reason in the result, in total and
+per constellation (SBAS and NavIC, and systems left out of ``constellations``:
+``unsupported_constellation``).
 
 Notes
 -----
@@ -25,9 +32,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gnss_common.constants import GPS_L1_WAVELENGTH_M, SPEED_OF_LIGHT_MPS
+from gnss_common.constants import (
+    BEIDOU_B1I_FREQUENCY_HZ,
+    GALILEO_E1_FREQUENCY_HZ,
+    GPS_L1_FREQUENCY_HZ,
+    SPEED_OF_LIGHT_MPS,
+)
 from gnss_common.coordinates import azimuth_elevation, ecef_to_geodetic
-from gnss_common.corrections import klobuchar_delay_m, troposphere_delay_m
+from gnss_common.corrections import ionosphere_frequency_scale, klobuchar_delay_m, troposphere_delay_m
 from gnss_common.ephemeris import (
     EphemerisStore,
     GpsEphemeris,
@@ -35,10 +47,17 @@ from gnss_common.ephemeris import (
     pack_ephemerides,
     satellite_states_at_transmit,
 )
+from gnss_common.glonass import (
+    GlonassEphemeris,
+    GlonassStore,
+    glonass_g1_frequency_hz,
+    glonass_states_at_transmit,
+    pack_glonass,
+)
 from gnss_common.gps_time import gps_to_stamp_ns
-from gnss_common.observations import GPS, GnssEpoch, SatelliteObservation
+from gnss_common.observations import BEIDOU, GALILEO, GLONASS, GPS, QZSS, SBAS, GnssEpoch, SatelliteObservation
 from gnss_common.positioning import CONVERGED, least_squares_position
-from gnss_common.rinex import RinexNav, RinexObs, RinexObsEpoch
+from gnss_common.rinex import SYSTEM_NAMES, RinexNav, RinexObs, RinexObsEpoch
 
 SKIP_REASONS = (
     "unsupported_constellation",
@@ -49,6 +68,40 @@ SKIP_REASONS = (
     "stale_ephemeris",
 )
 """Keys of :attr:`EpochBuildResult.skipped` (always all present, zero when nothing skipped)."""
+
+CONSTELLATION_CODES = {"G": GPS, "R": GLONASS, "E": GALILEO, "C": BEIDOU, "J": QZSS, "S": SBAS}
+"""RINEX system letter -> constellation code of rfi_msgs/GnssMeasurement."""
+
+SUPPORTED_SYSTEMS = ("G", "E", "C", "R", "J")
+"""Systems whose satellite state can be computed from a broadcast ephemeris here."""
+
+
+@dataclass(frozen=True)
+class SignalCodes:
+    """Which RINEX observables make one system's measurement, and its carrier.
+
+    Attributes:
+        pseudorange_codes: code observables tried in order, m.
+        doppler_codes: Doppler observables of the same signal tried in order, Hz.
+        cn0_codes: signal-strength observables tried in order, dB-Hz.
+        carrier_frequency_hz: the signal's carrier, Hz; NaN for GLONASS FDMA (per channel k).
+    """
+
+    pseudorange_codes: tuple[str, ...]
+    doppler_codes: tuple[str, ...]
+    cn0_codes: tuple[str, ...]
+    carrier_frequency_hz: float
+
+
+DEFAULT_SIGNALS = {
+    "E": SignalCodes(("C1C", "C1X", "C1"), ("D1C", "D1X", "D1"), ("S1C", "S1X", "S1"), GALILEO_E1_FREQUENCY_HZ),
+    # B1I: C2I in RINEX 3.02+, C1I in 3.01 files.
+    "C": SignalCodes(("C2I", "C1I"), ("D2I", "D1I"), ("S2I", "S1I"), BEIDOU_B1I_FREQUENCY_HZ),
+    "R": SignalCodes(("C1C", "C1"), ("D1C", "D1"), ("S1C", "S1"), math.nan),
+    "J": SignalCodes(("C1C", "C1"), ("D1C", "D1"), ("S1C", "S1"), GPS_L1_FREQUENCY_HZ),
+}
+"""Signals used per non-GPS system (GPS: :class:`MeasurementBuilderParams` ``*_codes``): Galileo E1
+(OS SIS ICD), BeiDou B1I (its broadcast clock is corrected with TGD1), GLONASS G1 C/A, QZSS L1 C/A."""
 
 
 @dataclass(frozen=True)
@@ -62,9 +115,14 @@ class MeasurementBuilderParams:
         min_pseudorange_m: smallest plausible pseudorange, m (GPS ranges are 20000-26000 km plus
             the receiver clock offset).
         max_pseudorange_m: largest plausible pseudorange, m.
+        max_pseudorange_high_orbit_m: largest plausible BeiDou and QZSS pseudorange, m (their GEO,
+            IGSO and QZO satellites are 36 000-42 000 km away, plus the receiver clock offset).
         max_ephemeris_age_s: |t - t_oe| limit, s; None uses half of each record's fit interval.
         apply_ionosphere: compute the Klobuchar delay (else 0).
         apply_troposphere: compute the Saastamoinen delay (else 0).
+        constellations: RINEX system letters to build (of :data:`SUPPORTED_SYSTEMS`); satellites
+            of other systems are skipped as ``unsupported_constellation``.
+        signals: the signal of each non-GPS system (:data:`DEFAULT_SIGNALS`).
     """
 
     pseudorange_codes: tuple[str, ...] = ("C1C", "C1")
@@ -72,13 +130,22 @@ class MeasurementBuilderParams:
     cn0_codes: tuple[str, ...] = ("S1C", "S1")
     min_pseudorange_m: float = 1.0e7
     max_pseudorange_m: float = 4.0e7
+    max_pseudorange_high_orbit_m: float = 4.8e7
     max_ephemeris_age_s: float | None = None
     apply_ionosphere: bool = True
     apply_troposphere: bool = True
+    constellations: tuple[str, ...] = SUPPORTED_SYSTEMS
+    signals: dict[str, SignalCodes] = field(default_factory=lambda: dict(DEFAULT_SIGNALS))
 
     def __post_init__(self) -> None:
         if not self.pseudorange_codes:
             raise ValueError("pseudorange_codes must name at least one observable")
+        unknown = [c for c in self.constellations if c not in SUPPORTED_SYSTEMS]
+        if unknown:
+            raise ValueError(f"constellations must be among {SUPPORTED_SYSTEMS}, got {unknown}")
+        missing = [c for c in self.constellations if c != "G" and c not in self.signals]
+        if missing:
+            raise ValueError(f"no signal given for constellation(s) {missing}")
         if not (
             math.isfinite(self.min_pseudorange_m)
             and math.isfinite(self.max_pseudorange_m)
@@ -88,6 +155,9 @@ class MeasurementBuilderParams:
                 "need 0 < min_pseudorange_m < max_pseudorange_m, both finite; got "
                 f"{self.min_pseudorange_m}, {self.max_pseudorange_m}"
             )
+        high = self.max_pseudorange_high_orbit_m
+        if not (math.isfinite(high) and high > self.min_pseudorange_m):
+            raise ValueError(f"max_pseudorange_high_orbit_m must be finite and > min_pseudorange_m, got {high}")
         if self.max_ephemeris_age_s is not None and not (
             math.isfinite(self.max_ephemeris_age_s) and self.max_ephemeris_age_s > 0.0
         ):
@@ -106,6 +176,9 @@ class EpochBuildResult:
         skipped_satellites: ``(satellite id, reason)`` for every skipped satellite.
         reference_position_ecef_m: receiver position used for the delays, m, (3,); NaN if none.
         reference_source: ``"given"``, ``"coarse_fix"`` or ``"none"`` (delays are NaN then).
+        extra: other counts (``ionosphere_unavailable``).
+        skipped_by_constellation: constellation name (:data:`gnss_common.rinex.SYSTEM_NAMES`,
+            e.g. ``"galileo"``) -> reason -> satellites skipped in this epoch (only nonzero entries).
     """
 
     epoch: GnssEpoch
@@ -114,6 +187,7 @@ class EpochBuildResult:
     reference_position_ecef_m: np.ndarray
     reference_source: str
     extra: dict[str, float] = field(default_factory=dict)
+    skipped_by_constellation: dict[str, dict[str, int]] = field(default_factory=dict)
 
 
 def _first_finite(values: dict[str, float], codes: Sequence[str]) -> float:
@@ -163,7 +237,7 @@ def coarse_position_fix(
 
 
 class GnssEpochBuilder:
-    """Turns RINEX observation epochs into GnssEpoch objects (GPS L1 C/A only).
+    """Turns RINEX observation epochs into GnssEpoch objects (GPS, Galileo, BeiDou, GLONASS, QZSS).
 
     Usage::
 
@@ -175,14 +249,15 @@ class GnssEpochBuilder:
 
     def __init__(
         self,
-        ephemerides: Sequence[GpsEphemeris],
+        ephemerides: Sequence[GpsEphemeris | GlonassEphemeris],
         iono_alpha: np.ndarray | None,
         iono_beta: np.ndarray | None,
         reference_position_ecef_m: np.ndarray | None = None,
         params: MeasurementBuilderParams | None = None,
     ) -> None:
         """Args:
-        ephemerides: GPS broadcast records (any PRNs, any order).
+        ephemerides: broadcast records of any systems (Keplerian :class:`GpsEphemeris` of GPS,
+            Galileo, BeiDou, QZSS and :class:`GlonassEphemeris`), any order.
         iono_alpha: Klobuchar alpha (4,), or None / NaN-filled (ionosphere then 0 and counted
             in ``extra["ionosphere_unavailable"]``).
         iono_beta: Klobuchar beta (4,), idem.
@@ -191,7 +266,14 @@ class GnssEpochBuilder:
         params: builder parameters (defaults if None).
         """
         self.params = params if params is not None else MeasurementBuilderParams()
-        self._store = EphemerisStore(ephemerides, self.params.max_ephemeris_age_s)
+        kepler = [e for e in ephemerides if isinstance(e, GpsEphemeris)]
+        glonass = [e for e in ephemerides if isinstance(e, GlonassEphemeris)]
+        self._store = EphemerisStore(kepler, self.params.max_ephemeris_age_s)
+        self._glonass = (
+            GlonassStore(glonass)
+            if self.params.max_ephemeris_age_s is None
+            else GlonassStore(glonass, self.params.max_ephemeris_age_s)
+        )
         alpha = None if iono_alpha is None else np.asarray(iono_alpha, dtype=float).reshape(-1)
         beta = None if iono_beta is None else np.asarray(iono_beta, dtype=float).reshape(-1)
         ok = (
@@ -218,9 +300,10 @@ class GnssEpochBuilder:
     def from_rinex(
         cls, obs: RinexObs, nav: RinexNav, params: MeasurementBuilderParams | None = None
     ) -> GnssEpochBuilder:
-        """Builder using the nav file's Klobuchar parameters and the obs header APPROX POSITION."""
+        """Builder using the nav file's records of every system, its Klobuchar parameters and the
+        obs header APPROX POSITION."""
         return cls(
-            nav.ephemerides,
+            (*nav.keplerian_ephemerides, *nav.glonass_ephemerides),
             nav.header.iono_alpha,
             nav.header.iono_beta,
             obs.header.approx_position_ecef_m,
@@ -241,41 +324,57 @@ class GnssEpochBuilder:
         week, tow = obs_epoch.gps_week, obs_epoch.tow_s
         skipped = dict.fromkeys(SKIP_REASONS, 0)
         skipped_sats: list[tuple[str, str]] = []
+        by_system: dict[str, dict[str, int]] = {}
 
         def skip(sat_id: str, reason: str) -> None:
             skipped[reason] += 1
             skipped_sats.append((sat_id, reason))
+            name = SYSTEM_NAMES.get(sat_id[0], sat_id[0].lower())
+            counts = by_system.setdefault(name, {})
+            counts[reason] = counts.get(reason, 0) + 1
 
-        ids: list[str] = []
+        gps_codes = SignalCodes(p.pseudorange_codes, p.doppler_codes, p.cn0_codes, GPS_L1_FREQUENCY_HZ)
+        systems: list[str] = []
         prns: list[int] = []
-        ephs: list[GpsEphemeris] = []
+        ephs: list[GpsEphemeris | GlonassEphemeris] = []
         prs: list[float] = []
         dops: list[float] = []
         cn0s: list[float] = []
+        freqs: list[float] = []
         for sat_id in sorted(obs_epoch.observations):
             values = obs_epoch.observations[sat_id]
-            if sat_id[0] != "G":
+            sys_char = sat_id[0]
+            if sys_char not in p.constellations:
                 skip(sat_id, "unsupported_constellation")
                 continue
-            pr = _first_finite(values, p.pseudorange_codes)
+            codes = gps_codes if sys_char == "G" else p.signals[sys_char]
+            pr = _first_finite(values, codes.pseudorange_codes)
             if not math.isfinite(pr):
                 skip(sat_id, "missing_pseudorange")
                 continue
-            if not p.min_pseudorange_m <= pr <= p.max_pseudorange_m:
+            max_pr = p.max_pseudorange_high_orbit_m if sys_char in ("C", "J") else p.max_pseudorange_m
+            if not p.min_pseudorange_m <= pr <= max_pr:
                 skip(sat_id, "pseudorange_out_of_range")
                 continue
             prn = int(sat_id[1:])
-            eph, reason = self._store.select(prn, week, tow)
+            eph: GpsEphemeris | GlonassEphemeris | None
+            if sys_char == "R":
+                eph, reason = self._glonass.select(prn, week, tow)
+                freq = glonass_g1_frequency_hz(eph.frequency_channel) if eph is not None else math.nan
+            else:
+                eph, reason = self._store.select(prn, week, tow, sys_char)
+                freq = codes.carrier_frequency_hz
             if eph is None:
                 skip(sat_id, reason)
                 continue
-            cn0 = _first_finite(values, p.cn0_codes)
-            ids.append(sat_id)
+            cn0 = _first_finite(values, codes.cn0_codes)
+            systems.append(sys_char)
             prns.append(prn)
             ephs.append(eph)
             prs.append(pr)
-            dops.append(_first_finite(values, p.doppler_codes))
+            dops.append(_first_finite(values, codes.doppler_codes))
             cn0s.append(cn0 if 0.0 < cn0 < 100.0 else math.nan)
+            freqs.append(freq)
 
         extra: dict[str, float] = {"ionosphere_unavailable": 0.0}
         ref = np.full(3, math.nan)
@@ -284,22 +383,26 @@ class GnssEpochBuilder:
             epoch = GnssEpoch(
                 stamp_ns=gps_to_stamp_ns(week, tow), gps_week=week, gps_time_of_week_s=tow, observations=()
             )
-            return EpochBuildResult(epoch, skipped, tuple(skipped_sats), ref, source, extra)
+            return EpochBuildResult(epoch, skipped, tuple(skipped_sats), ref, source, extra, by_system)
 
         pr_arr = np.asarray(prs)
-        states, _ = satellite_states_at_transmit(pack_ephemerides(ephs), week, tow, pr_arr)
-        pos = states.position_ecef_m
-        clk_m = SPEED_OF_LIGHT_MPS * states.clock_bias_s
-        drift_mps = SPEED_OF_LIGHT_MPS * states.clock_drift_s_per_s
+        n = len(ephs)
+        pos, vel, clk_s, drift_s = _states_at_transmit(ephs, week, tow, pr_arr)
+        clk_m = SPEED_OF_LIGHT_MPS * clk_s
+        drift_mps = SPEED_OF_LIGHT_MPS * drift_s
+        freq_arr = np.asarray(freqs, dtype=float)
 
         if self._ref is not None:
             ref, source = self._ref, "given"
         else:
-            fix = coarse_position_fix(pos, pr_arr + clk_m)
+            # One receiver clock for all systems: fix on GPS alone when it has 4 satellites (the
+            # inter-system biases are tens of ns), else on everything (tens of metres suffice here).
+            gps_rows = np.array([s == "G" for s in systems])
+            rows = gps_rows if int(np.sum(gps_rows)) >= 4 else np.ones(n, dtype=bool)
+            fix = coarse_position_fix(pos[rows], pr_arr[rows] + clk_m[rows])
             if fix is not None:
                 ref, source = fix, "coarse_fix"
 
-        n = len(ephs)
         iono = np.zeros(n)
         tropo = np.zeros(n)
         if source == "none":
@@ -311,26 +414,29 @@ class GnssEpochBuilder:
             az, el = azimuth_elevation(ref, rot_pos)
             if p.apply_ionosphere:
                 if self._alpha is not None and self._beta is not None:
-                    iono = klobuchar_delay_m(self._alpha, self._beta, lat, lon, az, el, tow)
+                    iono = klobuchar_delay_m(self._alpha, self._beta, lat, lon, az, el, tow) * (
+                        ionosphere_frequency_scale(freq_arr)
+                    )
                 else:
                     extra["ionosphere_unavailable"] = float(n)
             if p.apply_troposphere:
                 tropo = troposphere_delay_m(lat, h, el)
 
-        rates = -GPS_L1_WAVELENGTH_M * np.asarray(dops)
+        rates = -(SPEED_OF_LIGHT_MPS / freq_arr) * np.asarray(dops)
         observations = tuple(
             SatelliteObservation(
-                constellation=GPS,
+                constellation=CONSTELLATION_CODES[systems[i]],
                 svid=prns[i],
                 pseudorange_m=float(pr_arr[i]),
                 pseudorange_rate_mps=float(rates[i]),
                 cn0_dbhz=float(cn0s[i]),
                 satellite_position_ecef_m=pos[i].copy(),
-                satellite_velocity_ecef_mps=states.velocity_ecef_mps[i].copy(),
+                satellite_velocity_ecef_mps=vel[i].copy(),
                 satellite_clock_bias_m=float(clk_m[i]),
                 satellite_clock_drift_mps=float(drift_mps[i]),
                 ionosphere_delay_m=float(iono[i]),
                 troposphere_delay_m=float(tropo[i]),
+                carrier_frequency_hz=float(freq_arr[i]),
             )
             for i in range(n)
         )
@@ -341,8 +447,35 @@ class GnssEpochBuilder:
             observations=observations,
         )
         return EpochBuildResult(
-            epoch, skipped, tuple(skipped_sats), np.array(ref, dtype=float), source, extra
+            epoch, skipped, tuple(skipped_sats), np.array(ref, dtype=float), source, extra, by_system
         )
+
+
+def _states_at_transmit(
+    ephs: Sequence[GpsEphemeris | GlonassEphemeris], week: int, tow: float, pr: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Position (N, 3) m, velocity (N, 3) m/s, clock s, drift s/s of each record at transmit time:
+    Keplerian records by :func:`satellite_states_at_transmit`, GLONASS by
+    :func:`gnss_common.glonass.glonass_states_at_transmit`, rows in input order."""
+    n = len(ephs)
+    pos = np.zeros((n, 3))
+    vel = np.zeros((n, 3))
+    clk = np.zeros(n)
+    drift = np.zeros(n)
+    kep = np.array([isinstance(e, GpsEphemeris) for e in ephs], dtype=bool)
+    if np.any(kep):
+        k_ephs = [e for e in ephs if isinstance(e, GpsEphemeris)]
+        st, _ = satellite_states_at_transmit(pack_ephemerides(k_ephs), week, tow, pr[kep])
+        pos[kep], vel[kep], clk[kep], drift[kep] = (
+            st.position_ecef_m, st.velocity_ecef_mps, st.clock_bias_s, st.clock_drift_s_per_s
+        )
+    if not np.all(kep):
+        g_ephs = [e for e in ephs if isinstance(e, GlonassEphemeris)]
+        st, _ = glonass_states_at_transmit(pack_glonass(g_ephs), week, tow, pr[~kep])
+        pos[~kep], vel[~kep], clk[~kep], drift[~kep] = (
+            st.position_ecef_m, st.velocity_ecef_mps, st.clock_bias_s, st.clock_drift_s_per_s
+        )
+    return pos, vel, clk, drift
 
 
 def build_epochs(

@@ -43,6 +43,7 @@ class SatelliteObservation:
     troposphere_delay_m: float = 0.0
     pseudorange_std_m: float = math.nan
     pseudorange_rate_std_mps: float = math.nan
+    carrier_frequency_hz: float = math.nan  # carrier of the measured signal, Hz (NaN: unknown; GPS L1 assumed)
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,12 @@
-"""RINEX 2.10/2.11 and 3.0x observation and GPS navigation readers.
+"""RINEX 2.10/2.11 and 3.0x observation and navigation readers (GPS, Galileo, BeiDou, QZSS, GLONASS).
 
 Readers return plain frozen dataclasses; malformed input raises :class:`RinexFormatError`
 (a ``ValueError``) whose message names the file and the 1-based line number.
+
+Files are read as stations publish them: plain, gzip (``.gz``), Unix compress (``.Z``) and
+Hatanaka-compressed (``.crx``, ``.crx.gz``, RINEX 2 ``.yyd``) are recognised from their content
+and decompressed with the ``hatanaka`` package (the reference CRX2RNX algorithm); a truncated or
+corrupted compressed file raises :class:`RinexFormatError` naming the file.
 
 Scope
 -----
@@ -10,11 +15,18 @@ Scope
   (``SYS / # / OBS TYPES``, ``>`` epoch records). Event flags 2-5 (header records inside the
   data) and 6 (cycle-slip records) are skipped. Blank or zero-filled fields become NaN.
   Satellite ids are normalised to ``"G05"`` style (RINEX 2 blank system letter means GPS).
-- Navigation files: GPS LNAV records from RINEX 2.x GPS nav files (``N``) and RINEX 3.x
-  (``N``, any constellation mix; non-GPS records are skipped and counted). Klobuchar parameters
-  from ``ION ALPHA`` / ``ION BETA`` (2.x) or ``IONOSPHERIC CORR GPSA/GPSB`` (3.x).
-- Epoch times are on the GPS time scale (RINEX "GPS" time system); other time systems are
-  rejected with a clear error for GPS processing.
+- Navigation files: GPS LNAV records from RINEX 2.x GPS nav files (``N``) and, from RINEX 3.x
+  (``N``, mixed or one file per system), GPS, Galileo (I/NAV; F/NAV records are skipped and
+  counted: their health bits do not cover E1), BeiDou, QZSS and GLONASS records. SBAS and NavIC
+  records are skipped and counted by system; records of a supported system that describe no
+  usable orbit (e.g. sqrt(A) of a few sqrt(m)) are skipped and counted too, with the reason.
+  Klobuchar parameters from ``ION ALPHA`` / ``ION BETA`` (2.x) or ``IONOSPHERIC CORR GPSA/GPSB``
+  (3.x). Several nav files (one per system, as some archives publish them) are merged with
+  :func:`read_rinex_navs`.
+- Observation epochs are on the GPS time scale (RINEX "GPS" time system); other time systems are
+  rejected with a clear error. In nav records, Galileo times are GST (= GPST), BeiDou times BDT
+  (kept as such: :mod:`gnss_common.ephemeris` shifts by 14 s), GLONASS t_b is UTC and converted
+  here to GPS time with the header's LEAP SECONDS (else :data:`gnss_common.gps_time.LEAP_SECONDS`).
 
 Notes
 -----
@@ -23,21 +35,34 @@ Gurtner & Estey, RINEX 2.11 (2007), tables A1-A4; IGS RINEX 3.04/3.05 (2020), ta
 
 from __future__ import annotations
 
+import calendar
 import datetime as _dt
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import hatanaka
 import numpy as np
 
+from gnss_common.constants import BEIDOU_WEEK_OFFSET
 from gnss_common.ephemeris import DEFAULT_FIT_INTERVAL_H, GpsEphemeris
-from gnss_common.gps_time import datetime_to_gps
+from gnss_common.glonass import GlonassEphemeris
+from gnss_common.gps_time import datetime_to_gps, leap_seconds_at_ros_stamp
 
 _RINEX2_OBS_PER_LINE = 5
 _RINEX2_SATS_PER_LINE = 12
 _OBS_FIELD_WIDTH = 16
 _NAV3_LINES = {"G": 8, "E": 8, "C": 8, "J": 8, "I": 8, "R": 4, "S": 4}
+SYSTEM_NAMES = {"G": "gps", "R": "glonass", "E": "galileo", "C": "beidou", "J": "qzss", "S": "sbas", "I": "navic"}
+"""RINEX system letter -> lower-case constellation name (used as counter keys)."""
+
+NAV_SKIP_REASONS = ("unsupported_system", "non_physical_orbit", "galileo_fnav")
+"""Reasons a navigation record is not used (keys of :attr:`RinexNav.skipped_reasons` entries)."""
+
+_GALILEO_INAV_SOURCES = 0b101  # data source bits 0 (I/NAV E1-B) and 2 (I/NAV E5b-I)
+_GALILEO_E1_HEALTH_BITS = 0b111  # E1-B DVS (bit 0) and HS (bits 1-2), RINEX 3.05 Table A8
+_QZSS_HEALTH_MASK = 0xFE  # the LSB flags the L6 (LEX) signal only (as RTKLIB does for L1 users)
 
 
 class RinexFormatError(ValueError):
@@ -62,6 +87,8 @@ class RinexObsHeader:
             "C1", "D1", "S1" are listed under every system letter "G", "R", "E", "S", "J", "C").
         interval_s: INTERVAL, s (NaN when absent).
         time_system: TIME OF FIRST OBS time system ("GPS" default).
+        glonass_channels: GLONASS slot -> FDMA frequency channel k from ``GLONASS SLOT / FRQ #``
+            (empty when absent).
     """
 
     version: float
@@ -71,6 +98,7 @@ class RinexObsHeader:
     obs_types: dict[str, tuple[str, ...]]
     interval_s: float
     time_system: str
+    glonass_channels: dict[int, int] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -123,12 +151,39 @@ class RinexNavHeader:
 
 @dataclass(frozen=True)
 class RinexNav:
-    """A navigation file: header, GPS ephemerides, and counts of skipped records by system."""
+    """A navigation file (or several merged): header, ephemerides, records not used.
+
+    Attributes:
+        path: the file (merged: the files joined by ``";"``).
+        header: Klobuchar parameters and leap seconds.
+        ephemerides: GPS LNAV records only (as before multi-GNSS support; the simulators use them).
+        skipped_records: system letter -> number of records not used.
+        other_ephemerides: Galileo, BeiDou and QZSS records (``GpsEphemeris.system`` "E", "C", "J").
+        glonass_ephemerides: GLONASS records.
+        skipped_reasons: system letter -> {reason (:data:`NAV_SKIP_REASONS`): records}.
+    """
 
     path: str
     header: RinexNavHeader
     ephemerides: tuple[GpsEphemeris, ...]
     skipped_records: dict[str, int] = field(default_factory=dict)
+    other_ephemerides: tuple[GpsEphemeris, ...] = ()
+    glonass_ephemerides: tuple[GlonassEphemeris, ...] = ()
+    skipped_reasons: dict[str, dict[str, int]] = field(default_factory=dict)
+
+    @property
+    def keplerian_ephemerides(self) -> tuple[GpsEphemeris, ...]:
+        """GPS, Galileo, BeiDou and QZSS records together."""
+        return self.ephemerides + self.other_ephemerides
+
+    def record_counts(self) -> dict[str, int]:
+        """System letter -> records read and kept."""
+        out: dict[str, int] = {}
+        for e in self.keplerian_ephemerides:
+            out[e.system] = out.get(e.system, 0) + 1
+        if self.glonass_ephemerides:
+            out["R"] = len(self.glonass_ephemerides)
+        return out
 
 
 # ----------------------------------------------------------------------------------------------
@@ -138,10 +193,25 @@ class RinexNav:
 def _read_lines(path: str | Path) -> list[str]:
     p = Path(path)
     try:
-        text = p.read_text(encoding="ascii", errors="replace")
+        raw = p.read_bytes()
     except OSError as exc:
         raise RinexFormatError(p, 0, f"cannot read file: {exc}") from exc
-    return text.splitlines()
+    if _is_compressed(raw):
+        try:
+            raw = hatanaka.decompress(raw)
+        except Exception as exc:  # gzip/zlib/CRX errors of any type: the file is unusable
+            raise RinexFormatError(
+                p, 0, f"cannot decompress ({type(exc).__name__}: {exc}); truncated or corrupted file?"
+            ) from None
+    return raw.decode("ascii", errors="replace").splitlines()
+
+
+def _is_compressed(raw: bytes) -> bool:
+    """gzip, Unix compress, bzip2, zip magic numbers, or a Hatanaka (CRINEX) first line."""
+    if raw[:2] in (b"\x1f\x8b", b"\x1f\x9d") or raw[:3] == b"BZh" or raw[:4] == b"PK\x03\x04":
+        return True
+    first = raw[:100].split(b"\n", 1)[0]
+    return b"CRINEX VERS" in first[60:]
 
 
 def _label(line: str) -> str:
@@ -244,6 +314,7 @@ def _parse_obs_header(lines: list[str], path: str | Path) -> tuple[RinexObsHeade
     v2_count = -1
     v3_current: str | None = None
     v3_count = 0
+    glo_channels: dict[int, int] = {}
     end = None
     for idx in range(1, len(lines)):
         line = lines[idx]
@@ -270,6 +341,15 @@ def _parse_obs_header(lines: list[str], path: str | Path) -> tuple[RinexObsHeade
                 code = line[10 + 6 * k : 12 + 6 * k].strip()
                 if code:
                     v2_types.append(code)
+        elif label == "GLONASS SLOT / FRQ #":
+            for k in range(8):
+                tok = line[4 + 7 * k : 11 + 7 * k]
+                if not tok.strip():
+                    continue
+                try:
+                    glo_channels[int(tok[1:3])] = int(tok[3:7])
+                except ValueError:
+                    raise RinexFormatError(path, line_no, f"malformed GLONASS SLOT / FRQ # entry {tok!r}") from None
         elif label == "SYS / # / OBS TYPES":
             if line[0:1].strip():
                 v3_current = line[0:1].upper()
@@ -309,6 +389,7 @@ def _parse_obs_header(lines: list[str], path: str | Path) -> tuple[RinexObsHeade
         obs_types=types,
         interval_s=interval,
         time_system=time_system or "GPS",
+        glonass_channels=glo_channels,
     )
     return header, end
 
@@ -465,14 +546,15 @@ def _iter_obs3(
 
 
 def read_rinex_nav(path: str | Path) -> RinexNav:
-    """Read GPS LNAV ephemerides and Klobuchar parameters from a RINEX 2.x or 3.x nav file.
+    """Read broadcast ephemerides and Klobuchar parameters from a RINEX 2.x or 3.x nav file.
 
     Args:
-        path: file path.
+        path: file path (plain or compressed, see the module docstring).
 
     Returns:
-        :class:`RinexNav`; non-GPS records of RINEX 3 mixed files are skipped and counted in
-        ``skipped_records`` by system letter.
+        :class:`RinexNav`: GPS records in ``ephemerides``, Galileo/BeiDou/QZSS records in
+        ``other_ephemerides``, GLONASS records in ``glonass_ephemerides``; records not used are
+        counted in ``skipped_records`` by system letter, with the reasons in ``skipped_reasons``.
 
     Raises:
         RinexFormatError: unreadable file, wrong type, truncated or malformed records.
@@ -485,9 +567,9 @@ def read_rinex_nav(path: str | Path) -> RinexNav:
     if not (2.0 <= version < 4.0):
         raise RinexFormatError(path, 1, f"unsupported RINEX version {version}")
     if ftype != "N":
-        raise RinexFormatError(path, 1, f"not a GPS/mixed navigation file (type {ftype!r})")
-    if version >= 3.0 and lines[0][40:41].strip().upper() not in ("", "G", "M"):
-        raise RinexFormatError(path, 1, f"navigation file for system {lines[0][40:41]!r}, GPS expected")
+        raise RinexFormatError(path, 1, f"not a RINEX 2 GPS or RINEX 3 navigation file (type {ftype!r})")
+    if version >= 3.0 and lines[0][40:41].strip().upper() not in ("", "M", *_NAV3_LINES):
+        raise RinexFormatError(path, 1, f"navigation file for unknown system {lines[0][40:41]!r}")
     alpha = np.full(4, math.nan)
     beta = np.full(4, math.nan)
     leap: int | None = None
@@ -524,7 +606,16 @@ def read_rinex_nav(path: str | Path) -> RinexNav:
         raise RinexFormatError(path, len(lines), "no END OF HEADER")
     header = RinexNavHeader(version=version, iono_alpha=alpha, iono_beta=beta, leap_seconds=leap)
     ephs: list[GpsEphemeris] = []
+    others: list[GpsEphemeris] = []
+    glonass: list[GlonassEphemeris] = []
     skipped: dict[str, int] = {}
+    reasons: dict[str, dict[str, int]] = {}
+
+    def skip(sys_char: str, reason: str) -> None:
+        skipped[sys_char] = skipped.get(sys_char, 0) + 1
+        by = reasons.setdefault(sys_char, {})
+        by[reason] = by.get(reason, 0) + 1
+
     idx = end
     n = len(lines)
     while idx < n:
@@ -546,15 +637,193 @@ def read_rinex_nav(path: str | Path) -> RinexNav:
             lead = 4
         if idx + nrec > n:
             raise RinexFormatError(path, idx + 1, f"navigation record truncated (needs {nrec} lines)")
-        if sys_char != "G":
-            skipped[sys_char] = skipped.get(sys_char, 0) + 1
-            idx += nrec
-            continue
-        ephs.append(
-            _parse_gps_record(lines[idx : idx + nrec], idx + 1, version, first_vals_start, lead, path)
-        )
+        for j in range(1, nrec):
+            if lines[idx + j][0:1].strip():
+                raise RinexFormatError(
+                    path, idx + j + 1, f"navigation record of {lines[idx][0:3]!r} truncated (needs {nrec} lines)"
+                )
+        rec = lines[idx : idx + nrec]
+        rec_no = idx + 1
         idx += nrec
-    return RinexNav(path=str(path), header=header, ephemerides=tuple(ephs), skipped_records=skipped)
+        if version >= 3.0:
+            # Optional further lines (RINEX 3.05 adds a fifth GLONASS line): blank first column.
+            while idx < n and lines[idx].strip() and not lines[idx][0:1].strip():
+                idx += 1
+        if sys_char == "G":
+            ephs.append(_parse_gps_record(rec, rec_no, version, first_vals_start, lead, path))
+        elif sys_char in ("E", "C", "J"):
+            eph, reason = _parse_kepler_record(rec, rec_no, sys_char, path)
+            if eph is None:
+                skip(sys_char, reason)
+            else:
+                others.append(eph)
+        elif sys_char == "R":
+            glo, reason = _parse_glonass_record(rec, rec_no, leap, path)
+            if glo is None:
+                skip(sys_char, reason)
+            else:
+                glonass.append(glo)
+        else:
+            skip(sys_char, "unsupported_system")
+    return RinexNav(
+        path=str(path),
+        header=header,
+        ephemerides=tuple(ephs),
+        skipped_records=skipped,
+        other_ephemerides=tuple(others),
+        glonass_ephemerides=tuple(glonass),
+        skipped_reasons=reasons,
+    )
+
+
+def read_rinex_navs(paths: Sequence[str | Path]) -> RinexNav:
+    """Read several navigation files (e.g. one per system) and merge them.
+
+    Args:
+        paths: one or more nav files, any systems.
+
+    Returns:
+        One :class:`RinexNav`: the records of all files; the header of the first file that has
+        Klobuchar parameters (alpha and beta) and of the first that has leap seconds; skipped
+        records summed.
+
+    Raises:
+        RinexFormatError: as :func:`read_rinex_nav`, for any file.
+        ValueError: no path given.
+    """
+    if not paths:
+        raise ValueError("read_rinex_navs: no navigation file given")
+    navs = [read_rinex_nav(p) for p in paths]
+    if len(navs) == 1:
+        return navs[0]
+    iono = next((v.header for v in navs if np.all(np.isfinite(v.header.iono_alpha))
+                 and np.all(np.isfinite(v.header.iono_beta))), navs[0].header)
+    leap = next((v.header.leap_seconds for v in navs if v.header.leap_seconds is not None), None)
+    skipped: dict[str, int] = {}
+    reasons: dict[str, dict[str, int]] = {}
+    for v in navs:
+        for k, c in v.skipped_records.items():
+            skipped[k] = skipped.get(k, 0) + c
+        for k, by in v.skipped_reasons.items():
+            dst = reasons.setdefault(k, {})
+            for r, c in by.items():
+                dst[r] = dst.get(r, 0) + c
+    header = RinexNavHeader(
+        version=navs[0].header.version, iono_alpha=iono.iono_alpha, iono_beta=iono.iono_beta, leap_seconds=leap
+    )
+    return RinexNav(
+        path=";".join(v.path for v in navs),
+        header=header,
+        ephemerides=tuple(e for v in navs for e in v.ephemerides),
+        skipped_records=skipped,
+        other_ephemerides=tuple(e for v in navs for e in v.other_ephemerides),
+        glonass_ephemerides=tuple(e for v in navs for e in v.glonass_ephemerides),
+        skipped_reasons=reasons,
+    )
+
+
+def _record_values(rec: list[str], line_no: int, path: str | Path, n_lines: int) -> list[float]:
+    """The 3 clock values of the first line and 4 values per following line (RINEX 3 layout)."""
+    vals = [_float_field(rec[0][23 + 19 * k : 42 + 19 * k], path, line_no, "clock parameter") for k in range(3)]
+    for j in range(1, n_lines):
+        line = rec[j]
+        for k in range(4):
+            vals.append(
+                _float_field(line[4 + 19 * k : 23 + 19 * k], path, line_no + j,
+                             f"orbit parameter {len(vals) + 1}", blank=0.0)
+            )
+    if any(not math.isfinite(v) for v in vals[:3]):
+        raise RinexFormatError(path, line_no, "blank clock parameter")
+    return vals
+
+
+def _record_epoch(first: str, line_no: int, path: str | Path) -> tuple[int, int, int, int, int, int, float]:
+    try:
+        num = int(first[1:3])
+        year = int(first[4:8])
+        mo, dd, hh, mi, isec = (int(first[k : k + 3]) for k in (8, 11, 14, 17, 20))
+    except ValueError:
+        raise RinexFormatError(path, line_no, f"malformed navigation record epoch {first[0:23]!r}") from None
+    return num, year, mo, dd, hh, mi, float(isec)
+
+
+def _parse_kepler_record(
+    rec: list[str], line_no: int, sys_char: str, path: str | Path
+) -> tuple[GpsEphemeris | None, str]:
+    """A RINEX 3 Galileo, BeiDou or QZSS record (RINEX 3.05 Tables A8, A14, A10).
+
+    Returns ``(ephemeris, "ok")`` or ``(None, reason)`` for a record that is well formed but
+    not usable (F/NAV for an E1 user, a non-physical orbit)."""
+    num, year, mo, dd, hh, mi, sec = _record_epoch(rec[0], line_no, path)
+    # Galileo: GST calendar; BeiDou: BDT calendar; QZSS: GPST. Numbered as GPS weeks either way.
+    toc_week, toc_s = _epoch_to_gps(year, mo, dd, hh, mi, sec, path, line_no)
+    v = _record_values(rec, line_no, path, 8)
+    af0, af1, af2, iod, crs, dn, m0, cuc, e, cus, sqa, toe, cic, om0, cis, i0, crc, om, omd, idot = v[:20]
+    word21, week, _spare, acc, health, grp1, grp2, ttm, last = v[20:29]
+    if sqa < 1000.0 or not (0.0 <= e < 1.0):
+        return None, "non_physical_orbit"
+    fit_h = DEFAULT_FIT_INTERVAL_H
+    if sys_char == "E":
+        sources = int(word21)
+        if not sources & _GALILEO_INAV_SOURCES:
+            return None, "galileo_fnav"
+        tgd = grp2  # BGD E5b/E1: the I/NAV clock is the E1,E5b combination's (OS SIS ICD 5.1.5)
+        health_used = int(health) & _GALILEO_E1_HEALTH_BITS
+        iodc = int(iod)
+    elif sys_char == "C":
+        week = week + BEIDOU_WEEK_OFFSET
+        tgd = grp1  # TGD1: B1I user (BDS-SIS-ICD-B1I-3.0, 5.2.4.10)
+        health_used = int(health)
+        iodc = int(last)  # AODC
+    else:  # QZSS, GPS layout
+        tgd = grp1
+        health_used = int(health) & _QZSS_HEALTH_MASK
+        iodc = int(grp2)
+        fit_h = last if last >= DEFAULT_FIT_INTERVAL_H else DEFAULT_FIT_INTERVAL_H
+    try:
+        return GpsEphemeris(
+            prn=num, toc_week=toc_week, toc_s=toc_s, af0_s=af0, af1_s_per_s=af1, af2_s_per_s2=af2,
+            iode=int(iod), crs_m=crs, delta_n_radps=dn, m0_rad=m0, cuc_rad=cuc, e=e, cus_rad=cus,
+            sqrt_a_sqrt_m=sqa, toe_s=toe, cic_rad=cic, omega0_rad=om0, cis_rad=cis, i0_rad=i0, crc_m=crc,
+            omega_rad=om, omega_dot_radps=omd, idot_radps=idot, week=int(week), sv_accuracy_m=acc,
+            health=health_used, tgd_s=tgd, iodc=iodc, transmission_time_s=ttm, fit_interval_h=fit_h,
+            system=sys_char,
+        ), "ok"
+    except ValueError as exc:
+        raise RinexFormatError(path, line_no, str(exc)) from None
+
+
+def _parse_glonass_record(
+    rec: list[str], line_no: int, leap_seconds: int | None, path: str | Path
+) -> tuple[GlonassEphemeris | None, str]:
+    """A RINEX 3 GLONASS record (RINEX 3.05 Table A11): epoch t_b in UTC, -tau_n, +gamma_n,
+    frame time; then X, Vx, Ax, health / Y, Vy, Ay, channel / Z, Vz, Az, age (km, km/s, km/s^2)."""
+    num, year, mo, dd, hh, mi, sec = _record_epoch(rec[0], line_no, path)
+    week, tow = _epoch_to_gps(year, mo, dd, hh, mi, sec, path, line_no)
+    if leap_seconds is None:  # no LEAP SECONDS in the header: the suite's one table (UTC Unix ns)
+        leap = leap_seconds_at_ros_stamp(calendar.timegm((year, mo, dd, hh, mi, 0, 0, 0, 0)) * 1_000_000_000)
+    else:
+        leap = leap_seconds
+    tow += leap  # UTC -> GPST
+    if tow >= 604800.0:
+        week, tow = week + 1, tow - 604800.0
+    v = _record_values(rec, line_no, path, 4)
+    minus_tau, gamma, frame_t = v[0:3]
+    x, vx, ax, health, y, vy, ay, chan, z, vz, az, age = v[3:15]
+    pos = np.array([x, y, z]) * 1.0e3
+    if not 2.0e7 < float(np.linalg.norm(pos)) < 3.0e7:
+        return None, "non_physical_orbit"
+    if chan != round(chan):
+        raise RinexFormatError(path, line_no + 2, f"R{num:02d}: frequency channel {chan} is not an integer")
+    try:
+        return GlonassEphemeris(
+            slot=num, tb_week=week, tb_s=tow, minus_tau_n_s=minus_tau, gamma_n=gamma, frame_time_s=frame_t,
+            position_m=pos, velocity_mps=np.array([vx, vy, vz]) * 1.0e3,
+            acceleration_mps2=np.array([ax, ay, az]) * 1.0e3, health=int(health),
+            frequency_channel=int(round(chan)), age_days=age,
+        ), "ok"
+    except ValueError as exc:
+        raise RinexFormatError(path, line_no, str(exc)) from None
 
 
 def _parse_gps_record(

@@ -124,7 +124,16 @@ def test_missing_ephemeris_and_other_systems_are_counted(arl1):
     obs3 = read_rinex_obs(DATA / "hand_rnx3.rnx")
     nav3 = read_rinex_nav(DATA / "hand_rnx3.nav")
     r3 = GnssEpochBuilder.from_rinex(obs3, nav3).build(obs3.epochs[0])
-    assert r3.skipped["unsupported_constellation"] == 2
+    # The hand-made R07 / E11 nav records are non-physical, so those satellites have no ephemeris.
+    assert r3.skipped["unsupported_constellation"] == 0
+    assert r3.skipped_by_constellation["glonass"] == {"no_ephemeris": 1}
+    assert r3.skipped_by_constellation["galileo"] == {"no_ephemeris": 1}
+    gps_only = GnssEpochBuilder.from_rinex(obs3, nav3, MeasurementBuilderParams(constellations=("G",)))
+    r3g = gps_only.build(obs3.epochs[0])
+    assert r3g.skipped["unsupported_constellation"] == 2
+    assert r3g.skipped_by_constellation["glonass"] == {"unsupported_constellation": 1}
+    assert r3g.skipped_by_constellation["galileo"] == {"unsupported_constellation": 1}
+    assert r3g.skipped["no_ephemeris"] == r3.skipped["no_ephemeris"] - 2
     ref = GnssEpochBuilder.from_rinex(obs, nav).build(obs.epochs[0])
     assert [o.svid for o in r3.epoch.observations] == [o.svid for o in ref.epoch.observations]
     for a, b in zip(r3.epoch.observations, ref.epoch.observations, strict=True):
