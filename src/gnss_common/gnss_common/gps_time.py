@@ -10,7 +10,7 @@ up with an IMU, wheel odometry or tf. GPS time is kept exact in the messages' ow
     gps_ns   = (GPS_EPOCH_UNIX_S + week * 604800) * 10**9 + round(tow_s * 10**9)
     stamp_ns = gps_ns - (GPS - UTC)(gps_ns) * 10**9          # gps_to_ros_stamp_ns
 
-``gps_ns`` (the *GPS-scale* axis, what :func:`gps_to_stamp_ns` returns) counts SI seconds since
+``gps_ns`` (the *GPS-scale* axis, what :func:`gps_to_gps_ns` returns) counts SI seconds since
 1970-01-01 on the GPS time scale; it is continuous and is what simulators step on, but it is not a
 header stamp: it runs ahead of ROS time by the leap seconds (17 s from 2015-07-01, 18 s since
 2017-01-01).
@@ -146,7 +146,7 @@ def _check_week_tow(week: int, tow_s: float) -> None:
         raise ValueError(f"GPS time of week must be finite and in [0, 604800) s, got {tow_s!r}")
 
 
-def gps_to_stamp_ns(week: int, tow_s: float) -> int:
+def gps_to_gps_ns(week: int, tow_s: float) -> int:
     """Convert GPS week and time of week to GPS-scale ns since 1970 (no leap s; NOT a header stamp).
 
     A header stamp is :func:`gps_to_ros_stamp_ns`; this continuous GPS-scale axis is what
@@ -157,7 +157,7 @@ def gps_to_stamp_ns(week: int, tow_s: float) -> int:
         tow_s: GPS time of week, s, in [0, 604800).
 
     Returns:
-        Stamp, ns: ``(GPS_EPOCH_UNIX_S + week*604800) * 1e9 + round(tow_s * 1e9)``.
+        GPS-scale time, ns: ``(GPS_EPOCH_UNIX_S + week*604800) * 1e9 + round(tow_s * 1e9)``.
 
     Raises:
         ValueError: non-integer or negative week, non-finite or out-of-range tow.
@@ -170,25 +170,21 @@ def gps_to_stamp_ns(week: int, tow_s: float) -> int:
     return _GPS_EPOCH_NS + int(week) * _WEEK_NS + int(round(tow_s * NS_PER_S))
 
 
-def stamp_ns_to_gps(stamp_ns: int) -> tuple[int, float]:
+def gps_ns_to_gps(gps_ns: int) -> tuple[int, float]:
     """Convert GPS-scale ns since 1970 (NOT a header stamp) to (GPS week, time of week in s).
 
     A header stamp is converted with :func:`ros_stamp_ns_to_gps`.
 
     Args:
-        stamp_ns: GPS-scale time, ns, at or after the GPS epoch (>= 315964800e9).
+        gps_ns: GPS-scale time, ns, at or after the GPS epoch (>= 315964800e9).
 
     Returns:
         ``(week, tow_s)`` with week continuous and tow_s in [0, 604800).
 
     Raises:
-        ValueError: stamp before the GPS epoch or not an integer.
+        ValueError: time before the GPS epoch or not an integer.
     """
-    if not isinstance(stamp_ns, (int, np.integer)) or isinstance(stamp_ns, bool):
-        raise ValueError(f"stamp_ns must be an integer number of ns, got {stamp_ns!r}")
-    since = int(stamp_ns) - _GPS_EPOCH_NS
-    if since < 0:
-        raise ValueError(f"stamp_ns {stamp_ns} is before the GPS epoch 1980-01-06")
+    since = _check_stamp(gps_ns, "gps_ns") - _GPS_EPOCH_NS
     week, rem_ns = divmod(since, _WEEK_NS)
     return int(week), rem_ns / NS_PER_S
 
@@ -202,7 +198,7 @@ def _leap_at_utc_ns(utc_ns: int) -> int:
 
 
 def gps_ns_to_ros_stamp_ns(gps_ns: int) -> int:
-    """Convert GPS-scale ns since 1970 (:func:`gps_to_stamp_ns`) to a ROS header stamp, ns (UTC).
+    """Convert GPS-scale ns since 1970 (:func:`gps_to_gps_ns`) to a ROS header stamp, ns (UTC).
 
     Args:
         gps_ns: GPS-scale time, ns, at or after the GPS epoch.
@@ -267,7 +263,7 @@ def gps_to_ros_stamp_ns(week: int, tow_s: float) -> int:
     IS-GPS-200, 3.3.4 and 20.3.3.5.2.4. See the module docstring for the time-base convention
     and the leap second itself.
     """
-    return gps_ns_to_ros_stamp_ns(gps_to_stamp_ns(week, tow_s))
+    return gps_ns_to_ros_stamp_ns(gps_to_gps_ns(week, tow_s))
 
 
 def ros_stamp_ns_to_gps(stamp_ns: int) -> tuple[int, float]:
@@ -286,7 +282,7 @@ def ros_stamp_ns_to_gps(stamp_ns: int) -> tuple[int, float]:
     Warns:
         LeapTableExpiredWarning: the time is beyond :data:`LEAP_TABLE_VALID_UNTIL_UNIX_S`.
     """
-    return stamp_ns_to_gps(ros_stamp_ns_to_gps_ns(stamp_ns))
+    return gps_ns_to_gps(ros_stamp_ns_to_gps_ns(stamp_ns))
 
 
 def leap_seconds_at_gps(week: int, tow_s: float) -> int:
@@ -297,7 +293,7 @@ def leap_seconds_at_gps(week: int, tow_s: float) -> int:
     Warns:
         LeapTableExpiredWarning: the time is beyond :data:`LEAP_TABLE_VALID_UNTIL_UNIX_S`.
     """
-    gps_ns = gps_to_stamp_ns(week, tow_s)
+    gps_ns = gps_to_gps_ns(week, tow_s)
     leap = _leap_at_gps_ns(gps_ns)
     _warn_if_beyond_table(gps_ns - leap * NS_PER_S)
     return leap
@@ -358,16 +354,16 @@ def gps_to_datetime(week: int, tow_s: float) -> _dt.datetime:
     return GPS_EPOCH_DATETIME + _dt.timedelta(weeks=int(week), microseconds=round(tow_s * 1e6))
 
 
-def stamp_ns_to_datetime(stamp_ns: int) -> _dt.datetime:
-    """Convert a stamp, ns (GPS scale), to a naive datetime on the GPS scale (us resolution)."""
-    week, tow_s = stamp_ns_to_gps(stamp_ns)
+def gps_ns_to_datetime(gps_ns: int) -> _dt.datetime:
+    """Convert GPS-scale ns (not a header stamp) to a naive datetime on the GPS scale (us resolution)."""
+    week, tow_s = gps_ns_to_gps(gps_ns)
     return gps_to_datetime(week, tow_s)
 
 
-def datetime_to_stamp_ns(epoch: _dt.datetime) -> int:
-    """Convert a GPS-scale calendar epoch to a stamp, ns (see :func:`datetime_to_gps`)."""
+def datetime_to_gps_ns(epoch: _dt.datetime) -> int:
+    """Convert a GPS-scale calendar epoch to GPS-scale ns (see :func:`datetime_to_gps`; not a stamp)."""
     week, tow_s = datetime_to_gps(epoch)
-    return gps_to_stamp_ns(week, tow_s)
+    return gps_to_gps_ns(week, tow_s)
 
 
 def resolve_week_rollover(week_mod_1024: int, reference_week: int) -> int:

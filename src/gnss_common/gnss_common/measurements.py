@@ -54,7 +54,7 @@ from gnss_common.glonass import (
     glonass_states_at_transmit,
     pack_glonass,
 )
-from gnss_common.gps_time import gps_to_stamp_ns
+from gnss_common.gps_time import gps_to_ros_stamp_ns
 from gnss_common.observations import BEIDOU, GALILEO, GLONASS, GPS, QZSS, SBAS, GnssEpoch, SatelliteObservation
 from gnss_common.positioning import CONVERGED, least_squares_position
 from gnss_common.rinex import SYSTEM_NAMES, RinexNav, RinexObs, RinexObsEpoch
@@ -317,8 +317,9 @@ class GnssEpochBuilder:
             obs_epoch: one epoch from :func:`gnss_common.rinex.read_rinex_obs`.
 
         Returns:
-            :class:`EpochBuildResult`; ``epoch.stamp_ns`` is the receiver time tag on the GPS
-            time scale (see :mod:`gnss_common.gps_time`).
+            :class:`EpochBuildResult`; ``epoch.stamp_ns`` is the receiver time tag as a ROS
+            (UTC) stamp; the exact GPS week / time of week are in the epoch (see
+            :mod:`gnss_common.gps_time`).
         """
         p = self.params
         week, tow = obs_epoch.gps_week, obs_epoch.tow_s
@@ -381,7 +382,7 @@ class GnssEpochBuilder:
         source = "none"
         if not ephs:
             epoch = GnssEpoch(
-                stamp_ns=gps_to_stamp_ns(week, tow), gps_week=week, gps_time_of_week_s=tow, observations=()
+                stamp_ns=gps_to_ros_stamp_ns(week, tow), gps_week=week, gps_time_of_week_s=tow, observations=()
             )
             return EpochBuildResult(epoch, skipped, tuple(skipped_sats), ref, source, extra, by_system)
 
@@ -441,7 +442,7 @@ class GnssEpochBuilder:
             for i in range(n)
         )
         epoch = GnssEpoch(
-            stamp_ns=gps_to_stamp_ns(week, tow),
+            stamp_ns=gps_to_ros_stamp_ns(week, tow),
             gps_week=week,
             gps_time_of_week_s=tow,
             observations=observations,

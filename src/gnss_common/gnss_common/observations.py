@@ -50,7 +50,7 @@ class SatelliteObservation:
 class GnssEpoch:
     """All satellites measured at one receive epoch (see rfi_msgs/GnssMeasurementArray.msg)."""
 
-    stamp_ns: int  # receive time on the bag/system time base, ns
+    stamp_ns: int  # receive time, ROS (UTC) stamp, ns: gnss_common.gps_time.gps_to_ros_stamp_ns(week, tow)
     gps_week: int
     gps_time_of_week_s: float
     observations: tuple[SatelliteObservation, ...] = field(default_factory=tuple)

@@ -15,26 +15,26 @@ from gnss_common.gps_time import (
     LEAP_TABLE_VALID_UNTIL_UNIX_S,
     LeapTableExpiredWarning,
     datetime_to_gps,
-    datetime_to_stamp_ns,
+    datetime_to_gps_ns,
+    gps_ns_to_datetime,
+    gps_ns_to_gps,
     gps_ns_to_ros_stamp_ns,
     gps_seconds_difference,
     gps_to_datetime,
+    gps_to_gps_ns,
     gps_to_ros_stamp_ns,
-    gps_to_stamp_ns,
     leap_seconds_at_gps,
     leap_seconds_at_ros_stamp,
     resolve_week_rollover,
     ros_stamp_ns_to_gps,
     ros_stamp_ns_to_gps_ns,
-    stamp_ns_to_datetime,
-    stamp_ns_to_gps,
     wrap_week_crossover_s,
 )
 
 
 def test_gps_epoch_maps_to_documented_stamp():
-    assert gps_to_stamp_ns(0, 0.0) == GPS_EPOCH_UNIX_S * 1_000_000_000
-    assert stamp_ns_to_gps(GPS_EPOCH_UNIX_S * 1_000_000_000) == (0, 0.0)
+    assert gps_to_gps_ns(0, 0.0) == GPS_EPOCH_UNIX_S * 1_000_000_000
+    assert gps_ns_to_gps(GPS_EPOCH_UNIX_S * 1_000_000_000) == (0, 0.0)
 
 
 def test_known_dates():
@@ -42,9 +42,9 @@ def test_known_dates():
     assert datetime_to_gps(dt.datetime(2015, 7, 19)) == (1854, 0.0)
     assert datetime_to_gps(dt.datetime(2005, 4, 2)) == (1316, 518400.0)
     assert datetime_to_gps(dt.datetime(2019, 4, 7)) == (2048, 0.0)  # second 10-bit rollover
-    # no leap seconds: the stamp is the UTC-labelled Unix time of the same calendar label
+    # GPS-scale ns: the UTC-labelled Unix time of the same calendar label (no leap seconds)
     label = dt.datetime(2015, 7, 19, 0, 0, 30, tzinfo=dt.timezone.utc)
-    assert datetime_to_stamp_ns(label) == int(label.timestamp()) * 1_000_000_000
+    assert datetime_to_gps_ns(label) == int(label.timestamp()) * 1_000_000_000
 
 
 def test_round_trips():
@@ -52,17 +52,17 @@ def test_round_trips():
     for _ in range(200):
         week = int(rng.integers(0, 3000))
         tow = float(np.round(rng.uniform(0.0, 604800.0 - 1e-3), 6))
-        stamp = gps_to_stamp_ns(week, tow)
-        w2, t2 = stamp_ns_to_gps(stamp)
+        stamp = gps_to_gps_ns(week, tow)
+        w2, t2 = gps_ns_to_gps(stamp)
         assert w2 == week
         assert t2 == pytest.approx(tow, abs=1e-9)
         assert datetime_to_gps(gps_to_datetime(week, tow)) == (week, pytest.approx(tow, abs=1e-6))
-        assert stamp_ns_to_datetime(stamp) == gps_to_datetime(week, tow)
+        assert gps_ns_to_datetime(stamp) == gps_to_datetime(week, tow)
 
 
 def test_stamps_are_continuous_across_the_week_boundary():
-    a = gps_to_stamp_ns(1854, 604799.5)
-    b = gps_to_stamp_ns(1855, 0.0)
+    a = gps_to_gps_ns(1854, 604799.5)
+    b = gps_to_gps_ns(1855, 0.0)
     assert b - a == 500_000_000
 
 
@@ -86,15 +86,15 @@ def test_crossover_rule():
 
 def test_invalid_inputs_raise():
     with pytest.raises(ValueError):
-        gps_to_stamp_ns(-1, 0.0)
+        gps_to_gps_ns(-1, 0.0)
     with pytest.raises(ValueError):
-        gps_to_stamp_ns(100, 604800.0)
+        gps_to_gps_ns(100, 604800.0)
     with pytest.raises(ValueError):
-        gps_to_stamp_ns(100, float("nan"))
+        gps_to_gps_ns(100, float("nan"))
     with pytest.raises(ValueError):
-        gps_to_stamp_ns(1.5, 0.0)  # type: ignore[arg-type]
+        gps_to_gps_ns(1.5, 0.0)  # type: ignore[arg-type]
     with pytest.raises(ValueError):
-        stamp_ns_to_gps(0)
+        gps_ns_to_gps(0)
     with pytest.raises(ValueError):
         datetime_to_gps(dt.datetime(1979, 1, 1))
     with pytest.raises(ValueError):
@@ -146,7 +146,7 @@ def test_ros_stamps_of_known_gps_times():
     assert gps_to_ros_stamp_ns(1854, 0.0) == int(utc.timestamp()) * _NS
     assert leap_seconds_at_gps(1854, 0.0) == 17
     # 2024-02-08 00:00:00 GPST: 18 s.
-    assert gps_to_ros_stamp_ns(2300, 345600.0) == gps_to_stamp_ns(2300, 345600.0) - 18 * _NS
+    assert gps_to_ros_stamp_ns(2300, 345600.0) == gps_to_gps_ns(2300, 345600.0) - 18 * _NS
     assert leap_seconds_at_gps(2300, 345600.0) == 18
     assert ros_stamp_ns_to_gps(gps_to_ros_stamp_ns(2300, 345600.0)) == (2300, 345600.0)
 
@@ -169,8 +169,8 @@ def test_table_boundaries(row):
     # Round trips on both sides of the leap second are exact.
     for g in (last_ordinary, midnight, midnight + 7 * ms):
         assert ros_stamp_ns_to_gps_ns(gps_ns_to_ros_stamp_ns(g)) == g
-    assert leap_seconds_at_gps(*stamp_ns_to_gps(last_ordinary)) == old
-    assert leap_seconds_at_gps(*stamp_ns_to_gps(leap_start)) == leap
+    assert leap_seconds_at_gps(*gps_ns_to_gps(last_ordinary)) == old
+    assert leap_seconds_at_gps(*gps_ns_to_gps(leap_start)) == leap
 
 
 def test_a_stamp_inside_a_leap_second():
@@ -180,7 +180,7 @@ def test_a_stamp_inside_a_leap_second():
     inside = (t + 17) * _NS + _NS // 2
     assert gps_ns_to_ros_stamp_ns(inside) == (t - 1) * _NS + _NS // 2
     assert ros_stamp_ns_to_gps_ns(gps_ns_to_ros_stamp_ns(inside)) == inside - _NS
-    week, tow = stamp_ns_to_gps(inside)
+    week, tow = gps_ns_to_gps(inside)
     assert (week, tow) == (1930, 17.5)  # 2017-01-01 is GPS week 1930, day 0
     assert gps_to_ros_stamp_ns(week, tow) == (t - 1) * _NS + _NS // 2
     assert ros_stamp_ns_to_gps(gps_to_ros_stamp_ns(week, tow)) == (1930, 16.5)
@@ -199,7 +199,7 @@ def test_ros_round_trips_over_the_whole_table():
         tow = float(np.round(rng.uniform(0.0, 604800.0 - 1e-3), 6))
         stamp = gps_to_ros_stamp_ns(week, tow)
         leap = leap_seconds_at_gps(week, tow)
-        assert stamp == gps_to_stamp_ns(week, tow) - leap * _NS
+        assert stamp == gps_to_gps_ns(week, tow) - leap * _NS
         in_leap_second = leap_seconds_at_ros_stamp(stamp) != leap
         if not in_leap_second:
             w2, t2 = ros_stamp_ns_to_gps(stamp)
@@ -214,7 +214,7 @@ def test_beyond_the_table_warns_and_keeps_the_last_offset():
     week_2027 = 2450  # 2026-12-20
     with pytest.warns(LeapTableExpiredWarning):
         stamp = gps_to_ros_stamp_ns(week_2027, 0.0)
-    assert stamp == gps_to_stamp_ns(week_2027, 0.0) - 18 * _NS
+    assert stamp == gps_to_gps_ns(week_2027, 0.0) - 18 * _NS
     with pytest.warns(LeapTableExpiredWarning):
         assert ros_stamp_ns_to_gps(stamp) == (week_2027, 0.0)
     with pytest.warns(LeapTableExpiredWarning):

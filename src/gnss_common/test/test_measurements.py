@@ -9,7 +9,7 @@ import pytest
 from gnss_common.constants import GPS_L1_WAVELENGTH_M
 from gnss_common.coordinates import azimuth_elevation
 from gnss_common.ephemeris import earth_rotation_correction
-from gnss_common.gps_time import gps_to_stamp_ns
+from gnss_common.gps_time import gps_to_ros_stamp_ns
 from gnss_common.measurements import (
     SKIP_REASONS,
     GnssEpochBuilder,
@@ -41,7 +41,8 @@ def test_counts_and_fields(arl1):
         assert (("G06", "stale_ephemeris") in r.skipped_satellites) == g06_seen
         assert r.skipped["unhealthy"] == 1 and r.skipped["stale_ephemeris"] == int(g06_seen)
         assert len(r.epoch.observations) + sum(r.skipped.values()) == len(e.observations)
-        assert r.epoch.stamp_ns == gps_to_stamp_ns(e.gps_week, e.tow_s)
+        assert r.epoch.stamp_ns == gps_to_ros_stamp_ns(e.gps_week, e.tow_s)  # ROS (UTC) stamp
+        assert (r.epoch.gps_week, r.epoch.gps_time_of_week_s) == (e.gps_week, e.tow_s)
         assert r.reference_source == "given"
     assert sum(r.skipped["stale_ephemeris"] for r in res) > 0
     first = res[0].epoch

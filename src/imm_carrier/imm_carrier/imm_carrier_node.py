@@ -146,7 +146,8 @@ class CarrierNodeParams:
         '0..1; 0.5 = independent bits (the paper).', minimum=0.0, maximum=1.0)
     bit_period_s: float = parameter(
         0.02, 'Known data-bit timing: with T shorter than this, bit changes are allowed only on intervals '
-        'starting on a bit edge of the GPS time grid (stamps are GPS time), s; 0 = edges unknown.',
+        'starting on a bit edge of the GPS time grid (ROS stamps converted from GPS time are on it: GPS - UTC is '
+        'whole seconds), s; 0 = edges unknown.',
         minimum=0.0, maximum=1.0)
     iq_scaling: str = parameter(
         'unit_amplitude', 'Normalisation of the input correlators: unit_amplitude (A = 1, noise std from C/N0) '

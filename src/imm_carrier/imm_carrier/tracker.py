@@ -80,7 +80,8 @@ class TrackerParams:
             (missed satellite-motion phase changes): the channel restarts, counted, > 1.
         bit_period_s: navigation data-bit duration, s (GPS L1 C/A: 0.02). When the integration time
             is shorter, the IMM's bit-transition probability is used only on intervals that start on
-            a bit edge (stamps on the GPS time grid) and is 0 inside a bit; 0 disables this.
+            a bit edge (stamps on the GPS bit grid; ROS stamps from GPS time are, GPS - UTC being whole
+            seconds) and is 0 inside a bit; 0 disables this.
         min_integration_time_s, max_integration_time_s: the receiver's range of coherent
             integration times T, s, 0 < min < max; a correlator with T outside it is rejected
             (``rejected_integration_time``). Defaults 0.1 ms and 100 ms (Zhao et al.: 1-20 ms).

@@ -18,7 +18,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.context import Context
 from rclpy.parameter import Parameter
 
-from gnss_common.gps_time import gps_to_stamp_ns
+from gnss_common.gps_time import gps_to_ros_stamp_ns
 from imm_carrier import tracker as tracker_module
 from imm_carrier.imm_carrier_node import CarrierNodeParams, ImmCarrierNode
 from rfi_msgs.msg import CarrierPhase, CarrierPhaseArray, Correlator, CorrelatorArray
@@ -28,7 +28,7 @@ from rfi_node_common.stamps import ns_to_stamp
 from rfi_node_common.testing import NodeRig
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'imm_carrier.yaml'
-START_NS = gps_to_stamp_ns(2300, 345600.0)  # on the 20 ms GPS bit grid
+START_NS = gps_to_ros_stamp_ns(2300, 345600.0)  # on the 20 ms GPS bit grid (ROS = GPS - 18 s)
 T_S = 0.02
 T_NS = 20_000_000
 SPIN_DEADLINE_S = 60.0

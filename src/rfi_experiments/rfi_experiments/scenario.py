@@ -23,7 +23,8 @@ not for none) and the type's waveform keys: cw ``frequency_hz``; chirp ``start_f
 see streams/if_snapshots.py) are written once and every stream derives its own keys from them
 (:func:`resolve_streams`):
 
-- ``if_snapshots``: ``start_stamp_ns`` and ``phases`` (the phases as they are);
+- ``if_snapshots``: ``start_stamp_ns`` (the ROS (UTC) stamp of ``start``,
+  :func:`gnss_common.gps_time.gps_to_ros_stamp_ns`) and ``phases`` (the phases as they are);
 - ``gnss_uwb``: ``start_gps_week``, ``start_gps_tow_s`` and ``jamming`` (one ``{jsr_db, duration_s}``
   per phase, ``jsr_db: null`` for none and for the gaps between phases; the simulator models the
   J/S, whatever the waveform);
@@ -194,14 +195,14 @@ def resolve_streams(streams: Mapping[str, Mapping[str, Any]], duration_s: float,
         ScenarioError: ``onset_s`` and ``onset_phase`` together, ``onset_phase`` without a schedule
             or matching no phase, or a top-level ``start`` with rinex_jammed.
     """
-    from gnss_common.gps_time import gps_to_stamp_ns
+    from gnss_common.gps_time import gps_to_ros_stamp_ns
 
     out: dict[str, dict[str, Any]] = {}
     for name, section in streams.items():
         s = dict(section)
         if name == 'if_snapshots':
             if start is not None:
-                s.setdefault('start_stamp_ns', gps_to_stamp_ns(*start))
+                s.setdefault('start_stamp_ns', gps_to_ros_stamp_ns(*start))
             if jamming is not None:
                 s.setdefault('phases', [dict(p) for p in jamming])
         elif name in ('gnss_uwb', 'correlators'):

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gnss_common.gps_time import gps_to_ros_stamp_ns
 from gnss_common.jamming_weights import dll_jitter_m, effective_cn0_dbhz
 from rfi_experiments.rinex_to_bag import convert_rinex
 from rfi_experiments.scenario import STREAMS, Scenario, ScenarioError, load_scenario
@@ -171,6 +172,11 @@ def test_build_is_stamp_ordered_reproducible_and_keeps_the_real_epoch_times(arl1
     assert [s for s, _, _ in items] == sorted(s for s, _, _ in items)
     gnss = [m for _, t, m in items if t == '/gnss/measurements']
     assert [s for s, t, _ in items if t == '/gnss/measurements'] == [e.stamp_ns for e in epochs[:4]]
+    # stamps are ROS (UTC) time of each message's own GPS week / time of week (2015: GPS - UTC = 17 s)
+    gnss_items = [(s, m) for s, t, m in items if t == '/gnss/measurements']
+    assert all(s == m.header.stamp.sec * 10**9 + m.header.stamp.nanosec
+               == gps_to_ros_stamp_ns(m.gps_week, m.gps_time_of_week_s) for s, m in gnss_items)
+    assert items[0][0] == 1_437_263_983 * 10**9   # 2015-07-19 00:00:00 GPST = 2015-07-18 23:59:43 UTC
     assert len(gnss) == 4 and sum(t == '/uwb/ranges' for _, t, _ in items) == 3 * 120
     assert sum(t == '/truth/jammer_state' for _, t, _ in items) == 120
     assert sum(t == '/truth/position' for _, t, _ in items) == 4

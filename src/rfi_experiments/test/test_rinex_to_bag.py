@@ -11,7 +11,7 @@ import pytest
 
 from gnss_common.coordinates import azimuth_elevation
 from gnss_common.ephemeris import earth_rotation_correction
-from gnss_common.gps_time import gps_to_stamp_ns
+from gnss_common.gps_time import gps_to_ros_stamp_ns
 from gnss_common.measurements import GnssEpochBuilder
 from gnss_common.rinex import read_rinex_nav, read_rinex_obs
 from rfi_experiments.bag_io import BagReader
@@ -53,8 +53,12 @@ def test_counts_and_time_base(bag_content: dict[str, list]) -> None:
     # bag log time equals the header stamp, stamps strictly increase at the 30 s interval
     assert [log for log, _ in arrays] == stamps
     assert np.all(np.diff(stamps) == 30 * 10**9)
-    # first epoch 2015-07-19 00:00:00 GPST = GPS week 1854, tow 0 (a Sunday)
-    assert stamps[0] == gps_to_stamp_ns(1854, 0.0)
+    # first epoch 2015-07-19 00:00:00 GPST = GPS week 1854, tow 0 (a Sunday); the stamp is ROS
+    # (UTC) time, 17 s behind GPS time in 2015: 2015-07-18 23:59:43 UTC
+    assert stamps[0] == gps_to_ros_stamp_ns(1854, 0.0) == 1_437_263_983 * 10**9
+    # every stamp is the ROS time of the message's own GPS week / time of week
+    for _, msg in arrays:
+        assert msg_to_epoch(msg).stamp_ns == gps_to_ros_stamp_ns(msg.gps_week, msg.gps_time_of_week_s)
     assert all(msg.header.frame_id == "earth" for _, msg in arrays)
     n_meas = sum(len(msg.measurements) for _, msg in arrays)
     assert n_meas > 6 * len(arrays)  # a monitor station tracks 7-11 GPS satellites

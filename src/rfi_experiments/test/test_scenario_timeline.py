@@ -38,7 +38,8 @@ def with_(**changes):
 def test_every_stream_derives_start_and_schedule(tmp_path):
     sc = load(tmp_path, BASE)
     ifs, gnss, corr = sc.streams['if_snapshots'], sc.streams['gnss_uwb'], sc.streams['correlators']
-    assert ifs['start_stamp_ns'] == 1437267600_000_000_000     # GPS week 1854, TOW 3600 s
+    # ROS (UTC) stamp of GPS week 1854, TOW 3600 s (2015-07-19 01:00:00 GPST; GPS - UTC = 17 s)
+    assert ifs['start_stamp_ns'] == 1437267583_000_000_000
     assert ifs['phases'] == BASE['jamming']
     assert (gnss['start_gps_week'], gnss['start_gps_tow_s']) == (1854, 3600.0)
     assert (corr['start_gps_week'], corr['start_gps_tow_s']) == (1854, 3600.0)
@@ -103,7 +104,7 @@ def test_shipped_default_scenario_resolves_to_its_former_explicit_sections():
     resolve to exactly those sections (test/test_default_bag_regeneration.py compares the messages)."""
     sc = load_scenario(PKG / 'scenarios' / 'default.yaml')
     ifs, gnss, corr = sc.streams['if_snapshots'], sc.streams['gnss_uwb'], sc.streams['correlators']
-    assert ifs['start_stamp_ns'] == 1437267600000000000
+    assert ifs['start_stamp_ns'] == 1437267583000000000  # ROS (UTC) stamp of week 1854, TOW 3600 s
     assert [(p['start_s'], p['end_s'], p['type'], p.get('jsr_db')) for p in ifs['phases']] == [
         (0.0, 30.0, 'none', None), (30.0, 50.0, 'cw', 22.0), (50.0, 60.0, 'none', None),
         (60.0, 80.0, 'chirp', -10.0), (80.0, 100.0, 'chirp', -2.0), (100.0, 120.0, 'chirp', 6.0),

@@ -26,7 +26,7 @@ from gnss_common.clock_model import ClockHCoefficients, simulate_clock
 from gnss_common.constants import EARTH_ROTATION_RATE_RADPS, SPEED_OF_LIGHT_MPS
 from gnss_common.coordinates import azimuth_elevation, ecef_to_enu_rotation, ecef_to_geodetic
 from gnss_common.ephemeris import EphemerisArrays, EphemerisStore, pack_ephemerides, satellite_states
-from gnss_common.gps_time import gps_to_stamp_ns
+from gnss_common.gps_time import gps_ns_to_ros_stamp_ns, gps_to_gps_ns, gps_to_ros_stamp_ns
 from gnss_common.jamming_weights import TrackingLoopParams, measurement_sigmas
 from gnss_common.observations import GPS, GnssEpoch, SatelliteObservation, UwbRangeMeasurement
 from gnss_common.rinex import read_rinex_nav
@@ -348,7 +348,7 @@ def simulate(
         t_rel = k * dt_g
         week = sc.start_week
         tow = sc.start_tow_s + t_rel
-        stamp = gps_to_stamp_ns(week, tow)
+        stamp = gps_to_ros_stamp_ns(week, tow)  # header stamp: ROS (UTC) time of the GPS week/tow
         stamps[k] = stamp
         snap = geometry(week, tow - 0.075)
         # Light-time iteration with the Earth rotating during the flight (transmit-time ECEF).
@@ -440,15 +440,17 @@ def simulate(
     n_u = int(round(sc.duration_s * sc.uwb_rate_hz))
     k_a = anchors.shape[0]
     offsets_ns = [int(round(j / (k_a * sc.uwb_rate_hz) * 1e9)) for j in range(k_a)]
-    t0 = gps_to_stamp_ns(sc.start_week, sc.start_tow_s)
+    # UWB times are stepped on the GPS-scale axis (as the GNSS epochs) and stamped in ROS time by
+    # the same conversion, so both line up even across a leap second.
+    t0_gps_ns = gps_to_gps_ns(sc.start_week, sc.start_tow_s)
     noise = sc.uwb_noise_std_m * rng.standard_normal((n_u, k_a))
     uwb = []
     for m in range(n_u):
-        base = t0 + int(round(m / sc.uwb_rate_hz * 1e9))
+        base = t0_gps_ns + int(round(m / sc.uwb_rate_hz * 1e9))
         for j in range(k_a):
             uwb.append(
                 UwbRangeMeasurement(
-                    stamp_ns=base + offsets_ns[j],
+                    stamp_ns=gps_ns_to_ros_stamp_ns(base + offsets_ns[j]),
                     anchor_id=f"A{j + 1}",
                     anchor_position_m=anchors[j].copy(),
                     frame_id="earth",

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from gnss_common.constants import EARTH_GM_M3PS2, EARTH_ROTATION_RATE_RADPS, SPEED_OF_LIGHT_MPS
+from gnss_common.gps_time import gps_to_ros_stamp_ns
 from gnss_common.jamming_weights import effective_cn0_dbhz
 from gnss_common.observations import GnssEpoch
 from rfi_sim.gnss_uwb import (
@@ -135,3 +136,33 @@ def test_outlier_free_twin_differs_only_inside_bursts():
         differing += diff
     assert differing == run.truth.outlier_mask.sum()
     assert [u.range_m for u in run.uwb_ranges] == [u.range_m for u in twin.uwb_ranges]
+
+
+def _check_stamps(run):
+    """Every GNSS stamp is the ROS (UTC) time of the epoch's own GPS week / time of week; anchor A1's
+    ranges (20 Hz, the first of each round at the GNSS epochs' GPS times) carry the same stamps."""
+    for e in run.gnss_epochs:
+        assert e.stamp_ns == gps_to_ros_stamp_ns(e.gps_week, e.gps_time_of_week_s)
+    gnss = [e.stamp_ns for e in run.gnss_epochs]
+    assert run.truth.gnss_stamps_ns.tolist() == gnss
+    a1 = [u.stamp_ns for u in run.uwb_ranges if u.anchor_id == "A1"]
+    assert a1[::4] == gnss
+    return np.diff(gnss), np.diff(a1)
+
+
+def test_stamps_are_ros_time_and_uwb_lines_up_with_gnss():
+    run = _short(None, duration=4.0)
+    d_gnss, d_uwb = _check_stamps(run)
+    # week 1854, TOW 3600 s = 2015-07-19 01:00:00 GPST = 00:59:43 UTC (GPS - UTC = 17 s)
+    assert run.gnss_epochs[0].stamp_ns == 1_437_267_583 * 10**9
+    assert set(d_gnss.tolist()) == {200_000_000} and set(d_uwb.tolist()) == {50_000_000}
+
+
+def test_a_run_across_a_leap_second():
+    # GPS week 1930, TOW 10-30 s spans 2016-12-31 23:59:53 - 2017-01-01 00:00:12 UTC; the inserted
+    # 23:59:60 is GPS TOW 17-18 s: the stamps repeat 23:59:59 (one step back by 1 s) for GNSS and
+    # UWB alike, and stay the ROS time of each message's GPS time.
+    run = _short(None, duration=20.0, start_week=1930, start_tow_s=10.0)
+    d_gnss, d_uwb = _check_stamps(run)
+    assert sorted(set(d_gnss.tolist())) == [200_000_000 - 10**9, 200_000_000]
+    assert int(np.sum(d_gnss < 0)) == 1 and int(np.sum(d_uwb < 0)) == 1

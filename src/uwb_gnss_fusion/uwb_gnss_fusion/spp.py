@@ -1,9 +1,9 @@
 """Single-point positioning (SPP): weighted least squares per epoch with RAIM-like FDE.
 
 Pure core (no rclpy): :class:`SinglePointPositioner.process` takes a
-:class:`gnss_common.observations.GnssEpoch` (time from ``epoch.stamp_ns``, integer ns, GPS time
-scale) and returns a frozen :class:`SppResult`. It is the GNSS-only baseline of Cao et al.
-(sec. IV, "GNSS SPP") and the initialiser of their tightly coupled filter.
+:class:`gnss_common.observations.GnssEpoch` (time from ``epoch.stamp_ns``, integer ns, ROS (UTC)
+time; GPS week / time of week in the epoch) and returns a frozen :class:`SppResult`. It is the
+GNSS-only baseline of Cao et al. (sec. IV, "GNSS SPP") and the initialiser of their tightly coupled filter.
 
 Model (Cao et al., eq. 5 and 6), GPS satellites only, one receiver clock::
 

@@ -32,8 +32,9 @@ of ``onset_s``) puts the onset at the start of the first phase of that type and 
 
 The duration is the scenario's ``duration_s``. The builder runs
 :func:`rfi_sim.correlators.simulate_correlators` (one receiver clock shared by all
-satellites) and yields, for each interval k (stamp = end of the interval, GPS time scale as in
-gnss_common.gps_time), ``(stamp_ns, '/gnss/correlators', CorrelatorArray)`` and then
+satellites) and yields, for each interval k (stamp = end of the interval as a ROS (UTC) stamp,
+converted from GPS time by gnss_common.gps_time.gps_ns_to_ros_stamp_ns),
+``(stamp_ns, '/gnss/correlators', CorrelatorArray)`` and then
 ``(stamp_ns, '/truth/carrier', CarrierPhaseArray)``.
 
 Truth (/truth/carrier): one CarrierPhase per satellite with ``method = 0`` (TRUTH_METHOD, none of
@@ -54,7 +55,7 @@ from typing import Any
 
 from gnss_common.clock_model import PRESETS, ClockHCoefficients
 from gnss_common.constants import GPS_NAV_BIT_RATE_HZ
-from gnss_common.gps_time import gps_to_stamp_ns
+from gnss_common.gps_time import gps_ns_to_ros_stamp_ns, gps_to_gps_ns
 from rfi_experiments.scenario import Scenario
 from rfi_experiments.schema import ScenarioError, integer, number
 from rfi_sim.correlators import CorrelatorScenario, simulate_correlators
@@ -150,7 +151,8 @@ def parse_section(scenario: Scenario, section: Mapping[str, Any]) -> tuple[Corre
     if abs(tow_s / bit_s - round(tow_s / bit_s)) > 1e-6:
         raise ScenarioError(f'correlators.start_gps_tow_s must be a multiple of {bit_s} s so that data bits '
                             f'start on the GPS bit grid, got {tow_s}')
-    s['start_stamp_ns'] = gps_to_stamp_ns(week, tow_s)
+    s['start_gps_ns'] = gps_to_gps_ns(week, tow_s)  # GPS-scale ns of the start (gnss_common.gps_time)
+    s['start_stamp_ns'] = gps_ns_to_ros_stamp_ns(s['start_gps_ns'])  # its ROS (UTC) header stamp
     s['constellation'] = _integer(s, 'constellation', 1, 255)
     if not isinstance(s['frame_id'], str):
         raise ScenarioError(f'correlators.frame_id must be a string, got {s["frame_id"]!r}')
@@ -193,13 +195,15 @@ def _generate(sim_scenario: CorrelatorScenario, s: Mapping[str, Any], seed: int)
     from rfi_node_common.stamps import ns_to_stamp
 
     sim = simulate_correlators(sim_scenario, seed)
-    start_ns = s['start_stamp_ns']
+    start_gps_ns = s['start_gps_ns']
     constellation = s['constellation']
     t_s = sim_scenario.integration_time_s
     sats = [(sat.svid, sat.in_phase.tolist(), sat.quadrature.tolist(), sat.cn0_dbhz.tolist(),
              sat.predicted_phase_change_rad.tolist(), sat.truth_phase_rad.tolist(),
              sat.truth_frequency_hz.tolist(), sat.truth_bits.tolist()) for sat in sim.satellites]
-    stamps = (sim.satellites[0].stamps_ns + start_ns).tolist()
+    # Interval ends on the GPS-scale axis, stamped in ROS time by the one conversion (whole leap
+    # seconds: the 20 ms bit grid of GPS time is also a 20 ms grid of the stamps).
+    stamps = [gps_ns_to_ros_stamp_ns(t) for t in (sim.satellites[0].stamps_ns + start_gps_ns).tolist()]
     for k, stamp_ns in enumerate(stamps):
         stamp = ns_to_stamp(stamp_ns)
         arr = CorrelatorArray()

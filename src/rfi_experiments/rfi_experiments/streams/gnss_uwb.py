@@ -39,8 +39,9 @@ and receiver are the same. Not continuous across a phase boundary: the per-satel
 errors (re-drawn from their stationary distribution, so their statistics are unchanged), the state
 of outlier bursts (a burst ends at a boundary) and the random number streams.
 
-Output, in stamp order, per GNSS epoch k (stamp = receive time on the GPS time scale of
-gnss_common.gps_time; at equal stamps in this order):
+Output, in stamp order, per GNSS epoch k (stamp = receive time as a ROS (UTC) stamp,
+gnss_common.gps_time.gps_to_ros_stamp_ns of the message's gps_week / gps_time_of_week_s; UWB
+ranges stamped by the same conversion; at equal stamps in this order):
 
 * ``/gnss/measurements`` (rfi_msgs/GnssMeasurementArray, frame "earth");
 * ``/truth/position`` (geometry_msgs/PointStamped, frame "earth"): the true antenna (= tag)
@@ -81,7 +82,7 @@ from typing import Any
 import numpy as np
 
 from gnss_common.constants import SPEED_OF_LIGHT_MPS
-from gnss_common.gps_time import gps_to_stamp_ns
+from gnss_common.gps_time import gps_to_ros_stamp_ns
 from rfi_experiments.scenario import Scenario, data_path
 from rfi_experiments.schema import (
     JsrPhases,
@@ -312,6 +313,6 @@ def _generate(s: GnssUwbSection, phases: JsrPhases, geometry: BroadcastGeometry,
 
 
 def start_stamp_ns(section: Mapping[str, Any]) -> int:
-    """Stamp of the first GNSS epoch of a section (defaults applied), ns."""
+    """ROS (UTC) stamp of the first GNSS epoch of a section (defaults applied), ns."""
     s = GnssUwbSection.from_mapping(section)
-    return gps_to_stamp_ns(s.start_gps_week, s.start_gps_tow_s)
+    return gps_to_ros_stamp_ns(s.start_gps_week, s.start_gps_tow_s)

@@ -8,7 +8,7 @@ sees the gap between two snapshots as it would on the real front end, and the tr
 Section keys (all optional; defaults: Kang et al.'s front end, Sec. 2.1 and 4, no jammer)::
 
     if_snapshots:
-      start_stamp_ns: 1700000000000000000  # stamp of sample 0 of the stream, ns (int)
+      start_stamp_ns: 1700000000000000000  # ROS (UTC) stamp of sample 0 of the stream, ns (int)
       frame_id: front_end                  # header frame_id of both topics
       center_frequency_hz: 1575420000.0    # RF centre the blocks are referenced to, Hz (GPS L1)
       sample_rate_hz: 38192000.0           # samples (complex: I/Q pairs) per second, Hz
