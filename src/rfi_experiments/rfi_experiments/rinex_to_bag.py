@@ -1,16 +1,20 @@
-"""``rinex_to_bag OBS NAV OUT``: real RINEX GPS observations -> a bag the fusion node can replay.
+"""``rinex_to_bag OBS NAV [NAV ...] OUT``: real RINEX observations -> a bag the fusion node can replay.
 
-Each observation epoch of the RINEX 2/3 file becomes one ``rfi_msgs/GnssMeasurementArray`` on
-``/gnss/measurements`` (GPS L1 C/A only, built by :class:`gnss_common.measurements.GnssEpochBuilder`:
-pseudorange, Doppler rate, C/N0, satellite state at transmission, broadcast clock, Klobuchar and
-Saastamoinen delays). When the observation header has an APPROX POSITION XYZ, the same point is
+Each observation epoch of the RINEX 2/3 file (plain or compressed: ``.gz``, ``.Z``, Hatanaka
+``.crx`` / ``.crx.gz`` as stations publish them) becomes one ``rfi_msgs/GnssMeasurementArray`` on
+``/gnss/measurements``, built by :class:`gnss_common.measurements.GnssEpochBuilder` for every
+constellation whose satellite state can be computed from the navigation file(s) given (one mixed
+file or one per system): GPS and QZSS L1 C/A, Galileo E1, BeiDou B1I, GLONASS G1 (integrated
+orbits): pseudorange, Doppler rate (with the signal's wavelength), C/N0, carrier frequency,
+satellite state at transmission, broadcast clock, Klobuchar (scaled to the carrier) and
+Saastamoinen delays. ``--constellations`` restricts the set. SBAS and NavIC satellites are skipped
+(no orbit model here) and counted, as every skipped satellite is, per constellation and reason.
+When the observation header has an APPROX POSITION XYZ, the same point is
 written on ``/truth/position`` (``geometry_msgs/PointStamped``, frame "earth") at every epoch: it
 is the station's published coordinate, used as truth for a static receiver.
 
-Time base: header stamps and bag log times are ROS time (UTC-based Unix time, integer ns), converted
-from each epoch's GPS time by :func:`gnss_common.gps_time.gps_to_ros_stamp_ns` (leap seconds from
-its one table); the exact GPS week and time of week are in the message's ``gps_week`` and
-``gps_time_of_week_s``.
+Time base: header stamps and bag log times are GPS time on a Unix-like axis in integer ns, as
+defined in :mod:`gnss_common.gps_time` (no leap seconds; ahead of UTC Unix time by GPS-UTC).
 
 Satellites are skipped, and counted by reason, when they cannot be modelled (reasons of
 :data:`gnss_common.measurements.SKIP_REASONS`) or when they are below the elevation mask seen
@@ -37,9 +41,16 @@ import numpy as np
 
 from gnss_common.coordinates import azimuth_elevation
 from gnss_common.ephemeris import earth_rotation_correction
-from gnss_common.measurements import SKIP_REASONS, EpochBuildResult, GnssEpochBuilder
+from gnss_common.measurements import (
+    CONSTELLATION_CODES,
+    SKIP_REASONS,
+    SUPPORTED_SYSTEMS,
+    EpochBuildResult,
+    GnssEpochBuilder,
+    MeasurementBuilderParams,
+)
 from gnss_common.observations import GnssEpoch
-from gnss_common.rinex import RinexFormatError, read_rinex_nav, read_rinex_obs
+from gnss_common.rinex import SYSTEM_NAMES, RinexFormatError, read_rinex_navs, read_rinex_obs
 from rfi_experiments import cli
 from rfi_experiments.bag_io import BagError, BagWriter
 from rfi_experiments.cli import error_reporter
@@ -64,17 +75,34 @@ class RinexConversion:
             ``below_elevation_mask``).
         epochs_without_reference: epochs where no reference position existed, so the elevation
             mask was not applied.
+        skipped_by_constellation: constellation name ("gps", "galileo", ...) -> reason -> satellite
+            measurements skipped over the file (nonzero entries only).
+        nav_records: system letter -> navigation records used; ``nav_skipped``: system letter ->
+            reason -> navigation records not used (e.g. SBAS, Galileo F/NAV).
     """
 
     epochs: tuple[GnssEpoch, ...]
     truth_position_ecef_m: np.ndarray | None
     skipped: dict[str, int] = field(default_factory=dict)
     epochs_without_reference: int = 0
+    skipped_by_constellation: dict[str, dict[str, int]] = field(default_factory=dict)
+    nav_records: dict[str, int] = field(default_factory=dict)
+    nav_skipped: dict[str, dict[str, int]] = field(default_factory=dict)
 
     @property
     def measurement_count(self) -> int:
         """Satellite measurements over all epochs."""
         return sum(len(e.observations) for e in self.epochs)
+
+    def measurements_by_constellation(self) -> dict[str, int]:
+        """Constellation name -> satellite measurements written over all epochs."""
+        names = {code: SYSTEM_NAMES[letter] for letter, code in CONSTELLATION_CODES.items()}
+        out: dict[str, int] = {}
+        for e in self.epochs:
+            for o in e.observations:
+                name = names.get(o.constellation, str(o.constellation))
+                out[name] = out.get(name, 0) + 1
+        return out
 
 
 def apply_elevation_mask(result: EpochBuildResult, mask_rad: float) -> tuple[GnssEpoch, int, bool]:
@@ -86,7 +114,8 @@ def apply_elevation_mask(result: EpochBuildResult, mask_rad: float) -> tuple[Gns
 
     Returns:
         ``(epoch, n_dropped, applied)``: the masked epoch, the number of satellites removed, and
-        False when the epoch had no reference position (then nothing is removed).
+        False when the epoch had no reference position (then nothing is removed). Use
+        :func:`elevation_mask_drops` for the dropped satellites by constellation.
 
     Notes
     -----
@@ -107,39 +136,59 @@ def apply_elevation_mask(result: EpochBuildResult, mask_rad: float) -> tuple[Gns
 
 
 def convert_rinex(
-    obs_path: str | Path, nav_path: str | Path, elevation_mask_deg: float = 0.0
+    obs_path: str | Path,
+    nav_path: str | Path | Sequence[str | Path],
+    elevation_mask_deg: float = 0.0,
+    constellations: Sequence[str] = SUPPORTED_SYSTEMS,
 ) -> RinexConversion:
-    """Read a RINEX observation and navigation pair and build every epoch.
+    """Read a RINEX observation file and its navigation file(s) and build every epoch.
 
     Args:
-        obs_path: RINEX 2.x / 3.x observation file.
-        nav_path: RINEX 2.x / 3.x navigation file (GPS LNAV records are used).
+        obs_path: RINEX 2.x / 3.x observation file (plain or compressed).
+        nav_path: RINEX 2.x / 3.x navigation file, or several (e.g. one per system).
         elevation_mask_deg: satellites below this elevation, deg, in [-90, 90], are dropped.
+        constellations: RINEX system letters to convert (of
+            :data:`gnss_common.measurements.SUPPORTED_SYSTEMS`); the others are skipped and counted.
 
     Returns:
         :class:`RinexConversion`.
 
     Raises:
         RinexFormatError: unreadable or malformed file (the message names file and line).
-        ValueError: invalid mask, no epochs in the file, or an unusable header position.
+        ValueError: invalid mask or constellation, no epochs in the file, or an unusable header
+            position.
     """
     if not (math.isfinite(elevation_mask_deg) and -90.0 <= elevation_mask_deg <= 90.0):
         raise ValueError(f"--elevation-mask-deg must be in [-90, 90], got {elevation_mask_deg}")
+    params = MeasurementBuilderParams(constellations=tuple(constellations))
     obs = read_rinex_obs(obs_path)
-    nav = read_rinex_nav(nav_path)
+    navs = [nav_path] if isinstance(nav_path, (str, Path)) else list(nav_path)
+    nav = read_rinex_navs(navs)
     if not obs.epochs:
         raise ValueError(f"{obs_path}: no observation epochs")
-    builder = GnssEpochBuilder.from_rinex(obs, nav)
+    builder = GnssEpochBuilder.from_rinex(obs, nav, params)
     mask_rad = math.radians(elevation_mask_deg)
     skipped = dict.fromkeys((*SKIP_REASONS, BELOW_MASK), 0)
+    by_system: dict[str, dict[str, int]] = {}
+    names = {code: SYSTEM_NAMES[letter] for letter, code in CONSTELLATION_CODES.items()}
     epochs = []
     without_ref = 0
     for rinex_epoch in obs.epochs:
         result = builder.build(rinex_epoch)
         for reason, n in result.skipped.items():
             skipped[reason] = skipped.get(reason, 0) + n
+        for name, counts in result.skipped_by_constellation.items():
+            dst = by_system.setdefault(name, {})
+            for reason, n in counts.items():
+                dst[reason] = dst.get(reason, 0) + n
         epoch, dropped, applied = apply_elevation_mask(result, mask_rad)
         skipped[BELOW_MASK] += dropped
+        if dropped:
+            kept = {id(o) for o in epoch.observations}
+            for o in result.epoch.observations:
+                if id(o) not in kept:
+                    dst = by_system.setdefault(names.get(o.constellation, str(o.constellation)), {})
+                    dst[BELOW_MASK] = dst.get(BELOW_MASK, 0) + 1
         without_ref += 0 if applied else 1
         epochs.append(epoch)
     truth = obs.header.approx_position_ecef_m
@@ -148,6 +197,9 @@ def convert_rinex(
         truth_position_ecef_m=None if truth is None else np.asarray(truth, dtype=float).copy(),
         skipped=skipped,
         epochs_without_reference=without_ref,
+        skipped_by_constellation=by_system,
+        nav_records=nav.record_counts(),
+        nav_skipped={k: dict(v) for k, v in nav.skipped_reasons.items()},
     )
 
 
@@ -178,22 +230,38 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog=PROG,
         description=(
-            "Convert a RINEX 2/3 GPS observation file and its broadcast navigation file into a bag: "
-            f"{MEASUREMENTS_TOPIC} (rfi_msgs/GnssMeasurementArray, one per epoch, GPS L1 C/A) and "
+            "Convert a RINEX 2/3 observation file (plain, .gz, .Z, Hatanaka .crx / .crx.gz) and its broadcast "
+            "navigation file(s) (one mixed file or one per system) into a bag: "
+            f"{MEASUREMENTS_TOPIC} (rfi_msgs/GnssMeasurementArray, one per epoch: GPS and QZSS L1 C/A, Galileo "
+            "E1, BeiDou B1I, GLONASS G1, each where the navigation files carry its ephemerides) and "
             f"{TRUTH_TOPIC} (geometry_msgs/PointStamped, frame 'earth'). The truth is the header's "
             "APPROX POSITION XYZ, i.e. the station's published position, repeated at every epoch and "
             "used as truth for a static receiver; it is omitted when the header has none. Stamps are "
-            "ROS time (UTC, ns since 1970; GPS - UTC leap seconds removed); GPS week and time of week "
-            "are in the message fields."
+            "GPS time (no leap seconds) in ns since 1970."
         ),
     )
-    parser.add_argument("obs", help="RINEX observation file (2.x or 3.x)")
-    parser.add_argument("nav", help="RINEX navigation file with the GPS broadcast ephemerides")
+    parser.add_argument("obs", help="RINEX observation file (2.x or 3.x; plain, .gz, .crx, .crx.gz)")
+    parser.add_argument("nav", nargs="+",
+                        help="RINEX navigation file(s) with the broadcast ephemerides (mixed, or one per system)")
     parser.add_argument("out", help="bag directory to write")
+    parser.add_argument("--constellations", type=_constellations, default=SUPPORTED_SYSTEMS, metavar="LIST",
+                        help="RINEX system letters to convert, comma-separated, of "
+                             f"{','.join(SUPPORTED_SYSTEMS)} (default: all of them)")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing bag")
     parser.add_argument("--elevation-mask-deg", type=float, default=0.0, metavar="X",
                         help="drop satellites below X degrees of elevation (default 0: below the horizon)")
     return parser
+
+
+def _constellations(text: str) -> tuple[str, ...]:
+    """argparse type: ``G,E,C`` -> ("G", "E", "C"), each of :data:`SUPPORTED_SYSTEMS`."""
+    letters = tuple(t.strip().upper() for t in text.split(",") if t.strip())
+    bad = [t for t in letters if t not in SUPPORTED_SYSTEMS]
+    if not letters or bad:
+        raise argparse.ArgumentTypeError(
+            f"expected system letters among {','.join(SUPPORTED_SYSTEMS)}, got {text!r}"
+        )
+    return letters
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -204,7 +272,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return start
     args, out = start
     try:
-        conversion = convert_rinex(args.obs, args.nav, args.elevation_mask_deg)
+        conversion = convert_rinex(args.obs, args.nav, args.elevation_mask_deg, args.constellations)
         counts = write_bag(conversion, out, overwrite=args.overwrite)
     except (RinexFormatError, BagError, ValueError, OSError) as err:
         return _fail(str(err))
@@ -219,9 +287,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"  truth         {truth}")
     for topic, n in sorted(counts.items()):
         print(f"  {topic}  {n}")
+    print("  measurements by constellation:")
+    for name, n in sorted(conversion.measurements_by_constellation().items()):
+        print(f"    {name:<26} {n}")
+    print("  navigation records used by system:  " + (
+        ", ".join(f"{SYSTEM_NAMES.get(k, k)} {n}" for k, n in sorted(conversion.nav_records.items())) or "none"))
+    for letter, reasons in sorted(conversion.nav_skipped.items()):
+        text = ", ".join(f"{r} {n}" for r, n in sorted(reasons.items()))
+        print(f"  navigation records not used, {SYSTEM_NAMES.get(letter, letter)}: {text}")
     print("  skipped satellites by reason:")
     for reason, n in conversion.skipped.items():
         print(f"    {reason:<26} {n}")
+    if conversion.skipped_by_constellation:
+        print("  skipped satellites by constellation and reason:")
+        for name, reasons in sorted(conversion.skipped_by_constellation.items()):
+            text = ", ".join(f"{r} {n}" for r, n in sorted(reasons.items()))
+            print(f"    {name:<10} {text}")
     if conversion.epochs_without_reference:
         n_unmasked = conversion.epochs_without_reference
         print(f"  epochs without reference position (mask not applied): {n_unmasked}")

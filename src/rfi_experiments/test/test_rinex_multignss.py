@@ -1,0 +1,108 @@
+"""rinex_to_bag on a real multi-GNSS station hour (ESBC00DNK, RINEX 3.05 mixed, Hatanaka + gzip):
+every constellation with a satellite state is carried, the others are counted per constellation."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+from pathlib import Path
+
+import hatanaka
+import numpy as np
+import pytest
+
+from gnss_common.observations import BEIDOU, GALILEO, GLONASS, GPS
+from rfi_experiments.bag_io import BagReader
+from rfi_experiments.rinex_to_bag import MEASUREMENTS_TOPIC, TRUTH_TOPIC, convert_rinex, main
+from uwb_gnss_fusion.conversions import msg_to_epoch
+
+DATA = Path(__file__).resolve().parents[2] / "gnss_common" / "test" / "data"
+OBS = DATA / "ESBC00DNK_R_20201770000_01H_30S_MO.crx.gz"
+NAV = DATA / "ESBC00DNK_R_20201770000_01H_MN.rnx.gz"
+STATION_ECEF_M = np.array([3582105.2910, 532589.7313, 5232754.8054])
+
+
+def _run(*args: object) -> int:
+    return main(["rinex_to_bag", *map(str, args)])
+
+
+@pytest.fixture(scope="module")
+def esbc(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    out = tmp_path_factory.mktemp("esbc") / "bag"
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        assert _run(OBS, NAV, out, "--elevation-mask-deg", "5") == 0
+    return out, buf.getvalue()
+
+
+def test_every_constellation_with_an_orbit_is_carried(esbc: tuple[Path, str]) -> None:
+    out, text = esbc
+    with BagReader(out) as reader:
+        assert reader.topics[MEASUREMENTS_TOPIC][1] == 120
+        assert reader.topics[TRUTH_TOPIC][1] == 120
+        epochs = [msg_to_epoch(m.decode()) for m in reader.messages([MEASUREMENTS_TOPIC])]
+    per_epoch = [{o.constellation for o in e.observations} for e in epochs]
+    assert all(s >= {GPS, GALILEO, BEIDOU, GLONASS} for s in per_epoch)
+    for e in epochs[::20]:
+        for o in e.observations:
+            r = np.linalg.norm(o.satellite_position_ecef_m)
+            assert 2.0e7 < r < 4.5e7 and 1.9e7 < o.pseudorange_m < 4.8e7
+    # The printed summary says what was carried and what was skipped, per constellation.
+    for fragment in ("measurements by constellation", "galileo", "beidou", "glonass", "gps",
+                     "skipped satellites by constellation and reason", "sbas", "unsupported_constellation",
+                     "navigation records not used, galileo: galileo_fnav"):
+        assert fragment in text, fragment
+
+
+def test_restricted_constellations_and_per_system_nav_files(tmp_path: Path) -> None:
+    gps_only = convert_rinex(OBS, NAV, 5.0, ("G",))
+    assert {o.constellation for e in gps_only.epochs for o in e.observations} == {GPS}
+    assert gps_only.skipped_by_constellation["galileo"]["unsupported_constellation"] > 0
+    assert gps_only.skipped_by_constellation["glonass"]["unsupported_constellation"] > 0
+    # One nav file per system, as some archives publish them, gives the same measurements.
+    lines = hatanaka.decompress(NAV.read_bytes()).decode().splitlines()
+    end = next(i for i, line in enumerate(lines) if "END OF HEADER" in line)
+    files: dict[str, list[str]] = {}
+    current = ""
+    for line in lines[end + 1:]:
+        if line[:1].strip():
+            current = line[0]
+        files.setdefault(current, []).append(line)
+    paths = []
+    for letter, body in files.items():
+        p = tmp_path / f"nav_{letter}.rnx"
+        p.write_text("\n".join([lines[0][:40] + letter + lines[0][41:], *lines[1:end + 1], *body]) + "\n")
+        paths.append(p)
+    mixed = convert_rinex(OBS, NAV, 5.0, ("G", "E", "C", "R"))
+    split = convert_rinex(OBS, paths, 5.0, ("G", "E", "C", "R"))
+    assert split.measurements_by_constellation() == mixed.measurements_by_constellation()
+    assert len(mixed.measurements_by_constellation()) == 4
+    a, b = split.epochs[7].observations, mixed.epochs[7].observations
+    assert [(o.constellation, o.svid) for o in a] == [(o.constellation, o.svid) for o in b]
+    out = tmp_path / "bag"
+    assert _run(OBS, *paths, out, "--constellations", "G,E") == 0
+    with BagReader(out) as reader:
+        seen = {m.constellation for msg in reader.messages([MEASUREMENTS_TOPIC]) for m in msg.decode().measurements}
+    assert seen == {GPS, GALILEO}
+
+
+def _one_line_error(capsys: pytest.CaptureFixture[str], fragment: str) -> None:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err and fragment in err[-1], err
+    assert not any("Traceback" in line for line in err)
+
+
+def test_bad_input_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    cut = tmp_path / "cut.crx.gz"
+    cut.write_bytes(OBS.read_bytes()[:40000])
+    assert _run(cut, NAV, tmp_path / "out") == 2
+    _one_line_error(capsys, "cannot decompress")
+    assert not (tmp_path / "out").exists()
+    assert _run(OBS, NAV, tmp_path / "out", "--constellations", "G,S") == 2
+    _one_line_error(capsys, "expected system letters")
+    nav_cut = tmp_path / "nav.rnx"
+    text = hatanaka.decompress(NAV.read_bytes()).decode().splitlines()
+    start = next(i for i, line in enumerate(text) if line.startswith("C"))
+    nav_cut.write_text("\n".join(text[: start + 3]) + "\n")
+    assert _run(OBS, nav_cut, tmp_path / "out") == 2
+    _one_line_error(capsys, "truncated")
