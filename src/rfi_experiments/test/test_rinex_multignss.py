@@ -106,3 +106,36 @@ def test_bad_input_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixtur
     nav_cut.write_text("\n".join(text[: start + 3]) + "\n")
     assert _run(OBS, nav_cut, tmp_path / "out") == 2
     _one_line_error(capsys, "truncated")
+
+
+def test_gps_only_fusion_skips_the_other_constellations_by_name() -> None:
+    """The fusion filter still uses GPS alone: on the multi-GNSS epochs it gives the same outputs
+    as on their GPS subset, and counts every other satellite under
+    ``skipped_constellation.<name>``, not as a rejected satellite."""
+    from dataclasses import replace
+
+    from uwb_gnss_fusion.fusion_filter import FusionFilter, FusionParams
+
+    conv = convert_rinex(OBS, NAV, 10.0)
+    mixed, gps = FusionFilter(FusionParams(use_uwb=False)), FusionFilter(FusionParams(use_uwb=False))
+    expected: dict[str, int] = {}
+    names = {GALILEO: "galileo", BEIDOU: "beidou", GLONASS: "glonass"}
+    used = rejected = 0
+    for epoch in conv.epochs[:40]:
+        for o in epoch.observations:
+            if o.constellation != GPS:
+                key = f"skipped_constellation.{names[o.constellation]}"
+                expected[key] = expected.get(key, 0) + 1
+        a = mixed.process_gnss(epoch)
+        b = gps.process_gnss(replace(epoch, observations=tuple(o for o in epoch.observations
+                                                               if o.constellation == GPS)))
+        np.testing.assert_array_equal(a.position_m, b.position_m)
+        assert (a.satellites_used, a.satellites_rejected) == (b.satellites_used, b.satellites_rejected)
+        used += a.satellites_used
+        rejected += a.satellites_rejected
+    counts = mixed.rejection_counts
+    assert {k: v for k, v in counts.items() if k.startswith("skipped_constellation.")} == expected
+    assert set(expected) == {f"skipped_constellation.{n}" for n in ("galileo", "beidou", "glonass")}
+    assert not any(k.startswith("skipped_constellation.") for k in gps.rejection_counts)
+    assert used > 0 and rejected < used
+    assert np.linalg.norm(a.position_m - STATION_ECEF_M) < 20.0

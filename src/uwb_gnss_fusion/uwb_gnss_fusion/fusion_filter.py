@@ -50,7 +50,7 @@ from .fusion_params import (  # noqa: F401 (re-exported: the filter's public nam
     FusionParams,
 )
 from .gnss_update import clock_offset_from_residuals, prepare_epoch, screen_common_mode, update_gnss
-from .input_checks import PreparedEpoch, validate_uwb_range
+from .input_checks import PreparedEpoch, other_constellations, validate_uwb_range
 from .measurement_models import STATE_DIM, constant_velocity_transition, white_acceleration_noise
 from .reorder_buffer import ReorderBuffer  # noqa: F401 (re-exported)
 from .uwb_update import apply_range
@@ -411,7 +411,8 @@ class FusionFilter:
         if self._initialized and self._frame != FRAME_EARTH:
             self._count("gnss_in_map_frame")
             return self._output(False)
-        n_obs = len(epoch.observations)
+        # Other constellations are skipped (counted per constellation), not rejected satellites.
+        n_obs = len(epoch.observations) - other_constellations(epoch.observations)
         if n_obs == 0:
             self._count("no_satellites")
             return self._output(False)

@@ -13,7 +13,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gnss_common.observations import GPS, SatelliteObservation, UwbRangeMeasurement
+from gnss_common.observations import (
+    BEIDOU,
+    GALILEO,
+    GLONASS,
+    GPS,
+    QZSS,
+    SBAS,
+    SatelliteObservation,
+    UwbRangeMeasurement,
+)
 
 from .fusion_params import FRAME_EARTH, FRAME_MAP, FusionParams
 
@@ -62,11 +71,25 @@ class PreparedEpoch:
         )
 
 
+CONSTELLATION_NAMES = {GLONASS: "glonass", GALILEO: "galileo", BEIDOU: "beidou", QZSS: "qzss", SBAS: "sbas"}
+"""Constellation code -> name in the ``skipped_constellation.<name>`` counters."""
+
+
+def other_constellations(observations: Sequence[object]) -> int:
+    """How many observations belong to a constellation the filter does not use yet (not GPS).
+
+    They are skipped by design, not rejected: the filter leaves them out of its rejected-satellite
+    count (issue 15 item 1 will use them)."""
+    return sum(1 for o in observations if isinstance(o, SatelliteObservation) and o.constellation != GPS)
+
+
 def gps_observations(observations: Sequence[object], count: Count) -> list[SatelliteObservation]:
     """The GPS observations of an epoch, without satellites that appear more than once.
 
-    Counted: ``malformed_observation`` (not a SatelliteObservation), ``unsupported_constellation``,
-    ``duplicate_svid`` (every copy of a duplicated PRN).
+    Counted: ``malformed_observation`` (not a SatelliteObservation), ``unsupported_constellation``
+    with ``skipped_constellation.<name>`` (``glonass``, ``galileo``, ``beidou``, ``qzss``,
+    ``sbas``, or ``code_<n>``) for each satellite of another constellation, ``duplicate_svid``
+    (every copy of a duplicated PRN).
     """
     obs: list[SatelliteObservation] = []
     seen: dict[int, int] = {}
@@ -76,6 +99,7 @@ def gps_observations(observations: Sequence[object], count: Count) -> list[Satel
             continue
         if o.constellation != GPS:
             count("unsupported_constellation", 1)
+            count(f"skipped_constellation.{CONSTELLATION_NAMES.get(o.constellation, f'code_{o.constellation}')}", 1)
             continue
         seen[o.svid] = seen.get(o.svid, 0) + 1
         obs.append(o)
