@@ -40,6 +40,23 @@ def parse(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> argpar
         return int(stop.code or 0)
 
 
+def ros_namespace(text: str) -> str:
+    """An argparse ``type``: a ROS namespace, absolute (``robot1`` -> ``/robot1``; ``/`` is the root).
+
+    Raises:
+        argparse.ArgumentTypeError: not a valid ROS namespace (the message says why).
+    """
+    from rclpy.exceptions import InvalidNamespaceException
+    from rclpy.validate_namespace import validate_namespace
+
+    namespace = '/' + text.strip().strip('/')
+    try:
+        validate_namespace(namespace)
+    except InvalidNamespaceException as err:
+        raise argparse.ArgumentTypeError(f'not a ROS namespace: {text!r} ({" ".join(str(err).split())})') from None
+    return namespace
+
+
 def output_refusal(out: Path, overwrite: bool) -> str | None:
     """Why a converter must not write ``out`` (it exists and ``--overwrite`` was not given), or None."""
     if out.exists() and not overwrite:

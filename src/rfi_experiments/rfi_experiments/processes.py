@@ -8,6 +8,15 @@ has its subscriber (after a slow warm-up, see :func:`run_processes`), and this p
 outputs (reliable, keep-all subscriptions) until every node has answered its last input; then the
 nodes are stopped with SIGINT (killed if they do not exit), also on Ctrl-C, SIGTERM or an error
 (:class:`ChildProcesses`), and what they publish while stopping is still recorded.
+
+With a namespace (``run --namespace /robot1``) the whole suite lives under it: each node gets
+``-r __ns:=/robot1`` (its data topics are relative names) and ``-r /diagnostics:=/robot1/diagnostics``
+(the status names are the node names, the same in every suite, so the recorder must read its own
+suite's reports apart), ``play`` publishes into it (``-r /rfi/if_samples:=/robot1/rfi/if_samples``
+and so on) and the recorder subscribes there (:func:`suite_topic`): two suites side by side in one
+domain do not see each other. With external nodes (``run --external-nodes``) the nodes are not
+started here but expected in the graph (started on another host, say: see the README's deployment
+section) with reliable inputs; ``play`` and the recorder run here as usual.
 """
 
 from __future__ import annotations
@@ -79,6 +88,24 @@ SYNCED = (('rfi_monitor', '/rfi/if_samples', '/rfi/jammer_state'),)
 """(node, input, output) that ``play`` paces on (``--sync``): after each IF block it waits for the
 monitor's jammer state, so the fusion gets it before the GNSS and UWB messages that follow the
 block in the bag, as in a replay in one process, however long the monitor takes for a block."""
+
+def suite_topic(namespace: str, topic: str) -> str:
+    """The name of one of the suite's topics (a root name: ``/rfi/if_samples``) under ``namespace``
+    (``/`` or ``''``: the root name itself)."""
+    return namespace.rstrip('/') + topic
+
+
+def namespace_arguments(namespace: str, topics: Sequence[str]) -> list[str]:
+    """``-r`` remaps (for ``--ros-args``) that put a process into ``namespace`` and move each of the
+    absolute ``topics`` it uses there: the node's namespace, then ``/t:=<namespace>/t`` per topic
+    (remapping moves absolute names, which a namespace alone leaves where they are). Empty at the root."""
+    if namespace.rstrip('/') == '':
+        return []
+    out = ['-r', f'__ns:={namespace}']
+    for topic in topics:
+        out += ['-r', f'{topic}:={suite_topic(namespace, topic)}']
+    return out
+
 
 class RunError(RuntimeError):
     """A replay could not be completed; the message says what is missing and where to look."""
@@ -249,6 +276,9 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
     messages out of arrival order and rejects those later than its re-ordering window. Neither
     changes anything else: the nodes take their time from the stamps.
 
+    ``args.namespace`` (default ``/``) puts the suite under a namespace (see the module docstring);
+    with ``args.external_nodes`` the nodes are not started but expected in the graph.
+
     Returns:
         ``(ReplayResult, ProcessesRun)``: the recorded outputs (CDR bytes, in arrival order per topic)
         and input counts as the in-process transports give them, and the exit codes of the processes.
@@ -266,7 +296,9 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
     from rfi_node_common.qos import RECORDER_QOS
 
     rate = PROCESSES_DEFAULT_RATE if args.rate is None else args.rate
-    paths = {name: executable_path(package, exe) for name, package, exe in NODE_EXECUTABLES}
+    namespace = getattr(args, 'namespace', '/')
+    external = getattr(args, 'external_nodes', False)
+    paths = {} if external else {name: executable_path(package, exe) for name, package, exe in NODE_EXECUTABLES}
     play = executable_path('rfi_experiments', 'play')
     forwarded = ros_arguments(argv)
     start_s, stop_s = window if window is not None else (0.0, math.inf)
@@ -281,7 +313,7 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
     # leave the outcome to timing (an exception from spin_once, or loops waiting for the children);
     # ours raises KeyboardInterrupt, and the finally below stops the children in order.
     rclpy.init(args=list(argv), context=context, signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node('rfi_run_recorder', context=context)
+    node = rclpy.create_node('rfi_run_recorder', context=context, namespace=namespace)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     recorded: dict[str, list[tuple[int, bytes]]] = {t: [] for t in OUTPUT_TYPES}
@@ -299,7 +331,8 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
     previous = {sig: signal.signal(sig, _raise_interrupt) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
     exit_codes: dict[str, int] = {}
     try:
-        subs = {t: node.create_subscription(message_class(m), t, recorder(t), RECORDER_QOS, raw=True)
+        subs = {t: node.create_subscription(message_class(m), suite_topic(namespace, t), recorder(t), RECORDER_QOS,
+                                            raw=True)
                 for t, m in OUTPUT_TYPES.items()}
         for name, path in paths.items():
             command = [path, '--ros-args']
@@ -307,10 +340,14 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
                 command += ['--params-file', str(Path(params_file).resolve())]
             if name == 'imm_carrier':  # run's default, unless a parameters file sets it
                 command += ['-p', f'method:={params["imm_carrier"]["method"]}']
-            command += reliable_input_arguments(NODE_ENDPOINTS[name][0], node.resolve_topic_name)
+            # the names the node resolves its inputs to (the override is declared under those; another
+            # name would be refused as an unknown parameter)
+            command += reliable_input_arguments(
+                [node.resolve_topic_name(suite_topic(namespace, t)) for t in NODE_ENDPOINTS[name][0]])
+            command += namespace_arguments(namespace, ['/diagnostics'])
             command += forwarded[1:] if forwarded else []  # after ours: the caller's own -p wins
             children.start(name, command)
-        _wait_for_graph(node, executor, subs, children, args.timeout)
+        _wait_for_graph(node, executor, subs, children, args.timeout, namespace, external)
         node_names = list(paths)
         wall_start = time.monotonic()
         play_cmd = [play, str(args.bag), '--topics', *inputs, '--rate', repr(rate), '--start', repr(seg.start_s)]
@@ -327,6 +364,8 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
         play_cmd += [f'--expect-subscribers={t}:{n}' for t, n in subscribers.items()]
         if args.no_progress:
             play_cmd.append('--no-progress')
+        moved = namespace_arguments(namespace, sorted(set(inputs) | set(OUTPUT_TYPES)))
+        play_cmd += ['--ros-args', *moved, '--'] if moved else []
         play_cmd += forwarded
         player = children.start('play', play_cmd, stderr_to_terminal=not args.no_progress)
         while player.poll() is None:
@@ -359,22 +398,39 @@ def _raise_interrupt(signum: int, _frame: Any) -> None:
 
 
 def _wait_for_graph(node: Any, executor: Any, subs: dict[str, Any], children: ChildProcesses,
-                    timeout_s: float) -> None:
-    """Wait until every node shows its endpoints in the graph and the recorder has matched every
-    publisher of the recorded topics."""
+                    timeout_s: float, namespace: str = '/', external: bool = False) -> None:
+    """Wait until every node (in ``namespace``) shows its endpoints in the graph and the recorder has
+    matched every publisher of the recorded topics.
+
+    Raises:
+        RunError: not within ``timeout_s``; a node process exited; an external node's input is best
+            effort (a message it drops would be lost unseen).
+    """
+    from rclpy.qos import ReliabilityPolicy
+
     deadline = time.monotonic() + timeout_s
+    ns = '/' + namespace.strip('/')
     while True:
-        children.check_alive([n for n, _, _ in NODE_EXECUTABLES])
+        children.check_alive([] if external else [n for n, _, _ in NODE_EXECUTABLES])
         missing = []
+        best_effort = []
         for name, (subscribes, publishes) in NODE_ENDPOINTS.items():
             for topic in subscribes:
-                resolved = node.resolve_topic_name(topic)
-                if not any(i.node_name == name for i in node.get_subscriptions_info_by_topic(resolved)):
+                resolved = node.resolve_topic_name(suite_topic(namespace, topic))
+                ours = [i for i in node.get_subscriptions_info_by_topic(resolved)
+                        if i.node_name == name and i.node_namespace == ns]
+                if not ours:
                     missing.append(f'{name} subscribing {resolved}')
+                elif any(i.qos_profile.reliability != ReliabilityPolicy.RELIABLE for i in ours):
+                    best_effort.append(f'-p qos_overrides.{resolved}.subscription.reliability:=reliable ({name})')
             for topic in publishes:
-                resolved = node.resolve_topic_name(topic)
-                if not any(i.node_name == name for i in node.get_publishers_info_by_topic(resolved)):
+                resolved = node.resolve_topic_name(suite_topic(namespace, topic))
+                if not any(i.node_name == name and i.node_namespace == ns
+                           for i in node.get_publishers_info_by_topic(resolved)):
                     missing.append(f'{name} publishing {resolved}')
+        if external and best_effort and not missing:
+            raise RunError('the external nodes take these inputs best effort, so a message they drop would be '
+                           'lost unseen; start them with --ros-args ' + ' '.join(best_effort))
         for sub in subs.values():
             n_graph = len(node.get_publishers_info_by_topic(sub.topic_name))
             if sub.get_publisher_count() < n_graph:
@@ -388,7 +444,8 @@ def _wait_for_graph(node: Any, executor: Any, subs: dict[str, Any], children: Ch
                 executor.spin_once(timeout_sec=0.05)
             return
         if time.monotonic() > deadline:
-            raise RunError(f'the node processes did not come up within {timeout_s} s (ROS_DOMAIN_ID '
+            raise RunError(f'the {"external nodes" if external else "node processes"} did not come up in '
+                           f'namespace {ns} within {timeout_s} s (ROS_DOMAIN_ID '
                            f'{os.environ.get("ROS_DOMAIN_ID", "0")}, ROS_AUTOMATIC_DISCOVERY_RANGE '
                            f'{os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "unset")}); not seen: '
                            + '; '.join(missing) + f'. Logs: {children.log_dir}')

@@ -14,7 +14,10 @@ their topics exactly as on a robot, in one of three ways (``--transport``):
   its subscriber (after a slow warm-up, see :func:`run_processes`), and this process records their
   outputs (reliable, keep-all subscriptions) until every node has answered its last input; then the
   nodes are stopped with SIGINT (killed if they do not exit), also on Ctrl-C, SIGTERM or an error,
-  and what they publish while stopping is still recorded.
+  and what they publish while stopping is still recorded. ``--namespace /robot1`` runs the whole
+  suite (nodes, ``play``, the recorder) under a namespace, so that several suites run side by side
+  in one domain; ``--external-nodes`` starts no node but replays to and records from nodes already
+  running (on another host, say).
 
 After the last input the in-process transports call each node's ``end_of_input()`` (the fusion
 node then processes what its re-ordering buffer holds); a node process does the same by itself
@@ -40,13 +43,14 @@ from pathlib import Path
 from typing import Any
 
 from rfi_experiments.bag_io import BagError, BagReader
-from rfi_experiments.cli import error_reporter
+from rfi_experiments.cli import error_reporter, ros_namespace
 from rfi_experiments.play import LATE_REASON, add_window_arguments, window_ns, window_s
 from rfi_experiments.processes import (
     NODE_ENDPOINTS,
     PROCESSES_DEFAULT_RATE,
     RunError,
     reliable_input_arguments,
+    ros_arguments,
     run_processes,
 )
 
@@ -88,6 +92,15 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--params-file', action='append', default=[], metavar='YAML',
                         help='ROS 2 parameters file (node_name: ros__parameters: ...; "/**" for all nodes), '
                              'e.g. the one shipped beside a bag; may be given more than once')
+    parser.add_argument('--namespace', type=ros_namespace, default='/', metavar='NS',
+                        help='processes: run the suite under this ROS namespace (e.g. /robot1): the nodes get '
+                             '-r __ns:=NS and their /diagnostics at NS/diagnostics, play publishes to NS/<topic>, '
+                             'the outputs are recorded from there; several suites with different namespaces run '
+                             'side by side in one ROS domain without seeing each other (default: /, the root)')
+    parser.add_argument('--external-nodes', action='store_true',
+                        help='processes: start no node; replay to and record from rfi_monitor, uwb_gnss_fusion and '
+                             'imm_carrier already running in --namespace (e.g. on another host, see the README), '
+                             'their inputs reliable (-p qos_overrides.<topic>.subscription.reliability:=reliable)')
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
     return parser
 
@@ -200,6 +213,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         value = getattr(args, name)
         if not (math.isfinite(value) and (value > 0 or (name == 'warmup' and value == 0))):
             return fail(f'--{name.replace("_", "-")} must be a finite number > 0 (got {value})')
+    if args.transport != 'processes' and (args.namespace != '/' or args.external_nodes):
+        return fail('--namespace and --external-nodes apply to --transport processes only')
+    if any(a.startswith('__ns:=') for a in ros_arguments(argv)):
+        return fail('give the namespace as --namespace NS (run moves play and its recorder there too), '
+                    'not as --ros-args -r __ns:=NS')
     try:
         window = window_s(args.start, args.duration)
         params = load_params_files(args.params_file)
@@ -230,7 +248,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             print('run: interrupted; node processes stopped', file=sys.stderr)
             return 130
         rate = PROCESSES_DEFAULT_RATE if args.rate is None else args.rate
-        how = f'processes transport: node executables fed by play at {rate:g}x'
+        how = (f'processes transport: {"external nodes" if args.external_nodes else "node executables"} fed by '
+               f'play at {rate:g}x' + ('' if args.namespace == '/' else f', namespace {args.namespace}'))
         notes.append(f'Completion: {run.completion}.')
         notes.append('Exit codes after SIGINT: ' + ', '.join(f'{n} {c}' for n, c in run.exit_codes.items())
                      + '. Output of each process: [logs/](logs/).')
