@@ -232,7 +232,7 @@ def gnss_array():
     from rfi_msgs.msg import GnssMeasurement, GnssMeasurementArray
 
     msg = GnssMeasurementArray(gps_week=1854, gps_time_of_week_s=3600.0)
-    msg.header.stamp.sec = 1437267600
+    msg.header.stamp.sec = 1437267583  # ROS (UTC) time of week 1854, TOW 3600 s
     msg.measurements.append(GnssMeasurement(svid=2, pseudorange_m=22080540.10730033, pseudorange_rate_mps=267.44963,
                                             cn0_dbhz=43.6, pseudorange_std_m=math.nan))
     return msg

@@ -33,7 +33,9 @@ the same figures for any case):
   gaps of up to 1.5 s; 1917-2194 rows per anchor.
 * gnss.csv header stamps lie on an exact 125 ms (8 Hz) grid offset by 0.33 ms and are recorded
   26-77 ms (median 41 ms) later on the ROS clock, so they are the receiver's UTC epochs and the
-  PC clock agreed with UTC within tens of ms (GPS time would put them 18 s ahead).
+  PC clock agreed with UTC within tens of ms (GPS time would put them 18 s ahead). The stamps are
+  therefore kept as they are: they are already the suite's time base, ROS (UTC) time
+  (:mod:`gnss_common.gps_time`), so these ranges line up with GNSS converted by ``rinex_to_bag``.
 * trajectory.csv timestamps are those gnss.csv header stamps printed as float64 (``1.73e+18``),
   i.e. rounded to a multiple of 256 ns; 1881 of the 1882 fixes appear (seq 2733 is missing). When
   gnss.csv is present, each truth stamp is restored to the exact integer stamp whose float it is;

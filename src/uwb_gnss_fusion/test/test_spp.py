@@ -79,7 +79,7 @@ def _synthetic_epoch(sky=SKY, noise_m=None, svids=None, std_m=math.nan, cn0=45.0
             )
         )
     return GnssEpoch(
-        stamp_ns=1_437_264_000_000_000_000, gps_week=1854, gps_time_of_week_s=0.0, observations=tuple(obs)
+        stamp_ns=1_437_263_983_000_000_000, gps_week=1854, gps_time_of_week_s=0.0, observations=tuple(obs)  # ROS (UTC)
     )
 
 
@@ -276,7 +276,7 @@ def test_replay_is_deterministic(real_runs):
 
 
 # ----------------------------------------------------------------------------- SPP reference cache
-_T0 = 1_437_264_000_000_000_000
+_T0 = 1_437_263_983_000_000_000  # ROS (UTC) stamp of GPS week 1854, TOW 0
 _NS = 1_000_000_000
 
 
