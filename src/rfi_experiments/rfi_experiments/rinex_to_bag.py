@@ -13,8 +13,10 @@ When the observation header has an APPROX POSITION XYZ, the same point is
 written on ``/truth/position`` (``geometry_msgs/PointStamped``, frame "earth") at every epoch: it
 is the station's published coordinate, used as truth for a static receiver.
 
-Time base: header stamps and bag log times are GPS time on a Unix-like axis in integer ns, as
-defined in :mod:`gnss_common.gps_time` (no leap seconds; ahead of UTC Unix time by GPS-UTC).
+Time base: header stamps and bag log times are ROS time (UTC-based Unix time, integer ns), converted
+from each epoch's GPS time by :func:`gnss_common.gps_time.gps_to_ros_stamp_ns` (leap seconds from
+its one table); the exact GPS week and time of week are in the message's ``gps_week`` and
+``gps_time_of_week_s``.
 
 Satellites are skipped, and counted by reason, when they cannot be modelled (reasons of
 :data:`gnss_common.measurements.SKIP_REASONS`) or when they are below the elevation mask seen
@@ -237,7 +239,8 @@ def build_parser() -> argparse.ArgumentParser:
             f"{TRUTH_TOPIC} (geometry_msgs/PointStamped, frame 'earth'). The truth is the header's "
             "APPROX POSITION XYZ, i.e. the station's published position, repeated at every epoch and "
             "used as truth for a static receiver; it is omitted when the header has none. Stamps are "
-            "GPS time (no leap seconds) in ns since 1970."
+            "ROS time (UTC, ns since 1970; GPS - UTC leap seconds removed); GPS week and time of week "
+            "are in the message fields."
         ),
     )
     parser.add_argument("obs", help="RINEX observation file (2.x or 3.x; plain, .gz, .crx, .crx.gz)")
