@@ -1,0 +1,410 @@
+"""ROS node ``if_source``: a capture file, standard input or a named pipe -> /rfi/if_samples (rfi_msgs/IfSamples).
+
+Thin: the bytes are read and cut into blocks by :mod:`rfi_experiments.if_formats` (formats, unpacking,
+stamps, gap detection); this node declares the parameters, runs the reading loop on a thread of its own
+(a blocking read of a pipe must not stall the executor), publishes and reports /diagnostics.
+
+Input (``input``): a file path, ``-`` for standard input, or a named pipe. A regular file is checked first
+(its size must be a whole number of items, usually a wrong ``item_type`` otherwise) and read to its end;
+standard input and pipes are live streams: ``rtl_sdr -f 1575420000 -s 2048000 - | ros2 run rfi_experiments
+if_source --ros-args -p item_type:=uibyte -p sampling_frequency_hz:=2048000.0``. At the end of the input
+the node reports its counters and, with ``exit_at_end`` (default), shuts down (exit code 0).
+
+Pacing (``pace``): ``real_time`` publishes each block of a file when it would have been complete had the
+capture been live (block end time after the first block's start, on the steady clock); ``max`` publishes as
+fast as the subscribers take it: with ``reliability`` ``reliable`` every block waits until each matched
+subscriber has acknowledged it, so nothing is lost. A live stream is paced by its source in both modes.
+``wait_for_subscribers`` (default 0) holds the input until that many subscribers have matched (a file
+replayed into a monitor started at the same time loses nothing), for at most ``wait_timeout_s``.
+
+QoS (``reliability``): ``reliable`` (default: the suite's DATA_QOS, reliable, keep last 1000) or
+``best_effort`` (rclpy's sensor-data profile, REP 2003: a slow subscriber loses blocks instead of slowing
+the source; the monitor counts them as gaps and lost messages).
+
+Stamps: ``start_time`` (ISO 8601 UTC ``2021-12-02T08:47:00Z`` or Unix seconds) is the time of the first
+sample; empty: the node's ROS clock when the first byte arrives (a live SDR). Every block's stamp is
+``start + first_sample_index / sampling_frequency_hz`` (ROS time, UTC based). A sampling clock that is off
+by d ppm moves these stamps away from the wall clock by d ppm of the run.
+
+Gaps (live streams only): :class:`rfi_experiments.if_formats.LiveLag` compares the samples received (and
+still waiting in the pipe) with what ``sampling_frequency_hz`` delivers in the elapsed steady time; a lag of
+more than ``gap_tolerance_s`` is declared a gap before the bytes of the read that revealed it (where in the
+stream the samples went missing is known only to within the pipe's content, 64 KiB by default):
+``first_sample_index`` jumps by the missing samples (the monitor sees the jump and resets its tracker), the
+unfinished block is dropped, and ``gaps`` / ``samples_lost`` / ``samples_dropped_at_gap`` count it. A pipe
+found full after a read (the reader fell behind; the writer is blocked and an SDR tool then drops samples) is
+counted as ``pipe_full_reads``.
+
+Diagnostics (/diagnostics, name ``if_source``, every ``diagnostics_period_s`` of stamp time and at the end):
+bytes_in, blocks, samples, blocks_published, gaps, samples_lost, samples_dropped_at_gap, partial_item_reads,
+pipe_full_reads, final_partial_block_samples, trailing_bytes (the input ended inside an item), and for
+gr_complex rounded_values, clipped_values, non_finite_values; lag_s, subscribers, read_errors. Level: ERROR
+after a read error, WARN after gaps, trailing bytes or an inexact float conversion, else OK.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import termios
+import threading
+import time
+from collections import Counter
+from dataclasses import dataclass
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+
+from rfi_experiments.if_formats import (
+    ITEM_TYPES,
+    BlockAssembler,
+    FormatError,
+    IfBlock,
+    IfFormat,
+    LiveLag,
+    check_file_size,
+    is_live,
+    parse_start_time,
+)
+from rfi_msgs.msg import IfSamples
+from rfi_node_common.diagnostics import ERROR, OK, WARN, StampTimer, diagnostic_array
+from rfi_node_common.main import run_node
+from rfi_node_common.params import declare, parameter, validate_ranges
+from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS
+from rfi_node_common.stamps import ns_to_stamp
+
+TOPICS = """topics:
+  publishes  /rfi/if_samples (rfi_msgs/IfSamples), /diagnostics (diagnostic_msgs/DiagnosticArray)"""
+
+IF_TOPIC = 'rfi/if_samples'
+"""Output topic, relative (follows the node's namespace, as the monitor's input does)."""
+
+READ_BYTES = 1 << 16
+"""Bytes asked of one read (a pipe's default capacity on Linux)."""
+
+ACK_TIMEOUT_S = 30.0
+"""Longest wait for the acknowledgement of one block in ``max`` pace (reliable), s; then the block is counted
+as ``unacknowledged_blocks`` and reading goes on."""
+
+FORMAT_FIELDS = ('item_type', 'sampling_frequency_hz', 'intermediate_frequency_hz', 'center_frequency_hz',
+                 'spectral_inversion', 'sample_type', 'big_endian_bytes', 'big_endian_items', 'bits_per_sample',
+                 'scale', 'float_counts_per_unit')
+"""Parameters that are :class:`rfi_experiments.if_formats.IfFormat` fields (shared with if_to_bag)."""
+
+
+@dataclass(frozen=True)
+class IfSourceParams:
+    """Parameters of if_source (``--help`` lists them; if_to_bag takes the format ones as options)."""
+
+    input: str = parameter('-', 'Capture file, "-" for standard input, or a named pipe.')
+    item_type: str = parameter(
+        'ibyte', 'Sample format on disk / in the stream (rfi_experiments.if_formats): byte, ibyte, cbyte, short, '
+        'ishort, cshort, gr_complex (float32 I/Q), uibyte (rtl_sdr), two_bit_packed, two_bit_packed_short, '
+        'four_bit_cpx.', choices=tuple(ITEM_TYPES))
+    sampling_frequency_hz: float = parameter(
+        4.0e6, 'Samples per second (complex: I/Q pairs per second), Hz.', minimum=1.0e5, maximum=1.0e11)
+    intermediate_frequency_hz: float = parameter(
+        0.0, 'IF of the signal as it appears in the samples, Hz: real in [0, fs/2), complex in (-fs/2, fs/2); '
+        '0 for complex baseband.', minimum=-5.0e10, maximum=5.0e10)
+    center_frequency_hz: float = parameter(
+        1575.42e6, 'RF frequency the samples are referenced to, Hz (GPS L1: 1575.42e6).', minimum=0.0, maximum=1.0e11)
+    spectral_inversion: bool = parameter(
+        False, 'The RF spectrum is mirrored in the samples (high-side LO): real samples get a negative IF in the '
+        'message, complex samples have I and Q swapped.')
+    sample_type: str = parameter(
+        '', 'Packed types only: real, iq or qi (GNSS-SDR\'s names; empty: real, four_bit_cpx: iq).',
+        choices=('', 'real', 'iq', 'qi'))
+    big_endian_bytes: bool = parameter(
+        False, 'two_bit_packed*: the first sample of a byte is in its two most significant bits.')
+    big_endian_items: bool = parameter(
+        True, 'two_bit_packed_short: the 16-bit words are big-endian (GNSS-SDR\'s default).')
+    bits_per_sample: int = parameter(
+        0, 'Quantisation reported in the message, bits; 0: the item type\'s (PocketSDR int8 files hold 2-bit '
+        'values: 2).', minimum=0, maximum=16)
+    scale: float = parameter(
+        0.0, 'Volts (or full-scale units) per stored count; 0: the item type\'s (1 for integer items, 0.5 for '
+        '2v+1 codes, 1/float_counts_per_unit for gr_complex).', minimum=0.0, maximum=1.0e3)
+    float_counts_per_unit: float = parameter(
+        1.0, 'gr_complex: counts per unit of the file\'s floats (1: the floats are ADC counts; 32767 for '
+        'floats normalised to +-1).', minimum=1.0e-6, maximum=1.0e9)
+    block_duration_s: float = parameter(
+        0.001, 'Duration of one published block, s (rounded to whole samples).', minimum=1.0e-6, maximum=10.0)
+    start_time: str = parameter(
+        '', 'Time of the first sample: ISO 8601 UTC (2021-12-02T08:47:00Z) or Unix seconds; empty: the ROS '
+        'clock when the first byte arrives.')
+    pace: str = parameter(
+        'real_time', 'real_time: a file is published at its sample rate; max: as fast as the subscribers take '
+        'it (reliable: every block acknowledged). A live stream is paced by its source.',
+        choices=('real_time', 'max'))
+    reliability: str = parameter(
+        'reliable', 'QoS of /rfi/if_samples: reliable (keep last 1000) or best_effort (sensor data profile).',
+        choices=('reliable', 'best_effort'))
+    wait_for_subscribers: int = parameter(
+        0, 'Hold the input until this many subscribers of /rfi/if_samples have matched.', minimum=0, maximum=1000)
+    wait_timeout_s: float = parameter(
+        30.0, 'Longest wait for wait_for_subscribers, s; then reading starts anyway (with a warning).',
+        minimum=0.0, maximum=86400.0)
+    gap_tolerance_s: float = parameter(
+        0.5, 'Live streams: a lag of the samples received behind the sample rate larger than this is a gap, s; '
+        '0: no gap detection.', minimum=0.0, maximum=3600.0)
+    frame_id: str = parameter('gnss_front_end', 'header.frame_id of the blocks (the front end / antenna).')
+    diagnostics_period_s: float = parameter(
+        1.0, 'Period of /diagnostics in stamp time, s.', minimum=0.001, maximum=3600.0)
+    exit_at_end: bool = parameter(True, 'Shut the node down at the end of the input.')
+
+    def __post_init__(self) -> None:
+        validate_ranges(self)
+        fmt = self.format()
+        fmt.block_samples(self.block_duration_s)
+        if self.start_time:
+            parse_start_time(self.start_time)
+
+    def format(self) -> IfFormat:
+        """The input format (raises FormatError, a ValueError, on a combination that cannot be)."""
+        return IfFormat(**{name: getattr(self, name) for name in FORMAT_FIELDS})
+
+
+def block_message(block: IfBlock, fmt: IfFormat, frame_id: str) -> IfSamples:
+    """An :class:`IfBlock` of format ``fmt`` as rfi_msgs/IfSamples (the one conversion; if_to_bag uses it)."""
+    m = IfSamples()
+    m.header.stamp = ns_to_stamp(block.stamp_ns)
+    m.header.frame_id = frame_id
+    m.sample_rate_hz = float(fmt.sampling_frequency_hz)
+    m.intermediate_frequency_hz = fmt.published_intermediate_frequency_hz
+    m.center_frequency_hz = float(fmt.center_frequency_hz)
+    m.is_complex = fmt.is_complex
+    m.first_sample_index = int(block.first_sample_index)
+    m.scale = fmt.published_scale
+    m.bits_per_sample = fmt.published_bits_per_sample
+    m.sample_format = fmt.sample_format
+    m.samples = block.counts.astype(fmt.dtype, copy=False).tobytes()
+    return m
+
+
+def pipe_capacity(fd: int) -> int | None:
+    """Capacity of the pipe behind ``fd``, bytes, or None (not a pipe, or not Linux)."""
+    try:
+        return int(fcntl.fcntl(fd, getattr(fcntl, 'F_GETPIPE_SZ', 1032)))
+    except OSError:
+        return None
+
+
+def bytes_waiting(fd: int) -> int:
+    """Bytes readable without blocking (FIONREAD), 0 if unknown."""
+    try:
+        buf = fcntl.ioctl(fd, termios.FIONREAD, b'\0\0\0\0')
+        return int.from_bytes(buf, 'little', signed=True)
+    except OSError:
+        return 0
+
+
+class IfSourceNode(Node):
+    """Publishes the blocks of a capture file or live stream (module docstring)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__('if_source', **kwargs)
+        self.params = declare(self, IfSourceParams)
+        p = self.params
+        self.fmt = p.format()
+        self.block_samples = self.fmt.block_samples(p.block_duration_s)
+        self.live = is_live(p.input)
+        if not self.live:
+            check_file_size(p.input, self.fmt, self.block_samples)
+        self.start_ns = parse_start_time(p.start_time) if p.start_time else None
+        qos = DATA_QOS if p.reliability == 'reliable' else qos_profile_sensor_data
+        self.pub = self.create_publisher(IfSamples, IF_TOPIC, qos)
+        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self.counts: Counter[str] = Counter()
+        self.assembler: BlockAssembler | None = None
+        self.lag = LiveLag(self.fmt.sampling_frequency_hz, p.gap_tolerance_s) if p.gap_tolerance_s > 0 else None
+        self._timer = StampTimer(p.diagnostics_period_s)
+        self._last_stamp_ns = 0
+        self._lock = threading.Lock()
+        self.stop = threading.Event()
+        self.done = threading.Event()
+        """Set when the input has ended and the final diagnostics are out."""
+        self._fd: int | None = None
+        self._own_fd = False
+        if p.input == '-':
+            self._fd = 0
+        else:
+            try:
+                self._fd = os.open(p.input, os.O_RDONLY)
+            except OSError as err:
+                raise ValueError(f'input {p.input}: {err.strerror}') from None
+            self._own_fd = True
+        self._thread = threading.Thread(target=self._run, name='if_source_reader', daemon=True)
+        # started by the executor's first spin, after main() has checked the parameters (a misspelt -p
+        # must not have consumed the input)
+        self._start_timer = self.create_timer(0.0, self._start_reading)
+
+    def _start_reading(self) -> None:
+        self._start_timer.cancel()
+        if self._thread.ident is None:  # never started
+            self._thread.start()
+
+    # --------------------------------------------------------------------------------------------- reading
+    def _run(self) -> None:
+        try:
+            self._wait_for_subscribers()
+            if not self.stop.is_set():
+                self._read_loop()
+        except Exception as err:  # noqa: BLE001 - a read or publish failure ends the input, reported
+            self.counts['read_errors'] += 1
+            self.get_logger().error(f'input {self.params.input} ended by {type(err).__name__}: {err}')
+        finally:
+            if self.assembler is not None:
+                self.assembler.finish()
+            if self.params.reliability == 'reliable' and self.pub.get_subscription_count() > 0 \
+                    and not self.pub.wait_for_all_acked(_duration(ACK_TIMEOUT_S)):
+                self.counts['unacknowledged_blocks'] += 1
+            self._report_end()
+            self.done.set()
+            if self.params.exit_at_end and not self.stop.is_set() and self.context.ok():
+                self.get_logger().info('end of input: shutting down (exit_at_end)')
+                self.context.try_shutdown()
+
+    def _wait_for_subscribers(self) -> None:
+        want = self.params.wait_for_subscribers
+        if not want:
+            return
+        deadline = time.monotonic() + self.params.wait_timeout_s
+        while self.pub.get_subscription_count() < want and not self.stop.is_set():
+            if time.monotonic() >= deadline:
+                self.get_logger().warn(f'{self.pub.get_subscription_count()} of {want} subscribers after '
+                                       f'{self.params.wait_timeout_s} s: starting anyway')
+                return
+            self.stop.wait(0.02)
+
+    def _read_loop(self) -> None:
+        assert self._fd is not None
+        fd = self._fd
+        capacity = pipe_capacity(fd) if self.live else None
+        t_first: float | None = None
+        while not self.stop.is_set():
+            data = os.read(fd, READ_BYTES)
+            if not data:
+                return
+            now = time.monotonic()
+            if self.assembler is None:
+                start = self.start_ns if self.start_ns is not None else self.get_clock().now().nanoseconds
+                self.assembler = BlockAssembler(self.fmt, self.block_samples, start)
+                t_first = now
+            asm = self.assembler
+            if self.live:
+                waiting = bytes_waiting(fd)
+                if capacity and waiting >= capacity:
+                    self.counts['pipe_full_reads'] += 1
+                if self.lag is not None:
+                    unread = (asm.pending_bytes + len(data) + waiting) // self.fmt.chunk_bytes
+                    seen = asm.next_sample_index + unread * self.fmt.chunk_samples
+                    missing = self.lag.update(now, seen)
+                    if missing:  # placed before this read's bytes (uncertain by the pipe's content)
+                        asm.skip(missing)
+                        self.get_logger().warn(f'live input fell {missing / self.fmt.sampling_frequency_hz:.3f} s '
+                                               f'behind the sample rate: gap of {missing} samples declared')
+            self._publish_all(asm.feed(data), t_first)
+
+    def _publish_all(self, blocks: list[IfBlock], t_first: float | None) -> None:
+        for block in blocks:
+            if self.stop.is_set():
+                return
+            if not self.live and self.params.pace == 'real_time' and t_first is not None:
+                due = t_first + (block.first_sample_index + block.n_samples) / self.fmt.sampling_frequency_hz
+                delay = due - time.monotonic()
+                if delay > 0 and self.stop.wait(delay):
+                    return
+            self.pub.publish(block_message(block, self.fmt, self.params.frame_id))
+            self.counts['blocks_published'] += 1
+            if self.params.pace == 'max' and self.params.reliability == 'reliable' \
+                    and self.pub.get_subscription_count() > 0 \
+                    and not self.pub.wait_for_all_acked(_duration(ACK_TIMEOUT_S)):
+                self.counts['unacknowledged_blocks'] += 1
+            self._last_stamp_ns = block.stamp_ns
+            if self._timer.due(block.stamp_ns):
+                self._publish_diagnostics(block.stamp_ns, final=False)
+
+    # --------------------------------------------------------------------------------------------- reporting
+    def values(self) -> dict[str, object]:
+        """Counters of the reader and of the node."""
+        v: dict[str, object] = {}
+        asm = self.assembler.counters if self.assembler is not None else Counter()
+        for key in ('bytes_in', 'blocks', 'samples', 'gaps', 'samples_lost', 'samples_dropped_at_gap',
+                    'partial_item_reads', 'final_partial_block_samples', 'trailing_bytes'):
+            v[key] = asm.get(key, 0)
+        if self.fmt.item_type == 'gr_complex':
+            for key in ('rounded_values', 'clipped_values', 'non_finite_values'):
+                v[key] = asm.get(key, 0)
+        for key in ('blocks_published', 'pipe_full_reads', 'read_errors', 'unacknowledged_blocks'):
+            v[key] = self.counts.get(key, 0)
+        v['lag_s'] = round(self.lag.lag_s, 6) if self.lag is not None else 'off'
+        v['subscribers'] = self.pub.get_subscription_count()
+        v['input'] = self.params.input
+        v['item_type'] = self.fmt.item_type
+        return v
+
+    def level(self) -> tuple[bytes, str]:
+        v = self.values()
+        if v['read_errors']:
+            return ERROR, 'the input failed'
+        warn = [k for k in ('gaps', 'trailing_bytes', 'rounded_values', 'clipped_values', 'non_finite_values',
+                            'pipe_full_reads', 'unacknowledged_blocks') if v.get(k)]
+        if warn:
+            return WARN, 'counted: ' + ', '.join(f'{k} {v[k]}' for k in warn)
+        return OK, 'publishing'
+
+    def _publish_diagnostics(self, stamp_ns: int, final: bool) -> None:
+        level, text = self.level()
+        if final:
+            text = 'end of input; ' + text
+        try:
+            self.diag_pub.publish(diagnostic_array(max(1, stamp_ns), 'if_source', self.get_name(), level, text,
+                                                   self.values()))
+        except Exception as err:  # noqa: BLE001 - a report must never end the reader
+            self.get_logger().error(f'/diagnostics not published: {type(err).__name__}: {err}')
+
+    def _report_end(self) -> None:
+        v = self.values()
+        self._publish_diagnostics(self._last_stamp_ns, final=True)
+        text = ', '.join(f'{k} {v[k]}' for k in ('blocks_published', 'samples', 'gaps', 'samples_lost',
+                                                 'final_partial_block_samples', 'trailing_bytes'))
+        self.get_logger().info(f'end of input {self.params.input}: {text}')
+        if v['final_partial_block_samples']:
+            self.get_logger().warn(f'the last {v["final_partial_block_samples"]} samples did not fill a block '
+                                   'and were not published')
+        if v['trailing_bytes']:
+            self.get_logger().warn(f'the input ended inside an item: {v["trailing_bytes"]} trailing bytes ignored')
+
+    def destroy_node(self) -> None:
+        self.stop.set()
+        self._start_timer.cancel()
+        if self._thread.is_alive() and threading.current_thread() is not self._thread:
+            self._thread.join(timeout=2.0)
+        if self._own_fd and self._fd is not None and not self._thread.is_alive():  # a blocked read keeps it
+            os.close(self._fd)
+            self._fd = None
+        super().destroy_node()
+
+
+def _duration(seconds: float) -> Any:
+    from rclpy.duration import Duration
+    return Duration(nanoseconds=int(seconds * 1e9))
+
+
+def main(argv: Any = None) -> int:
+    def make() -> IfSourceNode:
+        try:
+            return IfSourceNode()
+        except FormatError as err:
+            raise ValueError(str(err)) from None
+    return run_node(make, executable='if_source', params_cls=IfSourceParams, topics=TOPICS,
+                    summary='Publish GNSS front-end samples from a capture file, standard input or a named pipe '
+                            '(rtl_sdr, hackrf_transfer, PocketSDR, GNSS-SDR formats) as rfi_msgs/IfSamples.',
+                    argv=argv)
+
+
+if __name__ == '__main__':
+    import sys
+    sys.exit(main())
