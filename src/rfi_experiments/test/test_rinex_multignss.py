@@ -43,6 +43,12 @@ def test_every_constellation_with_an_orbit_is_carried(esbc: tuple[Path, str]) ->
         epochs = [msg_to_epoch(m.decode()) for m in reader.messages([MEASUREMENTS_TOPIC])]
     per_epoch = [{o.constellation for o in e.observations} for e in epochs]
     assert all(s >= {GPS, GALILEO, BEIDOU, GLONASS} for s in per_epoch)
+    carriers = {o.constellation: set() for e in epochs for o in e.observations}
+    for e in epochs:
+        for o in e.observations:
+            carriers[o.constellation].add(o.carrier_frequency_hz)
+    assert carriers[GPS] == carriers[GALILEO] == {1575.42e6} and carriers[BEIDOU] == {1561.098e6}
+    assert len(carriers[GLONASS]) > 3 and all(1598.0e6 <= f <= 1610.0e6 for f in carriers[GLONASS])
     for e in epochs[::20]:
         for o in e.observations:
             r = np.linalg.norm(o.satellite_position_ecef_m)

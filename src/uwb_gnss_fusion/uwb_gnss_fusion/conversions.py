@@ -55,6 +55,7 @@ _FLOAT_FIELDS = (
     "troposphere_delay_m",
     "pseudorange_std_m",
     "pseudorange_rate_std_mps",
+    "carrier_frequency_hz",
 )
 """Scalar float64 fields shared by SatelliteObservation and GnssMeasurement (same names, units)."""
 
