@@ -15,7 +15,8 @@ Scope
   (``SYS / # / OBS TYPES``, ``>`` epoch records). Event flags 2-5 (header records inside the
   data) and 6 (cycle-slip records) are skipped. Blank or zero-filled fields become NaN.
   Satellite ids are normalised to ``"G05"`` style (RINEX 2 blank system letter means GPS).
-- Navigation files: GPS LNAV records from RINEX 2.x GPS nav files (``N``) and, from RINEX 3.x
+- Navigation files: GPS LNAV records from RINEX 2.x GPS nav files (``N``), GLONASS records from
+  RINEX 2.x GLONASS nav files (``G``), and, from RINEX 3.x
   (``N``, mixed or one file per system), GPS, Galileo (I/NAV; F/NAV records are skipped and
   counted: their health bits do not cover E1), BeiDou, QZSS and GLONASS records. SBAS and NavIC
   records are skipped and counted by system; records of a supported system that describe no
@@ -23,10 +24,11 @@ Scope
   Klobuchar parameters from ``ION ALPHA`` / ``ION BETA`` (2.x) or ``IONOSPHERIC CORR GPSA/GPSB``
   (3.x). Several nav files (one per system, as some archives publish them) are merged with
   :func:`read_rinex_navs`.
-- Observation epochs are on the GPS time scale (RINEX "GPS" time system); other time systems are
-  rejected with a clear error. In nav records, Galileo times are GST (= GPST), BeiDou times BDT
-  (kept as such: :mod:`gnss_common.ephemeris` shifts by 14 s), GLONASS t_b is UTC and converted
-  here to GPS time with the header's LEAP SECONDS (else :data:`gnss_common.gps_time.LEAP_SECONDS`).
+- Observation epochs are converted to GPS time from the file's time system (GPS, GAL, QZS, BDT,
+  GLO; :data:`OBS_TIME_SYSTEMS`); others are rejected with a clear error. In nav records, Galileo
+  times are GST (= GPST), BeiDou times BDT (kept as such: :mod:`gnss_common.ephemeris` shifts by
+  14 s), GLONASS t_b is UTC and converted here to GPS time with the header's LEAP SECONDS (else
+  :data:`gnss_common.gps_time.LEAP_SECONDS`).
 
 Notes
 -----
@@ -45,7 +47,7 @@ from pathlib import Path
 import hatanaka
 import numpy as np
 
-from gnss_common.constants import BEIDOU_WEEK_OFFSET
+from gnss_common.constants import BEIDOU_MINUS_GPS_TIME_S, BEIDOU_WEEK_OFFSET
 from gnss_common.ephemeris import DEFAULT_FIT_INTERVAL_H, GpsEphemeris
 from gnss_common.glonass import GlonassEphemeris
 from gnss_common.gps_time import datetime_to_gps, leap_seconds_at_ros_stamp
@@ -86,7 +88,8 @@ class RinexObsHeader:
         obs_types: system letter -> observable codes in file order (RINEX 2 codes such as
             "C1", "D1", "S1" are listed under every system letter "G", "R", "E", "S", "J", "C").
         interval_s: INTERVAL, s (NaN when absent).
-        time_system: TIME OF FIRST OBS time system ("GPS" default).
+        time_system: TIME OF FIRST OBS time system (default by file system as RINEX says: "GPS",
+            "GLO" for a pure GLONASS file, ...); epochs are converted from it to GPS time.
         glonass_channels: GLONASS slot -> FDMA frequency channel k from ``GLONASS SLOT / FRQ #``
             (empty when absent).
     """
@@ -257,6 +260,27 @@ def _epoch_to_gps(
     return week, tow
 
 
+OBS_TIME_SYSTEMS = ("GPS", "GAL", "QZS", "BDT", "GLO")
+"""Observation-file time systems read (epochs are converted to GPS time): GST and QZSST are
+aligned to GPST (offsets of a few ns neglected), BDT = GPST - 14 s, GLO = UTC(SU) + 3 h (RINEX
+files give GLO epochs as UTC, RINEX 2.11 5.6 / 3.05 5.6)."""
+
+
+def _obs_epoch_to_gps(
+    time_system: str, year: int, month: int, day: int, hour: int, minute: int, sec: float,
+    path: str | Path, line_no: int,
+) -> tuple[int, float]:
+    """A calendar epoch on an observation file's time system -> (GPS week, GPS time of week)."""
+    week, tow = _epoch_to_gps(year, month, day, hour, minute, sec, path, line_no)
+    if time_system == "BDT":
+        tow -= BEIDOU_MINUS_GPS_TIME_S
+    elif time_system == "GLO":  # given as UTC in RINEX
+        tow += leap_seconds_at_ros_stamp(calendar.timegm((year, month, day, hour, minute, 0, 0, 0, 0)) * 1_000_000_000)
+    if tow >= 604800.0:
+        week, tow = week + 1, tow - 604800.0
+    return week, tow
+
+
 def _sat_id(token: str, default_system: str) -> str:
     token = token.rstrip()
     sys_char = token[0] if token and token[0].isalpha() else " "
@@ -379,8 +403,14 @@ def _parse_obs_header(lines: list[str], path: str | Path) -> tuple[RinexObsHeade
             raise RinexFormatError(path, end, "no 'SYS / # / OBS TYPES' in header")
         types = {k: tuple(v) for k, v in obs_types.items()}
         del v3_count
-    if time_system not in ("GPS", ""):
-        raise RinexFormatError(path, end, f"time system {time_system!r} not supported (GPS time expected)")
+    if not time_system:
+        # RINEX 2.11, 5.6 / RINEX 3.05, 5.6: a pure GLONASS file defaults to GLO, others to GPS,
+        # a pure Galileo file to GAL, a pure BeiDou file to BDT, a pure QZSS file to QZS.
+        time_system = {"R": "GLO", "E": "GAL", "C": "BDT", "J": "QZS"}.get(file_system, "GPS")
+    if time_system not in OBS_TIME_SYSTEMS:
+        raise RinexFormatError(
+            path, end, f"time system {time_system!r} not supported (one of {', '.join(OBS_TIME_SYSTEMS)})"
+        )
     header = RinexObsHeader(
         version=version,
         file_system=file_system,
@@ -439,7 +469,9 @@ def _iter_obs2(
         except ValueError:
             raise RinexFormatError(path, line_no, f"malformed epoch date in {line[0:26]!r}") from None
         sec = _float_field(line[15:26], path, line_no, "epoch seconds")
-        week, tow = _epoch_to_gps(_two_digit_year(yy), mo, dd, hh, mi, sec, path, line_no)
+        week, tow = _obs_epoch_to_gps(
+            header.time_system, _two_digit_year(yy), mo, dd, hh, mi, sec, path, line_no
+        )
         clock = (
             _float_field(line[68:80], path, line_no, "receiver clock offset") if len(line) > 68 else math.nan
         )
@@ -507,7 +539,7 @@ def _iter_obs3(
         except ValueError:
             raise RinexFormatError(path, line_no, f"malformed epoch date in {line[0:29]!r}") from None
         sec = _float_field(line[18:29], path, line_no, "epoch seconds")
-        week, tow = _epoch_to_gps(year, mo, dd, hh, mi, sec, path, line_no)
+        week, tow = _obs_epoch_to_gps(header.time_system, year, mo, dd, hh, mi, sec, path, line_no)
         clock = (
             _float_field(line[41:56], path, line_no, "receiver clock offset") if len(line) > 41 else math.nan
         )
@@ -566,8 +598,11 @@ def read_rinex_nav(path: str | Path) -> RinexNav:
     ftype = lines[0][20:21].upper()
     if not (2.0 <= version < 4.0):
         raise RinexFormatError(path, 1, f"unsupported RINEX version {version}")
-    if ftype != "N":
-        raise RinexFormatError(path, 1, f"not a RINEX 2 GPS or RINEX 3 navigation file (type {ftype!r})")
+    glonass_v2 = version < 3.0 and ftype == "G"  # RINEX 2 GLONASS nav file (".g")
+    if ftype != "N" and not glonass_v2:
+        raise RinexFormatError(
+            path, 1, f"not a RINEX 2 GPS / GLONASS or RINEX 3 navigation file (type {ftype!r})"
+        )
     if version >= 3.0 and lines[0][40:41].strip().upper() not in ("", "M", *_NAV3_LINES):
         raise RinexFormatError(path, 1, f"navigation file for unknown system {lines[0][40:41]!r}")
     alpha = np.full(4, math.nan)
@@ -624,8 +659,8 @@ def read_rinex_nav(path: str | Path) -> RinexNav:
             idx += 1
             continue
         if version < 3.0:
-            nrec = 8
-            sys_char = "G"
+            nrec = 4 if glonass_v2 else 8
+            sys_char = "R" if glonass_v2 else "G"
             first_vals_start = 22
             lead = 3
         else:
@@ -658,7 +693,7 @@ def read_rinex_nav(path: str | Path) -> RinexNav:
             else:
                 others.append(eph)
         elif sys_char == "R":
-            glo, reason = _parse_glonass_record(rec, rec_no, leap, path)
+            glo, reason = _parse_glonass_record(rec, rec_no, leap, path, rinex2=version < 3.0)
             if glo is None:
                 skip(sys_char, reason)
             else:
@@ -722,14 +757,21 @@ def read_rinex_navs(paths: Sequence[str | Path]) -> RinexNav:
     )
 
 
-def _record_values(rec: list[str], line_no: int, path: str | Path, n_lines: int) -> list[float]:
-    """The 3 clock values of the first line and 4 values per following line (RINEX 3 layout)."""
-    vals = [_float_field(rec[0][23 + 19 * k : 42 + 19 * k], path, line_no, "clock parameter") for k in range(3)]
+def _record_values(
+    rec: list[str], line_no: int, path: str | Path, n_lines: int, rinex2: bool = False
+) -> list[float]:
+    """The 3 clock values of the first line and 4 values per following line (RINEX 3 layout, or
+    RINEX 2: values from column 22 / 3)."""
+    start, lead = (22, 3) if rinex2 else (23, 4)
+    vals = [
+        _float_field(rec[0][start + 19 * k : start + 19 * (k + 1)], path, line_no, "clock parameter")
+        for k in range(3)
+    ]
     for j in range(1, n_lines):
         line = rec[j]
         for k in range(4):
             vals.append(
-                _float_field(line[4 + 19 * k : 23 + 19 * k], path, line_no + j,
+                _float_field(line[lead + 19 * k : lead + 19 * (k + 1)], path, line_no + j,
                              f"orbit parameter {len(vals) + 1}", blank=0.0)
             )
     if any(not math.isfinite(v) for v in vals[:3]):
@@ -737,8 +779,14 @@ def _record_values(rec: list[str], line_no: int, path: str | Path, n_lines: int)
     return vals
 
 
-def _record_epoch(first: str, line_no: int, path: str | Path) -> tuple[int, int, int, int, int, int, float]:
+def _record_epoch(
+    first: str, line_no: int, path: str | Path, rinex2: bool = False
+) -> tuple[int, int, int, int, int, int, float]:
     try:
+        if rinex2:  # I2 satellite, 5 x I3 (2-digit year), F5.1 seconds
+            num = int(first[0:2])
+            yy, mo, dd, hh, mi = (int(first[k : k + 3]) for k in (2, 5, 8, 11, 14))
+            return num, _two_digit_year(yy), mo, dd, hh, mi, float(first[17:22])
         num = int(first[1:3])
         year = int(first[4:8])
         mo, dd, hh, mi, isec = (int(first[k : k + 3]) for k in (8, 11, 14, 17, 20))
@@ -794,11 +842,12 @@ def _parse_kepler_record(
 
 
 def _parse_glonass_record(
-    rec: list[str], line_no: int, leap_seconds: int | None, path: str | Path
+    rec: list[str], line_no: int, leap_seconds: int | None, path: str | Path, rinex2: bool = False
 ) -> tuple[GlonassEphemeris | None, str]:
-    """A RINEX 3 GLONASS record (RINEX 3.05 Table A11): epoch t_b in UTC, -tau_n, +gamma_n,
-    frame time; then X, Vx, Ax, health / Y, Vy, Ay, channel / Z, Vz, Az, age (km, km/s, km/s^2)."""
-    num, year, mo, dd, hh, mi, sec = _record_epoch(rec[0], line_no, path)
+    """A RINEX 3 GLONASS record (RINEX 3.05 Table A11; RINEX 2.11 Table A11 for ``rinex2``): epoch
+    t_b in UTC, -tau_n, +gamma_n, frame time; then X, Vx, Ax, health / Y, Vy, Ay, channel / Z, Vz,
+    Az, age (km, km/s, km/s^2)."""
+    num, year, mo, dd, hh, mi, sec = _record_epoch(rec[0], line_no, path, rinex2)
     week, tow = _epoch_to_gps(year, mo, dd, hh, mi, sec, path, line_no)
     if leap_seconds is None:  # no LEAP SECONDS in the header: the suite's one table (UTC Unix ns)
         leap = leap_seconds_at_ros_stamp(calendar.timegm((year, mo, dd, hh, mi, 0, 0, 0, 0)) * 1_000_000_000)
@@ -807,7 +856,7 @@ def _parse_glonass_record(
     tow += leap  # UTC -> GPST
     if tow >= 604800.0:
         week, tow = week + 1, tow - 604800.0
-    v = _record_values(rec, line_no, path, 4)
+    v = _record_values(rec, line_no, path, 4, rinex2)
     minus_tau, gamma, frame_t = v[0:3]
     x, vx, ax, health, y, vy, ay, chan, z, vz, az, age = v[3:15]
     pos = np.array([x, y, z]) * 1.0e3

@@ -351,3 +351,74 @@ def test_truncated_and_corrupted_nav_records(tmp_path):
     p.write_text("\n".join(bad) + "\n")
     with pytest.raises(RinexFormatError, match=f"gal.rnx:{gal + 2}: cannot parse"):
         read_rinex_nav(p)
+
+
+def _rinex2_value(v: float) -> str:
+    mant, exp = f"{v:.12E}".split("E")
+    return f"{mant}D{int(exp):+03d}".rjust(19)
+
+
+def test_rinex2_glonass_nav_file_equals_rinex3_records(nav, tmp_path):
+    """RINEX 2.11 GLONASS nav files (type G, ``.yyg``) as archives publish one file per system."""
+    lines = hatanaka.decompress(NAV.read_bytes()).decode().splitlines()
+    starts = [i for i, line in enumerate(lines) if line.startswith("R")][:12]
+    out = [
+        "     2.11           G: GLONASS NAV DATA                     RINEX VERSION / TYPE",
+        "    18                                                      LEAP SECONDS",
+        "                                                            END OF HEADER",
+    ]
+    for i in starts:
+        first = lines[i]
+        slot, yy = int(first[1:3]), int(first[4:8])
+        mo, dd, hh, mi, ss = (int(first[k:k + 3]) for k in (8, 11, 14, 17, 20))
+        vals = [float(first[23 + 19 * k: 42 + 19 * k]) for k in range(3)]
+        out.append(f"{slot:2d} {yy % 100:02d} {mo:2d} {dd:2d} {hh:2d} {mi:2d}{float(ss):5.1f}"
+                   + "".join(_rinex2_value(v) for v in vals))
+        for j in (1, 2, 3):
+            row = [float(lines[i + j][4 + 19 * k: 23 + 19 * k] or 0.0) for k in range(4)]
+            out.append("   " + "".join(_rinex2_value(v) for v in row))
+    p = tmp_path / "esbc1770.20g"
+    p.write_text("\n".join(out) + "\n")
+    v2 = read_rinex_nav(p)
+    assert v2.ephemerides == () and len(v2.glonass_ephemerides) == 12
+    for a, b in zip(v2.glonass_ephemerides, nav.glonass_ephemerides[:12], strict=True):
+        assert (a.slot, a.tb_week, a.tb_s, a.frequency_channel, a.health) == (
+            b.slot, b.tb_week, b.tb_s, b.frequency_channel, b.health)
+        np.testing.assert_allclose(a.position_m, b.position_m, rtol=1e-12)
+        np.testing.assert_allclose(a.velocity_mps, b.velocity_mps, rtol=1e-12)
+        assert a.minus_tau_n_s == pytest.approx(b.minus_tau_n_s, rel=1e-12)
+
+
+def _shift_epochs(text: str, seconds: int, time_system: str) -> str:
+    """The observation text with every epoch line moved by ``seconds`` and TIME OF FIRST OBS's
+    system replaced (epochs stay within the same minute range of this file)."""
+    import datetime as dt
+
+    out = []
+    for line in text.splitlines():
+        if line.startswith(">"):
+            t = dt.datetime(int(line[2:6]), int(line[7:9]), int(line[10:12]), int(line[13:15]), int(line[16:18]))
+            t += dt.timedelta(seconds=float(line[18:29]) + seconds)
+            line = f"> {t:%Y %m %d %H %M} {t.second + t.microsecond / 1e6:10.7f}" + line[29:]
+        elif line[60:].startswith("TIME OF FIRST OBS"):
+            line = line[:48] + time_system + line[51:]
+        out.append(line)
+    return "\n".join(out) + "\n"
+
+
+@pytest.mark.parametrize(("time_system", "offset_s"), [("BDT", -14), ("GLO", -18), ("GAL", 0)])
+def test_obs_time_systems_are_converted_to_gps_time(obs, tmp_path, time_system, offset_s):
+    """Epochs on BDT (GPST - 14 s), GLO (given as UTC, GPST - 18 s in 2020) or GAL (= GPST) read
+    back on GPS time."""
+    lines = hatanaka.decompress(OBS.read_bytes()).decode().splitlines()
+    epoch_lines = [i for i, line in enumerate(lines) if line.startswith(">")]
+    text = "\n".join(lines[: epoch_lines[3]]) + "\n"
+    p = tmp_path / f"{time_system}.rnx"
+    p.write_text(_shift_epochs(text, offset_s, time_system))
+    other = read_rinex_obs(p)
+    assert other.header.time_system == time_system
+    assert [(e.gps_week, e.tow_s) for e in other.epochs] == [(e.gps_week, e.tow_s) for e in obs.epochs[:3]]
+    bad = tmp_path / "tai.rnx"
+    bad.write_text(_shift_epochs(text, 0, "TAI"))
+    with pytest.raises(RinexFormatError, match="time system 'TAI' not supported"):
+        read_rinex_obs(bad)
