@@ -1,8 +1,25 @@
-"""Build ``diagnostic_msgs/DiagnosticArray`` messages from a node's counters."""
+"""Build ``diagnostic_msgs/DiagnosticArray`` messages from a node's counters, with levels that mean something.
+
+What the levels of the suite's nodes mean (each node's docstring lists its own conditions):
+
+* OK: the node receives its inputs and its output is valid; isolated rejections (a range gated now
+  and then on clean data) do not change this.
+* WARN: the inputs are degraded: over the last ``diagnostics_window_s`` of stamp time a fraction of
+  the input above ``warn_rejected_fraction`` was rejected, or a fraction above ``warn_lost_fraction``
+  was lost before reaching the node (:class:`CountWindow`, :func:`degraded_inputs`), or a node-specific
+  condition (a jammer reported, a filter re-initialised).
+* ERROR: the output is not valid (no solution, estimates suppressed), or the node's own accounting
+  failed or its core or a handler raised since the last report.
+* STALE: nothing received for ``input_timeout_s`` of wall time (:class:`rfi_node_common.inputs.StaleInputWatch`).
+
+``hardware_id`` of every status is the node's ``hardware_id`` parameter: the device behind the node's
+input (front end, receiver, UWB tag), as diagnostic aggregators group by it, not the node's name.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections import deque
+from collections.abc import Mapping, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
@@ -75,3 +92,89 @@ def stamp_jump_confirmations_parameter(default: int = 5) -> object:
         default, 'Consecutive messages, each newer than the last and within max_stamp_jump_s of it, that '
         'confirm a stamp jump; the node then restarts its state from the new time line.',
         minimum=1, maximum=100000)
+
+
+def hardware_id_parameter(default: str) -> object:
+    """The ``hardware_id`` parameter field (DiagnosticStatus.hardware_id of every report of the node)."""
+    from rfi_node_common.params import parameter
+    return parameter(
+        default, 'DiagnosticStatus.hardware_id of the node\'s reports: the device behind its input (model and '
+        'serial number of the front end, receiver or UWB tag); diagnostic aggregators group statuses by it.',
+        read_only=False)
+
+
+def diagnostics_window_parameter(default_s: float = 10.0) -> object:
+    """The ``diagnostics_window_s`` parameter field: the window of :class:`CountWindow`."""
+    from rfi_node_common.params import parameter
+    return parameter(
+        default_s, 'Window of message (stamp) time over which /diagnostics computes the rejected and lost '
+        'fractions of the input that set WARN, s (counts since start until the window has filled).',
+        minimum=0.01, maximum=3600.0, read_only=False)
+
+
+def warn_rejected_fraction_parameter(default: float = 0.1) -> object:
+    """The ``warn_rejected_fraction`` parameter field (:func:`degraded_inputs`)."""
+    from rfi_node_common.params import parameter
+    return parameter(
+        default, 'WARN (inputs degraded) when more than this fraction of an input (messages or measurements, '
+        'per kind) was rejected over diagnostics_window_s; 1: never.', minimum=0.0, maximum=1.0, read_only=False)
+
+
+def warn_lost_fraction_parameter(default: float = 0.01) -> object:
+    """The ``warn_lost_fraction`` parameter field (:func:`degraded_inputs`)."""
+    from rfi_node_common.params import parameter
+    return parameter(
+        default, 'WARN (inputs degraded) when more than this fraction of the messages published to the node '
+        'was lost before reaching it (publisher sequence gaps, middleware loss) over diagnostics_window_s; 1: '
+        'never.', minimum=0.0, maximum=1.0, read_only=False)
+
+
+class CountWindow:
+    """Increase of cumulative counters over the last ``window_s`` of stamp time.
+
+    The node calls :meth:`update` at each report with its cumulative counters; it returns how much
+    each grew since the newest snapshot at least ``window_s`` older (since start while the window has
+    not filled). Time is the report's stamp, so a replay at any speed gives the same levels; a stamp
+    older than the last one (a restart of the time line) starts the window again.
+
+    Args:
+        window_s: window length, s (> 0).
+    """
+
+    def __init__(self, window_s: float) -> None:
+        if not window_s > 0:
+            raise ValueError(f'window must be > 0 s, got {window_s}')
+        self.window_ns = int(round(window_s * 1e9))
+        self._snapshots: deque[tuple[int, dict[str, int]]] = deque()
+
+    def update(self, stamp_ns: int, totals: Mapping[str, int]) -> dict[str, int]:
+        """Record ``totals`` at ``stamp_ns`` and return their increase over the window, per key."""
+        if self._snapshots and stamp_ns < self._snapshots[-1][0]:
+            self._snapshots.clear()
+        if not self._snapshots:
+            self._snapshots.append((stamp_ns, {}))  # the start: every counter from zero
+        self._snapshots.append((stamp_ns, dict(totals)))
+        # keep one snapshot at or before the window's start as the base
+        while len(self._snapshots) > 2 and self._snapshots[1][0] <= stamp_ns - self.window_ns:
+            self._snapshots.popleft()
+        base = self._snapshots[0][1]
+        return {k: int(v) - int(base.get(k, 0)) for k, v in totals.items()}
+
+
+def fraction(numerator: int, denominator: int) -> float:
+    """numerator / denominator, 0 when the denominator is 0."""
+    return numerator / denominator if denominator > 0 else 0.0
+
+
+def degraded_inputs(checks: Sequence[tuple[str, int, int]], threshold: float) -> list[str]:
+    """Texts of the checks whose fraction exceeds ``threshold``.
+
+    Args:
+        checks: (what, count, out of) per input kind, e.g. ``('UWB ranges rejected', 12, 600)``.
+        threshold: fraction, 0..1 (1: never).
+
+    Returns:
+        e.g. ``['UWB ranges rejected 12/60 (20%)']``, in the order of ``checks``.
+    """
+    return [f'{what} {n}/{total} ({100.0 * fraction(n, total):.0f}%)'
+            for what, n, total in checks if fraction(n, total) > threshold]

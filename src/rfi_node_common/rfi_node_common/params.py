@@ -10,13 +10,23 @@ A node's parameters are one frozen dataclass whose fields carry their documentat
 range, read-only) and returns a ``Params`` built from the values the node was given (command
 line, YAML file), so the dataclass's own ``__post_init__`` validation runs on them. ``describe``
 renders the same documentation for ``--help``.
+
+Changes while running. A field declared with ``read_only=False`` can be set while the node runs
+(``ros2 param set``, the ``SetParameters`` service). :class:`RuntimeParameters` validates a change
+with the same code as at start (rclpy checks the descriptor's type and range, then the dataclass is
+rebuilt with the new values, so its ``__post_init__`` and :func:`validate_ranges` run on it: a value
+refused at start is refused here with the same reason) and keeps it pending; the node applies it at
+a safe point of its own (between two input messages) with :meth:`RuntimeParameters.take`. Every
+other field stays read-only (the descriptor says so and rclpy refuses the change); each node's
+documentation says why (typically: the value sizes or shapes state that a change would corrupt).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, TypeVar
+from collections.abc import Callable, Iterable
+from typing import Any, Generic, TypeVar
 
 T = TypeVar('T')
 
@@ -31,7 +41,8 @@ def parameter(default: Any, description: str, *, minimum: float | None = None,
         default: default value (its type is the parameter's type).
         description: meaning and unit, as shown by ``--help`` and ``ros2 param describe``.
         minimum, maximum: inclusive range of a numeric parameter.
-        read_only: the parameter cannot change after start-up (the default: nodes read them once).
+        read_only: the parameter cannot change after start-up (the default). False: settable while the
+            node runs (:class:`RuntimeParameters`), for values the node can apply between two messages.
         choices: allowed values of a string parameter.
     """
     doc = {'description': description, 'minimum': minimum, 'maximum': maximum,
@@ -104,9 +115,111 @@ def declare(node: Any, params_cls: type[T]) -> T:
             raise ValueError(f'parameter {field.name}: {_first_line(err)}') from None
         value = node.get_parameter(field.name).value
         values[field.name] = tuple(value) if isinstance(default, tuple) else value
-    params = params_cls(**values)
+    return build(params_cls, values)
+
+
+def build(params_cls: type[T], values: dict[str, Any]) -> T:
+    """``params_cls(**values)`` checked by :func:`validate_ranges`: the one validation of the parameters,
+    at start (:func:`declare`) and for a change while running (:class:`RuntimeParameters`).
+
+    Raises:
+        ValueError: a value is out of range or fails the dataclass's own validation.
+    """
+    try:
+        params = params_cls(**values)
+    except TypeError as err:
+        raise ValueError(str(err)) from None
     validate_ranges(params)
     return params
+
+
+def runtime_parameter_names(params_cls: type) -> tuple[str, ...]:
+    """Names of the fields settable while the node runs (declared with ``read_only=False``)."""
+    return tuple(f.name for f in dataclasses.fields(params_cls) if not _doc(f)['read_only'])
+
+
+class RuntimeParameters(Generic[T]):
+    """Changes of a node's settable parameters while it runs, validated as at start, applied by the node.
+
+    Registers an ``on_set_parameters`` callback on ``node``. rclpy itself refuses a read-only parameter,
+    a wrong type and a value outside the descriptor's range; for a change of the node's own parameters
+    that rclpy accepts, the callback rebuilds the parameter dataclass with the new values (on top of any
+    change still pending) through :func:`build`, the code that validated the start values, and refuses
+    the whole set (``SetParametersResult.successful`` false, the reason of the ValueError) if it fails.
+    An accepted change is pending until the node calls :meth:`take` at a safe point (between two
+    messages), which returns the new dataclass for the node to apply to its core.
+
+    Args:
+        node: the rclpy node that declared ``params`` (with :func:`declare`).
+        params: the values in force.
+
+    Attributes:
+        current: the values in force (updated by :meth:`take`).
+        changes_applied / changes_refused: counts, for /diagnostics.
+    """
+
+    def __init__(self, node: Any, params: T) -> None:
+        self.current = params
+        self._pending: T | None = None
+        self._names = {f.name for f in dataclasses.fields(params)}  # type: ignore[arg-type]
+        self._tuples = {f.name for f in dataclasses.fields(params)  # type: ignore[arg-type]
+                        if isinstance(getattr(params, f.name), tuple)}
+        self.changes_applied = 0
+        self.changes_refused = 0
+        node.add_on_set_parameters_callback(self._on_set)
+
+    def _on_set(self, parameters: Iterable[Any]) -> Any:
+        from rcl_interfaces.msg import SetParametersResult
+
+        changes = {p.name: (tuple(p.value) if p.name in self._tuples else p.value)
+                   for p in parameters if p.name in self._names}
+        if not changes:  # not ours (e.g. use_sim_time): rclpy's own checks decide
+            return SetParametersResult(successful=True)
+        try:
+            self._pending = self.validate(changes)
+        except ValueError as err:
+            self.changes_refused += 1
+            return SetParametersResult(successful=False, reason=str(err))
+        return SetParametersResult(successful=True)
+
+    def validate(self, changes: dict[str, Any]) -> T:
+        """The parameters in force (and any change pending) with ``changes``, validated as at start.
+
+        Raises:
+            ValueError: as :func:`build` at start.
+        """
+        base = self._pending if self._pending is not None else self.current
+        values = {f.name: getattr(base, f.name) for f in dataclasses.fields(base)}  # type: ignore[arg-type]
+        values.update(changes)
+        return build(type(base), values)
+
+    @property
+    def pending(self) -> bool:
+        """A validated change waits for :meth:`take`."""
+        return self._pending is not None
+
+    def take(self) -> T | None:
+        """The new parameters if a change is pending (they are then in force), else None."""
+        new, self._pending = self._pending, None
+        if new is not None:
+            self.current = new
+            self.changes_applied += 1
+        return new
+
+    def apply_pending(self, apply: Callable[[T, T], None]) -> bool:
+        """If a change is pending: ``apply(old, new)`` (the node hands the new values to its core) and
+        return True; the new values are in force afterwards even if ``apply`` raises."""
+        old = self.current
+        new = self.take()
+        if new is None:
+            return False
+        apply(old, new)
+        return True
+
+
+def changed_names(old: Any, new: Any) -> list[str]:
+    """Fields whose value differs between two instances of one parameter dataclass."""
+    return [f.name for f in dataclasses.fields(old) if getattr(old, f.name) != getattr(new, f.name)]
 
 
 def _first_line(err: Exception) -> str:
@@ -126,7 +239,8 @@ def describe(params_cls: type) -> str:
                      f'{doc["maximum"] if doc["maximum"] is not None else "inf"}]'
         if doc['choices']:
             limits = f' {{{", ".join(doc["choices"])}}}'
-        lines.append(f'  {field.name} (default {default!r}){limits}\n      {doc["description"]}')
+        live = '' if doc['read_only'] else ' [settable while running]'
+        lines.append(f'  {field.name} (default {default!r}){limits}{live}\n      {doc["description"]}')
     return '\n'.join(lines)
 
 
@@ -153,3 +267,44 @@ def unknown_parameters_message(node: Any, unknown: list[str]) -> str:
         parts.append(f'{name} (did you mean {" or ".join(close)}?)' if close else name)
     return (f'unknown parameter{"s" if len(unknown) > 1 else ""} {", ".join(parts)}: '
             f'{node.get_name()} has no such parameter (see --help)')
+
+
+def set_parameters_remotely(client_node: Any, executor: Any, node_name: str, values: dict[str, Any],
+                            timeout_s: float = 10.0) -> list[Any]:
+    """What ``ros2 param set NODE NAME VALUE`` does, from rclpy: call NODE's ``set_parameters`` service.
+
+    Args:
+        client_node: a node of the caller, added to ``executor``.
+        executor: spun (bounded by ``timeout_s``) until the answer arrives; it must also spin the
+            target node if that node lives in this process.
+        node_name: fully qualified name of the target node (``/uwb_gnss_fusion``).
+        values: parameter name -> value (Python types as for ``rclpy.parameter.Parameter``).
+        timeout_s: wall-clock bound on the service's discovery and answer, s.
+
+    Returns:
+        one ``rcl_interfaces/SetParametersResult`` per value, in order (``successful``, ``reason``).
+
+    Raises:
+        TimeoutError: the service did not appear or answer within ``timeout_s``.
+    """
+    import time
+
+    from rcl_interfaces.srv import SetParameters
+    from rclpy.parameter import Parameter
+
+    client = client_node.create_client(SetParameters, f'{node_name.rstrip("/")}/set_parameters')
+    try:
+        deadline = time.monotonic() + timeout_s
+        while not client.service_is_ready():
+            if time.monotonic() > deadline:
+                raise TimeoutError(f'{node_name}/set_parameters did not appear within {timeout_s} s')
+            executor.spin_once(timeout_sec=0.05)
+        request = SetParameters.Request(
+            parameters=[Parameter(name, value=value).to_parameter_msg() for name, value in values.items()])
+        future = client.call_async(request)
+        executor.spin_until_future_complete(future, timeout_sec=max(0.0, deadline - time.monotonic()))
+        if not future.done():
+            raise TimeoutError(f'{node_name}/set_parameters did not answer within {timeout_s} s')
+        return list(future.result().results)
+    finally:
+        client_node.destroy_client(client)

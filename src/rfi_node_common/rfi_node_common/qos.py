@@ -38,7 +38,16 @@ DIAGNOSTICS_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.VOLATILE,
 )
-"""/diagnostics publishers: reliable, volatile (what diagnostic_updater and the aggregator use), depth 100."""
+"""/diagnostics publishers: reliable, volatile, keep last 100.
+
+What the ROS 2 diagnostics stack uses (ros/diagnostics, Jazzy): ``diagnostic_updater::Updater`` publishes
+``/diagnostics`` with ``rclcpp::create_publisher(..., "/diagnostics", 1)``, i.e. the default profile with
+depth 1 (reliable, volatile, keep last); ``diagnostic_aggregator`` subscribes with
+``rclcpp::SystemDefaultsQoS().keep_last(history_depth)`` (reliable, volatile with the shipped
+middlewares). Reliability and durability are the ones that decide compatibility: a reliable, volatile
+publisher matches both that subscription and a best-effort one (``test_qos.py`` checks this with rclpy's
+own compatibility check). The depth is 100 rather than the updater's 1 because a fast replay publishes
+one report per second of stamp time, many per wall-clock second."""
 
 PLAYER_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_ALL,
@@ -53,3 +62,12 @@ RECORDER_QOS = QoSProfile(
     durability=DurabilityPolicy.VOLATILE,
 )
 """Subscriptions of ``record``: reliable and keep-all."""
+
+LATCHED_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+"""A value set once that a late subscriber must still get (REP 2003 latched status; the fusion node's
+datum): reliable, transient local, depth 1. A subscriber asks for TRANSIENT_LOCAL to receive it on joining."""
