@@ -47,6 +47,7 @@ from gnss_common.ephemeris import (
     pack_ephemerides,
     satellite_states_at_transmit,
 )
+from gnss_common.glonass import DEFAULT_MAX_AGE_S as GLONASS_DEFAULT_MAX_AGE_S
 from gnss_common.glonass import (
     GlonassEphemeris,
     GlonassStore,
@@ -117,7 +118,10 @@ class MeasurementBuilderParams:
         max_pseudorange_m: largest plausible pseudorange, m.
         max_pseudorange_high_orbit_m: largest plausible BeiDou and QZSS pseudorange, m (their GEO,
             IGSO and QZO satellites are 36 000-42 000 km away, plus the receiver clock offset).
-        max_ephemeris_age_s: |t - t_oe| limit, s; None uses half of each record's fit interval.
+        max_ephemeris_age_s: |t - t_oe| limit of the Keplerian records (GPS, Galileo, BeiDou,
+            QZSS), s; None uses half of each record's fit interval.
+        max_glonass_age_s: |t - t_b| limit of GLONASS records, s (records every 30 min; the
+            integrated orbit degrades by metres per extra quarter hour).
         apply_ionosphere: compute the Klobuchar delay (else 0).
         apply_troposphere: compute the Saastamoinen delay (else 0).
         constellations: RINEX system letters to build (of :data:`SUPPORTED_SYSTEMS`); satellites
@@ -132,10 +136,11 @@ class MeasurementBuilderParams:
     max_pseudorange_m: float = 4.0e7
     max_pseudorange_high_orbit_m: float = 4.8e7
     max_ephemeris_age_s: float | None = None
+    max_glonass_age_s: float = GLONASS_DEFAULT_MAX_AGE_S
     apply_ionosphere: bool = True
     apply_troposphere: bool = True
     constellations: tuple[str, ...] = SUPPORTED_SYSTEMS
-    signals: dict[str, SignalCodes] = field(default_factory=lambda: dict(DEFAULT_SIGNALS))
+    signals: dict[str, SignalCodes] = field(default_factory=lambda: dict(DEFAULT_SIGNALS), hash=False)
 
     def __post_init__(self) -> None:
         if not self.pseudorange_codes:
@@ -143,6 +148,8 @@ class MeasurementBuilderParams:
         unknown = [c for c in self.constellations if c not in SUPPORTED_SYSTEMS]
         if unknown:
             raise ValueError(f"constellations must be among {SUPPORTED_SYSTEMS}, got {unknown}")
+        if not (math.isfinite(self.max_glonass_age_s) and self.max_glonass_age_s > 0.0):
+            raise ValueError(f"max_glonass_age_s must be finite and > 0, got {self.max_glonass_age_s}")
         missing = [c for c in self.constellations if c != "G" and c not in self.signals]
         if missing:
             raise ValueError(f"no signal given for constellation(s) {missing}")
@@ -269,11 +276,7 @@ class GnssEpochBuilder:
         kepler = [e for e in ephemerides if isinstance(e, GpsEphemeris)]
         glonass = [e for e in ephemerides if isinstance(e, GlonassEphemeris)]
         self._store = EphemerisStore(kepler, self.params.max_ephemeris_age_s)
-        self._glonass = (
-            GlonassStore(glonass)
-            if self.params.max_ephemeris_age_s is None
-            else GlonassStore(glonass, self.params.max_ephemeris_age_s)
-        )
+        self._glonass = GlonassStore(glonass, self.params.max_glonass_age_s)
         alpha = None if iono_alpha is None else np.asarray(iono_alpha, dtype=float).reshape(-1)
         beta = None if iono_beta is None else np.asarray(iono_beta, dtype=float).reshape(-1)
         ok = (
