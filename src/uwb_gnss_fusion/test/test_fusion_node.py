@@ -24,7 +24,7 @@ from rclpy.context import Context
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import NavSatFix
 
-from gnss_common.coordinates import ecef_to_geodetic
+from gnss_common.coordinates import ecef_to_enu, ecef_to_enu_rotation, ecef_to_geodetic, geodetic_to_ecef
 from gnss_common.observations import UwbRangeMeasurement
 from rfi_msgs.msg import FusionStatus, GnssMeasurementArray, JammerState, UwbRange
 from rfi_node_common import testing
@@ -33,7 +33,7 @@ from rfi_node_common.stamps import ns_to_stamp, stamp_to_ns
 from rfi_node_common.testing import NodeRig
 from rfi_sim.evaluation import ecef_errors_enu, horizontal_error_m
 from rfi_sim.gnss_uwb import BroadcastGeometry, GnssUwbScenario, simulate
-from uwb_gnss_fusion.conversions import epoch_to_msg, uwb_to_msg
+from uwb_gnss_fusion.conversions import epoch_to_msg, msg_to_uwb, uwb_to_msg
 from uwb_gnss_fusion.fusion_node import ORIENTATION_UNKNOWN_VARIANCE_RAD2, FusionNode, FusionNodeParams
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'fusion.yaml'
@@ -75,7 +75,8 @@ class Rig(NodeRig):
         super().__init__(lambda context, overrides: FusionNode(context=context, parameter_overrides=overrides),
                          inputs={topic: (cls, DATA_QOS) for cls, topic in TOPICS.items()},
                          outputs={'/fusion/odometry': Odometry, '/fusion/fix': NavSatFix,
-                                  '/fusion/status': FusionStatus, '/diagnostics': DiagnosticArray},
+                                  '/fusion/status': FusionStatus, '/diagnostics': DiagnosticArray,
+                                  '/fusion/local_odometry': Odometry, '/fusion/datum': NavSatFix},
                          params=params, args=args, name='fusion_test_io', spin_deadline_s=SPIN_DEADLINE_S)
         self.sent: Counter[str] = Counter()
 
@@ -266,7 +267,9 @@ def test_nothing_published_before_initialisation(rig_factory, clean_stream):
     assert not status.initialized and status.mode == FusionStatus.MODE_NONE
     assert rig.out['/fusion/odometry'] == [] and rig.out['/fusion/fix'] == []
     assert rig.reasons()['gnss_init_failed'] == 1
-    assert rig.out['/diagnostics'][-1].status[0].level == DiagnosticStatus.WARN
+    # input processed but no solution: the output is not valid, ERROR
+    assert rig.out['/diagnostics'][-1].status[0].level == DiagnosticStatus.ERROR
+    assert 'no valid solution' in rig.out['/diagnostics'][-1].status[0].message
     uwb = next(m for _, t, m in inputs if t == '/uwb/ranges')
     rig.send(uwb)   # UWB disabled: counted, still nothing published
     assert rig.reasons()['uwb_disabled'] == 1 and rig.out['/fusion/fix'] == []
@@ -431,7 +434,7 @@ def test_malformed_uwb_bytes_are_counted_and_the_node_keeps_running(rig_factory,
     while len(rig.out['/diagnostics']) == reports:   # the next report, timed by the next accepted stamp
         rig.send(next(following)[2])
     status = rig.out['/diagnostics'][reports].status[0]
-    assert status.level == DiagnosticStatus.WARN and 'rejections' in status.message
+    assert status.level == DiagnosticStatus.WARN and 'UWB ranges rejected 5/' in status.message
     for _, _, msg in following:
         rig.send(msg)
     values = diag_values(rig)
@@ -783,7 +786,7 @@ def test_handler_errors_and_lost_messages_set_the_diagnostics_level(rig_factory,
     rig.node.health.middleware_lost('/uwb/ranges', 3)
     rig.send(inputs[20][2])
     status = rig.out['/diagnostics'][-1].status[0]
-    assert status.level == DiagnosticStatus.WARN and '3 input messages lost' in status.message
+    assert status.level == DiagnosticStatus.WARN and 'messages lost 3/' in status.message
     # a handler that raises (a bug): counted by the subscription's guard, ERROR, and the node goes on
     accept = rig.node._accept_uwb
     rig.node._accept_uwb = lambda *args: (_ for _ in ()).throw(RuntimeError('bug'))
@@ -797,3 +800,237 @@ def test_handler_errors_and_lost_messages_set_the_diagnostics_level(rig_factory,
     error = next(a.status[0] for a in rig.out['/diagnostics'] if a.status[0].level == DiagnosticStatus.ERROR)
     assert 'handler' in error.message
     assert diag_values(rig)['input./uwb/ranges.callback_errors'] == '1'
+
+
+# ---------------------------------------------------------------------------------- local frame (issue 11 item 2)
+# What robot_localization reads (cra-ros-pkg/robot_localization, ros2 branch):
+# * ekf_node, odomN input (RosFilter::odometryCallback): the pose part as a PoseWithCovarianceStamped with
+#   header = the message's header (frame_id: the world frame, map_frame / odom_frame of the EKF, or a frame
+#   tf can transform) and pose.covariance (6x6 row-major x, y, z, roll, pitch, yaw); the twist part with
+#   header.frame_id = child_frame_id (base_link_frame, or a frame tf can transform into it) and
+#   twist.covariance. A message older than the previous one of the topic is ignored (RosFilter::poseCallback:
+#   processed when last_message_time <= stamp).
+# * navsat_transform_node, gps/fix input (NavSatTransform::gpsFixCallback): header.frame_id (the GPS
+#   frame, looked up in tf against base_link; empty: "assume mounted at the robot's origin"),
+#   header.stamp, status.status != STATUS_NO_FIX, latitude / longitude / altitude not NaN, and the
+#   3x3 position_covariance (ENU).
+EKF_MAP_FRAME, EKF_BASE_LINK_FRAME = 'map', 'base_link'
+"""robot_localization's default map_frame and base_link_frame."""
+
+
+def vec(p) -> np.ndarray:
+    return np.array([p.x, p.y, p.z])
+
+
+def assert_ekf_readable(odom: Odometry) -> None:
+    """The fields an EKF odometry input reads: finite, symmetric covariances with positive diagonals, a
+    unit quaternion, unestimated quantities marked by ORIENTATION_UNKNOWN_VARIANCE_RAD2."""
+    q = odom.pose.pose.orientation
+    assert math.isclose(q.x ** 2 + q.y ** 2 + q.z ** 2 + q.w ** 2, 1.0, rel_tol=1e-12)
+    for cov in (np.array(odom.pose.covariance).reshape(6, 6), np.array(odom.twist.covariance).reshape(6, 6)):
+        assert np.all(np.isfinite(cov)) and np.allclose(cov, cov.T)
+        assert np.all(np.linalg.eigvalsh(cov[:3, :3]) > 0)
+        assert np.all(np.diag(cov) > 0)
+    assert odom.pose.covariance[21] == odom.pose.covariance[28] == ORIENTATION_UNKNOWN_VARIANCE_RAD2  # roll, pitch
+    assert all(odom.twist.covariance[k] == ORIENTATION_UNKNOWN_VARIANCE_RAD2 for k in (21, 28, 35))
+    assert all(math.isfinite(x) for x in (*vec(odom.pose.pose.position), *vec(odom.twist.twist.linear)))
+
+
+def test_local_odometry_and_fix_are_what_robot_localization_reads(rig_factory, clean_stream):
+    _, inputs = clean_stream
+    lever = [0.3, -0.4, 1.2]
+    rig = rig_factory({'reorder_window_s': 0.0, 'antenna_position_m': lever})
+    for _, _, msg in inputs[:120]:
+        rig.send(msg)
+    ecef, local, fixes = rig.out['/fusion/odometry'], rig.out['/fusion/local_odometry'], rig.out['/fusion/fix']
+    assert len(local) == len(ecef) == len(fixes) > 50
+    assert [stamp_of(m) for m in local] == [stamp_of(m) for m in ecef]
+    # the origin: the first published ECEF solution, published once (latched) as a NavSatFix
+    (datum,) = rig.out['/fusion/datum']
+    origin = vec(ecef[0].pose.pose.position)
+    lat, lon, alt = ecef_to_geodetic(origin)
+    assert datum.header.frame_id == 'map' and stamp_of(datum) == stamp_of(ecef[0])
+    assert (datum.latitude, datum.longitude) == pytest.approx((math.degrees(lat), math.degrees(lon)), abs=1e-9)
+    assert datum.altitude == pytest.approx(alt, abs=1e-6)
+    for e, m in zip(ecef, local, strict=True):
+        # the EKF's frames: pose in map, twist in base_link
+        assert (m.header.frame_id, m.child_frame_id) == (EKF_MAP_FRAME, EKF_BASE_LINK_FRAME)
+        assert_ekf_readable(m)
+        enu = ecef_to_enu(vec(e.pose.pose.position), origin)
+        # no yaw (heading_source none): the vertical lever arm applies, the horizontal one widens the covariance
+        np.testing.assert_allclose(vec(m.pose.pose.position), enu - [0.0, 0.0, 1.2], atol=1e-6)
+        assert (m.pose.pose.orientation.w, m.pose.covariance[35]) == (1.0, ORIENTATION_UNKNOWN_VARIANCE_RAD2)
+        assert m.pose.covariance[0] > 0.25 / 2 and m.pose.covariance[7] > 0.25 / 2
+        # body velocity: horizontal direction unknown (mean 0), vertical the ENU vertical velocity
+        assert (m.twist.twist.linear.x, m.twist.twist.linear.y) == (0.0, 0.0)
+    # the static receiver: body velocity known to be small once converged
+    assert max(local[-1].twist.covariance[0], local[-1].twist.covariance[7]) < 0.1
+    # navsat_transform's input is /fusion/fix, unchanged
+    for fix in fixes:
+        assert fix.header.frame_id == 'gnss_antenna' and fix.status.status != fix.status.STATUS_NO_FIX
+        assert not any(math.isnan(x) for x in (fix.latitude, fix.longitude, fix.altitude))
+        assert np.all(np.isfinite(fix.position_covariance))
+        assert fix.position_covariance_type == fix.COVARIANCE_TYPE_KNOWN
+    # the EKF ignores a message older than the previous one of its topic (an equal stamp passes: a GNSS
+    # epoch and a UWB range of one instant give two solutions with that stamp)
+    for msgs in (fixes, local):
+        stamps = [stamp_of(m) for m in msgs]
+        assert stamps == sorted(stamps)
+    # a subscriber that joins late still gets the datum (latched)
+    from rfi_node_common.qos import LATCHED_QOS
+    late: list = []
+    rig.io.create_subscription(NavSatFix, '/fusion/datum', late.append, LATCHED_QOS)
+    rig.spin_until(lambda: len(late) == 1, 'latched datum')
+    assert late[0].latitude == datum.latitude
+
+
+def test_datum_parameter_is_the_origin_and_velocity_heading_rotates_the_lever_arm(rig_factory, clean_stream):
+    truth, inputs = clean_stream
+    lat, lon, alt = ecef_to_geodetic(truth)
+    datum = [math.degrees(lat), math.degrees(lon), alt - 2.0]
+    rig = rig_factory({'reorder_window_s': 0.0, 'local_origin': 'datum', 'datum': datum,
+                       'antenna_position_m': [0.5, 0.0, 0.0], 'heading_source': 'velocity'})
+    for _, _, msg in inputs[:60]:
+        rig.send(msg)
+    origin = geodetic_to_ecef(lat, lon, alt - 2.0)
+    ecef, local = rig.out['/fusion/odometry'], rig.out['/fusion/local_odometry']
+    assert rig.out['/fusion/datum'][0].altitude == pytest.approx(alt - 2.0, abs=1e-9)
+    lat0, lon0 = math.radians(datum[0]), math.radians(datum[1])
+    rotation = ecef_to_enu_rotation(lat0, lon0)
+    known = 0
+    for e, m in zip(ecef, local, strict=True):
+        enu = ecef_to_enu(vec(e.pose.pose.position), origin)
+        v_enu = rotation @ vec(e.twist.twist.linear)
+        q = m.pose.pose.orientation
+        if m.pose.covariance[35] < ORIENTATION_UNKNOWN_VARIANCE_RAD2:
+            # moving (here: the velocity of the converging filter) above heading_min_speed_mps: yaw = course
+            known += 1
+            yaw = 2.0 * math.atan2(q.z, q.w)
+            assert math.hypot(v_enu[0], v_enu[1]) >= 0.5
+            assert yaw == pytest.approx(math.atan2(v_enu[1], v_enu[0]), abs=1e-9)
+            lever = np.array([0.5 * math.cos(yaw), 0.5 * math.sin(yaw), 0.0])
+            np.testing.assert_allclose(vec(m.pose.pose.position), enu - lever, atol=1e-6)
+            assert m.twist.twist.linear.x == pytest.approx(math.hypot(v_enu[0], v_enu[1]), abs=1e-9)
+            assert m.twist.twist.linear.y == pytest.approx(0.0, abs=1e-9)
+        else:   # slower: yaw unknown, the horizontal lever arm only widens the covariance
+            assert math.hypot(v_enu[0], v_enu[1]) < 0.5 and (q.z, q.w) == (0.0, 1.0)
+            np.testing.assert_allclose(vec(m.pose.pose.position), enu, atol=1e-6)
+    assert 0 < known < len(local)
+    assert abs(vec(local[-1].pose.pose.position)[2] - 2.0) < 1.0   # the datum 2 m below the antenna
+
+
+def test_parameters_set_while_running_are_validated_as_at_start_and_applied_between_messages(rig_factory,
+                                                                                              clean_stream):
+    from rfi_node_common.params import set_parameters_remotely
+
+    _, inputs = clean_stream
+    rig = rig_factory({'reorder_window_s': 0.0, 'diagnostics_period_s': 0.01})
+    for _, _, msg in inputs[:30]:
+        rig.send(msg)
+
+    def param_set(**values):
+        return set_parameters_remotely(rig.io, rig.executor, '/uwb_gnss_fusion', values)
+
+    results = param_set(min_cn0_dbhz=30.0, hardware_id='ublox-f9p#7', antenna_position_m=[0.0, 0.0, 1.0],
+                        warn_rejected_fraction=0.5)
+    assert all(r.successful for r in results), [r.reason for r in results]
+    assert rig.node.params.min_cn0_dbhz == 20.0 and rig.node.runtime.pending   # applied at the next message
+    before = len(rig.out['/fusion/local_odometry'])
+    for _, _, msg in inputs[30:40]:
+        rig.send(msg)
+    origin = vec(rig.out['/fusion/odometry'][0].pose.pose.position)
+    for k, (e, m) in enumerate(zip(rig.out['/fusion/odometry'], rig.out['/fusion/local_odometry'], strict=True)):
+        lever_up = 1.0 if k >= before else 0.0   # the new antenna position from the first message after the set
+        enu = ecef_to_enu(vec(e.pose.pose.position), origin)
+        assert m.pose.pose.position.z == pytest.approx(enu[2] - lever_up, abs=1e-6)
+    assert rig.node.params.min_cn0_dbhz == 30.0 and rig.node.filter.params.min_cn0_dbhz == 30.0
+    assert rig.node.params.warn_rejected_fraction == 0.5 and rig.node.counts['parameter_changes'] == 1
+    assert rig.out['/diagnostics'][-1].status[0].hardware_id == 'ublox-f9p#7'
+    # refused: read-only (the core derives its gate at construction; buffers size state)
+    for name, value in (('gate_probability', 0.999), ('reorder_window_s', 0.5), ('datum', [1.0, 2.0, 3.0])):
+        (result,) = param_set(**{name: value})
+        assert not result.successful and 'read-only' in result.reason, name
+    # refused by the descriptor's range (rclpy), as at start
+    (result,) = param_set(min_cn0_dbhz=80.0)
+    assert not result.successful and 'out of range' in result.reason
+    # refused by the dataclass's validation: the same message as at start
+    for name, value in (('heading_source', 'compass'), ('antenna_position_m', [0.0, 1.0])):
+        (result,) = param_set(**{name: value})
+        with pytest.raises(ValueError) as at_start:
+            FusionNodeParams(**{name: tuple(value) if isinstance(value, list) else value})
+        assert not result.successful and result.reason == str(at_start.value), name
+    assert rig.node.runtime.changes_refused == 2 and not rig.node.runtime.pending
+    assert rig.node.params.heading_source == 'none' and rig.node.get_parameter('heading_source').value == 'none'
+    for _, _, msg in inputs[40:50]:
+        rig.send(msg)
+    assert diag_values(rig)['parameter_changes_refused'] == '2'
+
+
+# Settable filter parameters: the core must read each at every update, so that a change is applied
+# (FusionNode._apply_parameters replaces FusionFilter.params). Checked per parameter: a filter built
+# with the default and given the new value before the first input behaves exactly as one built with
+# the new value (a value the core cached at construction would make them differ), and the new value
+# changes the outputs on this data (so the check is not vacuous) unless listed in NO_EFFECT_HERE.
+SETTABLE_FILTER_VALUES = {
+    'uwb_range_std_m': 0.3, 'uwb_max_range_m': 12.0, 'elevation_mask_deg': 40.0, 'min_cn0_dbhz': 44.0,
+    'nominal_cn0_dbhz': 35.0, 'jammer_quality_factor': 2.0, 'jammer_info_timeout_s': 0.05,
+    'loop_dll_bandwidth_hz': 4.0, 'loop_correlator_spacing_chips': 1.0, 'loop_integration_time_s': 0.001,
+    'loop_fll_bandwidth_hz': 10.0, 'loop_code_floor_m': 3.0, 'loop_rate_floor_mps': 0.5,
+    'max_position_std_m': 0.02, 'divergence_gnss_epochs': 1, 'divergence_uwb_gated_fraction': 0.01,
+    'uwb_huber_k': 0.3, 'uwb_huber_k_positive': 0.3, 'nonlinearity_threshold': 1e-6, 'max_update_iterations': 0,
+    'common_mode_screen': False,
+}
+NO_EFFECT_HERE: dict[str, str] = {}
+"""Settable filter parameters whose test value does not change the outputs of this short clean run, and why."""
+
+
+def test_every_settable_filter_parameter_is_read_by_the_core_at_each_update(clean_stream):
+    import dataclasses
+
+    from rfi_node_common.params import runtime_parameter_names
+    from uwb_gnss_fusion.conversions import msg_to_epoch
+    from uwb_gnss_fusion.fusion_filter import FusionFilter, FusionParams
+
+    core_names = {f.name for f in dataclasses.fields(FusionParams)} | {
+        name for name in FusionNodeParams.__dataclass_fields__ if name.startswith('loop_')}
+    assert set(runtime_parameter_names(FusionNodeParams)) & core_names == set(SETTABLE_FILTER_VALUES)
+    _, inputs = clean_stream
+    items = []
+    t0 = inputs[0][0]
+    for stamp, topic, msg in inputs[:400]:
+        rel_s = (stamp - t0) * 1e-9
+        if topic == '/gnss/measurements':
+            epoch = msg_to_epoch(msg)
+            if 3.0 <= rel_s < 4.0:   # a burst of pseudorange outliers on most satellites (a jammed receiver)
+                observations = tuple(dataclasses.replace(o, pseudorange_m=o.pseudorange_m + 150.0 * (k + 1))
+                                     if k < 5 else o for k, o in enumerate(epoch.observations))
+                epoch = dataclasses.replace(epoch, observations=observations)
+            items.append((stamp, 'gnss', epoch))
+        else:
+            uwb = msg_to_uwb(msg, frame_id='earth')
+            if 5.0 <= rel_s < 5.5 and uwb.anchor_id == 'A1':   # NLOS ranges of one anchor
+                uwb = dataclasses.replace(uwb, range_m=uwb.range_m + 2.0)
+            items.append((stamp, 'uwb', uwb))
+
+    def run(f: FusionFilter) -> np.ndarray:
+        out = []
+        for k, (stamp, kind, payload) in enumerate(items):
+            if k % 50 == 0:
+                f.set_jammer_to_signal(stamp, 20.0)
+            o = f.process_gnss(payload) if kind == 'gnss' else f.process_uwb(payload)
+            out.append(np.concatenate([o.position_m, o.velocity_mps, [o.satellites_used, o.uwb_used,
+                                                                       o.reinitializations]]))
+        return np.array(out)
+
+    reference = run(FusionFilter(FusionNodeParams().fusion_params()))
+    no_effect = {}
+    for name, value in SETTABLE_FILTER_VALUES.items():
+        changed = FusionNodeParams(**{name: value}).fusion_params()
+        built = run(FusionFilter(changed))
+        swapped_filter = FusionFilter(FusionNodeParams().fusion_params())
+        swapped_filter.params = changed
+        swapped = run(swapped_filter)
+        assert np.array_equal(built, swapped, equal_nan=True), name
+        if np.array_equal(built, reference, equal_nan=True):
+            no_effect[name] = 'no effect'
+    assert set(no_effect) == set(NO_EFFECT_HERE), no_effect

@@ -140,6 +140,7 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import NavSatFix
 
+from gnss_common.jamming_weights import effective_cn0_dbhz
 from gnss_common.observations import GnssEpoch, UwbRangeMeasurement
 from rfi_msgs.msg import FusionStatus, GnssMeasurementArray, JammerState, UwbRange
 from rfi_node_common.diagnostics import (
@@ -147,14 +148,17 @@ from rfi_node_common.diagnostics import (
     OK,
     STALE,
     WARN,
+    CountWindow,
     StampTimer,
+    degraded_inputs,
     diagnostic_array,
+    fraction,
 )
 from rfi_node_common.input_checks import STAMP_NOT_POSITIVE, StampGate
 from rfi_node_common.inputs import InputHealth, StaleInputWatch, subscribe_input
 from rfi_node_common.main import run_node
-from rfi_node_common.params import declare
-from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS
+from rfi_node_common.params import RuntimeParameters, changed_names, declare
+from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS, LATCHED_QOS
 from rfi_node_common.stamps import stamp_to_ns
 from uwb_gnss_fusion import ckf_kernels
 from uwb_gnss_fusion.conversions import decode_uwb_range_cdr, msg_to_observation, msg_to_uwb
@@ -167,10 +171,13 @@ from uwb_gnss_fusion.fusion_filter import (
 )
 from uwb_gnss_fusion.fusion_node_params import FusionNodeParams
 from uwb_gnss_fusion.input_admission import DuplicateFilter, admit_jammer_state
+from uwb_gnss_fusion.local_frame import LocalFrame, base_link_solution
 from uwb_gnss_fusion.message_checks import satellite_reason, uwb_range_reason
 from uwb_gnss_fusion.output_messages import (  # noqa: F401 (re-exported: the node's output contract)
     ORIENTATION_UNKNOWN_VARIANCE_RAD2,
+    datum_msg,
     fix_msg,
+    local_odometry_msg,
     odometry_msg,
     reason_lists,
     status_msg,
@@ -182,8 +189,9 @@ from uwb_gnss_fusion.spp_reference import SppReferenceCache
 TOPICS = """topics:
   subscribes /gnss/measurements (rfi_msgs/GnssMeasurementArray), /uwb/ranges (rfi_msgs/UwbRange),
              /rfi/jammer_state (rfi_msgs/JammerState)
-  publishes  /fusion/odometry (nav_msgs/Odometry), /fusion/fix (sensor_msgs/NavSatFix),
-             /fusion/status (rfi_msgs/FusionStatus), /diagnostics (diagnostic_msgs/DiagnosticArray)"""
+  publishes  /fusion/odometry (nav_msgs/Odometry, ECEF), /fusion/local_odometry (nav_msgs/Odometry, map ->
+             base_link), /fusion/fix (sensor_msgs/NavSatFix), /fusion/datum (sensor_msgs/NavSatFix, latched: the
+             origin of map), /fusion/status (rfi_msgs/FusionStatus), /diagnostics (diagnostic_msgs/DiagnosticArray)"""
 
 JAMMER_TYPES = frozenset((JammerState.NONE, JammerState.CW, JammerState.CHIRP, JammerState.WIDEBAND,
                           JammerState.UNKNOWN))
@@ -209,12 +217,20 @@ class FusionNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('uwb_gnss_fusion', **kwargs)
         self.params = declare(self, FusionNodeParams)
+        self.runtime = RuntimeParameters(self, self.params)
+        self.local_frame = LocalFrame(tuple(self.params.datum) if self.params.local_origin == 'datum' else None)
+        self._datum_published = False
+        self._count_window = CountWindow(self.params.diagnostics_window_s)
+        self._ever_initialized = False
+        self._last_js_db = math.nan
         self.spp = SinglePointPositioner()
         self.spp_cache = SppReferenceCache(self.spp, self.params.reference_max_age_s, self._count_spp)
         self.filter = self._new_filter()
         self.counts: Counter[str] = Counter({f'{k}_{what}': 0 for k in KINDS
                                              for what in ('received', 'rejected', 'processed')})
-        for name in ('reorder_window_growths', 'idle_flushes', 'end_of_input_flushes', 'publish_exceptions'):
+        for name in ('reorder_window_growths', 'idle_flushes', 'end_of_input_flushes', 'publish_exceptions',
+                     'satellites_used', 'satellites_rejected', 'uwb_used', 'uwb_rejected_by_filter', 'divergences',
+                     'nonfinite_estimates_suppressed', 'parameter_changes'):
             self.counts[name] = 0
         self.reasons: Counter[str] = Counter()
         self._retired_filter_counts: Counter[str] = Counter()
@@ -232,6 +248,8 @@ class FusionNode(Node):
         self._fix_frames = {FRAME_EARTH: self.params.earth_frame_id, FRAME_MAP: self.params.map_frame_id}
         self.odom_pub = self.create_publisher(Odometry, 'fusion/odometry', DATA_QOS)
         self.fix_pub = self.create_publisher(NavSatFix, 'fusion/fix', DATA_QOS)
+        self.local_odom_pub = self.create_publisher(Odometry, 'fusion/local_odometry', DATA_QOS)
+        self.datum_pub = self.create_publisher(NavSatFix, 'fusion/datum', LATCHED_QOS)
         self.status_pub = self.create_publisher(FusionStatus, 'fusion/status', DATA_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         ckf_kernels.warm_up()  # compile before subscribing: the node appears when it can keep up
@@ -410,6 +428,8 @@ class FusionNode(Node):
                                    f'maximum reorder_window_max_s {self._window_max_ns / _NS:g} s)')
 
     def _release(self, items: list) -> None:
+        if self.runtime.pending:
+            self.apply_parameter_changes()
         for ready in items:
             self._buffered[ready.kind] -= 1
             self._released_ns = ready.stamp_ns
@@ -511,6 +531,7 @@ class FusionNode(Node):
                 throttle_duration_sec=self.params.warning_throttle_s)
             return
         self.counts[f'{item.kind}_processed'] += 1
+        self._count_outcome(out)
         try:
             self._publish(out, item.stamp_ns)
         except Exception as err:  # e.g. the context is shutting down: the next message still gets its turn
@@ -518,6 +539,21 @@ class FusionNode(Node):
             self.get_logger().error(
                 f'publishing the output of a {item.kind} message at {item.stamp_ns} ns failed: '
                 f'{type(err).__name__}: {err}', throttle_duration_sec=self.params.warning_throttle_s)
+
+    def apply_parameter_changes(self) -> bool:
+        """Apply a change of the settable parameters (validated when it was set, :class:`RuntimeParameters`)
+        now: called between two messages (before the re-ordering buffer releases any to the core, and
+        before a diagnostics report). The core reads the settable filter parameters at each update, so
+        the new values hold from the next message on. Returns whether a change was applied."""
+        return self.runtime.apply_pending(self._apply_parameters)
+
+    def _apply_parameters(self, old: FusionNodeParams, new: FusionNodeParams) -> None:
+        self.params = new
+        self.filter.params = new.fusion_params()
+        self._count_window.window_ns = int(round(new.diagnostics_window_s * 1e9))
+        self.counts['parameter_changes'] += 1
+        self.get_logger().info('parameters changed: ' + ', '.join(
+            f'{name} = {getattr(new, name)!r}' for name in changed_names(old, new)))
 
     def _new_filter(self) -> FusionFilter:
         use_spp = self.params.use_spp_reference and self.params.use_gnss
@@ -556,6 +592,18 @@ class FusionNode(Node):
             cache = self._reasons_cache = (key, reasons, reason_lists(reasons))
         return cache[1], cache[2]
 
+    def _count_outcome(self, out: FusionOutput) -> None:
+        """Measurements used and rejected by the core, divergences, J/S: what the diagnostics levels need."""
+        c = self.counts
+        c['satellites_used'] += out.satellites_used
+        c['satellites_rejected'] += out.satellites_rejected
+        c['uwb_used'] += out.uwb_used
+        c['uwb_rejected_by_filter'] += out.uwb_rejected
+        c['divergences'] += bool(out.diverged)
+        self._last_js_db = out.jammer_to_signal_db
+        if out.initialized:
+            self._ever_initialized = True
+
     def _publish(self, out: FusionOutput, stamp_ns: int) -> None:
         frame = self._fix_frames.get(out.frame_id, out.frame_id)
         reasons, lists = self._status_reason_lists()
@@ -575,6 +623,30 @@ class FusionNode(Node):
                 self.fix_pub.publish(fix)
             else:
                 self.counts['nonfinite_estimates_suppressed'] += 1
+                return
+        self._publish_local(out)
+
+    def _publish_local(self, out: FusionOutput) -> None:
+        """fusion/local_odometry (and, once, fusion/datum) from a published, finite solution.
+
+        ECEF solutions are expressed in the local ENU frame, whose origin is the datum parameter or
+        the first of them (``local_origin``); a map-frame solution (UWB-only) is in the local frame
+        already. Then the antenna estimate is moved to base_link (:func:`base_link_solution`).
+        """
+        p = self.params
+        if out.frame_id == FRAME_EARTH:
+            if not self.local_frame.defined:
+                self.local_frame.set_origin_ecef(out.position_m)
+            pos, vel, cov = self.local_frame.from_ecef(out.position_m, out.velocity_mps, out.covariance_pv)
+            if not self._datum_published:
+                assert self.local_frame.origin_geodetic is not None
+                self.datum_pub.publish(datum_msg(out.stamp_ns, p.map_frame_id, self.local_frame.origin_geodetic))
+                self._datum_published = True
+        else:
+            pos, vel, cov = out.position_m, out.velocity_mps, out.covariance_pv
+        sol = base_link_solution(out.stamp_ns, pos, vel, cov, np.asarray(p.antenna_position_m, dtype=float),
+                                 p.heading_source, p.heading_min_speed_mps)
+        self.local_odom_pub.publish(local_odometry_msg(sol, p.map_frame_id, p.base_frame_id))
 
     # ------------------------------------------------------------------ diagnostics
     def accounting(self) -> dict[str, object]:
@@ -599,30 +671,93 @@ class FusionNode(Node):
         values['accounting_ok'] = ok
         return values
 
+    def jammer_cn0_loss_db(self) -> float:
+        """C/N0 lost to the jammer in use (Cao et al., eq. 4, at ``nominal_cn0_dbhz`` with
+        ``jammer_quality_factor``), dB; 0 when no J/S is in use."""
+        if not math.isfinite(self._last_js_db):
+            return 0.0
+        p = self.params
+        return p.nominal_cn0_dbhz - float(effective_cn0_dbhz(p.nominal_cn0_dbhz, self._last_js_db,
+                                                             p.jammer_quality_factor))
+
+    def _window_totals(self) -> dict[str, int]:
+        """The cumulative counts whose increase over ``diagnostics_window_s`` sets the level."""
+        c = self.counts
+        received = sum(self.health.counts[f'{t}.received'] for t in self.health.topics)
+        return {
+            'gnss_received': c['gnss_received'], 'gnss_rejected': c['gnss_rejected'],
+            'uwb_received': c['uwb_received'], 'uwb_rejected': c['uwb_rejected'] + c['uwb_rejected_by_filter'],
+            'jammer_received': c['jammer_received'], 'jammer_rejected': c['jammer_rejected'],
+            'satellites_used': c['satellites_used'], 'satellites_rejected': c['satellites_rejected'],
+            'messages_received': received, 'messages_lost': self.health.lost_total(),
+            'divergences': c['divergences'], 'suppressed': c['nonfinite_estimates_suppressed'],
+        }
+
     def diagnostics(self, stamp_ns: int) -> DiagnosticArray:
-        """The /diagnostics message (levels: module docstring); the counts "since the last report"
-        restart here."""
+        """The /diagnostics message (levels below); the counts "since the last report" restart here.
+
+        ERROR (the output is not valid, or the node is at fault): the accounting does not add up; the
+        core, a publisher or an input handler raised since the last report; the filter is not
+        initialised although input was processed (no solution is published); a non-finite estimate
+        was suppressed within ``diagnostics_window_s``. WARN (inputs degraded, the solution still
+        published): over ``diagnostics_window_s`` of stamp time more than ``warn_rejected_fraction`` of
+        the GNSS epochs, UWB ranges (rejected by the node or by the filter), jammer states or
+        satellites was rejected, or more than ``warn_lost_fraction`` of the messages published to the
+        node was lost; the filter diverged (and re-initialised) within the window; the J/S in use costs
+        more than ``warn_cn0_loss_db`` of C/N0 (eq. 4 at ``nominal_cn0_dbhz``: 3 dB at about 15 dB J/S).
+        OK otherwise, also before anything was processed ("starting"). Isolated rejections (a range
+        gated now and then on clean data) stay OK.
+        """
+        if self.runtime.pending:
+            self.apply_parameter_changes()
+        p = self.params
         values = self.accounting()
-        now = {'rejections': sum(self.rejection_reasons().values()),
-               'faults': self.counts['core_exceptions'] + self.counts['publish_exceptions'],
-               'handler_errors': self.health.callback_errors_total(), 'lost': self.health.lost_total()}
-        new = {k: v - self._at_last_report[k] for k, v in now.items()}
+        now = {'faults': self.counts['core_exceptions'] + self.counts['publish_exceptions'],
+               'handler_errors': self.health.callback_errors_total()}
+        new = {k: v - self._at_last_report.get(k, 0) for k, v in now.items()}
         self._at_last_report = now
+        w = self._count_window.update(stamp_ns, self._window_totals())
+        checks = [('GNSS epochs rejected', w['gnss_rejected'], w['gnss_received']),
+                  ('satellites rejected', w['satellites_rejected'], w['satellites_used'] + w['satellites_rejected']),
+                  ('UWB ranges rejected', w['uwb_rejected'], w['uwb_received']),
+                  ('jammer states rejected', w['jammer_rejected'], w['jammer_received'])]
+        for what, n, total in checks:
+            values[f'window.{what.replace(" ", "_").lower()}_fraction'] = round(fraction(n, total), 4)
+        lost = ('messages lost', w['messages_lost'], w['messages_received'] + w['messages_lost'])
+        values['window.messages_lost_fraction'] = round(fraction(lost[1], lost[2]), 4)
+        values['window_s'] = p.diagnostics_window_s
+        values['jammer_to_signal_db'] = self._last_js_db
+        values['parameter_changes_refused'] = self.runtime.changes_refused
+        processed = self.counts['gnss_processed'] + self.counts['uwb_processed']
         if not values['accounting_ok']:
             level, text = ERROR, 'input accounting does not add up'
         elif new['faults']:
             level, text = ERROR, f'{new["faults"]} core or publishing exceptions since the last report'
         elif new['handler_errors']:
             level, text = ERROR, f'{new["handler_errors"]} input handler exceptions since the last report'
-        elif not self.filter.initialized:
-            level, text = WARN, 'filter not initialised'
-        elif new['lost']:
-            level, text = WARN, f'{new["lost"]} input messages lost since the last report'
-        elif new['rejections']:
-            level, text = WARN, f'{new["rejections"]} rejections since the last report'
+        elif not self.filter.initialized and processed:
+            level, text = ERROR, ('no valid solution: filter not initialised' if not self._ever_initialized
+                                  else 'no valid solution: filter reset, not re-initialised yet')
+        elif w['suppressed']:
+            level, text = ERROR, (f'{w["suppressed"]} non-finite estimates suppressed in the last '
+                                  f'{p.diagnostics_window_s:g} s')
+        elif not processed:
+            level, text = OK, 'starting: nothing processed yet'
         else:
-            level, text = OK, 'fusing'
-        return diagnostic_array(stamp_ns, 'uwb_gnss_fusion', self.get_name(), level, text, values)
+            degraded = (degraded_inputs(checks, p.warn_rejected_fraction)
+                        + degraded_inputs([lost], p.warn_lost_fraction))
+            if w['divergences']:
+                degraded.append(f'filter diverged {w["divergences"]} times')
+            loss_db = self.jammer_cn0_loss_db()
+            values['jammer_cn0_loss_db'] = round(loss_db, 2)
+            if loss_db > p.warn_cn0_loss_db:
+                degraded.append(f'jammer reported: J/S {self._last_js_db:.1f} dB costs {loss_db:.1f} dB of C/N0')
+            if degraded:
+                level, text = WARN, (f'inputs degraded (window {p.diagnostics_window_s:g} s): '
+                                     + '; '.join(degraded))
+            else:
+                level, text = OK, 'fusing'
+        return diagnostic_array(stamp_ns, 'uwb_gnss_fusion', p.hardware_id, level, text, values)
 
     def _report(self) -> None:
         """Publish /diagnostics when due, timed by the latest accepted stamp (a rejected stamp never
@@ -635,7 +770,7 @@ class FusionNode(Node):
         """StaleInputWatch: no input for ``silent_s`` of wall time; a STALE status stamped with the
         node clock's now (the stamp-timed reports resume with the next accepted input)."""
         self.diag_pub.publish(diagnostic_array(
-            self.get_clock().now().nanoseconds, 'uwb_gnss_fusion', self.get_name(), STALE,
+            self.get_clock().now().nanoseconds, 'uwb_gnss_fusion', self.params.hardware_id, STALE,
             f'no input for {silent_s:.1f} s', self.accounting()))
 
 def main(argv=None) -> int:

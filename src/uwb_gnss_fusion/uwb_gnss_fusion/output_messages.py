@@ -1,7 +1,9 @@
 """Output messages of fusion_node built from a :class:`FusionOutput` (no rclpy import).
 
 ``status_msg``, ``odometry_msg`` and ``fix_msg`` turn one core output into rfi_msgs/FusionStatus,
-nav_msgs/Odometry and sensor_msgs/NavSatFix (contents: see :mod:`uwb_gnss_fusion.fusion_node`).
+nav_msgs/Odometry and sensor_msgs/NavSatFix (contents: see :mod:`uwb_gnss_fusion.fusion_node`);
+``local_odometry_msg`` turns a :class:`uwb_gnss_fusion.local_frame.LocalSolution` into the local-frame
+nav_msgs/Odometry and ``datum_msg`` the local frame's origin into a NavSatFix.
 They run for every input (up to 20 Hz UWB + 5 Hz GNSS), so their cost matters in a replay.
 
 The messages stay Python objects (the node checks a fix before publishing it, and the in-process
@@ -18,6 +20,7 @@ with the public constructors (checked once per class, see
 
 from __future__ import annotations
 
+import math
 from types import SimpleNamespace
 from typing import Any
 
@@ -28,6 +31,7 @@ from sensor_msgs.msg import NavSatFix, NavSatStatus
 from rfi_msgs.msg import FusionStatus
 from rfi_node_common.message_builder import builders_agree, message_builder
 from uwb_gnss_fusion.fusion_filter import FusionOutput
+from uwb_gnss_fusion.local_frame import LocalSolution
 
 ORIENTATION_UNKNOWN_VARIANCE_RAD2 = 1.0e6
 """Variance written for the unestimated orientation and angular velocity, rad^2 (rad^2/s^2)."""
@@ -136,6 +140,53 @@ def _fix(b: Any, out: FusionOutput, frame_id: str) -> Any:
         status__status=_STATUS_FIX, status__service=_SERVICE_GPS, latitude=latitude, longitude=longitude,
         altitude=altitude, position_covariance=np.asarray(out.position_covariance_enu_m2, dtype=np.float64).reshape(9),
         position_covariance_type=_COVARIANCE_TYPE_KNOWN)
+
+
+def _local_covariances(sol: LocalSolution) -> tuple[np.ndarray, np.ndarray]:
+    """Row-major 6x6 pose and twist covariances of the local odometry: the position / velocity blocks,
+    roll and pitch (and yaw when unknown) and the angular velocity :data:`ORIENTATION_UNKNOWN_VARIANCE_RAD2`."""
+    pose = np.zeros((6, 6))
+    twist = np.zeros((6, 6))
+    pose[:3, :3] = sol.position_covariance_m2
+    twist[:3, :3] = sol.velocity_covariance_m2ps2
+    for k in range(3, 6):
+        pose[k, k] = twist[k, k] = ORIENTATION_UNKNOWN_VARIANCE_RAD2
+    if math.isfinite(sol.yaw_variance_rad2):
+        pose[5, 5] = sol.yaw_variance_rad2
+    return pose.reshape(36), twist.reshape(36)
+
+
+def local_odometry_msg(sol: LocalSolution, frame_id: str, child_frame_id: str) -> Any:
+    """LocalSolution -> nav_msgs/Odometry in the local frame (``frame_id``, e.g. map) of ``child_frame_id``
+    (base_link): pose in frame_id, twist in child_frame_id axes (the Odometry convention); orientation
+    the yaw when known (roll = pitch = 0 with variance ORIENTATION_UNKNOWN_VARIANCE_RAD2), else the
+    identity with that variance on all three angles."""
+    sec, nanosec = _split_stamp(sol.stamp_ns)
+    pose_cov, twist_cov = _local_covariances(sol)
+    x, y, z = sol.position_m.tolist()
+    vx, vy, vz = sol.velocity_body_mps.tolist()
+    half = 0.0 if math.isnan(sol.yaw_rad) else sol.yaw_rad / 2.0
+    return _FAST.Odometry(
+        header__stamp__sec=sec, header__stamp__nanosec=nanosec, header__frame_id=frame_id,
+        child_frame_id=child_frame_id,
+        pose__pose__position__x=x, pose__pose__position__y=y, pose__pose__position__z=z,
+        pose__pose__orientation__x=0.0, pose__pose__orientation__y=0.0, pose__pose__orientation__z=math.sin(half),
+        pose__pose__orientation__w=math.cos(half), pose__covariance=pose_cov,
+        twist__twist__linear__x=vx, twist__twist__linear__y=vy, twist__twist__linear__z=vz,
+        twist__twist__angular__x=0.0, twist__twist__angular__y=0.0, twist__twist__angular__z=0.0,
+        twist__covariance=twist_cov)
+
+
+def datum_msg(stamp_ns: int, frame_id: str, geodetic: tuple[float, float, float]) -> Any:
+    """The local frame's origin as a NavSatFix: WGS 84 latitude, longitude (deg) and ellipsoidal altitude
+    (m) of the point (0, 0, 0) of ``frame_id``; exact by definition (COVARIANCE_TYPE_UNKNOWN, zeros)."""
+    sec, nanosec = _split_stamp(stamp_ns)
+    latitude, longitude, altitude = (float(v) for v in geodetic)
+    return _FAST.NavSatFix(
+        header__stamp__sec=sec, header__stamp__nanosec=nanosec, header__frame_id=frame_id,
+        status__status=_STATUS_FIX, status__service=_SERVICE_GPS, latitude=latitude, longitude=longitude,
+        altitude=altitude, position_covariance=np.zeros(9),
+        position_covariance_type=int(NavSatFix.COVARIANCE_TYPE_UNKNOWN))
 
 
 def status_msg(out: FusionOutput, stamp_ns: int, frame_id: str, reasons: dict[str, int],
