@@ -55,8 +55,10 @@ PSEUDORANGE_RATE_STD_MAX_MPS = 1.0e3
 SATELLITE_SPEED_MAX_MPS = 1.0e4
 """Largest ECEF satellite speed accepted, m/s (MEO satellites move at about 3-4 km/s in ECEF)."""
 
-SATELLITE_CLOCK_BIAS_MAX_M = 1.0e6
-"""Largest |c * satellite clock offset| accepted, m (broadcast offsets stay below 1 ms = 3e5 m)."""
+SATELLITE_CLOCK_BIAS_MAX_M = 1.0e8
+"""Largest |c * satellite clock offset| accepted, m: the broadcast a_f0 spans +-1.95 ms for GPS
+(IS-GPS-200 Table 20-III) but +-62.5 ms = 1.9e7 m for Galileo (OS SIS ICD Table 52); real Galileo
+satellites sit at several ms (E09 at 6.0 ms = 1.8e6 m on 2020-06-25)."""
 
 SATELLITE_CLOCK_DRIFT_MAX_MPS = 1.0e3
 """Largest |c * satellite clock drift| accepted, m/s (broadcast drifts are below 0.01 m/s)."""
