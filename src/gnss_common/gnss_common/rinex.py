@@ -17,8 +17,9 @@ Scope
   Satellite ids are normalised to ``"G05"`` style (RINEX 2 blank system letter means GPS).
 - Navigation files: GPS LNAV records from RINEX 2.x GPS nav files (``N``), GLONASS records from
   RINEX 2.x GLONASS nav files (``G``), and, from RINEX 3.x
-  (``N``, mixed or one file per system), GPS, Galileo (I/NAV; F/NAV records are skipped and
-  counted: their health bits do not cover E1), BeiDou, QZSS and GLONASS records. SBAS and NavIC
+  (``N``, mixed or one file per system), GPS, Galileo (I/NAV; F/NAV records only for satellites
+  without an I/NAV record in the file, the others skipped and counted), BeiDou, QZSS and GLONASS
+  records. SBAS and NavIC
   records are skipped and counted by system; records of a supported system that describe no
   usable orbit (e.g. sqrt(A) of a few sqrt(m)) are skipped and counted too, with the reason.
   Klobuchar parameters from ``ION ALPHA`` / ``ION BETA`` (2.x) or ``IONOSPHERIC CORR GPSA/GPSB``
@@ -642,6 +643,7 @@ def read_rinex_nav(path: str | Path) -> RinexNav:
     header = RinexNavHeader(version=version, iono_alpha=alpha, iono_beta=beta, leap_seconds=leap)
     ephs: list[GpsEphemeris] = []
     others: list[GpsEphemeris] = []
+    fnav: list[GpsEphemeris] = []
     glonass: list[GlonassEphemeris] = []
     skipped: dict[str, int] = {}
     reasons: dict[str, dict[str, int]] = {}
@@ -690,6 +692,8 @@ def read_rinex_nav(path: str | Path) -> RinexNav:
             eph, reason = _parse_kepler_record(rec, rec_no, sys_char, path)
             if eph is None:
                 skip(sys_char, reason)
+            elif reason == "galileo_fnav":
+                fnav.append(eph)
             else:
                 others.append(eph)
         elif sys_char == "R":
@@ -700,6 +704,14 @@ def read_rinex_nav(path: str | Path) -> RinexNav:
                 glonass.append(glo)
         else:
             skip(sys_char, "unsupported_system")
+    # Galileo F/NAV records only for satellites the file gives no I/NAV record of (the E1 user's
+    # own message); the others are counted as not used.
+    inav = {e.prn for e in others if e.system == "E"}
+    for eph in fnav:
+        if eph.prn in inav:
+            skip("E", "galileo_fnav")
+        else:
+            others.append(eph)
     return RinexNav(
         path=str(path),
         header=header,
@@ -800,8 +812,9 @@ def _parse_kepler_record(
 ) -> tuple[GpsEphemeris | None, str]:
     """A RINEX 3 Galileo, BeiDou or QZSS record (RINEX 3.05 Tables A8, A14, A10).
 
-    Returns ``(ephemeris, "ok")`` or ``(None, reason)`` for a record that is well formed but
-    not usable (F/NAV for an E1 user, a non-physical orbit)."""
+    Returns ``(ephemeris, "ok")``, ``(ephemeris, "galileo_fnav")`` for a Galileo F/NAV record
+    (its clock corrected with BGD E5a/E1, its health from the E5a bits), or ``(None, reason)`` for
+    a record that is well formed but not usable (a non-physical orbit)."""
     num, year, mo, dd, hh, mi, sec = _record_epoch(rec[0], line_no, path)
     # Galileo: GST calendar; BeiDou: BDT calendar; QZSS: GPST. Numbered as GPS weeks either way.
     toc_week, toc_s = _epoch_to_gps(year, mo, dd, hh, mi, sec, path, line_no)
@@ -812,11 +825,13 @@ def _parse_kepler_record(
         return None, "non_physical_orbit"
     fit_h = DEFAULT_FIT_INTERVAL_H
     if sys_char == "E":
-        sources = int(word21)
-        if not sources & _GALILEO_INAV_SOURCES:
-            return None, "galileo_fnav"
-        tgd = grp2  # BGD E5b/E1: the I/NAV clock is the E1,E5b combination's (OS SIS ICD 5.1.5)
-        health_used = int(health) & _GALILEO_E1_HEALTH_BITS
+        fnav = not int(word21) & _GALILEO_INAV_SOURCES
+        if fnav:  # F/NAV: clock of the E1,E5a combination, health bits of E5a only
+            tgd = grp1  # BGD E5a/E1 (OS SIS ICD 5.1.5)
+            health_used = (int(health) >> 3) & _GALILEO_E1_HEALTH_BITS
+        else:
+            tgd = grp2  # BGD E5b/E1: the I/NAV clock is the E1,E5b combination's (OS SIS ICD 5.1.5)
+            health_used = int(health) & _GALILEO_E1_HEALTH_BITS
         iodc = int(iod)
     elif sys_char == "C":
         week = week + BEIDOU_WEEK_OFFSET
@@ -836,7 +851,7 @@ def _parse_kepler_record(
             omega_rad=om, omega_dot_radps=omd, idot_radps=idot, week=int(week), sv_accuracy_m=acc,
             health=health_used, tgd_s=tgd, iodc=iodc, transmission_time_s=ttm, fit_interval_h=fit_h,
             system=sys_char,
-        ), "ok"
+        ), ("galileo_fnav" if sys_char == "E" and fnav else "ok")
     except ValueError as exc:
         raise RinexFormatError(path, line_no, str(exc)) from None
 

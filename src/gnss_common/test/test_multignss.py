@@ -422,3 +422,36 @@ def test_obs_time_systems_are_converted_to_gps_time(obs, tmp_path, time_system, 
     bad.write_text(_shift_epochs(text, 0, "TAI"))
     with pytest.raises(RinexFormatError, match="time system 'TAI' not supported"):
         read_rinex_obs(bad)
+
+
+def test_galileo_fnav_used_when_the_file_has_no_inav(obs, tmp_path):
+    """A nav file with only F/NAV Galileo records (data source bit 1): their clocks (BGD E5a/E1)
+    serve the E1 user too, and the Galileo fix stays within the bound."""
+    lines = hatanaka.decompress(NAV.read_bytes()).decode().splitlines()
+    end = next(i for i, line in enumerate(lines) if "END OF HEADER" in line)
+    out, i, n_fnav = lines[: end + 1], end + 1, 0
+    while i < len(lines):
+        j = i + 1
+        while j < len(lines) and lines[j][:1] == " " and lines[j].strip():
+            j += 1
+        rec = lines[i:j]
+        if rec[0].startswith("E"):
+            source = int(float(rec[5][23:42]))
+            if source & 0b101:  # I/NAV: dropped
+                i = j
+                continue
+            n_fnav += 1
+        out += rec
+        i = j
+    p = tmp_path / "fnav_only.rnx"
+    p.write_text("\n".join(out) + "\n")
+    nav = read_rinex_nav(p)
+    gal = [e for e in nav.other_ephemerides if e.system == "E"]
+    assert len(gal) == n_fnav > 0 and "E" not in nav.skipped_records
+    builder = GnssEpochBuilder.from_rinex(obs, nav)
+    errors = []
+    for epoch in obs.epochs[::12]:
+        x = _spp([o for o in builder.build(epoch).epoch.observations if o.constellation == GALILEO])
+        assert x is not None
+        errors.append(np.linalg.norm(x - STATION_ECEF_M))
+    assert float(np.sqrt(np.mean(np.square(errors)))) < SPP_RMS_LIMIT_M
