@@ -27,6 +27,7 @@ A window of the bag can be replayed (``--start``, ``--duration``). At the end a 
 printed and a report folder written: ``index.md`` with figures (rfi_experiments.report, scored on
 the replayed window), ``summary.json`` and ``replay.md`` (per-topic counts, the nodes' final
 diagnostics, where the time went); with ``processes`` also ``logs/`` (the output of each process).
+``--no-report`` writes only ``replay.md`` (and ``--record-outputs``).
 The summary and the report end with a warning when the fusion node rejected messages as later than
 its re-ordering window, or a node counted input messages lost (:func:`delivery_warnings`).
 """
@@ -101,6 +102,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help='processes: start no node; replay to and record from rfi_monitor, uwb_gnss_fusion and '
                              'imm_carrier already running in --namespace (e.g. on another host, see the README), '
                              'their inputs reliable (-p qos_overrides.<topic>.subscription.reliability:=reliable)')
+    parser.add_argument('--no-report', action='store_true',
+                        help='write only replay.md (counts, diagnostics) and --record-outputs, no figures or scores '
+                             '(index.md, summary.json): about 10 s less per run')
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
     return parser
 
@@ -294,6 +298,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         lines += ['', f'## Diagnostics of {name}', '', '| key | value |', '|---|---|']
         lines += [f'| {k} | {v} |' for k, v in values.items()]
     (out / 'replay.md').write_text('\n'.join(lines) + '\n')
+    if args.no_report:
+        print(replay_line)
+        for warning in warnings:
+            print(f'warning: {warning}')
+        print(f'counts and diagnostics written to {out / "replay.md"} (--no-report: no figures, no scores)')
+        return 0
     start = time.monotonic()
     header = replay_line + ' Counts and diagnostics: [replay.md](replay.md).'
     if warnings:
