@@ -30,6 +30,8 @@ setup(
             'simulate = rfi_experiments.simulate:main',
             'rinex_to_bag = rfi_experiments.rinex_to_bag:main',
             'uwb_dataset_to_bag = rfi_experiments.uwb_dataset_to_bag:main',
+            'ubx_source = rfi_experiments.ubx_source:main',
+            'ubx_to_bag = rfi_experiments.ubx_to_bag:main',
             'if_source = rfi_experiments.if_source:main',
             'if_to_bag = rfi_experiments.if_to_bag:main',
         ],

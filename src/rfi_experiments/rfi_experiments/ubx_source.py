@@ -1,0 +1,408 @@
+"""ROS node ``ubx_source``: a u-blox receiver (serial port) or a UBX log file -> gnss/measurements.
+
+Thin: the bytes go to :class:`rfi_experiments.ubx_decode.UbxDecoder` (framing, pyubx2 decoding,
+LNAV ephemerides from RXM-SFRBX, epochs built by the same code as ``rinex_to_bag``); this node
+declares the parameters, reads on a thread of its own (a blocking serial read must not stall the
+executor), publishes and reports /diagnostics.
+
+Outputs (relative names, so ``-r __ns:=/robot1`` moves them):
+``gnss/measurements`` (rfi_msgs/GnssMeasurementArray, one per RXM-RAWX epoch with at least
+``min_satellites`` modelled satellites; epochs before that are counted as
+``epochs_waiting_for_ephemeris``, not published) and ``gnss/receiver_interference``
+(rfi_msgs/ReceiverInterference: MON-HW, MON-RF per RF block, SEC-SIG), both reliable; /diagnostics.
+
+Input (``input``): a serial device (``/dev/ttyACM0``, ``/dev/ttyUSB0``; ``baud_rate``), or a
+UBX log file. The receiver must output UBX-RXM-RAWX (and RXM-SFRBX unless ``nav_file`` gives the
+ephemerides); u-center or ``ubxtool`` configure that. A file is read to its end and published at
+the pace of its RAWX epochs (``pace`` ``real_time``) or as fast as the subscribers take it
+(``max``: nothing dropped for a reliable subscriber, see :data:`ACK_EVERY`); then, with ``exit_at_end``,
+the node shuts down (exit code 0).
+
+A serial port that fails (unplugged receiver, EIO) is reported (ERROR in /diagnostics and the
+log, ``port_losses``) and reopened every ``reconnect_period_s``; after ``max_reconnect_attempts``
+failed attempts in a row (0: none) the node logs why and exits with code 1, without a traceback.
+
+Stamps: ROS time (UTC-based) of the receive epoch (:func:`rfi_experiments.ubx_decode.header_stamp_ns`);
+GPS week and time of week are in the message fields; nothing is stamped from the wall clock.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import stat
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.node import Node
+
+from rfi_experiments.ubx_decode import EpochOutput, UbxDecoder, UbxDecoderParams
+from rfi_msgs.msg import GnssMeasurementArray, ReceiverInterference
+from rfi_node_common.diagnostics import ERROR, OK, WARN, StampTimer, diagnostic_array
+from rfi_node_common.main import run_node
+from rfi_node_common.params import declare, parameter, validate_ranges
+from rfi_node_common.qos import DATA_QOS, DATA_QOS_DEPTH, DIAGNOSTICS_QOS
+
+TOPICS = """topics:
+  publishes  gnss/measurements (rfi_msgs/GnssMeasurementArray), gnss/receiver_interference
+             (rfi_msgs/ReceiverInterference), /diagnostics (diagnostic_msgs/DiagnosticArray)"""
+
+MEASUREMENTS_TOPIC = 'gnss/measurements'
+INTERFERENCE_TOPIC = 'gnss/receiver_interference'
+READ_BYTES = 1 << 14
+"""Bytes asked of one read."""
+SERIAL_TIMEOUT_S = 0.1
+"""Timeout of one serial read, s (the reader checks for shutdown between reads)."""
+ACK_TIMEOUT_S = 30.0
+"""Longest wait for the acknowledgements in ``max`` pace, s."""
+ACK_EVERY = DATA_QOS_DEPTH // 2
+"""``max`` pace: after this many messages on a topic the reader waits until every reliable subscriber has
+acknowledged them, so the publisher's history (DATA_QOS_DEPTH) never drops one a subscriber has not taken.
+Not after every message: Fast DDS acknowledges on its heartbeat period (about 3 s measured here)."""
+FINAL_ACK_TIMEOUT_S = 2.0
+"""At the end of the input: longest wait for reliable subscribers to acknowledge what was sent, s."""
+
+
+@dataclass(frozen=True)
+class UbxSourceParams:
+    """Parameters of ubx_source (``--help`` lists them)."""
+
+    input: str = parameter('/dev/ttyACM0', 'Serial device of the receiver, or a UBX log file.')
+    baud_rate: int = parameter(115200, 'Serial baud rate, bit/s (ignored by USB CDC-ACM receivers).',
+                               minimum=1200, maximum=4_000_000)
+    nav_file: str = parameter('', 'RINEX navigation file with GPS ephemerides (empty: only those decoded from '
+                                  'RXM-SFRBX).')
+    use_sfrbx: bool = parameter(True, 'Decode GPS LNAV ephemerides and Klobuchar parameters from RXM-SFRBX.')
+    reference_position_ecef_m: str = parameter(
+        '', 'Receiver ECEF position "X,Y,Z", m, for the ionosphere / troposphere models; empty: a coarse '
+            'single-point fix per epoch (tens of metres suffice).')
+    min_satellites: int = parameter(4, 'Publish an epoch only with at least this many satellites modelled '
+                                       '(ephemeris present, healthy); fewer: counted, not published.',
+                                    minimum=1, maximum=64)
+    use_receiver_std: bool = parameter(True, 'Fill pseudorange_std_m / pseudorange_rate_std_mps from the '
+                                             'receiver\'s prStdev / doStdev (false: NaN, the filter weights by C/N0).')
+    pace: str = parameter('real_time', 'Files: real_time publishes at the pace of the RAWX epochs; max as fast '
+                                       'as the subscribers take it. A serial port is paced by the receiver.',
+                          choices=('real_time', 'max'))
+    frame_id: str = parameter('gnss', 'header.frame_id of gnss/receiver_interference (the receiver); the '
+                                      'measurements are in "earth".')
+    reconnect_period_s: float = parameter(1.0, 'Serial: wait between attempts to reopen a lost port, s.',
+                                          minimum=0.01, maximum=3600.0)
+    max_reconnect_attempts: int = parameter(30, 'Serial: failed reopen attempts in a row before the node exits '
+                                                '(code 1); 0: exit at the first loss.', minimum=0, maximum=1_000_000)
+    diagnostics_period_s: float = parameter(1.0, 'Period of /diagnostics in stamp time, s.',
+                                            minimum=0.001, maximum=3600.0)
+    exit_at_end: bool = parameter(True, 'Files: shut the node down at the end of the file.')
+    wait_for_subscribers: int = parameter(0, 'Hold the input until this many subscribers of gnss/measurements '
+                                             'have matched (a file replayed into a node started at the same time).',
+                                          minimum=0, maximum=1000)
+    wait_timeout_s: float = parameter(30.0, 'Longest wait for wait_for_subscribers, s; then reading starts anyway.',
+                                      minimum=0.0, maximum=86400.0)
+
+    def __post_init__(self) -> None:
+        validate_ranges(self)
+        parse_position(self.reference_position_ecef_m)
+
+    def decoder_params(self) -> UbxDecoderParams:
+        return UbxDecoderParams(min_satellites=self.min_satellites, use_receiver_std=self.use_receiver_std,
+                                use_sfrbx=self.use_sfrbx)
+
+
+def parse_position(text: str) -> tuple[float, float, float] | None:
+    """``"X,Y,Z"`` (m) -> a tuple, ``""`` -> None. Raises ValueError otherwise."""
+    if not text.strip():
+        return None
+    try:
+        xyz = tuple(float(p) for p in text.replace(',', ' ').split())
+    except ValueError:
+        raise ValueError(f'reference_position_ecef_m must be "X,Y,Z" in metres, got {text!r}') from None
+    if len(xyz) != 3 or not all(math.isfinite(v) for v in xyz):
+        raise ValueError(f'reference_position_ecef_m must be three finite numbers, got {text!r}')
+    return xyz  # type: ignore[return-value]
+
+
+def is_regular_file(path: str) -> bool:
+    try:
+        return stat.S_ISREG(os.stat(path).st_mode)
+    except OSError:
+        return False
+
+
+class UbxSourceNode(Node):
+    """Publishes a u-blox receiver's measurements and interference indicators (module docstring)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__('ubx_source', **kwargs)
+        self.params = declare(self, UbxSourceParams)
+        p = self.params
+        from rfi_experiments.ubx_to_bag import make_decoder
+
+        try:
+            self.decoder: UbxDecoder = make_decoder(p.nav_file or None, parse_position(p.reference_position_ecef_m),
+                                                    p.decoder_params())
+        except OSError as err:
+            raise ValueError(f'nav_file {p.nav_file}: {err}') from None
+        self.is_file = is_regular_file(p.input)
+        self.pub = self.create_publisher(GnssMeasurementArray, MEASUREMENTS_TOPIC, DATA_QOS)
+        self.interference_pub = self.create_publisher(ReceiverInterference, INTERFERENCE_TOPIC, DATA_QOS)
+        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self.counts = {'epochs_sent': 0, 'interference_sent': 0, 'port_losses': 0, 'reconnects': 0,
+                       'read_errors': 0, 'publish_errors': 0}
+        self.port_state = 'closed'
+        self.exit_code = 0
+        self._unacked = {'epochs_sent': 0, 'interference_sent': 0}
+        self._timer = StampTimer(p.diagnostics_period_s)
+        self._last_stamp_ns = 0
+        self.stop = threading.Event()
+        self.done = threading.Event()
+        self._stream: Any = self._open()  # a bad path or port refuses the start (exit 2)
+        self._thread = threading.Thread(target=self._run, name='ubx_source_reader', daemon=True)
+        self._start_timer = self.create_timer(0.0, self._start_reading)
+
+    # ------------------------------------------------------------------------------------------- input
+    def _open(self) -> Any:
+        p = self.params
+        if self.is_file:
+            try:
+                stream = open(p.input, 'rb')  # noqa: SIM115 - closed by the reader
+            except OSError as err:
+                raise ValueError(f'input {p.input}: {err.strerror}') from None
+        else:
+            stream = self._open_serial()
+        self.port_state = 'open'
+        return stream
+
+    def _open_serial(self) -> Any:
+        import serial
+
+        try:
+            return serial.Serial(self.params.input, self.params.baud_rate, timeout=SERIAL_TIMEOUT_S)
+        except (serial.SerialException, OSError, ValueError) as err:
+            raise ValueError(f'input {self.params.input}: cannot open the serial port ({err})') from None
+
+    def _start_reading(self) -> None:
+        self._start_timer.cancel()
+        if self._thread.ident is None:
+            self._thread.start()
+
+    def _run(self) -> None:
+        try:
+            self._wait_for_subscribers()
+            if self.stop.is_set():
+                return
+            if self.is_file:
+                self._read_file()
+            else:
+                self._read_serial()
+        except Exception as err:  # noqa: BLE001 - a failure ends the input, reported, never a traceback
+            self.counts['read_errors'] += 1
+            self.exit_code = 1
+            self.get_logger().error(f'input {self.params.input} ended by {type(err).__name__}: {err}')
+        finally:
+            self.decoder.finish()
+            self._close()
+            self._report_end()
+            self.done.set()
+            stop_now = self.exit_code != 0 or (self.is_file and self.params.exit_at_end)
+            if stop_now and not self.stop.is_set() and self.context.ok():
+                self.context.try_shutdown()
+
+    def _wait_for_subscribers(self) -> None:
+        want = self.params.wait_for_subscribers
+        deadline = time.monotonic() + self.params.wait_timeout_s
+        while want and self.pub.get_subscription_count() < want and not self.stop.is_set():
+            if time.monotonic() >= deadline:
+                self.get_logger().warn(f'{self.pub.get_subscription_count()} of {want} subscribers after '
+                                       f'{self.params.wait_timeout_s} s: starting anyway')
+                return
+            self.stop.wait(0.02)
+
+    def _close(self) -> None:
+        stream, self._stream = self._stream, None
+        if stream is not None:
+            try:
+                stream.close()
+            except OSError:
+                pass
+        self.port_state = 'closed'
+
+    def _read_file(self) -> None:
+        t_first: float | None = None
+        tow_first = 0.0
+        while not self.stop.is_set():
+            data = self._stream.read(READ_BYTES)
+            if not data:
+                return
+            for item in self.decoder.feed(data):
+                if self.params.pace == 'real_time' and isinstance(item, EpochOutput):
+                    now = time.monotonic()
+                    if t_first is None:
+                        t_first, tow_first = now, item.epoch.gps_time_of_week_s
+                    due = t_first + _tow_difference(item.epoch.gps_time_of_week_s, tow_first)
+                    if due > now and self.stop.wait(due - now):
+                        return
+                self._publish(item)
+
+    def _read_serial(self) -> None:
+        import serial
+
+        while not self.stop.is_set():
+            try:
+                data = self._stream.read(READ_BYTES) if self._stream is not None else b''
+            except (serial.SerialException, OSError) as err:
+                self.counts['port_losses'] += 1
+                self.port_state = 'lost'
+                self.get_logger().error(f'serial port {self.params.input} lost: {err}')
+                self._close()
+                self.port_state = 'lost'
+                self._publish_diagnostics(self._last_stamp_ns, final=False)
+                if not self._reconnect():
+                    return
+                continue
+            for item in self.decoder.feed(data):
+                self._publish(item)
+
+    def _reconnect(self) -> bool:
+        p = self.params
+        for attempt in range(1, p.max_reconnect_attempts + 1):
+            if self.stop.wait(p.reconnect_period_s):
+                return False
+            try:
+                self._stream = self._open_serial()
+            except ValueError as err:
+                self.get_logger().warn(f'reopen attempt {attempt}/{p.max_reconnect_attempts} failed: {err}')
+                continue
+            self.port_state = 'open'
+            self.counts['reconnects'] += 1
+            self.get_logger().info(f'serial port {p.input} reopened (attempt {attempt})')
+            return True
+        self.exit_code = 1
+        self.get_logger().error(
+            f'serial port {p.input} lost and not back after {p.max_reconnect_attempts} attempt(s) every '
+            f'{p.reconnect_period_s} s: exiting (exit code 1)')
+        return False
+
+    # ------------------------------------------------------------------------------------------- output
+    def _publish(self, item: Any) -> None:
+        from rfi_experiments.ubx_messages import report_to_msg
+        from uwb_gnss_fusion.conversions import epoch_to_msg
+
+        try:
+            if isinstance(item, EpochOutput):
+                pub, msg, key = self.pub, epoch_to_msg(item.epoch), 'epochs_sent'
+                stamp = item.epoch.stamp_ns
+            else:
+                pub, msg, key = self.interference_pub, report_to_msg(item, self.params.frame_id), 'interference_sent'
+                stamp = item.stamp_ns
+        except ValueError as err:  # a field the message cannot carry: counted, never published
+            self.counts['publish_errors'] += 1
+            self.get_logger().warn(f'not published: {err}')
+            return
+        pub.publish(msg)
+        self.counts[key] += 1
+        self._unacked[key] += 1
+        if self.is_file and self.params.pace == 'max' and self._unacked[key] >= ACK_EVERY:
+            self._unacked[key] = 0
+            if not self._wait_acked(pub, ACK_TIMEOUT_S):
+                self.get_logger().warn(f'a subscriber did not acknowledge within {ACK_TIMEOUT_S} s')
+        self._last_stamp_ns = max(self._last_stamp_ns, stamp)
+        if self._timer.due(stamp):
+            self._publish_diagnostics(stamp, final=False)
+
+    def _wait_acked(self, pub: Any, timeout_s: float) -> bool:
+        """Poll until every reliable subscriber of ``pub`` acknowledged what it sent (True), or timeout.
+
+        Polled with a zero timeout, so that a shutdown (``stop``) ends the wait at once."""
+        deadline = time.monotonic() + timeout_s
+        zero = _duration(0.0)
+        while pub.get_subscription_count() > 0:
+            if pub.wait_for_all_acked(zero):
+                return True
+            if time.monotonic() >= deadline or self.stop.wait(0.001):
+                return False
+        return True
+
+    def values(self) -> dict[str, object]:
+        """Counters of the decoder and of the node, for /diagnostics."""
+        v: dict[str, object] = {'input': self.params.input, 'port_state': self.port_state}
+        v.update({k: int(n) for k, n in self.decoder.counts.items()})
+        v.update({f'skipped_{k}': int(n) for k, n in self.decoder.skipped.items()})
+        v.update({f'sfrbx_rejected_{k}': n for k, n in self.decoder.lnav_rejected.items()})
+        v['messages_not_used'] = sum(self.decoder.ignored.values())
+        v['satellites_with_ephemeris'] = len(self.decoder.ephemeris_prns)
+        v.update(self.counts)
+        v['subscribers'] = self.pub.get_subscription_count()
+        v['interference_subscribers'] = self.interference_pub.get_subscription_count()
+        return v
+
+    def level(self) -> tuple[bytes, str]:
+        v = self.values()
+        if self.port_state == 'lost' or v['read_errors']:
+            return ERROR, f'input {self.params.input} lost'
+        warn = [k for k in ('bad_checksum', 'bad_length', 'truncated', 'unparsable', 'epochs_waiting_for_ephemeris',
+                            'port_losses', 'publish_errors') if v.get(k)]
+        if warn:
+            return WARN, 'counted: ' + ', '.join(f'{k} {v[k]}' for k in warn)
+        return OK, 'publishing'
+
+    def _publish_diagnostics(self, stamp_ns: int, final: bool) -> None:
+        level, text = self.level()
+        if final:
+            text = 'end of input; ' + text
+        try:
+            self.diag_pub.publish(diagnostic_array(max(1, stamp_ns), 'ubx_source', self.get_name(), level, text,
+                                                   self.values()))
+        except Exception as err:  # noqa: BLE001 - a report must never end the reader
+            self.get_logger().error(f'/diagnostics not published: {type(err).__name__}: {err}')
+
+    def _report_end(self) -> None:
+        from rfi_experiments.ubx_to_bag import summary_lines
+
+        for pub in (self.pub, self.interference_pub):  # the data out before the final report and the shutdown
+            self._wait_acked(pub, FINAL_ACK_TIMEOUT_S)
+        self._publish_diagnostics(self._last_stamp_ns, final=True)
+        self._wait_acked(self.diag_pub, FINAL_ACK_TIMEOUT_S)
+        self.get_logger().info(f'end of input {self.params.input}: {self.counts["epochs_sent"]} epochs, '
+                               f'{self.counts["interference_sent"]} interference reports published\n'
+                               + '\n'.join(summary_lines(self.decoder)))
+
+    def destroy_node(self) -> None:
+        self.stop.set()
+        self._start_timer.cancel()
+        if self._thread.is_alive() and threading.current_thread() is not self._thread:
+            self._thread.join(timeout=2.0)
+        if not self._thread.is_alive():
+            self._close()
+        super().destroy_node()
+
+
+def _tow_difference(tow_s: float, tow_first_s: float) -> float:
+    dt = tow_s - tow_first_s
+    return dt + 604800.0 if dt < -302400.0 else dt
+
+
+def _duration(seconds: float) -> Any:
+    from rclpy.duration import Duration
+    return Duration(nanoseconds=int(seconds * 1e9))
+
+
+def main(argv: Any = None) -> int:
+    nodes: list[UbxSourceNode] = []
+
+    def make() -> UbxSourceNode:
+        node = UbxSourceNode()
+        nodes.append(node)
+        return node
+
+    code = run_node(make, executable='ubx_source', params_cls=UbxSourceParams, topics=TOPICS,
+                    summary='Publish a u-blox receiver\'s raw measurements (UBX-RXM-RAWX, with ephemerides from '
+                            'UBX-RXM-SFRBX or a RINEX nav file) as rfi_msgs/GnssMeasurementArray, and its '
+                            'interference indicators (UBX-MON-HW / MON-RF / SEC-SIG) as '
+                            'rfi_msgs/ReceiverInterference; from a serial port or a UBX log file.',
+                    argv=argv)
+    if code == 0 and nodes and nodes[0].exit_code:
+        return nodes[0].exit_code
+    return code

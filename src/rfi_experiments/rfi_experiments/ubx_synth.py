@@ -1,0 +1,100 @@
+"""A simulated u-blox receiver: GnssEpoch objects and broadcast ephemerides -> a UBX byte stream.
+
+Turns the measurements of a simulation (:mod:`rfi_sim.gnss_uwb`) into what a u-blox receiver
+would send for them, with pyubx2's own message generator (``UBXMessage(...).serialize()``):
+UBX-RXM-RAWX per epoch (GPS L1 C/A), UBX-RXM-SFRBX subframes 1-3 per satellite encoded from the
+ephemerides by :func:`gnss_common.lnav.encode_ephemeris_subframes`, a subframe 4 page 18 with the
+Klobuchar coefficients, and UBX-MON-HW. Used by tests and to feed ``ubx_source`` without a
+receiver. Pure: never imports rclpy.
+
+What a receiver reports is quantised, and so is this stream: C/N0 to an integer dB-Hz
+(RAWX ``cno``), Doppler to float32, the std fields to their 4-bit exponents, the ephemerides and
+Klobuchar coefficients to their LNAV scale factors.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+
+from gnss_common.constants import GPS_L1_WAVELENGTH_M
+from gnss_common.ephemeris import GpsEphemeris
+from gnss_common.lnav import encode_ephemeris_subframes, encode_iono_subframe
+from gnss_common.observations import GPS, GnssEpoch
+
+DEFAULT_PSEUDORANGE_STD_M = 0.64
+"""prStdev reported when a simulated observation carries no std, m (0.01 * 2**6)."""
+
+
+def _std_exponent(value: float, unit: float, default: int) -> int:
+    if not math.isfinite(value) or value <= 0.0:
+        return default
+    return int(min(15, max(0, round(math.log2(value / unit)))))
+
+
+def rawx_frame(epoch: GnssEpoch, leap_seconds: int = 18) -> bytes:
+    """One UBX-RXM-RAWX frame of an epoch's GPS observations (L1 C/A, pseudorange valid).
+
+    Args:
+        epoch: the epoch (its GPS week and time of week become week / rcvTow).
+        leap_seconds: leapS field (GPS - UTC, s; informative only).
+    """
+    from pyubx2 import GET, UBXMessage
+
+    fields: dict[str, object] = dict(rcvTow=float(epoch.gps_time_of_week_s), week=int(epoch.gps_week),
+                                     leapS=int(leap_seconds), leapSec=1, version=1)
+    obs = [o for o in epoch.observations if o.constellation == GPS]
+    for i, o in enumerate(obs, start=1):
+        s = f"_{i:02d}"
+        doppler = -o.pseudorange_rate_mps / GPS_L1_WAVELENGTH_M if math.isfinite(o.pseudorange_rate_mps) else 0.0
+        fields.update({
+            "prMes" + s: float(o.pseudorange_m), "cpMes" + s: 0.0, "doMes" + s: float(doppler),
+            "gnssId" + s: 0, "svId" + s: int(o.svid), "sigId" + s: 0, "freqId" + s: 0,
+            "locktime" + s: 64500,
+            "cno" + s: int(min(255, max(0, round(o.cn0_dbhz)))) if math.isfinite(o.cn0_dbhz) else 0,
+            "prStd" + s: _std_exponent(o.pseudorange_std_m, 0.01, _std_exponent(DEFAULT_PSEUDORANGE_STD_M, 0.01, 6)),
+            "cpStd" + s: 15,
+            "doStd" + s: _std_exponent(o.pseudorange_rate_std_mps / GPS_L1_WAVELENGTH_M, 0.002, 6),
+            "prValid" + s: 1, "cpValid" + s: 0, "halfCyc" + s: 0, "subHalfCyc" + s: 0,
+        })
+    fields["numMeas"] = len(obs)
+    return UBXMessage("RXM", "RXM-RAWX", GET, **fields).serialize()
+
+
+def sfrbx_frame(prn: int, words: Sequence[int]) -> bytes:
+    """One UBX-RXM-SFRBX frame (GPS L1 C/A, version 2) carrying ten LNAV words."""
+    from pyubx2 import GET, UBXMessage
+
+    return UBXMessage("RXM", "RXM-SFRBX", GET, gnssId=0, svId=int(prn), sigId=0, freqId=0,
+                      numWords=len(words), chn=0, version=2,
+                      **{f"dwrd_{i:02d}": int(w) for i, w in enumerate(words, start=1)}).serialize()
+
+
+def ephemeris_frames(ephemerides: Iterable[GpsEphemeris], week: int, tow_s: float) -> bytes:
+    """SFRBX frames of subframes 1-3 of each record, as broadcast from the 30 s frame before ``tow_s``."""
+    start = math.floor(tow_s / 30.0) * 30.0 - 30.0
+    wk = week
+    if start < 0:
+        start += 604800.0
+        wk -= 1
+    out = bytearray()
+    for eph in ephemerides:
+        for words in encode_ephemeris_subframes(eph, wk, start):
+            out += sfrbx_frame(eph.prn, words)
+    return bytes(out)
+
+
+def klobuchar_frame(prn: int, alpha: np.ndarray, beta: np.ndarray, tow_s: float) -> bytes:
+    """SFRBX frame of a subframe 4 page 18 (Klobuchar alpha, beta) sent by ``prn``."""
+    start = math.floor(tow_s / 30.0) * 30.0 + 18.0 - 30.0
+    return sfrbx_frame(prn, encode_iono_subframe(alpha, beta, start % 604800.0))
+
+
+def mon_hw_frame(jamming_state: int, jam_indicator: int, agc_count: int, noise_per_ms: int) -> bytes:
+    """A UBX-MON-HW frame with the given interference fields (antenna OK and powered)."""
+    from pyubx2 import GET, UBXMessage
+
+    return UBXMessage("MON", "MON-HW", GET, noisePerMS=int(noise_per_ms), agcCnt=int(agc_count), aStatus=2,
+                      aPower=1, jammingState=int(jamming_state), jamInd=int(jam_indicator)).serialize()

@@ -1,0 +1,174 @@
+"""ubx_source as its own process: a UBX log generated from the simulator gives, on gnss/measurements and
+gnss/receiver_interference, exactly the messages ubx_to_bag writes for it (one decoder, one conversion), and the
+process exits 0 at the end; a serial port that disappears mid-stream (a pseudo-terminal whose master is closed)
+is reported and retried, then the node exits 1 with a one-line reason and no traceback; a port that cannot be
+opened is refused at start (exit 2). Spins are bounded."""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+import rclpy
+from ament_index_python.packages import get_package_prefix
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+
+from gnss_common.ephemeris import EphemerisStore
+from gnss_common.rinex import read_rinex_nav
+from rfi_experiments import ubx_to_bag
+from rfi_experiments.ubx_decode import EpochOutput
+from rfi_experiments.ubx_messages import report_to_msg
+from rfi_experiments.ubx_synth import ephemeris_frames, mon_hw_frame, rawx_frame
+from rfi_msgs.msg import GnssMeasurementArray, ReceiverInterference
+from rfi_node_common.qos import DATA_QOS
+from rfi_sim.gnss_uwb import BroadcastGeometry, GnssUwbScenario, simulate
+from uwb_gnss_fusion.conversions import epoch_to_msg
+
+NAV = Path(__file__).resolve().parents[1] / 'src' / 'rfi_experiments' / 'data' / 'arlm2000.15n'
+DEADLINE_S = 60.0
+FRAME_ID = 'ubx_source_test'
+
+
+def fields(msg: object) -> object:
+    """Every field of a message, recursively, NaN as a string (the CDR bytes are not comparable: rclpy
+    leaves the alignment padding uninitialised)."""
+    if hasattr(msg, 'get_fields_and_field_types'):
+        return tuple((name, fields(getattr(msg, name))) for name in msg.get_fields_and_field_types())
+    if isinstance(msg, (list, tuple)) or hasattr(msg, 'tolist'):
+        return tuple(fields(v) for v in (msg.tolist() if hasattr(msg, 'tolist') else msg))
+    if isinstance(msg, float) and math.isnan(msg):
+        return 'nan'
+    return msg
+
+
+def executable() -> str:
+    return os.path.join(get_package_prefix('rfi_experiments'), 'lib', 'rfi_experiments', 'ubx_source')
+
+
+def command(*params: str) -> list[str]:
+    return [executable(), '--ros-args', *[x for p in params for x in ('-p', p)]]
+
+
+@pytest.fixture(scope='module')
+def ubx_log(tmp_path_factory) -> Path:
+    nav = read_rinex_nav(NAV)
+    run = simulate(GnssUwbScenario(duration_s=20.0, gnss_rate_hz=1.0, seed=5), BroadcastGeometry(NAV),
+                   nav.header.iono_alpha, nav.header.iono_beta)
+    store = EphemerisStore(nav.ephemerides)
+    first = run.gnss_epochs[0]
+    prns = sorted({o.svid for e in run.gnss_epochs for o in e.observations})
+    used = [store.select(p, first.gps_week, first.gps_time_of_week_s)[0] for p in prns]
+    stream = bytearray()
+    for k, epoch in enumerate(run.gnss_epochs):
+        if k == 2:
+            stream += ephemeris_frames(used, epoch.gps_week, epoch.gps_time_of_week_s)
+        if k == 5:
+            corrupt_at = len(stream) + 40
+        stream += rawx_frame(epoch) + mon_hw_frame(2, 40 + k, 1300 - k, 95)
+    stream[corrupt_at] ^= 0xFF  # the RAWX frame of epoch 5: a bad checksum, counted; the stream goes on
+    path = tmp_path_factory.mktemp('ubx') / 'sim.ubx'
+    path.write_bytes(bytes(stream))
+    return path
+
+
+class Probe:
+    def __init__(self) -> None:
+        self.context = Context()
+        rclpy.init(context=self.context)
+        self.node = Node('ubx_source_probe', context=self.context)
+        self.arrays: list[GnssMeasurementArray] = []
+        self.reports: list[ReceiverInterference] = []
+        self.final: dict[str, str] | None = None
+        self.node.create_subscription(GnssMeasurementArray, '/gnss/measurements', self.arrays.append, DATA_QOS)
+        self.node.create_subscription(ReceiverInterference, '/gnss/receiver_interference',
+                                      lambda m: self.reports.append(m) if m.header.frame_id == FRAME_ID else None,
+                                      DATA_QOS)
+        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._diag, DATA_QOS)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def _diag(self, msg: DiagnosticArray) -> None:
+        s = msg.status[0] if msg.status else None
+        if s is not None and s.name == 'ubx_source' and s.message.startswith('end of input'):
+            values = {kv.key: kv.value for kv in s.values}
+            if values.get('input', '').endswith('sim.ubx'):
+                self.final = values
+
+    def run(self, cmd: list[str]) -> subprocess.CompletedProcess:
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        deadline = time.monotonic() + DEADLINE_S
+        try:
+            while proc.poll() is None or self.final is None:
+                assert time.monotonic() < deadline, 'ubx_source did not finish'
+                self.executor.spin_once(timeout_sec=0.05)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+            out, err = proc.communicate(timeout=10)
+        return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+def test_file_gives_the_messages_of_ubx_to_bag(ubx_log):
+    probe = Probe()
+    try:
+        done = probe.run(command(f'input:={ubx_log}', 'pace:=max', 'wait_for_subscribers:=1',
+                                 f'frame_id:={FRAME_ID}'))
+    finally:
+        probe.close()
+    assert done.returncode == 0, done.stderr.decode()
+    assert b'Traceback' not in done.stderr
+    conversion = ubx_to_bag.convert_ubx(ubx_log, ubx_to_bag.make_decoder())
+    expected = [epoch_to_msg(e.epoch) for e in conversion.epochs if isinstance(e, EpochOutput)]
+    assert len(expected) == 20 - 2 - 1  # two epochs before the ephemerides, one corrupted RAWX frame (epoch 5)
+    assert [fields(m) for m in probe.arrays] == [fields(m) for m in expected]
+    reports = [report_to_msg(r, FRAME_ID) for r in conversion.interference]
+    assert [fields(m) for m in probe.reports] == [fields(m) for m in reports]
+    assert probe.final is not None
+    assert probe.final['bad_checksum'] == '1' and probe.final['epochs_waiting_for_ephemeris'] == '2'
+    assert probe.final['epochs_sent'] == str(len(expected)) and probe.final['port_state'] == 'closed'
+
+
+def test_serial_port_gone_is_reported_retried_and_ends_cleanly(ubx_log):
+    master, slave = os.openpty()
+    port = f'/dev/fd/{slave}'  # the pseudo-terminal's slave, passed down (/dev/pts may not be mounted here)
+    proc = subprocess.Popen(command(f'input:={port}', 'max_reconnect_attempts:=2', 'reconnect_period_s:=0.2'),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, pass_fds=(slave,))
+    try:
+        log = b''
+        deadline = time.monotonic() + DEADLINE_S
+        while b'ubx_source ready' not in log:  # the port is open once the node says it is ready
+            assert time.monotonic() < deadline and proc.poll() is None, log.decode()
+            log += os.read(proc.stderr.fileno(), 4096)
+        os.write(master, ubx_log.read_bytes()[:4000])  # a receiver sending, then unplugged
+        os.close(slave)
+        os.close(master)
+        out, err = proc.communicate(timeout=DEADLINE_S)
+        err = log + err
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate(timeout=10)
+    text = err.decode() + out.decode()
+    assert proc.returncode == 1, text
+    assert 'Traceback' not in text
+    assert f'serial port {port} lost' in text
+    assert 'not back after 2 attempt(s)' in text
+
+
+def test_a_port_that_cannot_be_opened_is_refused_at_start(tmp_path):
+    done = subprocess.run(command(f'input:={tmp_path / "ttyNONE"}'), capture_output=True, timeout=DEADLINE_S)
+    assert done.returncode == 2
+    err = done.stderr.decode()
+    assert 'cannot open the serial port' in err and 'Traceback' not in err
