@@ -22,6 +22,15 @@ that stays inside the band (8.24 MHz in 8.972 us is 0.92e12 Hz/s), so it is simu
 "1b" keeps rate and period (1.35 -> 1.54e12 Hz/s: a 12.96 MHz sweep) and lets the front end's
 filter (pass band -4.16..+4.08 MHz) cut what lies outside.
 
+Rows: 1a, 1b, 2: the recordings; 3: the issue's independent generator's saw-tooth chirps, CW and
+clean cases at three front ends (jammer on before the node starts; the AGC settled on it); 4: the
+same chirps switched on after 6 clean blocks, with an AGC that has to settle and with the gain fixed
+by the configured powers (as the issue's generator likely had it); S: item 3's sweep shapes (saw-tooth
+down, triangles, hooked saw-tooth, non-linear rate) at the recordings' front end; D: ``make demo``'s
+chirp phases as its scenario makes them (``scenarios/default.yaml``: 1 ms snapshots 1 s apart, each
+from a fresh simulator, the paper's front end and chirp); R: the real clean captures alone and with
+jammers added (bands scaled to each capture's IF filter, re-quantised to its bits).
+
 Verdicts per row (the issue's "right"): type right in >= 95 % of the blocks after the switch-on
 block; J/N within 3 dB of the truth (median; for clipped blocks a J/N flagged as a lower bound
 and below the truth + 3 dB counts as right); every published frequency finite and inside the sampled
@@ -253,6 +262,21 @@ def rows() -> list[Row]:
                      f"J/N {jn:.0f} dB, {label}", fe,
                      (ChirpJammer(start_frequency_hz=f0, sweep_rate_hz_per_s=bw / T, sweep_period_s=T,
                                   on_time_s=6 * BLOCK_S),), (jn,), n_blocks=20, settle_agc=False))
+    # item 3's sweep shapes, inside the band of the recordings' front end (10 MS/s complex int8, AGC)
+    fe_s = FrontEndConfig(**FE_REC, gain_mode="agc")
+    for j in (SweepJammer("saw_down", -4e6, 4e6, 10e-6),
+              SweepJammer("triangle", -4e6, 4e6, 20e-6, up_fraction=0.5),
+              SweepJammer("triangle", -3e6, 4e6, 15e-6, up_fraction=0.7, rate_ratio=1.3),
+              SweepJammer("hooked_saw", -3.5e6, 4e6, 12e-6, hook_fraction=0.15, hook_overshoot_hz=0.8e6),
+              SweepJammer("saw_up", -4e6, 4e6, 9e-6, rate_ratio=1.5)):
+        extra = ""
+        if j.shape == "triangle":
+            extra = f", up {j.up_fraction:.0%}"
+        elif j.shape == "hooked_saw":
+            extra = f", hook {j.hook_fraction:.0%} / {j.hook_overshoot_hz / 1e6:.1f} MHz"
+        r.append(Row(f"S {j.shape} {j.low_frequency_hz / 1e6:+.1f}..{j.high_frequency_hz / 1e6:+.1f} MHz, "
+                     f"{j.sweep_period_s * 1e6:.0f} us, rate ratio {j.rate_ratio:.2f}{extra}, J/N 10 dB, on at 0",
+                     fe_s, (dataclasses.replace(j, time_offset_s=0.3 * j.sweep_period_s),), (10.0,), n_blocks=12))
     # the demo's chirp phases (scenarios/default.yaml: paper front end, noise counted over 2 MHz, the
     # paper's chirp, 1 ms snapshots every second from a fresh simulator)
     fe_demo = FrontEndConfig(noise_bandwidth_hz=2e6)
