@@ -172,3 +172,18 @@ def test_a_port_that_cannot_be_opened_is_refused_at_start(tmp_path):
     assert done.returncode == 2
     err = done.stderr.decode()
     assert 'cannot open the serial port' in err and 'Traceback' not in err
+
+
+def test_config_file_values_equal_the_dataclass_defaults():
+    import dataclasses
+
+    import yaml
+
+    from rfi_experiments.ubx_source import UbxSourceParams
+
+    config = Path(__file__).resolve().parents[1] / 'src' / 'rfi_experiments' / 'config' / 'ubx_source.yaml'
+    data = yaml.safe_load(config.read_text())['ubx_source']['ros__parameters']
+    defaults = UbxSourceParams()
+    assert set(data) == {f.name for f in dataclasses.fields(UbxSourceParams)}
+    for name, value in data.items():
+        assert value == getattr(defaults, name) and type(value) is type(getattr(defaults, name)), name
