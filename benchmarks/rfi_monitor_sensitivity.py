@@ -266,7 +266,20 @@ def sweep(caps: Sequence[Source], grid: Sequence[float], trials: int) -> list[Cu
     return curves
 
 
+def _first_from(jn: Sequence[float], ok: Sequence[bool]) -> float:
+    """Lowest J/N from which ``ok`` holds at every grid point up (NaN: not even at the top)."""
+    return next((jn[i] for i in range(len(jn)) if all(ok[i:])), math.nan)
+
+
+def _db(v: float, grid: Sequence[float]) -> str:
+    """A "from" J/N for the table: never (NaN), "<= lowest" when it holds over the whole grid."""
+    if math.isnan(v):
+        return f"never (up to {grid[-1]:+.0f} dB)"
+    return f"<= {v:+.0f} dB" if v == grid[0] else f"{v:+.0f} dB"
+
+
 def goals(curves: list[Curve], fa: dict[tuple[str, str], tuple[int, int]]) -> list[str]:
+    """Markdown lines: the false-alarm rate and the two goals per method, then a table per curve."""
     lines = []
     for method in METHODS:
         k1, n1 = fa[(method, "1ms")]
@@ -274,26 +287,30 @@ def goals(curves: list[Curve], fa: dict[tuple[str, str], tuple[int, int]]) -> li
         k, n = k1 + k2, n1 + n2
         fa_ok = k / max(n, 1) <= 1e-3
         few = "; the bound is above 1e-3: too few clean blocks to prove it"
-        lines.append(f"- **{method}**: false alarms {k1}/{n1} (1 ms blocks) and {k2}/{n2} (1024-sample blocks): rate "
-                     f"{k / max(n, 1):.2e}, 95 % upper bound {upper95(k, n):.1e} (target 1e-3: "
-                     f"{'met as measured' if fa_ok else 'NOT met'}"
-                     f"{few if upper95(k, n) > 1e-3 else ''})")
-        for c in [c for c in curves if c.method == method]:
-            i5 = [i for i, v in enumerate(c.jn_db) if v >= -5.0]
-            det = all(c.all_trials_reported[i] for i in i5)
-            first_all = next((c.jn_db[i] for i in range(len(c.jn_db))
-                              if all(c.all_trials_reported[j] for j in range(i, len(c.jn_db)))), math.nan)
-            i0 = [i for i, v in enumerate(c.jn_db) if v >= 0.0]
-            typ = all(c.p_right[i] >= 0.9 for i in i0)
-            first_typ = next((c.jn_db[i] for i in range(len(c.jn_db))
-                              if all(c.p_right[j] >= 0.9 for j in range(i, len(c.jn_db)))), math.nan)
-            p5 = c.p_reported[i5[0]] if i5 else math.nan
-            p0 = c.p_right[i0[0]] if i0 else math.nan
-            lines.append(f"  - {c.capture}, {c.kind}: reported from J/N -5 dB in every trial: "
-                         f"{'met' if det and fa_ok else 'NOT met'} (P(reported) at {c.jn_db[i5[0]]:.0f} dB = "
-                         f"{p5:.2f}; reported in every trial from {first_all:.0f} dB on); type right from 0 dB: "
-                         f"{'met' if typ else 'NOT met'} (P(right) at {c.jn_db[i0[0]]:.0f} dB = {p0:.2f}; >= 0.9 "
-                         f"from {first_typ:.0f} dB on)")
+        mine = [c for c in curves if c.method == method]
+        det = [c for c in mine if all(c.all_trials_reported[i] for i, v in enumerate(c.jn_db) if v >= -5.0)]
+        typ = [c for c in mine if all(c.p_right[i] >= 0.9 for i, v in enumerate(c.jn_db) if v >= 0.0)]
+        lines += [
+            f"- **{method}**: false alarms {k1}/{n1} (1 ms blocks) and {k2}/{n2} (1024-sample blocks): rate "
+            f"{k / max(n, 1):.2e}, 95 % upper bound {upper95(k, n):.1e} (target <= 1e-3: "
+            f"{'met as measured' if fa_ok else 'NOT met'}{few if upper95(k, n) > 1e-3 else ''}).",
+            f"  Any jammer reported from J/N -5 dB (every trial, within {JAM_BLOCKS} ms): {len(det)} of {len(mine)} "
+            f"curves; with the false-alarm target: **{'met' if fa_ok and len(det) == len(mine) else 'NOT met'}**. "
+            f"Type right from J/N 0 dB (P >= 0.9 at every J/N >= 0): {len(typ)} of {len(mine)} curves: "
+            f"**{'met' if len(typ) == len(mine) else 'NOT met'}**.",
+        ]
+    lines += ["", "| source | jammer | method | reported in every trial from | P(reported) at -5 dB | "
+              "P(type right) >= 0.9 from | P(type right) at 0 dB | median latency at -5 dB |",
+              "|---|---|---|---|---|---|---|---|"]
+    for c in curves:
+        i5 = c.jn_db.index(-5.0) if -5.0 in c.jn_db else 0
+        i0 = c.jn_db.index(0.0) if 0.0 in c.jn_db else 0
+        first_all = _first_from(c.jn_db, c.all_trials_reported)
+        first_typ = _first_from(c.jn_db, [p >= 0.9 for p in c.p_right])
+        lat = c.latency_blocks[i5]
+        lines.append(f"| {c.capture} | {c.kind} | {c.method} | {_db(first_all, c.jn_db)} | {c.p_reported[i5]:.2f} | "
+                     f"{_db(first_typ, c.jn_db)} | {c.p_right[i0]:.2f} | "
+                     f"{'never' if math.isinf(lat) else f'{lat:.0f} block(s)'} |")
     return lines
 
 
