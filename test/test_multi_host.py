@@ -147,11 +147,17 @@ def runs(hosts, tmp_path_factory):
              str(tmp / 'direct' / 'outputs')], capture_output=True, text=True, timeout=RUN_TIMEOUT_S)
         assert direct.returncode == 0, direct.stderr
         before = hosts.link_bytes(hosts.nodes)
-        replay = subprocess.run(
+        proc = subprocess.Popen(
             ['ip', 'netns', 'exec', hosts.replay, sys.executable, '-m', 'rfi_experiments.run', str(BAG),
              '--out', str(tmp / 'replay'), '--transport', 'processes', '--external-nodes', *WINDOW, '--no-progress',
              '--no-report', '--timeout', '90', '--record-outputs', str(tmp / 'replay' / 'outputs')],
-            capture_output=True, text=True, timeout=RUN_TIMEOUT_S, env=env)
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+        try:
+            out, err = proc.communicate(timeout=RUN_TIMEOUT_S)
+        except subprocess.TimeoutExpired:  # SIGINT: run stops play before it exits
+            proc.send_signal(signal.SIGINT)
+            out, err = proc.communicate(timeout=30)
+        replay = subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
         carried = hosts.link_bytes(hosts.nodes) - before
         alive = {name: proc.poll() is None for name, proc in nodes.items()}
     finally:

@@ -135,3 +135,36 @@ def test_run_refuses_a_namespace_it_cannot_honour(tmp_path):
         assert done.returncode == 2, (extra, done.stderr)
         assert message in done.stderr, (extra, done.stderr)
         assert 'Traceback' not in done.stderr
+
+
+def test_external_nodes_with_best_effort_inputs_are_refused(tmp_path):
+    """`run --external-nodes` replays to nodes it did not start (another host): it refuses nodes whose
+    inputs are best effort (their default, for sensor drivers), where a dropped message would be lost
+    unseen, and names the parameter that makes each input reliable."""
+    from test_executables import executable
+
+    namespace = '/best_effort'
+    nodes = [subprocess.Popen([executable(package, name), '--ros-args', '-r', f'__ns:={namespace}',
+                               '-r', f'/diagnostics:={namespace}/diagnostics'],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+             for package, name in (('rfi_monitor', 'rfi_monitor_node'), ('uwb_gnss_fusion', 'fusion_node'),
+                                   ('imm_carrier', 'imm_carrier_node'))]
+    try:
+        done = subprocess.run(
+            [sys.executable, '-m', 'rfi_experiments.run', str(BAG), '--out', str(tmp_path / 'r'), '--transport',
+             'processes', '--external-nodes', '--namespace', namespace, *WINDOW, '--no-progress', '--no-report',
+             '--timeout', '90'], capture_output=True, text=True, timeout=150)
+    finally:
+        for proc in nodes:
+            proc.send_signal(2)
+        for proc in nodes:
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+    assert done.returncode == 2, done.stderr
+    assert 'Traceback' not in done.stderr
+    for topic in ('rfi/if_samples', 'gnss/measurements', 'uwb/ranges', 'rfi/jammer_state', 'gnss/correlators'):
+        assert f'-p qos_overrides.{namespace}/{topic}.subscription.reliability:=reliable' in done.stderr, done.stderr
+    assert not (tmp_path / 'r' / 'logs' / 'play.log').exists()  # nothing was played
