@@ -28,7 +28,8 @@ Pipeline
    Klobuchar, Saastamoinen): one implementation. Whatever that builder cannot model is skipped
    and counted by its reason.
 5. Broadcast ephemerides come from UBX-RXM-SFRBX (GPS LNAV subframes 1-3 and the Klobuchar page,
-   :class:`gnss_common.lnav.LnavAssembler`) and/or a RINEX navigation file given by the user.
+   :class:`gnss_common.lnav.LnavAssembler`; Galileo I/NAV word types 1-5,
+   :class:`gnss_common.inav.InavAssembler`) and/or a RINEX navigation file given by the user.
    An epoch with fewer than ``min_satellites`` modelled satellites (at start-up: no ephemeris
    yet) is withheld and counted (``epochs_waiting_for_ephemeris``), never published half-empty.
 6. UBX-MON-HW, UBX-MON-RF (one record per RF block) and UBX-SEC-SIG ->
@@ -51,6 +52,7 @@ import numpy as np
 
 from gnss_common.ephemeris import GpsEphemeris
 from gnss_common.gps_time import gps_to_ros_stamp_ns
+from gnss_common.inav import InavAssembler
 from gnss_common.lnav import KlobucharParams, LnavAssembler
 from gnss_common.measurements import SKIP_REASONS, GnssEpochBuilder, MeasurementBuilderParams
 from gnss_common.observations import GnssEpoch
@@ -75,6 +77,10 @@ RINEX_CODES: dict[tuple[int, int], str] = {
 }
 """(gnssId, sigId) of UBX-RXM-RAWX -> RINEX 3 signal code (band + attribute; RINEX 3.04 Table 4,
 u-blox F9 interface description, signal identifiers)."""
+
+GALILEO_INAV_SIGNALS = (0, 1, 5)
+"""UBX sigId of the Galileo signals whose RXM-SFRBX carries I/NAV: E1 (0 on u-blox M8, 1 = E1 B on
+F9) and E5 bI (5)."""
 
 REJECT_REASONS = ("bad_checksum", "bad_length", "truncated", "unparsable")
 """Frame-level rejections of :class:`UbxFramer` / :class:`UbxDecoder` (always all present)."""
@@ -383,7 +389,8 @@ class UbxDecoderParams:
             (4: enough for a position); fewer are withheld and counted.
         use_receiver_std: put the receiver's prStdev / doStdev into the measurement's std fields
             (else NaN: the filter decides from C/N0).
-        use_sfrbx: decode ephemerides and Klobuchar parameters from RXM-SFRBX.
+        use_sfrbx: decode ephemerides (GPS LNAV, Galileo I/NAV) and the GPS Klobuchar parameters
+            from RXM-SFRBX.
         max_ephemerides_per_satellite: records kept per PRN (the store picks the nearest t_oe).
         builder: parameters of :class:`GnssEpochBuilder` (observable codes, plausibility limits).
     """
@@ -436,7 +443,7 @@ class UbxDecoder:
         skipped: satellites skipped in published and withheld epochs, by reason
             (:data:`gnss_common.measurements.SKIP_REASONS`).
         ignored: messages decoded but not used, by pyubx2 identity (e.g. ``NAV-PVT``).
-        lnav_rejected: SFRBX subframes rejected, by reason (:data:`gnss_common.lnav.LNAV_REJECT_REASONS`).
+        lnav_rejected, inav_rejected: SFRBX GPS subframes / Galileo pages rejected, by reason.
     """
 
     def __init__(
@@ -450,9 +457,10 @@ class UbxDecoder:
         self.params = params if params is not None else UbxDecoderParams()
         self._framer = UbxFramer()
         self._lnav = LnavAssembler()
-        self._ephs: dict[int, list[GpsEphemeris]] = {}
+        self._inav = InavAssembler()
+        self._ephs: dict[tuple[str, int], list[Any]] = {}
         for e in ephemerides:
-            self._ephs.setdefault(e.prn, []).append(e)
+            self._ephs.setdefault((getattr(e, "system", "G"), e.prn), []).append(e)
         self._alpha = iono_alpha
         self._beta = iono_beta
         self._ref = reference_position_ecef_m
@@ -465,12 +473,18 @@ class UbxDecoder:
 
     @property
     def lnav_rejected(self) -> dict[str, int]:
+        """GPS LNAV subframes rejected, by reason (:data:`gnss_common.lnav.LNAV_REJECT_REASONS`)."""
         return dict(self._lnav.rejected)
 
     @property
-    def ephemeris_prns(self) -> tuple[int, ...]:
-        """PRNs with at least one ephemeris."""
-        return tuple(sorted(self._ephs))
+    def inav_rejected(self) -> dict[str, int]:
+        """Galileo I/NAV pages rejected, by reason (:data:`gnss_common.inav.INAV_REJECT_REASONS`)."""
+        return dict(self._inav.rejected)
+
+    @property
+    def satellites_with_ephemeris(self) -> tuple[str, ...]:
+        """RINEX ids ("G05", "E11") of the satellites with at least one ephemeris."""
+        return tuple(f"{s}{p:02d}" for s, p in sorted(self._ephs))
 
     def _sync_counts(self) -> None:
         self.counts["frames"] = self._framer.frames
@@ -529,7 +543,7 @@ class UbxDecoder:
     # -- ephemerides ------------------------------------------------------------------------
 
     def _add_ephemeris(self, eph: GpsEphemeris) -> None:
-        records = self._ephs.setdefault(eph.prn, [])
+        records = self._ephs.setdefault((eph.system, eph.prn), [])
         records[:] = [e for e in records if not (e.iodc == eph.iodc and e.toe_s == eph.toe_s and e.week == eph.week)]
         records.append(eph)
         del records[: max(0, len(records) - self.params.max_ephemerides_per_satellite)]
@@ -539,15 +553,22 @@ class UbxDecoder:
         if not self.params.use_sfrbx:
             self.ignored["RXM-SFRBX"] += 1
             return
-        if int(msg.gnssId) != 0 or int(getattr(msg, "sigId", 0)) != 0:
-            self.ignored["RXM-SFRBX (not GPS L1 C/A)"] += 1
+        gnss, sig = int(msg.gnssId), int(getattr(msg, "sigId", 0))
+        if not (gnss == 0 and sig == 0) and not (gnss == 2 and sig in GALILEO_INAV_SIGNALS):
+            self.ignored["RXM-SFRBX (not GPS L1 C/A, not Galileo I/NAV)"] += 1
             return
-        if self._last_time is None:  # the 10-bit week needs a reference: wait for the first RAWX
+        if self._last_time is None:  # the broadcast week needs a reference: wait for the first RAWX
             if len(self._pending_sfrbx) < 1000:
                 self._pending_sfrbx.append(msg)
             return
         self.counts["sfrbx_subframes"] += 1
         words = [int(getattr(msg, f"dwrd_{i:02d}")) for i in range(1, int(msg.numWords) + 1)]
+        if gnss == 2:
+            eph = self._inav.add(int(msg.svId), words, self._last_time[1])
+            if eph is not None:
+                self.counts["ephemerides_decoded"] += 1
+                self._add_ephemeris(eph)
+            return
         result = self._lnav.add(int(msg.svId), words, self._last_time[1])
         if isinstance(result, GpsEphemeris):
             self.counts["ephemerides_decoded"] += 1

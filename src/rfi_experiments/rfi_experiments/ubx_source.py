@@ -1,7 +1,8 @@
 """ROS node ``ubx_source``: a u-blox receiver (serial port) or a UBX log file -> gnss/measurements.
 
 Thin: the bytes go to :class:`rfi_experiments.ubx_decode.UbxDecoder` (framing, pyubx2 decoding,
-LNAV ephemerides from RXM-SFRBX, epochs built by the same code as ``rinex_to_bag``); this node
+GPS LNAV / Galileo I/NAV ephemerides from RXM-SFRBX, epochs built by the same code as
+``rinex_to_bag``); this node
 declares the parameters, reads on a thread of its own (a blocking serial read must not stall the
 executor), publishes and reports /diagnostics.
 
@@ -73,9 +74,10 @@ class UbxSourceParams:
     input: str = parameter('/dev/ttyACM0', 'Serial device of the receiver, or a UBX log file.')
     baud_rate: int = parameter(115200, 'Serial baud rate, bit/s (ignored by USB CDC-ACM receivers).',
                                minimum=1200, maximum=4_000_000)
-    nav_file: str = parameter('', 'RINEX navigation file with GPS ephemerides (empty: only those decoded from '
-                                  'RXM-SFRBX).')
-    use_sfrbx: bool = parameter(True, 'Decode GPS LNAV ephemerides and Klobuchar parameters from RXM-SFRBX.')
+    nav_file: str = parameter('', 'RINEX navigation file with broadcast ephemerides (empty: only those decoded '
+                                  'from RXM-SFRBX).')
+    use_sfrbx: bool = parameter(True, 'Decode ephemerides from RXM-SFRBX: GPS LNAV (and its Klobuchar page), '
+                                      'Galileo I/NAV.')
     reference_position_ecef_m: str = parameter(
         '', 'Receiver ECEF position "X,Y,Z", m, for the ionosphere / troposphere models; empty: a coarse '
             'single-point fix per epoch (tens of metres suffice).')
@@ -331,8 +333,9 @@ class UbxSourceNode(Node):
         v.update({k: int(n) for k, n in self.decoder.counts.items()})
         v.update({f'skipped_{k}': int(n) for k, n in self.decoder.skipped.items()})
         v.update({f'sfrbx_rejected_{k}': n for k, n in self.decoder.lnav_rejected.items()})
+        v.update({f'inav_rejected_{k}': n for k, n in self.decoder.inav_rejected.items()})
         v['messages_not_used'] = sum(self.decoder.ignored.values())
-        v['satellites_with_ephemeris'] = len(self.decoder.ephemeris_prns)
+        v['satellites_with_ephemeris'] = len(self.decoder.satellites_with_ephemeris)
         v.update(self.counts)
         v['subscribers'] = self.pub.get_subscription_count()
         v['interference_subscribers'] = self.interference_pub.get_subscription_count()

@@ -21,6 +21,7 @@ import numpy as np
 
 from gnss_common.constants import GPS_L1_WAVELENGTH_M
 from gnss_common.ephemeris import GpsEphemeris
+from gnss_common.inav import encode_page, encode_words
 from gnss_common.lnav import encode_ephemeris_subframes, encode_iono_subframe
 from gnss_common.observations import GPS, GnssEpoch
 
@@ -32,6 +33,37 @@ def _std_exponent(value: float, unit: float, default: int) -> int:
     if not math.isfinite(value) or value <= 0.0:
         return default
     return int(min(15, max(0, round(math.log2(value / unit)))))
+
+
+def rawx_from_rinex(week: int, tow_s: float, observations: dict[str, dict[str, float]],
+                    leap_seconds: int = 18) -> bytes:
+    """One UBX-RXM-RAWX frame of RINEX 3 observations: GPS and QZSS ``C1C/D1C/S1C`` (L1 C/A),
+    Galileo ``C1C/D1C/S1C`` (E1 C), BeiDou ``C2I/D2I/S2I`` (B1I); other satellites are left out."""
+    from pyubx2 import GET, UBXMessage
+
+    signals = {"G": (0, 0, "1C"), "E": (2, 0, "1C"), "C": (3, 0, "2I"), "J": (5, 0, "1C")}
+    fields: dict[str, object] = dict(rcvTow=float(tow_s), week=int(week), leapS=int(leap_seconds), leapSec=1,
+                                     version=1)
+    n = 0
+    for sat, values in sorted(observations.items()):
+        if sat[0] not in signals:
+            continue
+        gnss_id, sig_id, code = signals[sat[0]]
+        pr = values.get("C" + code, math.nan)
+        if not math.isfinite(pr):
+            continue
+        n += 1
+        s = f"_{n:02d}"
+        dop = values.get("D" + code, math.nan)
+        cn0 = values.get("S" + code, math.nan)
+        fields.update({
+            "prMes" + s: float(pr), "cpMes" + s: 0.0, "doMes" + s: float(dop) if math.isfinite(dop) else 0.0,
+            "gnssId" + s: gnss_id, "svId" + s: int(sat[1:]), "sigId" + s: sig_id, "freqId" + s: 0,
+            "locktime" + s: 64500, "cno" + s: int(round(cn0)) if math.isfinite(cn0) else 0,
+            "prStd" + s: 5, "cpStd" + s: 15, "doStd" + s: 6, "prValid" + s: 1,
+        })
+    fields["numMeas"] = n
+    return UBXMessage("RXM", "RXM-RAWX", GET, **fields).serialize()
 
 
 def rawx_frame(epoch: GnssEpoch, leap_seconds: int = 18) -> bytes:
@@ -63,11 +95,12 @@ def rawx_frame(epoch: GnssEpoch, leap_seconds: int = 18) -> bytes:
     return UBXMessage("RXM", "RXM-RAWX", GET, **fields).serialize()
 
 
-def sfrbx_frame(prn: int, words: Sequence[int]) -> bytes:
-    """One UBX-RXM-SFRBX frame (GPS L1 C/A, version 2) carrying ten LNAV words."""
+def sfrbx_frame(prn: int, words: Sequence[int], gnss_id: int = 0, sig_id: int = 0) -> bytes:
+    """One UBX-RXM-SFRBX frame (version 2): ten GPS LNAV words (default) or, with ``gnss_id`` 2 and
+    ``sig_id`` 1 (E1 B), the eight words of a Galileo I/NAV page pair."""
     from pyubx2 import GET, UBXMessage
 
-    return UBXMessage("RXM", "RXM-SFRBX", GET, gnssId=0, svId=int(prn), sigId=0, freqId=0,
+    return UBXMessage("RXM", "RXM-SFRBX", GET, gnssId=int(gnss_id), svId=int(prn), sigId=int(sig_id), freqId=0,
                       numWords=len(words), chn=0, version=2,
                       **{f"dwrd_{i:02d}": int(w) for i, w in enumerate(words, start=1)}).serialize()
 
@@ -83,6 +116,17 @@ def ephemeris_frames(ephemerides: Iterable[GpsEphemeris], week: int, tow_s: floa
     for eph in ephemerides:
         for words in encode_ephemeris_subframes(eph, wk, start):
             out += sfrbx_frame(eph.prn, words)
+    return bytes(out)
+
+
+def galileo_frames(ephemerides: Iterable[GpsEphemeris], tow_s: float) -> bytes:
+    """SFRBX frames of I/NAV word types 1-5 of each Galileo record (``system="E"``), E1 B, with GST
+    ``tow_s`` (s) in word type 5."""
+    out = bytearray()
+    for eph in ephemerides:
+        words = encode_words(eph, tow_s)
+        for k in (1, 2, 3, 4, 5):
+            out += sfrbx_frame(eph.prn, encode_page(words[k]), gnss_id=2, sig_id=1)
     return bytes(out)
 
 

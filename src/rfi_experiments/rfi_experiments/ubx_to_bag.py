@@ -5,8 +5,9 @@ Every UBX-RXM-RAWX epoch with at least ``--min-satellites`` modelled satellites 
 ``rinex_to_bag`` (:class:`gnss_common.measurements.GnssEpochBuilder`, via
 :class:`rfi_experiments.ubx_decode.UbxDecoder`); the receiver's interference indicators
 (UBX-MON-HW, UBX-MON-RF per RF block, UBX-SEC-SIG) go to ``/gnss/receiver_interference``
-(``rfi_msgs/ReceiverInterference``). Ephemerides come from the log's UBX-RXM-SFRBX (GPS LNAV)
-and/or ``--nav`` (RINEX); epochs before enough ephemerides exist are counted, not written.
+(``rfi_msgs/ReceiverInterference``). Ephemerides come from the log's UBX-RXM-SFRBX (GPS LNAV,
+Galileo I/NAV) and/or ``--nav`` (RINEX); epochs before enough ephemerides exist are counted, not
+written.
 
 Header stamps and bag log times are ROS time (UTC-based, ns) of the receive epoch; GPS week and
 time of week are in the message fields. Corrupted frames, unknown messages and everything
@@ -112,7 +113,10 @@ def summary_lines(decoder: UbxDecoder) -> list[str]:
     lines += [f"    {k:<28} {n}" for k, n in decoder.skipped.items()]
     rejected = {k: n for k, n in decoder.lnav_rejected.items() if n}
     if rejected:
-        lines.append("  SFRBX subframes rejected: " + ", ".join(f"{k} {n}" for k, n in rejected.items()))
+        lines.append("  SFRBX GPS subframes rejected: " + ", ".join(f"{k} {n}" for k, n in rejected.items()))
+    rejected = {k: n for k, n in decoder.inav_rejected.items() if n}
+    if rejected:
+        lines.append("  SFRBX Galileo pages rejected: " + ", ".join(f"{k} {n}" for k, n in rejected.items()))
     if decoder.ignored:
         lines.append("  messages not used: " + ", ".join(f"{k} {n}" for k, n in sorted(decoder.ignored.items())))
     return lines
