@@ -44,12 +44,22 @@ warning. An estimate is published with ``locked = true`` only when the core's fi
 (phase and frequency finite, the IMM's standard deviations finite and > 0, the state sane; see
 :class:`imm_carrier.tracker.CarrierTracker`), and the codec checks the same again.
 
-Levels: ERROR when the accounting does not add up, a tracker raised or a handler raised since the
-last report; WARN when arrays or correlators were rejected, messages were lost, or channels were
-restarted or suppressed after an invalid estimate since the last report; else OK. When no input has
-arrived for ``input_timeout_s`` of wall time, a STALE report (stamped with the node clock) says so,
-with the same counters (:class:`rfi_node_common.inputs.StaleInputWatch`); no estimate depends on the
-wall clock.
+Levels (``hardware_id``: the receiver, from the parameter): ERROR when the accounting does not add
+up, a tracker raised or a handler raised since the last report; WARN (inputs degraded) when over the
+last ``diagnostics_window_s`` of stamp time more than ``warn_rejected_fraction`` of the arrays or of the
+correlators was rejected, more than ``warn_lost_fraction`` of the arrays published was lost, or a
+channel was restarted or its lock suppressed after an invalid estimate (each such event is rare and
+means the input misled a tracker); else OK, so an isolated rejection on a clean stream stays OK
+(:class:`rfi_node_common.diagnostics.CountWindow`). When no input has arrived for ``input_timeout_s``
+of wall time, a STALE report (stamped with the node clock) says so, with the same counters
+(:class:`rfi_node_common.inputs.StaleInputWatch`); no estimate depends on the wall clock.
+
+Parameters settable while running (``ros2 param set``, validated as at start, applied before the next
+array): ``hardware_id``, ``diagnostics_window_s``, ``warn_rejected_fraction``, ``warn_lost_fraction``,
+``warning_throttle_s``. The tracker parameters are read-only: each tracker compiles them into its
+kernel's configuration when it is built (imm_carrier.tracker.CarrierTracker) and has no call to change
+them in flight, and a new tracker would restart every channel; ``method`` sets which trackers exist,
+the stamp and timeout parameters size the stamp gate and the timers.
 
 Core faults: should a tracker raise (it should not: the IMM keeps its mode probabilities as
 logarithms, so that a mode whose probability underflowed to 0 and a correlator that favours it by
@@ -84,16 +94,22 @@ from rfi_node_common.diagnostics import (
     OK,
     STALE,
     WARN,
+    CountWindow,
     StampTimer,
+    degraded_inputs,
     diagnostic_array,
+    diagnostics_window_parameter,
+    hardware_id_parameter,
     input_timeout_parameter,
     max_stamp_jump_parameter,
     stamp_jump_confirmations_parameter,
+    warn_lost_fraction_parameter,
+    warn_rejected_fraction_parameter,
 )
 from rfi_node_common.input_checks import NS_PER_S, STAMP_REASONS, StampGate
 from rfi_node_common.inputs import InputHealth, StaleInputWatch, subscribe_input
 from rfi_node_common.main import run_node
-from rfi_node_common.params import declare, parameter, validate_ranges
+from rfi_node_common.params import RuntimeParameters, changed_names, declare, parameter, validate_ranges
 from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS
 
 TOPICS = """topics:
@@ -200,7 +216,11 @@ class CarrierNodeParams:
         1.0, 'Period of /diagnostics in message (stamp) time, s.', minimum=0.01, maximum=3600.0)
     warning_throttle_s: float = parameter(
         5.0, 'Shortest interval between two warnings about rejected input, s (wall time; logging only).',
-        minimum=0.0, maximum=3600.0)
+        minimum=0.0, maximum=3600.0, read_only=False)
+    hardware_id: str = hardware_id_parameter('gnss_receiver')
+    diagnostics_window_s: float = diagnostics_window_parameter()
+    warn_rejected_fraction: float = warn_rejected_fraction_parameter()
+    warn_lost_fraction: float = warn_lost_fraction_parameter()
 
     def __post_init__(self) -> None:
         validate_ranges(self)
@@ -286,6 +306,8 @@ class ImmCarrierNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('imm_carrier', **kwargs)
         self.params = declare(self, CarrierNodeParams)
+        self.runtime = RuntimeParameters(self, self.params)
+        self._window = CountWindow(self.params.diagnostics_window_s)
         self.trackers = {m: CarrierTracker(self.params.tracker_params(m)) for m in self.params.methods}
         self.counts: Counter[str] = Counter()
         for key in ('arrays_received', 'arrays_processed', 'arrays_dropped_handler_error', 'stamp_restarts',
@@ -307,6 +329,8 @@ class ImmCarrierNode(Node):
 
     def on_correlators(self, msg: CorrelatorArray | bytes) -> None:
         """One CorrelatorArray, serialised (the raw subscription) or as a message object."""
+        if self.runtime.pending:  # between two arrays: the safe point for a parameter change
+            self.runtime.apply_pending(self._apply_parameters)
         self.counts['arrays_received'] += 1
         try:
             stamp_ns = self._on_array(msg)
@@ -383,6 +407,13 @@ class ImmCarrierNode(Node):
         self.get_logger().error(f'{method} tracker fault ({type(err).__name__}: {err}); its channels restart',
                                 throttle_duration_sec=self.params.warning_throttle_s)
 
+    def _apply_parameters(self, old: CarrierNodeParams, new: CarrierNodeParams) -> None:
+        """A change of the settable parameters (node-level only: module docstring)."""
+        self.params = new
+        self._window.window_ns = int(round(new.diagnostics_window_s * 1e9))
+        self.get_logger().info('parameters changed: ' + ', '.join(
+            f'{name} = {getattr(new, name)!r}' for name in changed_names(old, new)))
+
     def tracker_counters(self, method: str) -> dict[str, int]:
         """Counters of tracker ``method`` since start (including trackers replaced after a fault)."""
         total = Counter(self._retired[method])
@@ -427,34 +458,45 @@ class ImmCarrierNode(Node):
     def diagnostics(self, stamp_ns: int) -> DiagnosticArray:
         """The /diagnostics message at ``stamp_ns`` (an accepted input stamp); levels in the module docstring."""
         values = self._values()
+        p = self.params
         totals = Counter({
-            'rejected': sum(self.counts[f'rejected_arrays_{r}'] for r in ARRAY_REJECTION_REASONS) + sum(
-                rejected_total(self.tracker_counters(m)) for m in self.trackers),
             'faults': sum(self.counts[f'{m}.core_faults'] for m in self.trackers),
             'callback_errors': self.health.callback_errors_total(),
-            'lost': self.health.lost_total(),
-            'invalid': sum(self.tracker_counters(m)[k] for m in self.trackers for k in TRACKER_PROBLEM_KEYS),
         })
         new = totals - self._at_last_report  # Counter subtraction keeps the positive differences
         self._at_last_report = totals
+        rejected_arrays = sum(self.counts[f'rejected_arrays_{r}'] for r in ARRAY_REJECTION_REASONS)
+        w = self._window.update(stamp_ns, {
+            'arrays': self.counts['arrays_received'], 'rejected_arrays': rejected_arrays,
+            'correlators': self.counts['correlators_received'] * len(self.trackers),
+            'rejected_correlators': sum(rejected_total(self.tracker_counters(m)) for m in self.trackers),
+            'lost': self.health.lost_total(),
+            'invalid': sum(self.tracker_counters(m)[k] for m in self.trackers for k in TRACKER_PROBLEM_KEYS)})
+        checks = [('arrays rejected', w['rejected_arrays'], w['arrays']),
+                  ('correlators rejected', w['rejected_correlators'], w['correlators'])]
+        lost = ('messages lost', w['lost'], w['arrays'] + w['lost'])
+        values['window_s'] = p.diagnostics_window_s
         if not values['accounting_ok']:
             level, text = ERROR, 'input accounting does not add up'
         elif new['faults'] or new['callback_errors']:
             level, text = ERROR, (f'{new["faults"]} tracker faults (channels restarted) and {new["callback_errors"]} '
                                   f'handler errors since the last report')
-        elif new['rejected'] or new['lost'] or new['invalid']:
-            level, text = WARN, (f'since the last report: {new["rejected"]} inputs rejected, {new["lost"]} messages '
-                                 f'lost, {new["invalid"]} invalid estimates (channels restarted or unlocked)')
         else:
-            level, text = OK, 'tracking'
-        return diagnostic_array(stamp_ns, 'imm_carrier', self.get_name(), level,
+            degraded = degraded_inputs(checks, p.warn_rejected_fraction) + degraded_inputs([lost], p.warn_lost_fraction)
+            if w['invalid']:
+                degraded.append(f'{w["invalid"]} invalid estimates (channels restarted or unlocked)')
+            if degraded:
+                level, text = WARN, f'inputs degraded (window {p.diagnostics_window_s:g} s): ' + '; '.join(degraded)
+            else:
+                level, text = OK, 'tracking'
+        return diagnostic_array(stamp_ns, 'imm_carrier', p.hardware_id, level,
                                 f'{text}; {self._channels_text(values)}', values)
 
     def _publish_stale(self, silent_s: float) -> None:
         """STALE report of the StaleInputWatch (wall clock): no input for ``silent_s``; stamped with the node clock."""
         values = self._values()
         self.diag_pub.publish(diagnostic_array(
-            self.get_clock().now().nanoseconds, 'imm_carrier', self.get_name(), STALE,
+            self.get_clock().now().nanoseconds, 'imm_carrier', self.params.hardware_id, STALE,
             f'no input on {self.subscription.topic_name} for {silent_s:.1f} s (wall clock); '
             f'{self._channels_text(values)}', values))
 

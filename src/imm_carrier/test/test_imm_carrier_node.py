@@ -45,6 +45,10 @@ class Rig(NodeRig):
         params = dict(params or {})
         if args is None:
             params.setdefault('input_timeout_s', 0.0)  # no wall-clock STALE report in the middle of a test
+        if 'diagnostics_period_s' in params:
+            # levels over the last report only (window = period), as the level tests below are written;
+            # test_levels_use_fractions_over_the_window checks the window itself
+            params.setdefault('diagnostics_window_s', params['diagnostics_period_s'])
         if reliable:  # the tests count every message: make the (best-effort by default) input reliable
             params.setdefault(f'qos_overrides.{TOPIC}.subscription.reliability', 'reliable')
         super().__init__(lambda context, overrides: ImmCarrierNode(context=context, parameter_overrides=overrides),
@@ -534,7 +538,7 @@ def test_lost_messages_raise_the_level_to_warn(rig_factory):
     assert level(rig) == DiagnosticStatus.OK
     rig.node.health.middleware_lost(TOPIC, 3)  # what the subscription's message-lost event handler records
     rig.send(clean_array(4))
-    assert level(rig) == DiagnosticStatus.WARN and '3 messages lost' in rig.diagnostics[-1].status[0].message
+    assert level(rig) == DiagnosticStatus.WARN and 'messages lost 3/' in rig.diagnostics[-1].status[0].message
     assert rig.last_values()[f'input.{TOPIC}.middleware_lost'] == '3'
     rig.send(clean_array(5))
     assert level(rig) == DiagnosticStatus.OK
@@ -614,3 +618,51 @@ def test_fuzzed_arrays_never_raise_and_never_publish_an_invalid_locked_estimate(
     finally:
         node.destroy_node()
         rclpy.shutdown(context=context)
+
+
+def test_levels_use_fractions_over_the_window_and_name_the_hardware(rig_factory):
+    """One rejected array in 50 (2 %) over the 0.4 s window stays OK; a burst of rejections is WARN until it
+    leaves the window. hardware_id is the parameter, not the node name."""
+    rig = rig_factory({'method': 'imm', 'diagnostics_period_s': 0.02, 'diagnostics_window_s': 0.4,
+                       'hardware_id': 'ublox-zed#1'})
+    k = 0
+    for k in range(1, 41):
+        rig.send(clean_array(k))
+        if k == 20:
+            rig.send(array(START_NS + (k - 3) * T_NS, [correlator(3), correlator(7)]))   # stamp going back
+    status = rig.diagnostics[-1].status[0]
+    assert status.level == DiagnosticStatus.OK and status.hardware_id == 'ublox-zed#1'
+    assert rig.last_values()['rejected_arrays_stamp_not_increasing'] == '1'
+    for _ in range(4):   # 4 of the next ~20 arrays rejected: 20 %
+        k += 1
+        rig.send(clean_array(k))
+        rig.send(array(START_NS + (k - 3) * T_NS, [correlator(3), correlator(7)]))
+    k += 1
+    rig.send(clean_array(k))   # a refused stamp never drives the report: the next accepted one does
+    status = rig.diagnostics[-1].status[0]
+    assert status.level == DiagnosticStatus.WARN and 'arrays rejected 4/' in status.message
+    for _ in range(25):   # 0.5 s of clean arrays: the burst leaves the window
+        k += 1
+        rig.send(clean_array(k))
+    assert rig.diagnostics[-1].status[0].level == DiagnosticStatus.OK
+
+
+def test_settable_parameters_change_while_running_and_tracker_parameters_stay_read_only(rig_factory):
+    from rfi_node_common.params import set_parameters_remotely
+
+    rig = rig_factory({'method': 'imm', 'diagnostics_period_s': 0.01})
+    for k in range(1, 6):
+        rig.send(clean_array(k))
+
+    def param_set(**values):
+        return set_parameters_remotely(rig.io, rig.executor, '/imm_carrier', values)
+
+    assert all(r.successful for r in param_set(hardware_id='receiver#2', warn_rejected_fraction=0.3))
+    rig.send(clean_array(6))
+    assert rig.diagnostics[-1].status[0].hardware_id == 'receiver#2' and rig.node.params.warn_rejected_fraction == 0.3
+    for name, value in (('lock_phase_std_max_rad', 0.3), ('method', 'pll'), ('channel_timeout_s', 2.0)):
+        (result,) = param_set(**{name: value})
+        assert not result.successful and 'read-only' in result.reason, name
+    (result,) = param_set(warn_lost_fraction=1.5)
+    assert not result.successful and 'out of range' in result.reason
+    assert rig.node.params.lock_phase_std_max_rad == 0.5

@@ -12,8 +12,12 @@ the node reports its counters and, with ``exit_at_end`` (default), shuts down (e
 
 Pacing (``pace``): ``real_time`` publishes each block of a file when it would have been complete had the
 capture been live (block end time after the first block's start, on the steady clock); ``max`` publishes as
-fast as the subscribers take it: with ``reliability`` ``reliable`` every block waits until each matched
-subscriber has acknowledged it, so nothing is lost. A live stream is paced by its source in both modes.
+fast as it reads, and with ``reliability`` ``reliable`` waits every ACK_EVERY_BLOCKS (500, half the queue
+depth) blocks and at the end until each matched subscriber has acknowledged them, so the publisher's queue
+never overwrites a block a subscriber has not received (waiting after every block would cost a DDS heartbeat
+period, 3 s with Fast DDS, per block). A subscriber that does not drain its own queue (the monitor's: 1000
+blocks) in time loses blocks and counts them as lost; to lose nothing whatever the subscriber's speed, write a
+bag with ``if_to_bag`` and play it with ``play`` / ``run``. A live stream is paced by its source in both modes.
 ``wait_for_subscribers`` (default 0) holds the input until that many subscribers have matched (a file
 replayed into a monitor started at the same time loses nothing), for at most ``wait_timeout_s``.
 
@@ -85,8 +89,11 @@ READ_BYTES = 1 << 16
 """Bytes asked of one read (a pipe's default capacity on Linux)."""
 
 ACK_TIMEOUT_S = 30.0
-"""Longest wait for the acknowledgement of one block in ``max`` pace (reliable), s; then the block is counted
-as ``unacknowledged_blocks`` and reading goes on."""
+"""Longest wait for the subscribers' acknowledgements (``max`` pace and end of input, reliable), s; then
+``unacknowledged_waits`` counts it and reading goes on."""
+
+ACK_EVERY_BLOCKS = 500
+"""In ``max`` pace (reliable), wait for the acknowledgements after this many blocks (half DATA_QOS's depth)."""
 
 FORMAT_FIELDS = ('item_type', 'sampling_frequency_hz', 'intermediate_frequency_hz', 'center_frequency_hz',
                  'spectral_inversion', 'sample_type', 'big_endian_bytes', 'big_endian_items', 'bits_per_sample',
@@ -136,7 +143,7 @@ class IfSourceParams:
         'clock when the first byte arrives.')
     pace: str = parameter(
         'real_time', 'real_time: a file is published at its sample rate; max: as fast as the subscribers take '
-        'it (reliable: every block acknowledged). A live stream is paced by its source.',
+        'it (reliable: acknowledged every 500 blocks and at the end). A live stream is paced by its source.',
         choices=('real_time', 'max'))
     reliability: str = parameter(
         'reliable', 'QoS of /rfi/if_samples: reliable (keep last 1000) or best_effort (sensor data profile).',
@@ -257,14 +264,17 @@ class IfSourceNode(Node):
         finally:
             if self.assembler is not None:
                 self.assembler.finish()
-            if self.params.reliability == 'reliable' and self.pub.get_subscription_count() > 0 \
-                    and not self.pub.wait_for_all_acked(_duration(ACK_TIMEOUT_S)):
-                self.counts['unacknowledged_blocks'] += 1
+            self._wait_for_acks()
             self._report_end()
             self.done.set()
             if self.params.exit_at_end and not self.stop.is_set() and self.context.ok():
                 self.get_logger().info('end of input: shutting down (exit_at_end)')
                 self.context.try_shutdown()
+
+    def _wait_for_acks(self) -> None:
+        if self.params.reliability == 'reliable' and self.pub.get_subscription_count() > 0 \
+                and not self.pub.wait_for_all_acked(_duration(ACK_TIMEOUT_S)):
+            self.counts['unacknowledged_waits'] += 1
 
     def _wait_for_subscribers(self) -> None:
         want = self.params.wait_for_subscribers
@@ -318,10 +328,8 @@ class IfSourceNode(Node):
                     return
             self.pub.publish(block_message(block, self.fmt, self.params.frame_id))
             self.counts['blocks_published'] += 1
-            if self.params.pace == 'max' and self.params.reliability == 'reliable' \
-                    and self.pub.get_subscription_count() > 0 \
-                    and not self.pub.wait_for_all_acked(_duration(ACK_TIMEOUT_S)):
-                self.counts['unacknowledged_blocks'] += 1
+            if self.params.pace == 'max' and self.counts['blocks_published'] % ACK_EVERY_BLOCKS == 0:
+                self._wait_for_acks()
             self._last_stamp_ns = block.stamp_ns
             if self._timer.due(block.stamp_ns):
                 self._publish_diagnostics(block.stamp_ns, final=False)
@@ -337,7 +345,7 @@ class IfSourceNode(Node):
         if self.fmt.item_type == 'gr_complex':
             for key in ('rounded_values', 'clipped_values', 'non_finite_values'):
                 v[key] = asm.get(key, 0)
-        for key in ('blocks_published', 'pipe_full_reads', 'read_errors', 'unacknowledged_blocks'):
+        for key in ('blocks_published', 'pipe_full_reads', 'read_errors', 'unacknowledged_waits'):
             v[key] = self.counts.get(key, 0)
         v['lag_s'] = round(self.lag.lag_s, 6) if self.lag is not None else 'off'
         v['subscribers'] = self.pub.get_subscription_count()
@@ -350,7 +358,7 @@ class IfSourceNode(Node):
         if v['read_errors']:
             return ERROR, 'the input failed'
         warn = [k for k in ('gaps', 'trailing_bytes', 'rounded_values', 'clipped_values', 'non_finite_values',
-                            'pipe_full_reads', 'unacknowledged_blocks') if v.get(k)]
+                            'pipe_full_reads', 'unacknowledged_waits') if v.get(k)]
         if warn:
             return WARN, 'counted: ' + ', '.join(f'{k} {v[k]}' for k in warn)
         return OK, 'publishing'

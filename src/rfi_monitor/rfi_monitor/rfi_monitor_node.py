@@ -87,7 +87,11 @@ core's counters (``core.*``), calibrated, the last type, the subscription's ``in
 ``accounting_ok`` (every block that reached the subscription reached the handler, and
 blocks_received == blocks_processed + sum of rejected_*). Level: ERROR if the accounting does not
 add up, the core or the node raised, or the subscription's guard caught an exception since the last report;
-WARN if blocks were rejected or messages lost since the last report; else OK.
+WARN (input degraded) if over the last ``diagnostics_window_s`` of stamp time more than
+``warn_rejected_fraction`` of the blocks was rejected or more than ``warn_lost_fraction`` lost before
+reaching the node (one rejected block among many stays OK); else OK. ``hardware_id`` of every status is
+the parameter (the front end), and it, the window, the thresholds and ``warning_throttle_s`` can be set
+while the node runs (rfi_node_common.params.RuntimeParameters; the core's parameters are read-only).
 
 Stale input: :class:`rfi_node_common.inputs.StaleInputWatch` publishes a STALE status (stamped with
 the node clock, the only wall-clock use; no estimate depends on it) while nothing has arrived for
@@ -118,16 +122,22 @@ from rfi_node_common.diagnostics import (
     OK,
     STALE,
     WARN,
+    CountWindow,
     StampTimer,
+    degraded_inputs,
     diagnostic_array,
+    diagnostics_window_parameter,
+    hardware_id_parameter,
     input_timeout_parameter,
     max_stamp_jump_parameter,
     stamp_jump_confirmations_parameter,
+    warn_lost_fraction_parameter,
+    warn_rejected_fraction_parameter,
 )
 from rfi_node_common.input_checks import StampGate
 from rfi_node_common.inputs import InputHealth, StaleInputWatch, subscribe_input
 from rfi_node_common.main import run_node
-from rfi_node_common.params import declare, parameter, validate_ranges
+from rfi_node_common.params import RuntimeParameters, changed_names, declare, parameter, validate_ranges
 from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS
 from rfi_node_common.stamps import NS_PER_S, stamp_to_ns
 
@@ -195,7 +205,12 @@ class MonitorNodeParams:
         1.0, 'Period of /diagnostics in message (stamp) time, s.', minimum=0.001, maximum=3600.0)
     warning_throttle_s: float = parameter(
         5.0, 'Shortest interval between two warnings about rejected blocks, s (wall time; logging only).',
-        minimum=0.0, maximum=3600.0)
+        minimum=0.0, maximum=3600.0, read_only=False)
+    # diagnostics levels and hardware_id (rfi_node_common.diagnostics), settable while running
+    hardware_id: str = hardware_id_parameter('rf_front_end')
+    diagnostics_window_s: float = diagnostics_window_parameter()
+    warn_rejected_fraction: float = warn_rejected_fraction_parameter()
+    warn_lost_fraction: float = warn_lost_fraction_parameter()
     input_timeout_s: float = input_timeout_parameter()
     max_stamp_jump_s: float = max_stamp_jump_parameter(10.0)
     stamp_jump_confirmations: int = stamp_jump_confirmations_parameter(3)
@@ -495,15 +510,15 @@ class RfiMonitorNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('rfi_monitor', **kwargs)
         self.params = declare(self, MonitorNodeParams)
+        self.runtime = RuntimeParameters(self, self.params)  # the settable parameters: applied between blocks
+        self._window = CountWindow(self.params.diagnostics_window_s)
         self.monitor = RfiMonitor(self.params.monitor_params())
         self.counts: Counter[str] = Counter()
         self.health = InputHealth()
         self._gate = StampGate(self.params.max_stamp_jump_s, self.params.stamp_jump_confirmations)
         self._core_counters: dict[str, int] = {}
         self._last_type: int | None = None
-        self._rejected_at_last_report = 0
         self._errors_at_last_report = 0
-        self._lost_at_last_report = 0
         self._handler_errors_at_last_report = 0
         self._diag_timer = StampTimer(self.params.diagnostics_period_s)
         self.state_pub = self.create_publisher(JammerState, 'rfi/jammer_state', DATA_QOS)
@@ -517,6 +532,8 @@ class RfiMonitorNode(Node):
     def on_raw_block(self, raw: bytes | IfSamples) -> None:
         """A serialised block: deserialised by rclpy, or counted as ``rejected_malformed_message`` (a message
         object, as an in-process hand-over may give, goes straight to :meth:`on_block`)."""
+        if self.runtime.pending:
+            self.runtime.apply_pending(self._apply_parameters)
         if isinstance(raw, IfSamples):
             self.on_block(raw)
             return
@@ -596,11 +613,19 @@ class RfiMonitorNode(Node):
             self.get_logger().error(f'/diagnostics not published: {type(err).__name__}: {err}',
                                     throttle_duration_sec=self.params.warning_throttle_s)
 
+    def _apply_parameters(self, old: MonitorNodeParams, new: MonitorNodeParams) -> None:
+        """A change of the settable parameters (node-level only: hardware_id, the diagnostics window and
+        thresholds, warning_throttle_s; the core's parameters are read-only)."""
+        self.params = new
+        self._window.window_ns = int(round(new.diagnostics_window_s * 1e9))
+        self.get_logger().info('parameters changed: ' + ', '.join(
+            f'{name} = {getattr(new, name)!r}' for name in changed_names(old, new)))
+
     def publish_stale(self, silent_s: float) -> None:
         """StaleInputWatch: a STALE status stamped with the node clock (no input for ``silent_s`` s)."""
         def make() -> DiagnosticArray:
             topic = self.subscription.topic_name
-            return diagnostic_array(max(0, self.get_clock().now().nanoseconds), 'rfi_monitor', self.get_name(),
+            return diagnostic_array(max(0, self.get_clock().now().nanoseconds), 'rfi_monitor', self.params.hardware_id,
                                     STALE, f'no input on {topic} for {silent_s:.1f} s', self.accounting())
         self._publish(make)
 
@@ -625,31 +650,36 @@ class RfiMonitorNode(Node):
         """The /diagnostics message at ``stamp_ns`` (levels: see the module docstring)."""
         values = self.accounting()
         rejected = rejected_total(self.counts)
-        new = rejected - self._rejected_at_last_report
-        self._rejected_at_last_report = rejected
         errors = self.counts['rejected_core_error'] + self.counts['rejected_node_error']
         new_errors = errors - self._errors_at_last_report
         self._errors_at_last_report = errors
         lost = self.health.lost_total()
-        new_lost = lost - self._lost_at_last_report
-        self._lost_at_last_report = lost
         handler_errors = self.health.callback_errors_total()
         new_handler_errors = handler_errors - self._handler_errors_at_last_report
         self._handler_errors_at_last_report = handler_errors
         state = f'last type {values["last_type"]}' if self.monitor.calibrated else 'learning the noise floor'
+        degraded = self._degraded(stamp_ns, rejected, lost)  # every report moves the window
         if not values['accounting_ok']:
             level, text = ERROR, 'block accounting does not add up'
         elif new_errors:
             level, text = ERROR, f'{new_errors} blocks made the core or the node raise since the last report'
         elif new_handler_errors:
             level, text = ERROR, f'the input handler raised {new_handler_errors} times since the last report'
-        elif new or new_lost:
-            parts = [f'{new} blocks rejected'] if new else []
-            parts += [f'{new_lost} messages lost'] if new_lost else []
-            level, text = WARN, ' and '.join(parts) + ' since the last report'
+        elif degraded:
+            level, text = WARN, (f'inputs degraded (window {self.params.diagnostics_window_s:g} s): '
+                                 + '; '.join(degraded))
         else:
             level, text = OK, 'monitoring'
-        return diagnostic_array(stamp_ns, 'rfi_monitor', self.get_name(), level, f'{text}; {state}', values)
+        return diagnostic_array(stamp_ns, 'rfi_monitor', self.params.hardware_id, level, f'{text}; {state}', values)
+
+    def _degraded(self, stamp_ns: int, rejected: int, lost: int) -> list[str]:
+        """WARN texts: rejected / lost fractions of the blocks over diagnostics_window_s above their thresholds
+        (an isolated rejected block among many stays OK)."""
+        w = self._window.update(stamp_ns, {'received': self.counts['blocks_received'], 'rejected': rejected,
+                                           'lost': lost})
+        return (degraded_inputs([('blocks rejected', w['rejected'], w['received'])], self.params.warn_rejected_fraction)
+                + degraded_inputs([('messages lost', w['lost'], w['received'] + w['lost'])],
+                                  self.params.warn_lost_fraction))
 
 
 def main(argv=None) -> int:

@@ -50,7 +50,9 @@ SPIN_DEADLINE_S = 30.0
 
 def _parameters(**overrides) -> list[Parameter]:
     # no STALE reports on the wall clock unless a test asks for them: every output is then caused by a block
-    base = {'diagnostics_period_s': 0.001, 'noise_bandwidth_hz': NOISE_BW_HZ, 'input_timeout_s': 0.0}
+    # diagnostics window = period: the levels tested here are those of the blocks since the last report
+    base = {'diagnostics_period_s': 0.001, 'diagnostics_window_s': 0.001, 'noise_bandwidth_hz': NOISE_BW_HZ,
+            'input_timeout_s': 0.0}
     base.update(overrides)
     return [Parameter(k, value=v) for k, v in base.items()]
 
@@ -77,7 +79,7 @@ class Probe(NodeRig):
 
     def _own_diagnostics(self, msg: DiagnosticArray) -> bool:
         return bool(msg.status) and msg.status[0].name == 'rfi_monitor' \
-            and msg.status[0].hardware_id == self.node.get_name()
+            and msg.status[0].hardware_id == self.node.params.hardware_id
 
     def send(self, msg: IfSamples) -> JammerState | None:
         """Publish one block; return the JammerState it produced (None if it produced none)."""

@@ -109,7 +109,7 @@ def diagnostics_window_parameter(default_s: float = 10.0) -> object:
     return parameter(
         default_s, 'Window of message (stamp) time over which /diagnostics computes the rejected and lost '
         'fractions of the input that set WARN, s (counts since start until the window has filled).',
-        minimum=0.01, maximum=3600.0, read_only=False)
+        minimum=0.001, maximum=3600.0, read_only=False)
 
 
 def warn_rejected_fraction_parameter(default: float = 0.1) -> object:
