@@ -123,13 +123,16 @@ def test_each_suite_lives_in_its_namespace_and_sees_only_itself(runs, namespace)
     assert 'rfi_monitor 0, uwb_gnss_fusion 0, imm_carrier 0, play 0' in replay
 
 
-def test_run_refuses_a_namespace_it_cannot_honour(tmp_path):
+def test_run_refuses_what_it_cannot_honour(tmp_path):
     """--namespace applies to the processes transport; a namespace given as a ROS remap would leave
-    play and the recorder at the root, so run asks for --namespace; an invalid name is refused."""
+    play and the recorder at the root, so run asks for --namespace; an invalid name is refused; a
+    parameters file would not reach nodes that run does not start."""
     env = dict(os.environ)
     for extra, message in ((('--transport', 'direct', '--namespace', '/a'), 'apply to --transport processes only'),
                            (('--transport', 'processes', '--ros-args', '-r', '__ns:=/a'), 'give the namespace as'),
-                           (('--transport', 'processes', '--namespace', '/1a'), 'not a ROS namespace')):
+                           (('--transport', 'processes', '--namespace', '/1a'), 'not a ROS namespace'),
+                           (('--transport', 'processes', '--external-nodes', '--params-file', str(PARAMS)),
+                            'give it to the nodes themselves')):
         done = subprocess.run([sys.executable, '-m', 'rfi_experiments.run', str(BAG), '--out', str(tmp_path / 'r'),
                                *extra], capture_output=True, text=True, timeout=60, env=env)
         assert done.returncode == 2, (extra, done.stderr)

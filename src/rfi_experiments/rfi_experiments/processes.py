@@ -89,6 +89,7 @@ SYNCED = (('rfi_monitor', '/rfi/if_samples', '/rfi/jammer_state'),)
 monitor's jammer state, so the fusion gets it before the GNSS and UWB messages that follow the
 block in the bag, as in a replay in one process, however long the monitor takes for a block."""
 
+
 def suite_topic(namespace: str, topic: str) -> str:
     """The name of one of the suite's topics (a root name: ``/rfi/if_samples``) under ``namespace``
     (``/`` or ``''``: the root name itself)."""

@@ -219,6 +219,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             return fail(f'--{name.replace("_", "-")} must be a finite number > 0 (got {value})')
     if args.transport != 'processes' and (args.namespace != '/' or args.external_nodes):
         return fail('--namespace and --external-nodes apply to --transport processes only')
+    if args.external_nodes and args.params_file:
+        return fail('--params-file sets the parameters of the nodes run starts; with --external-nodes give it to the '
+                    'nodes themselves (--ros-args --params-file FILE)')
     if any(a.startswith('__ns:=') for a in ros_arguments(argv)):
         return fail('give the namespace as --namespace NS (run moves play and its recorder there too), '
                     'not as --ros-args -r __ns:=NS')
