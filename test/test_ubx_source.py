@@ -71,7 +71,7 @@ def ubx_log(tmp_path_factory) -> Path:
             stream += ephemeris_frames(used, epoch.gps_week, epoch.gps_time_of_week_s)
         if k == 5:
             corrupt_at = len(stream) + 40
-        stream += rawx_frame(epoch) + mon_hw_frame(2, 40 + k, 1300 - k, 95)
+        stream += rawx_frame(epoch, leap_seconds=17) + mon_hw_frame(2, 40 + k, 1300 - k, 95)  # 2015: 17 s
     stream[corrupt_at] ^= 0xFF  # the RAWX frame of epoch 5: a bad checksum, counted; the stream goes on
     path = tmp_path_factory.mktemp('ubx') / 'sim.ubx'
     path.write_bytes(bytes(stream))
@@ -137,6 +137,7 @@ def test_file_gives_the_messages_of_ubx_to_bag(ubx_log):
     assert [fields(m) for m in probe.reports] == [fields(m) for m in reports]
     assert probe.final is not None
     assert probe.final['bad_checksum'] == '1' and probe.final['epochs_waiting_for_ephemeris'] == '2'
+    assert probe.final['leap_seconds_disagree'] == '0' and probe.final['port_losses'] == '0'
     assert probe.final['epochs_sent'] == str(len(expected)) and probe.final['port_state'] == 'closed'
 
 

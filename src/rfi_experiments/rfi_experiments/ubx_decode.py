@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 
 from gnss_common.ephemeris import GpsEphemeris
-from gnss_common.gps_time import gps_to_ros_stamp_ns
+from gnss_common.gps_time import gps_to_ros_stamp_ns, leap_seconds_at_gps
 from gnss_common.inav import InavAssembler
 from gnss_common.lnav import KlobucharParams, LnavAssembler
 from gnss_common.measurements import SKIP_REASONS, GnssEpochBuilder, MeasurementBuilderParams
@@ -90,7 +90,8 @@ def header_stamp_ns(week: int, tow_s: float) -> int:
     """Header stamp of a receive time given as GPS week / time of week: ROS time (UTC-based), ns.
 
     The suite's one conversion, :func:`gnss_common.gps_time.gps_to_ros_stamp_ns` (leap seconds
-    from its table; the receiver's own leapS is kept in :class:`RawxEpoch` but not used).
+    from its table; the receiver's own leapS is kept in :class:`RawxEpoch`, and an epoch whose
+    valid leapS differs from the table is counted as ``leap_seconds_disagree``).
     """
     return gps_to_ros_stamp_ns(week, tow_s)
 
@@ -422,8 +423,8 @@ Output = EpochOutput | InterferenceReport
 COUNTER_KEYS = (
     "frames", "skipped_bytes", *REJECT_REASONS, "unknown_messages", "rawx_epochs", "epochs_published",
     "epochs_waiting_for_ephemeris", "interference_reports", "interference_before_time",
-    "sfrbx_subframes", "sfrbx_without_week", "ephemerides_decoded", "klobuchar_decoded", "unmapped_measurements",
-    "ionosphere_unavailable",
+    "leap_seconds_disagree", "sfrbx_subframes", "sfrbx_without_week", "ephemerides_decoded",
+    "klobuchar_decoded", "unmapped_measurements", "ionosphere_unavailable",
 )
 
 
@@ -589,6 +590,8 @@ class UbxDecoder:
     def _on_rawx(self, rawx: RawxEpoch) -> list[Output]:
         self.counts["rawx_epochs"] += 1
         stamp = header_stamp_ns(rawx.week, rawx.tow_s)
+        if rawx.leap_seconds_valid and rawx.leap_seconds != leap_seconds_at_gps(rawx.week, rawx.tow_s):
+            self.counts["leap_seconds_disagree"] += 1  # the stamp keeps the suite's table; counted
         self._last_time = (stamp, rawx.week, rawx.tow_s)
         if self._pending_sfrbx:
             pending, self._pending_sfrbx = self._pending_sfrbx, []

@@ -147,6 +147,16 @@ def test_rawx_to_rinex_observables():
     assert (obs.gps_week, obs.tow_s) == (2327, 223793.0)
 
 
+def test_receiver_leap_seconds_are_checked_against_the_table():
+    frames = frames_of(RAWX)  # 2024, leapS 18 (valid)
+    dec = UbxDecoder()
+    decode_stream([b"".join(frames)], dec)
+    assert dec.counts["leap_seconds_disagree"] == 0
+    msg = UBXMessage("RXM", "RXM-RAWX", GET, rcvTow=223793.0, week=2327, leapS=17, leapSec=1, numMeas=0, version=1)
+    decode_stream([msg.serialize()], dec)
+    assert dec.counts["leap_seconds_disagree"] == 1
+
+
 def test_invalid_pseudorange_is_never_used():
     msg = UBXMessage("RXM", "RXM-RAWX", GET, rcvTow=100.0, week=2000, leapS=18, numMeas=1, version=1,
                      prMes_01=2.1e7, cpMes_01=0.0, doMes_01=10.0, gnssId_01=0, svId_01=5, sigId_01=0, cno_01=40,

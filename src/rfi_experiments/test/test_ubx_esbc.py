@@ -34,17 +34,15 @@ def esbc():
     nav = read_rinex_nav(NAV)
     epochs = obs.epochs[:N_EPOCHS]
     first = epochs[0]
-    store = EphemerisStore(list(nav.ephemerides) + [e for e in nav.other_ephemerides if e.system == "E"])
-    gps, gal = [], []
-    for sat in sorted(first.observations):
-        if sat[0] in "GE":
-            eph, _ = store.select(int(sat[1:]), first.gps_week, first.tow_s) if sat[0] == "G" else (None, "")
-            if sat[0] == "E":
-                cands = [e for e in nav.other_ephemerides if e.system == "E" and e.prn == int(sat[1:])]
-                cands = [e for e in cands if abs(e.toe_s - first.tow_s) <= 7200.0]
-                eph = min(cands, key=lambda e: abs(e.toe_s - first.tow_s), default=None)
-            if eph is not None:
-                (gps if sat[0] == "G" else gal).append(eph)
+    store = EphemerisStore(nav.ephemerides)
+    gps = [store.select(int(s[1:]), first.gps_week, first.tow_s)[0] for s in sorted(first.observations) if s[0] == "G"]
+    gps = [e for e in gps if e is not None]
+    gal = []
+    for sat in sorted(s for s in first.observations if s[0] == "E"):  # the record nearest the first epoch
+        cands = [e for e in nav.other_ephemerides if e.system == "E" and e.prn == int(sat[1:])
+                 and abs(e.toe_s - first.tow_s) <= 7200.0]
+        if cands:
+            gal.append(min(cands, key=lambda e: abs(e.toe_s - first.tow_s)))
     stream = bytearray(ephemeris_frames(gps, first.gps_week, first.tow_s))
     stream += galileo_frames(gal, first.tow_s - 2.0)
     stream += klobuchar_frame(gps[0].prn, nav.header.iono_alpha, nav.header.iono_beta, first.tow_s)

@@ -110,6 +110,7 @@ def test_ubx_to_bag_then_fusion_equals_the_direct_way(scenario, tmp_path, capsys
     msgs = _bag(tmp_path, path, f"--reference-position={ref}", "--no-receiver-std")  # "=": X may be negative
     printed = capsys.readouterr().out
     assert "epochs_waiting_for_ephemeris" in printed
+    assert "leap_seconds_disagree          0" in printed  # 2015: 17 s, as the stream says
     arrays = [(t, m) for topic, t, m in msgs if topic == ubx_to_bag.MEASUREMENTS_TOPIC]
     reports = [m for topic, _, m in msgs if topic == ubx_to_bag.INTERFERENCE_TOPIC]
     n = len(run.gnss_epochs)
