@@ -246,13 +246,19 @@ def block_features(x: np.ndarray, template: np.ndarray | None, par: ClassifierPa
         par: ClassifierParams.
     """
     psd, frames = welch_psd(x, par.nfft, par.max_frames)
+    return features_from_psd(psd, frames, template, par, np.iscomplexobj(x))
+
+
+def features_from_psd(psd: np.ndarray, frames: int, template: np.ndarray | None, par: ClassifierParams,
+                      cplx: bool) -> BlockFeatures:
+    """``block_features`` from a Welch PSD already computed (``welch_psd``) of real or complex samples."""
     tpl = np.full(psd.size, 1.0 / psd.size) if template is None else np.ascontiguousarray(template,
                                                                                       dtype=np.float64)
     (power, scale, jn_spec, occupancy, k, dk,
      line) = _spectral_features(psd, tpl, max(par.sig_sigma / math.sqrt(frames), par.min_excess),
                                 10 ** (-par.sidelobe_db / 10))
     nb = psd.size
-    if np.iscomplexobj(x):
+    if cplx:
         f_pk = (k + dk - nb // 2) / par.nfft
     else:
         f_pk = (k + dk) / par.nfft

@@ -60,6 +60,7 @@ Example
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -68,15 +69,21 @@ from types import MappingProxyType
 import numpy as np
 from numba import njit
 
+from rfi_monitor import ridge as rg
 from rfi_monitor import sweep_period as sp
 from rfi_monitor.classifier import (
     CHIRP,
     CW,
+    CW_MIN_LINE_FRACTION,
     NONE,
     UNKNOWN,
+    WIDEBAND,
     block_features,
     classify,
+    features_from_psd,
+    logistic,
     smooth_template,
+    welch_psd,
 )
 from rfi_monitor.if_measurement import (
     STATUS_CORRECTION,
@@ -164,8 +171,15 @@ class JammerEstimate:
         valid: False when the block was rejected (then type UNKNOWN, confidence 0, NaN fields).
         counters: cumulative counts (measurement status, rejected blocks, gaps, resets).
         traces: per-sample estimates when requested, else None.
-        rejection: why the block was rejected (module docstring: ``saturated``, ``blank_block``,
-            ``power_overflow``, ``below_noise_floor``); empty when valid.
+        rejection: why the block was rejected (module docstring: ``non_finite``, ``blank_block``,
+            ``power_overflow``, ``below_noise_floor``, ``implausible_power``); empty when valid.
+        noise_reference: REF_* code of the noise power J/N is measured against.
+        jammer_to_noise_is_lower_bound: clipping limits the J/N (more than
+            ``clip_lower_bound_fraction`` of the samples at full scale).
+        clipped_fraction: share of the block's samples at or beyond full scale, 0..1.
+        sweep_shape: ridge.SHAPE_* code (CHIRP only, else 0 = unknown).
+        in_band_fraction: share of the sweep period with the jammer inside the sampled band (CHIRP with
+            a period; NaN otherwise).
     """
 
     stamp_ns: int
@@ -186,14 +200,21 @@ class JammerEstimate:
     counters: Mapping[str, int]
     traces: BlockTraces | None = field(default=None, repr=False)
     rejection: str = ""
+    noise_reference: int = 0
+    jammer_to_noise_is_lower_bound: bool = False
+    clipped_fraction: float = 0.0
+    sweep_shape: int = 0
+    in_band_fraction: float = math.nan
 
 
 SATURATED = "saturated"
+"""Former rejection of clipped blocks (no longer produced: clipped blocks are analysed)."""
+NON_FINITE = "non_finite"
 BLANK_BLOCK = "blank_block"
 POWER_OVERFLOW = "power_overflow"
 BELOW_NOISE_FLOOR = "below_noise_floor"
 IMPLAUSIBLE_POWER = "implausible_power"
-REJECTIONS = (SATURATED, BLANK_BLOCK, POWER_OVERFLOW, BELOW_NOISE_FLOOR, IMPLAUSIBLE_POWER)
+REJECTIONS = (NON_FINITE, BLANK_BLOCK, POWER_OVERFLOW, BELOW_NOISE_FLOOR, IMPLAUSIBLE_POWER)
 """``JammerEstimate.rejection`` reasons (module docstring)."""
 BELOW_FLOOR_DB = 10.0
 """A calibrated block whose power is more than this below the noise floor is rejected, dB. The block power
@@ -204,10 +225,18 @@ MAX_POWER_JN_DB = 120.0
 the noise floor puts at least -114 + 120 = +6 dBm into the antenna port (noise density -114 dBm/MHz, band
 >= 1 MHz), beyond the 1 dB compression of GNSS low-noise amplifiers (about -20..0 dBm input) and the range of
 front-end AGCs (about 60 dB): such a block would be clipped, never a clean measurement of the jammer."""
+RESELECT_BLOCKS = 64
+"""The "stft" estimator chooses its frame length again every this many blocks while it reports a CW or a
+chirp, and on every block after one without (choosing costs a few short-time FFTs of a slice of the block)."""
 MIN_BLOCK_POWER = 1e-60
 """Smallest block power analysed, sample units^2 (1e-30 rms): below it the block is blank. The Welch PSD is
 computed in single precision, whose numbers lose precision below 1.2e-38 (subnormal) and end at 1.4e-45;
 no unit a front end reports in (volts, full scale, counts) comes near."""
+
+REF_IN_BLOCK, REF_LEARNED, REF_FIXED = 0, 1, 2
+"""J/N references, identical to rfi_msgs/JammerState.REF_*: the noise level measured inside the block
+(ridge module, step 2), the floor learned from earlier blocks that passed as noise, the configured one
+(``noise_floor_power`` or ``noise_floor_dbfs``)."""
 
 _STATUS_NAMES = {STATUS_OK: "measurements_ok", STATUS_NEAR_ZERO: "rejected_near_zero",
                  STATUS_DOMAIN: "rejected_arccos_domain", STATUS_NON_FINITE: "rejected_non_finite",
@@ -231,13 +260,20 @@ class RfiMonitor:
         self._packed: dict[bool, tuple[np.ndarray, np.ndarray]] = {}
         self._block_counters = {"blocks": 0, "blocks_rejected": 0, "gaps": 0, "rate_changes": 0,
                                 "non_finite_samples": 0, "saturated_samples": 0, "recalibrations": 0,
-                                "calibrations_discarded": 0}
+                                "calibrations_discarded": 0, "clipped_blocks": 0, "frequency_not_tracked": 0,
+                                "tracker_resets_invalid": 0}
         self._off_floor_run = 0
         self._cal_psd: list[np.ndarray] = []
         self._cal_pow: list[float] = []
         self._template: np.ndarray | None = None
         self._floor: float = params.noise_floor_power if params.noise_floor_power > 0 else math.nan
         self._cal_key: tuple | None = None
+        self._learn_pow: list[float] = []
+        self._learn_psd: list[np.ndarray] = []
+        self._lfloor = math.nan
+        self._ltemplate: np.ndarray | None = None
+        self._frame_length = 0
+        self._blocks_since_select = 0
         self.reset()
 
     # ------------------------------------------------------------------------------------------
@@ -258,10 +294,27 @@ class RfiMonitor:
         if not keep_calibration:
             self._forget_calibration()
             self._cal_key = None
+            self._forget_learned()
+        self._frame_length = 0
+
+    def _forget_learned(self) -> None:
+        self._learn_pow, self._learn_psd = [], []
+        self._lfloor, self._ltemplate = math.nan, None
+
+    def _reset_tracker(self) -> None:
+        """Fresh per-sample tracker state (stream position and calibration kept)."""
+        fst, ist, ring = self.params.tracker.initial_state()
+        self._state = new_tracker_state(fst, ist, ring, sp.initial_state())
+        self._analysis = None
+        self._stream_first = None
 
     @property
     def calibrated(self) -> bool:
-        """True once the noise floor (and shape, unless fixed) is known."""
+        """True once the noise floor (and shape, unless fixed) is known. The "stft" estimator does not wait
+        for it (its J/N reference is the in-block noise level until then): True once a floor is fixed
+        (``noise_floor_power``) or learned from ``calibration_blocks`` blocks that passed as noise."""
+        if self.params.estimator == "stft":
+            return self.params.noise_floor_power > 0 or math.isfinite(self._lfloor)
         return math.isfinite(self._floor) and self._template is not None
 
     # ------------------------------------------------------------------------------------------
@@ -354,18 +407,31 @@ class RfiMonitor:
                                           math.inf if full_scale is None else float(full_scale))
         self._block_counters["non_finite_samples"] += n_bad
         self._block_counters["saturated_samples"] += n_sat
+        clipped = n_sat / n
+        if n_sat:
+            self._block_counters["clipped_blocks"] += 1
+        if n_bad > self.params.max_invalid_fraction * n:
+            if self.params.estimator == "kalman":
+                self._run_chunks(np.where(np.isfinite(xc), xc, 0), cplx, int(first_sample_index),
+                                 float(sample_rate_hz), False)
+            return self._rejected(NON_FINITE, int(stamp_ns), float(sample_rate_hz), int(first_sample_index), n,
+                                  None)
+        xs = xc if n_bad == 0 else np.where(np.isfinite(xc), xc, 0)
+        if self.params.estimator == "stft":
+            return self._identify_stft(xs, cplx, float(sample_rate_hz), float(intermediate_frequency_hz),
+                                       int(stamp_ns), int(first_sample_index), clipped, full_scale)
         # --- per-sample loop (always run: keeps the state continuous) ---------------------------
         resets_before = int(self._state.mist[MonitorInt.NRESETS])
         if self._stream_first is None:
             self._stream_first = int(first_sample_index)
-        traces = self._run_chunks(xc, cplx, int(first_sample_index), float(sample_rate_hz), return_traces)
+        traces = self._run_chunks(xs, cplx, int(first_sample_index), float(sample_rate_hz), return_traces)
         self._resets_in_block = int(self._state.mist[MonitorInt.NRESETS]) - resets_before
-        if n_bad + n_sat > self.params.max_invalid_fraction * n:
-            return self._rejected(SATURATED, int(stamp_ns), float(sample_rate_hz), int(first_sample_index), n,
-                                  traces)
-        xs = xc if n_bad == 0 else np.where(np.isfinite(xc), xc, 0)
-        return self._identify(xs, cplx, float(sample_rate_hz), float(intermediate_frequency_hz),
-                              int(stamp_ns), int(first_sample_index), traces)
+        est = self._identify(xs, cplx, float(sample_rate_hz), float(intermediate_frequency_hz),
+                             int(stamp_ns), int(first_sample_index), traces)
+        lower = clipped > self.params.clip_lower_bound_fraction
+        ref = REF_FIXED if self.params.noise_floor_power > 0 else REF_LEARNED
+        return dataclasses.replace(est, noise_reference=ref, jammer_to_noise_is_lower_bound=lower and est.valid,
+                                   clipped_fraction=clipped)
 
     # ------------------------------------------------------------------------------------------
     def _run_chunks(self, xc: np.ndarray, cplx: bool, first: int, fs: float, store: bool) -> BlockTraces | None:
@@ -572,6 +638,17 @@ class RfiMonitor:
                 fstd = fs / cp.nfft / math.sqrt(12.0)
                 rate = 0.0
             else:
+                f_dig = float(st.fst[FilterFloat.F])
+                lo_dig = -0.5 if cplx else 0.0
+                if not (lo_dig <= f_dig <= 0.5 and math.isfinite(fstd) and fstd < 0.25 * fs
+                        and abs(df) < 0.5):
+                    # a run-away track (outside the sampled band, or a std no measurement supports):
+                    # never published as valid; the per-sample tracker starts again (issue 14 item 4)
+                    self._block_counters["tracker_resets_invalid"] += 1
+                    self._block_counters["frequency_not_tracked"] += 1
+                    self._reset_tracker()
+                    return JammerEstimate(stamp_ns, int(jtype), float(conf), float(jn), float(js), nan, nan, nan,
+                                          nan, nan, nan, fs, first, xs.size, True, self._counters(), traces)
                 rate = sgn * df * fs * fs
                 if locked:
                     per = per_s / fs
@@ -583,6 +660,136 @@ class RfiMonitor:
         return JammerEstimate(stamp_ns, int(jtype), float(conf), float(jn), float(js), freq, fstd, rate, per,
                               f0,
                               bw, fs, first, xs.size, True, self._counters(), traces)
+
+    # ------------------------------------------------------------------------------------------
+    def _reference(self, fs: float, cplx: bool, full_scale: float | None, inblock: float) -> tuple[float, int]:
+        """(noise power, REF_* code) J/N is measured against (module docstring, "stft")."""
+        p = self.params
+        if p.noise_floor_power > 0:
+            return p.noise_floor_power, REF_FIXED
+        if p.noise_floor_dbfs < 0 and full_scale is not None:
+            return (2.0 if cplx else 1.0) * full_scale ** 2 * 10 ** (p.noise_floor_dbfs / 10), REF_FIXED
+        if math.isfinite(self._lfloor):
+            return self._lfloor, REF_LEARNED
+        return inblock, REF_IN_BLOCK
+
+    def _identify_stft(self, xs: np.ndarray, cplx: bool, fs: float, fif: float, stamp_ns: int, first: int,
+                       clipped: float, full_scale: float | None) -> JammerEstimate:
+        """Identification and estimates of the "stft" estimator (module docstring)."""
+        p = self.params
+        cp = p.classifier
+        nan = math.nan
+        n = xs.size
+        psd, frames = welch_psd(xs, cp.nfft, cp.max_frames)
+        power = float(psd.sum())
+        if not math.isfinite(power):
+            return self._rejected(POWER_OVERFLOW, stamp_ns, fs, first, n, None)
+        if not power >= MIN_BLOCK_POWER:
+            return self._rejected(BLANK_BLOCK, stamp_ns, fs, first, n, None)
+        floor, ref = self._reference(fs, cplx, full_scale, math.nan)
+        if ref != REF_IN_BLOCK:
+            # a block far below or above a known floor: gain or scale no longer match it (module docstring);
+            # a learned floor that stays off for calibration_blocks blocks is learned again
+            off = (BELOW_NOISE_FLOOR if power < floor * 10 ** (-BELOW_FLOOR_DB / 10) else
+                   IMPLAUSIBLE_POWER if power > floor * 10 ** (MAX_POWER_JN_DB / 10) else None)
+            if off is not None:
+                self._off_floor_run += 1
+                if ref == REF_LEARNED and self._off_floor_run >= p.calibration_blocks:
+                    self._block_counters["recalibrations"] += 1
+                    self._forget_learned()
+                    self._off_floor_run = 0
+                return self._rejected(off, stamp_ns, fs, first, n, None)
+        self._off_floor_run = 0
+        # frame length: chosen on the first block and again every RESELECT_BLOCKS blocks
+        if self._frame_length == 0 or self._blocks_since_select >= RESELECT_BLOCKS:
+            self._frame_length = rg.choose_frame_length(xs, cplx, p.ridge)
+            self._blocks_since_select = 0
+        self._blocks_since_select += 1
+        rr = rg.analyse(xs, cplx, fs, p.ridge, self._frame_length)
+        norm = psd / power
+        tpl = self._ltemplate if self._ltemplate is not None else smooth_template(norm, cp.template_smooth_bins)
+        feat = features_from_psd(psd, frames, tpl, cp, cplx)
+        if ref == REF_IN_BLOCK:
+            floor = rr.noise_power
+        if not rr.noise_power >= MIN_BLOCK_POWER:
+            # no noise at all in the block (a few non-zero samples): nothing to measure against
+            return self._rejected(BLANK_BLOCK, stamp_ns, fs, first, n, None)
+        if ref == REF_IN_BLOCK and power > rr.noise_power * 10 ** (MAX_POWER_JN_DB / 10):
+            return self._rejected(IMPLAUSIBLE_POWER, stamp_ns, fs, first, n, None)
+        jn_ref = 10 * math.log10(power / floor - 1.0) if power > floor else -math.inf
+        jn_in = 10 * math.log10(power / rr.noise_power - 1.0) if power > rr.noise_power else -math.inf
+        thr = cp.detect_jn_db
+        s = cp.confidence_slope_db
+        narrow = feat.jn_spectral_db >= thr
+        cw = narrow and (feat.occupancy <= cp.cw_max_occupancy or feat.line_fraction >= CW_MIN_LINE_FRACTION)
+        jn = jn_ref
+        if cw and not rr.sweeping:
+            jtype, conf = CW, logistic(feat.jn_spectral_db - thr, s)
+            jn = max(jn_ref, feat.jn_spectral_db)
+        elif rr.sweeping:
+            jtype = CHIRP
+            conf = logistic(max(jn_ref, jn_in) - thr, s) * (1.0 if rr.periodic else 0.6)
+        elif ref != REF_IN_BLOCK and jn_ref >= thr:
+            jtype, conf = WIDEBAND, logistic(jn_ref - thr, s)
+        elif narrow:
+            jtype, conf = WIDEBAND, 0.5 * logistic(feat.jn_spectral_db - thr, s)
+            jn = max(jn_ref, feat.jn_spectral_db)
+        else:
+            jtype = NONE
+            conf = 1.0 - logistic(max(feat.jn_spectral_db, jn_ref) - thr, s)
+            jn = max(jn_ref, feat.jn_spectral_db)
+            jn = max(jn, 5.0 * math.log10((1.0 if cplx else 2.0) / (frames * cp.nfft)))
+            # the floor learns only from blocks that pass as noise inside the block too
+            if clipped <= p.clip_lower_bound_fraction and not rr.periodic and jn_in < thr:
+                self._learn(power, norm)
+        bw_noise = p.noise_bandwidth_hz if p.noise_bandwidth_hz > 0 else (fs if cplx else fs / 2)
+        n_dbm = p.noise_density_dbm_per_mhz + 10 * math.log10(bw_noise / 1e6)
+        if not math.isfinite(jn):
+            jn = nan
+        js = jn + n_dbm - p.signal_power_dbm if math.isfinite(jn) else nan
+        freq = fstd = rate = per = f0 = bw = inb = nan
+        shape = rg.SHAPE_UNKNOWN
+        inverted = (not cplx) and fif < 0
+        if jtype == CW:
+            freq = self._to_rel_hz(feat.peak_frequency, fs, fif, cplx)
+            fstd = fs / cp.nfft / math.sqrt(12.0)
+            rate = 0.0
+        elif jtype == CHIRP:
+            lo_dig = -0.5 if cplx else 0.0
+            if math.isfinite(rr.frequency) and lo_dig <= rr.frequency <= 0.5:
+                freq = self._to_rel_hz(rr.frequency, fs, fif, cplx)
+                fstd = rr.frequency_std * fs
+            else:
+                self._block_counters["frequency_not_tracked"] += 1
+            sgn = -1.0 if inverted else 1.0
+            rate = sgn * rr.rate * fs * fs if math.isfinite(rr.rate) else nan
+            shape = rr.shape
+            if inverted and shape in (rg.SAWTOOTH_UP, rg.SAWTOOTH_DOWN):
+                shape = rg.SAWTOOTH_DOWN if shape == rg.SAWTOOTH_UP else rg.SAWTOOTH_UP
+            if rr.periodic:
+                per = rr.period_samples / fs
+                inb = rr.in_band_fraction
+            if math.isfinite(rr.low) and math.isfinite(rr.high):
+                a, b = self._to_rel_hz(rr.low, fs, fif, cplx), self._to_rel_hz(rr.high, fs, fif, cplx)
+                bw = abs(b - a)
+                if math.isfinite(rr.start):
+                    f0 = self._to_rel_hz(rr.start, fs, fif, cplx)
+        if jtype not in (CW, CHIRP):
+            self._blocks_since_select = RESELECT_BLOCKS      # nothing tracked: choose the frame length again
+        lower = clipped > p.clip_lower_bound_fraction and jtype != NONE
+        return JammerEstimate(stamp_ns, int(jtype), float(conf), float(jn), float(js), freq, fstd, rate, per, f0,
+                              bw, fs, first, n, True, self._counters(), None, "", ref, bool(lower), float(clipped),
+                              int(shape), inb)
+
+    def _learn(self, power: float, norm_psd: np.ndarray) -> None:
+        """Add a block that passed as noise to the learned floor and shape (the last calibration_blocks)."""
+        k = int(self.params.calibration_blocks)
+        self._learn_pow = (self._learn_pow + [power])[-k:]
+        self._learn_psd = (self._learn_psd + [norm_psd])[-k:]
+        if len(self._learn_pow) >= k:
+            self._lfloor = float(np.median(self._learn_pow))
+            med = np.median(np.stack(self._learn_psd), axis=0)
+            self._ltemplate = smooth_template(med, self.params.classifier.template_smooth_bins)
 
     # ------------------------------------------------------------------------------------------
     @property

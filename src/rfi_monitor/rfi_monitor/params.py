@@ -31,10 +31,14 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from rfi_monitor.classifier import ClassifierParams
+from rfi_monitor.ridge import RidgeParams
 from rfi_monitor.sweep_analysis import SweepAnalysisParams
 from rfi_monitor.sweep_period import SweepPeriodParams
 from rfi_monitor.tracker import MAX_REFINE_WINDOW
 from rfi_monitor.tracking_filters import MODE_AFKF, TrackingFilterParams
+
+ESTIMATORS = ("stft", "kalman")
+"""Values of ``RfiMonitorParams.estimator``."""
 
 
 @dataclass(frozen=True)
@@ -91,6 +95,17 @@ class RfiMonitorParams:
     """Validated parameters of the monitor.
 
     Attributes:
+        estimator: ``"stft"`` (default, ours: the short-time FFT ridge analysis of each block, module
+            rfi_monitor.ridge; no per-sample loop, no clean start needed, real sweep shapes) or
+            ``"kalman"`` (Kang et al.'s per-sample tracker with the switches of the ``Method`` table;
+            ``paper_method()`` selects it).
+        ridge: RidgeParams of the "stft" estimator.
+        noise_floor_dbfs: the front end's thermal noise power per real component relative to
+            full_scale^2 (as passed to ``process``), dB (e.g. -30: rms 3.2 % of full scale); 0: not
+            documented (noise at full scale is no working front end). Used as the J/N reference when
+            set (and full_scale is known), unless ``noise_floor_power`` is set.
+        clip_lower_bound_fraction: above this fraction of samples at full scale the J/N is flagged
+            as a lower bound (clipping compresses the jammer's power), in [0, 1].
         tracker: TrackingFilterParams (default: the proposed adaptive fading KF).
         sweep: SweepPeriodParams (default here: with lattice voting and decimation 4, ours;
             ``paper_method()`` switches voting off and uses decimation 2).
@@ -106,8 +121,9 @@ class RfiMonitorParams:
         signal_power_dbm: nominal GNSS signal power S for J/S, dBm (Kang et al.: -130).
         noise_density_dbm_per_mhz: nominal noise density for J/S, dBm/MHz (Kang et al.: -114).
         noise_bandwidth_hz: bandwidth of the nominal noise power, Hz; 0: the sampled band.
-        max_invalid_fraction: a block with more non-finite or saturated samples than this
-            fraction is rejected (result valid=False, type UNKNOWN), in [0, 1].
+        max_invalid_fraction: a block with more non-finite samples than this fraction is rejected
+            (``non_finite``: result valid=False, type UNKNOWN), in [0, 1]. Samples at full scale never
+            reject a block: clipping is evidence of a strong jammer (``clipped_fraction``).
         min_block_samples: shorter blocks raise ValueError (>= the classifier's nfft).
         refine_window: half-window W (samples) of the sweep-start step fit that refines the reset
             lattice (ours, tracker module docstring), 0..MAX_REFINE_WINDOW; 0 runs the paper's
@@ -128,6 +144,7 @@ class RfiMonitorParams:
         analysis: SweepAnalysisParams of the block-level periodicity detector (ours).
     """
 
+    estimator: str = "stft"
     tracker: TrackingFilterParams = field(default_factory=lambda: TrackingFilterParams(mode=MODE_AFKF))
     sweep: SweepPeriodParams = field(default_factory=lambda: SweepPeriodParams(lattice_voting=True))
     classifier: ClassifierParams = field(default_factory=ClassifierParams)
@@ -150,8 +167,17 @@ class RfiMonitorParams:
     reset_cross_covariance: bool = True
     confirm_fits: int = 4
     analysis: SweepAnalysisParams = field(default_factory=SweepAnalysisParams)
+    ridge: RidgeParams = field(default_factory=RidgeParams)
+    noise_floor_dbfs: float = 0.0
+    clip_lower_bound_fraction: float = 1e-3
 
     def __post_init__(self) -> None:
+        if self.estimator not in ESTIMATORS:
+            raise ValueError(f"estimator must be one of {ESTIMATORS}, got {self.estimator!r}")
+        if not -300.0 <= self.noise_floor_dbfs <= 0.0:
+            raise ValueError("noise_floor_dbfs must be in [-300, 0] (0: not set)")
+        if not 0.0 <= self.clip_lower_bound_fraction <= 1.0:
+            raise ValueError("clip_lower_bound_fraction must be in [0, 1]")
         for name in ("min_abs_ratio", "domain_margin", "noise_floor_power", "noise_bandwidth_hz"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
@@ -181,6 +207,7 @@ class RfiMonitorParams:
         """Parameters that run Kang et al.'s method only (``Method.paper()``: no step-fit lattice, no
         periodicity detector, the period from successive peak intervals, the AR enhancement at
         decimation 2); keyword arguments set the other fields."""
+        kw.setdefault("estimator", "kalman")
         return Method.paper().apply(RfiMonitorParams(**kw))
 
     @property

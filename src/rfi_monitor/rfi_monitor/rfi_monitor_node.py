@@ -68,8 +68,9 @@ Block checks, in this order (``rejected_<reason>``), with the physical ranges th
   absolute sample positions in float64, exact only up to 2^53: 7.5 years at 38.192 MS/s);
 * ``blank_block``: every sample equal (real), or every I and every Q equal (complex): a block
   with no variation (all zero, a stuck ADC) carries no information about a jammer;
-* from the core (``JammerEstimate.rejection``): ``saturated`` (more than ``max_invalid_fraction``
-  of the samples at full scale), ``blank_block`` (no power in the analysed Welch frames),
+* from the core (``JammerEstimate.rejection``): ``non_finite`` (more than ``max_invalid_fraction``
+  of the samples not finite; clipped blocks are analysed, issue 14), ``blank_block`` (no power in the
+  analysed Welch frames),
   ``power_overflow``, ``below_noise_floor`` (10 dB below the calibrated noise floor) and
   ``implausible_power`` (120 dB above it): gain or scale no longer match the calibration, see
   rfi_monitor.monitor;
@@ -77,8 +78,10 @@ Block checks, in this order (``rejected_<reason>``), with the physical ranges th
   checks raised (both bugs, logged as errors, and the diagnostics are ERROR).
 
 Saturation: full scale is ``(2**(bits_per_sample - 1) - 1) * scale`` for two's-complement front ends
-(bits >= 4). For 1-3 bit sign/magnitude front ends the largest level is a normal value (a 2-bit
-front end puts about a third of its samples there), so no saturation check is made.
+(bits >= 4). A clipped block is analysed: its clipped fraction is in the JammerState and in /diagnostics
+(``last_clipped_fraction``, ``core.clipped_blocks``, ``core.saturated_samples``), its J/N flagged as a lower
+bound above ``clip_lower_bound_fraction``. For 1-3 bit sign/magnitude front ends the largest level is a
+normal value (a 2-bit front end puts about a third of its samples there), so no saturation check is made.
 
 Diagnostics (/diagnostics, every ``diagnostics_period_s`` of *stamp* time via StampTimer, driven only
 by stamps the StampGate accepted, after the block of that stamp is counted): blocks_received,
@@ -111,7 +114,9 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
 from rfi_monitor.classifier import ClassifierParams
-from rfi_monitor.monitor import SATURATED, JammerEstimate, RfiMonitor, RfiMonitorParams
+from rfi_monitor.monitor import NON_FINITE, JammerEstimate, RfiMonitor, RfiMonitorParams
+from rfi_monitor.params import ESTIMATORS
+from rfi_monitor.ridge import RidgeParams
 from rfi_monitor.sweep_analysis import SweepAnalysisParams
 from rfi_monitor.sweep_period import SweepPeriodParams
 from rfi_monitor.tracker import MAX_REFINE_WINDOW
@@ -175,7 +180,8 @@ SAMPLE_DTYPES = {IfSamples.INT8: np.dtype('<i1'), IfSamples.INT16: np.dtype('<i2
 """IfSamples.sample_format -> numpy dtype of the stored values (little-endian)."""
 
 NESTED = (('tracker', 'tracker_', TrackingFilterParams), ('sweep', 'sweep_', SweepPeriodParams),
-          ('classifier', 'classifier_', ClassifierParams), ('analysis', 'analysis_', SweepAnalysisParams))
+          ('classifier', 'classifier_', ClassifierParams), ('analysis', 'analysis_', SweepAnalysisParams),
+          ('ridge', 'ridge_', RidgeParams))
 """(RfiMonitorParams field, node parameter prefix, dataclass) of the core's nested parameter groups."""
 
 _M = RfiMonitorParams()
@@ -183,6 +189,7 @@ _T = _M.tracker
 _S = _M.sweep
 _C = _M.classifier
 _A = _M.analysis
+_R = _M.ridge
 
 
 @dataclass(frozen=True)
@@ -215,12 +222,56 @@ class MonitorNodeParams:
     max_stamp_jump_s: float = max_stamp_jump_parameter(10.0)
     stamp_jump_confirmations: int = stamp_jump_confirmations_parameter(3)
     check_saturation: bool = parameter(
-        True, 'Count samples at full scale (two\'s-complement front ends, bits_per_sample >= 4) and reject '
-        'blocks with more than max_invalid_fraction of them.')
+        True, 'Count samples at full scale (two\'s-complement front ends, bits_per_sample >= 4): the block is '
+        'analysed, its clipped fraction reported and its J/N flagged as a lower bound.')
     max_block_samples: int = parameter(
         2 ** 22, 'Longest block analysed, samples (complex: I/Q pairs); longer blocks are rejected (long_block). '
         'Bounds memory (about 40 bytes per sample) and the time of one callback.', minimum=1024, maximum=2**31 - 1)
     # --- monitor ------------------------------------------------------------------------------
+    estimator: str = parameter(
+        _M.estimator, 'stft: short-time FFT ridge analysis per block (ours; real sweep shapes, no clean start '
+        'needed); kalman: Kang et al.\'s per-sample tracker (with the switches below).', choices=ESTIMATORS)
+    noise_floor_dbfs: float = parameter(
+        _M.noise_floor_dbfs, 'Thermal noise power of the front end per real component relative to full scale '
+        'squared, dB; the J/N reference when set (needs bits_per_sample >= 4); 0: not documented.',
+        minimum=-300.0, maximum=0.0)
+    clip_lower_bound_fraction: float = parameter(
+        _M.clip_lower_bound_fraction, 'Above this share of samples at full scale the J/N is flagged as a lower '
+        'bound, 0..1.', minimum=0.0, maximum=1.0)
+    ridge_min_frame_length: int = parameter(
+        _R.min_frame_length, 'Shortest short-time FFT frame tried by the stft estimator, samples (power of two).',
+        minimum=8, maximum=2**16)
+    ridge_max_frame_length: int = parameter(
+        _R.max_frame_length, 'Longest short-time FFT frame tried by the stft estimator, samples (power of two).',
+        minimum=8, maximum=2**16)
+    ridge_select_samples: int = parameter(
+        _R.select_samples, 'Samples of a block used to choose the frame length (stft); 0: the whole block.',
+        minimum=0, maximum=2**31 - 1)
+    ridge_min_period_frames: int = parameter(
+        _R.min_period_frames, 'Shortest sweep period searched (stft), frames of half the frame length.',
+        minimum=3, maximum=10**6)
+    ridge_presence_nats: float = parameter(
+        _R.presence_nats, 'Per-frame ridge threshold above ln(bins) (stft), nats of the exponential.',
+        minimum=0.1, maximum=100.0)
+    ridge_noise_smooth_bins: int = parameter(
+        _R.noise_smooth_bins, 'Width of the median across bins of the in-block noise level (stft), odd.',
+        minimum=3, maximum=10**4)
+    ridge_phase_bins: int = parameter(
+        _R.phase_bins, 'Bins of the folded sweep profile (stft).', minimum=8, maximum=4096)
+    ridge_hook_rate_ratio: float = parameter(
+        _R.hook_rate_ratio, 'A saw-tooth whose step after its flyback exceeds this times its median step is '
+        'hooked (stft).', minimum=1.0001, maximum=1e3)
+    ridge_min_present_fraction: float = parameter(
+        _R.min_present_fraction, 'A non-periodic ridge must be present in at least this share of the frames '
+        '(stft), (0, 1].', minimum=1e-6, maximum=1.0)
+    ridge_max_period_s: float = parameter(
+        _R.max_period_s, 'Longest sweep period searched by the stft estimator, s.', minimum=1e-7, maximum=10.0)
+    ridge_detect_sigma: float = parameter(
+        _R.detect_sigma, 'Significance of a sweep period (stft), noise standard deviations.',
+        minimum=1.0, maximum=100.0)
+    ridge_min_strength: float = parameter(
+        _R.min_strength, 'Smallest normalised autocorrelation peak of a periodic sweep (stft), (0, 1].',
+        minimum=1e-6, maximum=1.0)
     chirp_correction: bool = parameter(
         _M.chirp_correction, 'Correct the three-sample IF measurement for the sweep (Kang et al., eq. 10; '
         'real samples only).')
@@ -496,6 +547,11 @@ def jammer_state_msg(est: JammerEstimate, block: IfSamples) -> JammerState:
     m.sweep_bandwidth_hz = float(est.sweep_bandwidth_hz)
     m.center_frequency_hz = float(block.center_frequency_hz)
     m.sample_rate_hz = float(est.sample_rate_hz)
+    m.noise_reference = int(est.noise_reference)
+    m.jammer_to_noise_is_lower_bound = bool(est.jammer_to_noise_is_lower_bound)
+    m.clipped_fraction = float(est.clipped_fraction)
+    m.sweep_shape = int(est.sweep_shape)
+    m.in_band_fraction = float(est.in_band_fraction)
     return m
 
 
@@ -518,6 +574,7 @@ class RfiMonitorNode(Node):
         self._gate = StampGate(self.params.max_stamp_jump_s, self.params.stamp_jump_confirmations)
         self._core_counters: dict[str, int] = {}
         self._last_type: int | None = None
+        self._last_clipped_fraction = 0.0
         self._errors_at_last_report = 0
         self._handler_errors_at_last_report = 0
         self._diag_timer = StampTimer(self.params.diagnostics_period_s)
@@ -598,9 +655,10 @@ class RfiMonitorNode(Node):
             return 'core_error'
         self._core_counters = dict(est.counters)
         if not est.valid:
-            return est.rejection or SATURATED
+            return est.rejection or NON_FINITE
         self.counts['blocks_processed'] += 1
         self._last_type = int(est.type)
+        self._last_clipped_fraction = float(est.clipped_fraction)
         self.state_pub.publish(jammer_state_msg(est, msg))
         self.counts['states_published'] += 1
         return None
@@ -640,6 +698,7 @@ class RfiMonitorNode(Node):
         values.update({f'core.{k}': v for k, v in sorted(core.items()) if k not in ('gaps', 'rate_changes')})
         values['calibrated'] = self.monitor.calibrated
         values['last_type'] = 'none yet' if self._last_type is None else TYPE_NAMES.get(self._last_type, '?')
+        values['last_clipped_fraction'] = self._last_clipped_fraction
         values.update(self.health.values())
         received = self.counts['blocks_received']
         values['accounting_ok'] = (self.health.counts[f'{self.subscription.topic_name}.received'] == received

@@ -14,6 +14,12 @@ DATA = Path(__file__).parent / "data"
 BLOCK = 38192  # 1 ms at the paper's 38.192 MHz
 
 
+def _kalman(**kw):
+    """Parameters of the per-sample (Kang et al.) estimator, which most tests here exercise; the default
+    "stft" estimator has its own tests (test_stft_estimator.py)."""
+    return RfiMonitorParams(estimator="kalman", **kw)
+
+
 def _feed(mon, x, fe, block, first=0, traces=False):
     out = []
     for k in range(0, x.size - block + 1, block):
@@ -23,7 +29,7 @@ def _feed(mon, x, fe, block, first=0, traces=False):
 
 
 def _calibrated(fe, seed=50, **kw):
-    mon = RfiMonitor(RfiMonitorParams(**kw))
+    mon = RfiMonitor(_kalman(**kw))
     clean = IfSimulator(fe, (), seed=seed).generate(5 * BLOCK).values()
     _feed(mon, clean, fe, BLOCK)
     assert mon.calibrated
@@ -34,7 +40,7 @@ def _calibrated(fe, seed=50, **kw):
 def test_one_block_equals_many_blocks():
     fe = FrontEndConfig(noise_density_dbm_per_mhz=-124.0)
     x = IfSimulator(fe, (ChirpJammer(),), seed=1).generate(3 * BLOCK).values()
-    par = RfiMonitorParams(noise_floor_power=fe.noise_power_mw, calibration_blocks=1)
+    par = _kalman(noise_floor_power=fe.noise_power_mw, calibration_blocks=1)
     a = RfiMonitor(par)
     ta = a.process(x, fe.sample_rate_hz, fe.intermediate_frequency_hz, 0, 0, return_traces=True).traces
     b = RfiMonitor(par)
@@ -119,7 +125,7 @@ def test_noise_jammer_is_wideband(jam):
 
 def test_clean_is_none_and_calibration_is_unknown():
     fe = FrontEndConfig()
-    mon = RfiMonitor()
+    mon = RfiMonitor(_kalman())
     ests = _feed(mon, IfSimulator(fe, (), seed=5).generate(10 * BLOCK).values(), fe, BLOCK)
     assert [e.type for e in ests[:5]] == [UNKNOWN] * 5
     assert [e.type for e in ests[5:]] == [NONE] * 5
@@ -150,7 +156,7 @@ def test_complex_chirp_tracked():
 def test_gap_and_rate_change_reset_state():
     fe = FrontEndConfig()
     x = IfSimulator(fe, (), seed=8).generate(3 * 4096).values()
-    mon = RfiMonitor(RfiMonitorParams(calibration_blocks=1))
+    mon = RfiMonitor(_kalman(calibration_blocks=1))
     mon.process(x[:4096], fe.sample_rate_hz, fe.intermediate_frequency_hz, 0, 0)
     e = mon.process(x[4096:8192], fe.sample_rate_hz, fe.intermediate_frequency_hz, 9999, 0)
     assert e.counters["gaps"] == 1
@@ -159,7 +165,7 @@ def test_gap_and_rate_change_reset_state():
 
 
 def test_bad_input_raises():
-    mon = RfiMonitor()
+    mon = RfiMonitor(_kalman())
     x = np.zeros(4096)
     with pytest.raises(ValueError):
         mon.process(np.zeros(0), 4e6, 0.0, 0, 0)
@@ -176,12 +182,12 @@ def test_bad_input_raises():
     with pytest.raises(ValueError):
         mon.process(np.zeros((2, 2048)), 4e6, 0.0, 0, 0)
     with pytest.raises(ValueError):
-        RfiMonitorParams(phase_gain=0.0)
+        _kalman(phase_gain=0.0)
     with pytest.raises(ValueError):
-        RfiMonitorParams(noise_floor_power=-1.0)
+        _kalman(noise_floor_power=-1.0)
 
 
-def test_nan_and_saturated_blocks_are_rejected_not_estimated():
+def test_nan_blocks_are_rejected_clipped_blocks_analysed():
     fe = FrontEndConfig()
     mon = _calibrated(fe)
     x = IfSimulator(fe, (CwJammer(),), seed=9).generate(BLOCK).values()
@@ -191,7 +197,11 @@ def test_nan_and_saturated_blocks_are_rejected_not_estimated():
     assert e.counters["non_finite_samples"] == x[::10].size and e.counters["blocks_rejected"] == 1
     c = np.clip(np.round(IfSimulator(fe, (), seed=9).generate(BLOCK).values() / 1e-6), -3, 3)
     e = mon.process(c, fe.sample_rate_hz, fe.intermediate_frequency_hz, BLOCK, 0, full_scale=3.0)
-    assert not e.valid and e.counters["saturated_samples"] > 0
+    # issue 14 item 2: clipping is evidence, not a reason to drop the block (it was rejected before)
+    n_clip = int(np.sum(np.abs(c) >= 3.0))
+    assert e.valid and e.counters["saturated_samples"] == n_clip and e.counters["clipped_blocks"] == 1
+    assert e.clipped_fraction == pytest.approx(n_clip / c.size)
+    assert e.jammer_to_noise_is_lower_bound == (e.type != NONE)
 
 
 # ---------------------------------------------------------------- real captures (no jammer)
@@ -206,7 +216,7 @@ def _real_captures():
 
 @pytest.mark.parametrize("name,x,fs,fif,cplx,block", _real_captures())
 def test_real_capture_no_false_alarm(name, x, fs, fif, cplx, block):
-    mon = RfiMonitor()
+    mon = RfiMonitor(_kalman())
     step = 2 * block if (cplx and not np.iscomplexobj(x)) else block
     types = []
     for k in range(0, x.size - step + 1, step):
@@ -226,7 +236,7 @@ def test_real_capture_plus_simulated_chirp_detected_and_tracked():
     jam = ChirpJammer(start_frequency_hz=-1.5e6, sweep_rate_hz_per_s=2e11, sweep_period_s=15e-6,
                       js_db=10 * math.log10(n_pow / fe.signal_power_mw) + 10.0)  # J/N = 10 dB
     block = 12000
-    mon = RfiMonitor()
+    mon = RfiMonitor(_kalman())
     for k in range(5):
         mon.process(raw[k * block:(k + 1) * block], fs, fif, k * block, 0)
     sim = IfSimulator(fe, (jam,), satellites=(), seed=0)
@@ -253,9 +263,10 @@ def test_paper_method_parameters():
     assert p.refine_window == 0 and not p.analysis.enabled and not p.sweep.lattice_voting
     assert p.sweep.decimation == 2              # its best setting (monitor.paper_method docstring)
     assert p.phase_gain == 0.5
-    assert RfiMonitorParams().sweep.lattice_voting and RfiMonitorParams().analysis.enabled
+    kal = _kalman()
+    assert kal.sweep.lattice_voting and kal.analysis.enabled and RfiMonitorParams().estimator == "stft"
     with pytest.raises(ValueError):
-        RfiMonitorParams(refine_window=99)
+        _kalman(refine_window=99)
 
 
 @pytest.mark.parametrize("refine", [24, 0])
@@ -265,7 +276,7 @@ def test_resets_do_not_depend_on_unaligned_block_cuts(refine):
     fe = FrontEndConfig(noise_density_dbm_per_mhz=-124.0)
     fs, fif = fe.sample_rate_hz, fe.intermediate_frequency_hz
     x = IfSimulator(fe, (ChirpJammer(sweep_rate_hz_per_s=3e12),), seed=3).generate(2 * BLOCK).values()
-    par = RfiMonitorParams(noise_floor_power=fe.noise_power_mw, calibration_blocks=1, refine_window=refine)
+    par = _kalman(noise_floor_power=fe.noise_power_mw, calibration_blocks=1, refine_window=refine)
     ta = RfiMonitor(par).process(x, fs, fif, 0, 0, return_traces=True).traces
     cuts = np.cumsum(np.random.default_rng(1).integers(1024, 3000, 60))
     cuts = np.r_[0, cuts[cuts < x.size - 1024], x.size]
@@ -307,7 +318,7 @@ def test_blank_blocks_are_rejected_and_never_enter_the_calibration():
     """All-zero samples, or non-zero samples only where the Hann window is zero, hold no power in the Welch
     frames: rejected as blank_block (before: NaN PSD, and a NaN noise template for good during calibration)."""
     fe = FrontEndConfig()
-    mon = RfiMonitor()
+    mon = RfiMonitor(_kalman())
     fs, fif = fe.sample_rate_hz, fe.intermediate_frequency_hz
     x = IfSimulator(fe, (), seed=20).generate(8 * BLOCK).values()
     zero = np.zeros(BLOCK)
@@ -346,7 +357,7 @@ def test_block_far_off_the_noise_floor_is_rejected_then_relearned():
     assert [e.type for e in quiet[5:]] == [UNKNOWN] * 5       # learning the new floor
     assert mon.calibrated
     # a fixed noise floor is never relearned
-    fixed = RfiMonitor(RfiMonitorParams(noise_floor_power=float(np.mean(x ** 2)), calibration_blocks=1))
+    fixed = RfiMonitor(_kalman(noise_floor_power=float(np.mean(x ** 2)), calibration_blocks=1))
     out = _feed(fixed, x * 0.01, fe, BLOCK)
     assert {e.rejection for e in out[1:]} == {"below_noise_floor"} and out[-1].counters["recalibrations"] == 0
 
@@ -357,7 +368,7 @@ def test_none_always_carries_a_finite_jn():
     for fe in (FrontEndConfig(), FrontEndConfig(sample_rate_hz=16.368e6, intermediate_frequency_hz=0.0,
                                                 is_complex=True)):
         n = 16384
-        mon = RfiMonitor()
+        mon = RfiMonitor(_kalman())
         ests = _feed(mon, IfSimulator(fe, (), seed=22).generate(45 * n).values(), fe, n)
         none = [e for e in ests if e.type == NONE]
         assert len(none) == 40
@@ -373,13 +384,13 @@ def test_calibration_that_saw_no_noise_is_discarded():
     again."""
     fe = FrontEndConfig()
     fs, fif = fe.sample_rate_hz, fe.intermediate_frequency_hz
-    mon = RfiMonitor(RfiMonitorParams(calibration_blocks=3))
+    mon = RfiMonitor(_kalman(calibration_blocks=3))
     tone = 1e-29 * np.cos(2 * np.pi * 0.2 * np.arange(4 * BLOCK))    # power 5e-59 >= MIN_BLOCK_POWER 1e-60
     ests = _feed(mon, tone, fe, BLOCK)
     assert all(e.valid and e.type == UNKNOWN for e in ests)
     assert not mon.calibrated and ests[2].counters["calibrations_discarded"] == 1
     assert ests[3].counters["calibrations_discarded"] == 1     # the fourth block starts the new calibration
-    mon = RfiMonitor(RfiMonitorParams(calibration_blocks=3))   # the same tone at a real level calibrates
+    mon = RfiMonitor(_kalman(calibration_blocks=3))   # the same tone at a real level calibrates
     _feed(mon, tone * 1e29, fe, BLOCK)
     assert mon.calibrated
     e = mon.process(tone[:BLOCK] * 1e29, fs, fif, 4 * BLOCK, 0)

@@ -147,7 +147,8 @@ def test_chirp_stream_gives_chirp_with_the_right_frequency_track(probe_factory):
     p = probe_factory()
     states = p.send_all(msgs)
     assert all(s is not None for s in states)
-    assert [s.type for s in states[:CALIBRATION]] == [JammerState.UNKNOWN] * CALIBRATION
+    # the stft estimator reports from the first block (no UNKNOWN while the floor is learned; issue 14)
+    assert [s.type for s in states[:CALIBRATION]] == [JammerState.NONE] * CALIBRATION
     chirp = states[CALIBRATION:]
     types = [s.type for s in chirp]
     assert types.count(JammerState.CHIRP) >= 7 and set(types) <= {JammerState.CHIRP, JammerState.WIDEBAND}, types
@@ -216,7 +217,7 @@ def test_gaps_and_rate_changes_are_counted_and_reset_the_monitor(probe_factory):
     assert v['gaps'] == '1'
     assert v['rate_changes'] == '1'
     assert [s.type for s in states[CALIBRATION:-1]] == [JammerState.CW] * 4   # a gap keeps the calibration
-    assert states[-1].type == JammerState.UNKNOWN and states[-1].sample_rate_hz == 16.368e6
+    assert states[-1].type == JammerState.NONE and states[-1].sample_rate_hz == 16.368e6   # stft: no UNKNOWN
     assert v['calibrated'] == 'False'
     assert int(v['blocks_processed']) == len(msgs) and v['accounting_ok'] == 'True'
 
@@ -234,10 +235,7 @@ def _bad_blocks(good: IfSamples) -> dict[str, IfSamples]:
         return m
 
     counts = np.frombuffer(good.samples, dtype='<i1').copy()
-    saturated = counts.copy()
-    saturated[::10] = 127                                             # 10 % at full scale
     variant('empty_block', 1, samples=b'')
-    variant('saturated', 2, samples=saturated.tobytes())
     variant('bad_sample_rate', 3, sample_rate_hz=0.0)
     variant('bad_sample_rate_negative', 4, sample_rate_hz=-38.192e6)
     variant('odd_length_iq', 5, is_complex=True, intermediate_frequency_hz=0.0, samples=counts[:-1].tobytes())
@@ -270,8 +268,8 @@ def test_each_bad_input_is_counted_and_gives_no_state(probe_factory):
             assert int(v[key]) >= 1, (reason, v)
             assert v['accounting_ok'] == 'True'
             assert p.diagnostics[-1].status[0].level == b'\x01', reason  # WARN: a block was rejected
-    # the node is still alive and analyses the next good block. Only the saturated block reached the core
-    # (with the good block's first_sample_index: a gap); the next block continues it
+    # the node is still alive and analyses the next good block (no bad block reached the core: a clipped
+    # block, which did and made a gap, is analysed since issue 14, test_clipped_block_is_analysed)
     last = msgs[CALIBRATION + 1]
     last.header.stamp = ns_to_stamp(stamp_to_ns(good.header.stamp) + 100_000_000)
     state = p.send(last)
@@ -289,7 +287,27 @@ def test_each_bad_input_is_counted_and_gives_no_state(probe_factory):
     last2.first_sample_index += len(last.samples)
     assert p.send(last2) is not None
     assert p.diagnostics[-1].status[0].level == b'\x00'  # OK again: nothing rejected since the last report
-    assert p.values()['gaps'] == '1'
+    assert p.values()['gaps'] == '0'
+
+
+def test_clipped_block_is_analysed(probe_factory):
+    """Issue 14 item 2: a CW block through 18 dB too much gain (clipped): one JammerState with the clipped
+    fraction, the J/N flagged as a lower bound when a jammer is reported, and the fraction in /diagnostics."""
+    fe = FrontEndConfig(noise_bandwidth_hz=NOISE_BW_HZ)
+    msgs, _ = stream(fe, (CwJammer(frequency_hz=1e6, js_db=JS_DB),), CALIBRATION, 2, seed=9)
+    p = probe_factory()
+    p.send_all(msgs[:CALIBRATION])
+    m = msgs[CALIBRATION]
+    counts = np.clip(np.frombuffer(m.samples, dtype='<i1').astype(np.int64) * 8, -127, 127).astype('<i1')
+    assert 0.001 < np.mean(counts == 127) < 0.5          # the front end's gain 18 dB too high: it clips
+    m.samples = counts.tobytes()
+    state = p.send(m)
+    assert state is not None and state.type == JammerState.CW
+    assert state.clipped_fraction == pytest.approx(np.mean(np.abs(counts) >= 127), abs=1e-6)
+    assert state.jammer_to_noise_is_lower_bound
+    v = p.values()
+    assert float(v['last_clipped_fraction']) == pytest.approx(state.clipped_fraction, rel=1e-6)
+    assert int(v['core.clipped_blocks']) >= 1 and v['accounting_ok'] == 'True'
 
 
 def test_no_saturation_check_for_two_bit_front_ends():
@@ -556,7 +574,7 @@ def test_best_effort_publisher_reaches_the_node(probe_factory):
     p.spin_until(lambda: sensor.get_subscription_count() >= 1, 'best-effort discovery')
     p.pub = sensor
     states = p.send_all(msgs)
-    assert [s.type for s in states] == [JammerState.UNKNOWN] * CALIBRATION + [JammerState.NONE] * 2
+    assert [s.type for s in states] == [JammerState.NONE] * (CALIBRATION + 2)     # stft: no UNKNOWN
     v = p.values()
     assert v['accounting_ok'] == 'True' and v['blocks_processed'] == str(len(msgs))
     assert v['input./rfi/if_samples.received'] == str(len(msgs)) and v['input./rfi/if_samples.lost'] == '0'

@@ -54,7 +54,7 @@ def test_windowed_running_power_follows_the_exponential_average():
     rng = np.random.default_rng(5)
     n = 4096 + 16
     x = 3.0 * rng.standard_normal(n)
-    mon = RfiMonitor(RfiMonitorParams(noise_floor_power=1.0, calibration_blocks=1))
+    mon = RfiMonitor(RfiMonitorParams(estimator="kalman", noise_floor_power=1.0, calibration_blocks=1))
     mon.process(x[:n - 1], 38.192e6, 9.548e6, 0, 0)   # middle samples 1 .. n - 3: ends window 255
     lam = 1.0 / mon.params.power_time_constant
     pw = x[1] ** 2                                     # the stream starts from the first power
@@ -79,6 +79,6 @@ def test_tracker_state_fields_are_the_kernel_arguments():
 def test_method_table_paper_and_ours():
     from rfi_monitor.params import Method
 
-    assert RfiMonitorParams().method == Method.ours()
+    assert RfiMonitorParams(estimator="kalman").method == Method.ours()
     assert RfiMonitorParams.paper_method().method == Method.paper()
-    assert Method.ours().apply(RfiMonitorParams.paper_method()) == RfiMonitorParams()
+    assert Method.ours().apply(RfiMonitorParams.paper_method()) == RfiMonitorParams(estimator="kalman")

@@ -32,7 +32,7 @@ def _front_end() -> FrontEndConfig:
 
 def _params(tracking: bool) -> RfiMonitorParams:
     fe = _front_end()
-    p = RfiMonitorParams(noise_floor_power=fe.noise_power_mw, calibration_blocks=1)
+    p = RfiMonitorParams(estimator="kalman", noise_floor_power=fe.noise_power_mw, calibration_blocks=1)
     if not tracking:
         p = dataclasses.replace(p, confirm_fits=0, analysis=SweepAnalysisParams(skip_while_tracking=False))
     return p
