@@ -114,11 +114,22 @@ Outputs.
   (``input.<topic>.received`` / ``lost`` / ``middleware_lost`` / ``callback_errors``), the current
   ``reorder_window_s`` and ``accounting_ok``: for GNSS, UWB and jammer messages, received ==
   rejected by the node + processed + still buffered (lost messages never arrived: counted apart).
-  Level ERROR if the accounting does not add up, or since the last report the core raised or an
-  input handler raised; WARN if the filter is not initialised, or since the last report messages
-  were lost or input was rejected; else OK. When no input has arrived for ``input_timeout_s`` of
-  wall time, a STALE status ("no input for N s", with the counters) is published instead, stamped
+  ``hardware_id`` is the parameter (the receiver and UWB tag). Levels (:meth:`FusionNode.diagnostics`)
+  from fractions over ``diagnostics_window_s`` of stamp time: ERROR when no valid solution is
+  published although input was processed, an estimate was suppressed, the accounting does not add
+  up or the core / a handler raised since the last report; WARN when the inputs are degraded (more
+  than ``warn_rejected_fraction`` rejected, ``warn_lost_fraction`` lost, a divergence, a J/S costing
+  more than ``warn_cn0_loss_db`` of C/N0); else OK. When no input has arrived for ``input_timeout_s``
+  of wall time, a STALE status ("no input for N s", with the counters) is published instead, stamped
   with the node clock's now: the only use of the wall clock besides ``idle_flush_s``.
+* /fusion/local_odometry (nav_msgs/Odometry): every published solution again, in the local ENU
+  frame ``map_frame_id`` at ``base_frame_id`` (robot_localization's EKF input; origin, lever arm
+  and the attitude assumption: :mod:`uwb_gnss_fusion.local_frame`, :meth:`FusionNode._publish_local`).
+* /fusion/datum (sensor_msgs/NavSatFix, latched): the WGS 84 origin of ``map_frame_id``, once.
+
+Parameters settable while running (``ros2 param set``): see :class:`FusionNodeParams`; a change is
+validated as at start (:class:`rfi_node_common.params.RuntimeParameters`) and applied before the
+re-ordering buffer next releases a message to the core (:meth:`FusionNode.apply_parameter_changes`).
 
 A core exception on an input (it should not happen; the core counts bad input itself) is caught,
 counted (``core_exception``), logged and reported as ERROR; the node keeps running.
