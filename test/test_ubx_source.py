@@ -188,3 +188,30 @@ def test_config_file_values_equal_the_dataclass_defaults():
     assert set(data) == {f.name for f in dataclasses.fields(UbxSourceParams)}
     for name, value in data.items():
         assert value == getattr(defaults, name) and type(value) is type(getattr(defaults, name)), name
+
+
+def test_ctrl_c_while_reading_a_port_is_a_clean_exit(ubx_log):
+    import signal
+
+    master, slave = os.openpty()
+    proc = subprocess.Popen(command(f'input:=/dev/fd/{slave}'), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            pass_fds=(slave,))
+    try:
+        log = b''
+        deadline = time.monotonic() + DEADLINE_S
+        while b'ubx_source ready' not in log:
+            assert time.monotonic() < deadline and proc.poll() is None, log.decode()
+            log += os.read(proc.stderr.fileno(), 4096)
+        os.write(master, ubx_log.read_bytes()[:3000])
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=DEADLINE_S)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate(timeout=10)
+        os.close(slave)
+        os.close(master)
+    text = (log + err + out).decode()
+    assert proc.returncode == 0, text
+    assert 'Traceback' not in text and 'context is invalid' not in text
+    assert 'end of input' in text

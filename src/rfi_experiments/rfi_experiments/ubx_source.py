@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 import os
 import stat
+import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -200,13 +201,18 @@ class UbxSourceNode(Node):
             else:
                 self._read_serial()
         except Exception as err:  # noqa: BLE001 - a failure ends the input, reported, never a traceback
-            self.counts['read_errors'] += 1
-            self.exit_code = 1
-            self.get_logger().error(f'input {self.params.input} ended by {type(err).__name__}: {err}')
+            if self.context.ok() and not self.stop.is_set():
+                self.counts['read_errors'] += 1
+                self.exit_code = 1
+                self.get_logger().error(f'input {self.params.input} ended by {type(err).__name__}: {err}')
+            # else: Ctrl-C / shutdown while publishing (the context went away under the reader): not a fault
         finally:
             self.decoder.finish()
             self._close()
-            self._report_end()
+            try:
+                self._report_end(publish=self.context.ok() and not self.stop.is_set())
+            except Exception as err:  # noqa: BLE001 - shutting down: the report is best effort, never a traceback
+                self.get_logger().warn(f'final report incomplete ({type(err).__name__}: {err})')
             self.done.set()
             stop_now = self.exit_code != 0 or (self.is_file and self.params.exit_at_end)
             if stop_now and not self.stop.is_set() and self.context.ok():
@@ -361,16 +367,23 @@ class UbxSourceNode(Node):
         except Exception as err:  # noqa: BLE001 - a report must never end the reader
             self.get_logger().error(f'/diagnostics not published: {type(err).__name__}: {err}')
 
-    def _report_end(self) -> None:
+    def _report_end(self, publish: bool) -> None:
+        """Log the counters; with ``publish`` (not shutting down) also the final /diagnostics, after the
+        subscribers have acknowledged the data."""
         from rfi_experiments.ubx_to_bag import summary_lines
 
-        for pub in (self.pub, self.interference_pub):  # the data out before the final report and the shutdown
-            self._wait_acked(pub, FINAL_ACK_TIMEOUT_S)
-        self._publish_diagnostics(self._last_stamp_ns, final=True)
-        self._wait_acked(self.diag_pub, FINAL_ACK_TIMEOUT_S)
-        self.get_logger().info(f'end of input {self.params.input}: {self.counts["epochs_sent"]} epochs, '
-                               f'{self.counts["interference_sent"]} interference reports published\n'
-                               + '\n'.join(summary_lines(self.decoder)))
+        if publish:
+            for pub in (self.pub, self.interference_pub):  # the data out before the final report and the shutdown
+                self._wait_acked(pub, FINAL_ACK_TIMEOUT_S)
+            self._publish_diagnostics(self._last_stamp_ns, final=True)
+            self._wait_acked(self.diag_pub, FINAL_ACK_TIMEOUT_S)
+        text = (f'end of input {self.params.input}: {self.counts["epochs_sent"]} epochs, '
+                f'{self.counts["interference_sent"]} interference reports published\n'
+                + '\n'.join(summary_lines(self.decoder)))
+        if self.context.ok():
+            self.get_logger().info(text)
+        else:  # after a shutdown (Ctrl-C) the ROS logger cannot reach /rosout any more
+            print(f'[ubx_source] {text}', file=sys.stderr)
 
     def destroy_node(self) -> None:
         self.stop.set()
