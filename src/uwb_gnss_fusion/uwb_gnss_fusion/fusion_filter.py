@@ -179,6 +179,7 @@ class FusionFilter:
         clock_bias_m: float = math.nan,
         clock_drift_mps: float = math.nan,
         position_std_m: float | None = None,
+        position_clock_covariance_m2: np.ndarray | None = None,
     ) -> FusionOutput:
         """(Re)initialise the state from an external solution (e.g. the caller's SPP).
 
@@ -192,6 +193,13 @@ class FusionFilter:
                 one, with ``init_clock_drift_std_mps``; else zero with
                 ``init_clock_drift_unobserved_std_mps``).
             position_std_m: 1-sigma per axis, m (None: ``init_position_std_m``).
+            position_clock_covariance_m2: covariance of (x, y, z, c*dt) of the solution, m^2,
+                (4, 4), e.g. a snapshot fix's (None: ``position_std_m`` per axis, uncorrelated).
+                The filter never starts more confident than ``position_std_m`` (eigenvalues of the
+                position block floored at its square) or ``init_clock_bias_std_m``, but keeps the
+                solution's larger variances along its weak directions (a fix on few jammed
+                satellites is often tens of metres off in height) and its position-clock
+                correlation, so a UWB range or the next epochs correct both consistently.
 
         Returns:
             The output at ``stamp_ns``.
@@ -228,7 +236,10 @@ class FusionFilter:
             + [p.init_velocity_std_mps**2] * 3
             + [p.init_clock_bias_std_m**2, drift_std**2]
         )
-        self._ckf = CubatureKalmanFilter(np.zeros(STATE_DIM), np.diag(var))
+        cov0 = np.diag(var)
+        if position_clock_covariance_m2 is not None:
+            cov0 = _with_solution_covariance(cov0, position_clock_covariance_m2, clock_ok)
+        self._ckf = CubatureKalmanFilter(np.zeros(STATE_DIM), cov0)
         self._initialized = True
         self._clock_initialized = clock_ok
         self._bad_gnss_epochs = 0
@@ -438,8 +449,9 @@ class FusionFilter:
             if not self._fix_agrees_with_uwb(stamp, fix[0], self.params.init_position_std_m):
                 self._count("gnss_fix_inconsistent_with_uwb")
                 return self._output(False, sat_rej=n_obs)
-            pos, clk, vel, drift = fix
-            self.initialize(stamp, pos, velocity_mps=vel, clock_bias_m=clk, clock_drift_mps=drift)
+            pos, clk, vel, drift, cov = fix
+            self.initialize(stamp, pos, velocity_mps=vel, clock_bias_m=clk, clock_drift_mps=drift,
+                            position_clock_covariance_m2=cov)
             self._last_gnss_stamp = stamp
             return self._output(False, sat_used=n, sat_rej=pre_rejected)
         self._predict_to(stamp)
@@ -630,7 +642,8 @@ class FusionFilter:
                 fix = None
             if fix is not None:
                 self.initialize(
-                    stamp_ns, fix[0], velocity_mps=fix[2], clock_bias_m=fix[1], clock_drift_mps=fix[3]
+                    stamp_ns, fix[0], velocity_mps=fix[2], clock_bias_m=fix[1], clock_drift_mps=fix[3],
+                    position_clock_covariance_m2=fix[4],
                 )
                 done = True
         if not done:
@@ -643,3 +656,27 @@ class FusionFilter:
             self._t_ns = stamp_ns
             self._count("reset_uninitialized")
         return self._output(True)
+
+
+def _with_solution_covariance(cov0: np.ndarray, sol_cov: np.ndarray, clock_ok: bool) -> np.ndarray:
+    """The initial covariance ``cov0`` (diagonal) with a solution's (x, y, z, c*dt) covariance.
+
+    Position block: the solution's, its eigenvalues floored at ``cov0``'s position variance; clock:
+    the larger of the two variances; cross terms: the solution's. Only variances are raised, so the
+    result is the solution's covariance plus a positive semi-definite matrix. Without a clock
+    (``clock_ok`` False) the clock row keeps ``cov0``'s and no cross term.
+    """
+    c = np.asarray(sol_cov, dtype=float)
+    if c.shape != (4, 4) or not np.all(np.isfinite(c)):
+        raise ValueError(f"position_clock_covariance_m2 must be a finite (4, 4) array, got shape {c.shape}")
+    c = 0.5 * (c + c.T)
+    lam, vec = np.linalg.eigh(c[0:3, 0:3])
+    if lam[0] < -1e-9 * max(1.0, float(lam[-1])):
+        raise ValueError("position_clock_covariance_m2 is not positive semi-definite")
+    out = cov0.copy()
+    out[0:3, 0:3] = (vec * np.maximum(lam, cov0[0, 0])) @ vec.T
+    if clock_ok:
+        out[6, 6] = max(cov0[6, 6], float(c[3, 3]))
+        out[0:3, 6] = c[0:3, 3]
+        out[6, 0:3] = c[3, 0:3]
+    return out

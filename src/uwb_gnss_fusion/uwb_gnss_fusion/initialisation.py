@@ -31,7 +31,9 @@ RecentRanges = Mapping[str, tuple[int, np.ndarray, float, str]]
 """anchor id -> (stamp ns, anchor position m (3,), range m, frame id) of its latest range."""
 
 
-def snapshot_fix(prep: PreparedEpoch, min_satellites: int) -> tuple[np.ndarray, float, np.ndarray, float] | None:
+def snapshot_fix(
+    prep: PreparedEpoch, min_satellites: int
+) -> tuple[np.ndarray, float, np.ndarray, float, np.ndarray] | None:
     """Robust snapshot least squares (position, clock; then velocity, drift) for initialisation.
 
     Args:
@@ -39,8 +41,10 @@ def snapshot_fix(prep: PreparedEpoch, min_satellites: int) -> tuple[np.ndarray, 
         min_satellites: fewest satellites a fix may rest on (``min_satellites_init``).
 
     Returns:
-        ``(position_m (3,), clock_bias_m, velocity_mps (3,), clock_drift_mps)`` (velocity zero and
-        drift NaN without four pseudorange rates), or None (also with fewer than ``min_satellites``).
+        ``(position_m (3,), clock_bias_m, velocity_mps (3,), clock_drift_mps, covariance_m2 (4, 4))``
+        (velocity zero and drift NaN without four pseudorange rates; the covariance of position and
+        clock bias is ``(H^T W H)^-1`` scaled by the a-posteriori variance factor when that exceeds
+        1), or None (also with fewer than ``min_satellites``).
 
     Notes:
         Gauss-Newton on Cao et al., eq. 5 from the Earth's centre
@@ -73,6 +77,8 @@ def snapshot_fix(prep: PreparedEpoch, min_satellites: int) -> tuple[np.ndarray, 
         if dof == 0 or float(res @ res) <= chi2.ppf(0.999, dof):
             if dof == 0 and idx.size < min_satellites:
                 return None
+            factor = 1.0 if dof == 0 else max(1.0, float(res @ res) / dof)
+            cov = np.asarray(sol.covariance, dtype=float) * factor
             break
         if idx.size - 1 < min_satellites:
             return None
@@ -90,7 +96,9 @@ def snapshot_fix(prep: PreparedEpoch, min_satellites: int) -> tuple[np.ndarray, 
         solved = weighted_least_squares(h, y, np.ones(ridx.size))
         if solved is not None:
             vel, drift = solved[0][0:3], float(solved[0][3])
-    return x[0:3].copy(), float(x[3]), vel, drift
+    if not np.all(np.isfinite(cov)):
+        return None
+    return x[0:3].copy(), float(x[3]), vel, drift, cov
 
 
 def _full_state(x4: np.ndarray) -> np.ndarray:
