@@ -25,6 +25,7 @@ import numpy as np
 from gnss_common.clock_model import ClockHCoefficients, simulate_clock
 from gnss_common.constants import EARTH_ROTATION_RATE_RADPS, SPEED_OF_LIGHT_MPS
 from gnss_common.coordinates import azimuth_elevation, ecef_to_enu_rotation, ecef_to_geodetic
+from gnss_common.earth_rotation import rotate_about_z
 from gnss_common.ephemeris import EphemerisArrays, EphemerisStore, pack_ephemerides, satellite_states
 from gnss_common.gps_time import gps_ns_to_ros_stamp_ns, gps_to_gps_ns, gps_to_ros_stamp_ns
 from gnss_common.jamming_weights import TrackingLoopParams, measurement_sigmas
@@ -274,17 +275,6 @@ def anchor_positions_ecef(receiver_ecef_m: np.ndarray, ranges_m, azimuths_deg, u
     return np.array(out)
 
 
-def _rotate_z(vec: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
-    """Rotate row vectors about the z axis by -angle (ECEF at transmission -> ECEF at reception)."""
-    c = np.cos(angle_rad)
-    s = np.sin(angle_rad)
-    out = np.empty_like(vec)
-    out[:, 0] = c * vec[:, 0] + s * vec[:, 1]
-    out[:, 1] = -s * vec[:, 0] + c * vec[:, 1]
-    out[:, 2] = vec[:, 2]
-    return out
-
-
 def simulate(
     scenario: GnssUwbScenario,
     geometry: GeometrySource,
@@ -355,11 +345,14 @@ def simulate(
         tau = np.full(snap.prn.size, 0.075)
         for _ in range(3):
             p_tx = snap.position_ecef_m + snap.velocity_ecef_mps * (0.075 - tau)[:, None]
-            p_rot = _rotate_z(p_tx, EARTH_ROTATION_RATE_RADPS * tau)
+            ang = EARTH_ROTATION_RATE_RADPS * tau
+            p_rot = rotate_about_z(p_tx, np.cos(ang), np.sin(ang))
             tau = np.linalg.norm(p_rot - rx, axis=1) / SPEED_OF_LIGHT_MPS
         p_tx = snap.position_ecef_m + snap.velocity_ecef_mps * (0.075 - tau)[:, None]
-        p_rot = _rotate_z(p_tx, EARTH_ROTATION_RATE_RADPS * tau)
-        v_rot = _rotate_z(snap.velocity_ecef_mps, EARTH_ROTATION_RATE_RADPS * tau)
+        ang = EARTH_ROTATION_RATE_RADPS * tau
+        cos_a, sin_a = np.cos(ang), np.sin(ang)
+        p_rot = rotate_about_z(p_tx, cos_a, sin_a)
+        v_rot = rotate_about_z(snap.velocity_ecef_mps, cos_a, sin_a)
         geom = np.linalg.norm(p_rot - rx, axis=1)
         los = (p_rot - rx) / geom[:, None]
         az, el = azimuth_elevation(rx, p_rot)
