@@ -1034,3 +1034,30 @@ def test_every_settable_filter_parameter_is_read_by_the_core_at_each_update(clea
         if np.array_equal(built, reference, equal_nan=True):
             no_effect[name] = 'no effect'
     assert set(no_effect) == set(NO_EFFECT_HERE), no_effect
+
+
+def settable_in_config(text: str) -> set[str]:
+    """Parameters a config file marks ``[settable while running]`` in the comment block above them (a key
+    right below another key, without a comment of its own, belongs to that key's block)."""
+    import re
+
+    settable, block, previous = set(), [], False
+    for line in text.splitlines():
+        stripped = line.strip()
+        if stripped.startswith('#'):
+            block.append(stripped)
+            continue
+        key = re.match(r'^\s{4}([a-z0-9_]+):', line)
+        if key:
+            marked = any('[settable while running' in c for c in block) if block else previous
+            if marked:
+                settable.add(key.group(1))
+            previous = marked
+        block = []
+    return settable
+
+
+def test_config_marks_exactly_the_settable_parameters():
+    from rfi_node_common.params import runtime_parameter_names
+
+    assert settable_in_config(CONFIG.read_text()) == set(runtime_parameter_names(FusionNodeParams))
