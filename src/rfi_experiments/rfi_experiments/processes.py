@@ -259,7 +259,12 @@ def _segment(reader: BagReader, inputs: list[str], start_s: float, duration_s: f
             last_raw[message.topic] = message
     last_input: dict[str, int] = {}
     for topic, message in last_raw.items():
-        stamp = message.decode().header.stamp
+        try:
+            stamp = message.decode().header.stamp
+        except Exception as err:  # rclpy raises its own RMWError for a layout mismatch
+            raise RunError(f'cannot decode a {message.msgtype} of {topic} in the bag ({" ".join(str(err).split())}): '
+                           'was it written with other definitions of the messages? Regenerate it or rebuild '
+                           'rfi_msgs to match') from None
         node = stamped[topic]
         last_input[node] = max(last_input.get(node, 0), stamp.sec * 1_000_000_000 + stamp.nanosec)
     return Segment(start_s, duration_s, counts, first, last, last_input)
