@@ -21,6 +21,7 @@ from collections import defaultdict
 from pathlib import Path
 
 import pytest
+from test_two_suites import without_idle_flushes
 
 from rfi_experiments.bag_io import BagReader
 
@@ -36,10 +37,19 @@ RECEIVED_KEY = {'/gnss/correlators': 'arrays_received', '/gnss/measurements': 'g
 
 def run(tmp: Path, transport: str) -> tuple[subprocess.CompletedProcess, Path]:
     out = tmp / transport
-    done = subprocess.run(
+    proc = subprocess.Popen(
         [sys.executable, '-m', 'rfi_experiments.run', str(BAG), '--out', str(out), '--params-file', str(PARAMS),
          '--transport', transport, *WINDOW, '--no-progress', '--record-outputs', str(out / 'outputs')],
-        capture_output=True, text=True, timeout=120)
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        stdout, stderr = proc.communicate(timeout=120)
+    except subprocess.TimeoutExpired:
+        # interrupt, not kill: run stops its node processes on Ctrl-C (test_ctrl_c_stops_every_process);
+        # a killed run would leave them running in the test's domain
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=60)
+        pytest.fail(f'run --transport {transport} took over 120 s (interrupted, nodes stopped):\n{stderr[-3000:]}')
+    done = subprocess.CompletedProcess(proc.args, proc.returncode, stdout, stderr)
     assert done.returncode == 0, done.stderr
     assert 'Traceback' not in done.stderr
     return done, out
@@ -119,6 +129,9 @@ def test_processes_outputs_equal_direct_field_for_field(runs):
     got, expected = outputs(processes / 'outputs'), outputs(direct / 'outputs')
     got = {t: v for t, v in got.items() if not t.endswith(' STALE')}
     assert set(got) == set(expected)
+    fusion = '/diagnostics[uwb_gnss_fusion]'
+    for outs in (got, expected):  # wall-time flushes: see test_two_suites.without_idle_flushes
+        outs[fusion] = [without_idle_flushes(m) for m in outs[fusion]]
     assert {'/rfi/jammer_state', '/fusion/odometry', '/fusion/status', '/carrier/estimates',
             '/diagnostics[rfi_monitor]', '/diagnostics[uwb_gnss_fusion]', '/diagnostics[imm_carrier]'} <= set(got)
     for topic in expected:
