@@ -16,7 +16,9 @@ KF and AKF run on eq. 8 measurements without resets (as in the paper's compariso
 (paper method)" is the full RfiMonitor chain with ``RfiMonitorParams.paper_method()`` (eq. 10
 measurement with the tracker's rate, AFKF, LPD + AR period estimate from successive peaks, resets
 at predicted sweep starts nudged by the peaks); "ours" adds the lattice voting, the sweep-start
-step fit and the periodicity detector (RfiMonitorParams() defaults). "AFKF + true resets" is an oracle that resets
+step fit and the periodicity detector (``RfiMonitorParams(estimator="kalman")``: the per-sample tracker
+with all of our switches; since issue 14 the monitor's default estimator is "stft", which has no per-sample
+track to compare, see docs/rfi_monitor/stft_estimator.md). "AFKF + true resets" is an oracle that resets
 at the simulator's sweep starts (upper bound of what period estimation can give).
 """
 
@@ -88,7 +90,8 @@ def run_case(jn_db: float, js_db: float = 30.0, rate: float = 1e12, seed: int = 
     for key, par in (("proposed", RfiMonitorParams.paper_method(
             noise_floor_power=fe.noise_power_mw, calibration_blocks=1,
             noise_density_dbm_per_mhz=fe.noise_density_dbm_per_mhz)),
-            ("ours", RfiMonitorParams(noise_floor_power=fe.noise_power_mw, calibration_blocks=1,
+            ("ours", RfiMonitorParams(estimator="kalman", noise_floor_power=fe.noise_power_mw,
+                                      calibration_blocks=1,
                                       noise_density_dbm_per_mhz=fe.noise_density_dbm_per_mhz))):
         mon = RfiMonitor(par)
         fs_list, idx = [], []
@@ -142,7 +145,7 @@ def confusion(n_per_class: int = 50) -> np.ndarray:
                 jams = (NoiseJammer(bandwidth_hz=rng.uniform(2e6, 30e6), center_frequency_hz=rng.uniform(-2e6, 2e6)),)
             seed = int(rng.integers(1 << 30))
             clean = IfSimulator(fe, (), seed=seed + 1).generate(blk).values()
-            mon = RfiMonitor(RfiMonitorParams(calibration_blocks=1))
+            mon = RfiMonitor(RfiMonitorParams(estimator="kalman", calibration_blocks=1))
             mon.process(clean, FS, 9.548e6, 0, 0)
             mon.reset()
             x = IfSimulator(fe, jams, seed=seed).generate(3 * blk).values()

@@ -151,7 +151,7 @@ def welch_psd(x: np.ndarray, nfft: int, max_frames: int) -> tuple[np.ndarray, in
         spec = sp_fft.rfft(fw32, axis=1, overwrite_x=True)
         p = _frame_power(spec) / nfr
         fv = x[: nfr * nfft]
-        pw = float(np.dot(fv, fv)) / fv.size
+        pw = float(np.add.reduce(fv * fv)) / fv.size      # not np.dot: no multi-threaded BLAS
         return _normalised(p, pw), nfr
     # single precision FFT (scipy's pocketfft; numpy's float32 path is slower than its float64 one):
     # the PSD needs ~1e-3 relative accuracy (it is smoothed and thresholded in dB), float32 gives
@@ -166,7 +166,7 @@ def welch_psd(x: np.ndarray, nfft: int, max_frames: int) -> tuple[np.ndarray, in
     p = (p2[0::2] + p2[1::2]) / fr.shape[0]
     fv = np.ascontiguousarray(fr)
     fv = (fv.view(np.float64) if cplx else fv).ravel()
-    pw = float(np.dot(fv, fv)) / fr.size
+    pw = float(np.add.reduce(fv * fv)) / fr.size      # not np.dot: no multi-threaded BLAS
     if cplx:
         p = np.fft.fftshift(p)
     return _normalised(p, pw), int(fr.shape[0])

@@ -78,6 +78,7 @@ from rfi_monitor.classifier import (
     NONE,
     UNKNOWN,
     WIDEBAND,
+    BlockFeatures,
     block_features,
     classify,
     features_from_psd,
@@ -227,7 +228,10 @@ the noise floor puts at least -114 + 120 = +6 dBm into the antenna port (noise d
 front-end AGCs (about 60 dB): such a block would be clipped, never a clean measurement of the jammer."""
 RESELECT_BLOCKS = 64
 """The "stft" estimator chooses its frame length again every this many blocks while it reports a CW or a
-chirp, and on every block after one without (choosing costs a few short-time FFTs of a slice of the block)."""
+chirp (choosing costs a few short-time FFTs of a slice of the block, about the cost of the analysis)."""
+RESELECT_IDLE_BLOCKS = 4
+"""... and every this many blocks while it reports neither (a jammer that appears is analysed at its best
+frame length from at most this many blocks later; before that at the current one, which mostly sees it too)."""
 MIN_BLOCK_POWER = 1e-60
 """Smallest block power analysed, sample units^2 (1e-30 rms): below it the block is blank. The Welch PSD is
 computed in single precision, whose numbers lose precision below 1.2e-38 (subnormal) and end at 1.4e-45;
@@ -274,6 +278,7 @@ class RfiMonitor:
         self._ltemplate: np.ndarray | None = None
         self._frame_length = 0
         self._blocks_since_select = 0
+        self._tracking = False
         self.reset()
 
     # ------------------------------------------------------------------------------------------
@@ -700,47 +705,39 @@ class RfiMonitor:
                     self._off_floor_run = 0
                 return self._rejected(off, stamp_ns, fs, first, n, None)
         self._off_floor_run = 0
-        # frame length: chosen on the first block and again every RESELECT_BLOCKS blocks
-        if self._frame_length == 0 or self._blocks_since_select >= RESELECT_BLOCKS:
-            self._frame_length = rg.choose_frame_length(xs, cplx, p.ridge)
-            self._blocks_since_select = 0
-        self._blocks_since_select += 1
-        rr = rg.analyse(xs, cplx, fs, p.ridge, self._frame_length)
         norm = psd / power
         tpl = self._ltemplate if self._ltemplate is not None else smooth_template(norm, cp.template_smooth_bins)
         feat = features_from_psd(psd, frames, tpl, cp, cplx)
-        if ref == REF_IN_BLOCK:
-            floor = rr.noise_power
+        # frame length: chosen on the first block, every RESELECT_IDLE_BLOCKS blocks while nothing is tracked,
+        # every RESELECT_BLOCKS while something is, and at once (the block analysed again) when a block
+        # shows a power rise or a broad spectral excess that the current frame length resolves as no chirp
+        reselected = False
+        if self._frame_length == 0 or self._blocks_since_select >= (RESELECT_BLOCKS if self._tracking
+                                                                    else RESELECT_IDLE_BLOCKS):
+            self._frame_length = rg.choose_frame_length(xs, cplx, p.ridge)
+            self._blocks_since_select = 0
+            reselected = True
+        self._blocks_since_select += 1
+        while True:
+            rr = rg.analyse(xs, cplx, fs, p.ridge, self._frame_length)
+            jtype, conf, jn, jn_ref, jn_in, floor = self._decide(power, feat, rr, floor, ref)
+            if jtype != WIDEBAND or reselected or rr.noise_power < MIN_BLOCK_POWER:
+                break
+            length = rg.choose_frame_length(xs, cplx, p.ridge)
+            reselected = True
+            self._blocks_since_select = 1
+            if length == self._frame_length:
+                break
+            self._frame_length = length
         if not rr.noise_power >= MIN_BLOCK_POWER:
             # no noise at all in the block (a few non-zero samples): nothing to measure against
             return self._rejected(BLANK_BLOCK, stamp_ns, fs, first, n, None)
         if ref == REF_IN_BLOCK and power > rr.noise_power * 10 ** (MAX_POWER_JN_DB / 10):
             return self._rejected(IMPLAUSIBLE_POWER, stamp_ns, fs, first, n, None)
-        jn_ref = 10 * math.log10(power / floor - 1.0) if power > floor else -math.inf
-        jn_in = 10 * math.log10(power / rr.noise_power - 1.0) if power > rr.noise_power else -math.inf
-        thr = cp.detect_jn_db
-        s = cp.confidence_slope_db
-        narrow = feat.jn_spectral_db >= thr
-        cw = narrow and (feat.occupancy <= cp.cw_max_occupancy or feat.line_fraction >= CW_MIN_LINE_FRACTION)
-        jn = jn_ref
-        if cw and not rr.sweeping:
-            jtype, conf = CW, logistic(feat.jn_spectral_db - thr, s)
-            jn = max(jn_ref, feat.jn_spectral_db)
-        elif rr.sweeping:
-            jtype = CHIRP
-            conf = logistic(max(jn_ref, jn_in) - thr, s) * (1.0 if rr.periodic else 0.6)
-        elif ref != REF_IN_BLOCK and jn_ref >= thr:
-            jtype, conf = WIDEBAND, logistic(jn_ref - thr, s)
-        elif narrow:
-            jtype, conf = WIDEBAND, 0.5 * logistic(feat.jn_spectral_db - thr, s)
-            jn = max(jn_ref, feat.jn_spectral_db)
-        else:
-            jtype = NONE
-            conf = 1.0 - logistic(max(feat.jn_spectral_db, jn_ref) - thr, s)
-            jn = max(jn_ref, feat.jn_spectral_db)
+        if jtype == NONE:
             jn = max(jn, 5.0 * math.log10((1.0 if cplx else 2.0) / (frames * cp.nfft)))
             # the floor learns only from blocks that pass as noise inside the block too
-            if clipped <= p.clip_lower_bound_fraction and not rr.periodic and jn_in < thr:
+            if clipped <= p.clip_lower_bound_fraction and not rr.periodic and jn_in < cp.detect_jn_db:
                 self._learn(power, norm)
         bw_noise = p.noise_bandwidth_hz if p.noise_bandwidth_hz > 0 else (fs if cplx else fs / 2)
         n_dbm = p.noise_density_dbm_per_mhz + 10 * math.log10(bw_noise / 1e6)
@@ -774,12 +771,38 @@ class RfiMonitor:
                 bw = abs(b - a)
                 if math.isfinite(rr.start):
                     f0 = self._to_rel_hz(rr.start, fs, fif, cplx)
-        if jtype not in (CW, CHIRP):
-            self._blocks_since_select = RESELECT_BLOCKS      # nothing tracked: choose the frame length again
+        self._tracking = jtype in (CW, CHIRP)
         lower = clipped > p.clip_lower_bound_fraction and jtype != NONE
         return JammerEstimate(stamp_ns, int(jtype), float(conf), float(jn), float(js), freq, fstd, rate, per, f0,
                               bw, fs, first, n, True, self._counters(), None, "", ref, bool(lower), float(clipped),
                               int(shape), inb)
+
+    def _decide(self, power: float, feat: BlockFeatures, rr: rg.RidgeResult, floor: float, ref: int
+                ) -> tuple[int, float, float, float, float, float]:
+        """(type, confidence, J/N, J/N against the reference, J/N against the in-block level, the floor used)
+        of the "stft" estimator (docs/rfi_monitor/stft_estimator.md, step 6)."""
+        cp = self.params.classifier
+        if ref == REF_IN_BLOCK:
+            floor = rr.noise_power
+        jn_ref = 10 * math.log10(power / floor - 1.0) if power > floor else -math.inf
+        jn_in = 10 * math.log10(power / rr.noise_power - 1.0) if power > rr.noise_power > 0 else -math.inf
+        thr = cp.detect_jn_db
+        s = cp.confidence_slope_db
+        narrow = feat.jn_spectral_db >= thr
+        cw = narrow and (feat.occupancy <= cp.cw_max_occupancy or feat.line_fraction >= CW_MIN_LINE_FRACTION)
+        jn = jn_ref
+        if cw and not rr.sweeping:
+            return CW, logistic(feat.jn_spectral_db - thr, s), max(jn_ref, feat.jn_spectral_db), jn_ref, jn_in, floor
+        if rr.sweeping:
+            conf = logistic(max(jn_ref, jn_in) - thr, s) * (1.0 if rr.periodic else 0.6)
+            return CHIRP, conf, jn, jn_ref, jn_in, floor
+        if ref != REF_IN_BLOCK and jn_ref >= thr:
+            return WIDEBAND, logistic(jn_ref - thr, s), jn, jn_ref, jn_in, floor
+        if narrow:
+            return (WIDEBAND, 0.5 * logistic(feat.jn_spectral_db - thr, s), max(jn_ref, feat.jn_spectral_db), jn_ref,
+                    jn_in, floor)
+        conf = 1.0 - logistic(max(feat.jn_spectral_db, jn_ref) - thr, s)
+        return NONE, conf, max(jn_ref, feat.jn_spectral_db), jn_ref, jn_in, floor
 
     def _learn(self, power: float, norm_psd: np.ndarray) -> None:
         """Add a block that passed as noise to the learned floor and shape (the last calibration_blocks)."""

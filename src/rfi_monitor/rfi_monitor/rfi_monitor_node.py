@@ -96,6 +96,16 @@ reaching the node (one rejected block among many stays OK); else OK. ``hardware_
 the parameter (the front end), and it, the window, the thresholds and ``warning_throttle_s`` can be set
 while the node runs (rfi_node_common.params.RuntimeParameters; the core's parameters are read-only).
 
+Load shedding (issue 14 item 6): a front end delivers a continuous stream, and a node that takes longer
+per block than the block lasts falls behind until the middleware drops blocks it never sees. Instead the
+node spends at most ``max_cpu_load`` of one core over the stream time the blocks cover, measured with the
+CPU time of its own thread (``time.thread_time``: resource accounting only, no estimate depends on it), and
+sheds whole blocks on purpose when it is over that budget: counted as ``blocks_shed`` on /diagnostics,
+no JammerState, and the block after a shed one is a gap for the core (the "stft" estimator keeps no
+per-sample state, so its estimates stay valid). Which blocks are shed depends on the machine's speed, not
+on the replay rate (the budget is stream time). Snapshot front ends (1 ms per second) never shed.
+``accounting_ok`` counts shed blocks: received == processed + shed + rejected.
+
 Stale input: :class:`rfi_node_common.inputs.StaleInputWatch` publishes a STALE status (stamped with
 the node clock, the only wall-clock use; no estimate depends on it) while nothing has arrived for
 ``input_timeout_s``.
@@ -104,6 +114,7 @@ the node clock, the only wall-clock use; no estimate depends on it) while nothin
 from __future__ import annotations
 
 import dataclasses
+import time
 from collections import Counter
 from dataclasses import dataclass
 from typing import Any
@@ -163,6 +174,9 @@ SCALE_MAX = 1.0e3
 """Largest volts (or full-scale units) per count accepted (module docstring)."""
 CENTER_FREQUENCY_MAX_HZ = 1.0e11
 """Highest RF reference frequency accepted, Hz (GNSS bands are 1.1-2.5 GHz; 100 GHz leaves room for any band)."""
+SHED_CREDIT_CAP_S = 0.1
+"""Load shedding: CPU credit saved while idle is capped at this much stream time (times max_cpu_load), s: a burst
+of slow blocks after a quiet spell is absorbed, a lasting overload is not."""
 MAX_SAMPLE_INDEX = 2 ** 53
 """first_sample_index + samples may not exceed this: the core's sample positions are float64, exact to 2^53."""
 
@@ -224,6 +238,11 @@ class MonitorNodeParams:
     check_saturation: bool = parameter(
         True, 'Count samples at full scale (two\'s-complement front ends, bits_per_sample >= 4): the block is '
         'analysed, its clipped fraction reported and its J/N flagged as a lower bound.')
+    max_cpu_load: float = parameter(
+        0.9, 'Share of one core the analysis may use, over the stream time the blocks cover (a continuous stream: '
+        'the block durations; snapshots: the time between them). Beyond it whole blocks are shed on purpose '
+        '(blocks_shed on /diagnostics, no JammerState for them) until it fits again; 0: never shed.',
+        minimum=0.0, maximum=1000.0)
     max_block_samples: int = parameter(
         2 ** 22, 'Longest block analysed, samples (complex: I/Q pairs); longer blocks are rejected (long_block). '
         'Bounds memory (about 40 bytes per sample) and the time of one callback.', minimum=1024, maximum=2**31 - 1)
@@ -575,6 +594,8 @@ class RfiMonitorNode(Node):
         self._core_counters: dict[str, int] = {}
         self._last_type: int | None = None
         self._last_clipped_fraction = 0.0
+        self._cpu_debt_s = 0.0
+        self._last_block_stamp_ns: int | None = None
         self._errors_at_last_report = 0
         self._handler_errors_at_last_report = 0
         self._diag_timer = StampTimer(self.params.diagnostics_period_s)
@@ -612,8 +633,12 @@ class RfiMonitorNode(Node):
             reason, stamp_ns = self._admit_stamp(msg)
             if reason is None:
                 reason = check_block(msg, self.params.min_block_samples, self.params.max_block_samples)
-            if reason is None:
+            if reason is None and stamp_ns is not None and self._shed(stamp_ns, msg):
+                self.counts['blocks_shed'] += 1
+            elif reason is None:
+                cpu0 = time.thread_time()
                 reason = self._analyse(stamp_ns, msg)
+                self._cpu_debt_s += time.thread_time() - cpu0
         except Exception as err:  # noqa: BLE001 - a bug in the checks: count it, never lose the block
             self.get_logger().error(f'IF block dropped, the node raised {type(err).__name__}: {err}',
                                     throttle_duration_sec=self.params.warning_throttle_s)
@@ -624,6 +649,22 @@ class RfiMonitorNode(Node):
                                    throttle_duration_sec=self.params.warning_throttle_s)
         if stamp_ns is not None and self._diag_timer.due(stamp_ns):
             self._publish(lambda: self.diagnostics(stamp_ns))
+
+    def _shed(self, stamp_ns: int, msg: IfSamples) -> bool:
+        """Whether to shed this well-formed block (module docstring, "Load shedding"): every block earns
+        ``max_cpu_load`` times the stream time it covers (its duration, or the time since the last block when
+        longer), the analysis spends the CPU time it takes; a block arriving while the balance is in debt is
+        shed. The credit saved is capped at SHED_CREDIT_CAP_S times max_cpu_load (a burst allowance)."""
+        load = self.params.max_cpu_load
+        n = len(msg.samples) // SAMPLE_WIDTH_BYTES[msg.sample_format] // (2 if msg.is_complex else 1)
+        covered_s = n / msg.sample_rate_hz
+        if self._last_block_stamp_ns is not None:
+            covered_s = max(covered_s, (stamp_ns - self._last_block_stamp_ns) / NS_PER_S)
+        self._last_block_stamp_ns = stamp_ns
+        if not load > 0:
+            return False
+        self._cpu_debt_s = max(self._cpu_debt_s - load * covered_s, -load * SHED_CREDIT_CAP_S)
+        return self._cpu_debt_s > 0.0
 
     def _admit_stamp(self, msg: IfSamples) -> tuple[str | None, int | None]:
         """(rejection reason or None, the stamp in ns if the StampGate accepted it)."""
@@ -690,7 +731,7 @@ class RfiMonitorNode(Node):
     def accounting(self) -> dict[str, object]:
         """Counters of the node, the core and the subscription, and whether every block received is accounted for."""
         values: dict[str, object] = dict(sorted(self.counts.items()))
-        for key in ('blocks_received', 'blocks_processed', 'states_published', 'stamp_restarts'):
+        for key in ('blocks_received', 'blocks_processed', 'states_published', 'stamp_restarts', 'blocks_shed'):
             values.setdefault(key, 0)
         core = self._core_counters
         values['gaps'] = core.get('gaps', 0)
@@ -702,7 +743,8 @@ class RfiMonitorNode(Node):
         values.update(self.health.values())
         received = self.counts['blocks_received']
         values['accounting_ok'] = (self.health.counts[f'{self.subscription.topic_name}.received'] == received
-                                   == self.counts['blocks_processed'] + rejected_total(self.counts))
+                                   == self.counts['blocks_processed'] + self.counts['blocks_shed']
+                                   + rejected_total(self.counts))
         return values
 
     def diagnostics(self, stamp_ns: int) -> DiagnosticArray:

@@ -51,8 +51,9 @@ SPIN_DEADLINE_S = 30.0
 def _parameters(**overrides) -> list[Parameter]:
     # no STALE reports on the wall clock unless a test asks for them: every output is then caused by a block
     # diagnostics window = period: the levels tested here are those of the blocks since the last report
-    base = {'diagnostics_period_s': 0.001, 'diagnostics_window_s': 0.001, 'noise_bandwidth_hz': NOISE_BW_HZ,
-            'input_timeout_s': 0.0}
+    # max_cpu_load 0: every block analysed (shedding depends on the machine's speed; test_load_shedding tests it)
+    base = {'max_cpu_load': 0.0, 'diagnostics_period_s': 0.001, 'diagnostics_window_s': 0.001,
+            'noise_bandwidth_hz': NOISE_BW_HZ, 'input_timeout_s': 0.0}
     base.update(overrides)
     return [Parameter(k, value=v) for k, v in base.items()]
 
@@ -308,6 +309,20 @@ def test_clipped_block_is_analysed(probe_factory):
     v = p.values()
     assert float(v['last_clipped_fraction']) == pytest.approx(state.clipped_fraction, rel=1e-6)
     assert int(v['core.clipped_blocks']) >= 1 and v['accounting_ok'] == 'True'
+
+
+def test_load_shedding_counts_whole_blocks_and_keeps_accounting(probe_factory):
+    """Issue 14 item 6: over its CPU budget the node sheds whole blocks on purpose, counted as blocks_shed; the
+    blocks it analyses give valid states. With max_cpu_load 1e-4 a 1 ms block earns 0.1 us of CPU, far less than
+    any analysis costs, so after the first block every block of this short stream is shed."""
+    fe = FrontEndConfig(noise_bandwidth_hz=NOISE_BW_HZ)
+    msgs, _ = stream(fe, (ChirpJammer(js_db=JS_DB),), 0, 6, seed=21)
+    p = probe_factory(max_cpu_load=1e-4)
+    states = p.send_all(msgs)
+    assert states[0] is not None and states[0].type == JammerState.CHIRP
+    assert all(s is None for s in states[1:])
+    v = p.values()
+    assert v['blocks_shed'] == '5' and v['blocks_processed'] == '1' and v['accounting_ok'] == 'True'
 
 
 def test_no_saturation_check_for_two_bit_front_ends():
