@@ -103,6 +103,7 @@ class Monitor:
         rclpy.init(context=self.context)
         self.node = RfiMonitorNode(context=self.context, parameter_overrides=[
             Parameter('input_timeout_s', value=0.0),
+            Parameter('max_cpu_load', value=0.0),   # no load shedding: every block analysed, as by the core
             Parameter('qos_overrides./rfi/if_samples.subscription.reliability', value='reliable')])
         self.probe = Node('if_source_pipe_probe', context=self.context)
         self.blocks: list[IfSamples] = []
@@ -232,3 +233,41 @@ def test_a_pause_of_the_writer_is_a_counted_gap_and_a_truncated_end_is_counted(m
     assert [message_fields(b) for b in monitor.blocks] == [message_fields(b) for b in expected]
     monitor.settle(6)
     assert monitor.node.accounting()['gaps'] == 1   # the monitor saw the jump
+
+
+def tool(name: str) -> str:
+    return os.path.join(get_package_prefix('rfi_experiments'), 'lib', 'rfi_experiments', name)
+
+
+@pytest.mark.parametrize('name', ['if_source', 'if_to_bag'])
+def test_help(name):
+    done = subprocess.run([tool(name), '--help'], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and 'usage' in done.stdout.lower() and 'Traceback' not in done.stderr
+    for word in ('item_type' if name == 'if_source' else '--item-type', 'sampling', 'intermediate', 'center',
+                 'spectral'):
+        assert word in done.stdout
+
+
+def test_misspelt_parameter_is_refused_before_the_input_is_read():
+    """A misspelt -p stops the node (exit 2, one line naming the closest parameter) without taking a byte of
+    standard input (the reader starts only once the parameters are checked)."""
+    r, w = os.pipe()
+    os.write(w, CAPTURE.read_bytes()[:8000])
+    os.close(w)
+    try:
+        done = subprocess.run(source_command('sampling_frequency:=4000000.0'), stdin=r, capture_output=True,
+                              text=True, timeout=60)
+        left = len(os.read(r, 100_000))
+    finally:
+        os.close(r)
+    assert done.returncode == 2, done.stderr
+    assert 'unknown parameter sampling_frequency (did you mean sampling_frequency_hz?)' in done.stderr
+    assert 'Traceback' not in done.stderr
+    assert left == 8000
+
+
+def test_bad_format_is_refused_with_one_line():
+    done = subprocess.run(source_command('intermediate_frequency_hz:=3000000.0'), stdin=subprocess.DEVNULL,
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and 'Traceback' not in done.stderr
+    assert done.stderr.strip().endswith('must be below fs/2 = 2000000.0 Hz for complex samples'), done.stderr

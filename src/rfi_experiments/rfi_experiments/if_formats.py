@@ -543,13 +543,13 @@ class BlockAssembler:
 
 
 def is_live(path: str) -> bool:
-    """True for standard input ('-') and for anything that is not a regular file (a named pipe, a device)."""
-    if path == '-':
-        return True
+    """True for a live stream: standard input ('-') or a path that is not a regular file (a named pipe, a
+    device). Standard input redirected from a regular file (``< capture.bin``) is not live."""
     try:
-        return not stat.S_ISREG(os.stat(path).st_mode)
+        mode = os.fstat(0).st_mode if path == '-' else os.stat(path).st_mode
     except OSError:
-        return False
+        return path == '-'
+    return not stat.S_ISREG(mode)
 
 
 def check_file_size(path: str | Path, fmt: IfFormat, block_samples: int) -> int:

@@ -6,7 +6,8 @@ stamps, gap detection); this node declares the parameters, runs the reading loop
 
 Input (``input``): a file path, ``-`` for standard input, or a named pipe. A regular file is checked first
 (its size must be a whole number of items, usually a wrong ``item_type`` otherwise) and read to its end;
-standard input and pipes are live streams: ``rtl_sdr -f 1575420000 -s 2048000 - | ros2 run rfi_experiments
+standard input (unless redirected from a regular file, which is read like that file) and pipes are live
+streams: ``rtl_sdr -f 1575420000 -s 2048000 - | ros2 run rfi_experiments
 if_source --ros-args -p item_type:=uibyte -p sampling_frequency_hz:=2048000.0``. At the end of the input
 the node reports its counters and, with ``exit_at_end`` (default), shuts down (exit code 0).
 
@@ -217,7 +218,7 @@ class IfSourceNode(Node):
         self.fmt = p.format()
         self.block_samples = self.fmt.block_samples(p.block_duration_s)
         self.live = is_live(p.input)
-        if not self.live:
+        if not self.live and p.input != '-':
             check_file_size(p.input, self.fmt, self.block_samples)
         self.start_ns = parse_start_time(p.start_time) if p.start_time else None
         qos = DATA_QOS if p.reliability == 'reliable' else qos_profile_sensor_data

@@ -33,6 +33,9 @@ from rfi_node_common.qos import DATA_QOS
 from rfi_node_common.stamps import ns_to_stamp, stamp_to_ns
 
 DATA = Path(__file__).resolve().parents[2] / 'rfi_monitor' / 'test' / 'data'
+SHARED_12MHZ = Path(__file__).resolve().parents[4] / 'shared' / 'data' / 'iq_clean_pocketsdr' / \
+    'L1_20211125_004000_12MHz_I.bin'
+CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'if_source.yaml'
 FRAME_ID = 'if_source_node_test'
 START_NS = 1_638_434_820_000_000_000
 SPIN_DEADLINE_S = 60.0  # a cold numba cache compiles the monitor's kernels on the first block
@@ -109,6 +112,7 @@ class Chain:
         rclpy.init(context=self.context)
         self.monitor = RfiMonitorNode(context=self.context, parameter_overrides=[
             Parameter('input_timeout_s', value=0.0),
+            Parameter('max_cpu_load', value=0.0),   # no load shedding: every block analysed, as by the core
             Parameter('qos_overrides./rfi/if_samples.subscription.reliability', value='reliable')])
         self.probe = Node('if_source_probe', context=self.context)
         self.blocks: list[IfSamples] = []
@@ -165,10 +169,20 @@ def chains():
 
 @pytest.mark.parametrize('name,params,dtype,block,cplx,fs,fif,bits', CASES, ids=IDS)
 def test_source_to_monitor_equals_direct_read(chains, name, params, dtype, block, cplx, fs, fif, bits):
-    direct = direct_blocks(DATA / name, dtype, block, cplx, fs, fif, bits)
+    check_chain_against_direct_read(chains, DATA / name, params, dtype, block, cplx, fs, fif, bits)
+
+
+@pytest.mark.skipif(not SHARED_12MHZ.is_file(), reason='../shared/data is not here (a clone has the cuts only)')
+def test_whole_12mhz_capture_through_source_and_monitor(chains):
+    """The whole 0.1 s PocketSDR 12 MHz real capture of ../shared/data: 100 blocks, as above."""
+    check_chain_against_direct_read(chains, SHARED_12MHZ, *CASES[0][1:])
+
+
+def check_chain_against_direct_read(chains, path, params, dtype, block, cplx, fs, fif, bits):
+    direct = direct_blocks(path, dtype, block, cplx, fs, fif, bits)
     expected_states = core_states(direct)
     assert len(expected_states) == len(direct)  # every block analysed
-    chain = chains({'input': str(DATA / name), **params})
+    chain = chains({'input': str(path), **params})
     chain.spin_until(lambda: chain.source.done.is_set() and len(chain.states) >= len(direct)
                      and any(d.status[0].message.startswith('end of input') for d in chain.diagnostics),
                      'every block through the monitor')
@@ -218,8 +232,17 @@ def test_bad_parameters_are_refused(tmp_path, overrides, needle):
 
 
 def test_parameters_are_documented():
-    text = IfSourceParams.__doc__ or ''
-    assert 'if_to_bag' in text
     import dataclasses
+    assert 'if_to_bag' in (IfSourceParams.__doc__ or '')
     for f in dataclasses.fields(IfSourceParams):
         assert f.metadata['rfi_doc']['description'], f.name
+
+
+def test_config_file_lists_every_parameter_with_its_default():
+    import dataclasses
+
+    import yaml
+    values = yaml.safe_load(CONFIG.read_text())['if_source']['ros__parameters']
+    defaults = {f.name: f.default for f in dataclasses.fields(IfSourceParams)}
+    assert values == defaults
+    assert all(type(values[k]) is type(v) for k, v in defaults.items())  # 0.0 stays a float, 0 an int

@@ -66,7 +66,7 @@ def core_on_messages(msgs: list[IfSamples]) -> list[tuple]:
 
 
 def core_on_direct_read(path: Path, dtype, block: int, cplx: bool, fs: float, fif: float, bits: int,
-                        start_ns: int) -> list[tuple]:
+                        start_ns: int, n_blocks: int | None = None) -> list[tuple]:
     """The core fed the file read with np.fromfile, cut by hand (scale 1: the values are the counts)."""
     x = np.fromfile(path, dtype=dtype).astype(np.float64)
     per = block * (2 if cplx else 1)
@@ -74,15 +74,16 @@ def core_on_direct_read(path: Path, dtype, block: int, cplx: bool, fs: float, fi
     fs_counts = None if bits < 4 else float(2 ** (bits - 1) - 1)
     return [estimate_key(mon.process(x[k * per:(k + 1) * per], fs, fif, k * block,
                                      start_ns + round(k * block * 1e9 / fs), is_complex=cplx, full_scale=fs_counts))
-            for k in range(x.size // per)]
+            for k in range(min(x.size // per, n_blocks or x.size))]
 
 
-@pytest.mark.parametrize('name,opts,dtype,block,cplx,fs,fif,bits', CASES, ids=IDS)
-def test_bag_equals_direct_read_and_monitor_outputs_agree(tmp_path, name, opts, dtype, block, cplx, fs, fif, bits):
+def check_bag_against_direct_read(tmp_path, path, opts, dtype, block, cplx, fs, fif, bits, core_blocks=None):
+    """Every block of the bag equals the direct read; the core's outputs on the first ``core_blocks`` (None: all)
+    blocks of the bag equal those on the directly read ones."""
     out = tmp_path / 'bag'
-    assert main(['if_to_bag', str(DATA / name), str(out), *opts]) == 0
+    assert main(['if_to_bag', str(path), str(out), *opts]) == 0
     msgs = read_bag(out)
-    direct = np.fromfile(DATA / name, dtype=dtype)
+    direct = np.fromfile(path, dtype=dtype)
     per = block * (2 if cplx else 1)
     assert len(msgs) == direct.size // per
     start_ns = stamp_to_ns(msgs[0].header.stamp)
@@ -92,9 +93,31 @@ def test_bag_equals_direct_read_and_monitor_outputs_agree(tmp_path, name, opts, 
         assert m.sample_rate_hz == fs and m.intermediate_frequency_hz == fif and m.bits_per_sample == bits
         assert m.scale == 1.0 and m.center_frequency_hz == 1575.42e6 and m.header.frame_id == 'gnss_front_end'
         assert stamp_to_ns(m.header.stamp) == start_ns + round(k * block * 1e9 / fs)
+    msgs = msgs[:core_blocks]
     via_bag = core_on_messages(msgs)
-    assert via_bag == core_on_direct_read(DATA / name, dtype, block, cplx, fs, fif, bits, start_ns)
+    assert via_bag == core_on_direct_read(path, dtype, block, cplx, fs, fif, bits, start_ns, core_blocks)
     assert sum(1 for e in via_bag if e[0]) == len(msgs)  # every block analysed (the first ones learn the floor)
+
+
+@pytest.mark.parametrize('name,opts,dtype,block,cplx,fs,fif,bits', CASES, ids=IDS)
+def test_bag_equals_direct_read_and_monitor_outputs_agree(tmp_path, name, opts, dtype, block, cplx, fs, fif, bits):
+    check_bag_against_direct_read(tmp_path, DATA / name, opts, dtype, block, cplx, fs, fif, bits)
+
+
+SHARED_CASES = [
+    ('iq_clean_pocketsdr/L1_20211125_004000_12MHz_I.bin', *CASES[0][1:]),
+    ('iq_clean_pocketsdr/L1_20211202_084700_4MHz_IQ.bin', *CASES[1][1:]),
+    ('iq_clean_gnsssdr/GSoC_CTTC_capture_2012_07_26_4Msps_4ms.dat', *CASES[2][1:]),
+]
+
+
+@pytest.mark.skipif(not SHARED.is_dir(), reason='../shared/data is not here (a clone has the cuts only)')
+@pytest.mark.parametrize('name,opts,dtype,block,cplx,fs,fif,bits', SHARED_CASES, ids=[c[0] for c in SHARED_CASES])
+def test_whole_real_captures(tmp_path, name, opts, dtype, block, cplx, fs, fif, bits):
+    """The whole captures of ../shared/data (0.1 s, 0.5 s and 4 ms), as above; the monitor on their first 0.1 s
+    (the core runs twice per block: the 0.5 s capture would take about 25 s)."""
+    check_bag_against_direct_read(tmp_path, SHARED / name, opts, dtype, block, cplx, fs, fif, bits,
+                                  core_blocks=round(0.1 * fs / block))
 
 
 def test_start_time_is_ros_time(tmp_path):
