@@ -246,3 +246,42 @@ def test_config_file_lists_every_parameter_with_its_default():
     defaults = {f.name: f.default for f in dataclasses.fields(IfSourceParams)}
     assert values == defaults
     assert all(type(values[k]) is type(v) for k, v in defaults.items())  # 0.0 stays a float, 0 an int
+
+
+def test_pipe_backlog_and_capacity_are_seen():
+    """What the live reader uses to see that it fell behind: the bytes waiting in the pipe and its capacity."""
+    import os
+
+    from rfi_experiments.if_source import bytes_waiting, pipe_capacity
+    r, w = os.pipe()
+    try:
+        capacity = pipe_capacity(r)
+        assert capacity is not None and capacity >= 4096
+        os.set_blocking(w, False)
+        written = 0
+        try:
+            while True:
+                written += os.write(w, bytes(4096))
+        except BlockingIOError:
+            pass
+        assert written == capacity and bytes_waiting(r) == capacity   # a full pipe: the writer is blocked
+        os.read(r, 1000)
+        assert bytes_waiting(r) == capacity - 1000
+    finally:
+        os.close(r)
+        os.close(w)
+
+
+@pytest.mark.parametrize('reliability,policy', [('reliable', 'RELIABLE'), ('best_effort', 'BEST_EFFORT')])
+def test_reliability_parameter_sets_the_publisher_qos(reliability, policy):
+    context = Context()
+    rclpy.init(context=context)
+    node = None
+    try:
+        node = IfSourceNode(context=context, parameter_overrides=[
+            Parameter('input', value=str(DATA / CASES[1][0])), Parameter('reliability', value=reliability)])
+        assert node.pub.qos_profile.reliability.name == policy
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)

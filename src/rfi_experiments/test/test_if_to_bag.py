@@ -181,3 +181,11 @@ def test_truncated_standard_input_is_reported(tmp_path, capsys, monkeypatch):
     assert '500 samples after the last whole block, not written' in text
     assert '1 trailing bytes' in text
     assert len(read_bag(tmp_path / 'bag')) == 3
+
+
+def test_max_duration(tmp_path, capsys):
+    assert main(['if_to_bag', str(DATA / CASES[1][0]), str(tmp_path / 'bag'), *CASES[1][1], '--max-duration-s',
+                 '0.003']) == 0
+    assert [m.first_sample_index for m in read_bag(tmp_path / 'bag')] == [0, 4000, 8000]
+    _refused(capsys, [str(DATA / CASES[1][0]), str(tmp_path / 'bag2'), *CASES[1][1], '--max-duration-s', '0.0001'],
+             'shorter than one block')
