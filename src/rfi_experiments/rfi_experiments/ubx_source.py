@@ -390,6 +390,8 @@ class UbxSourceNode(Node):
         self._start_timer.cancel()
         if self._thread.is_alive() and threading.current_thread() is not self._thread:
             self._thread.join(timeout=2.0)
+        if self._thread.ident is None:  # stopped before the reader started: report the (empty) counters too
+            self._report_end(publish=False)
         if not self._thread.is_alive():
             self._close()
         super().destroy_node()
