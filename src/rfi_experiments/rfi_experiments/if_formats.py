@@ -597,7 +597,8 @@ class LiveLag:
     count exceeds what was received by more than ``tolerance_s * fs``, samples were lost upstream (the
     SDR tool overran while the reader fell behind, or dropped USB buffers): :meth:`update` returns the
     missing count, the caller declares it a gap (:meth:`BlockAssembler.skip`), and the reference moves on.
-    A stream that delivers more than ``fs`` (a wrong rate, or a backlog) is reported by :attr:`lag_s` < 0.
+    A stream more than ``tolerance_s`` ahead of ``fs`` (a fast sampling clock, a burst after a stall) re-bases
+    the reference (counted in :attr:`ahead_rebases`), so that a later loss is not hidden behind the advance.
     A sampling clock off by ``d`` ppm accumulates ``d * 1e-6 * T``: the tolerance must cover it over a run
     (50 ppm x 1 h = 0.18 s) as well as the tool's buffering (rtl_sdr: 256 KiB buffers).
 
@@ -609,6 +610,7 @@ class LiveLag:
     fs: float
     tolerance_s: float
     lag_s: float = 0.0
+    ahead_rebases: int = 0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.tolerance_s) and self.tolerance_s > 0):
@@ -630,4 +632,7 @@ class LiveLag:
             self._t0, self._base = float(elapsed_s), int(samples_seen) + missing
             self.lag_s = 0.0
             return missing
+        if self.lag_s < -self.tolerance_s:  # ahead (a fast sampling clock, a burst): re-base, or a later loss
+            self._t0, self._base = float(elapsed_s), int(samples_seen)  # would hide behind the advance
+            self.ahead_rebases += 1
         return 0

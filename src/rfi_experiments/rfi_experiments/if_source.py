@@ -43,8 +43,8 @@ counted as ``pipe_full_reads``.
 Diagnostics (/diagnostics, name ``if_source``, every ``diagnostics_period_s`` of stamp time and at the end):
 bytes_in, blocks, samples, blocks_published, gaps, samples_lost, samples_dropped_at_gap, partial_item_reads,
 pipe_full_reads, final_partial_block_samples, trailing_bytes (the input ended inside an item), and for
-gr_complex rounded_values, clipped_values, non_finite_values; lag_s, subscribers, read_errors. Level: ERROR
-after a read error, WARN after gaps, trailing bytes or an inexact float conversion, else OK.
+gr_complex rounded_values, clipped_values, non_finite_values; lag_s, ahead_rebases, subscribers, read_errors.
+Level: ERROR after a read error, WARN after gaps, trailing bytes or an inexact float conversion, else OK.
 """
 
 from __future__ import annotations
@@ -349,6 +349,7 @@ class IfSourceNode(Node):
         for key in ('blocks_published', 'pipe_full_reads', 'read_errors', 'unacknowledged_waits'):
             v[key] = self.counts.get(key, 0)
         v['lag_s'] = round(self.lag.lag_s, 6) if self.lag is not None else 'off'
+        v['ahead_rebases'] = self.lag.ahead_rebases if self.lag is not None else 0
         v['subscribers'] = self.pub.get_subscription_count()
         v['input'] = self.params.input
         v['item_type'] = self.fmt.item_type

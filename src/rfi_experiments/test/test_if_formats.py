@@ -225,8 +225,13 @@ def test_live_lag_declares_a_gap_beyond_the_tolerance():
     assert lag.update(11.0, 950_000) == 0 and lag.lag_s == pytest.approx(0.05)  # within tolerance
     missing = lag.update(11.5, 1_200_000)                                 # 0.3 s missing
     assert missing == pytest.approx(300_000, abs=1)
-    assert lag.update(12.0, 1_200_000 + missing + 500_000) == 0          # the reference moved on
-    assert lag.update(12.5, 0 + 1_200_000 + missing + 2_000_000) == 0 and lag.lag_s < 0  # faster: no gap
+    base = 1_200_000 + missing
+    assert lag.update(12.0, base + 500_000) == 0                        # the reference moved on
+    assert lag.update(12.5, base + 1_050_000) == 0 and lag.lag_s == pytest.approx(-0.05)  # ahead: no gap
+    assert lag.ahead_rebases == 0
+    assert lag.update(13.0, base + 2_000_000) == 0 and lag.ahead_rebases == 1  # 0.5 s ahead: re-based
+    assert lag.update(13.5, base + 2_450_000) == 0                      # 0.05 s behind the new reference
+    assert lag.update(14.0, base + 2_450_000) == pytest.approx(550_000, abs=1)  # a loss right after is seen
 
 
 def test_stamps_are_exact_and_do_not_drift():
