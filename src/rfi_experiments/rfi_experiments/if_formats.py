@@ -348,7 +348,8 @@ def _swap_iq(values: np.ndarray) -> np.ndarray:
 
 
 def _floats_to_counts(x: np.ndarray, k: float, counters: Counter[str] | None) -> np.ndarray:
-    y = x.astype(np.float64) * k
+    with np.errstate(invalid='ignore', over='ignore'):  # NaN / inf / overflow: counted below, not warned
+        y = x.astype(np.float64) * k
     finite = np.isfinite(y)
     y = np.where(finite, y, 0.0)
     r = np.rint(y)
