@@ -215,3 +215,52 @@ def test_ctrl_c_while_reading_a_port_is_a_clean_exit(ubx_log):
     assert proc.returncode == 0, text
     assert 'Traceback' not in text  # (rcl may print that a log line could not reach /rosout: a race it owns)
     assert 'end of input' in text
+
+
+def test_a_lost_port_that_comes_back_is_reopened_and_decoding_goes_on(ubx_log, monkeypatch):
+    import serial
+    from rclpy.parameter import Parameter
+
+    from rfi_experiments.ubx_source import UbxSourceNode
+
+    m1, s1 = os.openpty()
+    m2, s2 = os.openpty()
+    context = Context()
+    rclpy.init(context=context)
+    node = None
+    back = serial.Serial(f'/dev/fd/{s2}', 115200, timeout=0.1)  # the port as it is after the receiver is back
+    try:
+        node = UbxSourceNode(context=context, parameter_overrides=[
+            Parameter('input', value=f'/dev/fd/{s1}'), Parameter('reconnect_period_s', value=0.05),
+            Parameter('max_reconnect_attempts', value=3)])
+        monkeypatch.setattr(node, '_open_serial', lambda: back)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+
+        def spin_until(done, what):
+            deadline = time.monotonic() + DEADLINE_S
+            while not done():
+                assert time.monotonic() < deadline, what
+                executor.spin_once(timeout_sec=0.02)
+
+        data = ubx_log.read_bytes()
+        cut = len(data) // 2 + 7  # inside a frame
+        os.write(m1, data[:cut])
+        spin_until(lambda: node.decoder.counts['rawx_epochs'] >= 5, 'the first half was not read')
+        first = node.decoder.counts['rawx_epochs']
+        os.close(m1)  # unplugged
+        spin_until(lambda: node.counts['reconnects'] == 1, 'the port was not reopened')
+        assert node.counts['port_losses'] == 1 and node.port_state == 'open'
+        os.write(m2, data[cut:])
+        spin_until(lambda: node.decoder.counts['frames'] + node.decoder.counts['bad_checksum']
+                   + node.decoder.counts['truncated'] >= 65, 'the second half was not read')
+        assert node.decoder.counts['truncated'] == 1  # the frame cut by the loss, dropped and counted
+        assert node.decoder.counts['rawx_epochs'] > first
+        assert node.exit_code == 0
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        back.close()
+        for fd in (s1, m2, s2):
+            os.close(fd)

@@ -501,6 +501,12 @@ class UbxDecoder:
         self._sync_counts()
         return out
 
+    def discard_partial_frame(self) -> None:
+        """The byte stream broke (a serial port lost and reopened): a frame cut by the break is counted
+        as truncated and dropped, so that it is not glued to the bytes of the new connection."""
+        self._framer.finish()
+        self._sync_counts()
+
     def finish(self) -> None:
         """End of stream: counts a truncated last frame, and SFRBX that never got a week (no RAWX)."""
         self.counts["sfrbx_without_week"] += len(self._pending_sfrbx)

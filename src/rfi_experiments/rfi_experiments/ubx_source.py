@@ -264,6 +264,7 @@ class UbxSourceNode(Node):
                 self.counts['port_losses'] += 1
                 self.port_state = 'lost'
                 self.get_logger().error(f'serial port {self.params.input} lost: {err}')
+                self.decoder.discard_partial_frame()
                 self._close()
                 self.port_state = 'lost'
                 self._publish_diagnostics(self._last_stamp_ns, final=False)
