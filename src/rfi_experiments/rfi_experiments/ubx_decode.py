@@ -367,13 +367,12 @@ def interference_from_message(msg: Any, stamp_ns: int, week: int, tow_s: float) 
                 spoofing_detection_enabled=False))
         return out
     if ident == "SEC-SIG":
-        jam_state = int(getattr(msg, "jammingState", 0))
+        jam_state = int(msg.jammingState)  # same names in SEC-SIG versions 1 and 2; missing: unparsable
         return [InterferenceReport(
             **base, source=SOURCE_SEC_SIG, rf_block_id=0, jamming_state=jam_state, jam_indicator=math.nan,
             agc_count=math.nan, noise_per_ms=math.nan, antenna_status=0, antenna_power=0,
-            jamming_detection_enabled=bool(getattr(msg, "jamDetEnabled", 0)),
-            spoofing_state=int(getattr(msg, "spoofingState", 0)),
-            spoofing_detection_enabled=bool(getattr(msg, "spfDetEnabled", 0)))]
+            jamming_detection_enabled=bool(msg.jamDetEnabled), spoofing_state=int(msg.spoofingState),
+            spoofing_detection_enabled=bool(msg.spfDetEnabled))]
     return []
 
 

@@ -204,11 +204,13 @@ def test_reports_before_any_receive_time_are_counted_not_stamped():
     assert dec.counts["interference_before_time"] == 3
 
 
-def test_sec_sig():
-    sig = UBXMessage("SEC", "SEC-SIG", GET, version=1, jamDetEnabled=1, jammingState=2, spfDetEnabled=1,
-                     spoofingState=1).serialize()
+@pytest.mark.parametrize("version", [1, 2])
+def test_sec_sig(version):
+    sig = UBXMessage("SEC", "SEC-SIG", GET, version=version, jamDetEnabled=1, jammingState=2, spfDetEnabled=1,
+                     spoofingState=3).serialize()
     (r,) = _reports(sig)
-    assert (r.source, r.jamming_state, r.jamming_detection_enabled, r.spoofing_state) == (SOURCE_SEC_SIG, 2, True, 1)
+    assert (r.source, r.jamming_state, r.jamming_detection_enabled, r.spoofing_state) == (SOURCE_SEC_SIG, 2, True, 3)
+    assert r.spoofing_detection_enabled
     assert math.isnan(r.jam_indicator) and math.isnan(r.agc_count)
 
 
