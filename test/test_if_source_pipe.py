@@ -130,8 +130,7 @@ class Monitor:
         s = msg.status[0] if msg.status else None
         if s is not None and s.name == 'if_source' and s.message.startswith('end of input'):
             values = {kv.key: kv.value for kv in s.values}
-            if values.get('input') == '-':
-                self.final = values
+            self.final = values
 
     def run(self, command: list[str], writer) -> subprocess.CompletedProcess:
         proc = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
@@ -271,3 +270,21 @@ def test_bad_format_is_refused_with_one_line():
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 2 and 'Traceback' not in done.stderr
     assert done.stderr.strip().endswith('must be below fs/2 = 2000000.0 Hz for complex samples'), done.stderr
+
+
+def test_named_pipe(monitor, tmp_path):
+    """input:=<a named pipe>: opened by the reader (a FIFO's open waits for its writer), read as a live stream."""
+    fifo = tmp_path / 'sdr.fifo'
+    os.mkfifo(fifo)
+    raw = CAPTURE.read_bytes()
+
+    def write(stdin) -> None:
+        stdin.close()
+        with open(fifo, 'wb') as f:
+            for p in pieces(raw, 5000):
+                f.write(p)
+
+    done = monitor.run(source_command(f'input:={fifo}', 'gap_tolerance_s:=5.0'), write)
+    assert done.returncode == 0, done.stderr.decode()
+    assert [message_fields(b) for b in monitor.blocks] == [message_fields(b) for b in direct_blocks(raw)]
+    assert monitor.final is not None and monitor.final['gaps'] == '0'

@@ -237,6 +237,8 @@ class IfSourceNode(Node):
         self._own_fd = False
         if p.input == '-':
             self._fd = 0
+        elif self.live and os.path.exists(p.input):
+            pass  # a named pipe: opened by the reader thread (opening blocks until a writer opens it)
         else:
             try:
                 self._fd = os.open(p.input, os.O_RDONLY)
@@ -290,7 +292,9 @@ class IfSourceNode(Node):
             self.stop.wait(0.02)
 
     def _read_loop(self) -> None:
-        assert self._fd is not None
+        if self._fd is None:  # a named pipe
+            self._fd = os.open(self.params.input, os.O_RDONLY)
+            self._own_fd = True
         fd = self._fd
         capacity = pipe_capacity(fd) if self.live else None
         t_first: float | None = None
