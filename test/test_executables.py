@@ -22,8 +22,25 @@ EXECUTABLES = [
     ('rfi_experiments', 'simulate'),
     ('rfi_experiments', 'rinex_to_bag'),
     ('rfi_experiments', 'uwb_dataset_to_bag'),
+    ('rfi_experiments', 'if_source'),
+    ('rfi_experiments', 'if_to_bag'),
+    ('rfi_experiments', 'ubx_source'),
+    ('rfi_experiments', 'ubx_to_bag'),
 ]
 NODES = EXECUTABLES[:3]
+
+
+def test_every_console_script_is_listed():
+    """A new entry point in a setup.py gets the checks below (it must be added to EXECUTABLES)."""
+    root = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'src')
+    declared = set()
+    for package in sorted(os.listdir(root)):
+        setup = os.path.join(root, package, 'setup.py')
+        if os.path.isfile(setup):
+            text = open(setup, encoding='utf-8').read()
+            declared |= {(package, line.split('=')[0].strip().strip("'\""))
+                         for line in text.splitlines() if ' = ' in line and ':main' in line}
+    assert declared == set(EXECUTABLES)
 
 
 def executable(package: str, name: str) -> str:
