@@ -229,7 +229,6 @@ class IfSourceNode(Node):
         self.lag = LiveLag(self.fmt.sampling_frequency_hz, p.gap_tolerance_s) if p.gap_tolerance_s > 0 else None
         self._timer = StampTimer(p.diagnostics_period_s)
         self._last_stamp_ns = 0
-        self._lock = threading.Lock()
         self.stop = threading.Event()
         self.done = threading.Event()
         """Set when the input has ended and the final diagnostics are out."""
@@ -267,8 +266,12 @@ class IfSourceNode(Node):
         finally:
             if self.assembler is not None:
                 self.assembler.finish()
-            self._wait_for_acks()
-            self._report_end()
+            try:
+                if not self.stop.is_set():  # not while the node is being destroyed
+                    self._wait_for_acks()
+                self._report_end()
+            except Exception as err:  # noqa: BLE001 - the node may be going away under the reader
+                self.get_logger().error(f'end of input not reported: {type(err).__name__}: {err}')
             self.done.set()
             if self.params.exit_at_end and not self.stop.is_set() and self.context.ok():
                 self.get_logger().info('end of input: shutting down (exit_at_end)')
