@@ -9,7 +9,10 @@ nanoseconds (``stamp_ns``) and never read from a clock, so replays are bit-ident
 State: nominal ``[p (3), v (3), c*dt, c*ddt]`` in m, m/s, m, m/s (ECEF, frame "earth"; or the
 anchors' local frame "map" in UWB-only mode, where the clock states are frozen and unused) and an
 8-state error vector (Cao et al., eq. 8) estimated by the CKF and folded into the nominal after
-every update (eq. 25).
+every update (eq. 25). With several GNSS (``FusionParams.multi_gnss``), ``c*dt`` is the receiver
+clock in the reference system's time (GPS, unless the filter started from a fix of another
+system) and each other system seen gets an inter-system bias state ``b_sys`` (m, a random walk)
+appended after the clock, in the order the systems appear: a GPS-only stream keeps 8 states.
 
 :class:`FusionFilter` is the facade; the pieces live in their own modules:
 
@@ -34,7 +37,7 @@ from collections.abc import Callable, Mapping
 import numpy as np
 
 from gnss_common.clock_model import clock_process_noise_m as _clock_q
-from gnss_common.observations import GnssEpoch, UwbRangeMeasurement
+from gnss_common.observations import GPS, GnssEpoch, UwbRangeMeasurement
 
 from . import initialisation as init
 from .ckf import CholeskyError, CubatureKalmanFilter
@@ -43,6 +46,9 @@ from .fusion_output import FusionOutput
 from .fusion_params import (  # noqa: F401 (re-exported: the filter's public names)
     FRAME_EARTH,
     FRAME_MAP,
+    INTER_SYSTEM_BIAS_INIT_STD_M,
+    INTER_SYSTEM_BIAS_MAX_GAP_S,
+    INTER_SYSTEM_BIAS_PSD_M2PS,
     MODE_GNSS,
     MODE_GNSS_UWB,
     MODE_NONE,
@@ -50,7 +56,7 @@ from .fusion_params import (  # noqa: F401 (re-exported: the filter's public nam
     FusionParams,
 )
 from .gnss_update import clock_offset_from_residuals, prepare_epoch, screen_common_mode, update_gnss
-from .input_checks import PreparedEpoch, other_constellations, validate_uwb_range
+from .input_checks import CONSTELLATION_NAMES, PreparedEpoch, skipped_constellations, validate_uwb_range
 from .measurement_models import STATE_DIM, constant_velocity_transition, white_acceleration_noise
 from .reorder_buffer import ReorderBuffer  # noqa: F401 (re-exported)
 from .uwb_update import apply_range
@@ -103,7 +109,7 @@ class FusionFilter:
         self.params = params if params is not None else FusionParams()
         self._reference_provider = reference_provider
         self._gate = self.params.gate_nis
-        self._transition_cache: dict[tuple[int, bool], tuple[np.ndarray, np.ndarray]] = {}
+        self._transition_cache: dict[tuple[int, bool, int], tuple[np.ndarray, np.ndarray]] = {}
         self._counts_tuple: tuple[tuple[str, int], ...] | None = None
         clock = self.params.clock
         self._clock_q = lambda dt_s: _clock_q(clock, dt_s)
@@ -135,8 +141,15 @@ class FusionFilter:
         self._t_ns = 0
         self._nominal = np.zeros(STATE_DIM)
         self._ckf = CubatureKalmanFilter(np.zeros(STATE_DIM), np.eye(STATE_DIM))
+        self._reset_systems(GPS)
         self._bad_gnss_epochs = 0
         self._uwb_gated = GatedWindow(self.params.divergence_uwb_ranges)
+
+    def _reset_systems(self, reference: int) -> None:
+        """No inter-system bias states; ``reference`` is the system whose time ``c*dt`` is in."""
+        self._ref_system = int(reference)
+        self._bias_systems: list[int] = []  # system of state column STATE_DIM + i
+        self._bias_seen_ns: dict[int, int] = {}
 
     def _remember_drift(self) -> None:
         """Keep the clock drift of a state about to be replaced (reinitialisation, reset)."""
@@ -168,6 +181,28 @@ class FusionFilter:
     def time_ns(self) -> int:
         """Filter time, ns."""
         return self._t_ns
+
+    @property
+    def state_dimension(self) -> int:
+        """Size of the state: 8, plus one inter-system bias per system other than the reference seen."""
+        return int(self._nominal.size)
+
+    @property
+    def inter_system_biases_m(self) -> dict[str, tuple[float, float]]:
+        """Inter-system clock biases: system name -> (estimate, 1-sigma), m, relative to the
+        reference system's clock (:attr:`reference_system`)."""
+        out = {}
+        for i, sysc in enumerate(self._bias_systems):
+            col = STATE_DIM + i
+            var = max(float(self._ckf.p[col, col]), 0.0)
+            out[CONSTELLATION_NAMES.get(sysc, f"code_{sysc}")] = (float(self._nominal[col]), math.sqrt(var))
+        return out
+
+    @property
+    def reference_system(self) -> str:
+        """The system whose time the receiver clock state ``c*dt`` is in ("gps" unless the filter
+        started from a fix of another system)."""
+        return CONSTELLATION_NAMES.get(self._ref_system, f"code_{self._ref_system}")
 
     def initialize(
         self,
@@ -240,6 +275,7 @@ class FusionFilter:
         if position_clock_covariance_m2 is not None:
             cov0 = _with_solution_covariance(cov0, position_clock_covariance_m2, clock_ok)
         self._ckf = CubatureKalmanFilter(np.zeros(STATE_DIM), cov0)
+        self._reset_systems(GPS)
         self._initialized = True
         self._clock_initialized = clock_ok
         self._bad_gnss_epochs = 0
@@ -314,15 +350,18 @@ class FusionFilter:
         dt_ns = stamp_ns - self._t_ns
         if dt_ns <= 0:
             return
-        key = (dt_ns, self._frame == FRAME_EARTH)
+        nb = len(self._bias_systems)
+        key = (dt_ns, self._frame == FRAME_EARTH, nb)
         cached = self._transition_cache.get(key)
         if cached is None:
             dt = dt_ns / _NS
-            phi = constant_velocity_transition(dt)
-            q = np.zeros((STATE_DIM, STATE_DIM))
+            phi = constant_velocity_transition(dt, nb)
+            q = np.zeros((STATE_DIM + nb, STATE_DIM + nb))
             q[0:6, 0:6] = white_acceleration_noise(self.params.accel_psd_m2ps3, dt)
             if key[1]:
                 q[6:8, 6:8] = self._clock_q(dt)
+                # inter-system biases: random walks
+                q[STATE_DIM:, STATE_DIM:] = np.eye(nb) * (INTER_SYSTEM_BIAS_PSD_M2PS * dt)
             cached = (phi, q)
             if len(self._transition_cache) >= 64:  # the few distinct steps of a stream recur
                 self._transition_cache.clear()
@@ -422,8 +461,8 @@ class FusionFilter:
         if self._initialized and self._frame != FRAME_EARTH:
             self._count("gnss_in_map_frame")
             return self._output(False)
-        # Other constellations are skipped (counted per constellation), not rejected satellites.
-        n_obs = len(epoch.observations) - other_constellations(epoch.observations)
+        # Constellations not in use are skipped (counted per constellation), not rejected satellites.
+        n_obs = len(epoch.observations) - skipped_constellations(epoch.observations, self.params.multi_gnss)
         if n_obs == 0:
             self._count("no_satellites")
             return self._output(False)
@@ -442,7 +481,7 @@ class FusionFilter:
             self._count("fewer_than_4_satellites")
         self._last_prep = (stamp, prep)
         if not self._initialized:
-            fix = init.snapshot_fix(prep, self.params.min_satellites_init)
+            fix, fix_system = self._snapshot_fix(prep)
             if fix is None:
                 self._count("gnss_init_failed")
                 return self._output(False, sat_rej=n_obs)
@@ -452,27 +491,32 @@ class FusionFilter:
             pos, clk, vel, drift, cov = fix
             self.initialize(stamp, pos, velocity_mps=vel, clock_bias_m=clk, clock_drift_mps=drift,
                             position_clock_covariance_m2=cov)
+            self._ref_system = fix_system
+            self._update_bias_states(stamp, prep)
             self._last_gnss_stamp = stamp
             return self._output(False, sat_used=n, sat_rej=pre_rejected)
         self._predict_to(stamp)
         if not self._clock_initialized:
             # position known from UWB, clock not: set the clock from the pseudorange residuals.
             drift, drift_std = self._initial_drift(math.nan)
-            self._nominal[6] = clock_offset_from_residuals(prep, self._nominal)
+            self._nominal[6] = self._clock_from_residuals(prep)
             self._nominal[7] = drift
             self._ckf.reset_block(
                 slice(6, 8), clock_reset_variances(self._ckf.p, self.params.init_clock_bias_std_m, drift_std)
             )
             self._clock_initialized = True
+        cols = self._update_bias_states(stamp, prep)
         n_screened = 0
         if self.params.common_mode_screen:
-            prep, n_screened = screen_common_mode(prep, self._nominal, self._ckf.p, self._gate, self._count)
+            prep, n_screened = screen_common_mode(prep, self._nominal, self._ckf.p, self._gate, self._count, cols)
             if prep.pr.size == 0:
                 self._count("no_valid_satellites")
                 return self._output(False, sat_rej=n_obs)
             n = prep.pr.size
+            if n_screened:
+                cols = self._bias_columns(prep)
         try:
-            res = update_gnss(self._ckf, self._nominal, prep, self._gate, self.params)
+            res = update_gnss(self._ckf, self._nominal, prep, self._gate, self.params, cols)
         except CholeskyError:
             self._count("numerical_failure")
             return self._declare_divergence(stamp)
@@ -499,6 +543,92 @@ class FusionFilter:
                 return self._reset_clock_keep_position(stamp, prep)
             return self._declare_divergence(stamp)
         return self._output(False, sat_used=used, sat_rej=pre_rejected + n_screened + gated_pr, nis=nis)
+
+    # ------------------------------------------------------------------ several GNSS
+    def _bias_columns(self, prep: PreparedEpoch) -> np.ndarray | None:
+        """State column of each satellite's inter-system bias (-1: the reference system), or None
+        when every satellite is of the reference system (the single-clock model exactly)."""
+        system = prep.system
+        ref = self._ref_system
+        if system is None:  # all GPS
+            if ref == GPS:
+                return None
+            system = np.full(prep.pr.size, GPS, dtype=np.int64)
+        if not self._bias_systems:
+            return None if (system == ref).all() else np.full(system.size, -1, dtype=np.int64)
+        cols = np.full(system.size, -1, dtype=np.int64)
+        for i, sysc in enumerate(self._bias_systems):
+            cols[system == sysc] = STATE_DIM + i
+        return None if (cols < 0).all() and (system == ref).all() else cols
+
+    def _update_bias_states(self, stamp_ns: int, prep: PreparedEpoch) -> np.ndarray | None:
+        """Add a bias state for each system seen for the first time, re-initialise those of
+        systems back after more than ``INTER_SYSTEM_BIAS_MAX_GAP_S``; return the bias columns.
+
+        A new (or returning) system's bias is the median residual of its pseudoranges at the
+        predicted state with the reference clock (:func:`.gnss_update.clock_offset_from_residuals`),
+        with variance ``INTER_SYSTEM_BIAS_INIT_STD_M^2`` and no correlation: its satellites then
+        fix their bias first and the position only through their differences, so that a system
+        appearing cannot move the position by its bias.
+        """
+        system = prep.system
+        ref = self._ref_system
+        if self._frame != FRAME_EARTH or (system is None and ref == GPS):
+            return None
+        if system is None:  # all GPS, the reference another system
+            system = np.full(prep.pr.size, GPS, dtype=np.int64)
+        if (system == ref).all():
+            return None
+        var0 = INTER_SYSTEM_BIAS_INIT_STD_M**2
+        for sysc in np.unique(system).tolist():
+            if sysc == ref:
+                continue
+            rows = system == sysc
+            if sysc not in self._bias_systems:
+                value = clock_offset_from_residuals(prep, self._nominal, None, rows)
+                n = self._nominal.size
+                cov = np.zeros((n + 1, n + 1))
+                cov[:n, :n] = self._ckf.p
+                cov[n, n] = var0
+                self._nominal = np.append(self._nominal, value)
+                self._ckf = CubatureKalmanFilter(np.zeros(n + 1), cov)
+                self._bias_systems.append(int(sysc))
+                self._count("inter_system_bias_added")
+            elif stamp_ns - self._bias_seen_ns[sysc] > INTER_SYSTEM_BIAS_MAX_GAP_S * _NS:
+                col = STATE_DIM + self._bias_systems.index(sysc)
+                self._nominal[col] = clock_offset_from_residuals(prep, self._nominal, None, rows)
+                self._ckf.reset_block(slice(col, col + 1), np.array([var0]))
+                self._count("inter_system_bias_reset")
+            self._bias_seen_ns[int(sysc)] = stamp_ns
+        return self._bias_columns(prep)
+
+    def _clock_from_residuals(self, prep: PreparedEpoch) -> float:
+        """The receiver clock from the pseudorange residuals (position trusted): over the
+        reference system's satellites, and those of systems with a bias state; when the epoch has
+        none of them, the largest system present becomes the reference."""
+        system = prep.system
+        if system is None:
+            if self._ref_system == GPS:
+                return clock_offset_from_residuals(prep, self._nominal)
+            system = np.full(prep.pr.size, GPS, dtype=np.int64)
+        known = (system == self._ref_system) | np.isin(system, self._bias_systems)
+        if not known.any():
+            values, counts = np.unique(system, return_counts=True)
+            self._ref_system = int(values[np.argmax(counts)])
+            known = system == self._ref_system
+        return clock_offset_from_residuals(prep, self._nominal, self._bias_columns(prep), known)
+
+    def _snapshot_fix(self, prep: PreparedEpoch) -> tuple[tuple | None, int]:
+        """A snapshot fix (:func:`.initialisation.snapshot_fix`) on one system's satellites: GPS
+        when it has ``min_satellites_init``, else the system with the most satellites (one
+        receiver clock); returns ``(fix or None, its system)``."""
+        system = prep.system
+        if system is None or (system == GPS).all():
+            return init.snapshot_fix(prep, self.params.min_satellites_init), GPS
+        values, counts = np.unique(system, return_counts=True)
+        n_gps = int(counts[values == GPS].sum())
+        best = GPS if n_gps >= self.params.min_satellites_init else int(values[np.argmax(counts)])
+        return init.snapshot_fix(prep.subset(system == best), self.params.min_satellites_init), best
 
     # ------------------------------------------------------------------ UWB
     def process_uwb(self, meas: UwbRangeMeasurement) -> FusionOutput:
@@ -603,7 +733,7 @@ class FusionFilter:
         covariance (as when the clock is first initialised after a UWB start)."""
         self._reinits += 1
         self._count("clock_reset_uwb_consistent")
-        self._nominal[6] += clock_offset_from_residuals(prep, self._nominal)
+        self._nominal[6] += clock_offset_from_residuals(prep, self._nominal, self._bias_columns(prep))
         p = self.params
         self._ckf.reset_block(
             slice(6, 8), clock_reset_variances(self._ckf.p, p.init_clock_bias_std_m, p.init_clock_drift_std_mps)
@@ -636,7 +766,7 @@ class FusionFilter:
             and self._last_prep[0] == stamp_ns
         ):
             prep = self._last_prep[1]
-            fix = init.snapshot_fix(prep, self.params.min_satellites_init)
+            fix, fix_system = self._snapshot_fix(prep)
             if fix is not None and not self._fix_agrees_with_uwb(stamp_ns, fix[0], self.params.init_position_std_m):
                 self._count("gnss_fix_inconsistent_with_uwb")
                 fix = None
@@ -645,6 +775,8 @@ class FusionFilter:
                     stamp_ns, fix[0], velocity_mps=fix[2], clock_bias_m=fix[1], clock_drift_mps=fix[3],
                     position_clock_covariance_m2=fix[4],
                 )
+                self._ref_system = fix_system
+                self._update_bias_states(stamp_ns, prep)
                 done = True
         if not done:
             pos = self._multilaterate(stamp_ns, frame, self._nominal[0:3] if self._initialized else None)

@@ -157,6 +157,9 @@ class FusionNodeParams:
         _FP.common_mode_screen, 'Drop pseudoranges / rates whose innovation departs from the epoch median '
         '(common clock) beyond the gate with the clock-free variance, before the CKF update (beyond the paper).',
         read_only=False)
+    multi_gnss: bool = parameter(
+        _FP.multi_gnss, 'Use Galileo, BeiDou, GLONASS and QZSS as well as GPS, each with an inter-system clock '
+        'bias state (false: GPS only, the others counted as skipped_constellation.<name>).')
     elevation_mask_deg: float = parameter(
         _FP.elevation_mask_deg, 'Satellites below this elevation are rejected, deg.',
         minimum=-90.0, maximum=89.0, read_only=False)

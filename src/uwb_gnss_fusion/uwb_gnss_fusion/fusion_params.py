@@ -24,6 +24,23 @@ MODE_GNSS_UWB = 3
 FRAME_EARTH = "earth"
 FRAME_MAP = "map"
 
+INTER_SYSTEM_BIAS_PSD_M2PS = 1.0e-3
+"""Random-walk PSD of each inter-system clock bias state, m^2/s (0.6 m 1-sigma drift per hour at
+most, 1.9 m per hour allowed). What the bias holds: the receiver's hardware delay difference
+between the systems' signals (constant while the receiver runs) and the residual offset between
+the system times after the broadcast corrections (GPS-Galileo GGTO, BeiDou and GLONASS time:
+a few ns, varying over days; Hegarty et al. 2017)."""
+
+INTER_SYSTEM_BIAS_INIT_STD_M = 30.0
+"""1-sigma of an inter-system bias when it is (re)initialised from the median pseudorange residual
+of its system at the predicted state, m: the median holds the bias to the position error (metres)
+plus noise, so 30 m covers it with margin; the system's satellites then fix it in one epoch."""
+
+INTER_SYSTEM_BIAS_MAX_GAP_S = 300.0
+"""A system absent for longer than this has its bias re-initialised from its residuals when it
+returns, s (e.g. after a receiver restart its hardware biases may differ); a shorter absence keeps
+the estimate, whose variance grew by the random walk meanwhile."""
+
 
 @dataclass(frozen=True)
 class FusionParams:
@@ -88,6 +105,12 @@ class FusionParams:
             gate allows with the clock-free variance (:mod:`.robust_screen`; beyond the paper).
             Counted as ``common_mode_pseudorange`` / ``common_mode_doppler``; they count as gated
             for the divergence rule.
+        multi_gnss: use Galileo, BeiDou, GLONASS and QZSS satellites as well as GPS, each system
+            other than the reference (GPS) with an inter-system clock bias state (appended to the
+            state when the system is first seen, so that a GPS-only stream keeps the 8-state
+            filter; process model and initialisation: :data:`INTER_SYSTEM_BIAS_PSD_M2PS`,
+            :data:`INTER_SYSTEM_BIAS_INIT_STD_M`, :data:`INTER_SYSTEM_BIAS_MAX_GAP_S`); False: GPS
+            only, the others counted as ``skipped_constellation.<name>``. SBAS is always skipped.
     """
 
     # sensors and models (.measurement_models, .gnss_update, .uwb_update)
@@ -130,6 +153,8 @@ class FusionParams:
     uwb_huber_k: float = math.inf
     uwb_huber_k_positive: float = math.inf
     common_mode_screen: bool = True
+    # multi-GNSS: inter-system clock biases (issue 15 item 1)
+    multi_gnss: bool = True
 
     def __post_init__(self) -> None:
         pos = {

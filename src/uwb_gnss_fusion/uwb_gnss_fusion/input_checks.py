@@ -48,6 +48,8 @@ class PreparedEpoch:
         rate: pseudorange rates, m/s, (k,) (NaN: not applied).
         sigma_pr: pseudorange 1-sigmas, m, (k,).
         sigma_rate: pseudorange-rate 1-sigmas, m/s, (k,).
+        system: constellation code of each satellite (``gnss_common.observations`` GPS, GALILEO,
+            ...), int, (k,); None: all GPS.
     """
 
     sat_pos: np.ndarray
@@ -60,6 +62,7 @@ class PreparedEpoch:
     rate: np.ndarray
     sigma_pr: np.ndarray
     sigma_rate: np.ndarray
+    system: np.ndarray | None = None
 
     def subset(self, keep: np.ndarray, rate: np.ndarray | None = None) -> PreparedEpoch:
         """The satellites selected by ``keep`` (bool or index array), with ``rate`` if given."""
@@ -68,45 +71,64 @@ class PreparedEpoch:
             sat_pos=self.sat_pos[keep], sat_vel=self.sat_vel[keep], sat_clk=self.sat_clk[keep],
             sat_drift=self.sat_drift[keep], iono=self.iono[keep], tropo=self.tropo[keep], pr=self.pr[keep],
             rate=r[keep], sigma_pr=self.sigma_pr[keep], sigma_rate=self.sigma_rate[keep],
+            system=None if self.system is None else self.system[keep],
         )
 
 
-CONSTELLATION_NAMES = {GLONASS: "glonass", GALILEO: "galileo", BEIDOU: "beidou", QZSS: "qzss", SBAS: "sbas"}
-"""Constellation code -> name in the ``skipped_constellation.<name>`` counters."""
+CONSTELLATION_NAMES = {
+    GPS: "gps", GLONASS: "glonass", GALILEO: "galileo", BEIDOU: "beidou", QZSS: "qzss", SBAS: "sbas"
+}
+"""Constellation code -> name (``skipped_constellation.<name>`` counters, bias names)."""
+
+MULTI_GNSS_CONSTELLATIONS = frozenset((GPS, GALILEO, BEIDOU, GLONASS, QZSS))
+"""Constellations the filter applies with ``FusionParams.multi_gnss`` (each one other than GPS
+with its inter-system clock bias); SBAS is always skipped (no broadcast orbit in the input)."""
 
 
-def other_constellations(observations: Sequence[object]) -> int:
-    """How many observations belong to a constellation the filter does not use yet (not GPS).
+def used_constellations(multi_gnss: bool) -> frozenset[int]:
+    """The constellation codes the filter applies (GPS alone, or :data:`MULTI_GNSS_CONSTELLATIONS`)."""
+    return MULTI_GNSS_CONSTELLATIONS if multi_gnss else _GPS_ONLY
+
+
+_GPS_ONLY = frozenset((GPS,))
+
+
+def skipped_constellations(observations: Sequence[object], multi_gnss: bool) -> int:
+    """How many observations belong to a constellation the filter does not use.
 
     They are skipped by design, not rejected: the filter leaves them out of its rejected-satellite
-    count (issue 15 item 1 will use them)."""
-    return sum(1 for o in observations if isinstance(o, SatelliteObservation) and o.constellation != GPS)
+    count."""
+    used = used_constellations(multi_gnss)
+    return sum(1 for o in observations if isinstance(o, SatelliteObservation) and o.constellation not in used)
 
 
-def gps_observations(observations: Sequence[object], count: Count) -> list[SatelliteObservation]:
-    """The GPS observations of an epoch, without satellites that appear more than once.
+def usable_observations(observations: Sequence[object], count: Count, multi_gnss: bool) -> list[SatelliteObservation]:
+    """The observations of the constellations in use, without satellites that appear more than once.
 
     Counted: ``malformed_observation`` (not a SatelliteObservation), ``unsupported_constellation``
     with ``skipped_constellation.<name>`` (``glonass``, ``galileo``, ``beidou``, ``qzss``,
-    ``sbas``, or ``code_<n>``) for each satellite of another constellation, ``duplicate_svid``
-    (every copy of a duplicated PRN).
+    ``sbas``, or ``code_<n>``) for each satellite of a constellation not in use
+    (:func:`used_constellations`), ``duplicate_svid`` (every copy of a duplicated
+    (constellation, satellite number)).
     """
+    used = used_constellations(multi_gnss)
     obs: list[SatelliteObservation] = []
-    seen: dict[int, int] = {}
+    seen: dict[tuple[int, int], int] = {}
     for o in observations:
         if not isinstance(o, SatelliteObservation):
             count("malformed_observation", 1)
             continue
-        if o.constellation != GPS:
+        if o.constellation not in used:
             count("unsupported_constellation", 1)
             count(f"skipped_constellation.{CONSTELLATION_NAMES.get(o.constellation, f'code_{o.constellation}')}", 1)
             continue
-        seen[o.svid] = seen.get(o.svid, 0) + 1
+        key = (o.constellation, o.svid)
+        seen[key] = seen.get(key, 0) + 1
         obs.append(o)
     dup = {s for s, n in seen.items() if n > 1}
     if dup:
         count("duplicate_svid", sum(seen[s] for s in dup))
-        obs = [o for o in obs if o.svid not in dup]
+        obs = [o for o in obs if (o.constellation, o.svid) not in dup]
     return obs
 
 
@@ -144,7 +166,7 @@ def validate_satellites(obs: list[SatelliteObservation], params: FusionParams, c
     """The per-satellite checks, on arrays; each rejected satellite counted under its first failing reason.
 
     Args:
-        obs: GPS observations (:func:`gps_observations`).
+        obs: observations of the constellations in use (:func:`usable_observations`).
         params: filter parameters (``min_cn0_dbhz``, ``use_doppler``).
         count: the rejection counter.
 

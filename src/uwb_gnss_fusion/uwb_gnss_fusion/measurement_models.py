@@ -1,10 +1,12 @@
 """Measurement models of the GNSS/UWB tightly-coupled filter, as callables (filterpy ``hx`` style).
 
-Every model maps a batch of full navigation states ``X`` of shape (m, 8) -- rows
-``[x, y, z, vx, vy, vz, c*dt, c*ddt]`` in m, m/s, m, m/s (ECEF, or the local frame for UWB-only) --
-to predicted measurements of shape (m, k). The CKF evaluates a model on all 2n cubature points at
-once, so the models are vectorised over rows and never branch on the measurement type: the fusion
-filter builds one callable per update with :func:`stack_models`.
+Every model maps a batch of full navigation states ``X`` of shape (m, n) -- rows
+``[x, y, z, vx, vy, vz, c*dt, c*ddt, b_1, ..., b_j]`` in m, m/s, m, m/s, m (ECEF, or the local frame
+for UWB-only; ``b_i`` the inter-system clock biases of the systems other than GPS that the filter
+has seen, none for a GPS-only stream: n = 8) -- to predicted measurements of shape (m, k). The CKF
+evaluates a model on all 2n cubature points at once, so the models are vectorised over rows and
+never branch on the measurement type: the fusion filter builds one callable per update with
+:func:`stack_models`.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ MeasurementModel = Callable[[np.ndarray], np.ndarray]
 """hx(X): X (m, 8) states -> (m, k) predicted measurements."""
 
 STATE_DIM = 8
-"""Size of the navigation (and error) state [p(3), v(3), c*dt, c*ddt]."""
+"""Size of the navigation (and error) state [p(3), v(3), c*dt, c*ddt] without inter-system biases."""
 
 _EYE8 = np.eye(STATE_DIM)
 _PP = np.zeros((6, 6))
@@ -36,6 +38,7 @@ def pseudorange_model(
     sat_clock_bias_m: np.ndarray,
     iono_delay_m: np.ndarray,
     tropo_delay_m: np.ndarray,
+    bias_column: np.ndarray | None = None,
 ) -> MeasurementModel:
     """Pseudorange model for k satellites.
 
@@ -45,15 +48,20 @@ def pseudorange_model(
         sat_clock_bias_m: c * satellite clock offset, m, shape (k,).
         iono_delay_m: modelled ionospheric delay, m, shape (k,).
         tropo_delay_m: modelled tropospheric delay, m, shape (k,).
+        bias_column: for each satellite the state column (>= 8) of its system's inter-system
+            clock bias, or -1 for the reference system (GPS), int, shape (k,); None: all GPS.
 
     Returns:
-        hx mapping states (m, 8) to pseudoranges (m, k), m.
+        hx mapping states (m, n) to pseudoranges (m, k), m.
 
     Notes:
         Cao et al., eq. 5: ``rho = |p_s - p_r| + T + I + c (dt_r - dt_s)``. The Earth-rotation
         (Sagnac) correction is the first-order closed form
         ``omega_e / c (x_s y_r - y_s x_r)`` of :func:`gnss_common.earth_rotation.sagnac_range_correction_m`
-        (the neglected second-order term is below 1 mm for GNSS ranges).
+        (the neglected second-order term is below 1 mm for GNSS ranges). A satellite of another
+        system sees the receiver clock in that system's time: ``c dt_r + b_sys`` with ``b_sys`` the
+        inter-system bias (receiver hardware delay difference plus the residual offset between the
+        system times; Hegarty 2017 / RTKLIB ``pntpos``), a state of its own.
     """
     ps = np.asarray(sat_pos_ecef_m, dtype=float)
     const = (
@@ -62,13 +70,28 @@ def pseudorange_model(
         - np.asarray(sat_clock_bias_m, float)
     )
     ps_b = ps[None, :, :]
+    cols = None if bias_column is None else np.asarray(bias_column, dtype=np.int64)
+    if cols is None or not (cols >= 0).any():
 
-    def hx(states: np.ndarray) -> np.ndarray:
+        def hx(states: np.ndarray) -> np.ndarray:
+            p = states[:, None, 0:3]
+            geom = np.sqrt(((ps_b - p) ** 2).sum(axis=2))
+            return geom + sagnac_range_correction_m(ps_b, p) + states[:, 6:7] + const[None, :]
+
+        return hx
+    if cols.shape != const.shape or (cols[cols >= 0] < STATE_DIM).any():
+        raise ValueError(f"bias_column must be (k,) with -1 or columns >= {STATE_DIM}, got {bias_column!r}")
+    has_bias = cols >= 0
+    take = np.where(has_bias, cols, 6)  # GPS rows read the clock column and are masked to zero
+    mask = has_bias.astype(float)[None, :]
+
+    def hx_multi(states: np.ndarray) -> np.ndarray:
         p = states[:, None, 0:3]
         geom = np.sqrt(((ps_b - p) ** 2).sum(axis=2))
-        return geom + sagnac_range_correction_m(ps_b, p) + states[:, 6:7] + const[None, :]
+        bias = states[:, take] * mask
+        return geom + sagnac_range_correction_m(ps_b, p) + states[:, 6:7] + bias + const[None, :]
 
-    return hx
+    return hx_multi
 
 
 def pseudorange_rate_model(
@@ -177,19 +200,20 @@ def stack_models(models: list[MeasurementModel]) -> MeasurementModel:
     return hx
 
 
-def constant_velocity_transition(dt_s: float) -> np.ndarray:
+def constant_velocity_transition(dt_s: float, n_bias: int = 0) -> np.ndarray:
     """Discrete state transition of the 8-state constant-velocity / clock model.
 
     Args:
         dt_s: time step T_s, s (>= 0).
+        n_bias: inter-system bias states appended after the clock (random walks: identity rows).
 
     Returns:
-        Phi, shape (8, 8).
+        Phi, shape (8 + n_bias, 8 + n_bias).
 
     Notes:
         Cao et al., eq. 9 (continuous F) and eq. 10 (Phi = exp(F T_s)).
     """
-    phi = _EYE8.copy()
+    phi = _EYE8.copy() if n_bias == 0 else np.eye(STATE_DIM + n_bias)
     phi[0, 3] = phi[1, 4] = phi[2, 5] = dt_s
     phi[6, 7] = dt_s
     return phi

@@ -1,0 +1,175 @@
+"""Benchmark: the fusion filter with GPS alone against GPS + Galileo + BeiDou + GLONASS (+ QZSS).
+
+Station ESBC00DNK (EUREF/IGS, Esbjerg; Septentrio PolaRx5), 2020-06-25, RINEX 3.05 mixed obs
+(Hatanaka + gzip) and mixed broadcast nav; the measurements are built as in
+benchmarks/multignss_spp.py (gnss_common.measurements: GPS L1 C/A, Galileo E1, BeiDou B1I, GLONASS
+G1 per channel, QZSS L1; broadcast orbits, Klobuchar scaled to each carrier, Saastamoinen). Truth:
+the station's published coordinate (header APPROX POSITION XYZ, 3582105.2910 532589.7313
+5232754.8054 m ECEF).
+
+Each epoch goes through ``uwb_gnss_fusion.fusion_filter.FusionFilter`` (GNSS only,
+``use_uwb=False``, otherwise the default parameters), once with ``multi_gnss=False`` (GPS alone,
+the filter before issue 15 item 1: the other systems skipped) and once with ``multi_gnss=True``
+(one inter-system bias state per system other than GPS). The elevation mask of the filter is
+raised from the default 10 deg to 30, 35 and 40 deg as a stand-in for an obstructed (urban canyon)
+or partly jammed sky: fewer satellites of each system.
+
+Per configuration: the epochs where the filter had a *fix* (initialised and the epoch's update
+applied at least 3 + (number of systems in use above the mask) pseudoranges, i.e. a position
+determined by that epoch alone), the epochs with any estimate, and the error of the estimate in
+ENU at the truth over all epochs with an estimate (the filter predicts through epochs without a
+fix): horizontal and 3D RMS, 95th percentile and maximum, and the share of epochs within 5 m (3D).
+
+Data: the one-hour cut in src/gnss_common/test/data (always), and the whole day when given
+(``--day OBS.crx.gz NAV.rnx.gz``, from ../shared/data/multignss_esbc_2020/).
+Writes docs/uwb_gnss_fusion/fusion_multignss.md.
+Run: PYTHONPATH=src/gnss_common:src/uwb_gnss_fusion python benchmarks/fusion_multignss.py [--day OBS NAV]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+
+from gnss_common.coordinates import azimuth_elevation, ecef_to_enu_rotation, ecef_to_geodetic
+from gnss_common.measurements import GnssEpochBuilder
+from gnss_common.observations import GnssEpoch
+from gnss_common.rinex import read_rinex_nav, read_rinex_obs
+from uwb_gnss_fusion.fusion_filter import FusionFilter, FusionParams
+from uwb_gnss_fusion.input_checks import used_constellations
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT / "src" / "gnss_common" / "test" / "data"
+OUT = ROOT / "docs" / "uwb_gnss_fusion" / "fusion_multignss.md"
+CUT = (DATA / "ESBC00DNK_R_20201770000_01H_30S_MO.crx.gz", DATA / "ESBC00DNK_R_20201770000_01H_MN.rnx.gz")
+TRUTH_ECEF_M = np.array([3582105.2910, 532589.7313, 5232754.8054])
+MASKS_DEG = (10.0, 30.0, 35.0, 40.0)
+WITHIN_M = 5.0
+
+
+def cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def build_epochs(obs_path: Path, nav_path: Path) -> list[GnssEpoch]:
+    obs = read_rinex_obs(obs_path)
+    nav = read_rinex_nav(nav_path)
+    builder = GnssEpochBuilder.from_rinex(obs, nav)
+    return [builder.build(e).epoch for e in obs.epochs]
+
+
+def systems_above(epoch: GnssEpoch, mask_deg: float, multi: bool) -> int:
+    """Number of systems in use with a satellite above the mask (seen from the truth)."""
+    used = used_constellations(multi)
+    obs = [o for o in epoch.observations if o.constellation in used]
+    if not obs:
+        return 0
+    _, el = azimuth_elevation(TRUTH_ECEF_M, np.array([o.satellite_position_ecef_m for o in obs]))
+    el = np.degrees(np.atleast_1d(el))
+    return len({o.constellation for o, e in zip(obs, el, strict=True) if e >= mask_deg})
+
+
+def run(epochs: list[GnssEpoch], mask_deg: float, multi: bool) -> dict[str, object]:
+    f = FusionFilter(FusionParams(use_uwb=False, multi_gnss=multi, elevation_mask_deg=mask_deg))
+    lat, lon, _ = ecef_to_geodetic(TRUTH_ECEF_M)
+    rot = ecef_to_enu_rotation(lat, lon)
+    enu, fixes, n_sats = [], 0, []
+    t0 = time.perf_counter()
+    for epoch in epochs:
+        out = f.process_gnss(epoch)
+        if not out.initialized:
+            continue
+        enu.append(rot @ (out.position_m - TRUTH_ECEF_M))
+        n_sys = systems_above(epoch, mask_deg, multi)
+        if n_sys and out.satellites_used >= 3 + n_sys:
+            fixes += 1
+        n_sats.append(out.satellites_used)
+    wall = time.perf_counter() - t0
+    e = np.array(enu).reshape(-1, 3)
+    d3 = np.linalg.norm(e, axis=1)
+    h = np.linalg.norm(e[:, :2], axis=1)
+    return {
+        "fixes": fixes,
+        "estimates": len(e),
+        "h_rms": float(np.sqrt(np.mean(h**2))) if len(e) else math.nan,
+        "rms": float(np.sqrt(np.mean(d3**2))) if len(e) else math.nan,
+        "p95": float(np.percentile(d3, 95)) if len(e) else math.nan,
+        "max": float(d3.max()) if len(e) else math.nan,
+        "within": float(np.mean(d3 <= WITHIN_M)) * len(e) if len(e) else 0.0,
+        "sats": float(np.median(n_sats)) if n_sats else 0.0,
+        "ms_per_epoch": 1000.0 * wall / max(len(epochs), 1),
+        "biases": f.inter_system_biases_m,
+        "reference": f.reference_system,
+        "counts": f.rejection_counts,
+    }
+
+
+def section(title: str, epochs: list[GnssEpoch]) -> list[str]:
+    n = len(epochs)
+    lines = [
+        f"## {title}",
+        "",
+        "| mask deg | filter | median satellites used | epochs with a fix | epochs with an estimate | "
+        "horizontal RMS m | 3D RMS m | 3D 95 % m | 3D max m | epochs within 5 m (3D) | ms / epoch |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    notes = []
+    for mask in MASKS_DEG:
+        for multi in (False, True):
+            r = run(epochs, mask, multi)
+            name = "GPS + Galileo + BeiDou + GLONASS + QZSS" if multi else "GPS only"
+            lines.append(
+                f"| {mask:g} | {name} | {r['sats']:.0f} | {r['fixes']} / {n} ({100 * r['fixes'] / n:.0f} %) | "
+                f"{r['estimates']} / {n} | {r['h_rms']:.2f} | {r['rms']:.2f} | {r['p95']:.2f} | {r['max']:.2f} | "
+                f"{r['within']:.0f} / {n} ({100 * r['within'] / n:.0f} %) | {r['ms_per_epoch']:.2f} |"
+            )
+            if multi:
+                b = ", ".join(f"{k} {v[0]:.2f} +- {v[1]:.2f} m" for k, v in r["biases"].items())
+                events = {k: v for k, v in r["counts"].items() if k.startswith("inter_system_bias")}
+                notes.append(f"- mask {mask:g} deg: reference clock {r['reference']}; inter-system biases at the "
+                             f"end: {b}; {events}")
+            print(lines[-1], flush=True)
+    return lines + ["", "Multi-GNSS filter, inter-system bias estimates (relative to the reference clock):", "",
+                    *notes, ""]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--day", nargs=2, type=Path, metavar=("OBS", "NAV"), help="the whole-day files")
+    args = parser.parse_args()
+    text = [
+        "# Fusion filter: GPS alone against multi-GNSS on a real station (ESBC00DNK)",
+        "",
+        "Generated by `benchmarks/fusion_multignss.py` (method in its docstring). GNSS-only fusion",
+        "filter (default parameters, no UWB), GPS alone (`multi_gnss=False`) against every system the",
+        "input carries (`multi_gnss=True`: one inter-system bias state per system other than GPS).",
+        "Error against the station's published coordinate. A raised elevation mask stands in for an",
+        "obstructed or partly jammed sky. *Fix*: the epoch's update applied at least 3 + (systems in",
+        "use above the mask) pseudoranges. Single-system snapshot positions of the same data:",
+        "docs/gnss_common/multignss_spp.md.",
+        f"Machine: {cpu_model()}, Python {platform.python_version()}.",
+        "",
+    ]
+    sections = [("one hour (test data cut, 2020-06-25 00:00-01:00 GPST, 120 epochs)", CUT)]
+    if args.day:
+        sections.append(("whole day (2020-06-25, 2,880 epochs)", tuple(args.day)))
+    for title, (obs_path, nav_path) in sections:
+        text += section(title, build_epochs(obs_path, nav_path))
+    OUT.parent.mkdir(parents=True, exist_ok=True)
+    OUT.write_text("\n".join(text))
+    print(f"wrote {OUT}")
+
+
+if __name__ == "__main__":
+    main()
