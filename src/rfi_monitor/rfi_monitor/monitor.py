@@ -279,6 +279,7 @@ class RfiMonitor:
         self._frame_length = 0
         self._blocks_since_select = 0
         self._tracking = False
+        self._chirp = False
         self.reset()
 
     # ------------------------------------------------------------------------------------------
@@ -709,8 +710,9 @@ class RfiMonitor:
         tpl = self._ltemplate if self._ltemplate is not None else smooth_template(norm, cp.template_smooth_bins)
         feat = features_from_psd(psd, frames, tpl, cp, cplx)
         # frame length: chosen on the first block, every RESELECT_IDLE_BLOCKS blocks while nothing is tracked,
-        # every RESELECT_BLOCKS while something is, and at once (the block analysed again) when a block
-        # shows a power rise or a broad spectral excess that the current frame length resolves as no chirp
+        # every RESELECT_BLOCKS while something is, and at once (the block analysed again) when a block shows
+        # a chirp or a wideband rise at a frame length chosen while nothing was tracked (a length chosen on
+        # noise can resolve a sweep as noise, or fold its period)
         reselected = False
         if self._frame_length == 0 or self._blocks_since_select >= (RESELECT_BLOCKS if self._tracking
                                                                     else RESELECT_IDLE_BLOCKS):
@@ -718,10 +720,16 @@ class RfiMonitor:
             self._blocks_since_select = 0
             reselected = True
         self._blocks_since_select += 1
+        tail = int(p.ridge.tracking_samples)
+        part = xs[-tail:] if (self._chirp and 0 < tail < n) else xs
         while True:
-            rr = rg.analyse(xs, cplx, fs, p.ridge, self._frame_length)
+            rr = rg.analyse(part, cplx, fs, p.ridge, self._frame_length)
             jtype, conf, jn, jn_ref, jn_in, floor = self._decide(power, feat, rr, floor, ref)
-            if jtype != WIDEBAND or reselected or rr.noise_power < MIN_BLOCK_POWER:
+            if part.size < n and not rr.sweeping:
+                part = xs            # the tail shows no sweep (any more): the whole block decides
+                continue
+            # a jammer seen at a frame length chosen on blocks without one: choose again on this block
+            if jtype in (NONE, CW) or reselected or self._tracking or rr.noise_power < MIN_BLOCK_POWER:
                 break
             length = rg.choose_frame_length(xs, cplx, p.ridge)
             reselected = True
@@ -772,6 +780,7 @@ class RfiMonitor:
                 if math.isfinite(rr.start):
                     f0 = self._to_rel_hz(rr.start, fs, fif, cplx)
         self._tracking = jtype in (CW, CHIRP)
+        self._chirp = jtype == CHIRP
         lower = clipped > p.clip_lower_bound_fraction and jtype != NONE
         return JammerEstimate(stamp_ns, int(jtype), float(conf), float(jn), float(js), freq, fstd, rate, per, f0,
                               bw, fs, first, n, True, self._counters(), None, "", ref, bool(lower), float(clipped),

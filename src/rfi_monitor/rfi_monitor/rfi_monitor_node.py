@@ -99,11 +99,15 @@ while the node runs (rfi_node_common.params.RuntimeParameters; the core's parame
 Load shedding (issue 14 item 6): a front end delivers a continuous stream, and a node that takes longer
 per block than the block lasts falls behind until the middleware drops blocks it never sees. Instead the
 node spends at most ``max_cpu_load`` of one core over the stream time the blocks cover, measured with the
-CPU time of its own thread (``time.thread_time``: resource accounting only, no estimate depends on it), and
-sheds whole blocks on purpose when it is over that budget: counted as ``blocks_shed`` on /diagnostics,
+CPU time of its own thread in the callbacks, deserialising included (``time.thread_time``: resource
+accounting only, no estimate depends on it), and sheds whole blocks on purpose when it is over that budget,
+judged on the stamp read from the raw bytes before they are deserialised (``peek_stamp_ns``; a shed block
+costs almost nothing): counted as ``blocks_shed`` on /diagnostics,
 no JammerState, and the block after a shed one is a gap for the core (the "stft" estimator keeps no
 per-sample state, so its estimates stay valid). Which blocks are shed depends on the machine's speed, not
-on the replay rate (the budget is stream time). Snapshot front ends (1 ms per second) never shed.
+on the replay rate (the budget is stream time). Snapshot front ends (1 ms per second) never shed. The debt is
+capped at SHED_CREDIT_CAP_S, and the compiled functions are compiled (or loaded) at start-up
+(:func:`warm_up`), so that a one-off cost does not shed seconds of stream.
 ``accounting_ok`` counts shed blocks: received == processed + shed + rejected.
 
 Stale input: :class:`rfi_node_common.inputs.StaleInputWatch` publishes a STALE status (stamped with
@@ -283,6 +287,10 @@ class MonitorNodeParams:
     ridge_min_present_fraction: float = parameter(
         _R.min_present_fraction, 'A non-periodic ridge must be present in at least this share of the frames '
         '(stft), (0, 1].', minimum=1e-6, maximum=1.0)
+    ridge_tracking_samples: int = parameter(
+        _R.tracking_samples, 'While a chirp is tracked the stft estimator analyses only the last this many '
+        'samples of a block (speed; J/N and the CW test use the whole block); 0: the whole block.',
+        minimum=0, maximum=2**31 - 1)
     ridge_max_period_s: float = parameter(
         _R.max_period_s, 'Longest sweep period searched by the stft estimator, s.', minimum=1e-7, maximum=10.0)
     ridge_detect_sigma: float = parameter(
@@ -521,6 +529,31 @@ def check_block(msg: IfSamples, min_block_samples: int, max_block_samples: int =
     return None
 
 
+def warm_up(params: RfiMonitorParams) -> None:
+    """Run a throw-away monitor on a real and a complex noise block so that the compiled (numba) functions are
+    compiled or loaded from the cache at start-up, not on the first blocks of a live stream (seconds of CPU on
+    a fresh install, which the load shedding would otherwise pay for by shedding the first blocks)."""
+    rng = np.random.default_rng(0)
+    n = max(params.min_block_samples, 4096)
+    for cplx in (False, True):
+        mon = RfiMonitor(params)
+        x = rng.standard_normal(2 * n if cplx else n)
+        mon.process(x, 4.0e6, 0.0 if cplx else 1.0e6, 0, 1, is_complex=cplx, full_scale=8.0)
+
+
+def peek_stamp_ns(raw: bytes) -> int | None:
+    """header.stamp of a serialised IfSamples in ns, read from its first bytes (little-endian CDR: a 4-byte
+    encapsulation header, then stamp.sec int32 and stamp.nanosec uint32), or None if the bytes do not look
+    like that (the message is then deserialised and checked as usual)."""
+    if len(raw) < 12 or raw[0] != 0 or raw[1] not in (1, 3):      # CDR_LE / PL_CDR_LE
+        return None
+    sec = int.from_bytes(raw[4:8], 'little', signed=True)
+    nsec = int.from_bytes(raw[8:12], 'little')
+    if sec <= 0 or nsec >= NS_PER_S:
+        return None
+    return sec * NS_PER_S + nsec
+
+
 def decode_counts(msg: IfSamples) -> np.ndarray:
     """The block's stored values (counts), read only: int8 or int16, shape (n,) real or (2n,) I, Q."""
     return np.frombuffer(msg.samples, dtype=SAMPLE_DTYPES[msg.sample_format])
@@ -588,6 +621,7 @@ class RfiMonitorNode(Node):
         self.runtime = RuntimeParameters(self, self.params)  # the settable parameters: applied between blocks
         self._window = CountWindow(self.params.diagnostics_window_s)
         self.monitor = RfiMonitor(self.params.monitor_params())
+        warm_up(self.params.monitor_params())
         self.counts: Counter[str] = Counter()
         self.health = InputHealth()
         self._gate = StampGate(self.params.max_stamp_jump_s, self.params.stamp_jump_confirmations)
@@ -615,30 +649,53 @@ class RfiMonitorNode(Node):
         if isinstance(raw, IfSamples):
             self.on_block(raw)
             return
+        cpu0 = time.thread_time()
         try:
-            msg = deserialize_message(raw, IfSamples)
-        except Exception as err:  # noqa: BLE001 - rclpy raises RMWError (and others) on malformed CDR
-            self.counts['blocks_received'] += 1
-            self.counts['rejected_malformed_message'] += 1
-            self.get_logger().warn(f'IF block rejected: malformed message ({len(raw)} bytes: {type(err).__name__})',
-                                   throttle_duration_sec=self.params.warning_throttle_s)
-            return
-        self.on_block(msg)
+            stamp = peek_stamp_ns(raw)
+            if stamp is not None and self._shed(stamp, None):
+                # shed before the bytes are even deserialised: a node behind its stream must get cheaper
+                self.counts['blocks_received'] += 1
+                decision = self._gate.admit(stamp)
+                if not decision.accepted:
+                    self.counts[f'rejected_{decision.reason}'] += 1
+                    return
+                self.counts['blocks_shed'] += 1
+                if self._diag_timer.due(stamp):
+                    self._publish(lambda: self.diagnostics(stamp))
+                return
+            try:
+                msg = deserialize_message(raw, IfSamples)
+            except Exception as err:  # noqa: BLE001 - rclpy raises RMWError (and others) on malformed CDR
+                self.counts['blocks_received'] += 1
+                self.counts['rejected_malformed_message'] += 1
+                self.get_logger().warn(f'IF block rejected: malformed message ({len(raw)} bytes: '
+                                       f'{type(err).__name__})', throttle_duration_sec=self.params.warning_throttle_s)
+                return
+            self._handle(msg, shed_checked=stamp is not None)
+        finally:
+            self._cpu_debt_s += time.thread_time() - cpu0
 
     def on_block(self, msg: IfSamples) -> None:
-        """Account for one block: processed (one JammerState) or rejected under a named reason; never raises."""
+        """Account for one block: processed (one JammerState), shed or rejected under a named reason; never
+        raises."""
+        cpu0 = time.thread_time()
+        try:
+            self._handle(msg, shed_checked=False)
+        finally:
+            self._cpu_debt_s += time.thread_time() - cpu0
+
+    def _handle(self, msg: IfSamples, shed_checked: bool) -> None:
+        """on_block's work; ``shed_checked``: the shedding decision was made on the raw bytes already."""
         self.counts['blocks_received'] += 1
         stamp_ns: int | None = None
         try:
             reason, stamp_ns = self._admit_stamp(msg)
             if reason is None:
                 reason = check_block(msg, self.params.min_block_samples, self.params.max_block_samples)
-            if reason is None and stamp_ns is not None and self._shed(stamp_ns, msg):
+            if reason is None and stamp_ns is not None and not shed_checked and self._shed(stamp_ns, msg):
                 self.counts['blocks_shed'] += 1
             elif reason is None:
-                cpu0 = time.thread_time()
                 reason = self._analyse(stamp_ns, msg)
-                self._cpu_debt_s += time.thread_time() - cpu0
         except Exception as err:  # noqa: BLE001 - a bug in the checks: count it, never lose the block
             self.get_logger().error(f'IF block dropped, the node raised {type(err).__name__}: {err}',
                                     throttle_duration_sec=self.params.warning_throttle_s)
@@ -650,20 +707,27 @@ class RfiMonitorNode(Node):
         if stamp_ns is not None and self._diag_timer.due(stamp_ns):
             self._publish(lambda: self.diagnostics(stamp_ns))
 
-    def _shed(self, stamp_ns: int, msg: IfSamples) -> bool:
-        """Whether to shed this well-formed block (module docstring, "Load shedding"): every block earns
-        ``max_cpu_load`` times the stream time it covers (its duration, or the time since the last block when
-        longer), the analysis spends the CPU time it takes; a block arriving while the balance is in debt is
-        shed. The credit saved is capped at SHED_CREDIT_CAP_S times max_cpu_load (a burst allowance)."""
+    def _shed(self, stamp_ns: int, msg: IfSamples | None) -> bool:
+        """Whether to shed this block (module docstring, "Load shedding"): every block earns ``max_cpu_load``
+        times the stream time it covers (its duration, or the time since the last block when longer; only the
+        latter for a block judged on its raw bytes, ``msg`` None), each callback spends the CPU time it takes
+        (deserialising included); a block arriving while the balance is in debt is shed. The credit saved is
+        capped at SHED_CREDIT_CAP_S times max_cpu_load (a burst allowance)."""
         load = self.params.max_cpu_load
-        n = len(msg.samples) // SAMPLE_WIDTH_BYTES[msg.sample_format] // (2 if msg.is_complex else 1)
-        covered_s = n / msg.sample_rate_hz
-        if self._last_block_stamp_ns is not None:
+        covered_s = 0.0
+        if msg is not None and msg.sample_format in SAMPLE_WIDTH_BYTES and msg.sample_rate_hz > 0:
+            n = len(msg.samples) // SAMPLE_WIDTH_BYTES[msg.sample_format] // (2 if msg.is_complex else 1)
+            covered_s = n / msg.sample_rate_hz
+        if self._last_block_stamp_ns is not None and stamp_ns > self._last_block_stamp_ns:
             covered_s = max(covered_s, (stamp_ns - self._last_block_stamp_ns) / NS_PER_S)
-        self._last_block_stamp_ns = stamp_ns
+        if self._last_block_stamp_ns is None or stamp_ns > self._last_block_stamp_ns:
+            self._last_block_stamp_ns = stamp_ns
         if not load > 0:
             return False
-        self._cpu_debt_s = max(self._cpu_debt_s - load * covered_s, -load * SHED_CREDIT_CAP_S)
+        # the debt is capped too: a one-off cost (a garbage collection, a page fault storm) sheds at most
+        # SHED_CREDIT_CAP_S of stream; a lasting overload adds its cost again with every analysed block
+        self._cpu_debt_s = min(max(self._cpu_debt_s - load * covered_s, -load * SHED_CREDIT_CAP_S),
+                               SHED_CREDIT_CAP_S)
         return self._cpu_debt_s > 0.0
 
     def _admit_stamp(self, msg: IfSamples) -> tuple[str | None, int | None]:

@@ -72,6 +72,9 @@ SHAPE_NAMES = {SHAPE_UNKNOWN: "unknown", SAWTOOTH_UP: "sawtooth_up", SAWTOOTH_DO
 _Q_LOW = 0.1
 _Q_LOW_EXP = -math.log(1.0 - _Q_LOW)
 """The 10 % quantile of a unit exponential (the power of a noise bin over its mean)."""
+MIN_SELECT_EXCESS = 2.0
+"""choose_frame_length: below this best mean peak excess (white noise: -0.1..1.3 over 8192 samples, real
+input the higher) the longest frame within 0.5 of the best is taken instead of the best."""
 SHORT_FRAME_SCORE = 1.0
 """choose_frame_length takes the shortest frame whose peak excess is at least this share of the best one (1: the
 best; 0.5 lost the 5.1 MHz sweep of the paper front end at J/N 10 dB, a 16-sample frame has 2.4 MHz bins)."""
@@ -103,6 +106,9 @@ class RidgeParams:
         hook_rate_ratio: a saw-tooth whose step after the flyback exceeds this times its median step is
             hooked, > 1.
         min_present_fraction: a non-periodic ridge must be present in at least this share of the frames.
+        tracking_samples: while a chirp is tracked (the last block was CHIRP), only the last this many
+            samples of a block are analysed (speed; the J/N and the CW test still use the whole block; a
+            block whose tail shows no sweep is analysed whole); 0: always the whole block.
     """
 
     min_frame_length: int = 8
@@ -117,6 +123,7 @@ class RidgeParams:
     phase_bins: int = 32
     hook_rate_ratio: float = 2.0
     min_present_fraction: float = 0.5
+    tracking_samples: int = 16384
 
     @property
     def frame_lengths(self) -> tuple[int, ...]:
@@ -138,6 +145,8 @@ class RidgeParams:
                 raise ValueError(f"{name} must be finite and > 0")
         if self.min_strength > 1 or self.min_present_fraction > 1:
             raise ValueError("min_strength and min_present_fraction must be <= 1")
+        if int(self.tracking_samples) < 0 or 0 < int(self.tracking_samples) < 1024:
+            raise ValueError("tracking_samples must be 0 or >= 1024")
         if int(self.min_period_frames) < 3 or int(self.phase_bins) < 8 or int(self.select_samples) < 0:
             raise ValueError("min_period_frames >= 3, phase_bins >= 8, select_samples >= 0")
         if int(self.noise_smooth_bins) < 3 or int(self.noise_smooth_bins) % 2 == 0:
@@ -300,8 +309,12 @@ def _f32(lvl: np.ndarray) -> np.ndarray:
     return np.maximum(lvl, 1e-37).astype(np.float32)
 
 
-def _peak_excess(S: np.ndarray, lvl: np.ndarray) -> float:
-    """Mean over frames of the largest bin excess (power / noise level), minus the harmonic number H_B."""
+def _peak_excess(S: np.ndarray, lvl: np.ndarray, cplx: bool = True) -> float:
+    """Mean over frames of the largest bin excess (power / noise level), minus the harmonic number H_B (the
+    mean largest of B unit exponentials). Real input: without the DC and Nyquist bins (one degree of freedom:
+    heavier tails, which made noise score above zero at short frames)."""
+    if not cplx and S.shape[1] > 3:
+        S, lvl = S[:, 1:-1], lvl[1:-1]
     B = S.shape[1]
     h = float(np.sum(1.0 / np.arange(1, B + 1)))
     return float(np.mean(np.max(S / _f32(lvl), axis=1))) - h
@@ -317,13 +330,17 @@ def choose_frame_length(x: np.ndarray, cplx: bool, par: RidgeParams) -> int:
             break
         S, _ = stft_power(xs, L, cplx)
         lvl = noise_levels(S, par.noise_smooth_bins, cplx)
-        scores.append((L, _peak_excess(S, lvl)))
+        scores.append((L, _peak_excess(S, lvl, cplx)))
     if not scores:
         return int(par.min_frame_length)
     scores = [(L, sc) for L, sc in scores if math.isfinite(sc)]
     if not scores:
         return int(par.min_frame_length)
     best = max(sc for _, sc in scores)
+    if best < MIN_SELECT_EXCESS:
+        # nothing clearly concentrated in the slice: the longest frame within noise's scatter of the best
+        # (fewer frames, a cheaper analysis; a chirp that appears makes the monitor choose again at once)
+        return int(max(L for L, sc in scores if sc >= best - 0.5))
     # the shortest frame within a factor SHORT_FRAME_SCORE of the best: time resolution (a sweep's ends,
     # short sweeps, the frequency at the block end) at little loss of peak excess
     return next(L for L, sc in scores if sc >= SHORT_FRAME_SCORE * best)
