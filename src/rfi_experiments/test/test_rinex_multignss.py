@@ -115,15 +115,17 @@ def test_bad_input_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixtur
 
 
 def test_gps_only_fusion_skips_the_other_constellations_by_name() -> None:
-    """The fusion filter still uses GPS alone: on the multi-GNSS epochs it gives the same outputs
-    as on their GPS subset, and counts every other satellite under
-    ``skipped_constellation.<name>``, not as a rejected satellite."""
+    """With ``multi_gnss=False`` the fusion filter uses GPS alone: on the multi-GNSS epochs it gives
+    the same outputs as on their GPS subset, and counts every other satellite under
+    ``skipped_constellation.<name>``, not as a rejected satellite (the multi-GNSS default is tested
+    in uwb_gnss_fusion's test_multignss_filter.py)."""
     from dataclasses import replace
 
     from uwb_gnss_fusion.fusion_filter import FusionFilter, FusionParams
 
     conv = convert_rinex(OBS, NAV, 10.0)
-    mixed, gps = FusionFilter(FusionParams(use_uwb=False)), FusionFilter(FusionParams(use_uwb=False))
+    params = FusionParams(use_uwb=False, multi_gnss=False)
+    mixed, gps = FusionFilter(params), FusionFilter(params)
     expected: dict[str, int] = {}
     names = {GALILEO: "galileo", BEIDOU: "beidou", GLONASS: "glonass"}
     used = rejected = 0
