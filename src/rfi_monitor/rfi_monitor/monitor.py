@@ -226,6 +226,8 @@ MAX_POWER_JN_DB = 120.0
 the noise floor puts at least -114 + 120 = +6 dBm into the antenna port (noise density -114 dBm/MHz, band
 >= 1 MHz), beyond the 1 dB compression of GNSS low-noise amplifiers (about -20..0 dBm input) and the range of
 front-end AGCs (about 60 dB): such a block would be clipped, never a clean measurement of the jammer."""
+COARSE_BITS = 3
+"""Front ends with at most this many bits per value: the J/N of a reported jammer is a lower bound (``process``)."""
 RESELECT_BLOCKS = 64
 """The "stft" estimator chooses its frame length again every this many blocks while it reports a CW or a
 chirp (choosing costs a few short-time FFTs of a slice of the block, about the cost of the analysis)."""
@@ -340,7 +342,8 @@ class RfiMonitor:
 
     def process(self, samples: np.ndarray, sample_rate_hz: float, intermediate_frequency_hz: float,
                 first_sample_index: int, stamp_ns: int, is_complex: bool | None = None,
-                full_scale: float | None = None, return_traces: bool = False) -> JammerEstimate:
+                full_scale: float | None = None, return_traces: bool = False,
+                bits: int | None = None) -> JammerEstimate:
         """Analyse one block.
 
         Args:
@@ -356,6 +359,10 @@ class RfiMonitor:
             full_scale: largest magnitude the quantiser delivers (same unit); values at or beyond it
                 count as saturated. None: no saturation check.
             return_traces: attach per-sample BlockTraces.
+            bits: quantisation of the front end, bits per real value (None: unknown). With 1-3 bits the J/N
+                of a reported jammer is flagged as a lower bound: a coarse quantiser compresses a strong
+                jammer's power (measured: a J/N 10 dB saw-tooth added to 2-bit PocketSDR captures read
+                4.9-6.5 dB), and its top level is a normal value, so no clipping is counted.
 
         Returns:
             JammerEstimate.
@@ -425,7 +432,8 @@ class RfiMonitor:
         xs = xc if n_bad == 0 else np.where(np.isfinite(xc), xc, 0)
         if self.params.estimator == "stft":
             return self._identify_stft(xs, cplx, float(sample_rate_hz), float(intermediate_frequency_hz),
-                                       int(stamp_ns), int(first_sample_index), clipped, full_scale)
+                                       int(stamp_ns), int(first_sample_index), clipped, full_scale,
+                                       bits is not None and int(bits) <= COARSE_BITS)
         # --- per-sample loop (always run: keeps the state continuous) ---------------------------
         resets_before = int(self._state.mist[MonitorInt.NRESETS])
         if self._stream_first is None:
@@ -434,7 +442,7 @@ class RfiMonitor:
         self._resets_in_block = int(self._state.mist[MonitorInt.NRESETS]) - resets_before
         est = self._identify(xs, cplx, float(sample_rate_hz), float(intermediate_frequency_hz),
                              int(stamp_ns), int(first_sample_index), traces)
-        lower = clipped > self.params.clip_lower_bound_fraction
+        lower = clipped > self.params.clip_lower_bound_fraction or (bits is not None and int(bits) <= COARSE_BITS)
         ref = REF_FIXED if self.params.noise_floor_power > 0 else REF_LEARNED
         return dataclasses.replace(est, noise_reference=ref, jammer_to_noise_is_lower_bound=lower and est.valid,
                                    clipped_fraction=clipped)
@@ -680,7 +688,7 @@ class RfiMonitor:
         return inblock, REF_IN_BLOCK
 
     def _identify_stft(self, xs: np.ndarray, cplx: bool, fs: float, fif: float, stamp_ns: int, first: int,
-                       clipped: float, full_scale: float | None) -> JammerEstimate:
+                       clipped: float, full_scale: float | None, coarse: bool = False) -> JammerEstimate:
         """Identification and estimates of the "stft" estimator (module docstring)."""
         p = self.params
         cp = p.classifier
@@ -779,9 +787,13 @@ class RfiMonitor:
                 bw = abs(b - a)
                 if math.isfinite(rr.start):
                     f0 = self._to_rel_hz(rr.start, fs, fif, cplx)
+        if jtype in (CW, CHIRP) and ref != REF_IN_BLOCK and math.isfinite(jn) and jn == jn_in and jn_in > jn_ref:
+            # an AGC (or a gain change) hides the jammer from the block power; the noise measured in the block
+            # beside the jammer shows it: J/N against REF_IN_BLOCK, and said so
+            ref = REF_IN_BLOCK
         self._tracking = jtype in (CW, CHIRP)
         self._chirp = jtype == CHIRP
-        lower = clipped > p.clip_lower_bound_fraction and jtype != NONE
+        lower = (clipped > p.clip_lower_bound_fraction or coarse) and jtype != NONE
         return JammerEstimate(stamp_ns, int(jtype), float(conf), float(jn), float(js), freq, fstd, rate, per, f0,
                               bw, fs, first, n, True, self._counters(), None, "", ref, bool(lower), float(clipped),
                               int(shape), inb)
@@ -801,10 +813,11 @@ class RfiMonitor:
         cw = narrow and (feat.occupancy <= cp.cw_max_occupancy or feat.line_fraction >= CW_MIN_LINE_FRACTION)
         jn = jn_ref
         if cw and not rr.sweeping:
-            return CW, logistic(feat.jn_spectral_db - thr, s), max(jn_ref, feat.jn_spectral_db), jn_ref, jn_in, floor
+            return (CW, logistic(feat.jn_spectral_db - thr, s), max(jn_ref, feat.jn_spectral_db, jn_in), jn_ref, jn_in,
+                    floor)
         if rr.sweeping:
             conf = logistic(max(jn_ref, jn_in) - thr, s) * (1.0 if rr.periodic else 0.6)
-            return CHIRP, conf, jn, jn_ref, jn_in, floor
+            return CHIRP, conf, max(jn_ref, jn_in), jn_ref, jn_in, floor
         if ref != REF_IN_BLOCK and jn_ref >= thr:
             return WIDEBAND, logistic(jn_ref - thr, s), jn, jn_ref, jn_in, floor
         if narrow:

@@ -753,7 +753,7 @@ class RfiMonitorNode(Node):
             est = self.monitor.process(
                 counts.astype(np.float64) * msg.scale, msg.sample_rate_hz, msg.intermediate_frequency_hz,
                 msg.first_sample_index, stamp_ns, is_complex=bool(msg.is_complex),
-                full_scale=full_scale(msg) if self.params.check_saturation else None)
+                full_scale=full_scale(msg) if self.params.check_saturation else None, bits=int(msg.bits_per_sample))
         except Exception as err:  # noqa: BLE001 - the checks should make this unreachable; count it, keep going
             self.get_logger().error(f'core raised on a checked IF block ({type(err).__name__}: {err})',
                                     throttle_duration_sec=self.params.warning_throttle_s)

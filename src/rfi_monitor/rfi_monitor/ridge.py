@@ -78,6 +78,10 @@ input the higher) the longest frame within 0.5 of the best is taken instead of t
 SHORT_FRAME_SCORE = 1.0
 """choose_frame_length takes the shortest frame whose peak excess is at least this share of the best one (1: the
 best; 0.5 lost the 5.1 MHz sweep of the paper front end at J/N 10 dB, a 16-sample frame has 2.4 MHz bins)."""
+JUMP_SPAN = 0.6
+"""A step between consecutive in-band profile bins larger than this share of the swept span is a flyback
+(a saw-tooth's is ~1; a sweep that crosses the band in two or three bins, as a triangle wider than the
+band does, steps by a half or a third of the span and is still a sweep)."""
 SHAPE_BINS = 16
 """Phase bins of the profile the sweep shape and rate are read from (the finer ``phase_bins`` profile gives
 the frequency at the block end)."""
@@ -376,6 +380,18 @@ def _periodicity(u: np.ndarray, lmin: int, lmax: int, par: RidgeParams) -> tuple
     good = cand[ok]
     top = float(np.max(r[good]))
     T0 = float(good[np.argmax(r[good] >= 0.6 * top)])
+    # a period of only a few frames is smeared by the frame (its first peak can fall below the second):
+    # take T0 / k when the autocorrelation peaks there too (k = 2, 3), at least half as high
+    for k in (3, 2):
+        c = int(round(T0 / k))
+        if c < max(lmin, 2):
+            continue
+        lo_c, hi_c = max(c - 1, 1), min(c + 1, T - 2)
+        j = lo_c + int(np.argmax(r[lo_c:hi_c + 1]))
+        if (r[j] >= r[j - 1] and r[j] >= r[j + 1] and r[j] >= 0.5 * r[int(T0)]
+                and r[j] - trough[j - 1] >= max(par.min_strength, par.detect_sigma * sig[j])):
+            T0 = float(j)
+            break
     strength = float(r[int(T0)] - trough[int(T0) - 1])
     # refine on multiples (least squares through the origin)
     num, den = 0.0, 0.0
@@ -478,7 +494,7 @@ def _shape(prof: np.ndarray, inband: np.ndarray, hook_ratio: float) -> tuple[int
     nxt = np.roll(np.arange(K), -1)
     both = inband & inband[nxt]
     d = np.where(both, prof[nxt] - prof, np.nan)
-    jump = both & (np.abs(d) > span / 3.0)
+    jump = both & (np.abs(d) > JUMP_SPAN * span)
     swept = both & ~jump
     dsw = d[swept]
     if dsw.size < 3 or not span > 0:
@@ -599,6 +615,9 @@ def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length
         prof_s, share_s = (prof, share) if Ks == K else _profile(f, present, per_fr, Ks)
         inband_s = (share_s >= 0.5 * float(np.max(share_s))) & np.isfinite(prof_s) & (top > 0)
         inb = float(np.mean(inband_s))
+        if inb < 0.6 and Ks < K:
+            # in band only part of the period: the finer profile has more bins in each in-band run
+            Ks, prof_s, inband_s = K, prof, inband
         shape, low, high, start, step = _shape(prof_s, inband_s, par.hook_rate_ratio)
         if math.isfinite(step):
             rate = step / (per_fr * hop / Ks)
