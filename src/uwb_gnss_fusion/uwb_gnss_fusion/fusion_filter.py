@@ -13,6 +13,9 @@ every update (eq. 25). With several GNSS (``FusionParams.multi_gnss``), ``c*dt``
 clock in the reference system's time (GPS, unless the filter started from a fix of another
 system) and each other system seen gets an inter-system bias state ``b_sys`` (m, a random walk)
 appended after the clock, in the order the systems appear: a GPS-only stream keeps 8 states.
+With ``FusionParams.pseudorange_correlated_std_m`` > 0, each tracked satellite has a first-order
+Gauss-Markov pseudorange-error state ``e_sat`` (m) after the inter-system biases, allocated when
+the satellite appears and removed (marginalised) when it has been unseen for a while.
 
 :class:`FusionFilter` is the facade; the pieces live in their own modules:
 
@@ -44,6 +47,7 @@ from .ckf import CholeskyError, CubatureKalmanFilter
 from .divergence import GatedWindow, clock_reset_variances, gnss_epoch_inconsistent, position_lost
 from .fusion_output import FusionOutput
 from .fusion_params import (  # noqa: F401 (re-exported: the filter's public names)
+    CORRELATED_ERROR_MAX_GAP_TAU,
     FRAME_EARTH,
     FRAME_MAP,
     INTER_SYSTEM_BIAS_INIT_STD_M,
@@ -109,7 +113,7 @@ class FusionFilter:
         self.params = params if params is not None else FusionParams()
         self._reference_provider = reference_provider
         self._gate = self.params.gate_nis
-        self._transition_cache: dict[tuple[int, bool, int], tuple[np.ndarray, np.ndarray]] = {}
+        self._transition_cache: dict[tuple[int, bool, int, int], tuple[np.ndarray, np.ndarray]] = {}
         self._counts_tuple: tuple[tuple[str, int], ...] | None = None
         clock = self.params.clock
         self._clock_q = lambda dt_s: _clock_q(clock, dt_s)
@@ -150,6 +154,12 @@ class FusionFilter:
         self._ref_system = int(reference)
         self._bias_systems: list[int] = []  # system of state column STATE_DIM + i
         self._bias_seen_ns: dict[int, int] = {}
+        self._err_sats: list[int] = []  # satellite key of correlated-error column _err_base() + i
+        self._err_seen_ns: dict[int, int] = {}
+
+    def _err_base(self) -> int:
+        """First state column of the correlated pseudorange errors (after the inter-system biases)."""
+        return STATE_DIM + len(self._bias_systems)
 
     def _remember_drift(self) -> None:
         """Keep the clock drift of a state about to be replaced (reinitialisation, reset)."""
@@ -184,7 +194,8 @@ class FusionFilter:
 
     @property
     def state_dimension(self) -> int:
-        """Size of the state: 8, plus one inter-system bias per system other than the reference seen."""
+        """Size of the state: 8, plus one inter-system bias per system other than the reference seen,
+        plus one correlated pseudorange error per tracked satellite (when modelled)."""
         return int(self._nominal.size)
 
     @property
@@ -197,6 +208,16 @@ class FusionFilter:
             var = max(float(self._ckf.p[col, col]), 0.0)
             out[CONSTELLATION_NAMES.get(sysc, f"code_{sysc}")] = (float(self._nominal[col]), math.sqrt(var))
         return out
+
+    @property
+    def correlated_errors_m(self) -> dict[int, tuple[float, float]]:
+        """Time-correlated pseudorange errors: satellite key (``constellation * 1000 + svid``) ->
+        (estimate, 1-sigma), m (empty when they are not modelled)."""
+        base = self._err_base()
+        return {
+            sat: (float(self._nominal[base + i]), math.sqrt(max(float(self._ckf.p[base + i, base + i]), 0.0)))
+            for i, sat in enumerate(self._err_sats)
+        }
 
     @property
     def reference_system(self) -> str:
@@ -351,17 +372,25 @@ class FusionFilter:
         if dt_ns <= 0:
             return
         nb = len(self._bias_systems)
-        key = (dt_ns, self._frame == FRAME_EARTH, nb)
+        ne = len(self._err_sats)
+        key = (dt_ns, self._frame == FRAME_EARTH, nb, ne)
         cached = self._transition_cache.get(key)
         if cached is None:
             dt = dt_ns / _NS
-            phi = constant_velocity_transition(dt, nb)
-            q = np.zeros((STATE_DIM + nb, STATE_DIM + nb))
+            tau = self.params.pseudorange_correlated_tau_s
+            phi = constant_velocity_transition(dt, nb, ne, tau)
+            q = np.zeros((STATE_DIM + nb + ne, STATE_DIM + nb + ne))
             q[0:6, 0:6] = white_acceleration_noise(self.params.accel_psd_m2ps3, dt)
             if key[1]:
                 q[6:8, 6:8] = self._clock_q(dt)
                 # inter-system biases: random walks
-                q[STATE_DIM:, STATE_DIM:] = np.eye(nb) * (INTER_SYSTEM_BIAS_PSD_M2PS * dt)
+                isb = slice(STATE_DIM, STATE_DIM + nb)
+                q[isb, isb] = np.eye(nb) * (INTER_SYSTEM_BIAS_PSD_M2PS * dt)
+                if ne:
+                    # Gauss-Markov: x_k+1 = exp(-dt/tau) x_k + w, var(w) = sigma^2 (1 - exp(-2 dt/tau))
+                    # (Brown & Hwang, 4th ed., eq. 4.2.11-4.2.12)
+                    idx = np.arange(STATE_DIM + nb, STATE_DIM + nb + ne)
+                    q[idx, idx] = self.params.pseudorange_correlated_std_m**2 * (1.0 - math.exp(-2.0 * dt / tau))
             cached = (phi, q)
             if len(self._transition_cache) >= 64:  # the few distinct steps of a stream recur
                 self._transition_cache.clear()
@@ -506,17 +535,21 @@ class FusionFilter:
             )
             self._clock_initialized = True
         cols = self._update_bias_states(stamp, prep)
+        err_cols = self._update_error_states(stamp, prep)
         n_screened = 0
         if self.params.common_mode_screen:
-            prep, n_screened = screen_common_mode(prep, self._nominal, self._ckf.p, self._gate, self._count, cols)
+            prep, n_screened = screen_common_mode(
+                prep, self._nominal, self._ckf.p, self._gate, self._count, cols, err_cols
+            )
             if prep.pr.size == 0:
                 self._count("no_valid_satellites")
                 return self._output(False, sat_rej=n_obs)
             n = prep.pr.size
             if n_screened:
                 cols = self._bias_columns(prep)
+                err_cols = self._error_columns(prep)
         try:
-            res = update_gnss(self._ckf, self._nominal, prep, self._gate, self.params, cols)
+            res = update_gnss(self._ckf, self._nominal, prep, self._gate, self.params, cols, err_cols)
         except CholeskyError:
             self._count("numerical_failure")
             return self._declare_divergence(stamp)
@@ -587,10 +620,10 @@ class FusionFilter:
             if sysc not in self._bias_systems:
                 value = clock_offset_from_residuals(prep, self._nominal, None, rows)
                 n = self._nominal.size
-                cov = np.zeros((n + 1, n + 1))
-                cov[:n, :n] = self._ckf.p
-                cov[n, n] = var0
-                self._nominal = np.append(self._nominal, value)
+                at = self._err_base()  # before the correlated-error columns (if any)
+                cov = np.insert(np.insert(self._ckf.p, at, 0.0, axis=0), at, 0.0, axis=1)
+                cov[at, at] = var0
+                self._nominal = np.insert(self._nominal, at, value)
                 self._ckf = CubatureKalmanFilter(np.zeros(n + 1), cov)
                 self._bias_systems.append(int(sysc))
                 self._count("inter_system_bias_added")
@@ -601,6 +634,56 @@ class FusionFilter:
                 self._count("inter_system_bias_reset")
             self._bias_seen_ns[int(sysc)] = stamp_ns
         return self._bias_columns(prep)
+
+    # ------------------------------------------------------------------ correlated errors
+    def _error_columns(self, prep: PreparedEpoch) -> np.ndarray | None:
+        """State column of each satellite's correlated pseudorange error, or None when not modelled."""
+        if not self._err_sats or prep.sat_id is None:
+            return None
+        base = self._err_base()
+        index = {sat: base + i for i, sat in enumerate(self._err_sats)}
+        return np.array([index[s] for s in prep.sat_id.tolist()], dtype=np.int64)
+
+    def _update_error_states(self, stamp_ns: int, prep: PreparedEpoch) -> np.ndarray | None:
+        """Free the correlated-error states of satellites unseen for more than
+        ``CORRELATED_ERROR_MAX_GAP_TAU`` correlation times, allocate one for each satellite of the
+        epoch without one; return the error columns of the epoch's satellites.
+
+        Removing a state (its row and column of P) is the exact marginalisation of a Gaussian; a
+        new state starts at zero with the stationary variance ``sigma^2`` and no correlation (the
+        error of a satellite just acquired is unknown). Counted: ``correlated_error_added``,
+        ``correlated_error_removed``.
+        """
+        p = self.params
+        if p.pseudorange_correlated_std_m <= 0.0 or self._frame != FRAME_EARTH or prep.sat_id is None:
+            return None
+        base = self._err_base()
+        limit_ns = CORRELATED_ERROR_MAX_GAP_TAU * p.pseudorange_correlated_tau_s * _NS
+        stale = [i for i, sat in enumerate(self._err_sats) if stamp_ns - self._err_seen_ns[sat] > limit_ns]
+        if stale:
+            keep = np.ones(self._nominal.size, dtype=bool)
+            keep[[base + i for i in stale]] = False
+            for i in reversed(stale):
+                del self._err_seen_ns[self._err_sats.pop(i)]
+            self._nominal = self._nominal[keep]
+            self._ckf = CubatureKalmanFilter(np.zeros(self._nominal.size), self._ckf.p[np.ix_(keep, keep)])
+            self._count("correlated_error_removed", len(stale))
+        known = set(self._err_sats)
+        new = [sat for sat in prep.sat_id.tolist() if sat not in known]
+        if new:
+            n = self._nominal.size
+            k = len(new)
+            cov = np.zeros((n + k, n + k))
+            cov[:n, :n] = self._ckf.p
+            idx = np.arange(n, n + k)
+            cov[idx, idx] = p.pseudorange_correlated_std_m**2
+            self._nominal = np.concatenate([self._nominal, np.zeros(k)])
+            self._ckf = CubatureKalmanFilter(np.zeros(n + k), cov)
+            self._err_sats.extend(new)
+            self._count("correlated_error_added", k)
+        for sat in prep.sat_id.tolist():
+            self._err_seen_ns[sat] = stamp_ns
+        return self._error_columns(prep)
 
     def _clock_from_residuals(self, prep: PreparedEpoch) -> float:
         """The receiver clock from the pseudorange residuals (position trusted): over the

@@ -160,6 +160,12 @@ class FusionNodeParams:
     multi_gnss: bool = parameter(
         _FP.multi_gnss, 'Use Galileo, BeiDou, GLONASS and QZSS as well as GPS, each with an inter-system clock '
         'bias state (false: GPS only, the others counted as skipped_constellation.<name>).')
+    pseudorange_correlated_std_m: float = parameter(
+        _FP.pseudorange_correlated_std_m, 'Stationary 1-sigma of the time-correlated pseudorange error, m: one '
+        'first-order Gauss-Markov state per tracked satellite (0: off, white pseudorange errors).',
+        minimum=0.0, maximum=100.0)
+    pseudorange_correlated_tau_s: float = parameter(
+        _FP.pseudorange_correlated_tau_s, 'Correlation time of that error, s.', minimum=0.1, maximum=86400.0)
     elevation_mask_deg: float = parameter(
         _FP.elevation_mask_deg, 'Satellites below this elevation are rejected, deg.',
         minimum=-90.0, maximum=89.0, read_only=False)

@@ -41,6 +41,11 @@ INTER_SYSTEM_BIAS_MAX_GAP_S = 300.0
 returns, s (e.g. after a receiver restart its hardware biases may differ); a shorter absence keeps
 the estimate, whose variance grew by the random walk meanwhile."""
 
+CORRELATED_ERROR_MAX_GAP_TAU = 2.0
+"""A satellite unseen for longer than this many correlation times has its correlated-error state
+removed (marginalised, exact); if it returns it gets a fresh state with the stationary variance
+(after two correlation times the old estimate keeps less than 2 % of its correlation)."""
+
 
 @dataclass(frozen=True)
 class FusionParams:
@@ -111,6 +116,14 @@ class FusionParams:
             filter; process model and initialisation: :data:`INTER_SYSTEM_BIAS_PSD_M2PS`,
             :data:`INTER_SYSTEM_BIAS_INIT_STD_M`, :data:`INTER_SYSTEM_BIAS_MAX_GAP_S`); False: GPS
             only, the others counted as ``skipped_constellation.<name>``. SBAS is always skipped.
+        pseudorange_correlated_std_m / pseudorange_correlated_tau_s: stationary 1-sigma (m) and
+            correlation time (s) of the time-correlated part of each pseudorange error (residual
+            orbit, clock and atmosphere, multipath), a first-order Gauss-Markov state per tracked
+            satellite (Brown & Hwang, 4th ed., sec. 4.2), allocated when the satellite appears and
+            removed after :data:`CORRELATED_ERROR_MAX_GAP_TAU` correlation times unseen. Treated
+            as white, such errors are averaged over every epoch of a correlation time and the
+            filter becomes overconfident (docs/uwb_gnss_fusion/fusion_never_worse.md).
+            Std 0: off (white pseudorange errors, the 8-state filter).
     """
 
     # sensors and models (.measurement_models, .gnss_update, .uwb_update)
@@ -155,6 +168,9 @@ class FusionParams:
     common_mode_screen: bool = True
     # multi-GNSS: inter-system clock biases (issue 15 item 1)
     multi_gnss: bool = True
+    # time-correlated pseudorange errors, one Gauss-Markov state per satellite (issue 15 item 2)
+    pseudorange_correlated_std_m: float = 0.0
+    pseudorange_correlated_tau_s: float = 60.0
 
     def __post_init__(self) -> None:
         pos = {
@@ -174,6 +190,7 @@ class FusionParams:
             "reference_max_age_s": self.reference_max_age_s,
             "uwb_init_window_s": self.uwb_init_window_s,
             "nonlinearity_threshold": self.nonlinearity_threshold,
+            "pseudorange_correlated_tau_s": self.pseudorange_correlated_tau_s,
             # inf switches the Huber weighting off; anything else must be finite and > 0
             "uwb_huber_k": 1.0 if self.uwb_huber_k == math.inf else self.uwb_huber_k,
             "uwb_huber_k_positive": 1.0 if self.uwb_huber_k_positive == math.inf else self.uwb_huber_k_positive,
@@ -183,6 +200,10 @@ class FusionParams:
                 raise ValueError(f"FusionParams.{name} must be a finite number > 0, got {value!r}")
         if not (math.isfinite(self.clock_h_minus2_hz) and self.clock_h_minus2_hz >= 0.0):
             raise ValueError(f"FusionParams.clock_h_minus2_hz must be >= 0, got {self.clock_h_minus2_hz!r}")
+        if not (math.isfinite(self.pseudorange_correlated_std_m) and self.pseudorange_correlated_std_m >= 0.0):
+            raise ValueError(
+                f"FusionParams.pseudorange_correlated_std_m must be >= 0, got {self.pseudorange_correlated_std_m!r}"
+            )
         if not (0.0 < self.gate_probability <= 1.0):
             raise ValueError(
                 f"FusionParams.gate_probability must be in (0, 1], got {self.gate_probability!r}"

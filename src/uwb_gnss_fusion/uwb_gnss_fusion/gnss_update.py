@@ -192,11 +192,13 @@ def prepare_epoch(
         sigma_pr=s_pr,
         sigma_rate=s_rate,
         system=system,
+        sat_id=np.array([r[0].constellation * 1000 + r[0].svid for r in rows], dtype=np.int64),
     )
 
 
 def clock_offset_from_residuals(
-    prep: PreparedEpoch, nominal: np.ndarray, bias_column: np.ndarray | None = None, rows: np.ndarray | None = None
+    prep: PreparedEpoch, nominal: np.ndarray, bias_column: np.ndarray | None = None, rows: np.ndarray | None = None,
+    error_column: np.ndarray | None = None,
 ) -> float:
     """Median pseudorange residual at the nominal state, m: the receiver clock correction when the
     position is trusted (a UWB start, or a GNSS-declared divergence that UWB does not confirm), or
@@ -208,18 +210,19 @@ def clock_offset_from_residuals(
         bias_column: inter-system bias column of each satellite (-1: none), as
             :func:`.measurement_models.pseudorange_model`; None: no bias applied.
         rows: bool mask of the satellites to take the median over (None: all).
+        error_column: correlated-error state column of each satellite (None: none).
 
     Notes:
         Cao et al., eq. 5 with the position fixed; the median ignores the jammed outliers.
     """
-    hx0 = pseudorange_model(prep.sat_pos, prep.sat_clk, prep.iono, prep.tropo, bias_column)
+    hx0 = pseudorange_model(prep.sat_pos, prep.sat_clk, prep.iono, prep.tropo, bias_column, error_column)
     res = prep.pr - hx0(nominal[None, :])[0]
     return float(np.median(res if rows is None else res[rows]))
 
 
 def screen_common_mode(
     prep: PreparedEpoch, nominal: np.ndarray, p: np.ndarray, gate_nis: float, count: Count,
-    bias_column: np.ndarray | None = None,
+    bias_column: np.ndarray | None = None, error_column: np.ndarray | None = None,
 ) -> tuple[PreparedEpoch, int]:
     """Drop the pseudoranges (and mark the rates) that fail the common-mode innovation screen.
 
@@ -230,6 +233,8 @@ def screen_common_mode(
         gate_nis: the per-measurement gate.
         count: the rejection counter (``common_mode_pseudorange``, ``common_mode_doppler``).
         bias_column: inter-system bias column of each satellite (-1: GPS); None: all GPS.
+        error_column: correlated-error state column of each satellite (None: none); its
+            estimate is removed from the innovation and its variance added.
 
     Returns:
         (the epoch without the dropped pseudoranges, how many were dropped).
@@ -245,8 +250,10 @@ def screen_common_mode(
     x = nominal[None, :]
     d = prep.sat_pos - nominal[None, 0:3]
     los = d / np.linalg.norm(d, axis=1)[:, None]
-    nu = prep.pr - pseudorange_model(prep.sat_pos, prep.sat_clk, prep.iono, prep.tropo, bias_column)(x)[0]
+    nu = prep.pr - pseudorange_model(prep.sat_pos, prep.sat_clk, prep.iono, prep.tropo, bias_column, error_column)(x)[0]
     var = prep.sigma_pr**2 + projected_variance(los, p[0:3, 0:3])
+    if error_column is not None:
+        var = var + np.diag(p)[error_column]
     if bias_column is not None:
         has = bias_column >= 0
         if has.any():
@@ -273,7 +280,7 @@ def screen_common_mode(
 
 def update_gnss(
     ckf: CubatureKalmanFilter, nominal: np.ndarray, prep: PreparedEpoch, gate_nis: float, params: FusionParams,
-    bias_column: np.ndarray | None = None,
+    bias_column: np.ndarray | None = None, error_column: np.ndarray | None = None,
 ) -> UpdateResult:
     """One gated cubature update with the epoch's pseudoranges and usable pseudorange rates.
 
@@ -284,6 +291,7 @@ def update_gnss(
         gate_nis: the per-measurement gate.
         params: ``max_update_iterations``, ``nonlinearity_threshold``.
         bias_column: inter-system bias column of each satellite (-1: GPS); None: all GPS.
+        error_column: correlated-error state column of each satellite (None: none).
 
     Returns:
         The CKF's :class:`.ckf.UpdateResult` (``accepted[:k]``: pseudoranges).
@@ -294,7 +302,7 @@ def update_gnss(
     Notes:
         Cao et al., eq. 5 and 6 (models), 17-24 (cubature update).
     """
-    models = [pseudorange_model(prep.sat_pos, prep.sat_clk, prep.iono, prep.tropo, bias_column)]
+    models = [pseudorange_model(prep.sat_pos, prep.sat_clk, prep.iono, prep.tropo, bias_column, error_column)]
     z = [prep.pr]
     var = [prep.sigma_pr**2]
     ridx = np.flatnonzero(np.isfinite(prep.rate))

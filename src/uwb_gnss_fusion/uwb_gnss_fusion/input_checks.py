@@ -50,6 +50,8 @@ class PreparedEpoch:
         sigma_rate: pseudorange-rate 1-sigmas, m/s, (k,).
         system: constellation code of each satellite (``gnss_common.observations`` GPS, GALILEO,
             ...), int, (k,); None: all GPS.
+        sat_id: key of each satellite, ``constellation * 1000 + svid``, int, (k,) (the
+            correlated-error slots of the fusion filter); None: not given.
     """
 
     sat_pos: np.ndarray
@@ -63,6 +65,7 @@ class PreparedEpoch:
     sigma_pr: np.ndarray
     sigma_rate: np.ndarray
     system: np.ndarray | None = None
+    sat_id: np.ndarray | None = None
 
     def subset(self, keep: np.ndarray, rate: np.ndarray | None = None) -> PreparedEpoch:
         """The satellites selected by ``keep`` (bool or index array), with ``rate`` if given."""
@@ -72,6 +75,7 @@ class PreparedEpoch:
             sat_drift=self.sat_drift[keep], iono=self.iono[keep], tropo=self.tropo[keep], pr=self.pr[keep],
             rate=r[keep], sigma_pr=self.sigma_pr[keep], sigma_rate=self.sigma_rate[keep],
             system=None if self.system is None else self.system[keep],
+            sat_id=None if self.sat_id is None else self.sat_id[keep],
         )
 
 

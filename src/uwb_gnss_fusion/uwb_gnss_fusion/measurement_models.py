@@ -39,6 +39,7 @@ def pseudorange_model(
     iono_delay_m: np.ndarray,
     tropo_delay_m: np.ndarray,
     bias_column: np.ndarray | None = None,
+    error_column: np.ndarray | None = None,
 ) -> MeasurementModel:
     """Pseudorange model for k satellites.
 
@@ -50,6 +51,8 @@ def pseudorange_model(
         tropo_delay_m: modelled tropospheric delay, m, shape (k,).
         bias_column: for each satellite the state column (>= 8) of its system's inter-system
             clock bias, or -1 for the reference system (GPS), int, shape (k,); None: all GPS.
+        error_column: for each satellite the state column of its time-correlated pseudorange
+            error (first-order Gauss-Markov, added to the range), int, shape (k,); None: none.
 
     Returns:
         hx mapping states (m, n) to pseudoranges (m, k), m.
@@ -61,7 +64,9 @@ def pseudorange_model(
         (the neglected second-order term is below 1 mm for GNSS ranges). A satellite of another
         system sees the receiver clock in that system's time: ``c dt_r + b_sys`` with ``b_sys`` the
         inter-system bias (receiver hardware delay difference plus the residual offset between the
-        system times; Hegarty 2017 / RTKLIB ``pntpos``), a state of its own.
+        system times; Hegarty 2017 / RTKLIB ``pntpos``), a state of its own. The time-correlated
+        error of a satellite (residual orbit/clock, ionosphere and troposphere, multipath) is a
+        first-order Gauss-Markov state of its own (Brown & Hwang, 4th ed., sec. 2.9 and 4.2).
     """
     ps = np.asarray(sat_pos_ecef_m, dtype=float)
     const = (
@@ -69,6 +74,16 @@ def pseudorange_model(
         + np.asarray(tropo_delay_m, float)
         - np.asarray(sat_clock_bias_m, float)
     )
+    if error_column is not None:
+        err = np.asarray(error_column, dtype=np.int64)
+        if err.shape != const.shape or (err < STATE_DIM).any():
+            raise ValueError(f"error_column must be (k,) with columns >= {STATE_DIM}, got {error_column!r}")
+        base = pseudorange_model(sat_pos_ecef_m, sat_clock_bias_m, iono_delay_m, tropo_delay_m, bias_column)
+
+        def hx_err(states: np.ndarray) -> np.ndarray:
+            return base(states) + states[:, err]
+
+        return hx_err
     ps_b = ps[None, :, :]
     cols = None if bias_column is None else np.asarray(bias_column, dtype=np.int64)
     if cols is None or not (cols >= 0).any():
@@ -200,20 +215,29 @@ def stack_models(models: list[MeasurementModel]) -> MeasurementModel:
     return hx
 
 
-def constant_velocity_transition(dt_s: float, n_bias: int = 0) -> np.ndarray:
+def constant_velocity_transition(
+    dt_s: float, n_bias: int = 0, n_error: int = 0, error_tau_s: float = 1.0
+) -> np.ndarray:
     """Discrete state transition of the 8-state constant-velocity / clock model.
 
     Args:
         dt_s: time step T_s, s (>= 0).
         n_bias: inter-system bias states appended after the clock (random walks: identity rows).
+        n_error: first-order Gauss-Markov pseudorange-error states after the biases.
+        error_tau_s: their correlation time, s (> 0).
 
     Returns:
-        Phi, shape (8 + n_bias, 8 + n_bias).
+        Phi, shape (8 + n_bias + n_error, 8 + n_bias + n_error).
 
     Notes:
-        Cao et al., eq. 9 (continuous F) and eq. 10 (Phi = exp(F T_s)).
+        Cao et al., eq. 9 (continuous F) and eq. 10 (Phi = exp(F T_s)); a Gauss-Markov state
+        decays by ``exp(-T_s / tau)`` (Brown & Hwang, 4th ed., eq. 4.2.11).
     """
-    phi = _EYE8.copy() if n_bias == 0 else np.eye(STATE_DIM + n_bias)
+    n = STATE_DIM + n_bias + n_error
+    phi = _EYE8.copy() if n == STATE_DIM else np.eye(n)
+    if n_error:
+        idx = np.arange(STATE_DIM + n_bias, n)
+        phi[idx, idx] = math.exp(-dt_s / error_tau_s)
     phi[0, 3] = phi[1, 4] = phi[2, 5] = dt_s
     phi[6, 7] = dt_s
     return phi
