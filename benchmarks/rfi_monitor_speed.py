@@ -13,13 +13,16 @@ shared, and wall-clock time would count the time other processes hold the core. 
 from __future__ import annotations
 
 import dataclasses
+import importlib.util
 import math
 import os
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from rfi_monitor import monitor as monitor_module
 from rfi_monitor.classifier import ClassifierParams, block_features
 from rfi_monitor.if_measurement import measure_if
 from rfi_monitor.monitor import RfiMonitor, RfiMonitorParams
@@ -77,6 +80,26 @@ Measured and not kept (fused loop over 20 ms, best of 21, in one run; ns per sam
   alone goes from ~11.5 to ~10 ns per sample, the fused loop does not change measurably.
 """
 OUT = Path(__file__).resolve().parent.parent / "docs" / "rfi_monitor"
+LIVE_RUNS = 3
+"""The live-stream rows are measured this many times in one run (the table gives the median, the runs are
+listed after it)."""
+RIDGE_SPEEDUP = """Ridge analysis speed-up (issue 14 item 6; kept): the per-bin noise level (module docstring
+step 2) computed in one compiled pass after a numpy quantile (was: np.partition over the strided axis,
+two scipy.ndimage median filters, a grey opening, four copies of a boolean mask and a masked float64 sum);
+the ridge's strongest bin, its excess and the two spectral-phasor sums in one compiled pass over the STFT
+power (float32, numpy's pairwise summation order); STFT power squared in place; the period refinement
+loop on Python floats; small medians without numpy's per-call overhead. The arithmetic was kept in the
+same precision and order, so the results are the same to the bit on this machine
+(src/rfi_monitor/test/test_ridge_speed_equivalence.py: the shape cases of test_stft_estimator.py and
+the real clean captures, ridge and whole monitor, against the frozen pre-speed-up ridge_reference.py;
+stated tolerances 1e-9 relative, 1e-6 dB, integers and types exactly). Tried and not kept: the
+autocorrelation FFT with scipy.fft instead of numpy.fft (the same bits, 3-5 us per block); the noise
+level's quantile in the compiled pass (numba's np.partition and a hand-written quickselect were 4-7x
+slower than numpy's introselect).
+"""
+REFERENCE_RIDGE = Path(__file__).resolve().parent.parent / "src" / "rfi_monitor" / "test" / "ridge_reference.py"
+"""ridge.py as of efa776e, before the speed work of issue 14 item 6 (a frozen copy kept for the equivalence
+test): the live-stream rows are timed with it and with the current ridge.py, alternately, in the same run."""
 
 
 def _steady_rate(fe, block: int, par, warm: int = 20, timed: int = 100, repeats: int = 5) -> float:
@@ -116,30 +139,57 @@ def cpu_model() -> str:
     return "unknown"
 
 
+def _reference_ridge():
+    """The frozen pre-speed-up ridge module, or None when the file is not there."""
+    if not REFERENCE_RIDGE.exists():
+        return None
+    spec = importlib.util.spec_from_file_location("rfi_monitor_ridge_reference", REFERENCE_RIDGE)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
 def live_stream_rows() -> list[tuple[str, float]]:
     """The live-stream case of issue 14 item 6 with the default ("stft") estimator: 1 ms blocks of 38.192 MS/s
-    8-bit real IF (decoded from int8 counts as the node does), CPU time per block, median of 5 streams of
-    40 blocks; acquisition (no jammer: the frame length is chosen again every 4 blocks) and tracking (the
-    paper's chirp at J/N 21 dB). Returns (label, samples/s)."""
+    8-bit real IF (decoded from int8 counts as the node does), CPU time per block, blocks 4-39 of streams of
+    40 blocks from a fresh monitor, 7 streams (the first, warm-up, dropped); acquisition (no jammer: the frame
+    length is chosen again every 4 blocks) and tracking (the paper's chirp at J/N 21 dB). The median block
+    and the mean block (the throughput a live stream needs: it includes the blocks where the frame length is
+    chosen again) per stream, median over streams. With the frozen pre-speed-up ridge (REFERENCE_RIDGE)
+    and the current one, alternately stream by stream, so that both see the same machine load.
+    Returns (label, samples/s)."""
     fe = FrontEndConfig(noise_bandwidth_hz=2e6)
     block = int(round(fe.sample_rate_hz * 1e-3))
+    current = monitor_module.rg
+    ref = _reference_ridge()
+    versions = ([("ridge before the speed-up (efa776e)", ref)] if ref is not None else []) + [("ridge now", current)]
     rows = []
     for label, jams in (("acquisition, no jammer", ()), ("tracking, chirp J/N 21 dB", (ChirpJammer(js_db=40.0),))):
         blk = IfSimulator(fe, jams, seed=3).generate(40 * block)
         counts = np.clip(np.round(blk.values() / blk.scale), -127, 127).astype(np.int8)
-        meds = []
-        for _ in range(6):
-            mon = RfiMonitor(RfiMonitorParams())
-            ts = []
-            for k in range(40):
-                t0 = time.thread_time()
-                x = counts[k * block:(k + 1) * block].astype(np.float64) * blk.scale
-                mon.process(x, fe.sample_rate_hz, fe.intermediate_frequency_hz, k * block, 0,
-                            full_scale=127 * blk.scale)
-                ts.append(time.thread_time() - t0)
-            meds.append(float(np.median(ts[4:])))
-        rows.append((f"live stream (stft, default), {label}, 38.192 MS/s 8-bit real, per 1 ms block",
-                     block / float(np.median(meds[1:]))))
+        meds: dict[str, list[float]] = {v: [] for v, _ in versions}
+        means: dict[str, list[float]] = {v: [] for v, _ in versions}
+        try:
+            for _ in range(7):
+                for vname, mod in versions:
+                    monitor_module.rg = mod
+                    mon = RfiMonitor(RfiMonitorParams())
+                    ts = []
+                    for k in range(40):
+                        t0 = time.thread_time()
+                        x = counts[k * block:(k + 1) * block].astype(np.float64) * blk.scale
+                        mon.process(x, fe.sample_rate_hz, fe.intermediate_frequency_hz, k * block, 0,
+                                    full_scale=127 * blk.scale)
+                        ts.append(time.thread_time() - t0)
+                    meds[vname].append(float(np.median(ts[4:])))
+                    means[vname].append(float(np.mean(ts[4:])))
+        finally:
+            monitor_module.rg = current
+        for vname, _ in versions:
+            for stat, vals in (("median block", meds[vname]), ("mean block", means[vname])):
+                rows.append((f"live stream (stft, default), {label}, 38.192 MS/s 8-bit real, per 1 ms block, "
+                             f"{stat}, {vname}", block / float(np.median(vals[1:]))))
     return rows
 
 
@@ -148,7 +198,8 @@ def main() -> None:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     except (AttributeError, OSError):
         pass
-    rows = live_stream_rows()
+    runs = [live_stream_rows() for _ in range(LIVE_RUNS)]
+    rows = [(runs[0][i][0], float(np.median([r[i][1] for r in runs]))) for i in range(len(runs[0]))]
     ref_rate = math.nan
     for name, fe in (("real IF 38.192 MS/s", FrontEndConfig(noise_density_dbm_per_mhz=-124.0)),
                      ("complex 16.368 MS/s", FrontEndConfig(sample_rate_hz=16.368e6, intermediate_frequency_hz=0.0,
@@ -221,8 +272,22 @@ def main() -> None:
         "The first rows are the default estimator since issue 14 (\"stft\", short-time FFT ridge analysis of\n"
         "each block, no per-sample loop); 'ours' and 'paper method' below are the per-sample \"kalman\"\n"
         "estimator. Where the live-stream real-time factor is below 1 the node sheds whole blocks on purpose\n"
-        "(``max_cpu_load``, blocks_shed on /diagnostics; rfi_monitor_node module docstring).\n\n"
-        + table + "\n\n" + NOT_KEPT)
+        "(``max_cpu_load``, blocks_shed on /diagnostics; rfi_monitor_node module docstring). The live-stream\n"
+        "rows give the median block and the mean block (the throughput a live stream needs: it includes the\n"
+        "blocks where the frame length is chosen again, every 4 blocks in acquisition), each with the ridge\n"
+        "analysis before its speed-up (efa776e, src/rfi_monitor/test/ridge_reference.py) and now, timed\n"
+        f"alternately stream by stream; {LIVE_RUNS} runs of them in this run, the table gives their median.\n\n"
+        + table + "\n\n" + live_runs_table(runs) + "\n\n" + RIDGE_SPEEDUP + "\n" + NOT_KEPT)
+
+
+def live_runs_table(runs: list[list[tuple[str, float]]]) -> str:
+    """The live-stream rows of each run, real-time factor vs 38.192 MS/s (the spread between runs)."""
+    lines = ["Live-stream rows, each of the runs (real-time factor; the table above gives their median):", "",
+             "| row | " + " | ".join(f"run {i + 1}" for i in range(len(runs))) + " |",
+             "|---|" + "---|" * len(runs)]
+    for i, (name, _) in enumerate(runs[0]):
+        lines.append(f"| {name} | " + " | ".join(f"{r[i][1] / PAPER_FS:.2f}" for r in runs) + " |")
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

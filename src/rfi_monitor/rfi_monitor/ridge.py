@@ -62,8 +62,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from scipy import fft as sp_fft
-from scipy.ndimage import grey_opening, median_filter
 
 SHAPE_UNKNOWN, SAWTOOTH_UP, SAWTOOTH_DOWN, TRIANGLE, HOOKED_SAWTOOTH = 0, 1, 2, 3, 4
 """Sweep shape codes, identical to rfi_msgs/JammerState.SHAPE_*."""
@@ -220,7 +220,8 @@ def stft_power(x: np.ndarray, frame_length: int, cplx: bool) -> tuple[np.ndarray
     hop = L // 2
     nfr = (x.size - L) // hop + 1
     fr = np.lib.stride_tricks.as_strided(x, shape=(nfr, L), strides=(x.strides[0] * hop, x.strides[0]))
-    fw = fr.astype(np.complex64 if cplx else np.float32) * _window(L)
+    fw = fr.astype(np.complex64 if cplx else np.float32)
+    fw *= _window(L)
     # scipy's pocketfft in single precision (numpy's float32 path is slower; see classifier.welch_psd)
     if cplx:
         spec = np.fft.fftshift(sp_fft.fft(fw, axis=1, overwrite_x=True), axes=1)
@@ -229,45 +230,212 @@ def stft_power(x: np.ndarray, frame_length: int, cplx: bool) -> tuple[np.ndarray
         spec = sp_fft.rfft(fw, axis=1, overwrite_x=True)
         freqs = np.arange(L // 2 + 1) / L
     v = spec.view(np.float32) if spec.dtype == np.complex64 else spec.astype(np.complex64).view(np.float32)
-    S = v[:, 0::2] ** 2 + v[:, 1::2] ** 2
+    np.square(v, out=v)
+    S = v[:, 0::2] + v[:, 1::2]
     return S, freqs
 
 
 def noise_levels(S: np.ndarray, smooth_bins: int, cplx: bool) -> np.ndarray:
-    """Per-bin noise power of |STFT|^2 (module docstring, step 2), shape (bins,)."""
-    nfr = S.shape[0]
+    """Per-bin noise power of |STFT|^2 (module docstring, step 2), shape (bins,) float64.
+
+    S: float32 (frames, bins), as from stft_power (other dtypes are converted). One compiled pass
+    (``_noise_levels_kernel``); the same arithmetic as the numpy version it replaced (float32 quantile,
+    medians and threshold, float64 masked means; test_ridge_speed_equivalence.py)."""
+    S = np.ascontiguousarray(S, dtype=np.float32)
+    nfr, B = S.shape
     k = max(0, min(nfr - 1, int(_Q_LOW * nfr)))
-    lvl0 = np.partition(S, k, axis=0)[k] / _Q_LOW_EXP
-    w = min(int(smooth_bins), S.shape[1] - (1 - S.shape[1] % 2))
-    mode = "wrap" if cplx else "nearest"
+    q = np.partition(np.ascontiguousarray(S.T), k, axis=1)[:, k]
+    w = min(int(smooth_bins), B - (1 - B % 2))
+    return _noise_levels_kernel(S, q, w, bool(cplx), bool(cplx), (B // 3) | 1)
+
+
+@njit(cache=True)
+def _median_filter_1d(a: np.ndarray, w: int, wrap: bool) -> np.ndarray:
+    """scipy.ndimage.median_filter(a, size=w, mode="wrap" if wrap else "nearest") of a 1-D array, w odd."""
+    n = a.size
+    h = w // 2
+    out = np.empty_like(a)
+    buf = np.empty(w, dtype=a.dtype)
+    for i in range(n):
+        for j in range(w):
+            q = i + j - h
+            if wrap:
+                q %= n
+            else:
+                q = min(max(q, 0), n - 1)
+            buf[j] = a[q]
+        buf.sort()
+        out[i] = buf[h]
+    return out
+
+
+@njit(cache=True)
+def _min_max_filter_1d(a: np.ndarray, w: int, wrap: bool, take_max: bool) -> np.ndarray:
+    """scipy.ndimage minimum_filter / maximum_filter of a 1-D array (size w odd, mode wrap or nearest)."""
+    n = a.size
+    h = w // 2
+    out = np.empty_like(a)
+    for i in range(n):
+        v = a[i]
+        for j in range(w):
+            q = i + j - h
+            if wrap:
+                q %= n
+            else:
+                q = min(max(q, 0), n - 1)
+            if take_max:
+                if a[q] > v:
+                    v = a[q]
+            elif a[q] < v:
+                v = a[q]
+        out[i] = v
+    return out
+
+
+@njit(cache=True)
+def _row_hot(S: np.ndarray, t: int, thr: np.ndarray, out: np.ndarray) -> None:
+    """out[b]: S[t, b'] > thr[b'] for some b' in b - 1 .. b + 1 (the hot cells of frame t widened by a bin)."""
+    B = out.size
+    out[:] = False
+    for b in range(B):
+        if S[t, b] > thr[b]:
+            out[b] = True
+            if b > 0:
+                out[b - 1] = True
+            if b < B - 1:
+                out[b + 1] = True
+
+
+@njit(cache=True)
+def _noise_levels_kernel(S: np.ndarray, q: np.ndarray, w: int, wrap: bool, cplx: bool, w2: int) -> np.ndarray:
+    """noise_levels after the quantile (module docstring, step 2), compiled. S float32 (frames, bins); q the
+    ``_Q_LOW`` quantile of each bin over frames, float32."""
+    nfr, B = S.shape
+    q_exp = np.float32(_Q_LOW_EXP)
+    lvl0 = np.empty(B, dtype=np.float32)
+    for b in range(B):
+        lvl0[b] = q[b] / q_exp
     if w >= 3:
-        lvl0 = median_filter(lvl0, size=w, mode=mode)
-    lvl0 = np.maximum(lvl0, np.float32(1e-37))
-    # jammer cells: above the cut, widened by one bin and one frame (its skirts)
-    hot = S > _CUT * lvl0
-    hot[:, 1:] |= hot[:, :-1].copy()
-    hot[:, :-1] |= hot[:, 1:].copy()
-    hot[1:] |= hot[:-1].copy()
-    hot[:-1] |= hot[1:].copy()
-    keep = ~hot
-    cnt = keep.sum(axis=0)
-    lvl1 = np.where(keep, S, 0.0).sum(axis=0, dtype=np.float64) / np.maximum(cnt, 1) / _TRUNC_MEAN
-    lvl1 = np.where(cnt >= 8, lvl1, lvl0)
+        lvl0 = _median_filter_1d(lvl0, w, wrap)
+    tiny = np.float32(1e-37)
+    cut = np.float32(_CUT)
+    thr = np.empty(B, dtype=np.float32)
+    for b in range(B):
+        if lvl0[b] < tiny:
+            lvl0[b] = tiny
+        thr[b] = cut * lvl0[b]
+    # jammer cells: above the cut, widened by one bin and one frame (its skirts): a 3 x 3 dilation, kept as
+    # three rolling rows (frames t - 1, t, t + 1 widened by a bin); the others summed per bin in frame order
+    r0 = np.zeros(B, dtype=np.bool_)
+    r1 = np.zeros(B, dtype=np.bool_)
+    r2 = np.zeros(B, dtype=np.bool_)
+    _row_hot(S, 0, thr, r1)
+    acc = np.zeros(B)
+    cnt = np.zeros(B, dtype=np.int64)
+    for t in range(nfr):
+        if t + 1 < nfr:
+            _row_hot(S, t + 1, thr, r2)
+        else:
+            r2[:] = False
+        for b in range(B):
+            if not (r0[b] or r1[b] or r2[b]):
+                acc[b] += np.float64(S[t, b])
+                cnt[b] += 1
+        r0, r1, r2 = r1, r2, r0
+    lvl1 = np.empty(B)
+    for b in range(B):
+        if cnt[b] >= 8:
+            lvl1[b] = acc[b] / max(cnt[b], 1) / _TRUNC_MEAN
+        else:
+            lvl1[b] = np.float64(lvl0[b])
     if not cplx:
         # the DC and Nyquist bins of a real signal are chi-square with one degree of freedom
         lvl1[0], lvl1[-1] = lvl1[1], lvl1[-2]
     if w >= 3:
-        lvl1 = median_filter(lvl1, size=w, mode=mode)
-    # a jammer that holds a band of bins in most frames (a slow or wide-lobed sweep at high J/N) is a
-    # plateau above the front end's shape: bins more than PLATEAU_DB above the lower envelope (a grey
-    # opening over a third of the band, which keeps monotonic slopes and plateaus wider than that) take
-    # the envelope's value
-    B = lvl1.size
-    w2 = (B // 3) | 1
+        lvl1 = _median_filter_1d(lvl1, w, wrap)
+    # a jammer that holds a band of bins in most frames is a plateau above the front end's shape: bins more
+    # than PLATEAU_DB above the lower envelope (a grey opening over w2 bins) take the envelope's value
     if w2 >= 3 and B > w2:
-        env = grey_opening(lvl1, size=w2, mode=mode)
-        lvl1 = np.minimum(lvl1, env * 10 ** (PLATEAU_DB / 10))
-    return np.maximum(lvl1.astype(np.float64), 1e-300)
+        env = _min_max_filter_1d(_min_max_filter_1d(lvl1, w2, wrap, False), w2, wrap, True)
+        f = 10 ** (PLATEAU_DB / 10)
+        for b in range(B):
+            lvl1[b] = min(lvl1[b], env[b] * f)
+    for b in range(B):
+        lvl1[b] = max(lvl1[b], 1e-300)
+    return lvl1
+
+
+@njit(cache=True)
+def _pairwise_sum_f32(a: np.ndarray) -> np.float32:
+    """Sum of a float32 vector in float32 in numpy's pairwise order (numpy's ``add.reduce`` over a contiguous
+    axis: 8 partial sums, combined in pairs, the rest in order; halves above 128), so that the compiled
+    phasor equals the numpy expression it replaced to the bit."""
+    n = a.size
+    if n < 8:
+        res = np.float32(0.0)
+        for i in range(n):
+            res += a[i]
+        return res
+    if n > 128:
+        n2 = n // 2
+        n2 -= n2 % 8
+        return _pairwise_sum_f32(a[:n2]) + _pairwise_sum_f32(a[n2:])
+    r0, r1, r2, r3, r4, r5, r6, r7 = a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]
+    i = 8
+    while i < n - (n % 8):
+        r0 += a[i]
+        r1 += a[i + 1]
+        r2 += a[i + 2]
+        r3 += a[i + 3]
+        r4 += a[i + 4]
+        r5 += a[i + 5]
+        r6 += a[i + 6]
+        r7 += a[i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[i]
+        i += 1
+    return res
+
+
+@njit(cache=True)
+def _excess_kernel(S: np.ndarray, div: np.ndarray, cos32: np.ndarray, sin32: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One pass over |STFT|^2 (module docstring, steps 3-4): per frame the strongest bin of the excess
+    E = S / div (float32; the first one, as np.argmax), E there, and the two float32 sums of the spectral
+    phasor, sum_b max(E - 1, 0) cos / sin(2 pi b / B)."""
+    nfr, B = S.shape
+    k = np.empty(nfr, dtype=np.int64)
+    pk = np.empty(nfr, dtype=np.float32)
+    uc = np.empty(nfr, dtype=np.float32)
+    us = np.empty(nfr, dtype=np.float32)
+    e = np.empty(B, dtype=np.float32)
+    tc = np.empty(B, dtype=np.float32)
+    ts = np.empty(B, dtype=np.float32)
+    one = np.float32(1.0)
+    zero = np.float32(0.0)
+    for t in range(nfr):
+        for b in range(B):
+            e[b] = S[t, b] / div[b]
+        kb = 0
+        best = e[0]
+        for b in range(1, B):
+            v = e[b]
+            if v > best or (v != v and best == best):
+                best = v
+                kb = b
+        k[t] = kb
+        pk[t] = best
+        for b in range(B):
+            v = e[b] - one
+            if v < zero:
+                v = zero
+            tc[b] = v * cos32[b]
+            ts[b] = v * sin32[b]
+        uc[t] = _pairwise_sum_f32(tc)
+        us[t] = _pairwise_sum_f32(ts)
+    return k, pk, uc, us
 
 
 def _parseval(levels: np.ndarray, L: int, cplx: bool) -> float:
@@ -399,15 +567,17 @@ def _periodicity(u: np.ndarray, lmin: int, lmax: int, par: RidgeParams) -> tuple
     m = 1
     # multiples 1, 2, 3, 4, 6, 8, 12, 16, 24, ... (geometric: the far ones give the precision, each step
     # keeps the search window of the next one within 15 % of the period; a dozen steps instead of T / 2 T0)
+    rl = r.tolist()          # the scalar loop on Python floats (the same double arithmetic, no numpy scalars)
     while m * Tc + 2 < T // 2:
         c = int(round(m * Tc))
         w = max(1, int(round(0.15 * Tc)))
         lo, hi = max(c - w, 1), min(c + w, T - 2)
-        j = lo + int(np.argmax(r[lo:hi + 1]))
-        if r[j] < 0.5 * strength or j <= 0 or j >= T - 1:
+        seg = rl[lo:hi + 1]
+        j = lo + seg.index(max(seg))          # the first largest, as np.argmax
+        if rl[j] < 0.5 * strength or j <= 0 or j >= T - 1:
             m = m + 1 if m < 4 else m + m // 2
             continue
-        a, b, cc = r[j - 1], r[j], r[j + 1]
+        a, b, cc = rl[j - 1], rl[j], rl[j + 1]
         den2 = a - 2 * b + cc
         d = 0.5 * (a - cc) / den2 if den2 < 0 else 0.0
         pos = j + max(-0.5, min(0.5, d))
@@ -436,14 +606,12 @@ def _periodicity(u: np.ndarray, lmin: int, lmax: int, par: RidgeParams) -> tuple
     return Tc, strength
 
 
-def _ridge(S: np.ndarray, lvl: np.ndarray, freqs: np.ndarray, presence: float
+def _ridge(S: np.ndarray, k: np.ndarray, pk: np.ndarray, freqs: np.ndarray, presence: float
            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per frame: interpolated ridge frequency (cycles/sample), peak excess, present flag."""
-    E = S / _f32(lvl)
-    nfr, B = E.shape
-    k = np.argmax(E, axis=1)
+    """Per frame: interpolated ridge frequency (cycles/sample), peak excess, present flag. k, pk: the
+    strongest bin of each frame's excess and the excess there (``_excess_kernel``)."""
+    nfr, B = S.shape
     rows = np.arange(nfr)
-    pk = E[rows, k]
     km, kp = np.clip(k - 1, 0, B - 1), np.clip(k + 1, 0, B - 1)
     a = np.log(S[rows, km] + 1e-30)
     b = np.log(S[rows, k] + 1e-30)
@@ -483,6 +651,13 @@ def _profile(f: np.ndarray, present: np.ndarray, period_frames: float, K: int
     return prof, share
 
 
+def _median_small(v: np.ndarray) -> float:
+    """np.median of a short finite 1-D array on Python floats (the same value: the middle element, or the
+    mean of the two middle ones; without numpy's per-call overhead)."""
+    s = sorted(v.tolist())
+    h = len(s) // 2
+    return float(s[h]) if len(s) % 2 else (s[h - 1] + s[h]) / 2.0
+
 def _shape(prof: np.ndarray, inband: np.ndarray, hook_ratio: float) -> tuple[int, float, float, float, float]:
     """(shape, low, high, start, rate per phase bin) of a folded profile (module docstring, step 5)."""
     K = prof.size
@@ -491,7 +666,7 @@ def _shape(prof: np.ndarray, inband: np.ndarray, hook_ratio: float) -> tuple[int
     vals = prof[inband]
     low, high = float(np.min(vals)), float(np.max(vals))
     span = high - low
-    nxt = np.roll(np.arange(K), -1)
+    nxt = (np.arange(K) + 1) % K           # the next phase bin (cyclic)
     both = inband & inband[nxt]
     d = np.where(both, prof[nxt] - prof, np.nan)
     jump = both & (np.abs(d) > JUMP_SPAN * span)
@@ -502,8 +677,8 @@ def _shape(prof: np.ndarray, inband: np.ndarray, hook_ratio: float) -> tuple[int
     n_up = int(np.sum(dsw > 0))
     n_dn = int(np.sum(dsw < 0))
     frac_up = n_up / max(n_up + n_dn, 1)
-    med_up = float(np.median(dsw[dsw > 0])) if n_up else 0.0
-    med_dn = float(np.median(dsw[dsw < 0])) if n_dn else 0.0
+    med_up = _median_small(dsw[dsw > 0]) if n_up else 0.0
+    med_dn = _median_small(dsw[dsw < 0]) if n_dn else 0.0
     if 0.3 <= frac_up <= 0.7:
         return TRIANGLE, low, high, low, med_up
     up = frac_up > 0.5
@@ -535,7 +710,7 @@ def _sawtooth_law(prof: np.ndarray, inband: np.ndarray, period_samples: float, L
     sweep since the flyback; None when fewer than 4 bins remain or the fit leaves an RMS residual above a
     tenth of the span."""
     K = prof.size
-    nxt = np.roll(np.arange(K), -1)
+    nxt = (np.arange(K) + 1) % K           # the next phase bin (cyclic)
     both = inband & inband[nxt] & np.isfinite(prof) & np.isfinite(prof[nxt])
     if not both.any() or not span > 0:
         return None
@@ -578,16 +753,15 @@ def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length
     lvl = noise_levels(S, par.noise_smooth_bins, cplx)
     noise = _noise_power(lvl, L, cplx, par.noise_smooth_bins)
     nfr, B = S.shape
-    f, pk, present = _ridge(S, lvl, freqs, par.presence_nats)
+    # the ridge's strongest bins and the sums of the spectral phasor (its periodicity below) in one pass
+    ang = 2.0 * np.pi * np.arange(B) / B
+    kmax, pk32, uc, us = _excess_kernel(S, _f32(lvl), np.cos(ang).astype(np.float32),
+                                        np.sin(ang).astype(np.float32))
+    f, pk, present = _ridge(S, kmax, pk32, freqs, par.presence_nats)
     h = float(np.sum(1.0 / np.arange(1, B + 1)))
     peak_excess = float(np.mean(pk)) - h
     pres_frac = float(np.mean(present))
-    # periodicity of the spectral phasor
-    E = np.maximum(S / _f32(lvl) - 1.0, 0.0)
-    # the phasor sum as two element-wise reductions (a matrix product would go to a multi-threaded BLAS,
-    # which on a shared 2-core machine cost 16 ms per 1 ms block instead of 0.01 ms)
-    ang = 2.0 * np.pi * np.arange(B) / B
-    u = (E * np.cos(ang).astype(np.float32)).sum(axis=1) + 1j * (E * np.sin(ang).astype(np.float32)).sum(axis=1)
+    u = uc + 1j * us
     lmax = int(min(par.max_period_s * fs / hop, nfr // 4))
     per_fr, strength = _periodicity(u.astype(np.complex128), int(par.min_period_frames), lmax, par)
     periodic = math.isfinite(per_fr)

@@ -1,0 +1,707 @@
+"""FROZEN REFERENCE (test only): rfi_monitor/ridge.py as of commit efa776e, before the speed work of issue 14
+item 6. test_ridge_speed_equivalence.py runs it beside the installed ridge.py to show the faster version
+reports the same; never import it from the package. Original docstring follows.
+
+Short-time FFT ridge analysis of one IF block (ours): in-block noise level, swept-jammer detection,
+sweep period, shape, swept band and rate, for real jammers at common SDR rates.
+
+Why: Kang et al.'s per-sample tracker (tracker.py) follows a saw-tooth whose rate per sample squared is
+small (1e12 Hz/s at 38.192 MS/s: 7e-4 cycles/sample^2). Real jammers seen by 4-20 MS/s front ends sweep
+10-50x faster per sample, in triangles, hooked saw-tooths, with non-constant rates and beyond the sampled
+band (the jammer is then in band only part of each period). The short-time spectrum sees all of these the
+same way: in every frame a swept tone is one ridge a few bins wide, wherever it is and however it moves.
+Everything here is vectorised numpy over the frames of one block (no per-sample loop).
+
+Steps (``analyse``):
+
+1. Frame length. Frames of L samples (Hann, hop L/2) for each L in ``RidgeParams.frame_lengths``, tried
+   on a slice of the block: a tone sweeping ``k`` cycles/sample^2 spreads over ``k L^2`` bins of a frame,
+   so its peak excess over the noise grows with L up to ``L ~ 1 / sqrt(k)`` and falls after. The L with
+   the largest mean frame peak excess above what noise alone gives (the expectation of the largest of
+   B exponential variables, the harmonic number ``H_B``) is used for the block.
+2. In-block noise level per bin (no clean start needed): the lower quartile over frames of each bin's
+   power, scaled to the exponential mean (``/ -ln(0.75)``); then the mean of the frames below three
+   times that (divided by the mean of a unit exponential truncated at 3, 0.8428); then a median across
+   ``noise_smooth_bins`` bins (a CW or a slowly swept jammer that holds one or two bins all the time
+   never enters it; the front end's filter shape does). A jammer that occupies a bin in fewer than
+   ~60 % of the frames (a sweep, a pulse) or fewer than half of ``noise_smooth_bins`` adjacent bins all
+   the time (a tone) cannot poison it; a noise jammer that fills the band can (then only a fixed or
+   learned floor sees it, monitor module docstring). The block's noise power N follows by Parseval.
+3. Ridge per frame: the strongest bin, its frequency interpolated (parabola on log power), present when
+   its excess over the noise level exceeds ``ln(B) + presence_nats`` (a false alarm in
+   ``exp(-presence_nats)`` of the noise frames).
+4. Period: the autocorrelation over frames of the spectral phasor ``u_t = sum_b max(S_tb / N_b - 1, 0)
+   exp(2 pi i b / B)`` (mean removed): a CW is constant (removed with the mean), noise is white, any
+   periodic sweep (any shape, pulsed or not) is periodic. The first lag whose peak reaches 0.6 of the
+   highest one and stands ``detect_sigma`` noise standard deviations (``1 / sqrt(2 (T - lag))`` for T
+   frames) and ``min_strength`` above the lowest value before it is the coarse period; it is refined by
+   a least-squares fit over the interpolated peaks at its multiples (up to half the block: the error of
+   one peak is divided by the number of periods).
+5. Sweep profile: the ridge frequencies of the present frames folded on the period into
+   ``phase_bins`` bins (median of each bin) and the share of present frames per bin. Bins with at least
+   half of the largest share are "in band"; ``in_band_fraction`` is their share of the period (< 1: a
+   sweep that leaves the sampled band, or a pulsed one). Steps between consecutive in-band bins larger
+   than a third of the swept span are flybacks; the others are swept steps, up or down.
+   Shape: sweeping up in >= 85 % of the swept steps: saw-tooth up (down: <= 15 %); 30-70 %: triangle;
+   otherwise, or a saw-tooth whose step right after its flyback is more than ``hook_rate_ratio`` times
+   its median step: hooked saw-tooth. Rate: the median step of the main direction; swept band: the
+   extremes of the profile (of its in-band part: a lower bound of a sweep wider than the band).
+6. Current frequency: the ridge of the last frame when present, else NaN (the jammer is out of the band
+   at the block end, or not tracked). Its 1-sigma: the RMS deviation of the present frames' ridge from
+   the profile (periodic), else from the local straight line through three consecutive frames, but at
+   least one bin / sqrt(12).
+
+A frequency track that is coherent but not periodic inside the block (a single slow sweep, a period
+longer than ``max_period_s``) is reported as ``sweeping`` without a period: present in at least
+``min_present_fraction`` of the frames, consecutive ridges within 2 bins in most of them, and a span of
+at least 4 bins.
+
+Frequencies are digital, cycles/sample: complex input signed in [-0.5, 0.5) (fftshift order), real input
+in [0, 0.5]. Powers in sample units^2.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import fft as sp_fft
+from scipy.ndimage import grey_opening, median_filter
+
+SHAPE_UNKNOWN, SAWTOOTH_UP, SAWTOOTH_DOWN, TRIANGLE, HOOKED_SAWTOOTH = 0, 1, 2, 3, 4
+"""Sweep shape codes, identical to rfi_msgs/JammerState.SHAPE_*."""
+SHAPE_NAMES = {SHAPE_UNKNOWN: "unknown", SAWTOOTH_UP: "sawtooth_up", SAWTOOTH_DOWN: "sawtooth_down",
+               TRIANGLE: "triangle", HOOKED_SAWTOOTH: "hooked_sawtooth"}
+_Q_LOW = 0.1
+_Q_LOW_EXP = -math.log(1.0 - _Q_LOW)
+"""The 10 % quantile of a unit exponential (the power of a noise bin over its mean)."""
+MIN_SELECT_EXCESS = 2.0
+"""choose_frame_length: below this best mean peak excess (white noise: -0.1..1.3 over 8192 samples, real
+input the higher) the longest frame within 0.5 of the best is taken instead of the best."""
+SHORT_FRAME_SCORE = 1.0
+"""choose_frame_length takes the shortest frame whose peak excess is at least this share of the best one (1: the
+best; 0.5 lost the 5.1 MHz sweep of the paper front end at J/N 10 dB, a 16-sample frame has 2.4 MHz bins)."""
+JUMP_SPAN = 0.6
+"""A step between consecutive in-band profile bins larger than this share of the swept span is a flyback
+(a saw-tooth's is ~1; a sweep that crosses the band in two or three bins, as a triangle wider than the
+band does, steps by a half or a third of the span and is still a sweep)."""
+SHAPE_BINS = 16
+"""Phase bins of the profile the sweep shape and rate are read from (the finer ``phase_bins`` profile gives
+the frequency at the block end)."""
+PLATEAU_DB = 1.5
+"""A bin's noise level may exceed the lower envelope of its neighbours by this much, dB (noise_levels)."""
+_CUT = 3.0
+_TRUNC_MEAN = 1.0 - _CUT * math.exp(-_CUT) / (1.0 - math.exp(-_CUT))
+"""Mean of a unit exponential truncated at _CUT (0.8428)."""
+
+
+@dataclass(frozen=True)
+class RidgeParams:
+    """Parameters of the short-time FFT ridge analysis (module docstring).
+
+    Attributes:
+        min_frame_length, max_frame_length: the candidate frame lengths are the powers of two between
+            them, samples (>= 8).
+        select_samples: samples of the block used to choose the frame length (0: the whole block).
+        max_period_s: longest sweep period searched, s (also limited to a quarter of the block).
+        min_period_frames: shortest period, frames (hops of L/2), >= 3.
+        detect_sigma: significance of the periodicity peak, noise standard deviations.
+        min_strength: smallest normalised autocorrelation peak-to-trough of a periodic sweep, (0, 1].
+        presence_nats: per-frame ridge threshold above ln(B), nats of the exponential (4.6: 1 % false).
+        noise_smooth_bins: width of the median across bins of the noise level (odd, >= 3).
+        phase_bins: bins of the folded sweep profile, >= 8.
+        hook_rate_ratio: a saw-tooth whose step after the flyback exceeds this times its median step is
+            hooked, > 1.
+        min_present_fraction: a non-periodic ridge must be present in at least this share of the frames.
+        tracking_samples: while a chirp is tracked (the last block was CHIRP), only the last this many
+            samples of a block are analysed (speed; the J/N and the CW test still use the whole block; a
+            block whose tail shows no sweep is analysed whole); 0: always the whole block.
+    """
+
+    min_frame_length: int = 8
+    max_frame_length: int = 128
+    select_samples: int = 8192
+    max_period_s: float = 250e-6
+    min_period_frames: int = 4
+    detect_sigma: float = 7.0
+    min_strength: float = 0.08
+    presence_nats: float = 4.6
+    noise_smooth_bins: int = 5
+    phase_bins: int = 32
+    hook_rate_ratio: float = 2.0
+    min_present_fraction: float = 0.5
+    tracking_samples: int = 16384
+
+    @property
+    def frame_lengths(self) -> tuple[int, ...]:
+        """The candidate frame lengths, increasing."""
+        out, L = [], int(self.min_frame_length)
+        while L <= int(self.max_frame_length):
+            out.append(L)
+            L *= 2
+        return tuple(out)
+
+    def __post_init__(self) -> None:
+        a, b = int(self.min_frame_length), int(self.max_frame_length)
+        if a < 8 or b < a or a & (a - 1) or b & (b - 1):
+            raise ValueError("min_frame_length <= max_frame_length must be powers of two >= 8")
+        for name in ("max_period_s", "detect_sigma", "min_strength", "presence_nats", "hook_rate_ratio",
+                     "min_present_fraction"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be finite and > 0")
+        if self.min_strength > 1 or self.min_present_fraction > 1:
+            raise ValueError("min_strength and min_present_fraction must be <= 1")
+        if int(self.tracking_samples) < 0 or 0 < int(self.tracking_samples) < 1024:
+            raise ValueError("tracking_samples must be 0 or >= 1024")
+        if int(self.min_period_frames) < 3 or int(self.phase_bins) < 8 or int(self.select_samples) < 0:
+            raise ValueError("min_period_frames >= 3, phase_bins >= 8, select_samples >= 0")
+        if int(self.noise_smooth_bins) < 3 or int(self.noise_smooth_bins) % 2 == 0:
+            raise ValueError("noise_smooth_bins must be odd and >= 3")
+
+
+@dataclass(frozen=True)
+class RidgeResult:
+    """What the ridge analysis found in one block (NaN where unknown; frequencies in cycles/sample).
+
+    Attributes:
+        frame_length, hop: samples.
+        noise_power: in-block noise power per sample (sample units^2).
+        peak_excess: mean frame peak excess over noise, minus the noise-only expectation (>= ~0 for noise).
+        present_fraction: share of frames with a ridge above the presence threshold.
+        periodic: a sweep period was found; period_samples, strength: it and its autocorrelation peak.
+        sweeping: a swept jammer (periodic, or a coherent moving ridge) with a span of >= 4 bins.
+        shape: SHAPE_* code; in_band_fraction: share of the period with the jammer in band.
+        low, high: swept band limits seen in band; start: frequency at the sweep start (shape-dependent).
+        rate: sweep rate of the main direction, cycles/sample^2 (signed; triangle: of the up part).
+        frequency: ridge at the block end (NaN when absent); frequency_std: its 1-sigma.
+    """
+
+    frame_length: int
+    hop: int
+    noise_power: float
+    peak_excess: float
+    present_fraction: float
+    periodic: bool
+    period_samples: float
+    strength: float
+    sweeping: bool
+    shape: int
+    in_band_fraction: float
+    low: float
+    high: float
+    start: float
+    rate: float
+    frequency: float
+    frequency_std: float
+
+
+_WIN: dict[int, np.ndarray] = {}
+
+
+def _window(n: int) -> np.ndarray:
+    w = _WIN.get(n)
+    if w is None:
+        w = np.hanning(n + 2)[1:-1].astype(np.float32)   # no zero end points
+        w.flags.writeable = False
+        _WIN[n] = w
+    return w
+
+
+def stft_power(x: np.ndarray, frame_length: int, cplx: bool) -> tuple[np.ndarray, np.ndarray]:
+    """|STFT|^2 of a block: Hann frames of frame_length, hop frame_length / 2.
+
+    Args:
+        x: samples, shape (n,), float64 or complex128, n >= frame_length.
+        frame_length: L, samples.
+        cplx: complex input (fft, fftshift order) or real (rfft).
+
+    Returns:
+        (S, freqs): S shape (frames, bins) float32; freqs shape (bins,), cycles/sample.
+    """
+    L = int(frame_length)
+    hop = L // 2
+    nfr = (x.size - L) // hop + 1
+    fr = np.lib.stride_tricks.as_strided(x, shape=(nfr, L), strides=(x.strides[0] * hop, x.strides[0]))
+    fw = fr.astype(np.complex64 if cplx else np.float32) * _window(L)
+    # scipy's pocketfft in single precision (numpy's float32 path is slower; see classifier.welch_psd)
+    if cplx:
+        spec = np.fft.fftshift(sp_fft.fft(fw, axis=1, overwrite_x=True), axes=1)
+        freqs = (np.arange(L) - L // 2) / L
+    else:
+        spec = sp_fft.rfft(fw, axis=1, overwrite_x=True)
+        freqs = np.arange(L // 2 + 1) / L
+    v = spec.view(np.float32) if spec.dtype == np.complex64 else spec.astype(np.complex64).view(np.float32)
+    S = v[:, 0::2] ** 2 + v[:, 1::2] ** 2
+    return S, freqs
+
+
+def noise_levels(S: np.ndarray, smooth_bins: int, cplx: bool) -> np.ndarray:
+    """Per-bin noise power of |STFT|^2 (module docstring, step 2), shape (bins,)."""
+    nfr = S.shape[0]
+    k = max(0, min(nfr - 1, int(_Q_LOW * nfr)))
+    lvl0 = np.partition(S, k, axis=0)[k] / _Q_LOW_EXP
+    w = min(int(smooth_bins), S.shape[1] - (1 - S.shape[1] % 2))
+    mode = "wrap" if cplx else "nearest"
+    if w >= 3:
+        lvl0 = median_filter(lvl0, size=w, mode=mode)
+    lvl0 = np.maximum(lvl0, np.float32(1e-37))
+    # jammer cells: above the cut, widened by one bin and one frame (its skirts)
+    hot = S > _CUT * lvl0
+    hot[:, 1:] |= hot[:, :-1].copy()
+    hot[:, :-1] |= hot[:, 1:].copy()
+    hot[1:] |= hot[:-1].copy()
+    hot[:-1] |= hot[1:].copy()
+    keep = ~hot
+    cnt = keep.sum(axis=0)
+    lvl1 = np.where(keep, S, 0.0).sum(axis=0, dtype=np.float64) / np.maximum(cnt, 1) / _TRUNC_MEAN
+    lvl1 = np.where(cnt >= 8, lvl1, lvl0)
+    if not cplx:
+        # the DC and Nyquist bins of a real signal are chi-square with one degree of freedom
+        lvl1[0], lvl1[-1] = lvl1[1], lvl1[-2]
+    if w >= 3:
+        lvl1 = median_filter(lvl1, size=w, mode=mode)
+    # a jammer that holds a band of bins in most frames (a slow or wide-lobed sweep at high J/N) is a
+    # plateau above the front end's shape: bins more than PLATEAU_DB above the lower envelope (a grey
+    # opening over a third of the band, which keeps monotonic slopes and plateaus wider than that) take
+    # the envelope's value
+    B = lvl1.size
+    w2 = (B // 3) | 1
+    if w2 >= 3 and B > w2:
+        env = grey_opening(lvl1, size=w2, mode=mode)
+        lvl1 = np.minimum(lvl1, env * 10 ** (PLATEAU_DB / 10))
+    return np.maximum(lvl1.astype(np.float64), 1e-300)
+
+
+def _parseval(levels: np.ndarray, L: int, cplx: bool) -> float:
+    w = _window(L).astype(np.float64)
+    if cplx:
+        tot = float(levels.sum())
+    else:
+        tot = float(levels[0] + levels[-1] + 2.0 * levels[1:-1].sum())
+    return tot / (L * float(np.dot(w, w)))
+
+
+_BIAS: dict[tuple[int, bool, int], float] = {}
+
+
+def estimator_gain(L: int, cplx: bool, smooth_bins: int) -> float:
+    """Mean ratio of the noise power from ``noise_levels`` to the true power on white Gaussian noise (the
+    correlation of overlapping Hann frames and neighbouring bins makes the masked mean ~0.3 dB low for
+    complex samples, 0.5-2 dB for real ones at L = 128..8). Measured once per (L, kind) on 1,000 frames of
+    seeded noise (deterministic) and divided out by ``_noise_power``."""
+    key = (int(L), bool(cplx), int(smooth_bins))
+    g = _BIAS.get(key)
+    if g is None:
+        rng = np.random.default_rng(12345)
+        n = 500 * L + L
+        vals = []
+        for _ in range(4):
+            x = ((rng.standard_normal(n) + 1j * rng.standard_normal(n)) / math.sqrt(2.0) if cplx
+                 else rng.standard_normal(n))
+            S, _ = stft_power(x, L, cplx)
+            vals.append(_parseval(noise_levels(S, smooth_bins, cplx), L, cplx) / float(np.mean(np.abs(x) ** 2)))
+        g = float(np.mean(vals))
+        _BIAS[key] = g
+    return g
+
+
+def _noise_power(levels: np.ndarray, L: int, cplx: bool, smooth_bins: int) -> float:
+    """Noise power per sample from the per-bin levels (Parseval with the Hann window), bias removed."""
+    return _parseval(levels, L, cplx) / estimator_gain(L, cplx, smooth_bins)
+
+
+def _f32(lvl: np.ndarray) -> np.ndarray:
+    """Noise levels as float32 divisors (never zero: a block without noise gives huge excesses, not NaN)."""
+    return np.maximum(lvl, 1e-37).astype(np.float32)
+
+
+def _peak_excess(S: np.ndarray, lvl: np.ndarray, cplx: bool = True) -> float:
+    """Mean over frames of the largest bin excess (power / noise level), minus the harmonic number H_B (the
+    mean largest of B unit exponentials). Real input: without the DC and Nyquist bins (one degree of freedom:
+    heavier tails, which made noise score above zero at short frames)."""
+    if not cplx and S.shape[1] > 3:
+        S, lvl = S[:, 1:-1], lvl[1:-1]
+    B = S.shape[1]
+    h = float(np.sum(1.0 / np.arange(1, B + 1)))
+    return float(np.mean(np.max(S / _f32(lvl), axis=1))) - h
+
+
+def choose_frame_length(x: np.ndarray, cplx: bool, par: RidgeParams) -> int:
+    """The frame length of the block (module docstring, step 1)."""
+    n = x.size if par.select_samples <= 0 else min(x.size, int(par.select_samples))
+    xs = x[:n]
+    scores: list[tuple[int, float]] = []
+    for L in par.frame_lengths:
+        if 8 * L > n:
+            break
+        S, _ = stft_power(xs, L, cplx)
+        lvl = noise_levels(S, par.noise_smooth_bins, cplx)
+        scores.append((L, _peak_excess(S, lvl, cplx)))
+    if not scores:
+        return int(par.min_frame_length)
+    scores = [(L, sc) for L, sc in scores if math.isfinite(sc)]
+    if not scores:
+        return int(par.min_frame_length)
+    best = max(sc for _, sc in scores)
+    if best < MIN_SELECT_EXCESS:
+        # nothing clearly concentrated in the slice: the longest frame within noise's scatter of the best
+        # (fewer frames, a cheaper analysis; a chirp that appears makes the monitor choose again at once)
+        return int(max(L for L, sc in scores if sc >= best - 0.5))
+    # the shortest frame within a factor SHORT_FRAME_SCORE of the best: time resolution (a sweep's ends,
+    # short sweeps, the frequency at the block end) at little loss of peak excess
+    return next(L for L, sc in scores if sc >= SHORT_FRAME_SCORE * best)
+
+
+def _periodicity(u: np.ndarray, lmin: int, lmax: int, par: RidgeParams) -> tuple[float, float]:
+    """(period in frames, strength) of the phasor sequence u, or (nan, 0) (module docstring, step 4)."""
+    T = u.size
+    if lmax <= lmin + 2 or T < 4 * lmin:
+        return math.nan, 0.0
+    v = u - u.mean()
+    nf = 1 << int(math.ceil(math.log2(2 * T)))
+    V = np.fft.fft(v, nf)
+    R = np.fft.ifft(V * np.conj(V))[:T].real
+    if not R[0] > 0:
+        return math.nan, 0.0
+    lags = np.arange(T)
+    r = R / (T - lags) * T / R[0]
+    sig = 1.0 / np.sqrt(2.0 * np.maximum(T - lags, 1))
+    seg = r[lmin:lmax + 1]
+    # local maxima
+    loc = np.flatnonzero((seg[1:-1] >= seg[:-2]) & (seg[1:-1] > seg[2:])) + 1
+    if loc.size == 0:
+        return math.nan, 0.0
+    cand = loc + lmin
+    # peak-to-trough: the peak over the lowest value between lag 1 and it
+    trough = np.minimum.accumulate(r[1:lmax + 2])
+    prom = r[cand] - trough[cand - 1]
+    ok = (prom >= par.min_strength) & (r[cand] >= par.detect_sigma * sig[cand]) & (
+        prom >= par.detect_sigma * sig[cand])
+    if not ok.any():
+        return math.nan, 0.0
+    good = cand[ok]
+    top = float(np.max(r[good]))
+    T0 = float(good[np.argmax(r[good] >= 0.6 * top)])
+    # a period of only a few frames is smeared by the frame (its first peak can fall below the second):
+    # take T0 / k when the autocorrelation peaks there too (k = 2, 3), at least half as high
+    for k in (3, 2):
+        c = int(round(T0 / k))
+        if c < max(lmin, 2):
+            continue
+        lo_c, hi_c = max(c - 1, 1), min(c + 1, T - 2)
+        j = lo_c + int(np.argmax(r[lo_c:hi_c + 1]))
+        if (r[j] >= r[j - 1] and r[j] >= r[j + 1] and r[j] >= 0.5 * r[int(T0)]
+                and r[j] - trough[j - 1] >= max(par.min_strength, par.detect_sigma * sig[j])):
+            T0 = float(j)
+            break
+    strength = float(r[int(T0)] - trough[int(T0) - 1])
+    # refine on multiples (least squares through the origin)
+    num, den = 0.0, 0.0
+    Tc = T0
+    m = 1
+    # multiples 1, 2, 3, 4, 6, 8, 12, 16, 24, ... (geometric: the far ones give the precision, each step
+    # keeps the search window of the next one within 15 % of the period; a dozen steps instead of T / 2 T0)
+    while m * Tc + 2 < T // 2:
+        c = int(round(m * Tc))
+        w = max(1, int(round(0.15 * Tc)))
+        lo, hi = max(c - w, 1), min(c + w, T - 2)
+        j = lo + int(np.argmax(r[lo:hi + 1]))
+        if r[j] < 0.5 * strength or j <= 0 or j >= T - 1:
+            m = m + 1 if m < 4 else m + m // 2
+            continue
+        a, b, cc = r[j - 1], r[j], r[j + 1]
+        den2 = a - 2 * b + cc
+        d = 0.5 * (a - cc) / den2 if den2 < 0 else 0.0
+        pos = j + max(-0.5, min(0.5, d))
+        num += m * pos
+        den += m * m
+        Tc = num / den
+        m = m + 1 if m < 4 else m + m // 2
+    if den <= 0:
+        return T0, strength
+    # then every multiple at once (vectorised): the block-end frequency is read at the phase of the last
+    # sample, ~T / period periods after the first frame, so it needs the period to ~1e-5
+    ms = np.arange(1, int((T // 2 - 2) / Tc) + 1)
+    if ms.size >= 2:
+        w = max(1, int(round(0.1 * Tc)))
+        c = np.rint(ms * Tc).astype(np.int64)
+        idx = np.clip(c[:, None] + np.arange(-w, w + 1)[None, :], 1, T - 2)
+        j = idx[np.arange(ms.size), np.argmax(r[idx], axis=1)]
+        a, b, cc = r[j - 1], r[j], r[j + 1]
+        den2 = a - 2 * b + cc
+        with np.errstate(divide="ignore", invalid="ignore"):
+            d = np.where(den2 < 0, 0.5 * (a - cc) / den2, 0.0)
+        pos = j + np.clip(d, -0.5, 0.5)
+        ok = b >= 0.5 * strength
+        if ok.sum() >= 2:
+            Tc = float(np.sum(ms[ok] * pos[ok]) / np.sum(ms[ok] ** 2))
+    return Tc, strength
+
+
+def _ridge(S: np.ndarray, lvl: np.ndarray, freqs: np.ndarray, presence: float
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per frame: interpolated ridge frequency (cycles/sample), peak excess, present flag."""
+    E = S / _f32(lvl)
+    nfr, B = E.shape
+    k = np.argmax(E, axis=1)
+    rows = np.arange(nfr)
+    pk = E[rows, k]
+    km, kp = np.clip(k - 1, 0, B - 1), np.clip(k + 1, 0, B - 1)
+    a = np.log(S[rows, km] + 1e-30)
+    b = np.log(S[rows, k] + 1e-30)
+    c = np.log(S[rows, kp] + 1e-30)
+    den = a - 2 * b + c
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = np.where((den < 0) & (k > 0) & (k < B - 1), 0.5 * (a - c) / den, 0.0)
+    d = np.clip(d, -0.5, 0.5)
+    df = freqs[1] - freqs[0]
+    f = freqs[k] + d * df
+    present = pk > (math.log(B) + presence)
+    return f, pk, present
+
+
+def _profile(f: np.ndarray, present: np.ndarray, period_frames: float, K: int
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """Folded sweep profile: mean ridge frequency and present share per phase bin (K bins)."""
+    t = np.arange(f.size)
+    kb = np.minimum((np.mod(t / period_frames, 1.0) * K).astype(np.int64), K - 1)
+    n = np.bincount(kb, minlength=K).astype(np.float64)
+    npres = np.bincount(kb, weights=present.astype(np.float64), minlength=K)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share = np.where(n > 0, npres / np.maximum(n, 1), 0.0)
+    # median of each bin (frames that straddle a flyback give the far side's frequency: a mean would
+    # pull the bin towards it)
+    ks, fp = kb[present], f[present]
+    prof = np.full(K, np.nan)
+    if ks.size:
+        order = np.lexsort((fp, ks))
+        cnt = np.bincount(ks, minlength=K)
+        start = np.concatenate(([0], np.cumsum(cnt)[:-1]))
+        has = cnt > 0
+        lo_i = start + (cnt - 1) // 2
+        hi_i = start + cnt // 2
+        fs_sorted = fp[order]
+        prof[has] = 0.5 * (fs_sorted[lo_i[has]] + fs_sorted[hi_i[has]])
+    return prof, share
+
+
+def _shape(prof: np.ndarray, inband: np.ndarray, hook_ratio: float) -> tuple[int, float, float, float, float]:
+    """(shape, low, high, start, rate per phase bin) of a folded profile (module docstring, step 5)."""
+    K = prof.size
+    if inband.sum() < 4:
+        return SHAPE_UNKNOWN, math.nan, math.nan, math.nan, math.nan
+    vals = prof[inband]
+    low, high = float(np.min(vals)), float(np.max(vals))
+    span = high - low
+    nxt = np.roll(np.arange(K), -1)
+    both = inband & inband[nxt]
+    d = np.where(both, prof[nxt] - prof, np.nan)
+    jump = both & (np.abs(d) > JUMP_SPAN * span)
+    swept = both & ~jump
+    dsw = d[swept]
+    if dsw.size < 3 or not span > 0:
+        return SHAPE_UNKNOWN, low, high, math.nan, math.nan
+    n_up = int(np.sum(dsw > 0))
+    n_dn = int(np.sum(dsw < 0))
+    frac_up = n_up / max(n_up + n_dn, 1)
+    med_up = float(np.median(dsw[dsw > 0])) if n_up else 0.0
+    med_dn = float(np.median(dsw[dsw < 0])) if n_dn else 0.0
+    if 0.3 <= frac_up <= 0.7:
+        return TRIANGLE, low, high, low, med_up
+    up = frac_up > 0.5
+    shape = SAWTOOTH_UP if up else SAWTOOTH_DOWN
+    med = med_up if up else med_dn
+    # hook: a swept return segment (15-30 % of the steps), or a step right after the flyback much
+    # steeper than the median (an overshoot relaxing back)
+    if 0.15 < min(frac_up, 1 - frac_up):
+        shape = HOOKED_SAWTOOTH
+    else:
+        jumps = np.flatnonzero(jump)
+        for j in jumps:
+            a = (j + 1) % K
+            if swept[a] and abs(d[a]) > hook_ratio * abs(med) and np.sign(d[a]) == np.sign(med):
+                shape = HOOKED_SAWTOOTH
+                break
+    start = low if up else high
+    return shape, low, high, start, med
+
+
+def _sawtooth_law(prof: np.ndarray, inband: np.ndarray, period_samples: float, L: int, span: float
+                  ) -> tuple[float, np.ndarray, float] | None:
+    """(flyback phase, polynomial in the elapsed sweep fraction, RMS residual of the fit) of a saw-tooth's
+    folded profile, or None.
+
+    The flyback is the largest step between consecutive in-band bins. Bins within half a frame (plus one
+    bin) of it are left out: their frames straddle the flyback. A quadratic (a rate that changes along the
+    sweep; linear with fewer than 8 bins) is fitted to the others against the elapsed fraction of the
+    sweep since the flyback; None when fewer than 4 bins remain or the fit leaves an RMS residual above a
+    tenth of the span."""
+    K = prof.size
+    nxt = np.roll(np.arange(K), -1)
+    both = inband & inband[nxt] & np.isfinite(prof) & np.isfinite(prof[nxt])
+    if not both.any() or not span > 0:
+        return None
+    d = np.where(both, np.abs(prof[nxt] - prof), -1.0)
+    j = int(np.argmax(d))
+    if d[j] < span / 3.0:
+        return None
+    phi_j = (j + 1) / K
+    c = (np.arange(K) + 0.5) / K
+    e = (c - phi_j) % 1.0
+    guard = 0.5 * L / period_samples + 1.0 / K
+    ok = inband & np.isfinite(prof) & (e > guard) & (e < 1.0 - guard)
+    if ok.sum() < 4:
+        return None
+    deg = 2 if ok.sum() >= 8 else 1
+    coef = np.polyfit(e[ok], prof[ok], deg)
+    res = prof[ok] - np.polyval(coef, e[ok])
+    rms = float(np.sqrt(np.mean(res * res) * ok.sum() / max(ok.sum() - deg - 1, 1)))
+    if rms > 0.1 * span:
+        return None
+    return phi_j, coef, rms
+
+
+def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length: int = 0) -> RidgeResult:
+    """Ridge analysis of one block (module docstring).
+
+    Args:
+        x: finite samples, shape (n,), float64 (real) or complex128, n >= 8 * min(frame_lengths).
+        cplx: complex samples.
+        fs: sample rate, Hz (> 0; converts max_period_s to frames).
+        par: RidgeParams.
+        frame_length: 0: choose it (step 1); else use this one.
+
+    Returns:
+        RidgeResult.
+    """
+    L = int(frame_length) if frame_length else choose_frame_length(x, cplx, par)
+    hop = L // 2
+    S, freqs = stft_power(x, L, cplx)
+    lvl = noise_levels(S, par.noise_smooth_bins, cplx)
+    noise = _noise_power(lvl, L, cplx, par.noise_smooth_bins)
+    nfr, B = S.shape
+    f, pk, present = _ridge(S, lvl, freqs, par.presence_nats)
+    h = float(np.sum(1.0 / np.arange(1, B + 1)))
+    peak_excess = float(np.mean(pk)) - h
+    pres_frac = float(np.mean(present))
+    # periodicity of the spectral phasor
+    E = np.maximum(S / _f32(lvl) - 1.0, 0.0)
+    # the phasor sum as two element-wise reductions (a matrix product would go to a multi-threaded BLAS,
+    # which on a shared 2-core machine cost 16 ms per 1 ms block instead of 0.01 ms)
+    ang = 2.0 * np.pi * np.arange(B) / B
+    u = (E * np.cos(ang).astype(np.float32)).sum(axis=1) + 1j * (E * np.sin(ang).astype(np.float32)).sum(axis=1)
+    lmax = int(min(par.max_period_s * fs / hop, nfr // 4))
+    per_fr, strength = _periodicity(u.astype(np.complex128), int(par.min_period_frames), lmax, par)
+    periodic = math.isfinite(per_fr)
+    binw = 1.0 / L
+    nan = math.nan
+    shape, inb, low, high, start, rate = SHAPE_UNKNOWN, nan, nan, nan, nan, nan
+    fstd = nan
+    prof_k: np.ndarray | None = None
+    inband_k: np.ndarray | None = None
+    sweeping = False
+    if periodic:
+        # a period that is not a whole number of frames spreads the frames over all phases, so the profile
+        # can be finer than a frame; where it is (nearly) whole, only per_fr phases are seen
+        K = int(par.phase_bins)
+        prof, share = _profile(f, present, per_fr, K)
+        if np.mean(np.isnan(prof) & (share == 0)) > 0.25:
+            K = int(max(4, math.floor(per_fr)))
+            prof, share = _profile(f, present, per_fr, K)
+        top = float(np.max(share))
+        inband = (share >= 0.5 * top) & np.isfinite(prof) & (top > 0)
+        inb = float(np.mean(inband))
+        prof_k, inband_k = prof, inband
+        # the shape from a coarser profile (at most SHAPE_BINS bins: steps well above the ridge's scatter)
+        Ks = min(K, SHAPE_BINS)
+        prof_s, share_s = (prof, share) if Ks == K else _profile(f, present, per_fr, Ks)
+        inband_s = (share_s >= 0.5 * float(np.max(share_s))) & np.isfinite(prof_s) & (top > 0)
+        inb = float(np.mean(inband_s))
+        if inb < 0.6 and Ks < K:
+            # in band only part of the period: the finer profile has more bins in each in-band run
+            Ks, prof_s, inband_s = K, prof, inband
+        shape, low, high, start, step = _shape(prof_s, inband_s, par.hook_rate_ratio)
+        if math.isfinite(step):
+            rate = step / (per_fr * hop / Ks)
+        sweeping = bool(math.isfinite(high - low) and (high - low) >= 4 * binw)
+        if present.any():
+            t = np.arange(nfr)
+            kb = np.minimum((np.mod(t / per_fr, 1.0) * K).astype(np.int64), K - 1)
+            sel = present & inband[kb]
+            res = (f - prof[kb])[sel]
+            res = res[np.isfinite(res)]
+            if res.size:
+                fstd = float(np.sqrt(np.mean(res * res)))
+            if sel.sum() >= 20 and math.isfinite(low):
+                # the profile averages over a phase bin and the frame: the swept band's edges come from the
+                # ridge itself (2 % and 98 % points of the in-band ridge frequencies)
+                q_lo, q_hi = np.percentile(f[sel], (2.0, 98.0))
+                low, high = float(q_lo), float(q_hi)
+                if shape in (SAWTOOTH_UP, TRIANGLE):
+                    start = low
+                elif shape == SAWTOOTH_DOWN:
+                    start = high
+    elif pres_frac >= par.min_present_fraction and nfr >= 8:
+        fp = f[present]
+        dd = np.abs(np.diff(f))[present[1:] & present[:-1]]
+        coherent = dd.size > 0 and float(np.mean(dd <= 2 * binw)) >= 0.8
+        span = float(np.percentile(fp, 95) - np.percentile(fp, 5)) if fp.size >= 8 else 0.0
+        if coherent and span >= 4 * binw:
+            sweeping = True
+            low, high = float(np.percentile(fp, 5)), float(np.percentile(fp, 95))
+            tt = np.flatnonzero(present)
+            slope = float(np.polyfit(tt, fp, 1)[0]) if tt.size >= 3 else nan
+            rate = slope / hop
+            shape = SAWTOOTH_UP if slope > 0 else SAWTOOTH_DOWN
+            start = low if slope > 0 else high
+            inb = 1.0
+    if not math.isfinite(fstd) and nfr >= 3:
+        # local straight line through three consecutive present frames
+        ok = present[:-2] & present[1:-1] & present[2:]
+        r2 = (f[1:-1] - 0.5 * (f[:-2] + f[2:]))[ok]
+        if r2.size:
+            fstd = float(np.sqrt(np.mean(r2 * r2) / 1.5))
+    fstd = max(fstd, binw / math.sqrt(12.0)) if math.isfinite(fstd) else binw / math.sqrt(12.0)
+    # frequency at the block's last sample: frame t's ridge is the frequency near its centre,
+    # t hop + L / 2 - 1/2; a periodic sweep is read off its folded profile at the last sample's phase
+    # (the last frame's centre is up to hop + L / 2 samples before the end), else the last ridge
+    # moved on by the rate
+    t_end = (x.size - 1 - (L - 1) / 2.0) / hop          # the last sample, in frame units
+    freq = nan
+    law = None
+    if periodic and prof_k is not None and inband_k is not None and shape in (SAWTOOTH_UP, SAWTOOTH_DOWN,
+                                                                              HOOKED_SAWTOOTH):
+        law = _sawtooth_law(prof_k, inband_k, per_fr * hop, L, high - low)
+    if law is not None and inband_k is not None:
+        # saw-tooth: the sweep law fitted away from the flyback (where frames straddle it) gives the
+        # swept band's ends, the mean rate and the frequency at the block end
+        phi_j, coef, rms = law
+        # the block-end error measured on the paper front end (12 blocks, J/N 21 dB) had an RMS of about
+        # twice the profile-fit residual (the flyback phase is quantised to a bin, frames smear)
+        fstd = max(2.0 * rms, 1e-4 / L)
+        f0, f1 = float(np.polyval(coef, 0.0)), float(np.polyval(coef, 1.0))
+        low, high = min(f0, f1), max(f0, f1)
+        start = f0
+        rate = (f1 - f0) / (per_fr * hop)
+        ph_end = float(np.mod(t_end / per_fr, 1.0))
+        e_end = (ph_end - phi_j) % 1.0
+        if inband_k[min(int(ph_end * inband_k.size), inband_k.size - 1)]:
+            freq = float(np.polyval(coef, e_end))
+    elif periodic and prof_k is not None and inband_k is not None:
+        K = prof_k.size
+        pos = np.mod(t_end / per_fr, 1.0) * K - 0.5
+        k0 = int(math.floor(pos)) % K
+        k1 = (k0 + 1) % K
+        a = pos - math.floor(pos)
+        if inband_k[k0] and inband_k[k1] and abs(prof_k[k1] - prof_k[k0]) < 0.5 * (high - low):
+            freq = float((1 - a) * prof_k[k0] + a * prof_k[k1])
+        elif inband_k[k0 if a < 0.5 else k1]:
+            freq = float(prof_k[k0 if a < 0.5 else k1])
+    elif present[-1]:
+        freq = float(f[-1]) + (float(rate) * (t_end - (nfr - 1)) * hop if math.isfinite(rate) else 0.0)
+    if math.isfinite(freq) and not (float(freqs[0]) - 0.5 / L <= freq <= float(freqs[-1]) + 0.5 / L):
+        freq = nan
+    return RidgeResult(L, hop, noise, peak_excess, pres_frac, periodic, float(per_fr * hop) if periodic else nan,
+                       float(strength), sweeping, int(shape), inb, low, high, start, rate, freq, fstd)
