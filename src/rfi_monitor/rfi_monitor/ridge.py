@@ -293,20 +293,6 @@ def _min_max_filter_1d(a: np.ndarray, w: int, wrap: bool, take_max: bool) -> np.
 
 
 @njit(cache=True)
-def _row_hot(S: np.ndarray, t: int, thr: np.ndarray, out: np.ndarray) -> None:
-    """out[b]: S[t, b'] > thr[b'] for some b' in b - 1 .. b + 1 (the hot cells of frame t widened by a bin)."""
-    B = out.size
-    out[:] = False
-    for b in range(B):
-        if S[t, b] > thr[b]:
-            out[b] = True
-            if b > 0:
-                out[b - 1] = True
-            if b < B - 1:
-                out[b + 1] = True
-
-
-@njit(cache=True)
 def _noise_levels_kernel(S: np.ndarray, q: np.ndarray, w: int, wrap: bool, cplx: bool, w2: int) -> np.ndarray:
     """noise_levels after the quantile (module docstring, step 2), compiled. S float32 (frames, bins); q the
     ``_Q_LOW`` quantile of each bin over frames, float32."""
@@ -324,24 +310,24 @@ def _noise_levels_kernel(S: np.ndarray, q: np.ndarray, w: int, wrap: bool, cplx:
         if lvl0[b] < tiny:
             lvl0[b] = tiny
         thr[b] = cut * lvl0[b]
-    # jammer cells: above the cut, widened by one bin and one frame (its skirts): a 3 x 3 dilation, kept as
-    # three rolling rows (frames t - 1, t, t + 1 widened by a bin); the others summed per bin in frame order
-    r0 = np.zeros(B, dtype=np.bool_)
-    r1 = np.zeros(B, dtype=np.bool_)
-    r2 = np.zeros(B, dtype=np.bool_)
-    _row_hot(S, 0, thr, r1)
+    # jammer cells: above the cut, widened by one bin and one frame (its skirts): a 3 x 3 dilation (hot cells
+    # with an empty border, widened along bins, then along frames where the others are summed per bin in
+    # frame order; branch-free loops that the compiler vectorises across bins)
+    H = np.zeros((nfr + 2, B + 2), dtype=np.uint8)
+    for t in range(nfr):
+        for b in range(B):
+            H[t + 1, b + 1] = S[t, b] > thr[b]
+    R = np.empty((nfr + 2, B), dtype=np.uint8)
+    for t in range(nfr + 2):
+        for b in range(B):
+            R[t, b] = H[t, b] | H[t, b + 1] | H[t, b + 2]
     acc = np.zeros(B)
     cnt = np.zeros(B, dtype=np.int64)
     for t in range(nfr):
-        if t + 1 < nfr:
-            _row_hot(S, t + 1, thr, r2)
-        else:
-            r2[:] = False
         for b in range(B):
-            if not (r0[b] or r1[b] or r2[b]):
-                acc[b] += np.float64(S[t, b])
-                cnt[b] += 1
-        r0, r1, r2 = r1, r2, r0
+            keep = (R[t, b] | R[t + 1, b] | R[t + 2, b]) == 0
+            acc[b] += np.float64(S[t, b]) if keep else 0.0
+            cnt[b] += 1 if keep else 0
     lvl1 = np.empty(B)
     for b in range(B):
         if cnt[b] >= 8:
@@ -485,11 +471,27 @@ def _peak_excess(S: np.ndarray, lvl: np.ndarray, cplx: bool = True) -> float:
     """Mean over frames of the largest bin excess (power / noise level), minus the harmonic number H_B (the
     mean largest of B unit exponentials). Real input: without the DC and Nyquist bins (one degree of freedom:
     heavier tails, which made noise score above zero at short frames)."""
-    if not cplx and S.shape[1] > 3:
-        S, lvl = S[:, 1:-1], lvl[1:-1]
-    B = S.shape[1]
+    b0, b1 = (1, S.shape[1] - 1) if (not cplx and S.shape[1] > 3) else (0, S.shape[1])
+    B = b1 - b0
     h = float(np.sum(1.0 / np.arange(1, B + 1)))
-    return float(np.mean(np.max(S / _f32(lvl), axis=1))) - h
+    return float(np.mean(_row_max_excess(np.ascontiguousarray(S, dtype=np.float32), _f32(lvl), b0, b1))) - h
+
+
+@njit(cache=True)
+def _row_max_excess(S: np.ndarray, div: np.ndarray, b0: int, b1: int) -> np.ndarray:
+    """Per frame the largest S / div (float32) over bins b0 .. b1 - 1 (NaN if any is NaN, as np.max)."""
+    nfr = S.shape[0]
+    out = np.empty(nfr, dtype=np.float32)
+    for t in range(nfr):
+        best = S[t, b0] / div[b0]
+        for b in range(b0 + 1, b1):
+            v = S[t, b] / div[b]
+            if v > best or v != v:
+                best = v
+                if v != v:
+                    break
+        out[t] = best
+    return out
 
 
 def choose_frame_length(x: np.ndarray, cplx: bool, par: RidgeParams) -> int:

@@ -102,8 +102,10 @@ def test_analyse_same_as_reference(name, x, fs, cplx):
         S, _ = old.stft_power(x, L, cplx)
         S2, _ = new.stft_power(x, L, cplx)
         np.testing.assert_allclose(S2, S, rtol=0, atol=0)
-        np.testing.assert_allclose(new.noise_levels(S, par.noise_smooth_bins, cplx),
-                                   old.noise_levels(S, par.noise_smooth_bins, cplx), rtol=REL, atol=0)
+        lvl = old.noise_levels(S, par.noise_smooth_bins, cplx)
+        np.testing.assert_allclose(new.noise_levels(S, par.noise_smooth_bins, cplx), lvl, rtol=REL, atol=0)
+        # the frame-length score (choose_frame_length)
+        assert _close(new._peak_excess(S, lvl, cplx), old._peak_excess(S, lvl, cplx)), (name, L)
 
 
 def test_noise_levels_same_as_reference_on_random_spectra():
