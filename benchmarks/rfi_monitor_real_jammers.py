@@ -92,11 +92,15 @@ BLOCK_S = 1e-3
 # The monitor as the node drives it
 # ---------------------------------------------------------------------------------------------
 def shipped_node_params() -> tuple[object, list[str]]:
-    """MonitorNodeParams from the shipped YAML (values the dataclass does not know are listed, not used)."""
+    """MonitorNodeParams from the shipped YAML (values the dataclass does not know are listed, not used).
+
+    The YAML beside the measured package's source (``<pkg>/../config``) when there is one, else the tree's."""
     import yaml
 
+    import rfi_monitor
     from rfi_monitor.rfi_monitor_node import MonitorNodeParams
-    doc = yaml.safe_load(CONFIG.read_text())
+    beside = Path(rfi_monitor.__file__).resolve().parents[1] / "config" / "rfi_monitor.yaml"
+    doc = yaml.safe_load((beside if beside.exists() else CONFIG).read_text())
     values = doc["rfi_monitor"]["ros__parameters"]
     known = {f.name for f in dataclasses.fields(MonitorNodeParams)}
     use = {k: v for k, v in values.items() if k in known}
@@ -594,7 +598,8 @@ def cpu_model() -> str:
     return platform.processor() or "unknown"
 
 
-def markdown(results: list[RowResult], sources: list[str], unknown: list[str], wall_s: float) -> str:
+def markdown(results: list[RowResult], sources: list[str], unknown: list[str], wall_s: float,
+             monitor_from: str = "") -> str:
     import rfi_monitor
     mod = Path(rfi_monitor.__file__).resolve().parent
     n_met = sum(verdict(r) == "**met**" for r in results)
@@ -606,7 +611,7 @@ def markdown(results: list[RowResult], sources: list[str], unknown: list[str], w
         "`rfi_monitor_node` drives it,",
         "with the shipped `config/rfi_monitor.yaml`; one fresh monitor per row, 1 ms blocks.",
         "",
-        f"- monitor measured: `{mod}` at {git_describe(ROOT / 'src' / 'rfi_monitor')}",
+        f"- monitor measured: {monitor_from or f'`{mod}` at ' + git_describe(ROOT / 'src' / 'rfi_monitor')}",
         f"- rows met: **{n_met} of {len(results)}**; run time {wall_s:.0f} s on {cpu_model()}",
         f"- clean captures: {'; '.join(sources)}",
     ]
@@ -646,11 +651,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--rows", nargs="*", default=[], help="run only rows whose name contains one of these")
     ap.add_argument("--blocks", type=int, default=None, help="at most this many blocks per simulated row")
     ap.add_argument("--capture-blocks", type=int, default=45, help="blocks per real capture row")
+    ap.add_argument("--monitor-from", default="", help="say where the measured rfi_monitor came from (e.g. a "
+                    "`git archive` export of a commit), instead of its path and the tree's git state")
     a = ap.parse_args(argv)
     t0 = time.time()
     results, sources = run(a.rows, a.blocks, a.capture_blocks)
     _, unknown = shipped_node_params()
-    md = markdown(results, sources, unknown, time.time() - t0)
+    md = markdown(results, sources, unknown, time.time() - t0, a.monitor_from)
     print(md)
     if a.out is not None:
         a.out.write_text(md)

@@ -349,7 +349,7 @@ def figure(curves: list[Curve], path: Path) -> None:
 
 
 def markdown(curves: list[Curve], goal_lines: list[str], caps: Sequence[Capture], fig_name: str,
-             wall_s: float, trials: int) -> str:
+             wall_s: float, trials: int, monitor_from: str = "") -> str:
     import rfi_monitor
     mod = Path(rfi_monitor.__file__).resolve().parent
     lines = [
@@ -361,7 +361,7 @@ def markdown(curves: list[Curve], goal_lines: list[str], caps: Sequence[Capture]
         f"shipped settings (\"ours\") and with Kang et al.'s method (\"paper\"). {trials} trials per point, each "
         f"{CLEAN_BLOCKS} clean + {JAM_BLOCKS} jammed 1 ms blocks; seeded.",
         "",
-        f"- monitor measured: `{mod}` at {git_describe(ROOT / 'src' / 'rfi_monitor')}",
+        f"- monitor measured: {monitor_from or f'`{mod}` at ' + git_describe(ROOT / 'src' / 'rfi_monitor')}",
         "- captures: " + "; ".join(f"{c.name} ({c.source}, {c.n_samples / c.sample_rate_hz * 1e3:.0f} ms)"
                                    for c in caps),
         f"- run time {wall_s:.0f} s on {cpu_model()}",
@@ -397,6 +397,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, default=None, help="markdown output (the figure goes beside it)")
     ap.add_argument("--quick", action="store_true", help="smoke run: 3 J/N points, 1 trial, first 40 ms of captures")
+    ap.add_argument("--monitor-from", default="", help="say where the measured rfi_monitor came from (e.g. a "
+                    "`git archive` export of a commit), instead of its path and the tree's git state")
     a = ap.parse_args(argv)
     t0 = time.time()
     # the GNSS-SDR capture (4 ms) is too short for trials; the simulated 8-bit front end shows the same
@@ -426,7 +428,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     fig_name = "sensitivity.png"
     if a.out is not None:
         figure(curves, a.out.parent / fig_name)
-    md = markdown(curves, goal_lines, fa_caps, fig_name, time.time() - t0, trials)
+    md = markdown(curves, goal_lines, fa_caps, fig_name, time.time() - t0, trials, a.monitor_from)
     print(md)
     if a.out is not None:
         a.out.write_text(md)
