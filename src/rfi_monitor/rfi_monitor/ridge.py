@@ -531,55 +531,119 @@ def _periodicity(u: np.ndarray, lmin: int, lmax: int, par: RidgeParams) -> tuple
     R = np.fft.ifft(V * np.conj(V))[:T].real
     if not R[0] > 0:
         return math.nan, 0.0
-    lags = np.arange(T)
-    r = R / (T - lags) * T / R[0]
-    sig = 1.0 / np.sqrt(2.0 * np.maximum(T - lags, 1))
-    seg = r[lmin:lmax + 1]
-    # local maxima
-    loc = np.flatnonzero((seg[1:-1] >= seg[:-2]) & (seg[1:-1] > seg[2:])) + 1
-    if loc.size == 0:
-        return math.nan, 0.0
-    cand = loc + lmin
-    # peak-to-trough: the peak over the lowest value between lag 1 and it
-    trough = np.minimum.accumulate(r[1:lmax + 2])
-    prom = r[cand] - trough[cand - 1]
-    ok = (prom >= par.min_strength) & (r[cand] >= par.detect_sigma * sig[cand]) & (
-        prom >= par.detect_sigma * sig[cand])
-    if not ok.any():
-        return math.nan, 0.0
-    good = cand[ok]
-    top = float(np.max(r[good]))
-    T0 = float(good[np.argmax(r[good] >= 0.6 * top)])
+    per, strength = _period_from_autocorrelation(np.ascontiguousarray(R), int(lmin), int(lmax),
+                                                 float(par.min_strength), float(par.detect_sigma))
+    return per, strength
+
+
+@njit(cache=True)
+def _pairwise_sum_f64(a: np.ndarray) -> float:
+    """np.sum of a contiguous float64 vector in numpy's pairwise order (see _pairwise_sum_f32)."""
+    n = a.size
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[i]
+        return res
+    if n > 128:
+        n2 = n // 2
+        n2 -= n2 % 8
+        return _pairwise_sum_f64(a[:n2]) + _pairwise_sum_f64(a[n2:])
+    r0, r1, r2, r3, r4, r5, r6, r7 = a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]
+    i = 8
+    while i < n - (n % 8):
+        r0 += a[i]
+        r1 += a[i + 1]
+        r2 += a[i + 2]
+        r3 += a[i + 3]
+        r4 += a[i + 4]
+        r5 += a[i + 5]
+        r6 += a[i + 6]
+        r7 += a[i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[i]
+        i += 1
+    return res
+
+
+@njit(cache=True)
+def _first_argmax(r: np.ndarray, lo: int, hi: int) -> int:
+    """Index of the first largest of r[lo .. hi] (np.argmax)."""
+    j = lo
+    for i in range(lo + 1, hi + 1):
+        if r[i] > r[j]:
+            j = i
+    return j
+
+
+@njit(cache=True)
+def _period_from_autocorrelation(R: np.ndarray, lmin: int, lmax: int, min_strength: float, detect_sigma: float
+                                 ) -> tuple[float, float]:
+    """_periodicity after the autocorrelation R (lags 0 .. T - 1, R[0] > 0), compiled: normalised
+    autocorrelation, candidate peaks, coarse period, sub-harmonic check, refinement on multiples."""
+    T = R.size
+    r = np.empty(T)
+    sig = np.empty(T)
+    for i in range(T):
+        r[i] = R[i] / (T - i) * T / R[0]
+        sig[i] = 1.0 / np.sqrt(2.0 * max(T - i, 1))
+    # peak-to-trough: the peak over the lowest value between lag 1 and it (trough[i] = min r[1 .. i + 1])
+    ntr = min(lmax + 1, T - 1)
+    trough = np.empty(ntr)
+    mn = r[1]
+    for i in range(ntr):
+        if r[i + 1] < mn:
+            mn = r[i + 1]
+        trough[i] = mn
+    # local maxima of r[lmin .. lmax] that stand out: the first within 0.6 of the highest is the period
+    hi_seg = min(lmax, T - 1)
+    top = -np.inf
+    n_good = 0
+    good = np.empty(max(hi_seg - lmin, 1), dtype=np.int64)
+    for c in range(lmin + 1, hi_seg):
+        if r[c] >= r[c - 1] and r[c] > r[c + 1]:
+            prom = r[c] - trough[c - 1]
+            if prom >= min_strength and r[c] >= detect_sigma * sig[c] and prom >= detect_sigma * sig[c]:
+                good[n_good] = c
+                n_good += 1
+                if r[c] > top:
+                    top = r[c]
+    if n_good == 0:
+        return np.nan, 0.0
+    T0 = float(good[0])
+    for g in range(n_good):
+        if r[good[g]] >= 0.6 * top:
+            T0 = float(good[g])
+            break
     # a period of only a few frames is smeared by the frame (its first peak can fall below the second):
     # take T0 / k when the autocorrelation peaks there too (k = 2, 3), at least half as high
     for k in (3, 2):
-        c = int(round(T0 / k))
+        c = int(np.rint(T0 / k))
         if c < max(lmin, 2):
             continue
         lo_c, hi_c = max(c - 1, 1), min(c + 1, T - 2)
-        j = lo_c + int(np.argmax(r[lo_c:hi_c + 1]))
+        j = _first_argmax(r, lo_c, hi_c)
         if (r[j] >= r[j - 1] and r[j] >= r[j + 1] and r[j] >= 0.5 * r[int(T0)]
-                and r[j] - trough[j - 1] >= max(par.min_strength, par.detect_sigma * sig[j])):
+                and r[j] - trough[j - 1] >= max(min_strength, detect_sigma * sig[j])):
             T0 = float(j)
             break
-    strength = float(r[int(T0)] - trough[int(T0) - 1])
-    # refine on multiples (least squares through the origin)
+    strength = r[int(T0)] - trough[int(T0) - 1]
+    # refine on multiples (least squares through the origin): 1, 2, 3, 4, 6, 9, 13, ... (geometric: the far
+    # ones give the precision, each step keeps the search window of the next one within 15 % of the period)
     num, den = 0.0, 0.0
     Tc = T0
     m = 1
-    # multiples 1, 2, 3, 4, 6, 8, 12, 16, 24, ... (geometric: the far ones give the precision, each step
-    # keeps the search window of the next one within 15 % of the period; a dozen steps instead of T / 2 T0)
-    rl = r.tolist()          # the scalar loop on Python floats (the same double arithmetic, no numpy scalars)
     while m * Tc + 2 < T // 2:
-        c = int(round(m * Tc))
-        w = max(1, int(round(0.15 * Tc)))
+        c = int(np.rint(m * Tc))
+        w = max(1, int(np.rint(0.15 * Tc)))
         lo, hi = max(c - w, 1), min(c + w, T - 2)
-        seg = rl[lo:hi + 1]
-        j = lo + seg.index(max(seg))          # the first largest, as np.argmax
-        if rl[j] < 0.5 * strength or j <= 0 or j >= T - 1:
+        j = _first_argmax(r, lo, hi)
+        if r[j] < 0.5 * strength or j <= 0 or j >= T - 1:
             m = m + 1 if m < 4 else m + m // 2
             continue
-        a, b, cc = rl[j - 1], rl[j], rl[j + 1]
+        a, b, cc = r[j - 1], r[j], r[j + 1]
         den2 = a - 2 * b + cc
         d = 0.5 * (a - cc) / den2 if den2 < 0 else 0.0
         pos = j + max(-0.5, min(0.5, d))
@@ -589,24 +653,32 @@ def _periodicity(u: np.ndarray, lmin: int, lmax: int, par: RidgeParams) -> tuple
         m = m + 1 if m < 4 else m + m // 2
     if den <= 0:
         return T0, strength
-    # then every multiple at once (vectorised): the block-end frequency is read at the phase of the last
-    # sample, ~T / period periods after the first frame, so it needs the period to ~1e-5
-    ms = np.arange(1, int((T // 2 - 2) / Tc) + 1)
-    if ms.size >= 2:
-        w = max(1, int(round(0.1 * Tc)))
-        c = np.rint(ms * Tc).astype(np.int64)
-        idx = np.clip(c[:, None] + np.arange(-w, w + 1)[None, :], 1, T - 2)
-        j = idx[np.arange(ms.size), np.argmax(r[idx], axis=1)]
-        a, b, cc = r[j - 1], r[j], r[j + 1]
-        den2 = a - 2 * b + cc
-        with np.errstate(divide="ignore", invalid="ignore"):
-            d = np.where(den2 < 0, 0.5 * (a - cc) / den2, 0.0)
-        pos = j + np.clip(d, -0.5, 0.5)
-        ok = b >= 0.5 * strength
-        if ok.sum() >= 2:
-            Tc = float(np.sum(ms[ok] * pos[ok]) / np.sum(ms[ok] ** 2))
+    # then every multiple at once: the block-end frequency is read at the phase of the last sample, ~T / period
+    # periods after the first frame, so it needs the period to ~1e-5
+    nm = int((T // 2 - 2) / Tc)
+    if nm >= 2:
+        w = max(1, int(np.rint(0.1 * Tc)))
+        mp = np.empty(nm)
+        n_ok = 0
+        m2 = 0
+        for mi in range(1, nm + 1):
+            c = int(np.rint(mi * Tc))
+            j = min(max(c - w, 1), T - 2)
+            for o in range(-w + 1, w + 1):
+                q = min(max(c + o, 1), T - 2)
+                if r[q] > r[j]:
+                    j = q
+            a, b, cc = r[j - 1], r[j], r[j + 1]
+            den2 = a - 2 * b + cc
+            d = 0.5 * (a - cc) / den2 if den2 < 0 else 0.0
+            pos = j + min(max(d, -0.5), 0.5)
+            if b >= 0.5 * strength:
+                mp[n_ok] = mi * pos
+                m2 += mi * mi
+                n_ok += 1
+        if n_ok >= 2:
+            Tc = _pairwise_sum_f64(mp[:n_ok]) / m2
     return Tc, strength
-
 
 def _ridge(S: np.ndarray, k: np.ndarray, pk: np.ndarray, freqs: np.ndarray, presence: float
            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
