@@ -89,12 +89,15 @@ two scipy.ndimage median filters, a grey opening, four copies of a boolean mask 
 the 3 x 3 dilation of the jammer cells and the masked sums are now branch-free loops vectorised across
 bins); the ridge's strongest bin, its excess and the two spectral-phasor sums in one compiled pass over
 the STFT power (float32, numpy's pairwise summation order); the frame-length score's row maxima compiled;
-STFT power squared in place; the period refinement loop on Python floats; small medians without numpy's
-per-call overhead. What is left of a tracking block (profiling, 1 ms block, tail of 16384 samples, ~0.9 ms
-of ridge analysis when the machine was quiet): the period search ~150 us (two 1024-point FFTs and a
-vectorised refinement), the STFT ~95 us (its FFTs), the saw-tooth law fit (np.polyfit) ~95 us, the folded
-profiles and shape ~150 us, percentiles and residuals ~90 us, noise level, excess and ridge ~60 us each:
-many numpy calls of 10-50 us, no single hot spot. The arithmetic was kept in the
+STFT power squared in place; the period search after its autocorrelation FFT compiled (candidates,
+sub-harmonic check, refinement on multiples, numpy's pairwise sum order); small medians without numpy's
+per-call overhead. What is left of a tracking block (line timing on captured monitor inputs: tail of
+16384 samples, frame 64, ~0.85 ms of ridge analysis when the machine was quiet): the STFT ~95 us (mostly
+its FFTs), the saw-tooth law fit and its use ~95 + 95 us, the two folded profiles ~65 + 50 us, the shape
+~35 us, percentiles and residuals ~85 us, the noise level ~70 us, the ridge's interpolation ~60 us, the
+excess pass ~60 us, the period search ~55 us (its two FFTs): many numpy calls of 10-50 us each, no single
+hot spot left. Cost: the compiled functions take ~10 s of CPU to compile on their first use after an
+install (cached after that: 0.35 s; the node's warm_up does it before it subscribes). The arithmetic was kept in the
 same precision and order, so the results are the same to the bit on this machine
 (src/rfi_monitor/test/test_ridge_speed_equivalence.py: the shape cases of test_stft_estimator.py and
 the real clean captures, ridge and whole monitor, against the frozen pre-speed-up ridge_reference.py;
