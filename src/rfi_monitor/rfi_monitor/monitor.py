@@ -93,6 +93,7 @@ from rfi_monitor.if_measurement import (
     STATUS_NON_FINITE,
     STATUS_OK,
 )
+from rfi_monitor.integration import IntegratedDecision, Integrator
 from rfi_monitor.params import RfiMonitorParams
 from rfi_monitor.sweep_analysis import SweepAnalysis, analyse
 from rfi_monitor.sweep_period import SweepFloat, SweepInt
@@ -267,7 +268,11 @@ class RfiMonitor:
         self._block_counters = {"blocks": 0, "blocks_rejected": 0, "gaps": 0, "rate_changes": 0,
                                 "non_finite_samples": 0, "saturated_samples": 0, "recalibrations": 0,
                                 "calibrations_discarded": 0, "clipped_blocks": 0, "frequency_not_tracked": 0,
-                                "tracker_resets_invalid": 0}
+                                "tracker_resets_invalid": 0, "integrated_reports": 0,
+                                "integration_window_blocks": 0}
+        self._integrator = Integrator(params.integration, params.classifier.detect_jn_db)
+        self.last_integration: IntegratedDecision | None = None
+        self._last_single = NONE
         self._off_floor_run = 0
         self._cal_psd: list[np.ndarray] = []
         self._cal_pow: list[float] = []
@@ -300,6 +305,7 @@ class RfiMonitor:
         self._if: float | None = None
         self._complex: bool | None = None
         if not keep_calibration:
+            self._integrator.reset()
             self._forget_calibration()
             self._cal_key = None
             self._forget_learned()
@@ -750,8 +756,31 @@ class RfiMonitor:
             return self._rejected(BLANK_BLOCK, stamp_ns, fs, first, n, None)
         if ref == REF_IN_BLOCK and power > rr.noise_power * 10 ** (MAX_POWER_JN_DB / 10):
             return self._rejected(IMPLAUSIBLE_POWER, stamp_ns, fs, first, n, None)
+        integrated: IntegratedDecision | None = None
+        if self._integrator.enabled and jtype in (CW, CHIRP):
+            self._last_single = jtype          # one block suffices: no evidence gathered (speed while tracking)
+        elif self._integrator.enabled:
+            # evidence of the blocks of the last integration_window_s (integration module): decides only when
+            # this block alone shows no CW or chirp (a single block that suffices adds no latency)
+            if self._last_single in (CW, CHIRP):
+                self._integrator.restart()     # the jammer one block showed is gone: its evidence goes too
+            self._last_single = jtype
+            d = self._integrator.add(xs, cplx, fs, stamp_ns)
+            self.last_integration = d
+            self._block_counters["integration_window_blocks"] = d.blocks
+            if d.type == CHIRP and jtype in (NONE, WIDEBAND):
+                # a periodic sweep in the window: no noise jammer makes one (the per-bin mean is removed, its
+                # frames are independent), so a block reported WIDEBAND from its broad excess is a sweep seen
+                # too weakly per frame for the ridge (measured: saw-tooths at J/N -2..0 dB on 2-bit captures)
+                jtype = NONE
+            if jtype == NONE and d.type != NONE:
+                integrated = d
+                self._block_counters["integrated_reports"] += 1
         if jtype == NONE:
             jn = max(jn, 5.0 * math.log10((1.0 if cplx else 2.0) / (frames * cp.nfft)))
+        if integrated is not None:
+            return self._integrated_estimate(integrated, jn, stamp_ns, fs, fif, cplx, first, n, ref, clipped)
+        if jtype == NONE:
             # the floor learns only from blocks that pass as noise inside the block too
             if clipped <= p.clip_lower_bound_fraction and not rr.periodic and jn_in < cp.detect_jn_db:
                 self._learn(power, norm)
@@ -797,6 +826,33 @@ class RfiMonitor:
         return JammerEstimate(stamp_ns, int(jtype), float(conf), float(jn), float(js), freq, fstd, rate, per, f0,
                               bw, fs, first, n, True, self._counters(), None, "", ref, bool(lower), float(clipped),
                               int(shape), inb)
+
+    def _integrated_estimate(self, d: IntegratedDecision, jn: float, stamp_ns: int, fs: float, fif: float,
+                             cplx: bool, first: int, n: int, ref: int, clipped: float) -> JammerEstimate:
+        """A CW or chirp found only by the evidence over blocks (integration module). Type, confidence (0.5 at the
+        threshold) and, for a CW, its frequency; a chirp's sweep period from the comb; the J/N is this block's own
+        measurement (mostly its resolution: such a jammer is below what one block measures), flagged as a lower
+        bound; the other fields NaN."""
+        p = self.params
+        nan = math.nan
+        bw_noise = p.noise_bandwidth_hz if p.noise_bandwidth_hz > 0 else (fs if cplx else fs / 2)
+        n_dbm = p.noise_density_dbm_per_mhz + 10 * math.log10(bw_noise / 1e6)
+        freq = fstd = rate = per = nan
+        if d.type == CW:
+            conf = logistic(10 * math.log10(max(d.cw_score, 1e-30)), 0.5)
+            jn = max(jn, d.excess_db)
+            freq = self._to_rel_hz(d.cw_frequency, fs, fif, cplx)
+            fstd = fs / self._integrator.params.nfft / math.sqrt(12.0)
+            rate = 0.0
+        else:
+            conf = logistic(d.chirp_z - d.chirp_threshold, 1.0)
+            per = d.period_samples / fs
+        js = jn + n_dbm - p.signal_power_dbm
+        self._tracking = False
+        self._chirp = False
+        return JammerEstimate(stamp_ns, int(d.type), float(conf), float(jn), float(js), freq, fstd, rate, per, nan,
+                              nan, fs, first, n, True, self._counters(), None, "", ref, True, float(clipped),
+                              int(rg.SHAPE_UNKNOWN), nan)
 
     def _decide(self, power: float, feat: BlockFeatures, rr: rg.RidgeResult, floor: float, ref: int
                 ) -> tuple[int, float, float, float, float, float]:

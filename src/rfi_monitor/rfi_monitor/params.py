@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from rfi_monitor.classifier import ClassifierParams
+from rfi_monitor.integration import IntegrationParams
 from rfi_monitor.ridge import RidgeParams
 from rfi_monitor.sweep_analysis import SweepAnalysisParams
 from rfi_monitor.sweep_period import SweepPeriodParams
@@ -100,6 +101,8 @@ class RfiMonitorParams:
             ``"kalman"`` (Kang et al.'s per-sample tracker with the switches of the ``Method`` table;
             ``paper_method()`` selects it).
         ridge: RidgeParams of the "stft" estimator.
+        integration: IntegrationParams of the "stft" estimator's evidence over blocks (rfi_monitor.integration:
+            a weak stationary CW or chirp that no single block shows; window_s 0: off).
         noise_floor_dbfs: the front end's thermal noise power per real component relative to
             full_scale^2 (as passed to ``process``), dB (e.g. -30: rms 3.2 % of full scale); 0: not
             documented (noise at full scale is no working front end). Used as the J/N reference when
@@ -170,6 +173,7 @@ class RfiMonitorParams:
     ridge: RidgeParams = field(default_factory=RidgeParams)
     noise_floor_dbfs: float = 0.0
     clip_lower_bound_fraction: float = 1e-3
+    integration: IntegrationParams = field(default_factory=IntegrationParams)
 
     def __post_init__(self) -> None:
         if self.estimator not in ESTIMATORS:

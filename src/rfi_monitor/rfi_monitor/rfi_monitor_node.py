@@ -129,6 +129,7 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
 from rfi_monitor.classifier import ClassifierParams
+from rfi_monitor.integration import IntegrationParams
 from rfi_monitor.monitor import NON_FINITE, JammerEstimate, RfiMonitor, RfiMonitorParams
 from rfi_monitor.params import ESTIMATORS
 from rfi_monitor.ridge import RidgeParams
@@ -199,7 +200,7 @@ SAMPLE_DTYPES = {IfSamples.INT8: np.dtype('<i1'), IfSamples.INT16: np.dtype('<i2
 
 NESTED = (('tracker', 'tracker_', TrackingFilterParams), ('sweep', 'sweep_', SweepPeriodParams),
           ('classifier', 'classifier_', ClassifierParams), ('analysis', 'analysis_', SweepAnalysisParams),
-          ('ridge', 'ridge_', RidgeParams))
+          ('ridge', 'ridge_', RidgeParams), ('integration', 'integration_', IntegrationParams))
 """(RfiMonitorParams field, node parameter prefix, dataclass) of the core's nested parameter groups."""
 
 _M = RfiMonitorParams()
@@ -208,6 +209,7 @@ _S = _M.sweep
 _C = _M.classifier
 _A = _M.analysis
 _R = _M.ridge
+_I = _M.integration
 
 
 @dataclass(frozen=True)
@@ -299,6 +301,30 @@ class MonitorNodeParams:
     ridge_min_strength: float = parameter(
         _R.min_strength, 'Smallest normalised autocorrelation peak of a periodic sweep (stft), (0, 1].',
         minimum=1e-6, maximum=1.0)
+    integration_window_s: float = parameter(
+        _I.window_s, 'stft: evidence of the blocks stamped within this many seconds is summed to find a weak '
+        'stationary CW or chirp that no single block shows, s; 0: off.', minimum=0.0, maximum=60.0)
+    integration_false_alarm_per_block: float = parameter(
+        _I.false_alarm_per_block, 'stft: false-alarm probability per block of each integrated statistic under '
+        'Gaussian noise (sets the thresholds), (0, 0.1].', minimum=1e-12, maximum=0.1)
+    integration_frame_length_s: float = parameter(
+        _I.frame_length_s, 'stft: frame of the integrated chirp statistic, s (rounded to a power of two of '
+        '8..128 samples).', minimum=1e-9, maximum=1.0)
+    integration_max_period_s: float = parameter(
+        _I.max_period_s, 'stft: longest sweep period of the integrated chirp statistic, s.', minimum=1e-7,
+        maximum=1.0)
+    integration_max_multiples: int = parameter(
+        _I.max_multiples, 'stft: most multiples of a candidate sweep period summed by the integrated chirp '
+        'statistic.', minimum=2, maximum=4096)
+    integration_nfft: int = parameter(
+        _I.nfft, 'stft: Welch frame of the integrated CW statistic, samples (power of two >= 64).', minimum=64,
+        maximum=2**20)
+    integration_smooth_bins: int = parameter(
+        _I.smooth_bins, 'stft: running median (bins, odd >= 5) that is the integrated CW statistic\'s noise '
+        'reference.', minimum=5, maximum=4095)
+    integration_decide_interval_s: float = parameter(
+        _I.decide_interval_s, 'stft: the integrated statistics are tested at most once per this many seconds of '
+        'stamps (speed); blocks in between get the last decision, s; 0: every block.', minimum=0.0, maximum=10.0)
     chirp_correction: bool = parameter(
         _M.chirp_correction, 'Correct the three-sample IF measurement for the sweep (Kang et al., eq. 10; '
         'real samples only).')

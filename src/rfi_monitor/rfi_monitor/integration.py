@@ -1,0 +1,452 @@
+"""Evidence integrated over blocks: weak stationary jammers that no single block shows (issue 14 item 5).
+
+Pure module (no ROS). ``RfiMonitor`` (the "stft" estimator) feeds every analysed block to an
+``Integrator`` and asks it for a decision when the block alone reports NONE. The integrator keeps,
+summed over the blocks of the last ``window_s`` seconds (stamps, not the wall clock), two statistics
+that do not depend on where a block starts, so that blocks need not be contiguous (the demo's 1 ms
+snapshots once a second are integrated as well as a continuous stream):
+
+* **CW**: a tone of at least ``min_cw_jn_db`` over the whole band's noise (front-end spurs, -11 to -20 dB
+  in the real clean captures, are significant but no jammer), significant in the Welch PSD (the
+  classifier's Welch PSD of the block at ``nfft``, all frames) summed over blocks. Under
+  Gaussian noise each bin of the sum over ``K`` independent Hann frames is ``N_b chi2(2K) / 2K``
+  (real input: the DC and Nyquist bins ``chi2(K) / K``). The reference ``N_b`` is the summed PSD's
+  own running median over ``smooth_bins`` bins (a tone never enters it). A bin is a tone when
+  ``P_b / N_b`` exceeds the ``1 - alpha / B`` quantile of ``Gamma(K, 1/K)`` (Bonferroni over the
+  ``B`` bins: a false alarm per block of at most ``alpha``; the median's own scatter, ~1.25 /
+  sqrt(K smooth_bins), taken at 4 sigma, multiplies the threshold).
+* **CHIRP** (any periodic sweep): the 2-D autocorrelation over frames of the short-time spectrum,
+  ``r(l) = sum_t sum_b E(t, b) E(t + l, b)`` with ``E = |X| / mean_t |X| - 1`` per bin (amplitudes: lighter
+  tails than powers) (zero mean per bin
+  and block: a CW and the front end's shape drop out), summed over blocks, together with its variance
+  under noise ``(T - l) sum_bb' C_bb'^2`` (``C``: the block's covariance between bins, measured, so the
+  window's leakage between bins and a jammer's own variance are accounted for). A periodic sweep puts
+  the same spectrum at every multiple of its period, so the statistic is the comb
+  ``Z(p) = sum_k r(k p) / sqrt(sum_k var r(k p))`` (``k = 1..K_p``, up to ``max_multiples``, lags
+  rounded to frames; candidate periods on a grid of ``0.5 / K_p`` frames: the folding of the spectrogram
+  at the period, written with the autocorrelation so that blocks add without knowing their sweep phase).
+  Under noise ``Z`` is standard normal per candidate (lags >= 2 frames: Hann frames at hop L/2 do not
+  overlap); the threshold is ``Phi^-1(1 - alpha / M)`` for ``M`` candidates (Bonferroni).
+
+The frame length of the chirp statistic is fixed per stream (``frame_length_s`` of the sample rate,
+a power of two in 8..128): the sweep must move by less than about one bin per frame (a sweep of k
+cycles/sample^2 moves k L^2 bins per frame: 0.7 at the paper's 1e12 Hz/s, 38.192 MS/s, L = 32).
+
+The window restarts on a change of sample rate, IF or real/complex (``reset``), when the monitor's
+single-block analysis stops seeing a jammer it saw in the block before (``restart``: a jammer switched
+off is not reported on for window_s), and drops blocks older than ``window_s`` (a stamp that goes
+backwards restarts it). A jammer too weak for any single block that switches off is still reported
+until its evidence leaves the window (at most ``window_s``). The decision says how many blocks and
+seconds it rests on (``IntegratedDecision``).
+
+Example
+-------
+>>> import numpy as np
+>>> integ = Integrator(IntegrationParams())
+>>> x = np.random.default_rng(0).standard_normal(38192)
+>>> d = integ.add(x, False, 38.192e6, stamp_ns=0)
+>>> d.type   # noise: NONE
+0
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import fft as sp_fft
+from scipy import stats
+from scipy.ndimage import median_filter
+
+from rfi_monitor import ridge as rg
+from rfi_monitor.classifier import welch_psd
+
+NONE, CW, CHIRP = 0, 1, 2
+"""Types, identical to classifier.NONE / CW / CHIRP (rfi_msgs/JammerState)."""
+
+
+@dataclass(frozen=True)
+class IntegrationParams:
+    """Parameters of the integration over blocks (module docstring).
+
+    Attributes:
+        window_s: evidence of the blocks stamped within the last window_s seconds is summed, s (0: off).
+        false_alarm_per_block: alpha, the false-alarm probability of each statistic per block under
+            Gaussian noise (Bonferroni over bins / candidate periods), (0, 0.1].
+        frame_length_s: frame of the chirp statistic, s of samples (rounded to a power of two, 8..128).
+        max_period_s: longest sweep period searched, s.
+        max_multiples: most multiples of a candidate period summed (sets the grid: 0.5 / K frames).
+        nfft: frame length of the CW statistic (the classifier's Welch frames), samples.
+        smooth_bins: width of the running median that is the CW statistic's noise reference, odd >= 5.
+        decide_interval_s: the statistics are tested at most once per this many seconds of stamps (speed: the
+            test costs about as much as adding a block) unless the window's frames grew by 10 % since the last
+            test (a young window is tested at every block); blocks in between get the last decision, s (0: every
+            block). The first block of a window is always tested.
+    """
+
+    window_s: float = 1.0
+    false_alarm_per_block: float = 1e-4
+    frame_length_s: float = 1e-6
+    max_period_s: float = 100e-6
+    max_multiples: int = 128
+    nfft: int = 1024
+    smooth_bins: int = 31
+    decide_interval_s: float = 0.01
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.window_s) and self.window_s >= 0):
+            raise ValueError("window_s must be finite and >= 0")
+        if not (0 < self.false_alarm_per_block <= 0.1):
+            raise ValueError("false_alarm_per_block must be in (0, 0.1]")
+        if not (math.isfinite(self.frame_length_s) and self.frame_length_s > 0):
+            raise ValueError("frame_length_s must be > 0")
+        if not (math.isfinite(self.max_period_s) and self.max_period_s > 0):
+            raise ValueError("max_period_s must be > 0")
+        if self.max_multiples < 2:
+            raise ValueError("max_multiples must be >= 2")
+        if self.nfft < 64 or self.nfft & (self.nfft - 1):
+            raise ValueError("nfft must be a power of two >= 64")
+        if self.smooth_bins < 5 or self.smooth_bins % 2 == 0:
+            raise ValueError("smooth_bins must be odd and >= 5")
+        if not (math.isfinite(self.decide_interval_s) and self.decide_interval_s >= 0):
+            raise ValueError("decide_interval_s must be finite and >= 0")
+
+
+@dataclass(frozen=True)
+class IntegratedDecision:
+    """Decision from the evidence of the window.
+
+    Attributes:
+        type: NONE, CW or CHIRP.
+        blocks: blocks summed; window_s: stamp span they cover (first to last block start + its length), s.
+        cw_score: largest normalised PSD bin over its threshold (> 1: a tone); cw_frequency: its bin centre,
+            cycles/sample (fftshift order for complex input, -0.5..0.5; real 0..0.5).
+        chirp_z: largest comb statistic, standard deviations; chirp_threshold: its threshold;
+            period_samples: the candidate period that gave it (NaN unless CHIRP).
+        excess_db: the strongest bin's tone power (5 bins' excess over the reference) over the noise of the whole
+            band, dB (-inf: none).
+    """
+
+    type: int
+    blocks: int
+    window_s: float
+    cw_score: float
+    cw_frequency: float
+    chirp_z: float
+    chirp_threshold: float
+    period_samples: float
+    excess_db: float
+
+
+NEIGHBOUR_BINS = 3
+"""Bin covariances summed for the variance of the chirp statistic: offsets 0..this (a Hann window leaks into the
+next bin, little beyond; a bin's correlation with far bins under noise is zero)."""
+MIN_CHIRP_FRAMES = 512
+"""The chirp statistic decides once the window holds this many frames: a sum of products of few frames has heavier
+tails than the normal law its threshold assumes (measured on Gaussian noise: 1024-sample blocks of 12 MS/s real IF,
+127 frames each, exceeded the alpha = 1e-4 threshold in 1 of 3,000 single blocks)."""
+COARSE_MULTIPLES = 16
+"""Multiples summed by the coarse comb that selects the candidates of the fine one."""
+FINE_CANDIDATES = 12
+"""Best coarse candidates refined with ``max_multiples`` multiples."""
+
+
+def _comb_z(r: np.ndarray, v: np.ndarray, idx: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Comb statistic Z(p) per candidate row (module docstring)."""
+    num = np.where(mask, r[idx], 0.0).sum(axis=1)
+    den = np.sqrt(np.where(mask, v[idx], 0.0).sum(axis=1))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(den > 0, num / den, -math.inf)
+
+
+class _BlockStats:
+    __slots__ = ("stamp_ns", "n", "psd_sum", "psd_frames", "power", "r", "var", "frames")
+
+    def __init__(self, stamp_ns: int, n: int, psd_sum: np.ndarray, psd_frames: int, power: float,
+                 r: np.ndarray, var: np.ndarray, frames: int) -> None:
+        self.stamp_ns, self.n = stamp_ns, n
+        self.psd_sum, self.psd_frames, self.power = psd_sum, psd_frames, power
+        self.r, self.var, self.frames = r, var, frames
+
+
+def frame_length(fs: float, par: IntegrationParams) -> int:
+    """Frame length of the chirp statistic at sample rate fs (module docstring)."""
+    L = 2 ** int(round(math.log2(max(fs * par.frame_length_s, 1.0))))
+    return int(min(max(L, 8), 128))
+
+
+def spectral_autocorrelation(x: np.ndarray, cplx: bool, L: int, max_lag: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """(r, var, T): the 2-D autocorrelation r(l), l = 0..max_lag, of E = |X| / mean_t |X| - 1 and its variance under
+    noise (module docstring), T frames of L samples at hop L / 2."""
+    S, _ = rg.stft_power(x, L, cplx)
+    A = np.sqrt(S)          # amplitudes: lighter tails than powers (Rayleigh, not exponential) at little loss
+    T = A.shape[0]
+    m = A.mean(axis=0, dtype=np.float64)
+    E = A / np.maximum(m, 1e-300).astype(np.float32) - np.float32(1.0)
+    if not cplx and E.shape[1] > 3:
+        E = E[:, 1:-1]              # DC and Nyquist of a real signal: one degree of freedom
+    nf = sp_fft.next_fast_len(2 * T, real=True)
+    F = sp_fft.rfft(E, nf, axis=0, overwrite_x=False)
+    v = F.view(np.float32)
+    pw = (v[:, 0::2] ** 2 + v[:, 1::2] ** 2).sum(axis=1, dtype=np.float64)
+    R = sp_fft.irfft(pw, nf)[: max_lag + 1]
+    # sum over bin pairs of their covariance squared: the window's leakage correlates a bin with its next few
+    # neighbours only (element-wise products: no matrix product, which would go to a multi-threaded BLAS)
+    B = E.shape[1]
+    q = 0.0
+    for d in range(min(NEIGHBOUR_BINS + 1, B)):
+        c = np.einsum("tb,tb->b", E[:, : B - d], E[:, d:], dtype=np.float64) / T if d else \
+            np.einsum("tb,tb->b", E, E, dtype=np.float64) / T
+        q += (1.0 if d == 0 else 2.0) * float((c * c).sum())
+    lags = np.arange(max_lag + 1)
+    var = np.maximum(T - lags, 0) * q
+    return R, var, T
+
+
+class Integrator:
+    """Sums block evidence over a time window and decides (module docstring).
+
+    Args:
+        params: IntegrationParams.
+        min_cw_jn_db: a significant tone is a CW only from this J/N, dB (the classifier's ``detect_jn_db``: the
+            spurs of real front ends, -11 to -20 dB in the clean captures, are significant in a 1 s sum but
+            are no jammer).
+    """
+
+    def __init__(self, params: IntegrationParams = IntegrationParams(), min_cw_jn_db: float = -6.0) -> None:
+        self.params = params
+        self.min_cw_jn_db = float(min_cw_jn_db)
+        self._blocks: deque[_BlockStats] = deque()
+        self._key: tuple[float, bool] | None = None
+        self._grids: dict[tuple[int, int, int, int], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._cw_thr: dict[tuple[int, int, bool], np.ndarray] = {}
+        self._med: dict[int, float] = {}
+        self._chirp_thr: dict[tuple[int, int, int, int], float] = {}
+        self._clear()
+
+    @property
+    def enabled(self) -> bool:
+        return self.params.window_s > 0
+
+    def reset(self) -> None:
+        """Forget the window (a change of sample rate, IF or kind)."""
+        self._clear()
+        self._key = None
+
+    def restart(self) -> None:
+        """Drop the evidence gathered so far (the stream stays the same): the monitor calls it when a jammer that
+        one block showed is gone from a block, so that its evidence does not outlive it."""
+        self._clear()
+
+    def _clear(self) -> None:
+        self._last: IntegratedDecision | None = None
+        self._last_stamp = 0
+        self._last_frames = 0
+        self._blocks.clear()
+        self._sum_psd: np.ndarray | None = None
+        self._sum_r: np.ndarray | None = None
+        self._sum_v: np.ndarray | None = None
+        self._sum_k = 0
+
+    def _push(self, b: _BlockStats) -> None:
+        if self._sum_psd is None or self._sum_r is None or self._sum_v is None:
+            self._sum_psd, self._sum_r, self._sum_v = b.psd_sum.copy(), b.r.copy(), b.var.copy()
+        else:
+            self._sum_psd += b.psd_sum
+            self._sum_r += b.r
+            self._sum_v += b.var
+        self._sum_k += b.psd_frames
+        self._blocks.append(b)
+
+    def _pop(self) -> None:
+        b = self._blocks.popleft()
+        assert self._sum_psd is not None and self._sum_r is not None and self._sum_v is not None
+        self._sum_psd -= b.psd_sum
+        self._sum_r -= b.r
+        self._sum_v -= b.var
+        self._sum_k -= b.psd_frames
+
+    def _comb_grid(self, lmin: int, lmax: int, lag_limit: int, kmax: int
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(periods (M,), lags (M, kmax), mask (M, kmax)): candidate periods from lmin to lmax frames on a grid of
+        0.5 / K_p frames, K_p = min(kmax, lag_limit // p) multiples (cached)."""
+        key = (lmin, lmax, lag_limit, kmax)
+        hit = self._grids.get(key)
+        if hit is not None:
+            return hit
+        periods: list[float] = []
+        p = float(lmin)
+        while p <= lmax:
+            periods.append(p)
+            p += 0.5 / max(2, min(kmax, int(lag_limit // p)))
+        P = np.asarray(periods)
+        out = self._comb_lags(P, lag_limit, kmax)
+        self._grids[key] = out
+        return out
+
+    @staticmethod
+    def _comb_lags(P: np.ndarray, lag_limit: int, kmax: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        ks = np.arange(1, kmax + 1)
+        Kp = np.clip((lag_limit // P).astype(np.int64), 2, kmax)
+        idx = np.rint(P[:, None] * ks[None, :]).astype(np.int64)
+        mask = (ks[None, :] <= Kp[:, None]) & (idx <= lag_limit)
+        return P, np.where(mask, idx, 0), mask
+
+    @staticmethod
+    def _fine_count(lmin: int, lmax: int, lag_limit: int, kmax: int) -> float:
+        """Candidates of the fine grid (0.5 / K_p frames, K_p up to kmax) over lmin..lmax: the Bonferroni count."""
+        p = np.linspace(lmin, lmax, 20001)
+        K = np.clip(lag_limit // p, 2, kmax)
+        return float(np.trapezoid(2.0 * K, p)) + 1.0
+
+    def add(self, x: np.ndarray, cplx: bool, fs: float, stamp_ns: int) -> IntegratedDecision:
+        """Add one block (finite samples, float64 or complex128) and decide on the window.
+
+        Args:
+            x: samples, shape (n,).
+            cplx: complex samples.
+            fs: sample rate, Hz.
+            stamp_ns: time of the block's first sample, ns.
+
+        Returns:
+            IntegratedDecision.
+        """
+        par = self.params
+        key = (float(fs), bool(cplx))
+        if key != self._key:
+            self.reset()
+            self._key = key
+        if self._blocks and stamp_ns < self._blocks[-1].stamp_ns:
+            self._clear()
+        L = frame_length(fs, par)
+        hop = L // 2
+        lmin = 4
+        T_blk = (x.size - L) // hop + 1
+        lag_limit = int(0.75 * T_blk)
+        lmax = min(int(par.max_period_s * fs / hop), lag_limit // 4)
+        nfft = min(par.nfft, 1 << int(math.floor(math.log2(max(x.size, 64)))))
+        psd, frames = welch_psd(x, nfft, 1 << 30)
+        power = float(psd.sum())
+        r, var, T = spectral_autocorrelation(x, cplx, L, lag_limit)
+        if self._blocks and (self._blocks[-1].psd_sum.size != psd.size or self._blocks[-1].r.size != r.size):
+            self._clear()
+        self._push(_BlockStats(int(stamp_ns), x.size, psd * frames, frames, power, r, var, T))
+        horizon = int(stamp_ns) - int(round(par.window_s * 1e9))
+        while len(self._blocks) > 1 and self._blocks[0].stamp_ns <= horizon:
+            self._pop()
+        n_frames = sum(b.frames for b in self._blocks)
+        if (self._last is not None and len(self._blocks) > 1 and n_frames < 1.1 * self._last_frames
+                and int(stamp_ns) - self._last_stamp < int(round(par.decide_interval_s * 1e9))):
+            return dataclasses.replace(self._last, blocks=len(self._blocks))
+        self._last = self._decide(cplx, fs, lmin, lmax, lag_limit)
+        self._last_stamp = int(stamp_ns)
+        self._last_frames = n_frames
+        return self._last
+
+    def _median_ratio(self, K: int) -> float:
+        """Median over mean of Gamma(K, 1/K) (cached)."""
+        v = self._med.get(int(K))
+        if v is None:
+            v = float(stats.gamma.median(float(K), scale=1.0 / float(K)))
+            if len(self._med) > 256:
+                self._med.clear()
+            self._med[int(K)] = v
+        return v
+
+    def _cw_threshold(self, K: int, B: int, cplx: bool) -> np.ndarray:
+        """Per-bin threshold of P_b / N_b (module docstring), cached per (K, B, kind)."""
+        key = (int(K), int(B), bool(cplx))
+        thr = self._cw_thr.get(key)
+        if thr is None:
+            alpha = float(self.params.false_alarm_per_block)
+            dof = np.full(B, float(K))
+            if not cplx:
+                dof[0] = dof[-1] = 0.5 * K
+            thr_g = stats.gamma.isf(alpha / B, dof, scale=1.0 / dof)
+            # the reference's own scatter (a median of smooth_bins bins of the same chi-square: 1.2533 / sqrt(K w)
+            # relative, 1 sigma), taken at 4 sigma as a relative error of the reference
+            rel_ref = 1.2533 / math.sqrt(K * self.params.smooth_bins)
+            thr = thr_g * (1.0 + 4.0 * rel_ref)
+            if len(self._cw_thr) > 64:
+                self._cw_thr.clear()
+            self._cw_thr[key] = thr
+        return thr
+
+    def _decide(self, cplx: bool, fs: float, lmin: int, lmax: int, lag_limit: int) -> IntegratedDecision:
+        par = self.params
+        alpha = float(par.false_alarm_per_block)
+        bl = list(self._blocks)
+        nb = len(bl)
+        span = (bl[-1].stamp_ns - bl[0].stamp_ns) * 1e-9 + bl[-1].n / fs
+        # --- CW: summed PSD against its running median --------------------------------------
+        assert self._sum_psd is not None and self._sum_r is not None and self._sum_v is not None
+        P = self._sum_psd
+        K = self._sum_k
+        Pm = P
+        if not cplx and P.size > 3:
+            Pm = P.copy()
+            Pm[0], Pm[-1] = P[1], P[-2]      # DC and Nyquist (one degree of freedom) do not enter the median
+        # the running median of a Gamma(K, 1/K) variable is its median, not its mean (ln 2 at K = 1): corrected
+        ref = median_filter(Pm, size=par.smooth_bins, mode="wrap" if cplx else "reflect") / self._median_ratio(K)
+        ref = np.maximum(ref, 1e-300)
+        ratio = P / ref
+        B = P.size
+        thr = self._cw_threshold(K, B, cplx)
+        score = ratio / thr
+        if not cplx:
+            score[0] = score[-1] = 0.0     # DC and Nyquist of a real IF: outside any front end's pass band
+        j = int(np.argmax(score))
+        cw_score = float(score[j])
+        cw_f = (j - B // 2) / B if cplx else j / (2 * (B - 1))
+        # the tone's power: the excess over the reference of its bin and two on either side (a Hann window puts
+        # 0.4-0.67 of a tone in its strongest bin), over the noise of the whole band
+        lo_j, hi_j = max(j - 2, 0), min(j + 3, B)
+        excess = float(np.sum(P[lo_j:hi_j] - ref[lo_j:hi_j]) / max(float(ref.sum()), 1e-300))
+        # --- CHIRP: comb over the summed 2-D autocorrelation ---------------------------------
+        chirp_z, chirp_thr, per = -math.inf, math.inf, math.nan
+        frames = sum(b.frames for b in bl)
+        if lmax >= lmin + 2 and frames >= MIN_CHIRP_FRAMES:
+            r, v = self._sum_r, self._sum_v
+            kf = int(par.max_multiples)
+            kc = min(COARSE_MULTIPLES, kf)
+            # coarse comb (kc multiples) over all periods, then the fine one (kf multiples, a finer grid) around
+            # the best coarse candidates; the threshold counts every fine candidate over the whole range
+            # (Bonferroni), so evaluating only some of them keeps the false-alarm rate below alpha
+            periods, idx, mask = self._comb_grid(lmin, lmax, lag_limit, kc)
+            zc = _comb_z(r, v, idx, mask)
+            order = np.argsort(zc)[::-1]
+            top: list[int] = []
+            for i in order[: 20 * FINE_CANDIDATES]:
+                if all(abs(periods[i] - periods[j]) > 0.5 for j in top):
+                    top.append(int(i))
+                    if len(top) == FINE_CANDIDATES:
+                        break
+            cand: list[float] = []
+            for i in top:
+                p0 = float(periods[i])
+                k0 = max(2, min(kc, int(lag_limit // p0)))
+                k1 = max(2, min(kf, int(lag_limit // p0)))
+                cand.extend(np.arange(p0 - 0.5 / k0, p0 + 0.5 / k0 + 1e-12, 0.5 / k1).tolist())
+            Pf = np.asarray([c for c in cand if lmin <= c <= lmax] or [float(periods[top[0]])])
+            _, idf, mf = self._comb_lags(Pf, lag_limit, kf)
+            zf = _comb_z(r, v, idf, mf)
+            ck = (lmin, lmax, lag_limit, kf)
+            if ck not in self._chirp_thr:
+                self._chirp_thr[ck] = float(stats.norm.isf(alpha / self._fine_count(lmin, lmax, lag_limit, kf)))
+            chirp_thr = self._chirp_thr[ck]
+            i = int(np.argmax(zf))
+            chirp_z = float(zf[i])
+            if chirp_z > chirp_thr:
+                per = float(Pf[i]) * (frame_length(fs, par) // 2)
+        if math.isfinite(per) and chirp_z > chirp_thr:
+            jtype = CHIRP
+        elif cw_score > 1.0 and excess > 0 and 10 * math.log10(excess) >= self.min_cw_jn_db:
+            jtype = CW
+        else:
+            jtype = NONE
+        return IntegratedDecision(jtype, nb, float(span), cw_score, float(cw_f), chirp_z, chirp_thr,
+                                  per if jtype == CHIRP else math.nan,
+                                  10 * math.log10(excess) if excess > 0 else -math.inf)

@@ -1,0 +1,150 @@
+"""Tests of the evidence integrated over blocks (rfi_monitor.integration, issue 14 item 5).
+
+Weak stationary jammers that no single block shows are found from the sums over the window; noise and the
+real clean captures give NONE; the window restarts on a change of sample rate; blocks need not be contiguous
+(the demo's 1 ms snapshots once a second). The thresholds come from the noise statistics (module docstring),
+not from these cases.
+"""
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rfi_monitor.classifier import CHIRP, CW, NONE
+from rfi_monitor.integration import IntegrationParams, Integrator, frame_length
+from rfi_monitor.monitor import RfiMonitor, RfiMonitorParams
+from rfi_sim.if_signal import ChirpJammer, FrontEndConfig, IfSimulator, js_for_jn_db
+
+DATA = Path(__file__).parent / "data"
+
+
+def _noise(rng, n, cplx):
+    return (rng.standard_normal(n) + 1j * rng.standard_normal(n)) / math.sqrt(2) if cplx else rng.standard_normal(n)
+
+
+@pytest.mark.parametrize("fs,n,cplx", [(4e6, 1024, True), (12e6, 12000, False), (10e6, 10000, True)])
+def test_noise_stays_below_both_thresholds(fs, n, cplx):
+    """Gaussian noise, 300 contiguous blocks (the window fills): no decision, and the statistics stay well below
+    their thresholds (a mis-normalised statistic would drift up as the window grows)."""
+    rng = np.random.default_rng(11)
+    integ = Integrator(IntegrationParams())
+    margins = []
+    for b in range(300):
+        d = integ.add(_noise(rng, n, cplx), cplx, fs, int(b * n / fs * 1e9))
+        assert d.type == NONE
+        assert d.cw_score < 1.0
+        if math.isfinite(d.chirp_z):
+            margins.append(d.chirp_threshold - d.chirp_z)
+    assert d.blocks == 300
+    assert margins and min(margins) > 0.5
+
+
+def test_demo_chirp_snapshots_once_a_second():
+    """The demo's chirp at J/S 6 dB (J/N -13 dB over the 38.192 MS/s real block, the paper's 1e12 Hz/s sweep):
+    1 ms snapshots 1 s apart (a gap in sample index between them) are reported as CHIRP with its period."""
+    fe = FrontEndConfig(noise_bandwidth_hz=2e6)
+    jam = ChirpJammer(js_db=6.0)
+    sim = IfSimulator(fe, (jam,), seed=1)
+    mon = RfiMonitor(RfiMonitorParams())
+    ests = []
+    for k in range(6):
+        blk = sim.generate(38192)
+        assert abs(float(blk.truth.jn_block_db[0]) + 13.0) < 0.5
+        ests.append(mon.process(blk.counts, fe.sample_rate_hz, fe.intermediate_frequency_hz,
+                                blk.first_sample_index + k * 38_192_000, k * 1_000_000_000))
+        sim.generate(0)
+    types = [e.type for e in ests]
+    assert types.count(CHIRP) >= 5, types
+    periods = [e.sweep_period_s for e in ests if e.type == CHIRP]
+    assert abs(float(np.median(periods)) / jam.sweep_period_s - 1.0) < 0.01
+
+
+def test_weak_chirp_at_the_paper_front_end_continuous_stream():
+    """J/N -10 dB saw-tooth at 38.192 MS/s real (one block alone shows it at no J/N below about 0 dB there):
+    CHIRP within the first 3 blocks and in every block after, period within 1 %."""
+    fe = FrontEndConfig()
+    jam = ChirpJammer(js_db=js_for_jn_db(fe, -10.0))
+    sim = IfSimulator(fe, (jam,), seed=4)
+    mon = RfiMonitor(RfiMonitorParams())
+    types, periods = [], []
+    for b in range(8):
+        blk = sim.generate(38192)
+        e = mon.process(blk.counts, fe.sample_rate_hz, fe.intermediate_frequency_hz, blk.first_sample_index,
+                        b * 1_000_000)
+        types.append(e.type)
+        periods.append(e.sweep_period_s)
+    assert CHIRP in types[:3] and all(t == CHIRP for t in types[3:]), types
+    assert abs(float(np.median(periods[3:])) / jam.sweep_period_s - 1.0) < 0.01
+    # the single-block estimator alone does not see it (the integration made the difference)
+    off = RfiMonitor(RfiMonitorParams(integration=IntegrationParams(window_s=0.0)))
+    sim = IfSimulator(fe, (jam,), seed=4)
+    t_off = []
+    for b in range(8):
+        blk = sim.generate(38192)
+        t_off.append(off.process(blk.counts, fe.sample_rate_hz, fe.intermediate_frequency_hz,
+                                 blk.first_sample_index, b * 1_000_000).type)
+    assert t_off.count(CHIRP) <= 2, t_off
+
+
+def test_integrated_cw_needs_significance_and_the_detection_level():
+    """A tone at J/N -5 dB in 1024-sample complex blocks (one Welch frame each): CW from the window, at its
+    frequency; the same tone at J/N -12 dB (as the clean captures' front-end spurs) is significant but no jammer."""
+    fs = 4e6
+    for jn_db, want in ((-5.0, CW), (-12.0, NONE)):
+        rng = np.random.default_rng(3)
+        integ = Integrator(IntegrationParams(), min_cw_jn_db=-6.0)
+        amp = math.sqrt(10 ** (jn_db / 10))
+        got = []
+        for b in range(40):
+            t = np.arange(b * 1024, (b + 1) * 1024) / fs
+            x = _noise(rng, 1024, True) + amp * np.exp(2j * math.pi * 0.61e6 * t)
+            got.append(integ.add(x, True, fs, int(b * 256_000)))
+        assert got[-1].type == want, (jn_db, got[-1])
+        assert got[-1].cw_score > 1.0       # significant either way
+        assert abs(got[-1].cw_frequency * fs - 0.61e6) < fs / 1024
+        assert abs(got[-1].excess_db - jn_db) < 1.5
+
+
+def test_window_restarts_on_rate_change_and_drops_old_blocks():
+    rng = np.random.default_rng(5)
+    integ = Integrator(IntegrationParams(window_s=0.01))
+    for b in range(5):
+        d = integ.add(_noise(rng, 4000, True), True, 4e6, b * 1_000_000)
+    assert d.blocks == 5
+    d = integ.add(_noise(rng, 4000, True), True, 4e6, 100_000_000)      # 95 ms later: the old ones are out
+    assert d.blocks == 1
+    d = integ.add(_noise(rng, 12000, False), False, 12e6, 101_000_000)  # another rate and kind
+    assert d.blocks == 1
+    d = integ.add(_noise(rng, 12000, False), False, 12e6, 50_000_000)   # a stamp going back restarts it
+    assert d.blocks == 1
+
+
+def test_frame_length_and_parameters():
+    p = IntegrationParams()
+    assert frame_length(38.192e6, p) == 32 and frame_length(4e6, p) == 8 and frame_length(1e9, p) == 128
+    for bad in (dict(window_s=-1.0), dict(false_alarm_per_block=0.0), dict(max_multiples=1), dict(nfft=100),
+                dict(smooth_bins=4)):
+        with pytest.raises(ValueError):
+            IntegrationParams(**bad)
+
+
+def test_real_clean_captures_stay_none_with_a_full_window():
+    """The project's copies of the clean captures, every block in order with consecutive stamps (all in one
+    window): NONE throughout, and the integrated statistics were evaluated over all blocks."""
+    caps = [(np.fromfile(DATA / "pocketsdr_L1_4MHz_IQ_10ms.bin", dtype=np.int8).astype(np.float64), 4e6, 0.0,
+             True, 2000),
+            (np.fromfile(DATA / "pocketsdr_L1_12MHz_I_10ms.bin", dtype=np.int8).astype(np.float64), 12e6, 3e6,
+             False, 3000),
+            (np.fromfile(DATA / "gnsssdr_cttc_4Msps_4ms.dat", dtype=np.complex64).astype(np.complex128), 4e6, 0.0,
+             True, 2000)]
+    for v, fs, fif, cplx, block in caps:
+        x = v[0::2] + 1j * v[1::2] if (cplx and not np.iscomplexobj(v)) else v
+        mon = RfiMonitor()
+        nb = x.size // block
+        types = [mon.process(x[k * block:(k + 1) * block], fs, fif, k * block, int(k * block / fs * 1e9)).type
+                 for k in range(nb)]
+        assert types == [NONE] * nb
+        assert mon.last_integration is not None and mon.last_integration.blocks == nb
+        assert mon.last_integration.cw_score > 0
