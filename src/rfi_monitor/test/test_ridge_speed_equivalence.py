@@ -6,12 +6,13 @@ the STFT power in place). Both run on the same inputs here: the swept-jammer sha
 test_stft_estimator.py (CASES) and the real clean captures in data/, block by block, the whole block and
 the tail analysed while tracking (RidgeParams.tracking_samples), and through the whole monitor.
 
-Tolerances: integers, flags and shape codes exactly; floats within 1e-9 relative (plus 1e-15 absolute
+Tolerances: integers, flags and shape codes exactly; floats within 1e-6 relative (plus 1e-15 absolute
 near zero), NaN where the reference has NaN. The arithmetic was kept in the same precision and order
-(float32 quantile, medians, threshold; float64 masked sums in frame order), so on this machine the
-results are bit-identical; the tolerance only allows for a compiler that orders the float64 sums
-differently. Monitor outputs: type and shape exactly, J/N within 1e-6 dB, frequency, rate, period, band
-within 1e-9 relative.
+(float32 quantile, medians and threshold; float64 masked sums in frame order; the float32 phasor sums and
+the float64 period sum in numpy's pairwise order), so on the development machine the results are
+bit-identical; the tolerance allows for a numpy or CPU that sums float32 in another order (~1e-7
+relative on the phasor, less on what is derived from it). Monitor outputs: type and shape exactly, J/N
+within 1e-6 dB, frequency, rate, period, band within 1e-6 relative.
 """
 
 import dataclasses
@@ -40,7 +41,7 @@ def _load(name: str, path: Path):
 old = _load("rfi_monitor_ridge_reference", HERE / "ridge_reference.py")
 shapes = _load("rfi_monitor_stft_cases", HERE / "test_stft_estimator.py")
 
-REL = 1e-9
+REL = 1e-6
 
 
 def _close(a: float, b: float, rel: float = REL) -> bool:
