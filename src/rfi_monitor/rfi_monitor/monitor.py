@@ -240,6 +240,11 @@ MIN_BLOCK_POWER = 1e-60
 computed in single precision, whose numbers lose precision below 1.2e-38 (subnormal) and end at 1.4e-45;
 no unit a front end reports in (volts, full scale, counts) comes near."""
 
+APERIODIC_MARGIN_DB = 3.0
+"""A moving ridge without a period in the block (ridge: present in half the frames, coherent, over >= 4 bins) is a
+chirp only from ``detect_jn_db`` minus this, dB (the in-block J/N of sweeps reads up to 1.3 dB low). On the whole
+real clean captures in 1024-sample blocks (few frames) such ridges appeared by chance at J/N -16 to -5 dB (5 of
+3,139 blocks, 3 of them below -9 dB); a periodic ridge (a 7-sigma period) needs no level."""
 REF_IN_BLOCK, REF_LEARNED, REF_FIXED = 0, 1, 2
 """J/N references, identical to rfi_msgs/JammerState.REF_*: the noise level measured inside the block
 (ridge module, step 2), the floor learned from earlier blocks that passed as noise, the configured one
@@ -871,7 +876,7 @@ class RfiMonitor:
         if cw and not rr.sweeping:
             return (CW, logistic(feat.jn_spectral_db - thr, s), max(jn_ref, feat.jn_spectral_db, jn_in), jn_ref, jn_in,
                     floor)
-        if rr.sweeping:
+        if rr.sweeping and (rr.periodic or max(jn_ref, jn_in) >= thr - APERIODIC_MARGIN_DB):
             conf = logistic(max(jn_ref, jn_in) - thr, s) * (1.0 if rr.periodic else 0.6)
             return CHIRP, conf, max(jn_ref, jn_in), jn_ref, jn_in, floor
         if ref != REF_IN_BLOCK and jn_ref >= thr:
