@@ -188,18 +188,18 @@ def spectral_autocorrelation(x: np.ndarray, cplx: bool, L: int, max_lag: int) ->
     E = A / np.maximum(m, 1e-300).astype(np.float32) - np.float32(1.0)
     if not cplx and E.shape[1] > 3:
         E = E[:, 1:-1]              # DC and Nyquist of a real signal: one degree of freedom
-    nf = sp_fft.next_fast_len(2 * T, real=True)
-    F = sp_fft.rfft(E, nf, axis=0, overwrite_x=False)
+    Et = np.ascontiguousarray(E.T)  # (bins, frames): the FFTs run along contiguous rows (speed)
+    nf = sp_fft.next_fast_len(T + max_lag + 1, real=True)     # no circular wrap up to max_lag
+    F = sp_fft.rfft(Et, nf, axis=1)
     v = F.view(np.float32)
-    pw = (v[:, 0::2] ** 2 + v[:, 1::2] ** 2).sum(axis=1, dtype=np.float64)
+    pw = (v[:, 0::2] ** 2 + v[:, 1::2] ** 2).sum(axis=0, dtype=np.float64)
     R = sp_fft.irfft(pw, nf)[: max_lag + 1]
     # sum over bin pairs of their covariance squared: the window's leakage correlates a bin with its next few
     # neighbours only (element-wise products: no matrix product, which would go to a multi-threaded BLAS)
-    B = E.shape[1]
+    B = Et.shape[0]
     q = 0.0
     for d in range(min(NEIGHBOUR_BINS + 1, B)):
-        c = np.einsum("tb,tb->b", E[:, : B - d], E[:, d:], dtype=np.float64) / T if d else \
-            np.einsum("tb,tb->b", E, E, dtype=np.float64) / T
+        c = (Et[: B - d] * Et[d:]).sum(axis=1, dtype=np.float64) / T
         q += (1.0 if d == 0 else 2.0) * float((c * c).sum())
     lags = np.arange(max_lag + 1)
     var = np.maximum(T - lags, 0) * q
