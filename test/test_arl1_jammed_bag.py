@@ -76,7 +76,8 @@ def test_bag_holds_the_scenario(replayed):
     counts, start_ns, truth, input_stamps, _, _ = replayed
     assert counts == {'/gnss/measurements': 120, '/uwb/ranges': 21600, '/truth/position': 120,
                       '/truth/jammer_state': 3600}
-    assert start_ns == 1_437_264_000_000_000_000        # GPS week 1854, TOW 0: the first ARL1 epoch
+    # GPS week 1854, TOW 0, the first ARL1 epoch, as a ROS (UTC) stamp: 2015-07-18 23:59:43 UTC (GPS - UTC = 17 s)
+    assert start_ns == 1_437_263_983_000_000_000
     assert np.all(np.diff(input_stamps['/gnss/measurements']) == 30_000_000_000)   # real epochs, not resampled
     points = {(m.point.x, m.point.y, m.point.z) for m in truth}
     assert points == {(-740289.918, -5457071.734, 3207245.542)}   # ARL1 header APPROX POSITION

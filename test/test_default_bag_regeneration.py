@@ -60,6 +60,7 @@ ATOL = {
     '_dbhz': (1e-9, 'dB-Hz'),         # C/N0 (measured 2.1e-14 dB-Hz)
     '_dbm': (1e-9, 'dBm'),            # RSSI
     '_rad': (1e-9, 'rad'),            # carrier phase, phase change over an integration
+    '_fraction': (1e-12, 'fraction'), # JammerState clipped / in-band fractions, 0..1 (0 in the truth)
 }
 """Absolute tolerance per unit suffix of a field name: (tolerance, unit)."""
 

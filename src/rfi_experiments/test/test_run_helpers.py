@@ -46,8 +46,8 @@ def test_window_segment_counts_and_last_stamps():
                           '/uwb/ranges': 180}
     # the last IF block (30 s), GNSS or UWB input (a range at 30.983 s) and correlator array (30.98 s)
     # of the window, header stamps: what each node's last output must be stamped with
-    assert seg.last_input == {'rfi_monitor': 1437267630_000_000_000, 'uwb_gnss_fusion': 1437267630_983_333_333,
-                              'imm_carrier': 1437267630_980_000_000}
+    assert seg.last_input == {'rfi_monitor': 1437267613_000_000_000, 'uwb_gnss_fusion': 1437267613_983_333_333,
+                              'imm_carrier': 1437267613_980_000_000}   # ROS (UTC) stamps: GPS time - 17 s
     assert tail.duration_s is None and tail.counts['/rfi/if_samples'] == 2
 
 
