@@ -610,11 +610,15 @@ def full_scale(msg: IfSamples) -> float | None:
 
 
 def jammer_state_msg(est: JammerEstimate, block: IfSamples) -> JammerState:
-    """JammerEstimate -> rfi_msgs/JammerState (header and center frequency from the block)."""
+    """JammerEstimate -> rfi_msgs/JammerState (header and center frequency from the block).
+
+    float32 fields are rounded to float32 here, so the message is the same whether a subscriber gets
+    it over the wire or in-process (rclpy keeps a Python float's float64 value until serialisation).
+    """
     m = JammerState()
     m.header = block.header
     m.type = int(est.type)
-    m.confidence = float(est.confidence)
+    m.confidence = float(np.float32(est.confidence))
     m.jammer_to_noise_db = float(est.jammer_to_noise_db)
     m.jammer_to_signal_db = float(est.jammer_to_signal_db)
     m.frequency_hz = float(est.frequency_hz)
@@ -627,9 +631,9 @@ def jammer_state_msg(est: JammerEstimate, block: IfSamples) -> JammerState:
     m.sample_rate_hz = float(est.sample_rate_hz)
     m.noise_reference = int(est.noise_reference)
     m.jammer_to_noise_is_lower_bound = bool(est.jammer_to_noise_is_lower_bound)
-    m.clipped_fraction = float(est.clipped_fraction)
+    m.clipped_fraction = float(np.float32(est.clipped_fraction))
     m.sweep_shape = int(est.sweep_shape)
-    m.in_band_fraction = float(est.in_band_fraction)
+    m.in_band_fraction = float(np.float32(est.in_band_fraction))
     return m
 
 
