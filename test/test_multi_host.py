@@ -27,8 +27,7 @@ import sys
 import uuid
 
 import pytest
-from test_run_processes import ARRIVAL_TIMED, BAG, PARAMS, WINDOW, outputs
-from test_two_suites import without_idle_flushes
+from test_run_processes import ARRIVAL_TIMED, BAG, PARAMS, WINDOW, outputs, without_idle_flushes
 
 NODES_ADDRESS = '10.200.0.1/24'
 REPLAY_ADDRESS = '10.200.0.2/24'
@@ -181,7 +180,7 @@ def test_outputs_across_the_link_equal_the_direct_replay(runs):
     got = {t: v for t, v in outputs(tmp / 'replay' / 'outputs').items() if not t.endswith(' STALE')}
     expected = outputs(tmp / 'direct' / 'outputs')
     fusion = '/diagnostics[uwb_gnss_fusion]'
-    for outs in (got, expected):  # wall-time flushes: see test_two_suites.without_idle_flushes
+    for outs in (got, expected):  # wall-time flushes: see test_run_processes.without_idle_flushes
         outs[fusion] = [without_idle_flushes(m) for m in outs[fusion]]
     assert set(got) == set(expected)
     assert {'/rfi/jammer_state', '/fusion/odometry', '/fusion/status', '/carrier/estimates',

@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from test_run_processes import ARRIVAL_TIMED, BAG, PARAMS, WINDOW, outputs
+from test_run_processes import ARRIVAL_TIMED, BAG, PARAMS, WINDOW, outputs, without_idle_flushes
 
 SUITES = ('/suite_a', '/suite_b')
 
@@ -49,16 +49,6 @@ def strip_namespace(value, namespace: str):
     if isinstance(value, tuple):
         return tuple(strip_namespace(v, namespace) for v in value)
     return value
-
-
-def without_idle_flushes(entry):
-    """A fusion /diagnostics entry (header, status) without its ``idle_flushes`` counter: the fusion
-    processes its re-ordering buffer when no input has come for ``idle_flush_s`` of wall time, so how
-    often that happens during a run depends on the machine's load (two suites on two shared cores:
-    play waits longer for the monitor), not on the data; what the flushed messages give is compared."""
-    header, status = entry
-    return header, tuple((name, tuple(kv for kv in value if kv[0][1] != 'idle_flushes')) if name == 'values'
-                         else (name, value) for name, value in status)
 
 
 @pytest.fixture(scope='module')
