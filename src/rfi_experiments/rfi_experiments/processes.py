@@ -51,7 +51,8 @@ NODE_EXECUTABLES = (('rfi_monitor', 'rfi_monitor', 'rfi_monitor_node'),
 NODE_ENDPOINTS = {
     'rfi_monitor': (('/rfi/if_samples',), ('/rfi/jammer_state', '/diagnostics')),
     'uwb_gnss_fusion': (('/gnss/measurements', '/uwb/ranges', '/rfi/jammer_state'),
-                        ('/fusion/odometry', '/fusion/fix', '/fusion/status', '/diagnostics')),
+                        ('/fusion/odometry', '/fusion/local_odometry', '/fusion/fix', '/fusion/datum',
+                         '/fusion/status', '/diagnostics')),
     'imm_carrier': (('/gnss/correlators',), ('/carrier/estimates', '/diagnostics')),
 }
 """Node name -> (topics it subscribes, topics it publishes), before remapping."""
@@ -59,7 +60,9 @@ NODE_ENDPOINTS = {
 OUTPUT_TYPES = {
     '/rfi/jammer_state': 'rfi_msgs/msg/JammerState',
     '/fusion/odometry': 'nav_msgs/msg/Odometry',
+    '/fusion/local_odometry': 'nav_msgs/msg/Odometry',
     '/fusion/fix': 'sensor_msgs/msg/NavSatFix',
+    '/fusion/datum': 'sensor_msgs/msg/NavSatFix',
     '/fusion/status': 'rfi_msgs/msg/FusionStatus',
     '/carrier/estimates': 'rfi_msgs/msg/CarrierPhaseArray',
     '/diagnostics': 'diagnostic_msgs/msg/DiagnosticArray',
