@@ -265,7 +265,11 @@ def test_node_survives_hostile_input_and_accounts_for_every_message(name):
     rng = np.random.default_rng([SEED, list(NODES).index(name)])
     valid = valid_messages(inputs, seconds)
     prime_count = len(valid) // 3
-    rig = NodeProcess(name, reliable_inputs=True)
+    # the monitor sheds whole blocks (counted) when its CPU time exceeds max_cpu_load of the stream time
+    # (issue 14 item 6): thousands of hostile blocks on a few ms of stream put it in debt, and it would
+    # then shed the valid tail this test wants answered; shedding has tests of its own
+    extra = ('-p', 'max_cpu_load:=0.0') if name == 'rfi_monitor_node' else ()
+    rig = NodeProcess(name, reliable_inputs=True, extra_args=extra)
     try:
         pubs = rig.publishers()
         sent: dict[str, int] = dict.fromkeys(inputs, 0)
