@@ -99,6 +99,32 @@ def suite_topic(namespace: str, topic: str) -> str:
     return namespace.rstrip('/') + topic
 
 
+def namespaced_params_file(path: Path, namespace: str, workdir: Path) -> Path:
+    """``path`` itself at the root; under a namespace, a copy whose node keys carry it.
+
+    A parameters file names nodes by their fully qualified name, and a plain key (``rfi_monitor:``)
+    means the node at the root: ``/robot1/rfi_monitor`` would silently get none of its parameters.
+    The suite's own files are written for the root, so each plain key ``k`` becomes
+    ``<namespace>/k``; keys that are already absolute or wildcards (``/**``) are kept as they are.
+    """
+    path = path.resolve()
+    if namespace.rstrip('/') == '':
+        return path
+    import yaml
+
+    try:
+        data = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as err:
+        raise RunError(f'cannot read parameters file {path}: {err}') from err
+    if not isinstance(data, dict):
+        raise RunError(f'{path}: a parameters file maps node names to ros__parameters')
+    moved = {(k if str(k).startswith('/') else f"{namespace.rstrip('/')}/{k}"): v for k, v in data.items()}
+    workdir.mkdir(parents=True, exist_ok=True)
+    target = workdir / f'{path.stem}.namespaced{path.suffix or ".yaml"}'
+    target.write_text(yaml.safe_dump(moved, sort_keys=False))
+    return target
+
+
 def namespace_arguments(namespace: str, topics: Sequence[str]) -> list[str]:
     """``-r`` remaps (for ``--ros-args``) that put a process into ``namespace`` and move each of the
     absolute ``topics`` it uses there: the node's namespace, then ``/t:=<namespace>/t`` per topic
@@ -346,7 +372,7 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
         for name, path in paths.items():
             command = [path, '--ros-args']
             for params_file in args.params_file:
-                command += ['--params-file', str(Path(params_file).resolve())]
+                command += ['--params-file', str(namespaced_params_file(Path(params_file), namespace, out / 'logs'))]
             if name == 'imm_carrier':  # run's default, unless a parameters file sets it
                 command += ['-p', f'method:={params["imm_carrier"]["method"]}']
             # the names the node resolves its inputs to (the override is declared under those; another

@@ -100,3 +100,19 @@ def test_delivery_warnings_name_late_rejections_and_losses():
     late, lost = delivery_warnings(loaded)
     assert 'the fusion node rejected 566 messages' in late and 'now 0.75 s' in late
     assert lost.endswith('/rfi/if_samples 3')
+
+
+def test_parameters_file_follows_the_namespace(tmp_path):
+    """A plain node key means the node at the root; under --namespace the suite's file is rewritten
+    so /robot1/rfi_monitor gets its parameters (a J/S off by 10 dB showed it did not)."""
+    import yaml
+
+    from rfi_experiments.processes import namespaced_params_file
+
+    src = tmp_path / 'p.yaml'
+    src.write_text('rfi_monitor:\n  ros__parameters:\n    noise_bandwidth_hz: 2.0e6\n'
+                   '/**:\n  ros__parameters:\n    use_sim_time: false\n')
+    assert namespaced_params_file(src, '/', tmp_path / 'w') == src.resolve()
+    moved = yaml.safe_load(namespaced_params_file(src, '/robot1', tmp_path / 'w').read_text())
+    assert moved == {'/robot1/rfi_monitor': {'ros__parameters': {'noise_bandwidth_hz': 2.0e6}},
+                     '/**': {'ros__parameters': {'use_sim_time': False}}}
