@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import signal
 import subprocess
 import time
@@ -104,25 +105,28 @@ def namespaced_params_file(path: Path, namespace: str, workdir: Path) -> Path:
 
     A parameters file names nodes by their fully qualified name, and a plain key (``rfi_monitor:``)
     means the node at the root: ``/robot1/rfi_monitor`` would silently get none of its parameters.
-    The suite's own files are written for the root, so each plain key ``k`` becomes
-    ``<namespace>/k``; keys that are already absolute or wildcards (``/**``) are kept as they are.
+    The suite's own files are written for the root, so each plain top-level key ``k`` becomes
+    ``<namespace>/k``; keys that are already absolute or wildcards (``/**``) are kept. Only those key
+    lines are rewritten, as text: every value stays exactly as written (a YAML round trip would not
+    keep e.g. ``2.0e6``, which PyYAML reads as a string and rcl as a double).
     """
     path = path.resolve()
     if namespace.rstrip('/') == '':
         return path
-    import yaml
-
     try:
-        data = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as err:
+        lines = path.read_text().splitlines(keepends=True)
+    except OSError as err:
         raise RunError(f'cannot read parameters file {path}: {err}') from err
-    if not isinstance(data, dict):
-        raise RunError(f'{path}: a parameters file maps node names to ros__parameters')
-    moved = {(k if str(k).startswith('/') else f"{namespace.rstrip('/')}/{k}"): v for k, v in data.items()}
+    prefix = namespace.rstrip('/')
+    out = [_TOP_LEVEL_NODE_KEY.sub(lambda m: f'{prefix}/{m.group(1)}:', line, count=1) for line in lines]
     workdir.mkdir(parents=True, exist_ok=True)
     target = workdir / f'{path.stem}.namespaced{path.suffix or ".yaml"}'
-    target.write_text(yaml.safe_dump(moved, sort_keys=False))
+    target.write_text(''.join(out))
     return target
+
+
+_TOP_LEVEL_NODE_KEY = re.compile(r'^([A-Za-z_][A-Za-z0-9_]*)\s*:')
+"""A top-level key of a parameters file that is a plain node name (no namespace, no wildcard)."""
 
 
 def namespace_arguments(namespace: str, topics: Sequence[str]) -> list[str]:
