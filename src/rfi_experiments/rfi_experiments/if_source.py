@@ -158,6 +158,9 @@ class IfSourceParams:
         0.5, 'Live streams: a lag of the samples received behind the sample rate larger than this is a gap, s; '
         '0: no gap detection.', minimum=0.0, maximum=3600.0)
     frame_id: str = parameter('gnss_front_end', 'header.frame_id of the blocks (the front end / antenna).')
+    hardware_id: str = parameter(
+        'rf_front_end', 'DiagnosticStatus.hardware_id of the node\'s reports: the device behind its input '
+        '(model and serial number); diagnostic aggregators group statuses by it.')
     diagnostics_period_s: float = parameter(
         1.0, 'Period of /diagnostics in stamp time, s.', minimum=0.001, maximum=3600.0)
     exit_at_end: bool = parameter(True, 'Shut the node down at the end of the input.')
@@ -377,7 +380,7 @@ class IfSourceNode(Node):
         if final:
             text = 'end of input; ' + text
         try:
-            self.diag_pub.publish(diagnostic_array(max(1, stamp_ns), 'if_source', self.get_name(), level, text,
+            self.diag_pub.publish(diagnostic_array(max(1, stamp_ns), 'if_source', self.params.hardware_id, level, text,
                                                    self.values()))
         except Exception as err:  # noqa: BLE001 - a report must never end the reader
             self.get_logger().error(f'/diagnostics not published: {type(err).__name__}: {err}')

@@ -96,6 +96,9 @@ class UbxSourceParams:
                                           minimum=0.01, maximum=3600.0)
     max_reconnect_attempts: int = parameter(30, 'Serial: failed reopen attempts in a row before the node exits '
                                                 '(code 1); 0: exit at the first loss.', minimum=0, maximum=1_000_000)
+    hardware_id: str = parameter(
+        'gnss_receiver', 'DiagnosticStatus.hardware_id of the node\'s reports: the device behind its input '
+        '(model and serial number); diagnostic aggregators group statuses by it.')
     diagnostics_period_s: float = parameter(1.0, 'Period of /diagnostics in stamp time, s.',
                                             minimum=0.001, maximum=3600.0)
     exit_at_end: bool = parameter(True, 'Files: shut the node down at the end of the file.')
@@ -363,7 +366,7 @@ class UbxSourceNode(Node):
         if final:
             text = 'end of input; ' + text
         try:
-            self.diag_pub.publish(diagnostic_array(max(1, stamp_ns), 'ubx_source', self.get_name(), level, text,
+            self.diag_pub.publish(diagnostic_array(max(1, stamp_ns), 'ubx_source', self.params.hardware_id, level, text,
                                                    self.values()))
         except Exception as err:  # noqa: BLE001 - a report must never end the reader
             self.get_logger().error(f'/diagnostics not published: {type(err).__name__}: {err}')

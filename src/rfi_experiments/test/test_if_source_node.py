@@ -134,7 +134,8 @@ class Chain:
         return lambda msg: into.append(msg) if msg.header.frame_id == FRAME_ID else None
 
     def _diag(self, msg: DiagnosticArray) -> None:
-        if msg.status and msg.status[0].name == 'if_source' and msg.status[0].hardware_id == self.source.get_name():
+        status = msg.status[0] if msg.status else None
+        if status is not None and status.name == 'if_source' and status.hardware_id == self.source.params.hardware_id:
             self.diagnostics.append(msg)
 
     def final_values(self) -> dict[str, str]:
