@@ -274,7 +274,7 @@ class RfiMonitor:
                                 "non_finite_samples": 0, "saturated_samples": 0, "recalibrations": 0,
                                 "calibrations_discarded": 0, "clipped_blocks": 0, "frequency_not_tracked": 0,
                                 "tracker_resets_invalid": 0, "integrated_reports": 0,
-                                "integration_window_blocks": 0}
+                                "integration_window_blocks": 0, "integration_blocks_thinned": 0}
         self._integrator = Integrator(params.integration, params.classifier.detect_jn_db)
         self.last_integration: IntegratedDecision | None = None
         self._last_single = NONE
@@ -288,6 +288,7 @@ class RfiMonitor:
         self._learn_psd: list[np.ndarray] = []
         self._lfloor = math.nan
         self._ltemplate: np.ndarray | None = None
+        self._learn_since_tpl = 0
         self._frame_length = 0
         self._blocks_since_select = 0
         self._tracking = False
@@ -319,6 +320,7 @@ class RfiMonitor:
     def _forget_learned(self) -> None:
         self._learn_pow, self._learn_psd = [], []
         self._lfloor, self._ltemplate = math.nan, None
+        self._learn_since_tpl = 0
 
     def _reset_tracker(self) -> None:
         """Fresh per-sample tracker state (stream position and calibration kept)."""
@@ -773,6 +775,7 @@ class RfiMonitor:
             d = self._integrator.add(xs, cplx, fs, stamp_ns)
             self.last_integration = d
             self._block_counters["integration_window_blocks"] = d.blocks
+            self._block_counters["integration_blocks_thinned"] = self._integrator.thinned
             if d.type == CHIRP and jtype in (NONE, WIDEBAND):
                 # a periodic sweep in the window: no noise jammer makes one (the per-bin mean is removed, its
                 # frames are independent), so a block reported WIDEBAND from its broad excess is a sweep seen
@@ -888,14 +891,21 @@ class RfiMonitor:
         return NONE, conf, max(jn_ref, feat.jn_spectral_db), jn_ref, jn_in, floor
 
     def _learn(self, power: float, norm_psd: np.ndarray) -> None:
-        """Add a block that passed as noise to the learned floor and shape (the last calibration_blocks)."""
+        """Add a block that passed as noise to the learned floor and shape (the last calibration_blocks).
+
+        The floor (a median of k numbers) follows every such block; the shape (a median of k spectra, then a
+        running median across bins: ~0.15 ms, more than the rest of a quiet block's bookkeeping) is formed again
+        once every k blocks learned, from the last k (the front end's shape drifts over seconds, not blocks)."""
         k = int(self.params.calibration_blocks)
         self._learn_pow = (self._learn_pow + [power])[-k:]
         self._learn_psd = (self._learn_psd + [norm_psd])[-k:]
+        self._learn_since_tpl += 1
         if len(self._learn_pow) >= k:
             self._lfloor = float(np.median(self._learn_pow))
-            med = np.median(np.stack(self._learn_psd), axis=0)
-            self._ltemplate = smooth_template(med, self.params.classifier.template_smooth_bins)
+            if self._ltemplate is None or self._learn_since_tpl >= k:
+                med = np.median(np.stack(self._learn_psd), axis=0)
+                self._ltemplate = smooth_template(med, self.params.classifier.template_smooth_bins)
+                self._learn_since_tpl = 0
 
     # ------------------------------------------------------------------------------------------
     @property

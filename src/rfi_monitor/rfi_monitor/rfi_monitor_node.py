@@ -325,6 +325,10 @@ class MonitorNodeParams:
     integration_decide_interval_s: float = parameter(
         _I.decide_interval_s, 'stft: the integrated statistics are tested at most once per this many seconds of '
         'stamps (speed); blocks in between get the last decision, s; 0: every block.', minimum=0.0, maximum=10.0)
+    integration_max_samples_per_s: float = parameter(
+        _I.max_samples_per_s, 'stft: processing budget of the evidence over blocks, samples per second of stamps '
+        '(deterministic): beyond it blocks are left out of the sums (counted, integration_blocks_thinned); 0: no '
+        'limit.', minimum=0.0, maximum=1e12)
     chirp_correction: bool = parameter(
         _M.chirp_correction, 'Correct the three-sample IF measurement for the sweep (Kang et al., eq. 10; '
         'real samples only).')

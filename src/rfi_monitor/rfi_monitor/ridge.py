@@ -74,7 +74,12 @@ _Q_LOW_EXP = -math.log(1.0 - _Q_LOW)
 """The 10 % quantile of a unit exponential (the power of a noise bin over its mean)."""
 MIN_SELECT_EXCESS = 2.0
 """choose_frame_length: below this best mean peak excess (white noise: -0.1..1.3 over 8192 samples, real
-input the higher) the longest frame within 0.5 of the best is taken instead of the best."""
+input the higher) the longest frame within 0.5 of the best is taken instead of the best; and the longest frame of
+all when no score stands ``SELECT_Z`` of its noise-only standard deviations above its noise-only mean
+(``null_peak_excess``): nothing in the slice but noise."""
+SELECT_Z = 3.0
+"""choose_frame_length: significance of a frame-length score over noise, standard deviations of the score on white
+Gaussian noise at that frame length."""
 SHORT_FRAME_SCORE = 1.0
 """choose_frame_length takes the shortest frame whose peak excess is at least this share of the best one (1: the
 best; 0.5 lost the 5.1 MHz sweep of the paper front end at J/N 10 dB, a 16-sample frame has 2.4 MHz bins)."""
@@ -457,6 +462,33 @@ def estimator_gain(L: int, cplx: bool, smooth_bins: int) -> float:
     return g
 
 
+_NULL_EXCESS: dict[tuple[int, bool, int, int], tuple[float, float]] = {}
+NULL_SLICES = 24
+"""Seeded white-noise slices that ``null_peak_excess`` measures its mean and standard deviation on."""
+
+
+def null_peak_excess(L: int, cplx: bool, n: int, smooth_bins: int) -> tuple[float, float]:
+    """(mean, standard deviation) of ``_peak_excess`` on white Gaussian noise for frames of L over n samples
+    (choose_frame_length): measured once per (L, kind, n, smooth_bins) on ``NULL_SLICES`` seeded noise slices
+    (deterministic) and cached. Neither is zero: the score's noise-only mean is 0.6-1.0 for real input (8192 samples)
+    and its scatter 0.2-0.5."""
+    key = (int(L), bool(cplx), int(n), int(smooth_bins))
+    v = _NULL_EXCESS.get(key)
+    if v is None:
+        rng = np.random.default_rng(23456)
+        vals = []
+        for _ in range(NULL_SLICES):
+            x = ((rng.standard_normal(n) + 1j * rng.standard_normal(n)) / math.sqrt(2.0) if cplx
+                 else rng.standard_normal(n))
+            S, _ = stft_power(x, L, cplx)
+            vals.append(_peak_excess(S, noise_levels(S, smooth_bins, cplx), cplx))
+        v = (float(np.mean(vals)), float(np.std(vals, ddof=1)))
+        if len(_NULL_EXCESS) > 256:
+            _NULL_EXCESS.clear()
+        _NULL_EXCESS[key] = v
+    return v
+
+
 def _noise_power(levels: np.ndarray, L: int, cplx: bool, smooth_bins: int) -> float:
     """Noise power per sample from the per-bin levels (Parseval with the Hann window), bias removed."""
     return _parseval(levels, L, cplx) / estimator_gain(L, cplx, smooth_bins)
@@ -513,7 +545,16 @@ def choose_frame_length(x: np.ndarray, cplx: bool, par: RidgeParams) -> int:
     best = max(sc for _, sc in scores)
     if best < MIN_SELECT_EXCESS:
         # nothing clearly concentrated in the slice: the longest frame within noise's scatter of the best
-        # (fewer frames, a cheaper analysis; a chirp that appears makes the monitor choose again at once)
+        # (fewer frames, a cheaper analysis; a chirp that appears makes the monitor choose again at once), and
+        # the longest of all when no score is significant over noise: the scores of a noise-only slice scatter
+        # by about 0.5 around a mean of up to 1, so "the best" was a random frame length, often the shortest
+        # and costliest (band-limited noise at 38.192 MS/s: L = 8, 9,547 frames per 1 ms block)
+        z = []
+        for L, sc in scores:
+            mu, sd = null_peak_excess(L, cplx, n, par.noise_smooth_bins)
+            z.append((sc - mu) / sd if sd > 0 else math.inf)
+        if max(z) < SELECT_Z:
+            return int(max(L for L, _ in scores))
         return int(max(L for L, sc in scores if sc >= best - 0.5))
     # the shortest frame within a factor SHORT_FRAME_SCORE of the best: time resolution (a sweep's ends,
     # short sweeps, the frequency at the block end) at little loss of peak excess

@@ -148,3 +148,46 @@ def test_real_clean_captures_stay_none_with_a_full_window():
         assert types == [NONE] * nb
         assert mon.last_integration is not None and mon.last_integration.blocks == nb
         assert mon.last_integration.cw_score > 0
+
+
+def test_processing_budget_thins_fast_streams_only_and_deterministically():
+    """The budget (IntegrationParams.max_samples_per_s, a token bucket along the stamps): every 1 ms block of a
+    16.368 MS/s stream is added; at 38.192 MS/s about 16.5 / 38.192 = 43 % of them, the others counted and given the
+    last decision; the same stamps give the same choice whatever the order of calls elsewhere (no wall clock)."""
+    rng = np.random.default_rng(9)
+    x16 = rng.standard_normal(16368)
+    x38 = rng.standard_normal(38192)
+    integ = Integrator(IntegrationParams())
+    for b in range(200):
+        integ.add(x16, False, 16.368e6, b * 1_000_000)
+    assert integ.thinned == 0
+    runs = []
+    for _ in range(2):
+        integ = Integrator(IntegrationParams())
+        added = []
+        for b in range(1000):
+            before = integ.thinned
+            d = integ.add(x38, False, 38.192e6, 10**9 + b * 1_000_000)
+            added.append(integ.thinned == before)
+            assert d.blocks >= 1
+        runs.append(added)
+        share = float(np.mean(added))
+        assert abs(share - 16.5e6 / 38.192e6) < 0.01, share
+        assert integ.thinned == added.count(False)
+    assert runs[0] == runs[1]
+    # no budget: every block
+    integ = Integrator(IntegrationParams(max_samples_per_s=0.0))
+    for b in range(50):
+        integ.add(x38, False, 38.192e6, b * 1_000_000)
+    assert integ.thinned == 0
+    # a pause does not let a burst through: after 1 s without blocks at most BUDGET_HOLD_S of budget is left
+    integ = Integrator(IntegrationParams())
+    integ.add(x38, False, 38.192e6, 0)
+    added = []
+    for b in range(20):
+        before = integ.thinned
+        integ.add(x38, False, 38.192e6, 10**9 + b * 1000)      # 20 blocks 1 us apart after a 1 s pause
+        added.append(integ.thinned == before)
+    assert sum(added) <= math.ceil(16.5e6 * 0.01 / 38192) + 1
+    with pytest.raises(ValueError):
+        IntegrationParams(max_samples_per_s=-1.0)
