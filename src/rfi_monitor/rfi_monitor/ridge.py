@@ -36,12 +36,30 @@ Steps (``analyse``):
 5. Sweep profile: the ridge frequencies of the present frames folded on the period into
    ``phase_bins`` bins (median of each bin) and the share of present frames per bin. Bins with at least
    half of the largest share are "in band"; ``in_band_fraction`` is their share of the period (< 1: a
-   sweep that leaves the sampled band, or a pulsed one). Steps between consecutive in-band bins larger
-   than a third of the swept span are flybacks; the others are swept steps, up or down.
-   Shape: sweeping up in >= 85 % of the swept steps: saw-tooth up (down: <= 15 %); 30-70 %: triangle;
-   otherwise, or a saw-tooth whose step right after its flyback is more than ``hook_rate_ratio`` times
-   its median step: hooked saw-tooth. Rate: the median step of the main direction; swept band: the
+   sweep that leaves the sampled band, or a pulsed one). Complex input: a ridge in the first or last bin
+   (the +-0.5 cycles/sample edge, where the circular spectrum joins) is present but its frequency stays
+   out of the medians (it may be either edge). Steps between consecutive in-band bins larger than
+   ``JUMP_SPAN`` of the swept span are flybacks; the others are swept steps, up or down.
+   Shape (issue 14 item 3), a statistic of the profile's slope sequence with this decision rule:
+   a swept step *counts* when it exceeds ``STEP_SIGMA`` (3) standard errors of the two bin medians it
+   joins (each from its bin's interquartile range / sqrt(frames)): a ridge that is only scatter gives no
+   counted steps. Fewer than 3 counted steps: unknown. Of the counted steps, up in a share of 30-70 %,
+   or a way back from the sweep's end (``_return_bins``) lasting >= 30 % of the period
+   (``TRIANGLE_SIDE``): triangle (at least 2 counted steps each way, else unknown). Otherwise the main
+   direction's saw-tooth when its sign test (``_sign_tail``, Binomial(n, 1/2)) is <= ``SAW_P`` (0.01),
+   or all counted steps go its way and a flyback is seen between two in-band bins (a triangle seen only in
+   pieces also goes one way within each piece); steps against it in 15-30 % of the counted ones, or the
+   direction unproven: unknown. It is hooked when its way
+   back from the sweep's end is swept (``MIN_RETURN_BINS`` = 2 bins of the profile strictly inside the
+   span, 10 % from its ends: an instantaneous flyback gives at most one such bin) or when the two steps
+   after its flyback both exceed ``hook_rate_ratio`` times the median step (an overshoot relaxing back
+   fast). The return is also looked for in the finer ``phase_bins`` profile. A hook whose return is
+   shorter than about two profile bins and a frame is not resolved: the jammer is reported as the
+   saw-tooth it is otherwise. Rate: the median counted step of the main direction; swept band: the
    extremes of the profile (of its in-band part: a lower bound of a sweep wider than the band).
+   A periodic ridge is a sweep when it moves over >= 4 bins, or over >= 2 bins with a saw-tooth
+   direction whose sign test is <= ``SAW_P`` (a narrow saw-tooth seen with short frames); a pulsed tone
+   is periodic but does not move.
 6. Current frequency: the ridge of the last frame when present, else NaN (the jammer is out of the band
    at the block end, or not tracked). Its 1-sigma: the RMS deviation of the present frames' ridge from
    the profile (periodic), else from the local straight line through three consecutive frames, but at
@@ -90,6 +108,22 @@ band does, steps by a half or a third of the span and is still a sweep)."""
 SHAPE_BINS = 16
 """Phase bins of the profile the sweep shape and rate are read from (the finer ``phase_bins`` profile gives
 the frequency at the block end)."""
+RETURN_MARGIN = 0.1
+"""_return_bins: a bin on a saw-tooth's way back counts when it lies more than this share of the swept span inside
+either end of it."""
+MIN_RETURN_BINS = 2
+"""A saw-tooth with at least this many profile bins on a swept way back is hooked (an instantaneous flyback
+gives none, or one where the frames around it are mixed)."""
+TRIANGLE_SIDE = 0.3
+"""_shape: a triangle's shorter side takes at least this share of the period (of the counted steps, or of the
+profile's bins on the way back from the sweep's end); a swept return shorter than that is a hook."""
+STEP_SIGMA = 3.0
+"""_shape: a swept step of the folded profile counts for the shape when it exceeds this many standard errors of
+the two medians it joins (a ridge that is only scatter gives few such steps, and no runs of them)."""
+SAW_P = 0.01
+"""_shape: a saw-tooth whose counted steps do not all go one way needs a sign test (``_sign_tail``) of at most this
+(6 of 7 steps up: 0.06, unknown; 13 of 15: 0.004, a saw-tooth). analyse: a periodic ridge that moves over only 2-4
+bins is a sweep when its saw-tooth direction has a sign test of at most this (7 of 7 steps: 0.008)."""
 PLATEAU_DB = 1.5
 """A bin's noise level may exceed the lower envelope of its neighbours by this much, dB (noise_levels)."""
 _CUT = 3.0
@@ -112,8 +146,9 @@ class RidgeParams:
         presence_nats: per-frame ridge threshold above ln(B), nats of the exponential (4.6: 1 % false).
         noise_smooth_bins: width of the median across bins of the noise level (odd, >= 3).
         phase_bins: bins of the folded sweep profile, >= 8.
-        hook_rate_ratio: a saw-tooth whose step after the flyback exceeds this times its median step is
-            hooked, > 1.
+        hook_rate_ratio: a saw-tooth whose two steps after the flyback both exceed this times its median
+            step is hooked (an overshoot relaxing back fast; the other hook test, a swept return, has no
+            parameter), > 1.
         min_present_fraction: a non-periodic ridge must be present in at least this share of the frames.
         tracking_samples: while a chirp is tracked (the last block was CHIRP), only the last this many
             samples of a block are analysed (speed; the J/N and the CW test still use the whole block; a
@@ -741,9 +776,12 @@ def _ridge(S: np.ndarray, k: np.ndarray, pk: np.ndarray, freqs: np.ndarray, pres
     return f, pk, present
 
 
-def _profile(f: np.ndarray, present: np.ndarray, period_frames: float, K: int
-             ) -> tuple[np.ndarray, np.ndarray]:
-    """Folded sweep profile: mean ridge frequency and present share per phase bin (K bins)."""
+def _profile(f: np.ndarray, present: np.ndarray, period_frames: float, K: int, fuse: np.ndarray | None = None,
+             resolution: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Folded sweep profile: median ridge frequency, present share and the median's standard error per phase
+    bin (K bins). fuse: the present frames whose frequency enters the medians (default all present ones).
+    Standard error: 1.2533 x the interquartile range / 1.349 / sqrt(n) (a median's, from the bin's own spread),
+    at least ``resolution`` / sqrt(12 n); infinite with fewer than 4 frames in the bin."""
     t = np.arange(f.size)
     kb = np.minimum((np.mod(t / period_frames, 1.0) * K).astype(np.int64), K - 1)
     n = np.bincount(kb, minlength=K).astype(np.float64)
@@ -752,66 +790,190 @@ def _profile(f: np.ndarray, present: np.ndarray, period_frames: float, K: int
         share = np.where(n > 0, npres / np.maximum(n, 1), 0.0)
     # median of each bin (frames that straddle a flyback give the far side's frequency: a mean would
     # pull the bin towards it)
-    ks, fp = kb[present], f[present]
+    use = present if fuse is None else fuse
+    ks, fp = kb[use], f[use]
+    if not ks.size:
+        return np.full(K, np.nan), share, np.full(K, np.inf)
+    order = np.lexsort((fp, ks))
+    prof, se = _bin_stats(fp[order], np.bincount(ks, minlength=K), float(resolution))
+    return prof, share, se
+
+
+@njit(cache=True)
+def _bin_stats(fs_sorted: np.ndarray, cnt: np.ndarray, resolution: float) -> tuple[np.ndarray, np.ndarray]:
+    """_profile's per-bin median and its standard error from the frequencies sorted by (bin, value) and the
+    counts per bin (compiled; NaN / inf for an empty bin / fewer than 4 frames)."""
+    K = cnt.size
     prof = np.full(K, np.nan)
-    if ks.size:
-        order = np.lexsort((fp, ks))
-        cnt = np.bincount(ks, minlength=K)
-        start = np.concatenate(([0], np.cumsum(cnt)[:-1]))
-        has = cnt > 0
-        lo_i = start + (cnt - 1) // 2
-        hi_i = start + cnt // 2
-        fs_sorted = fp[order]
-        prof[has] = 0.5 * (fs_sorted[lo_i[has]] + fs_sorted[hi_i[has]])
-    return prof, share
+    se = np.full(K, np.inf)
+    start = 0
+    floor = resolution / math.sqrt(12.0)
+    for k in range(K):
+        c = cnt[k]
+        if c > 0:
+            prof[k] = 0.5 * (fs_sorted[start + (c - 1) // 2] + fs_sorted[start + c // 2])
+        if c >= 4:
+            iqr = 1.2533 / 1.349 * (fs_sorted[start + (3 * (c - 1)) // 4] - fs_sorted[start + (c - 1) // 4])
+            se[k] = max(iqr, floor) / math.sqrt(float(c))
+        start += c
+    return prof, se
 
 
-def _median_small(v: np.ndarray) -> float:
-    """np.median of a short finite 1-D array on Python floats (the same value: the middle element, or the
-    mean of the two middle ones; without numpy's per-call overhead)."""
-    s = sorted(v.tolist())
-    h = len(s) // 2
-    return float(s[h]) if len(s) % 2 else (s[h - 1] + s[h]) / 2.0
+@njit(cache=True)
+def _sign_tail(k: int, n: int) -> float:
+    """P(X >= k) for X ~ Binomial(n, 1/2): the chance that k or more of n steps go one way with no sweep."""
+    if n <= 0:
+        return 1.0
+    tot = 0.0
+    c = 1.0                                # C(n, i), exact in double for the n of a profile (<= 64)
+    for i in range(n + 1):
+        if i >= k:
+            tot += c
+        c = c * (n - i) / (i + 1)
+    return tot / 2.0 ** n
 
-def _shape(prof: np.ndarray, inband: np.ndarray, hook_ratio: float) -> tuple[int, float, float, float, float]:
-    """(shape, low, high, start, rate per phase bin) of a folded profile (module docstring, step 5)."""
+
+@njit(cache=True)
+def _return_bins(prof: np.ndarray, inband: np.ndarray, up: bool) -> tuple[int, int]:
+    """Bins on a saw-tooth's return (module docstring, step 5): from the profile's extreme at the end of the
+    sweep (its maximum for an up-sweep), the consecutive in-band bins that keep moving back (down for an
+    up-sweep) and lie strictly inside the swept span (more than ``RETURN_MARGIN`` of it from either end).
+    0 for an instantaneous flyback (the frames around it see one side or the other; at most one bin, the one
+    where the two sides are mixed in equal numbers, can fall in between); >= ``MIN_RETURN_BINS``: a swept
+    return (a hook's flyback, or an asymmetric triangle's short side). Returns (those bins, the steps the return
+    takes: 1 for an instantaneous flyback). Compiled, O(bins)."""
     K = prof.size
-    if inband.sum() < 4:
-        return SHAPE_UNKNOWN, math.nan, math.nan, math.nan, math.nan
-    vals = prof[inband]
-    low, high = float(np.min(vals)), float(np.max(vals))
+    sgn = 1.0 if up else -1.0
+    n_ok = 0
+    lo, hi = np.inf, -np.inf
+    j, best = -1, -np.inf
+    for k in range(K):
+        if inband[k] and np.isfinite(prof[k]):
+            n_ok += 1
+            lo = min(lo, prof[k])
+            hi = max(hi, prof[k])
+            if sgn * prof[k] > best:
+                best, j = sgn * prof[k], k
+    if n_ok < 4 or not hi - lo > 0:
+        return 0, 0
+    m = RETURN_MARGIN * (hi - lo)
+    n = steps = 0
+    prev = prof[j]
+    for i in range(1, K):
+        k = (j + i) % K
+        if not (inband[k] and np.isfinite(prof[k])):
+            break
+        v = prof[k]
+        if sgn * (v - prev) >= 0:          # moving with the sweep again: the return is over
+            break
+        steps += 1
+        if lo + m < v < hi - m:
+            n += 1
+        prev = v
+    return n, steps
+
+
+def _shape(prof: np.ndarray, inband: np.ndarray, hook_ratio: float, se: np.ndarray | None = None
+           ) -> tuple[int, float, float, float, float, float]:
+    """(shape, low, high, start, rate per phase bin, direction p) of a folded profile (module docstring, step 5).
+
+    se: standard error of each bin's median (``_profile``); a swept step counts for the shape only when it
+    exceeds ``STEP_SIGMA`` times the standard error of the difference of the two medians it joins (None: every
+    swept step counts). direction p: the sign-test probability (``_sign_tail``) of the saw-tooth's main
+    direction among the counted steps (NaN for a triangle or an unknown shape). Compiled (``_shape_kernel``)."""
+    has_se = se is not None
+    out = _shape_kernel(np.ascontiguousarray(prof, dtype=np.float64), np.ascontiguousarray(inband, dtype=np.bool_),
+                        float(hook_ratio), np.ascontiguousarray(se if has_se else prof, dtype=np.float64), has_se)
+    return int(out[0]), float(out[1]), float(out[2]), float(out[3]), float(out[4]), float(out[5])
+
+
+@njit(cache=True)
+def _median_sorted(v: np.ndarray) -> float:
+    s = np.sort(v)
+    h = s.size // 2
+    return float(s[h]) if s.size % 2 else (s[h - 1] + s[h]) / 2.0
+
+
+@njit(cache=True)
+def _shape_kernel(prof: np.ndarray, inband: np.ndarray, hook_ratio: float, se: np.ndarray, has_se: bool
+                  ) -> tuple[int, float, float, float, float, float]:
+    """_shape, compiled."""
+    K = prof.size
+    nan = np.nan
+    n_in = 0
+    low, high = np.inf, -np.inf
+    for k in range(K):
+        if inband[k]:
+            n_in += 1
+            low = min(low, prof[k])
+            high = max(high, prof[k])
+    if n_in < 4:
+        return SHAPE_UNKNOWN, nan, nan, nan, nan, nan
     span = high - low
-    nxt = (np.arange(K) + 1) % K           # the next phase bin (cyclic)
-    both = inband & inband[nxt]
-    d = np.where(both, prof[nxt] - prof, np.nan)
-    jump = both & (np.abs(d) > JUMP_SPAN * span)
-    swept = both & ~jump
-    dsw = d[swept]
-    if dsw.size < 3 or not span > 0:
-        return SHAPE_UNKNOWN, low, high, math.nan, math.nan
-    n_up = int(np.sum(dsw > 0))
-    n_dn = int(np.sum(dsw < 0))
+    d = np.full(K, np.nan)
+    jump = np.zeros(K, np.bool_)
+    counted = np.zeros(K, np.bool_)
+    n_c = n_up = n_dn = n_jump = 0
+    for k in range(K):
+        nx = (k + 1) % K
+        if inband[k] and inband[nx]:
+            d[k] = prof[nx] - prof[k]
+            if abs(d[k]) > JUMP_SPAN * span:
+                jump[k] = True
+                n_jump += 1
+            elif not has_se or abs(d[k]) > STEP_SIGMA * math.sqrt(se[k] * se[k] + se[nx] * se[nx]):
+                counted[k] = True
+                n_c += 1
+                if d[k] > 0:
+                    n_up += 1
+                elif d[k] < 0:
+                    n_dn += 1
+    if n_c < 3 or not span > 0:
+        return SHAPE_UNKNOWN, low, high, nan, nan, nan
+    ups = np.empty(n_up)
+    dns = np.empty(n_dn)
+    iu = idn = 0
+    for k in range(K):
+        if counted[k]:
+            if d[k] > 0:
+                ups[iu] = d[k]
+                iu += 1
+            elif d[k] < 0:
+                dns[idn] = d[k]
+                idn += 1
     frac_up = n_up / max(n_up + n_dn, 1)
-    med_up = _median_small(dsw[dsw > 0]) if n_up else 0.0
-    med_dn = _median_small(dsw[dsw < 0]) if n_dn else 0.0
-    if 0.3 <= frac_up <= 0.7:
-        return TRIANGLE, low, high, low, med_up
+    med_up = _median_sorted(ups) if n_up else 0.0
+    med_dn = _median_sorted(dns) if n_dn else 0.0
     up = frac_up > 0.5
-    shape = SAWTOOTH_UP if up else SAWTOOTH_DOWN
+    n_mid, n_ret = _return_bins(prof, inband, up)
+    if TRIANGLE_SIDE <= frac_up <= 1 - TRIANGLE_SIDE or n_ret >= TRIANGLE_SIDE * K:
+        # up and down alike (by counted steps, or by the time the way back takes): a triangle when each way has
+        # at least two counted steps
+        if min(n_up, n_dn) >= 2:
+            return TRIANGLE, low, high, low, med_up, nan
+        return SHAPE_UNKNOWN, low, high, nan, nan, nan
     med = med_up if up else med_dn
-    # hook: a swept return segment (15-30 % of the steps), or a step right after the flyback much
-    # steeper than the median (an overshoot relaxing back)
-    if 0.15 < min(frac_up, 1 - frac_up):
-        shape = HOOKED_SAWTOOTH
-    else:
-        jumps = np.flatnonzero(jump)
-        for j in jumps:
-            a = (j + 1) % K
-            if swept[a] and abs(d[a]) > hook_ratio * abs(med) and np.sign(d[a]) == np.sign(med):
-                shape = HOOKED_SAWTOOTH
-                break
+    p_dir = _sign_tail(max(n_up, n_dn), n_up + n_dn)
     start = low if up else high
-    return shape, low, high, start, med
+    # hooked: a swept return (MIN_RETURN_BINS bins inside the span on the way back), or an overshoot that
+    # relaxes back faster than the sweep over at least two counted steps after the flyback
+    hooked = n_mid >= MIN_RETURN_BINS
+    if not hooked:
+        for j in range(K):
+            if jump[j]:
+                a, b = (j + 1) % K, (j + 2) % K
+                if (counted[a] and counted[b] and np.sign(d[a]) == np.sign(med) and np.sign(d[b]) == np.sign(med)
+                        and min(abs(d[a]), abs(d[b])) > hook_ratio * abs(med)):
+                    hooked = True
+                    break
+    if hooked:
+        return HOOKED_SAWTOOTH, low, high, start, med, p_dir
+    if 0.15 < min(frac_up, 1 - frac_up) or (p_dir > SAW_P and (min(n_up, n_dn) > 0 or not n_jump > 0)):
+        # steps going back but not as a return (scatter: a weak ridge), or a direction seen too few times with
+        # no flyback between two in-band bins (a triangle's side seen in pieces looks the same): not a shape
+        # that the profile shows
+        return SHAPE_UNKNOWN, low, high, nan, med, nan
+    return (SAWTOOTH_UP if up else SAWTOOTH_DOWN), low, high, start, med, p_dir
 
 
 def _sawtooth_law(prof: np.ndarray, inband: np.ndarray, period_samples: float, L: int, span: float
@@ -891,26 +1053,37 @@ def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length
         # a period that is not a whole number of frames spreads the frames over all phases, so the profile
         # can be finer than a frame; where it is (nearly) whole, only per_fr phases are seen
         K = int(par.phase_bins)
-        prof, share = _profile(f, present, per_fr, K)
+        # complex input: the spectrum is circular, a ridge in the first or last bin (-0.5 and 0.5 - 1/L cycles/
+        # sample, not interpolated) is a tone near the +-0.5 edge on either side; such frames count as present
+        # but their frequency does not enter the medians (a sweep through an edge would otherwise mix -0.5 and
+        # +0.5 in one phase bin's median)
+        fuse = present & (kmax > 0) & (kmax < B - 1) if cplx else present
+        prof, share, se = _profile(f, present, per_fr, K, fuse, binw)
         if np.mean(np.isnan(prof) & (share == 0)) > 0.25:
             K = int(max(4, math.floor(per_fr)))
-            prof, share = _profile(f, present, per_fr, K)
+            prof, share, se = _profile(f, present, per_fr, K, fuse, binw)
         top = float(np.max(share))
         inband = (share >= 0.5 * top) & np.isfinite(prof) & (top > 0)
         inb = float(np.mean(inband))
         prof_k, inband_k = prof, inband
         # the shape from a coarser profile (at most SHAPE_BINS bins: steps well above the ridge's scatter)
         Ks = min(K, SHAPE_BINS)
-        prof_s, share_s = (prof, share) if Ks == K else _profile(f, present, per_fr, Ks)
+        prof_s, share_s, se_s = (prof, share, se) if Ks == K else _profile(f, present, per_fr, Ks, fuse, binw)
         inband_s = (share_s >= 0.5 * float(np.max(share_s))) & np.isfinite(prof_s) & (top > 0)
         inb = float(np.mean(inband_s))
         if inb < 0.6 and Ks < K:
             # in band only part of the period: the finer profile has more bins in each in-band run
-            Ks, prof_s, inband_s = K, prof, inband
-        shape, low, high, start, step = _shape(prof_s, inband_s, par.hook_rate_ratio)
+            Ks, prof_s, inband_s, se_s = K, prof, inband, se
+        shape, low, high, start, step, p_dir = _shape(prof_s, inband_s, par.hook_rate_ratio, se_s)
+        if shape in (SAWTOOTH_UP, SAWTOOTH_DOWN) and K > Ks and \
+                _return_bins(prof, inband, shape == SAWTOOTH_UP)[0] >= MIN_RETURN_BINS:
+            shape = HOOKED_SAWTOOTH          # a return too short for the coarse profile, seen in the fine one
         if math.isfinite(step):
             rate = step / (per_fr * hop / Ks)
-        sweeping = bool(math.isfinite(high - low) and (high - low) >= 4 * binw)
+        # a sweep: the ridge moves over >= 4 bins, or over >= 2 with a direction no chance gives (a saw-tooth
+        # narrower than 4 bins of a short frame, e.g. 2.5 MHz at 12 MS/s with 16-sample frames)
+        span_bins = (high - low) / binw if math.isfinite(high - low) else 0.0
+        sweeping = bool(span_bins >= 4 or (span_bins >= 2 and p_dir <= SAW_P))
         if present.any():
             t = np.arange(nfr)
             kb = np.minimum((np.mod(t / per_fr, 1.0) * K).astype(np.int64), K - 1)

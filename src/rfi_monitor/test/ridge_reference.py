@@ -1,6 +1,9 @@
 """FROZEN REFERENCE (test only): rfi_monitor/ridge.py as of commit efa776e, before the speed work of issue 14
-item 6. test_ridge_speed_equivalence.py runs it beside the installed ridge.py to show the faster version
-reports the same; never import it from the package. Original docstring follows.
+item 6, with one later change that is not speed work ported in: the sweep-shape step of issue 14 item 3
+(``_profile`` with standard errors and the complex edge bins left out of the medians, ``_sign_tail``,
+``_return_bins``, ``_shape``, the 2-4-bin sweep rule and the hook check in ``analyse``; the same code as ridge.py's).
+test_ridge_speed_equivalence.py runs it beside the installed ridge.py to show the faster version reports the
+same; never import it from the package. Original docstring follows.
 
 Short-time FFT ridge analysis of one IF block (ours): in-block noise level, swept-jammer detection,
 sweep period, shape, swept band and rate, for real jammers at common SDR rates.
@@ -89,6 +92,22 @@ band does, steps by a half or a third of the span and is still a sweep)."""
 SHAPE_BINS = 16
 """Phase bins of the profile the sweep shape and rate are read from (the finer ``phase_bins`` profile gives
 the frequency at the block end)."""
+RETURN_MARGIN = 0.1
+"""_return_bins: a bin on a saw-tooth's way back counts when it lies more than this share of the swept span inside
+either end of it."""
+MIN_RETURN_BINS = 2
+"""A saw-tooth with at least this many profile bins on a swept way back is hooked (an instantaneous flyback
+gives none, or one where the frames around it are mixed)."""
+TRIANGLE_SIDE = 0.3
+"""_shape: a triangle's shorter side takes at least this share of the period (of the counted steps, or of the
+profile's bins on the way back from the sweep's end); a swept return shorter than that is a hook."""
+STEP_SIGMA = 3.0
+"""_shape: a swept step of the folded profile counts for the shape when it exceeds this many standard errors of
+the two medians it joins (a ridge that is only scatter gives few such steps, and no runs of them)."""
+SAW_P = 0.01
+"""_shape: a saw-tooth whose counted steps do not all go one way needs a sign test (``_sign_tail``) of at most this
+(6 of 7 steps up: 0.06, unknown; 13 of 15: 0.004, a saw-tooth). analyse: a periodic ridge that moves over only 2-4
+bins is a sweep when its saw-tooth direction has a sign test of at most this (7 of 7 steps: 0.008)."""
 PLATEAU_DB = 1.5
 """A bin's noise level may exceed the lower envelope of its neighbours by this much, dB (noise_levels)."""
 _CUT = 3.0
@@ -462,9 +481,12 @@ def _ridge(S: np.ndarray, lvl: np.ndarray, freqs: np.ndarray, presence: float
     return f, pk, present
 
 
-def _profile(f: np.ndarray, present: np.ndarray, period_frames: float, K: int
-             ) -> tuple[np.ndarray, np.ndarray]:
-    """Folded sweep profile: mean ridge frequency and present share per phase bin (K bins)."""
+def _profile(f: np.ndarray, present: np.ndarray, period_frames: float, K: int, fuse: np.ndarray | None = None,
+             resolution: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Folded sweep profile: median ridge frequency, present share and the median's standard error per phase
+    bin (K bins). fuse: the present frames whose frequency enters the medians (default all present ones).
+    Standard error: 1.2533 x the interquartile range / 1.349 / sqrt(n) (a median's, from the bin's own spread),
+    at least ``resolution`` / sqrt(12 n); infinite with fewer than 4 frames in the bin."""
     t = np.arange(f.size)
     kb = np.minimum((np.mod(t / period_frames, 1.0) * K).astype(np.int64), K - 1)
     n = np.bincount(kb, minlength=K).astype(np.float64)
@@ -473,8 +495,10 @@ def _profile(f: np.ndarray, present: np.ndarray, period_frames: float, K: int
         share = np.where(n > 0, npres / np.maximum(n, 1), 0.0)
     # median of each bin (frames that straddle a flyback give the far side's frequency: a mean would
     # pull the bin towards it)
-    ks, fp = kb[present], f[present]
+    use = present if fuse is None else fuse
+    ks, fp = kb[use], f[use]
     prof = np.full(K, np.nan)
+    se = np.full(K, np.inf)
     if ks.size:
         order = np.lexsort((fp, ks))
         cnt = np.bincount(ks, minlength=K)
@@ -484,48 +508,127 @@ def _profile(f: np.ndarray, present: np.ndarray, period_frames: float, K: int
         hi_i = start + cnt // 2
         fs_sorted = fp[order]
         prof[has] = 0.5 * (fs_sorted[lo_i[has]] + fs_sorted[hi_i[has]])
-    return prof, share
+        many = cnt >= 4
+        if many.any():
+            q1 = fs_sorted[(start + (cnt - 1) // 4)[many]]
+            q3 = fs_sorted[(start + (3 * (cnt - 1)) // 4)[many]]
+            n = cnt[many].astype(np.float64)
+            se[many] = np.maximum(1.2533 / 1.349 * (q3 - q1), resolution / math.sqrt(12.0)) / np.sqrt(n)
+    return prof, share, se
 
 
-def _shape(prof: np.ndarray, inband: np.ndarray, hook_ratio: float) -> tuple[int, float, float, float, float]:
-    """(shape, low, high, start, rate per phase bin) of a folded profile (module docstring, step 5)."""
+def _median_small(v: np.ndarray) -> float:
+    """np.median of a short finite 1-D array on Python floats (the same value: the middle element, or the
+    mean of the two middle ones; without numpy's per-call overhead)."""
+    s = sorted(v.tolist())
+    h = len(s) // 2
+    return float(s[h]) if len(s) % 2 else (s[h - 1] + s[h]) / 2.0
+
+def _sign_tail(k: int, n: int) -> float:
+    """P(X >= k) for X ~ Binomial(n, 1/2): the chance that k or more of n steps go one way with no sweep."""
+    if n <= 0:
+        return 1.0
+    return sum(math.comb(n, i) for i in range(max(k, 0), n + 1)) / 2.0 ** n
+
+
+def _return_bins(prof: np.ndarray, inband: np.ndarray, up: bool) -> tuple[int, int]:
+    """Bins on a saw-tooth's return (module docstring, step 5): from the profile's extreme at the end of the
+    sweep (its maximum for an up-sweep), the consecutive in-band bins that keep moving back (down for an
+    up-sweep) and lie strictly inside the swept span (more than ``RETURN_MARGIN`` of it from either end).
+    0 for an instantaneous flyback (the frames around it see one side or the other; at most one bin, the one
+    where the two sides are mixed in equal numbers, can fall in between); >= ``MIN_RETURN_BINS``: a swept
+    return (a hook's flyback, or an asymmetric triangle's short side). Returns (those bins, the steps the return
+    takes: 1 for an instantaneous flyback). O(bins)."""
     K = prof.size
+    ok = inband & np.isfinite(prof)
+    if ok.sum() < 4:
+        return 0, 0
+    vals = prof[ok]
+    lo, hi = float(np.min(vals)), float(np.max(vals))
+    span = hi - lo
+    if not span > 0:
+        return 0, 0
+    sgn = 1.0 if up else -1.0
+    j = int(np.flatnonzero(ok)[int(np.argmax(sgn * vals))])
+    m = RETURN_MARGIN * span
+    n = steps = 0
+    prev = float(prof[j])
+    for i in range(1, K):
+        k = (j + i) % K
+        if not ok[k]:
+            break
+        v = float(prof[k])
+        if sgn * (v - prev) >= 0:          # moving with the sweep again: the return is over
+            break
+        steps += 1
+        if lo + m < v < hi - m:
+            n += 1
+        prev = v
+    return n, steps
+
+
+def _shape(prof: np.ndarray, inband: np.ndarray, hook_ratio: float, se: np.ndarray | None = None
+           ) -> tuple[int, float, float, float, float, float]:
+    """(shape, low, high, start, rate per phase bin, direction p) of a folded profile (module docstring, step 5).
+
+    se: standard error of each bin's median (``_profile``); a swept step counts for the shape only when it
+    exceeds ``STEP_SIGMA`` times its own standard error (None: every swept step counts). direction p: the sign
+    test probability (``_sign_tail``) of the saw-tooth's main direction among the counted steps (NaN for a
+    triangle or an unknown shape)."""
+    K = prof.size
+    nan = math.nan
     if inband.sum() < 4:
-        return SHAPE_UNKNOWN, math.nan, math.nan, math.nan, math.nan
+        return SHAPE_UNKNOWN, nan, nan, nan, nan, nan
     vals = prof[inband]
     low, high = float(np.min(vals)), float(np.max(vals))
     span = high - low
-    nxt = np.roll(np.arange(K), -1)
+    nxt = (np.arange(K) + 1) % K           # the next phase bin (cyclic)
     both = inband & inband[nxt]
     d = np.where(both, prof[nxt] - prof, np.nan)
     jump = both & (np.abs(d) > JUMP_SPAN * span)
     swept = both & ~jump
-    dsw = d[swept]
+    if se is not None:
+        with np.errstate(invalid="ignore"):
+            counted = swept & (np.abs(d) > STEP_SIGMA * np.sqrt(se * se + se[nxt] * se[nxt]))
+    else:
+        counted = swept
+    dsw = d[counted]
     if dsw.size < 3 or not span > 0:
-        return SHAPE_UNKNOWN, low, high, math.nan, math.nan
+        return SHAPE_UNKNOWN, low, high, nan, nan, nan
     n_up = int(np.sum(dsw > 0))
     n_dn = int(np.sum(dsw < 0))
     frac_up = n_up / max(n_up + n_dn, 1)
-    med_up = float(np.median(dsw[dsw > 0])) if n_up else 0.0
-    med_dn = float(np.median(dsw[dsw < 0])) if n_dn else 0.0
-    if 0.3 <= frac_up <= 0.7:
-        return TRIANGLE, low, high, low, med_up
+    med_up = _median_small(dsw[dsw > 0]) if n_up else 0.0
+    med_dn = _median_small(dsw[dsw < 0]) if n_dn else 0.0
     up = frac_up > 0.5
-    shape = SAWTOOTH_UP if up else SAWTOOTH_DOWN
+    n_mid, n_ret = _return_bins(prof, inband, up)
+    if TRIANGLE_SIDE <= frac_up <= 1 - TRIANGLE_SIDE or n_ret >= TRIANGLE_SIDE * K:
+        # up and down alike (by counted steps, or by the time the way back takes): a triangle when each way has
+        # at least two counted steps
+        if min(n_up, n_dn) >= 2:
+            return TRIANGLE, low, high, low, med_up, nan
+        return SHAPE_UNKNOWN, low, high, nan, nan, nan
     med = med_up if up else med_dn
-    # hook: a swept return segment (15-30 % of the steps), or a step right after the flyback much
-    # steeper than the median (an overshoot relaxing back)
-    if 0.15 < min(frac_up, 1 - frac_up):
-        shape = HOOKED_SAWTOOTH
-    else:
-        jumps = np.flatnonzero(jump)
-        for j in jumps:
-            a = (j + 1) % K
-            if swept[a] and abs(d[a]) > hook_ratio * abs(med) and np.sign(d[a]) == np.sign(med):
-                shape = HOOKED_SAWTOOTH
-                break
+    p_dir = _sign_tail(max(n_up, n_dn), n_up + n_dn)
     start = low if up else high
-    return shape, low, high, start, med
+    # hooked: a swept return (MIN_RETURN_BINS bins inside the span on the way back), or an overshoot that
+    # relaxes back faster than the sweep over at least two counted steps after the flyback
+    hooked = n_mid >= MIN_RETURN_BINS
+    if not hooked:
+        for j in np.flatnonzero(jump):
+            a, b = (j + 1) % K, (j + 2) % K
+            if (counted[a] and counted[b] and np.sign(d[a]) == np.sign(med) == np.sign(d[b])
+                    and min(abs(d[a]), abs(d[b])) > hook_ratio * abs(med)):
+                hooked = True
+                break
+    if hooked:
+        return HOOKED_SAWTOOTH, low, high, start, med, p_dir
+    if 0.15 < min(frac_up, 1 - frac_up) or (p_dir > SAW_P and (min(n_up, n_dn) > 0 or not bool(jump.any()))):
+        # steps going back but not as a return (scatter: a weak ridge), or a direction seen too few times with
+        # no flyback between two in-band bins (a triangle's side seen in pieces looks the same): not a shape
+        # that the profile shows
+        return SHAPE_UNKNOWN, low, high, nan, med, nan
+    return (SAWTOOTH_UP if up else SAWTOOTH_DOWN), low, high, start, med, p_dir
 
 
 def _sawtooth_law(prof: np.ndarray, inband: np.ndarray, period_samples: float, L: int, span: float
@@ -606,26 +709,33 @@ def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length
         # a period that is not a whole number of frames spreads the frames over all phases, so the profile
         # can be finer than a frame; where it is (nearly) whole, only per_fr phases are seen
         K = int(par.phase_bins)
-        prof, share = _profile(f, present, per_fr, K)
+        # issue 14 item 3 (shape step, not speed work; as in ridge.py): complex edge bins out of the medians
+        # (here told by the exact edge frequency: the first and last bins are never interpolated)
+        fuse = present & (f != freqs[0]) & (f != freqs[-1]) if cplx else present
+        prof, share, se = _profile(f, present, per_fr, K, fuse, binw)
         if np.mean(np.isnan(prof) & (share == 0)) > 0.25:
             K = int(max(4, math.floor(per_fr)))
-            prof, share = _profile(f, present, per_fr, K)
+            prof, share, se = _profile(f, present, per_fr, K, fuse, binw)
         top = float(np.max(share))
         inband = (share >= 0.5 * top) & np.isfinite(prof) & (top > 0)
         inb = float(np.mean(inband))
         prof_k, inband_k = prof, inband
         # the shape from a coarser profile (at most SHAPE_BINS bins: steps well above the ridge's scatter)
         Ks = min(K, SHAPE_BINS)
-        prof_s, share_s = (prof, share) if Ks == K else _profile(f, present, per_fr, Ks)
+        prof_s, share_s, se_s = (prof, share, se) if Ks == K else _profile(f, present, per_fr, Ks, fuse, binw)
         inband_s = (share_s >= 0.5 * float(np.max(share_s))) & np.isfinite(prof_s) & (top > 0)
         inb = float(np.mean(inband_s))
         if inb < 0.6 and Ks < K:
             # in band only part of the period: the finer profile has more bins in each in-band run
-            Ks, prof_s, inband_s = K, prof, inband
-        shape, low, high, start, step = _shape(prof_s, inband_s, par.hook_rate_ratio)
+            Ks, prof_s, inband_s, se_s = K, prof, inband, se
+        shape, low, high, start, step, p_dir = _shape(prof_s, inband_s, par.hook_rate_ratio, se_s)
+        if shape in (SAWTOOTH_UP, SAWTOOTH_DOWN) and K > Ks and \
+                _return_bins(prof, inband, shape == SAWTOOTH_UP)[0] >= MIN_RETURN_BINS:
+            shape = HOOKED_SAWTOOTH
         if math.isfinite(step):
             rate = step / (per_fr * hop / Ks)
-        sweeping = bool(math.isfinite(high - low) and (high - low) >= 4 * binw)
+        span_bins = (high - low) / binw if math.isfinite(high - low) else 0.0
+        sweeping = bool(span_bins >= 4 or (span_bins >= 2 and p_dir <= SAW_P))
         if present.any():
             t = np.arange(nfr)
             kb = np.minimum((np.mod(t / per_fr, 1.0) * K).astype(np.int64), K - 1)

@@ -1,0 +1,172 @@
+"""Oracle tests of the sweep-shape label of the "stft" estimator (ridge.py, module docstring step 5; issue 14 item 3).
+
+The jammers are rfi_sim's frequency laws (``jammer_waveforms.sweep_law``: exact phase, the hook as rfi_sim makes it:
+a return that overshoots below the sweep's start and relaxes back), plus unit-power Gaussian noise, at common SDR
+rates (4 and 10 MS/s complex, 12, 16.368 and 38.192 MS/s real) and J/N 10-20 dB. What is asserted is the decision
+rule, not a tuned number: a hooked saw-tooth whose return lasts at least two profile bins is HOOKED; a plain
+saw-tooth (linear or not) is never HOOKED; triangles (symmetric, 70/30, wider than the band) are TRIANGLE; a ridge
+that is only scatter gives UNKNOWN; a periodic ridge moving over only 2-4 bins is a sweep when its direction is
+significant and a pulsed tone (periodic, not moving) is not.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from rfi_monitor import ridge as rg
+from rfi_sim.jammer_waveforms import SweepJammer, sweep_law
+
+
+def _swept(n: int, fs: float, cplx: bool, jam: SweepJammer, jn_db: float, seed: int, fif: float = 0.0,
+           band_hz: float | None = None) -> np.ndarray:
+    """n samples of unit-power noise plus ``jam`` at J/N jn_db (in band); band_hz: the tone only where |f| <= it."""
+    rng = np.random.default_rng(seed)
+    law = sweep_law(jam)
+    t = np.arange(n) / fs + 0.37 * jam.sweep_period_s
+    k = np.floor(t / law.period_s)
+    tau = t - k * law.period_s
+    cyc = k * law.cycles_per_period + law.cycles(tau) + fif * t
+    a = math.sqrt(10 ** (jn_db / 10))
+    gate = 1.0 if band_hz is None else (np.abs(law.frequency_hz(tau)) <= band_hz).astype(float)
+    ph = 2 * np.pi * np.mod(cyc, 1.0)
+    if cplx:
+        return a * gate * np.exp(1j * ph) + (rng.standard_normal(n) + 1j * rng.standard_normal(n)) / math.sqrt(2)
+    return a * math.sqrt(2) * gate * np.cos(ph) + rng.standard_normal(n)
+
+
+FRONT_ENDS = {  # name: (fs, complex, IF, usable half band Hz)
+    "4 MS/s complex": (4e6, True, 0.0, 1.4e6),
+    "10 MS/s complex": (10e6, True, 0.0, 3.5e6),
+    "16.368 MS/s real": (16.368e6, False, 4.092e6, 3.0e6),
+    "38.192 MS/s real": (38.192e6, False, 9.548e6, 5.0e6),
+}
+
+
+def _shape_of(fe: str, jam_of_band, jn_db: float, seed: int, frame_length: int = 0, **kw) -> rg.RidgeResult:
+    fs, cplx, fif, half = FRONT_ENDS[fe]
+    x = _swept(int(1e-3 * fs), fs, cplx, jam_of_band(half), jn_db, seed, fif, **kw)
+    return rg.analyse(x, cplx, fs, rg.RidgeParams(), frame_length)
+
+
+HOOKED = [  # (front end, period s, hook fraction, overshoot as a share of the swept band): returns of 2+ profile bins
+    ("10 MS/s complex", 30e-6, 0.25, 0.2),
+    ("10 MS/s complex", 100e-6, 0.2, 0.15),
+    ("4 MS/s complex", 100e-6, 0.3, 0.25),
+    ("16.368 MS/s real", 10e-6, 0.3, 0.25),
+    ("16.368 MS/s real", 30e-6, 0.25, 0.2),
+    ("38.192 MS/s real", 30e-6, 0.25, 0.2),
+    ("38.192 MS/s real", 100e-6, 0.15, 0.1),
+]
+
+
+@pytest.mark.parametrize("fe,period,hook,over", HOOKED, ids=[f"{c[0]} {c[1] * 1e6:.0f}us hook {c[2]}" for c in HOOKED])
+@pytest.mark.parametrize("jn", [10.0, 20.0])
+def test_hooked_sawtooth_with_a_resolved_return_is_hooked(fe, period, hook, over, jn):
+    for seed in (1, 2):
+        r = _shape_of(fe, lambda h: SweepJammer("hooked_saw", -h, h, period, hook_fraction=hook,
+                                                hook_overshoot_hz=over * 2 * h), jn, seed)
+        assert r.periodic and r.period_samples == pytest.approx(period * FRONT_ENDS[fe][0], rel=0.01)
+        assert r.shape == rg.HOOKED_SAWTOOTH, (fe, period, hook, jn, seed, rg.SHAPE_NAMES[r.shape])
+
+
+SAWS = [(fe, shape, period, ratio) for fe in FRONT_ENDS for shape, period, ratio in
+        (("saw_up", 10e-6, 1.0), ("saw_down", 30e-6, 1.3), ("saw_up", 100e-6, 1.5))]
+
+
+@pytest.mark.parametrize("fe,shape,period,ratio", SAWS, ids=[f"{c[0]} {c[1]} {c[2] * 1e6:.0f}us x{c[3]}" for c in SAWS])
+def test_plain_sawtooth_is_never_hooked(fe, shape, period, ratio):
+    """An instantaneous flyback (linear or non-linear rate) gives the saw-tooth's direction, or UNKNOWN; never a hook,
+    a triangle or the other direction."""
+    want = rg.SAWTOOTH_UP if shape == "saw_up" else rg.SAWTOOTH_DOWN
+    got = []
+    for seed in (1, 2, 3):
+        for jn in (10.0, 20.0):
+            r = _shape_of(fe, lambda h: SweepJammer(shape, -h, h, period, rate_ratio=ratio), jn, seed)
+            assert r.periodic and r.sweeping
+            got.append(r.shape)
+    assert set(got) <= {want, rg.SHAPE_UNKNOWN}, [rg.SHAPE_NAMES[s] for s in got]
+    assert got.count(want) >= 5, [rg.SHAPE_NAMES[s] for s in got]
+
+
+TRIANGLES = [(fe, period, up) for fe in FRONT_ENDS for period, up in ((20e-6, 0.5), (60e-6, 0.7))]
+
+
+@pytest.mark.parametrize("fe,period,up", TRIANGLES, ids=[f"{c[0]} {c[1] * 1e6:.0f}us up {c[2]}" for c in TRIANGLES])
+def test_triangle_is_triangle(fe, period, up):
+    for seed in (1, 2):
+        r = _shape_of(fe, lambda h: SweepJammer("triangle", -h, h, period, up_fraction=up, rate_ratio=1.2), 10.0,
+                      seed)
+        assert r.shape == rg.TRIANGLE, (fe, period, up, seed, rg.SHAPE_NAMES[r.shape])
+
+
+@pytest.mark.parametrize("fs,cplx,fif", [(10e6, True, 0.0), (12e6, False, 3e6)],
+                         ids=["10 MS/s complex", "12 MS/s real"])
+def test_triangle_wider_than_the_band_in_pieces(fs, cplx, fif):
+    """A triangle over 4x the sampled band (in band ~25 % of each 9.09 us period: the in-band pieces alternate up
+    and down). Complex input: the pieces cross the +-fs/2 edge, where a ridge in the first or last bin is ambiguous
+    (left out of the profile's medians)."""
+    half = fs / 2 if cplx else fs / 4
+    jam = SweepJammer("triangle", -4 * half, 4 * half, 9.09e-6)
+    shapes = []
+    for seed in range(1, 6):
+        x = _swept(int(1e-3 * fs), fs, cplx, jam, 15.0, seed, fif, band_hz=0.95 * half)
+        r = rg.analyse(x, cplx, fs, rg.RidgeParams(), 8)
+        assert r.periodic and r.period_samples == pytest.approx(9.09e-6 * fs, rel=0.01)
+        assert r.in_band_fraction < 0.6
+        shapes.append(r.shape)
+    assert shapes == [rg.TRIANGLE] * 5, [rg.SHAPE_NAMES[s] for s in shapes]
+
+
+def test_scatter_profile_is_unknown():
+    """Ridge points that are only noise (uniform over the band, any period) folded as analyse folds them: no shape."""
+    rng = np.random.default_rng(5)
+    shapes = []
+    for _ in range(300):
+        nfr = int(rng.integers(200, 2000))
+        L = int(rng.choice([8, 16, 32, 64]))
+        f = rng.uniform(-0.5, 0.5, nfr)
+        present = rng.uniform(size=nfr) < rng.uniform(0.05, 1.0)
+        per = float(rng.uniform(4.0, 60.0))
+        K = 32 if per > 16 else max(4, int(per))
+        prof, share, se = rg._profile(f, present, per, K, None, 1.0 / L)
+        if not np.any(share > 0):
+            continue
+        inband = (share >= 0.5 * float(np.max(share))) & np.isfinite(prof)
+        shapes.append(rg._shape(prof, inband, 2.0, se)[0])
+    assert len(shapes) > 250
+    assert shapes.count(rg.SHAPE_UNKNOWN) == len(shapes), {rg.SHAPE_NAMES[s]: shapes.count(s) for s in set(shapes)}
+
+
+def test_narrow_sawtooth_is_a_sweep_and_pulsed_tone_is_not():
+    """A saw-tooth over 2.5 MHz in 12 us at 12 MS/s real seen with 16-sample frames moves over only ~3.4 bins: a sweep
+    (its counted profile steps all go up: sign test <= SAW_P). A tone pulsed on and off with the same period is
+    periodic but does not move: not a sweep, no shape."""
+    fs, fif = 12e6, 3e6
+    n = 12000
+    for seed in (1, 2, 3):
+        x = _swept(n, fs, False, SweepJammer("saw_up", -1.26e6, 1.26e6, 12e-6), 25.0, seed, fif)
+        r = rg.analyse(x, False, fs, rg.RidgeParams(), 16)
+        assert r.periodic and r.sweeping and r.shape == rg.SAWTOOTH_UP, rg.SHAPE_NAMES[r.shape]
+        rng = np.random.default_rng(seed)
+        t = np.arange(n) / fs
+        gate = (np.mod(t, 12e-6) < 6e-6).astype(float)
+        x = math.sqrt(2 * 10 ** 2.5) * gate * np.cos(2 * np.pi * (fif + 0.4e6) * t) + rng.standard_normal(n)
+        r = rg.analyse(x, False, fs, rg.RidgeParams(), 16)
+        assert not r.sweeping and r.shape == rg.SHAPE_UNKNOWN, (r.periodic, rg.SHAPE_NAMES[r.shape])
+
+
+def test_sign_tail():
+    assert rg._sign_tail(3, 3) == pytest.approx(1 / 8)
+    assert rg._sign_tail(15, 15) == pytest.approx(2.0 ** -15)
+    assert rg._sign_tail(6, 7) == pytest.approx(8 / 128)
+    assert rg._sign_tail(0, 5) == 1.0 and rg._sign_tail(1, 0) == 1.0
+
+
+def test_return_bins():
+    up = np.array([0.0, 0.1, 0.2, 0.3, 0.4, -0.4, -0.3, -0.2, -0.1])          # instantaneous flyback
+    hook = np.array([0.0, 0.1, 0.2, 0.3, 0.4, 0.15, -0.15, -0.45, -0.35, -0.2, -0.1])   # swept, overshooting
+    ok_u, ok_h = np.ones(up.size, bool), np.ones(hook.size, bool)
+    assert rg._return_bins(up, ok_u, True) == (0, 1)
+    assert rg._return_bins(hook, ok_h, True) == (2, 3)
+    assert rg._return_bins(-hook, ok_h, False) == (2, 3)
