@@ -13,16 +13,17 @@ shared, and wall-clock time would count the time other processes hold the core. 
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
+import json
 import math
 import os
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-from rfi_monitor import monitor as monitor_module
 from rfi_monitor.classifier import ClassifierParams, block_features
 from rfi_monitor.if_measurement import measure_if
 from rfi_monitor.monitor import RfiMonitor, RfiMonitorParams
@@ -106,11 +107,6 @@ autocorrelation FFT with scipy.fft instead of numpy.fft (the same bits, 3-5 us p
 level's quantile in the compiled pass (numba's np.partition and a hand-written quickselect were 4-7x
 slower than numpy's introselect).
 """
-REFERENCE_RIDGE = Path(__file__).resolve().parent.parent / "src" / "rfi_monitor" / "test" / "ridge_reference.py"
-"""ridge.py as of efa776e, before the speed work of issue 14 item 6 (a frozen copy kept for the equivalence
-test): the live-stream rows are timed with it and with the current ridge.py, alternately, in the same run."""
-
-
 def _steady_rate(fe, block: int, par, warm: int = 20, timed: int = 100, repeats: int = 5) -> float:
     """Samples/s of a continuous stream once acquired: ``warm`` blocks untimed, then ``timed`` blocks
     (CPU time, median of ``repeats`` fresh monitors)."""
@@ -148,57 +144,85 @@ def cpu_model() -> str:
     return "unknown"
 
 
-def _reference_ridge():
-    """The frozen pre-speed-up ridge module, or None when the file is not there."""
-    if not REFERENCE_RIDGE.exists():
+BASELINE_COMMIT = "089111a"
+"""The project before the second round of speed work on issue 14 item 6 (the integration over blocks compiled and
+budgeted, the frame length on noise, the reselection interval): its rfi_monitor is timed beside the current one."""
+LIVE_BLOCKS = 300
+"""Blocks of each live-stream stream (1 ms each; the first WARM_BLOCKS are not counted): long enough for the
+integration window to hold hundreds of blocks, as in a long-running stream."""
+WARM_BLOCKS = 20
+CHILD = r"""
+import json, sys, time
+import numpy as np
+sys.path.insert(0, sys.argv[3])
+from rfi_monitor_real_jammers import NodeLikeMonitor
+from rfi_sim.if_signal import ChirpJammer, FrontEndConfig, IfSimulator
+case, nblk = sys.argv[1], int(sys.argv[2])
+fe = FrontEndConfig(noise_bandwidth_hz=2e6)
+block = int(round(fe.sample_rate_hz * 1e-3))
+sim = IfSimulator(fe, () if case == "acquisition" else (ChirpJammer(js_db=40.0),), seed=3)
+mon = NodeLikeMonitor(None)
+ts, types = [], []
+for k in range(nblk):
+    blk = sim.generate(block)
+    counts = np.clip(np.round(blk.values() / blk.scale), -127, 127).astype(np.int8)
+    t0 = time.thread_time()
+    e = mon.process(counts, blk.scale, fe.sample_rate_hz, fe.intermediate_frequency_hz, False, 8, k * block,
+                    10**9 + k * 10**6)
+    ts.append(time.thread_time() - t0)
+    types.append(int(e.type))
+print(json.dumps({"t": ts, "types": types}))
+"""
+"""One stream in a child process (so that each version of the package is imported on its own): the shipped node
+settings (``NodeLikeMonitor``, as rfi_monitor_node feeds the core), 1 ms blocks of 38.192 MS/s 8-bit real IF with
+consecutive stamps; prints the CPU time of each block."""
+
+
+def _export_baseline(tmp: Path) -> Path | None:
+    """src/rfi_monitor of BASELINE_COMMIT exported under tmp (None if git or the commit is not there)."""
+    root = Path(__file__).resolve().parent.parent
+    try:
+        arc = subprocess.run(["git", "archive", BASELINE_COMMIT, "src/rfi_monitor"], cwd=root, capture_output=True,
+                             timeout=60, check=True).stdout
+        subprocess.run(["tar", "-x", "-C", str(tmp)], input=arc, check=True, timeout=60)
+    except (OSError, subprocess.SubprocessError):
         return None
-    spec = importlib.util.spec_from_file_location("rfi_monitor_ridge_reference", REFERENCE_RIDGE)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod
-    spec.loader.exec_module(mod)
-    return mod
+    return tmp / "src" / "rfi_monitor"
+
+
+def _stream_times(pkg_dir: Path, case: str) -> tuple[np.ndarray, np.ndarray]:
+    """(CPU s per block, types) of one stream with the rfi_monitor package found in pkg_dir."""
+    root = Path(__file__).resolve().parent.parent
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(pkg_dir), str(root / "src" / "rfi_sim"),
+                                         str(root / "src" / "rfi_node_common"), str(root / "src" / "gnss_common"),
+                                         env.get("PYTHONPATH", "")])
+    out = subprocess.run([sys.executable, "-c", CHILD, case, str(LIVE_BLOCKS), str(Path(__file__).resolve().parent)],
+                         env=env, capture_output=True, text=True, timeout=1200, check=True).stdout
+    d = json.loads(out.strip().splitlines()[-1])
+    return np.asarray(d["t"]), np.asarray(d["types"])
 
 
 def live_stream_rows() -> list[tuple[str, float]]:
-    """The live-stream case of issue 14 item 6 with the default ("stft") estimator: 1 ms blocks of 38.192 MS/s
-    8-bit real IF (decoded from int8 counts as the node does), CPU time per block, blocks 4-39 of streams of
-    40 blocks from a fresh monitor, 7 streams (the first, warm-up, dropped); acquisition (no jammer: the frame
-    length is chosen again every 4 blocks) and tracking (the paper's chirp at J/N 21 dB). The median block
-    and the mean block (the throughput a live stream needs: it includes the blocks where the frame length is
-    chosen again) per stream, median over streams. With the frozen pre-speed-up ridge (REFERENCE_RIDGE)
-    and the current one, alternately stream by stream, so that both see the same machine load.
-    Returns (label, samples/s)."""
-    fe = FrontEndConfig(noise_bandwidth_hz=2e6)
-    block = int(round(fe.sample_rate_hz * 1e-3))
-    current = monitor_module.rg
-    ref = _reference_ridge()
-    versions = ([("ridge before the speed-up (efa776e)", ref)] if ref is not None else []) + [("ridge now", current)]
+    """The live-stream case of issue 14 item 6 with the default ("stft") estimator and the shipped node settings:
+    CPU time per 1 ms block of 38.192 MS/s 8-bit real IF, blocks WARM_BLOCKS..LIVE_BLOCKS of a stream from a fresh
+    monitor; acquisition (no jammer) and tracking (the paper's chirp at J/N 21 dB). The median block and the mean
+    block (the throughput a live stream needs: it includes the blocks where the frame length is chosen again and
+    the integration's tests). The rfi_monitor of BASELINE_COMMIT and the current one, alternately, each in a child
+    process of its own. Returns (label, samples/s)."""
+    block = int(round(PAPER_FS * 1e-3))
     rows = []
-    for label, jams in (("acquisition, no jammer", ()), ("tracking, chirp J/N 21 dB", (ChirpJammer(js_db=40.0),))):
-        blk = IfSimulator(fe, jams, seed=3).generate(40 * block)
-        counts = np.clip(np.round(blk.values() / blk.scale), -127, 127).astype(np.int8)
-        meds: dict[str, list[float]] = {v: [] for v, _ in versions}
-        means: dict[str, list[float]] = {v: [] for v, _ in versions}
-        try:
-            for _ in range(7):
-                for vname, mod in versions:
-                    monitor_module.rg = mod
-                    mon = RfiMonitor(RfiMonitorParams())
-                    ts = []
-                    for k in range(40):
-                        t0 = time.thread_time()
-                        x = counts[k * block:(k + 1) * block].astype(np.float64) * blk.scale
-                        mon.process(x, fe.sample_rate_hz, fe.intermediate_frequency_hz, k * block, 0,
-                                    full_scale=127 * blk.scale)
-                        ts.append(time.thread_time() - t0)
-                    meds[vname].append(float(np.median(ts[4:])))
-                    means[vname].append(float(np.mean(ts[4:])))
-        finally:
-            monitor_module.rg = current
-        for vname, _ in versions:
-            for stat, vals in (("median block", meds[vname]), ("mean block", means[vname])):
-                rows.append((f"live stream (stft, default), {label}, 38.192 MS/s 8-bit real, per 1 ms block, "
-                             f"{stat}, {vname}", block / float(np.median(vals[1:]))))
+    with tempfile.TemporaryDirectory() as tmp:
+        base = _export_baseline(Path(tmp))
+        now = Path(__file__).resolve().parent.parent / "src" / "rfi_monitor"
+        versions = ([(f"before ({BASELINE_COMMIT})", base)] if base is not None else []) + [("now", now)]
+        for case, label in (("acquisition", "acquisition, no jammer"), ("tracking", "tracking, chirp J/N 21 dB")):
+            for vname, pkg in versions:
+                t, types = _stream_times(pkg, case)
+                t = t[WARM_BLOCKS:]
+                for stat, v in (("median block", float(np.median(t))), ("mean block", float(np.mean(t)))):
+                    rows.append((f"live stream (stft, default), {label}, 38.192 MS/s 8-bit real, per 1 ms block, "
+                                 f"{stat}, {vname}", block / v))
     return rows
 
 
@@ -283,9 +307,11 @@ def main() -> None:
         "estimator. Where the live-stream real-time factor is below 1 the node sheds whole blocks on purpose\n"
         "(``max_cpu_load``, blocks_shed on /diagnostics; rfi_monitor_node module docstring). The live-stream\n"
         "rows give the median block and the mean block (the throughput a live stream needs: it includes the\n"
-        "blocks where the frame length is chosen again, every 4 blocks in acquisition), each with the ridge\n"
-        "analysis before its speed-up (efa776e, src/rfi_monitor/test/ridge_reference.py) and now, timed\n"
-        f"alternately stream by stream; {LIVE_RUNS} runs of them in this run, the table gives their median.\n\n"
+        "blocks where the frame length is chosen again and the integration's tests) of a 300-block stream with\n"
+        "the shipped node settings, for the rfi_monitor of commit "
+        f"{BASELINE_COMMIT} (before this round of speed work) and now,\n"
+        "each in a child process, alternately; "
+        f"{LIVE_RUNS} runs of them in this run, the table gives their median.\n\n"
         + table + "\n\n" + live_runs_table(runs) + "\n\n" + real_time_verdict(rows) + "\n\n" + RIDGE_SPEEDUP
         + "\n" + NOT_KEPT)
 
