@@ -1023,9 +1023,13 @@ FOLD_FALSE = 1e-3
 
 
 @njit(cache=True)
-def _fold_kernel(S: np.ndarray, kb: np.ndarray, K: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per phase bin and frequency bin, the mean of S over the frames of that phase bin (K, B); per frequency bin
-    the mean and the variance of S over all frames (B,) (compiled, one pass)."""
+def _fold_kernel(S: np.ndarray, kb: np.ndarray, K: int, freqs: np.ndarray, thr: float, cplx: bool
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """_fold_shape's folded profile, compiled: per phase bin (of K) the frequency bin whose mean of S over the phase
+    bin's frames exceeds its mean over all frames the most (the strongest component at that phase, as the ridge
+    takes the strongest bin), present when that excess stands z > thr standard errors (the bin's standard
+    deviation over all frames / sqrt(n)); its frequency (parabola on the excesses) and standard error (one bin / z).
+    Returns (profile, standard errors, present, fewest frames in a phase bin)."""
     nfr, B = S.shape
     M = np.zeros((K, B))
     cnt = np.zeros(K)
@@ -1039,14 +1043,43 @@ def _fold_kernel(S: np.ndarray, kb: np.ndarray, K: int) -> tuple[np.ndarray, np.
             M[k, b] += v
             m1[b] += v
             m2[b] += v * v
-    for k in range(K):
-        if cnt[k] > 0:
-            for b in range(B):
-                M[k, b] /= cnt[k]
+    var = np.empty(B)
     for b in range(B):
         m1[b] /= nfr
-        m2[b] = max(m2[b] / nfr - m1[b] * m1[b], 1e-30)
-    return M, m1, m2
+        var[b] = max(m2[b] / nfr - m1[b] * m1[b], 1e-30)
+    prof = np.full(K, np.nan)
+    se = np.full(K, np.inf)
+    present = np.zeros(K, np.bool_)
+    binw = freqs[1] - freqs[0]
+    nmin = nfr
+    b_lo, b_hi = (1, B - 1) if cplx else (0, B)   # complex: the +-0.5 edge bins may be either side
+    for k in range(K):
+        n = cnt[k]
+        nmin = min(nmin, int(n))
+        if n < 1:
+            continue
+        for b in range(B):
+            M[k, b] /= n
+        best, kb_ = -np.inf, -1
+        for b in range(b_lo, b_hi):
+            if M[k, b] - m1[b] > best:
+                best, kb_ = M[k, b] - m1[b], b
+        if kb_ < 0:
+            continue
+        z = best / math.sqrt(var[kb_] / n)
+        if not z > thr:
+            continue
+        present[k] = True
+        d = 0.0
+        if 0 < kb_ < B - 1:
+            a = M[k, kb_ - 1] - m1[kb_ - 1]
+            c = M[k, kb_ + 1] - m1[kb_ + 1]
+            den = a - 2.0 * best + c
+            if den < 0:
+                d = min(max(0.5 * (a - c) / den, -0.5), 0.5)
+        prof[k] = freqs[kb_] + d * binw
+        se[k] = binw / max(z, 1.0)
+    return prof, se, present, nmin
 
 
 def folded_shape(x: np.ndarray, cplx: bool, period_samples: float, par: RidgeParams
@@ -1058,11 +1091,11 @@ def folded_shape(x: np.ndarray, cplx: bool, period_samples: float, par: RidgePar
     The short-time spectrum (frames of the longest L with hop <= period / ``FOLD_HOPS``) is averaged per phase of
     the period (``SHAPE_BINS`` phase bins, or one per hop when the period is nearly a whole number of hops):
     synchronous averaging over the block's periods, n frames per phase bin, raises a sweep that is below the
-    per-frame presence threshold by sqrt(n). Per phase bin the strongest frequency bin's z (its phase mean minus
-    the bin's mean over all frames, in standard errors: the bin's standard deviation over frames / sqrt(n); no
-    noise level is needed, each bin is its own reference) must exceed the Gaussian quantile of
-    1 - ``FOLD_FALSE`` / (phase bins x bins) to be present; its frequency is interpolated (parabola on the phase
-    means over each bin's overall mean), its standard error taken as one bin / z (the position error of a peak
+    per-frame presence threshold by sqrt(n). Per phase bin the strongest frequency bin (the largest phase mean
+    minus the bin's mean over all frames) must stand z standard errors high (the bin's standard deviation over
+    frames / sqrt(n); no noise level is needed) with z above the Gaussian quantile of
+    1 - ``FOLD_FALSE`` / (phase bins x bins) to be present; its frequency is interpolated (parabola on those
+    excesses), its standard error taken as one bin / z (the position error of a peak
     about a bin wide that stands z standard errors high). The shape rule is ``_shape``'s (module docstring,
     step 5). Cost: one STFT of the block and one compiled pass over it (0.25-0.4 ms for 1 ms at 38.192 MS/s
     here)."""
@@ -1075,35 +1108,25 @@ def folded_shape(x: np.ndarray, cplx: bool, period_samples: float, par: RidgePar
             L = cand
     if L == 0 or not math.isfinite(T) or x.size < 8 * L or x.size < 4 * T:
         return SHAPE_UNKNOWN, nan, nan, nan
-    hop = L // 2
     S, freqs = stft_power(x, L, cplx)
+    return _fold_shape(S, freqs, T / (L // 2), L, cplx, par.hook_rate_ratio)
+
+
+def _fold_shape(S: np.ndarray, freqs: np.ndarray, per_fr: float, L: int, cplx: bool, hook_ratio: float
+                ) -> tuple[int, float, float, float]:
+    """folded_shape on a computed |STFT|^2 S (frames, bins) of frame length L and a period of per_fr frames."""
+    nan = math.nan
     nfr, B = S.shape
-    per_fr = T / hop
     K = SHAPE_BINS
     if abs(per_fr - round(per_fr)) * (nfr / per_fr) < 1.0:      # whole number of hops: only round(per_fr) phases
         K = max(4, min(K, int(round(per_fr))))
     kb = np.minimum((np.mod(np.arange(nfr) / per_fr, 1.0) * K).astype(np.int64), K - 1)
-    M, m1, var = _fold_kernel(np.ascontiguousarray(S), kb, K)
-    n = np.bincount(kb, minlength=K).astype(np.float64)
-    if n.min() < 4:
-        return SHAPE_UNKNOWN, nan, nan, nan
-    z = (M - m1[None, :]) / np.sqrt(var[None, :] / n[:, None])
-    if cplx:
-        z[:, 0] = z[:, -1] = -np.inf         # the +-0.5 edge bins: either side (analyse's profile leaves them out)
-    k_arg = np.argmax(z, axis=1)
-    zmax = z[np.arange(K), k_arg]
     thr = float(-ndtri(FOLD_FALSE / (K * B)))
-    present = zmax > thr
-    binw = 1.0 / L
-    km, kp = np.clip(k_arg - 1, 0, B - 1), np.clip(k_arg + 1, 0, B - 1)
-    Mn = M / m1[None, :]                     # each bin over its mean over all frames (the front end's shape out)
-    a, b0, c = Mn[np.arange(K), km], Mn[np.arange(K), k_arg], Mn[np.arange(K), kp]
-    den = a - 2 * b0 + c
-    with np.errstate(divide="ignore", invalid="ignore"):
-        d = np.where((den < 0) & (k_arg > 0) & (k_arg < B - 1), 0.5 * (a - c) / den, 0.0)
-    prof = np.where(present, freqs[k_arg] + np.clip(d, -0.5, 0.5) * binw, np.nan)
-    se = np.where(present, binw / np.maximum(zmax, 1.0), np.inf)
-    shape, low, high, _start, _step, _p = _shape(prof, present, par.hook_rate_ratio, se)
+    prof, se, present, nmin = _fold_kernel(np.ascontiguousarray(S), kb, K, np.asarray(freqs, dtype=np.float64), thr,
+                                           bool(cplx))
+    if nmin < 4:
+        return SHAPE_UNKNOWN, nan, nan, nan
+    shape, low, high, _start, _step, _p = _shape(prof, present, hook_ratio, se)
     return shape, float(np.mean(present)), low, high
 
 
@@ -1145,6 +1168,7 @@ def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length
     prof_k: np.ndarray | None = None
     inband_k: np.ndarray | None = None
     sweeping = False
+    shape_fold = SHAPE_UNKNOWN
     if periodic:
         # a period that is not a whole number of frames spreads the frames over all phases, so the profile
         # can be finer than a frame; where it is (nearly) whole, only per_fr phases are seen
@@ -1174,6 +1198,11 @@ def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length
         if shape in (SAWTOOTH_UP, SAWTOOTH_DOWN) and K > Ks and \
                 _return_bins(prof, inband, shape == SAWTOOTH_UP)[0] >= MIN_RETURN_BINS:
             shape = HOOKED_SAWTOOTH          # a return too short for the coarse profile, seen in the fine one
+        if shape == SHAPE_UNKNOWN:
+            # the per-frame ridge's profile shows no shape (a weak sweep, or one seen in pieces): the spectrum
+            # itself folded on the period (folded_shape's synchronous average, O(frames x bins)) may; only the
+            # label is taken from it (no sweep law is fitted to a profile that showed no shape)
+            shape_fold = _fold_shape(S, freqs, per_fr, L, cplx, par.hook_rate_ratio)[0]
         if math.isfinite(step):
             rate = step / (per_fr * hop / Ks)
         # a sweep: the ridge moves over >= 4 bins, or over >= 2 with a direction no chance gives (a saw-tooth
@@ -1257,5 +1286,7 @@ def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length
         freq = float(f[-1]) + (float(rate) * (t_end - (nfr - 1)) * hop if math.isfinite(rate) else 0.0)
     if math.isfinite(freq) and not (float(freqs[0]) - 0.5 / L <= freq <= float(freqs[-1]) + 0.5 / L):
         freq = nan
+    if shape == SHAPE_UNKNOWN:
+        shape = shape_fold
     return RidgeResult(L, hop, noise, peak_excess, pres_frac, periodic, float(per_fr * hop) if periodic else nan,
                        float(strength), sweeping, int(shape), inb, low, high, start, rate, freq, fstd)

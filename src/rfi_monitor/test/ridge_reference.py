@@ -1,7 +1,8 @@
 """FROZEN REFERENCE (test only): rfi_monitor/ridge.py as of commit efa776e, before the speed work of issue 14
 item 6, with one later change that is not speed work ported in: the sweep-shape step of issue 14 item 3
 (``_profile`` with standard errors and the complex edge bins left out of the medians, ``_sign_tail``,
-``_return_bins``, ``_shape``, the 2-4-bin sweep rule and the hook check in ``analyse``; the same code as ridge.py's).
+``_return_bins``, ``_shape``, the 2-4-bin sweep rule, the hook check and the folded spectrum's shape (``_fold_shape``,
+here in numpy) in ``analyse``; ridge.py has the same rules, partly compiled).
 test_ridge_speed_equivalence.py runs it beside the installed ridge.py to show the faster version reports the
 same; never import it from the package. Original docstring follows.
 
@@ -631,6 +632,47 @@ def _shape(prof: np.ndarray, inband: np.ndarray, hook_ratio: float, se: np.ndarr
     return (SAWTOOTH_UP if up else SAWTOOTH_DOWN), low, high, start, med, p_dir
 
 
+SHAPE_FOLD_FALSE = 1e-3
+
+
+def _fold_shape(S: np.ndarray, freqs: np.ndarray, per_fr: float, L: int, cplx: bool, hook_ratio: float
+                ) -> tuple[int, float, float, float]:
+    """Issue 14 item 3 (ported, numpy): the spectrum folded on the period when the ridge profile shows no shape."""
+    from scipy.special import ndtri
+    nan = math.nan
+    nfr, B = S.shape
+    K = SHAPE_BINS
+    if abs(per_fr - round(per_fr)) * (nfr / per_fr) < 1.0:
+        K = max(4, min(K, int(round(per_fr))))
+    kb = np.minimum((np.mod(np.arange(nfr) / per_fr, 1.0) * K).astype(np.int64), K - 1)
+    S64 = S.astype(np.float64)
+    M = np.zeros((K, B))
+    np.add.at(M, kb, S64)
+    n = np.bincount(kb, minlength=K).astype(np.float64)
+    if n.min() < 4:
+        return SHAPE_UNKNOWN, nan, nan, nan
+    M /= n[:, None]
+    m1 = S64.mean(axis=0)
+    var = np.maximum((S64 * S64).mean(axis=0) - m1 * m1, 1e-30)
+    ex = M - m1[None, :]
+    sel = ex.copy()
+    if cplx:
+        sel[:, 0] = sel[:, -1] = -np.inf
+    k_arg = np.argmax(sel, axis=1)
+    zmax = ex[np.arange(K), k_arg] / np.sqrt(var[k_arg] / n)
+    present = zmax > float(-ndtri(SHAPE_FOLD_FALSE / (K * B)))
+    binw = 1.0 / L
+    km, kp = np.clip(k_arg - 1, 0, B - 1), np.clip(k_arg + 1, 0, B - 1)
+    a, b0, c = ex[np.arange(K), km], ex[np.arange(K), k_arg], ex[np.arange(K), kp]
+    den = a - 2 * b0 + c
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = np.where((den < 0) & (k_arg > 0) & (k_arg < B - 1), 0.5 * (a - c) / den, 0.0)
+    prof = np.where(present, freqs[k_arg] + np.clip(d, -0.5, 0.5) * binw, np.nan)
+    se = np.where(present, binw / np.maximum(zmax, 1.0), np.inf)
+    shape, low, high, _start, _step, _p = _shape(prof, present, hook_ratio, se)
+    return shape, float(np.mean(present)), low, high
+
+
 def _sawtooth_law(prof: np.ndarray, inband: np.ndarray, period_samples: float, L: int, span: float
                   ) -> tuple[float, np.ndarray, float] | None:
     """(flyback phase, polynomial in the elapsed sweep fraction, RMS residual of the fit) of a saw-tooth's
@@ -705,6 +747,7 @@ def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length
     prof_k: np.ndarray | None = None
     inband_k: np.ndarray | None = None
     sweeping = False
+    shape_fold = SHAPE_UNKNOWN
     if periodic:
         # a period that is not a whole number of frames spreads the frames over all phases, so the profile
         # can be finer than a frame; where it is (nearly) whole, only per_fr phases are seen
@@ -732,6 +775,8 @@ def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length
         if shape in (SAWTOOTH_UP, SAWTOOTH_DOWN) and K > Ks and \
                 _return_bins(prof, inband, shape == SAWTOOTH_UP)[0] >= MIN_RETURN_BINS:
             shape = HOOKED_SAWTOOTH
+        if shape == SHAPE_UNKNOWN:
+            shape_fold = _fold_shape(S, freqs, per_fr, L, cplx, par.hook_rate_ratio)[0]
         if math.isfinite(step):
             rate = step / (per_fr * hop / Ks)
         span_bins = (high - low) / binw if math.isfinite(high - low) else 0.0
@@ -813,5 +858,7 @@ def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length
         freq = float(f[-1]) + (float(rate) * (t_end - (nfr - 1)) * hop if math.isfinite(rate) else 0.0)
     if math.isfinite(freq) and not (float(freqs[0]) - 0.5 / L <= freq <= float(freqs[-1]) + 0.5 / L):
         freq = nan
+    if shape == SHAPE_UNKNOWN:
+        shape = shape_fold
     return RidgeResult(L, hop, noise, peak_excess, pres_frac, periodic, float(per_fr * hop) if periodic else nan,
                        float(strength), sweeping, int(shape), inb, low, high, start, rate, freq, fstd)
