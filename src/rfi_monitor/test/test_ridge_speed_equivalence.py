@@ -2,8 +2,10 @@
 
 ridge_reference.py beside this file is ridge.py as of efa776e, before the speed work (numpy noise levels with
 scipy.ndimage filters; the new one computes them in one compiled pass, reuses the excess array and writes
-the STFT power in place). Both run on the same inputs here: the swept-jammer shape cases of
-test_stft_estimator.py (CASES) and the real clean captures in data/, block by block, the whole block and
+the STFT power in place), with the later sweep-shape step of issue 14 item 3 ported into it (not speed work: its
+rules are checked by test_ridge_shapes.py, the compiled versions against the reference's numpy ones there too;
+here they only keep the two analyses comparable field by field). Both run on the same inputs here: the
+swept-jammer shape cases of test_stft_estimator.py (CASES) and the real clean captures in data/, block by block, the whole block and
 the tail analysed while tracking (RidgeParams.tracking_samples), and through the whole monitor.
 
 Tolerances: integers, flags and shape codes exactly; floats within 1e-6 relative (plus 1e-15 absolute
