@@ -5,8 +5,9 @@ scipy.ndimage filters; the new one computes them in one compiled pass, reuses th
 the STFT power in place), with the later sweep-shape step of issue 14 item 3 ported into it (not speed work: its
 rules are checked by test_ridge_shapes.py, the compiled versions against the reference's numpy ones there too;
 here they only keep the two analyses comparable field by field). Both run on the same inputs here: the
-swept-jammer shape cases of test_stft_estimator.py (CASES) and the real clean captures in data/, block by block, the whole block and
-the tail analysed while tracking (RidgeParams.tracking_samples), and through the whole monitor.
+swept-jammer shape cases of test_stft_estimator.py (CASES) and the real clean captures in data/, block by
+block, the whole block and the tail analysed while tracking (RidgeParams.tracking_samples), and through the
+whole monitor.
 
 Tolerances: integers, flags and shape codes exactly; floats within 1e-6 relative (plus 1e-15 absolute
 near zero), NaN where the reference has NaN. The arithmetic was kept in the same precision and order
