@@ -790,7 +790,7 @@ class RfiMonitor:
         if jtype == NONE:
             jn = max(jn, 5.0 * math.log10((1.0 if cplx else 2.0) / (frames * cp.nfft)))
         if integrated is not None:
-            return self._integrated_estimate(integrated, jn, stamp_ns, fs, fif, cplx, first, n, ref, clipped)
+            return self._integrated_estimate(integrated, jn, stamp_ns, fs, fif, cplx, first, n, ref, clipped, xs)
         if jtype == NONE:
             # the floor learns only from blocks that pass as noise inside the block too
             if clipped <= p.clip_lower_bound_fraction and not rr.periodic and jn_in < cp.detect_jn_db:
@@ -839,16 +839,20 @@ class RfiMonitor:
                               int(shape), inb)
 
     def _integrated_estimate(self, d: IntegratedDecision, jn: float, stamp_ns: int, fs: float, fif: float,
-                             cplx: bool, first: int, n: int, ref: int, clipped: float) -> JammerEstimate:
+                             cplx: bool, first: int, n: int, ref: int, clipped: float,
+                             xs: np.ndarray) -> JammerEstimate:
         """A CW or chirp found only by the evidence over blocks (integration module). Type, confidence (0.5 at the
-        threshold) and, for a CW, its frequency; a chirp's sweep period from the comb; the J/N is this block's own
-        measurement (mostly its resolution: such a jammer is below what one block measures), flagged as a lower
-        bound; the other fields NaN."""
+        threshold) and, for a CW, its frequency; a chirp's sweep period from the comb, and its sweep shape and
+        in-band fraction from this block's short-time spectrum folded on that period (``ridge.folded_shape``:
+        synchronous averaging over the block's periods; unknown / NaN when the block does not show it); the J/N
+        is this block's own measurement (mostly its resolution: such a jammer is below what one block measures),
+        flagged as a lower bound; the other fields NaN."""
         p = self.params
         nan = math.nan
         bw_noise = p.noise_bandwidth_hz if p.noise_bandwidth_hz > 0 else (fs if cplx else fs / 2)
         n_dbm = p.noise_density_dbm_per_mhz + 10 * math.log10(bw_noise / 1e6)
-        freq = fstd = rate = per = nan
+        freq = fstd = rate = per = inb = nan
+        shape = rg.SHAPE_UNKNOWN
         if d.type == CW:
             conf = logistic(10 * math.log10(max(d.cw_score, 1e-30)), 0.5)
             jn = max(jn, d.excess_db)
@@ -858,12 +862,18 @@ class RfiMonitor:
         else:
             conf = logistic(d.chirp_z - d.chirp_threshold, 1.0)
             per = d.period_samples / fs
+            shape, inb, _, _ = rg.folded_shape(xs, cplx, d.period_samples, p.ridge)
+            if (not cplx) and fif < 0 and shape in (rg.SAWTOOTH_UP, rg.SAWTOOTH_DOWN):
+                # spectral inversion: the IF runs against RF (as in the CHIRP path of _identify_stft)
+                shape = rg.SAWTOOTH_DOWN if shape == rg.SAWTOOTH_UP else rg.SAWTOOTH_UP
+            if shape == rg.SHAPE_UNKNOWN:
+                inb = nan
         js = jn + n_dbm - p.signal_power_dbm
         self._tracking = False
         self._chirp = False
         return JammerEstimate(stamp_ns, int(d.type), float(conf), float(jn), float(js), freq, fstd, rate, per, nan,
                               nan, fs, first, n, True, self._counters(), None, "", ref, True, float(clipped),
-                              int(rg.SHAPE_UNKNOWN), nan)
+                              int(shape), float(inb))
 
     def _decide(self, power: float, feat: BlockFeatures, rr: rg.RidgeResult, floor: float, ref: int
                 ) -> tuple[int, float, float, float, float, float]:

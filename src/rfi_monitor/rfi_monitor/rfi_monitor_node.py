@@ -284,8 +284,8 @@ class MonitorNodeParams:
     ridge_phase_bins: int = parameter(
         _R.phase_bins, 'Bins of the folded sweep profile (stft).', minimum=8, maximum=4096)
     ridge_hook_rate_ratio: float = parameter(
-        _R.hook_rate_ratio, 'A saw-tooth whose step after its flyback exceeds this times its median step is '
-        'hooked (stft).', minimum=1.0001, maximum=1e3)
+        _R.hook_rate_ratio, 'A saw-tooth whose two steps after its flyback both exceed this times its median step '
+        'is hooked (stft; also hooked: a way back swept over at least two profile bins).', minimum=1.0001, maximum=1e3)
     ridge_min_present_fraction: float = parameter(
         _R.min_present_fraction, 'A non-periodic ridge must be present in at least this share of the frames '
         '(stft), (0, 1].', minimum=1e-6, maximum=1.0)

@@ -1130,6 +1130,19 @@ def _fold_shape(S: np.ndarray, freqs: np.ndarray, per_fr: float, L: int, cplx: b
     return shape, float(np.mean(present)), low, high
 
 
+def joined_span(f: np.ndarray, present: np.ndarray, max_step: float) -> float:
+    """The 5-95 % span of the ridge frequencies of the frames joined to a present neighbour by a step of at most
+    max_step (analyse, a sweep without a period; 0 when fewer than 8 such frames): the span the track itself covers.
+    A tone held in one bin with a few isolated frames elsewhere (front-end spurs, noise) spans nothing; a sweep's
+    frames are all joined. (The span of all present frames made such blocks of real captures look like sweeps.)"""
+    pair = present[1:] & present[:-1] & (np.abs(np.diff(f)) <= max_step)
+    joined = np.zeros(f.size, dtype=bool)
+    joined[1:] |= pair
+    joined[:-1] |= pair
+    fj = f[joined]
+    return float(np.percentile(fj, 95) - np.percentile(fj, 5)) if fj.size >= 8 else 0.0
+
+
 def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length: int = 0) -> RidgeResult:
     """Ridge analysis of one block (module docstring).
 
@@ -1151,7 +1164,13 @@ def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length
     nfr, B = S.shape
     # the ridge's strongest bins and the sums of the spectral phasor (its periodicity below) in one pass
     ang = 2.0 * np.pi * np.arange(B) / B
-    kmax, pk32, uc, us = _excess_kernel(S, _f32(lvl), np.cos(ang).astype(np.float32),
+    div = _f32(lvl)
+    if not cplx and B > 3:
+        # a real IF's DC and Nyquist bins: outside any front end's pass band, one degree of freedom (heavier
+        # tails), and where a quantiser's offset and fs/2 products sit: no ridge there (the front-end spurs there
+        # made noise blocks of the 2-bit 12 MS/s capture look like sweeps)
+        div[0] = div[-1] = np.float32(np.inf)
+    kmax, pk32, uc, us = _excess_kernel(S, div, np.cos(ang).astype(np.float32),
                                         np.sin(ang).astype(np.float32))
     f, pk, present = _ridge(S, kmax, pk32, freqs, par.presence_nats)
     h = float(np.sum(1.0 / np.arange(1, B + 1)))
@@ -1230,7 +1249,7 @@ def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length
         fp = f[present]
         dd = np.abs(np.diff(f))[present[1:] & present[:-1]]
         coherent = dd.size > 0 and float(np.mean(dd <= 2 * binw)) >= 0.8
-        span = float(np.percentile(fp, 95) - np.percentile(fp, 5)) if fp.size >= 8 else 0.0
+        span = joined_span(f, present, 2 * binw)
         if coherent and span >= 4 * binw:
             sweeping = True
             low, high = float(np.percentile(fp, 5)), float(np.percentile(fp, 95))

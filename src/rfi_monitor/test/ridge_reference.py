@@ -708,6 +708,19 @@ def _sawtooth_law(prof: np.ndarray, inband: np.ndarray, period_samples: float, L
     return phi_j, coef, rms
 
 
+def joined_span(f: np.ndarray, present: np.ndarray, max_step: float) -> float:
+    """The 5-95 % span of the ridge frequencies of the frames joined to a present neighbour by a step of at most
+    max_step (analyse, a sweep without a period; 0 when fewer than 8 such frames): the span the track itself covers.
+    A tone held in one bin with a few isolated frames elsewhere (front-end spurs, noise) spans nothing; a sweep's
+    frames are all joined. (The span of all present frames made such blocks of real captures look like sweeps.)"""
+    pair = present[1:] & present[:-1] & (np.abs(np.diff(f)) <= max_step)
+    joined = np.zeros(f.size, dtype=bool)
+    joined[1:] |= pair
+    joined[:-1] |= pair
+    fj = f[joined]
+    return float(np.percentile(fj, 95) - np.percentile(fj, 5)) if fj.size >= 8 else 0.0
+
+
 def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length: int = 0) -> RidgeResult:
     """Ridge analysis of one block (module docstring).
 
@@ -727,6 +740,12 @@ def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length
     lvl = noise_levels(S, par.noise_smooth_bins, cplx)
     noise = _noise_power(lvl, L, cplx, par.noise_smooth_bins)
     nfr, B = S.shape
+    if not cplx and B > 3:
+        # a real IF's DC and Nyquist bins: outside any front end's pass band, one degree of freedom (heavier
+        # tails), and where a quantiser's offset and fs/2 products sit: no ridge there (the front-end spurs there
+        # made noise blocks of the 2-bit 12 MS/s capture look like sweeps)
+        lvl = lvl.copy()
+        lvl[0] = lvl[-1] = np.inf
     f, pk, present = _ridge(S, lvl, freqs, par.presence_nats)
     h = float(np.sum(1.0 / np.arange(1, B + 1)))
     peak_excess = float(np.mean(pk)) - h
@@ -802,7 +821,7 @@ def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length
         fp = f[present]
         dd = np.abs(np.diff(f))[present[1:] & present[:-1]]
         coherent = dd.size > 0 and float(np.mean(dd <= 2 * binw)) >= 0.8
-        span = float(np.percentile(fp, 95) - np.percentile(fp, 5)) if fp.size >= 8 else 0.0
+        span = joined_span(f, present, 2 * binw)
         if coherent and span >= 4 * binw:
             sweeping = True
             low, high = float(np.percentile(fp, 5)), float(np.percentile(fp, 95))
