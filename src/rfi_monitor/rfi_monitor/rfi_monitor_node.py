@@ -110,6 +110,14 @@ capped at SHED_CREDIT_CAP_S, and the compiled functions are compiled (or loaded)
 (:func:`warm_up`), so that a one-off cost does not shed seconds of stream.
 ``accounting_ok`` counts shed blocks: received == processed + shed + rejected.
 
+Live streams, latency: ``max_block_age_s`` (0: off, the default) also sheds, before deserialising, a block whose
+stamp is more than that many seconds behind the node's clock (counted in ``blocks_shed`` and in
+``blocks_shed_stale``), so that a node that was starved of CPU (another process, a slower computer) answers
+the newest blocks at once instead of working through a queue (the input keeps up to 1000 blocks, a second of
+1 ms blocks). For live front ends only, whose stamps are the clock's (if_source ``pace: real_time``, an SDR
+driver): a replay's stamps are in the past and would all be shed, so it is off by default; the wall clock
+decides only which blocks are analysed, never what an analysed block gives.
+
 Stale input: :class:`rfi_node_common.inputs.StaleInputWatch` publishes a STALE status (stamped with
 the node clock, the only wall-clock use; no estimate depends on it) while nothing has arrived for
 ``input_timeout_s``.
@@ -249,6 +257,10 @@ class MonitorNodeParams:
         'the block durations; snapshots: the time between them). Beyond it whole blocks are shed on purpose '
         '(blocks_shed on /diagnostics, no JammerState for them) until it fits again; 0: never shed.',
         minimum=0.0, maximum=1000.0)
+    max_block_age_s: float = parameter(
+        0.0, 'Live streams only: a block stamped more than this many seconds behind the node clock is shed before '
+        'it is deserialised (blocks_shed and blocks_shed_stale), so the answers stay within this latency when the '
+        'node was starved of CPU; 0: off (replays: their stamps are in the past).', minimum=0.0, maximum=3600.0)
     max_block_samples: int = parameter(
         2 ** 22, 'Longest block analysed, samples (complex: I/Q pairs); longer blocks are rejected (long_block). '
         'Bounds memory (about 40 bytes per sample) and the time of one callback.', minimum=1024, maximum=2**31 - 1)
@@ -756,6 +768,10 @@ class RfiMonitorNode(Node):
             covered_s = max(covered_s, (stamp_ns - self._last_block_stamp_ns) / NS_PER_S)
         if self._last_block_stamp_ns is None or stamp_ns > self._last_block_stamp_ns:
             self._last_block_stamp_ns = stamp_ns
+        age = self.params.max_block_age_s
+        if age > 0 and self.get_clock().now().nanoseconds - stamp_ns > age * NS_PER_S:
+            self.counts['blocks_shed_stale'] += 1
+            return True
         if not load > 0:
             return False
         # the debt is capped too: a one-off cost (a garbage collection, a page fault storm) sheds at most
@@ -829,7 +845,8 @@ class RfiMonitorNode(Node):
     def accounting(self) -> dict[str, object]:
         """Counters of the node, the core and the subscription, and whether every block received is accounted for."""
         values: dict[str, object] = dict(sorted(self.counts.items()))
-        for key in ('blocks_received', 'blocks_processed', 'states_published', 'stamp_restarts', 'blocks_shed'):
+        for key in ('blocks_received', 'blocks_processed', 'states_published', 'stamp_restarts', 'blocks_shed',
+                    'blocks_shed_stale'):
             values.setdefault(key, 0)
         core = self._core_counters
         values['gaps'] = core.get('gaps', 0)

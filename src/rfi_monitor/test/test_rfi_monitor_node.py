@@ -325,6 +325,29 @@ def test_load_shedding_counts_whole_blocks_and_keeps_accounting(probe_factory):
     assert v['blocks_shed'] == '5' and v['blocks_processed'] == '1' and v['accounting_ok'] == 'True'
 
 
+def test_stale_blocks_are_shed_when_an_age_limit_is_set(probe_factory):
+    """max_block_age_s (live streams): blocks stamped more than that behind the node clock are shed before they are
+    deserialised, counted in blocks_shed and blocks_shed_stale; blocks stamped now are analysed. Off (0, the
+    default): old blocks are analysed (a replay)."""
+    import time as _time
+    fe = FrontEndConfig(noise_bandwidth_hz=NOISE_BW_HZ)
+    msgs, _ = stream(fe, (ChirpJammer(js_db=JS_DB),), 0, 6, seed=23)
+    old = probe_factory(max_block_age_s=0.5)
+    t0 = _time.time_ns() - 2 * 10**9                     # two seconds ago
+    for k, m in enumerate(msgs):
+        m.header.stamp = ns_to_stamp(t0 + k * 10**6)
+    assert all(s is None for s in old.send_all(msgs))
+    v = old.values()
+    assert v['blocks_shed'] == '6' and v['blocks_shed_stale'] == '6' and v['accounting_ok'] == 'True'
+    assert all(s is not None for s in probe_factory().send_all(msgs))     # off: a replay's old stamps are analysed
+    live = probe_factory(max_block_age_s=0.5)
+    t0 = _time.time_ns()
+    for k, m in enumerate(msgs):
+        m.header.stamp = ns_to_stamp(t0 + k * 10**6)
+    assert all(s is not None for s in live.send_all(msgs))
+    assert live.values()['blocks_shed_stale'] == '0'
+
+
 def test_no_saturation_check_for_two_bit_front_ends():
     """A 2-bit front end puts about a third of its samples on its top level: that is not saturation."""
     from rfi_monitor.rfi_monitor_node import full_scale
