@@ -318,7 +318,10 @@ def test_divergence_when_most_anchors_disagree_even_if_one_agrees(fraction):
     rel = truth - anchors[0]
     c, s_ = math.cos(0.6), math.sin(0.6)
     jumped = anchors[0] + np.array([c * rel[0] - s_ * rel[1], s_ * rel[0] + c * rel[1], rel[2]])
-    f = FusionFilter(FusionParams(use_gnss=False, accel_psd_m2ps3=0.01, divergence_uwb_gated_fraction=fraction))
+    # the window rule alone (the per-anchor rule, uwb_gated_anchor_reinit, would also recover the
+    # state here: test_mirror_ambiguity.py)
+    f = FusionFilter(FusionParams(use_gnss=False, accel_psd_m2ps3=0.01, divergence_uwb_gated_fraction=fraction,
+                                  uwb_gated_anchor_reinit=False))
     out = None
     for k in range(400):
         pos = truth if k < 200 else jumped

@@ -28,6 +28,7 @@ the satellite appears and removed (marginalised) when it has been unseen for a w
 :mod:`.gnss_update`        weights (eq. 4, 12), common-mode screen, GNSS update (eq. 5, 6, 17-24)
 :mod:`.uwb_update`         UWB update (eq. 7, 13, 17-25)
 :mod:`.divergence`         divergence rules
+:mod:`.mirror_test`        the mirror ambiguity of coplanar anchors, resolved by GNSS
 :mod:`.ckf`                the CKF, which owns the error covariance (eq. 14-24)
 =========================  ==================================================================
 """
@@ -57,11 +58,13 @@ from .fusion_params import (  # noqa: F401 (re-exported: the filter's public nam
     MODE_GNSS_UWB,
     MODE_NONE,
     MODE_UWB,
+    UWB_FIX_CONSISTENT_SIGMA,
     FusionParams,
 )
 from .gnss_update import clock_offset_from_residuals, prepare_epoch, screen_common_mode, update_gnss
 from .input_checks import CONSTELLATION_NAMES, PreparedEpoch, skipped_constellations, validate_uwb_range
-from .measurement_models import STATE_DIM, constant_velocity_transition, white_acceleration_noise
+from .measurement_models import STATE_DIM, constant_velocity_transition, pseudorange_model, white_acceleration_noise
+from .mirror_test import MirrorTest, anchor_plane, clock_free_chi2, householder, is_range_ambiguous, reflect
 from .reorder_buffer import ReorderBuffer  # noqa: F401 (re-exported)
 from .uwb_update import apply_range
 
@@ -96,7 +99,11 @@ class FusionFilter:
         not confirm re-solves the clock and keeps the position; a GNSS snapshot fix that fails the
         gate against a recent UWB range is refused; a reinitialisation keeps the clock drift.
         UWB multilateration is multi-start and waits for a fourth anchor (or a whole
-        ``uwb_init_window_s``) because three anchors have two mirror solutions.
+        ``uwb_init_window_s``) because three anchors have two mirror solutions. One anchor gated
+        ``divergence_uwb_ranges`` times in a row while a multilateration explains every anchor
+        restarts the position from that fix (``uwb_gated_anchor_reinit``: a wrong local minimum of
+        the ranges). Optionally (``uwb_mirror_test``) the mirror of coplanar anchors is resolved by
+        an accumulated GNSS log-likelihood ratio (:mod:`.mirror_test`).
 
     Example:
         >>> f = FusionFilter(FusionParams(use_gnss=False))
@@ -134,6 +141,13 @@ class FusionFilter:
         self._initialized = False
         self._drift_memory_mps: float | None = None
         self._uwb_wait_since_ns: int | None = None
+        # the test assumes the filter's pseudorange error model: white (tau -> 0, every epoch
+        # independent) unless the correlated errors are modelled
+        self._mirror = MirrorTest(
+            self.params.pseudorange_correlated_tau_s if self.params.pseudorange_correlated_std_m > 0.0 else 0.0,
+            self.params.uwb_mirror_switch_log_lr,
+        )
+        self._mirror_last_ns: int | None = None
         self._reset_state()
 
     # ------------------------------------------------------------------ state handling
@@ -148,6 +162,12 @@ class FusionFilter:
         self._reset_systems(GPS)
         self._bad_gnss_epochs = 0
         self._uwb_gated = GatedWindow(self.params.divergence_uwb_ranges)
+        self._anchor_gated_run: dict[str, int] = {}
+        self._reset_mirror()
+
+    def _reset_mirror(self, key: object = None) -> None:
+        self._mirror.reset(key)
+        self._mirror_last_ns = None
 
     def _reset_systems(self, reference: int) -> None:
         """No inter-system bias states; ``reference`` is the system whose time ``c*dt`` is in."""
@@ -301,6 +321,8 @@ class FusionFilter:
         self._clock_initialized = clock_ok
         self._bad_gnss_epochs = 0
         self._uwb_gated = GatedWindow(self.params.divergence_uwb_ranges)
+        self._anchor_gated_run = {}
+        self._reset_mirror()
         return self._output(False)
 
     def _initial_drift(self, clock_drift_mps: float) -> tuple[float, float]:
@@ -559,6 +581,8 @@ class FusionFilter:
         self._count("innovation_gate_pseudorange", gated_pr)
         self._count("innovation_gate_doppler", int(acc_rate.size - acc_rate.sum()))
         self._correct()
+        if self.params.uwb_mirror_test and self.params.use_uwb:
+            self._mirror_check(stamp, prep, acc_pr, cols)
         used = int(acc_pr.sum())
         if used or acc_rate.any():
             self._last_gnss_stamp = stamp
@@ -576,6 +600,56 @@ class FusionFilter:
                 return self._reset_clock_keep_position(stamp, prep)
             return self._declare_divergence(stamp)
         return self._output(False, sat_used=used, sat_rej=pre_rejected + n_screened + gated_pr, nis=nis)
+
+    # ------------------------------------------------------------------ mirror ambiguity
+    def _mirror_check(self, stamp_ns: int, prep: PreparedEpoch, accepted: np.ndarray,
+                      bias_column: np.ndarray | None) -> None:
+        """Add the epoch to the mirror test (:mod:`.mirror_test`) and jump to the mirror when the
+        GNSS evidence says so (beyond the paper).
+
+        The anchors are those heard within ``uwb_init_window_s`` (the test restarts when that set
+        changes); the mirror is the reflection of the tag (antenna plus lever arm) across their
+        best-fit plane, tested only if it leaves every range within ``MIRROR_MAX_RANGE_CHANGE_SIGMA``
+        range 1-sigmas. The residuals are the raw pseudorange residuals (inter-system biases
+        applied, correlated-error states not: the test scales for the correlation itself) of the
+        pseudoranges the update accepted. The jump reflects position and velocity and applies the
+        same reflection to the error covariance (``P <- T P T^T``, exact for a linear map).
+        """
+        p = self.params
+        if self._frame != FRAME_EARTH or int(accepted.sum()) < 4:
+            return
+        window_ns = p.uwb_init_window_s * _NS
+        recent = sorted(
+            (aid, v[1]) for aid, v in self._recent_uwb.items() if v[3] == FRAME_EARTH and stamp_ns - v[0] <= window_ns
+        )
+        key = tuple(aid for aid, _ in recent)
+        if key != self._mirror.key:
+            self._reset_mirror(key)
+        plane = anchor_plane(np.array([a for _, a in recent])) if len(recent) >= 3 else None
+        if plane is None:
+            return
+        anchors = np.array([a for _, a in recent])
+        tag = self._nominal[0:3] + self._lever
+        tag_m = reflect(tag, *plane)
+        if not is_range_ambiguous(tag, tag_m, anchors, p.uwb_range_std_m):
+            return
+        states = np.stack([self._nominal, self._nominal])
+        states[1, 0:3] = tag_m - self._lever
+        hx = pseudorange_model(prep.sat_pos, prep.sat_clk, prep.iono, prep.tropo, bias_column)
+        res = prep.pr[None, :] - hx(states)
+        chi2 = clock_free_chi2(res[:, accepted], prep.sigma_pr[accepted])
+        dt_s = 0.0 if self._mirror_last_ns is None else (stamp_ns - self._mirror_last_ns) / _NS
+        self._mirror_last_ns = stamp_ns
+        if not self._mirror.add(chi2, int(accepted.sum()), dt_s):
+            return
+        m = householder(plane[1])
+        t = np.eye(self._nominal.size)
+        t[0:3, 0:3] = m
+        t[3:6, 3:6] = m
+        self._nominal[0:3] = tag_m - self._lever
+        self._nominal[3:6] = m @ self._nominal[3:6]
+        self._ckf = CubatureKalmanFilter(np.zeros(self._nominal.size), t @ self._ckf.p @ t.T)
+        self._count("uwb_mirror_switch")
 
     # ------------------------------------------------------------------ several GNSS
     def _bias_columns(self, prep: PreparedEpoch) -> np.ndarray | None:
@@ -759,18 +833,51 @@ class FusionFilter:
             return self._declare_divergence(stamp)
         self._uwb_gated.push(ok)
         if ok:
+            if self._anchor_gated_run:
+                self._anchor_gated_run.pop(meas.anchor_id, None)
             self._last_uwb_stamp = stamp
             if self._position_lost():
                 self._count("divergence")
                 return self._declare_divergence(stamp)
             return self._output(False, uwb_used=1, nis=nis)
         self._count("innovation_gate_uwb")
+        run = self._anchor_gated_run.get(meas.anchor_id, 0) + 1
+        self._anchor_gated_run[meas.anchor_id] = run
+        if run >= p.divergence_uwb_ranges and p.uwb_gated_anchor_reinit:
+            self._anchor_gated_run[meas.anchor_id] = 0
+            pos = self._consistent_uwb_fix(stamp, meas.frame_id, std)
+            if pos is not None:
+                # every anchor agrees with a fix and the state gates one of them: the state sits in
+                # a wrong local minimum of the ranges (e.g. the mirror of three of four anchors)
+                self._reinits += 1
+                self._count("uwb_anchor_gated_reinit")
+                self.initialize(stamp, pos, frame_id=meas.frame_id, position_std_m=1.0)
+                self._last_uwb_stamp = stamp
+                return self._output(True, uwb_rej=1)
         # Divergence: most of the recent ranges (all anchors together) inconsistent with the state.
         # A single anchor that still agrees (the state sits on its range sphere) does not mask it.
         if self._uwb_gated.diverged(p.divergence_uwb_gated_fraction):
             self._count("divergence")
             return self._declare_divergence(stamp)
         return self._output(False, uwb_rej=1)
+
+    def _consistent_uwb_fix(self, stamp_ns: int, frame: str, range_std_m: float) -> np.ndarray | None:
+        """A multi-start multilateration on the latest range of at least four anchors within
+        ``uwb_init_window_s`` whose residuals are all within ``UWB_FIX_CONSISTENT_SIGMA`` range
+        1-sigmas, else None (beyond the paper). Asked when one anchor has had
+        ``divergence_uwb_ranges`` consecutive ranges gated: if such a fix exists the ranges are
+        consistent and the state is wrong; if not, that anchor's ranges are faulty (e.g. NLOS) and
+        stay gated."""
+        win = self.params.uwb_init_window_s * _NS
+        ranged = [(a, r) for (t, a, r, f) in self._recent_uwb.values() if f == frame and stamp_ns - t <= win]
+        if len(ranged) < 4:
+            return None
+        pos = init.multilaterate(self._recent_uwb, stamp_ns, frame, self.params.uwb_init_window_s, self._lever)
+        if pos is None:
+            return None
+        anchors = np.array([a for a, _ in ranged])
+        res = np.array([r for _, r in ranged]) - np.linalg.norm(pos + self._lever - anchors, axis=1)
+        return pos if float(np.max(np.abs(res))) <= UWB_FIX_CONSISTENT_SIGMA * range_std_m else None
 
     def _multilaterate(self, stamp_ns: int, frame: str, guess: np.ndarray | None = None) -> np.ndarray | None:
         return init.multilaterate(self._recent_uwb, stamp_ns, frame, self.params.uwb_init_window_s, self._lever, guess)

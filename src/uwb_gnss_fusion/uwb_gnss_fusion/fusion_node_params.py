@@ -166,6 +166,19 @@ class FusionNodeParams:
         minimum=0.0, maximum=100.0)
     pseudorange_correlated_tau_s: float = parameter(
         _FP.pseudorange_correlated_tau_s, 'Correlation time of that error, s.', minimum=0.1, maximum=86400.0)
+    uwb_mirror_test: bool = parameter(
+        _FP.uwb_mirror_test, 'Resolve the mirror ambiguity of coplanar anchors (three anchors always are) with a '
+        'GNSS log-likelihood ratio of the reflected estimate against the estimate, accumulated over the epochs '
+        '(beyond the paper; counted as uwb_mirror_switch).')
+    uwb_mirror_switch_log_lr: float = parameter(
+        _FP.uwb_mirror_switch_log_lr, 'Jump to the mirror when that log-likelihood ratio exceeds this '
+        '(natural log; evidence scaled to independent samples with pseudorange_correlated_tau_s).',
+        minimum=0.01, maximum=100.0)
+    uwb_gated_anchor_reinit: bool = parameter(
+        _FP.uwb_gated_anchor_reinit, 'Reinitialise the position from a multilateration fix that explains the '
+        'latest range of every anchor (at least four) when one anchor has had divergence_uwb_ranges consecutive '
+        'ranges gated (the state is in a wrong local minimum; beyond the paper; counted as '
+        'uwb_anchor_gated_reinit).')
     elevation_mask_deg: float = parameter(
         _FP.elevation_mask_deg, 'Satellites below this elevation are rejected, deg.',
         minimum=-90.0, maximum=89.0, read_only=False)

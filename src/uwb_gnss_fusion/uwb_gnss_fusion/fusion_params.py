@@ -41,6 +41,10 @@ INTER_SYSTEM_BIAS_MAX_GAP_S = 300.0
 returns, s (e.g. after a receiver restart its hardware biases may differ); a shorter absence keeps
 the estimate, whose variance grew by the random walk meanwhile."""
 
+UWB_FIX_CONSISTENT_SIGMA = 4.0
+"""A multilateration fix explains the ranges when every residual is within this many range
+1-sigmas (``FusionParams.uwb_gated_anchor_reinit``)."""
+
 CORRELATED_ERROR_MAX_GAP_TAU = 2.0
 """A satellite unseen for longer than this many correlation times has its correlated-error state
 removed (marginalised, exact); if it returns it gets a fresh state with the stationary variance
@@ -124,6 +128,23 @@ class FusionParams:
             as white, such errors are averaged over every epoch of a correlation time and the
             filter becomes overconfident (docs/uwb_gnss_fusion/fusion_never_worse.md).
             Std 0: off (white pseudorange errors, the 8-state filter).
+        uwb_mirror_test: resolve the mirror ambiguity of coplanar anchors (three anchors always
+            are) with the pseudoranges: a GNSS log-likelihood ratio of the reflection of the
+            estimate across the anchors' plane against the estimate, accumulated over the epochs,
+            and a jump to the mirror when it exceeds ``uwb_mirror_switch_log_lr``
+            (:mod:`.mirror_test`; beyond the paper). Active only with GNSS and UWB, in the earth
+            frame, while the anchors heard within ``uwb_init_window_s`` lie in a plane.
+            Counted as ``uwb_mirror_switch``.
+        uwb_gated_anchor_reinit: when one anchor has had ``divergence_uwb_ranges`` consecutive
+            ranges gated while a multi-start multilateration on the latest range of every anchor
+            heard (at least four) explains all of them within ``UWB_FIX_CONSISTENT_SIGMA`` range
+            1-sigmas, reinitialise the position from that fix: the state sits in a wrong local
+            minimum of the ranges (e.g. near the mirror of three of four anchors after a GNSS start
+            metres off in height) and the gate keeps out the anchor that would pull it back. If no
+            such fix exists the anchor's ranges are faulty (e.g. NLOS) and stay gated. Beyond the
+            paper; counted as ``uwb_anchor_gated_reinit``.
+        uwb_mirror_switch_log_lr: that threshold, natural log of the likelihood ratio (> 0; the
+            evidence is scaled to independent samples with ``pseudorange_correlated_tau_s``).
     """
 
     # sensors and models (.measurement_models, .gnss_update, .uwb_update)
@@ -171,6 +192,10 @@ class FusionParams:
     # time-correlated pseudorange errors, one Gauss-Markov state per satellite (issue 15 item 2)
     pseudorange_correlated_std_m: float = 0.0
     pseudorange_correlated_tau_s: float = 60.0
+    # the mirror ambiguity of coplanar anchors, resolved by GNSS (issue 15 item 2)
+    uwb_mirror_test: bool = False
+    uwb_mirror_switch_log_lr: float = 1.0
+    uwb_gated_anchor_reinit: bool = True
 
     def __post_init__(self) -> None:
         pos = {
@@ -191,6 +216,7 @@ class FusionParams:
             "uwb_init_window_s": self.uwb_init_window_s,
             "nonlinearity_threshold": self.nonlinearity_threshold,
             "pseudorange_correlated_tau_s": self.pseudorange_correlated_tau_s,
+            "uwb_mirror_switch_log_lr": self.uwb_mirror_switch_log_lr,
             # inf switches the Huber weighting off; anything else must be finite and > 0
             "uwb_huber_k": 1.0 if self.uwb_huber_k == math.inf else self.uwb_huber_k,
             "uwb_huber_k_positive": 1.0 if self.uwb_huber_k_positive == math.inf else self.uwb_huber_k_positive,

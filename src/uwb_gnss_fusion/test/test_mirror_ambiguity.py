@@ -1,0 +1,206 @@
+"""UWB range ambiguities (issue 15 item 2): the mirror of coplanar anchors resolved by the GNSS
+likelihood ratio (:mod:`uwb_gnss_fusion.mirror_test`), and the reinitialisation when one anchor is
+persistently gated while a fix explains every anchor (``uwb_gated_anchor_reinit``)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from gnss_common.observations import UwbRangeMeasurement
+from uwb_gnss_fusion.fusion_filter import FusionFilter, FusionParams
+from uwb_gnss_fusion.mirror_test import (
+    MirrorTest,
+    anchor_plane,
+    clock_free_chi2,
+    householder,
+    is_range_ambiguous,
+    reflect,
+)
+
+# the benchmark's anchors (fusion_never_worse.py): the paper's three and a fourth, in a local
+# east/north/up frame around the tag at the origin
+_RANGES = (11.71, 13.00, 11.26, 12.0)
+_AZ = (20.0, 140.0, 260.0, 80.0)
+_UP = (1.5, -0.5, 0.8, 2.5)
+
+
+def _local_anchors() -> np.ndarray:
+    out = []
+    for r, az, up in zip(_RANGES, _AZ, _UP, strict=True):
+        h = math.sqrt(r * r - up * up)
+        out.append([h * math.sin(math.radians(az)), h * math.cos(math.radians(az)), up])
+    return np.array(out)
+
+
+# ------------------------------------------------------------------ geometry and the statistic
+def test_reflection_keeps_every_range_to_three_anchors() -> None:
+    a = _local_anchors()[:3]
+    c, n = anchor_plane(a)
+    tag = np.zeros(3)
+    m = reflect(tag, c, n)
+    assert np.allclose(np.linalg.norm(a - tag, axis=1), np.linalg.norm(a - m, axis=1), atol=1e-12)
+    assert np.linalg.norm(m - tag) > 1.0  # the tag is about 0.6 m off the anchors' plane
+    assert is_range_ambiguous(tag, m, a, 0.1)
+    # the fourth anchor (2.5 m up) tells them apart
+    assert not is_range_ambiguous(tag, m, _local_anchors(), 0.1)
+    # reflect is affine with linear part householder(n); twice is the identity
+    x = np.array([[1.0, -2.0, 3.0], [0.5, 0.2, -0.1]])
+    assert np.allclose(reflect(x, c, n) - reflect(np.zeros(3), c, n), x @ householder(n).T)
+    assert np.allclose(reflect(reflect(x, c, n), c, n), x)
+
+
+def test_collinear_or_too_few_anchors_have_no_plane() -> None:
+    assert anchor_plane(np.zeros((2, 3))) is None
+    assert anchor_plane(np.array([[0.0, 0, 0], [1, 0, 0], [5, 0, 0]])) is None
+
+
+def test_clock_free_chi2_ignores_a_common_offset() -> None:
+    rng = np.random.default_rng(1)
+    r = rng.normal(size=(2, 7))
+    s = rng.uniform(0.5, 2.0, 7)
+    w = 1.0 / s**2
+    c = (r * w).sum(axis=1, keepdims=True) / w.sum()
+    assert np.allclose(clock_free_chi2(r, s), ((r - c) ** 2 * w).sum(axis=1))
+    assert np.allclose(clock_free_chi2(r + 12.3, s), clock_free_chi2(r, s))
+
+
+def test_mirror_statistic_scales_to_independent_samples_and_swaps() -> None:
+    tau = 60.0
+    t = MirrorTest(tau_s=tau, switch_log_lr=1.0)
+    # chi2 current 4 over 8 satellites: variance factor 1 (floor); increment 0.5 * (4 - 2.3) * dt / (2 tau)
+    dt = 0.2
+    per_epoch = 0.5 * 1.7 * dt / (2.0 * tau)
+    n_needed = math.floor(1.0 / per_epoch) + 1  # 706 (1 / per_epoch = 705.9)
+    fired = [t.add(np.array([4.0, 2.3]), 8, dt) for _ in range(n_needed)]
+    assert fired[-1] and not any(fired[:-1])
+    assert t.log_lr == pytest.approx(-n_needed * per_epoch)
+    # a variance factor of 4 (chi2 / dof) divides the evidence by 4
+    t2 = MirrorTest(tau_s=tau, switch_log_lr=100.0)
+    t2.add(np.array([16.0, 8.0]), 8, 0.0)  # first epoch: sets the factor, dt 0 adds nothing
+    assert t2.variance_factor == pytest.approx(4.0) and t2.log_lr == 0.0
+    t2.add(np.array([16.0, 8.0]), 8, dt)
+    assert t2.log_lr == pytest.approx(0.5 * 8.0 * dt / (2.0 * tau) / 4.0)
+    # fewer than four satellites carry no evidence
+    assert not t2.add(np.array([100.0, 0.0]), 3, dt)
+
+
+# ------------------------------------------------------------------ the filter on the simulator
+@pytest.fixture(scope="module")
+def clean_run():
+    """120 s, no jamming, pseudorange errors white (jitter only), the benchmark's four anchors."""
+    from pathlib import Path
+
+    from rfi_sim.gnss_uwb import PAPER_ANCHOR_RANGES_M, BroadcastGeometry, GnssUwbScenario, simulate
+
+    nav = Path(__file__).resolve().parents[2] / "gnss_common" / "test" / "data" / "arlm2000.15n"
+    geo = BroadcastGeometry(nav)
+    sc = GnssUwbScenario(
+        jsr_db=None, duration_s=120.0, seed=7, correlated_error_std_m=0.0,
+        anchor_ranges_m=(*PAPER_ANCHOR_RANGES_M, 12.0), anchor_azimuths_deg=_AZ, anchor_up_m=_UP,
+    )
+    return simulate(sc, geo, geo.iono_alpha, geo.iono_beta)
+
+
+def _run_from_mirror(run, **params) -> tuple[FusionFilter, float, float]:
+    """Start the filter on the mirror of the truth across anchors A1-A3 and run GNSS + A1-A3.
+    Returns (filter, final distance to the truth, to the mirror), m."""
+    truth = np.asarray(run.truth.receiver_ecef_m, dtype=float)
+    c, n = anchor_plane(run.truth.anchor_ecef_m[:3])
+    mirror = reflect(truth, c, n)
+    f = FusionFilter(FusionParams(accel_psd_m2ps3=0.01, **params))
+    f.initialize(run.gnss_epochs[0].stamp_ns, mirror, position_std_m=0.05)
+    out = None
+    for m in run.messages(anchor_ids=("A1", "A2", "A3"), gnss=True):
+        if m.stamp_ns > run.gnss_epochs[0].stamp_ns:
+            out = f.process(m)
+    assert out is not None and out.initialized
+    return f, float(np.linalg.norm(out.position_m - truth)), float(np.linalg.norm(out.position_m - mirror))
+
+
+def test_mirror_test_moves_the_filter_to_the_side_gnss_favours(clean_run) -> None:
+    f_off, to_truth_off, to_mirror_off = _run_from_mirror(clean_run, uwb_mirror_test=False)
+    # without the test the ranges hold the filter on the mirror (the GNSS pull is too weak)
+    assert to_mirror_off < 0.3 < 1.0 < to_truth_off
+    assert "uwb_mirror_switch" not in f_off.rejection_counts
+    f_on, to_truth_on, _ = _run_from_mirror(clean_run, uwb_mirror_test=True)
+    assert f_on.rejection_counts.get("uwb_mirror_switch", 0) >= 1
+    assert to_truth_on < 0.3
+
+
+def test_gated_anchor_reinitialises_from_a_fix_that_explains_every_anchor() -> None:
+    """The benchmark's failure (fusion_never_worse.py, +22 dB, seed 165): the GNSS start is metres
+    off in height, the first ranges pull the state near the mirror of A1-A3 and the gate then keeps
+    A4 out for the whole run. With ``uwb_gated_anchor_reinit`` the filter restarts from the
+    four-anchor fix after ``divergence_uwb_ranges`` gated ranges of A4."""
+    from pathlib import Path
+
+    from rfi_sim.gnss_uwb import PAPER_ANCHOR_RANGES_M, BroadcastGeometry, GnssUwbScenario, simulate
+
+    nav = Path(__file__).resolve().parents[2] / "gnss_common" / "test" / "data" / "arlm2000.15n"
+    geo = BroadcastGeometry(nav)
+    sc = GnssUwbScenario(
+        jsr_db=22.0, duration_s=30.0, seed=165,
+        anchor_ranges_m=(*PAPER_ANCHOR_RANGES_M, 12.0), anchor_azimuths_deg=_AZ, anchor_up_m=_UP,
+    )
+    run = simulate(sc, geo, geo.iono_alpha, geo.iono_beta)
+    truth = np.asarray(run.truth.receiver_ecef_m, dtype=float)
+
+    def final_error(**params) -> tuple[FusionFilter, float]:
+        f = FusionFilter(FusionParams(accel_psd_m2ps3=0.01, **params))
+        errs = [np.linalg.norm(f.process(m).position_m - truth) for m in run.messages(gnss=True)]
+        return f, float(np.sqrt(np.mean(np.square(errs[-2000:]))))  # the last 5 s
+
+    f_off, err_off = final_error(uwb_gated_anchor_reinit=False)
+    assert err_off > 1.0 and f_off.rejection_counts["innovation_gate_uwb"] > 500  # A4: 600 ranges in 30 s
+    f_on, err_on = final_error()
+    assert f_on.rejection_counts.get("uwb_anchor_gated_reinit", 0) >= 1
+    assert err_on < 0.2
+
+
+def test_a_biased_anchor_is_gated_without_a_restart() -> None:
+    """UWB alone (map frame), started at the tag: A4 reads 2 m long (NLOS-like), no fix explains
+    every anchor within 4 sigma, so A4 stays gated and the filter is never restarted."""
+    anchors = _local_anchors()
+    tag = np.zeros(3)
+    rng = np.random.default_rng(3)
+    f = FusionFilter(FusionParams(use_gnss=False, accel_psd_m2ps3=0.01))
+    f.initialize(0, tag, frame_id="map", position_std_m=0.02)
+    out = None
+    for k in range(1, 20 * 10 + 1):  # 10 s at 20 Hz per anchor
+        for j, a in enumerate(anchors):
+            r = float(np.linalg.norm(a - tag)) + 0.03 * rng.standard_normal() + (2.0 if j == 3 else 0.0)
+            out = f.process(UwbRangeMeasurement(stamp_ns=k * 50_000_000 + j * 10_000_000, anchor_id=f"A{j + 1}",
+                                                anchor_position_m=a, range_m=r, frame_id="map"))
+    assert out is not None
+    counts = f.rejection_counts
+    assert "uwb_anchor_gated_reinit" not in counts and counts["innovation_gate_uwb"] >= 190
+    # the three unbiased anchors hold the horizontal tightly and the height weakly (the tag is
+    # 0.6 m from their plane: UWB alone with three anchors, 0.09 m 3D RMS in the benchmark)
+    err = out.position_m - tag
+    assert float(np.linalg.norm(err[:2])) < 0.05 and abs(float(err[2])) < 0.3
+
+
+def test_per_anchor_rule_recovers_a_jump_the_consecutive_window_rule_misses() -> None:
+    """test_fusion_filter's jump (the tag moves to a point at the same distance from anchor 1):
+    with ``divergence_uwb_gated_fraction = 1`` the window rule never fires; the per-anchor rule
+    restarts from the four-anchor fix."""
+    anchors = np.array([[0.0, 0.0, 2.0], [10.0, 0.0, 0.5], [10.0, 10.0, 2.5], [0.0, 10.0, 0.3]])
+    truth = np.array([4.0, 6.0, 1.0])
+    rel = truth - anchors[0]
+    c, s_ = math.cos(0.6), math.sin(0.6)
+    jumped = anchors[0] + np.array([c * rel[0] - s_ * rel[1], s_ * rel[0] + c * rel[1], rel[2]])
+    f = FusionFilter(FusionParams(use_gnss=False, accel_psd_m2ps3=0.01, divergence_uwb_gated_fraction=1.0))
+    out = None
+    for k in range(400):
+        pos = truth if k < 200 else jumped
+        a = anchors[k % 4]
+        out = f.process_uwb(UwbRangeMeasurement(stamp_ns=k * 25_000_000, anchor_id=f"A{k % 4}", anchor_position_m=a,
+                                                range_m=float(np.linalg.norm(a - pos)), frame_id="map"))
+    assert out is not None
+    counts = dict(out.rejection_counts)
+    assert "divergence" not in counts
+    assert counts.get("uwb_anchor_gated_reinit", 0) >= 1
+    assert np.linalg.norm(out.position_m - jumped) < 0.05
