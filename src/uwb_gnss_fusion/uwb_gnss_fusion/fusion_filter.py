@@ -39,6 +39,7 @@ import math
 from collections.abc import Callable, Mapping
 
 import numpy as np
+from scipy.stats import chi2
 
 from gnss_common.clock_model import clock_process_noise_m as _clock_q
 from gnss_common.observations import GPS, GnssEpoch, UwbRangeMeasurement
@@ -120,12 +121,16 @@ class FusionFilter:
         self.params = params if params is not None else FusionParams()
         self._reference_provider = reference_provider
         self._gate = self.params.gate_nis
+        self._gate_3d = (
+            math.inf if self.params.gate_probability >= 1.0 else float(chi2.ppf(self.params.gate_probability, 3))
+        )
         self._transition_cache: dict[tuple[int, bool, int, int], tuple[np.ndarray, np.ndarray]] = {}
         self._counts_tuple: tuple[tuple[str, int], ...] | None = None
         clock = self.params.clock
         self._clock_q = lambda dt_s: _clock_q(clock, dt_s)
         self._lever = np.asarray(self.params.uwb_lever_arm_m, dtype=float)
         self._uwb_scratch = np.zeros(6)  # diagnostics of the compiled UWB update (.ckf_kernels)
+        self._gated_restarted: set[str] = set()  # anchors that restarted the filter (uwb_gated_anchor_reinit)
         self._anchor_registry: Mapping[str, np.ndarray] = {
             a[0]: np.array([float(a[1]), float(a[2]), float(a[3])]) for a in self.params.anchors
         }
@@ -637,10 +642,10 @@ class FusionFilter:
         states[1, 0:3] = tag_m - self._lever
         hx = pseudorange_model(prep.sat_pos, prep.sat_clk, prep.iono, prep.tropo, bias_column)
         res = prep.pr[None, :] - hx(states)
-        chi2 = clock_free_chi2(res[:, accepted], prep.sigma_pr[accepted])
+        chi2_pair = clock_free_chi2(res[:, accepted], prep.sigma_pr[accepted])
         dt_s = 0.0 if self._mirror_last_ns is None else (stamp_ns - self._mirror_last_ns) / _NS
         self._mirror_last_ns = stamp_ns
-        if not self._mirror.add(chi2, int(accepted.sum()), dt_s):
+        if not self._mirror.add(chi2_pair, int(accepted.sum()), dt_s):
             return
         m = householder(plane[1])
         t = np.eye(self._nominal.size)
@@ -843,12 +848,15 @@ class FusionFilter:
         self._count("innovation_gate_uwb")
         run = self._anchor_gated_run.get(meas.anchor_id, 0) + 1
         self._anchor_gated_run[meas.anchor_id] = run
-        if run >= p.divergence_uwb_ranges and p.uwb_gated_anchor_reinit:
+        if run >= p.divergence_uwb_ranges and p.uwb_gated_anchor_reinit and meas.anchor_id not in self._gated_restarted:
             self._anchor_gated_run[meas.anchor_id] = 0
             pos = self._consistent_uwb_fix(stamp, meas.frame_id, std)
             if pos is not None:
+                self._gated_restarted.add(meas.anchor_id)
                 # every anchor agrees with a fix and the state gates one of them: the state sits in
-                # a wrong local minimum of the ranges (e.g. the mirror of three of four anchors)
+                # a wrong local minimum of the ranges (e.g. near the mirror of three of four
+                # anchors). Once per anchor id in the filter's life: a biased anchor whose fix also
+                # explains the ranges (weak geometry) must not make the filter cycle.
                 self._reinits += 1
                 self._count("uwb_anchor_gated_reinit")
                 self.initialize(stamp, pos, frame_id=meas.frame_id, position_std_m=1.0)
@@ -867,7 +875,10 @@ class FusionFilter:
         1-sigmas, else None (beyond the paper). Asked when one anchor has had
         ``divergence_uwb_ranges`` consecutive ranges gated: if such a fix exists the ranges are
         consistent and the state is wrong; if not, that anchor's ranges are faulty (e.g. NLOS) and
-        stay gated."""
+        stay gated. The fix must also disagree with the state: squared Mahalanobis distance
+        ``d^T (P_pos + C_fix)^-1 d`` above the 3-dof chi-square quantile of ``gate_probability``,
+        with ``C_fix = sigma^2 (H^T H)^-1`` the fix's covariance (``H``: unit lines of sight), so
+        that a fix a slightly biased anchor moves by decimetres does not restart the filter."""
         win = self.params.uwb_init_window_s * _NS
         ranged = [(a, r) for (t, a, r, f) in self._recent_uwb.values() if f == frame and stamp_ns - t <= win]
         if len(ranged) < 4:
@@ -876,8 +887,19 @@ class FusionFilter:
         if pos is None:
             return None
         anchors = np.array([a for a, _ in ranged])
-        res = np.array([r for _, r in ranged]) - np.linalg.norm(pos + self._lever - anchors, axis=1)
-        return pos if float(np.max(np.abs(res))) <= UWB_FIX_CONSISTENT_SIGMA * range_std_m else None
+        rel = pos + self._lever - anchors
+        dist = np.linalg.norm(rel, axis=1)
+        res = np.array([r for _, r in ranged]) - dist
+        if float(np.max(np.abs(res))) > UWB_FIX_CONSISTENT_SIGMA * range_std_m:
+            return None
+        h = rel / dist[:, None]
+        try:
+            cov = range_std_m**2 * np.linalg.inv(h.T @ h) + self._ckf.p[0:3, 0:3]
+            d = pos - self._nominal[0:3]
+            far = float(d @ np.linalg.solve(cov, d)) > self._gate_3d
+        except np.linalg.LinAlgError:
+            return None
+        return pos if far else None
 
     def _multilaterate(self, stamp_ns: int, frame: str, guess: np.ndarray | None = None) -> np.ndarray | None:
         return init.multilaterate(self._recent_uwb, stamp_ns, frame, self.params.uwb_init_window_s, self._lever, guess)

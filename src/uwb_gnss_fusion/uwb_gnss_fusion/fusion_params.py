@@ -138,11 +138,13 @@ class FusionParams:
         uwb_gated_anchor_reinit: when one anchor has had ``divergence_uwb_ranges`` consecutive
             ranges gated while a multi-start multilateration on the latest range of every anchor
             heard (at least four) explains all of them within ``UWB_FIX_CONSISTENT_SIGMA`` range
-            1-sigmas, reinitialise the position from that fix: the state sits in a wrong local
-            minimum of the ranges (e.g. near the mirror of three of four anchors after a GNSS start
-            metres off in height) and the gate keeps out the anchor that would pull it back. If no
-            such fix exists the anchor's ranges are faulty (e.g. NLOS) and stay gated. Beyond the
-            paper; counted as ``uwb_anchor_gated_reinit``.
+            1-sigmas and lies outside the 3-dof gate around the state, reinitialise the position
+            from that fix: the state sits in a wrong local minimum of the ranges (e.g. near the
+            mirror of three of four anchors after a GNSS start metres off in height) and the gate
+            keeps out the anchor that would pull it back. If no such fix exists the anchor's ranges
+            are faulty (e.g. NLOS) and stay gated. At most once per anchor id in the filter's life
+            (a biased anchor whose fix also explains the ranges in a weak geometry must not make the
+            filter cycle). Beyond the paper; counted as ``uwb_anchor_gated_reinit``.
         uwb_mirror_switch_log_lr: that threshold, natural log of the likelihood ratio (> 0; the
             evidence is scaled to independent samples with ``pseudorange_correlated_tau_s``).
     """
