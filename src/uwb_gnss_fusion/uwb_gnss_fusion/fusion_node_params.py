@@ -176,9 +176,9 @@ class FusionNodeParams:
         minimum=0.01, maximum=100.0)
     uwb_gated_anchor_reinit: bool = parameter(
         _FP.uwb_gated_anchor_reinit, 'Reinitialise the position from a multilateration fix that explains the '
-        'latest range of every anchor (at least four) when one anchor has had divergence_uwb_ranges consecutive '
-        'ranges gated (the state is in a wrong local minimum; beyond the paper; counted as '
-        'uwb_anchor_gated_reinit).')
+        'latest range of every anchor (at least four) and lies outside the 3-dof gate around the state, when one '
+        'anchor has had divergence_uwb_ranges consecutive ranges gated (the state is in a wrong local minimum); at '
+        'most once per anchor id. Beyond the paper; counted as uwb_anchor_gated_reinit.')
     elevation_mask_deg: float = parameter(
         _FP.elevation_mask_deg, 'Satellites below this elevation are rejected, deg.',
         minimum=-90.0, maximum=89.0, read_only=False)
