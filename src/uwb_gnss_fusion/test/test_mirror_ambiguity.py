@@ -208,3 +208,21 @@ def test_per_anchor_rule_recovers_a_jump_the_consecutive_window_rule_misses() ->
     assert "divergence" not in counts
     assert counts.get("uwb_anchor_gated_reinit", 0) >= 1
     assert np.linalg.norm(out.position_m - jumped) < 0.05
+
+
+def test_side_prior_puts_the_filter_on_the_side_the_installer_gives(clean_run) -> None:
+    """uwb_tag_side_of_anchor_plane: the tag of the benchmark lies below the plane of A1-A3 (the mirror about
+    1.2 m above it). Started on the mirror, the prior -1 (below) moves the filter to the truth; the prior +1
+    (a wrong installation entry) keeps it on the mirror; the prior 0 is the filter without it."""
+    truth = np.asarray(clean_run.truth.receiver_ecef_m, dtype=float)
+    c, n = anchor_plane(clean_run.truth.anchor_ecef_m[:3])
+    up = truth / np.linalg.norm(truth)
+    assert float((truth - c) @ (n if float(n @ up) >= 0 else -n)) < -0.3       # the tag is below the plane
+    f_below, to_truth, _ = _run_from_mirror(clean_run, uwb_tag_side_of_anchor_plane=-1)
+    assert f_below.rejection_counts.get("uwb_side_prior_flip", 0) >= 1
+    assert to_truth < 0.3
+    f_above, to_truth_above, to_mirror_above = _run_from_mirror(clean_run, uwb_tag_side_of_anchor_plane=1)
+    assert "uwb_side_prior_flip" not in f_above.rejection_counts
+    assert to_mirror_above < 0.3 < 1.0 < to_truth_above
+    with pytest.raises(ValueError):
+        FusionParams(uwb_tag_side_of_anchor_plane=2)

@@ -586,7 +586,7 @@ class FusionFilter:
         self._count("innovation_gate_pseudorange", gated_pr)
         self._count("innovation_gate_doppler", int(acc_rate.size - acc_rate.sum()))
         self._correct()
-        if self.params.uwb_mirror_test and self.params.use_uwb:
+        if (self.params.uwb_mirror_test or self.params.uwb_tag_side_of_anchor_plane) and self.params.use_uwb:
             self._mirror_check(stamp, prep, acc_pr, cols)
         used = int(acc_pr.sum())
         if used or acc_rate.any():
@@ -638,6 +638,18 @@ class FusionFilter:
         tag_m = reflect(tag, *plane)
         if not is_range_ambiguous(tag, tag_m, anchors, p.uwb_range_std_m):
             return
+        side = int(p.uwb_tag_side_of_anchor_plane)
+        if side:
+            # the installation's side of the anchors' plane (a prior, not a test): "up" is the local
+            # vertical (earth frame: the radial direction), the normal oriented along it
+            centroid, normal = plane
+            up = tag / max(float(np.linalg.norm(tag)), 1.0)
+            n_up = normal if float(normal @ up) >= 0.0 else -normal
+            if float((tag - centroid) @ n_up) * side < 0.0:
+                self._jump_to_mirror(tag_m, normal)
+                self._count("uwb_side_prior_flip")
+                self._reset_mirror(key)
+            return
         states = np.stack([self._nominal, self._nominal])
         states[1, 0:3] = tag_m - self._lever
         hx = pseudorange_model(prep.sat_pos, prep.sat_clk, prep.iono, prep.tropo, bias_column)
@@ -647,14 +659,20 @@ class FusionFilter:
         self._mirror_last_ns = stamp_ns
         if not self._mirror.add(chi2_pair, int(accepted.sum()), dt_s):
             return
-        m = householder(plane[1])
+        self._jump_to_mirror(tag_m, plane[1])
+        self._count("uwb_mirror_switch")
+
+    def _jump_to_mirror(self, tag_m: np.ndarray, normal: np.ndarray) -> None:
+        """Move the state to the mirror image ``tag_m`` of the tag across the anchors' plane (unit
+        ``normal``): position and velocity reflected, the error covariance by the same linear map
+        (``P <- T P T^T``, exact)."""
+        m = householder(normal)
         t = np.eye(self._nominal.size)
         t[0:3, 0:3] = m
         t[3:6, 3:6] = m
         self._nominal[0:3] = tag_m - self._lever
         self._nominal[3:6] = m @ self._nominal[3:6]
         self._ckf = CubatureKalmanFilter(np.zeros(self._nominal.size), t @ self._ckf.p @ t.T)
-        self._count("uwb_mirror_switch")
 
     # ------------------------------------------------------------------ several GNSS
     def _bias_columns(self, prep: PreparedEpoch) -> np.ndarray | None:

@@ -174,6 +174,11 @@ class FusionNodeParams:
         _FP.uwb_mirror_switch_log_lr, 'Jump to the mirror when that log-likelihood ratio exceeds this '
         '(natural log; evidence scaled to independent samples with pseudorange_correlated_tau_s).',
         minimum=0.01, maximum=100.0)
+    uwb_tag_side_of_anchor_plane: int = parameter(
+        _FP.uwb_tag_side_of_anchor_plane, 'The tag moves below (-1) or above (+1) the plane of its coplanar anchors, '
+        'or unknown (0): with -1/+1 an estimate on the other side (the mirror ambiguity of three anchors) is '
+        'reflected back across the plane (counted as uwb_side_prior_flip) and uwb_mirror_test is not used.',
+        minimum=-1, maximum=1)
     uwb_gated_anchor_reinit: bool = parameter(
         _FP.uwb_gated_anchor_reinit, 'Reinitialise the position from a multilateration fix that explains the '
         'latest range of every anchor (at least four) and lies outside the 3-dof gate around the state, when one '

@@ -147,6 +147,14 @@ class FusionParams:
             filter cycle). Beyond the paper; counted as ``uwb_anchor_gated_reinit``.
         uwb_mirror_switch_log_lr: that threshold, natural log of the likelihood ratio (> 0; the
             evidence is scaled to independent samples with ``pseudorange_correlated_tau_s``).
+        uwb_tag_side_of_anchor_plane: what the installer knows of the mirror ambiguity: -1 the tag
+            moves below the plane of its coplanar anchors (anchors mounted high), +1 above it, 0
+            unknown (the default). With -1 or +1, whenever the anchors heard are coplanar and the
+            estimate lies on the other side of their plane (along the local vertical), the filter
+            jumps to its mirror (position, velocity and covariance reflected; counted as
+            ``uwb_side_prior_flip``) and the GNSS test (``uwb_mirror_test``) is not used. For tags
+            that stay clearly on one side: a tag that crosses the plane is pulled back to the side
+            given. Beyond the paper.
     """
 
     # sensors and models (.measurement_models, .gnss_update, .uwb_update)
@@ -198,6 +206,7 @@ class FusionParams:
     uwb_mirror_test: bool = False
     uwb_mirror_switch_log_lr: float = 1.0
     uwb_gated_anchor_reinit: bool = True
+    uwb_tag_side_of_anchor_plane: int = 0
 
     def __post_init__(self) -> None:
         pos = {
@@ -245,6 +254,11 @@ class FusionParams:
                 raise ValueError(f"FusionParams.{name} must be finite")
         if len(self.uwb_lever_arm_m) != 3 or not all(math.isfinite(v) for v in self.uwb_lever_arm_m):
             raise ValueError("FusionParams.uwb_lever_arm_m must be three finite numbers")
+        if self.uwb_tag_side_of_anchor_plane not in (-1, 0, 1) or isinstance(self.uwb_tag_side_of_anchor_plane, bool):
+            raise ValueError(
+                "FusionParams.uwb_tag_side_of_anchor_plane must be -1 (below), 0 (unknown) or 1 (above), "
+                f"got {self.uwb_tag_side_of_anchor_plane!r}"
+            )
         if not (isinstance(self.uwb_latency_s, (int, float)) and 0.0 <= self.uwb_latency_s <= 1.0):
             raise ValueError(f"FusionParams.uwb_latency_s must be in [0, 1] s, got {self.uwb_latency_s!r}")
         if not (isinstance(self.max_update_iterations, int) and 0 <= self.max_update_iterations <= 50):
