@@ -149,7 +149,7 @@ def welch_psd(x: np.ndarray, nfft: int, max_frames: int) -> tuple[np.ndarray, in
         fw32 = np.empty((nfr, nfft), dtype=np.float32)
         _window_frames(x, _hann32(nfft), fw32)
         spec = sp_fft.rfft(fw32, axis=1, overwrite_x=True)
-        p = _frame_power(spec) / nfr
+        p = frame_power(spec) / nfr
         fv = x[: nfr * nfft]
         pw = float(np.add.reduce(fv * fv)) / fv.size      # not np.dot: no multi-threaded BLAS
         return _normalised(p, pw), nfr
@@ -193,7 +193,7 @@ def _window_frames(x: np.ndarray, w32: np.ndarray, out: np.ndarray) -> None:
 
 
 @njit(cache=True)
-def _frame_power(spec: np.ndarray) -> np.ndarray:
+def frame_power(spec: np.ndarray) -> np.ndarray:
     """Sum over frames (rows) of |X|^2 of a complex64 spectrum, accumulated in double."""
     nfr, nb = spec.shape
     acc = np.zeros(nb)

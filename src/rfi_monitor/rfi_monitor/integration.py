@@ -63,7 +63,7 @@ from scipy import stats
 from scipy.ndimage import median_filter
 
 from rfi_monitor import ridge as rg
-from rfi_monitor.classifier import welch_psd
+from rfi_monitor.classifier import frame_power, welch_psd
 
 NONE, CW, CHIRP = 0, 1, 2
 """Types, identical to classifier.NONE / CW / CHIRP (rfi_msgs/JammerState)."""
@@ -212,7 +212,7 @@ def spectral_autocorrelation(x: np.ndarray, cplx: bool, L: int, max_lag: int) ->
     Et, q = _normalised_amplitudes(np.ascontiguousarray(S), bool(not cplx and S.shape[1] > 3), NEIGHBOUR_BINS)
     nf = sp_fft.next_fast_len(T + max_lag + 1, real=True)     # no circular wrap up to max_lag
     F = sp_fft.rfft(Et, nf, axis=1)
-    R = sp_fft.irfft(_power_over_rows(F), nf)[: max_lag + 1]
+    R = sp_fft.irfft(frame_power(F), nf)[: max_lag + 1]     # sum over bins of |F|^2 (the classifier's pass)
     lags = np.arange(max_lag + 1)
     var = np.maximum(T - lags, 0) * q
     return R, var, T
@@ -251,18 +251,6 @@ def _normalised_amplitudes(S: np.ndarray, drop_edges: bool, neighbours: int) -> 
             c /= nfr
             q += (1.0 if d == 0 else 2.0) * c * c
     return Et, q
-
-
-@njit(cache=True, nogil=True, fastmath=_REASSOC)
-def _power_over_rows(F: np.ndarray) -> np.ndarray:
-    """sum over rows of |F|^2 (F complex64 (rows, n)), float64 (n,)."""
-    rows, n = F.shape
-    out = np.zeros(n)
-    for i in range(rows):
-        for k in range(n):
-            v = F[i, k]
-            out[k] += float(v.real) * float(v.real) + float(v.imag) * float(v.imag)
-    return out
 
 
 class Integrator:
