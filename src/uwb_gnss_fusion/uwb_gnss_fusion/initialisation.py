@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from itertools import combinations
 
 import numpy as np
 from scipy.stats import chi2
@@ -48,43 +49,26 @@ def snapshot_fix(
 
     Notes:
         Gauss-Newton on Cao et al., eq. 5 from the Earth's centre
-        (:func:`gnss_common.positioning.least_squares_position`, weights 1 / sigma^2), then
-        iterative exclusion of the largest normalised residual while the weighted sum of squares
-        fails a 0.999 chi-square test; the velocity and drift from eq. 6 in one least-squares step.
+        (:func:`gnss_common.positioning.least_squares_position`, weights 1 / sigma^2). When the weighted
+        sum of squares fails a 0.999 chi-square test, fault exclusion over subsets
+        (:func:`_exclude_faults`, ours): several satellites may be faulty at once under jamming, and
+        dropping the largest residual one at a time can keep a wrong consistent set. The velocity and
+        drift from eq. 6 in one least-squares step.
     """
     if prep.pr.size < min_satellites:
         return None
-    keep = np.ones(prep.pr.size, dtype=bool)
-    while keep.sum() >= 4:
-        idx = np.flatnonzero(keep)
-        hx = pseudorange_model(prep.sat_pos[idx], prep.sat_clk[idx], prep.iono[idx], prep.tropo[idx])
-        sp = prep.sat_pos[idx]
-        w = 1.0 / prep.sigma_pr[idx]
-        w2 = w * w
-
-        def model(x4: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-            d = sp - x4[0:3]  # noqa: B023 (used within this iteration only)
-            return hx(_full_state(x4))[0], d / np.linalg.norm(d, axis=1)[:, None], w2  # noqa: B023
-
-        sol = least_squares_position(model, prep.pr[idx], np.zeros(4), 10, 1e-4, max_variance_m2=math.inf)
-        if sol.status == SINGULAR:
-            return None
-        x = sol.x
-        res = (prep.pr[idx] - hx(_full_state(x))[0]) * w
-        dof = idx.size - 4
-        if not np.isfinite(res).all() or np.linalg.norm(x[0:3]) < 6.0e6:
-            return None
-        if dof == 0 or float(res @ res) <= chi2.ppf(0.999, dof):
-            if dof == 0 and idx.size < min_satellites:
-                return None
-            factor = 1.0 if dof == 0 else max(1.0, float(res @ res) / dof)
-            cov = np.asarray(sol.covariance, dtype=float) * factor
-            break
-        if idx.size - 1 < min_satellites:
-            return None
-        keep[idx[int(np.argmax(np.abs(res)))]] = False
-    else:
+    n = prep.pr.size
+    whole = _fit_subset(prep, np.arange(n))
+    if whole is None:
         return None
+    if whole[2]:
+        keep = np.ones(n, dtype=bool)
+        x, cov = whole[0], whole[1]
+    else:
+        found = _exclude_faults(prep, min_satellites)
+        if found is None:
+            return None
+        keep, x, cov = found
     vel = np.zeros(3)
     drift = math.nan  # unobserved without >= 4 Dopplers
     ridx = np.flatnonzero(keep & np.isfinite(prep.rate))
@@ -99,6 +83,82 @@ def snapshot_fix(
     if not np.all(np.isfinite(cov)):
         return None
     return x[0:3].copy(), float(x[3]), vel, drift, cov
+
+
+MAX_EXCLUDED = 2
+"""Most satellites the snapshot fix excludes (``_exclude_faults``): all subsets without 1 or 2 satellites are
+tried (at most 91 least-squares fits for 14 satellites; only at (re)initialisation)."""
+AGREE_SIGMA = 3.0
+"""Two consistent subsets of the same size agree when their positions differ by at most this many 1-sigmas of the
+difference along it (its variance from both covariances, taken as independent: conservative)."""
+
+
+def _fit_subset(prep: PreparedEpoch, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool, float] | None:
+    """Snapshot least squares (position and clock) on the satellites ``idx``: ``(x (4,), covariance (4, 4),
+    consistent, weighted sum of squares)``, or None (singular, not finite, or inside the Earth). Consistent: the
+    weighted sum of squares passes a 0.999 chi-square test (always, without redundancy). The covariance is
+    ``(H^T W H)^-1`` scaled by the a-posteriori variance factor when that exceeds 1."""
+    hx = pseudorange_model(prep.sat_pos[idx], prep.sat_clk[idx], prep.iono[idx], prep.tropo[idx])
+    sp = prep.sat_pos[idx]
+    w2 = 1.0 / prep.sigma_pr[idx] ** 2
+
+    def model(x4: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        d = sp - x4[0:3]
+        return hx(_full_state(x4))[0], d / np.linalg.norm(d, axis=1)[:, None], w2
+
+    sol = least_squares_position(model, prep.pr[idx], np.zeros(4), 10, 1e-4, max_variance_m2=math.inf)
+    if sol.status == SINGULAR:
+        return None
+    x = sol.x
+    res = (prep.pr[idx] - hx(_full_state(x))[0]) / prep.sigma_pr[idx]
+    if not np.isfinite(res).all() or np.linalg.norm(x[0:3]) < 6.0e6:
+        return None
+    dof = idx.size - 4
+    ssq = float(res @ res)
+    consistent = dof == 0 or ssq <= chi2.ppf(0.999, dof)
+    factor = 1.0 if dof == 0 else max(1.0, ssq / dof)
+    cov = np.asarray(sol.covariance, dtype=float) * factor
+    if not np.all(np.isfinite(cov)):
+        return None
+    return x, cov, consistent, ssq
+
+
+def _exclude_faults(prep: PreparedEpoch, min_satellites: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Fault exclusion for a snapshot fix that fails its consistency test (ours, not Cao et al.): the subsets
+    without 1, then 2 satellites (``MAX_EXCLUDED``) that keep at least ``min_satellites`` and at least one
+    redundant satellite are fitted; the first size with consistent subsets decides. Their fix is the one with the
+    smallest weighted sum of squares, accepted only when every consistent subset of that size agrees with it
+    (``AGREE_SIGMA``): with several faulty satellites a subset that keeps one can also pass the test, and then
+    the epoch cannot say which position is right, so it gives none (the filter waits for the next epoch).
+    Returns ``(kept mask, x (4,), covariance (4, 4))`` or None."""
+    n = prep.pr.size
+    for k in range(1, MAX_EXCLUDED + 1):
+        size = n - k
+        if size < max(min_satellites, 5):
+            return None
+        fits = []
+        for out in combinations(range(n), k):
+            idx = np.setdiff1d(np.arange(n), np.asarray(out))
+            f = _fit_subset(prep, idx)
+            if f is not None and f[2]:
+                fits.append((f[3], idx, f[0], f[1]))
+        if not fits:
+            continue
+        fits.sort(key=lambda t: t[0])
+        _, idx, x, cov = fits[0]
+        for _, _, x2, cov2 in fits[1:]:
+            d = x2[0:3] - x[0:3]
+            dn = float(np.linalg.norm(d))
+            if dn == 0.0:
+                continue
+            u = d / dn
+            sd = math.sqrt(float(u @ cov[0:3, 0:3] @ u) + float(u @ cov2[0:3, 0:3] @ u))
+            if dn > AGREE_SIGMA * sd:
+                return None
+        keep = np.zeros(n, dtype=bool)
+        keep[idx] = True
+        return keep, x, cov
+    return None
 
 
 def _full_state(x4: np.ndarray) -> np.ndarray:
