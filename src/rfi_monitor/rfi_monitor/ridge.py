@@ -786,22 +786,118 @@ def _profile(f: np.ndarray, present: np.ndarray, period_frames: float, K: int, f
     """Folded sweep profile: median ridge frequency, present share and the median's standard error per phase
     bin (K bins). fuse: the present frames whose frequency enters the medians (default all present ones).
     Standard error: 1.2533 x the interquartile range / 1.349 / sqrt(n) (a median's, from the bin's own spread),
-    at least ``resolution`` / sqrt(12 n); infinite with fewer than 4 frames in the bin."""
-    t = np.arange(f.size)
-    kb = np.minimum((np.mod(t / period_frames, 1.0) * K).astype(np.int64), K - 1)
-    n = np.bincount(kb, minlength=K).astype(np.float64)
-    npres = np.bincount(kb, weights=present.astype(np.float64), minlength=K)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        share = np.where(n > 0, npres / np.maximum(n, 1), 0.0)
-    # median of each bin (frames that straddle a flyback give the far side's frequency: a mean would
-    # pull the bin towards it)
+    at least ``resolution`` / sqrt(12 n); infinite with fewer than 4 frames in the bin. Frame t falls in phase
+    bin floor(K (t / period_frames mod 1)). Compiled (``_profile_kernel``; the numpy version it replaced, with
+    np.bincount and np.lexsort, is ridge_reference.py's, test_ridge_speed_equivalence.py)."""
     use = present if fuse is None else fuse
-    ks, fp = kb[use], f[use]
-    if not ks.size:
+    return _profile_kernel(np.ascontiguousarray(f, dtype=np.float64), np.ascontiguousarray(present, dtype=np.bool_),
+                           np.ascontiguousarray(use, dtype=np.bool_), float(period_frames), int(K), float(resolution))
+
+
+@njit(cache=True)
+def _phase_bins(nfr: int, period_frames: float, K: int) -> np.ndarray:
+    """Phase bin of frames 0..nfr-1 on a period of period_frames frames, K bins: floor(K (t / period mod 1)),
+    at most K - 1 (np.minimum((np.mod(t / p, 1.0) * K).astype(np.int64), K - 1); Python's float % is np.mod)."""
+    kb = np.empty(nfr, dtype=np.int64)
+    for t in range(nfr):
+        j = int(((t / period_frames) % 1.0) * K)
+        kb[t] = j if j < K - 1 else K - 1
+    return kb
+
+
+@njit(cache=True)
+def _profile_kernel(f: np.ndarray, present: np.ndarray, use: np.ndarray, period_frames: float, K: int,
+                    resolution: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """_profile, compiled: phase bins, frame counts and present shares, the used frequencies gathered per bin and
+    sorted (a counting sort by bin, then each bin's values: the order np.lexsort((f, bin)) gives), then
+    ``_bin_stats``."""
+    nfr = f.size
+    kb = _phase_bins(nfr, period_frames, K)
+    n = np.zeros(K)
+    npres = np.zeros(K)
+    cnt = np.zeros(K, dtype=np.int64)
+    m = 0
+    for t in range(nfr):
+        b = kb[t]
+        n[b] += 1.0
+        if present[t]:
+            npres[b] += 1.0
+        if use[t]:
+            cnt[b] += 1
+            m += 1
+    share = np.zeros(K)
+    for b in range(K):
+        if n[b] > 0:
+            share[b] = npres[b] / max(n[b], 1.0)
+    if m == 0:
         return np.full(K, np.nan), share, np.full(K, np.inf)
-    order = np.lexsort((fp, ks))
-    prof, se = _bin_stats(fp[order], np.bincount(ks, minlength=K), float(resolution))
+    start = np.empty(K, dtype=np.int64)
+    acc = 0
+    for b in range(K):
+        start[b] = acc
+        acc += cnt[b]
+    pos = start.copy()
+    buf = np.empty(m)
+    for t in range(nfr):
+        if use[t]:
+            b = kb[t]
+            buf[pos[b]] = f[t]
+            pos[b] += 1
+    for b in range(K):
+        if cnt[b] > 1:
+            buf[start[b]:start[b] + cnt[b]] = np.sort(buf[start[b]:start[b] + cnt[b]])
+    prof, se = _bin_stats(buf, cnt, resolution)
     return prof, share, se
+
+
+@njit(cache=True)
+def _lerp(a: float, b: float, t: float) -> float:
+    """numpy's quantile interpolation between neighbours (numpy.lib._function_base_impl._lerp)."""
+    d = b - a
+    if t >= 0.5:
+        return b - d * (1.0 - t)
+    return a + d * t
+
+
+@njit(cache=True)
+def _quantile_sorted(v: np.ndarray, q: float) -> float:
+    """np.percentile(v, 100 q) (method "linear") of a sorted, non-empty, NaN-free vector."""
+    n = v.size
+    vi = (n - 1) * q
+    if vi >= n - 1:
+        return float(v[n - 1])
+    i = int(math.floor(vi))
+    return _lerp(float(v[i]), float(v[i + 1]), vi - i)
+
+
+@njit(cache=True)
+def _fold_residuals(f: np.ndarray, present: np.ndarray, inband: np.ndarray, prof: np.ndarray, period_frames: float,
+                    q_lo: float, q_hi: float) -> tuple[float, int, float, float]:
+    """The ridge against its folded profile (analyse, a periodic sweep): over the present frames whose phase bin is
+    in band, (RMS of the finite differences from the profile, NaN when there are none; their number; the q_lo and
+    q_hi quantiles (fractions) of their frequencies, NaN below 20 frames). Compiled: the mean in numpy's pairwise
+    order, the quantiles as np.percentile's "linear"."""
+    K = prof.size
+    nfr = f.size
+    kb = _phase_bins(nfr, period_frames, K)
+    r2 = np.empty(nfr)
+    fsel = np.empty(nfr)
+    nres = 0
+    nsel = 0
+    for t in range(nfr):
+        if present[t] and inband[kb[t]]:
+            fsel[nsel] = f[t]
+            nsel += 1
+            r = f[t] - prof[kb[t]]
+            if np.isfinite(r):
+                r2[nres] = r * r
+                nres += 1
+    rms = math.sqrt(_pairwise_sum_f64(r2[:nres]) / nres) if nres else np.nan
+    lo = hi = np.nan
+    if nsel >= 20:
+        v = np.sort(fsel[:nsel])
+        lo, hi = _quantile_sorted(v, q_lo), _quantile_sorted(v, q_hi)
+    return rms, nsel, lo, hi
 
 
 @njit(cache=True)
@@ -990,30 +1086,91 @@ def _sawtooth_law(prof: np.ndarray, inband: np.ndarray, period_samples: float, L
     bin) of it are left out: their frames straddle the flyback. A quadratic (a rate that changes along the
     sweep; linear with fewer than 8 bins) is fitted to the others against the elapsed fraction of the
     sweep since the flyback; None when fewer than 4 bins remain or the fit leaves an RMS residual above a
-    tenth of the span."""
+    tenth of the span. Compiled (``_sawtooth_law_kernel``: np.polyfit's scaled least squares)."""
+    ok, phi_j, coef, rms = _sawtooth_law_kernel(np.ascontiguousarray(prof, dtype=np.float64),
+                                                np.ascontiguousarray(inband, dtype=np.bool_), float(period_samples),
+                                                int(L), float(span))
+    return (phi_j, coef, rms) if ok else None
+
+
+@njit(cache=True)
+def _polyval(coef: np.ndarray, x: float) -> float:
+    """np.polyval of one point (Horner, highest power first)."""
+    y = 0.0
+    for c in coef:
+        y = y * x + c
+    return y
+
+
+@njit(cache=True)
+def _polyfit(x: np.ndarray, y: np.ndarray, deg: int) -> np.ndarray:
+    """np.polyfit(x, y, deg): the Vandermonde columns scaled to unit norm, least squares (LAPACK gelsd, rcond
+    n eps), the scale taken back out. Highest power first."""
+    n = x.size
+    order = deg + 1
+    A = np.empty((n, order))
+    for i in range(n):
+        v = 1.0
+        A[i, order - 1] = 1.0
+        for j in range(order - 2, -1, -1):
+            v = v * x[i]
+            A[i, j] = v
+    scale = np.zeros(order)
+    for i in range(n):
+        for j in range(order):
+            scale[j] += A[i, j] * A[i, j]
+    for j in range(order):
+        scale[j] = math.sqrt(scale[j])
+    for i in range(n):
+        for j in range(order):
+            A[i, j] /= scale[j]
+    c = np.linalg.lstsq(A, y.copy(), n * 2.220446049250313e-16)[0]
+    return c / scale
+
+
+@njit(cache=True)
+def _sawtooth_law_kernel(prof: np.ndarray, inband: np.ndarray, period_samples: float, L: int, span: float
+                         ) -> tuple[bool, float, np.ndarray, float]:
+    """_sawtooth_law, compiled: (found, flyback phase, coefficients, RMS)."""
     K = prof.size
-    nxt = (np.arange(K) + 1) % K           # the next phase bin (cyclic)
-    both = inband & inband[nxt] & np.isfinite(prof) & np.isfinite(prof[nxt])
-    if not both.any() or not span > 0:
-        return None
-    d = np.where(both, np.abs(prof[nxt] - prof), -1.0)
-    j = int(np.argmax(d))
-    if d[j] < span / 3.0:
-        return None
+    none = (False, np.nan, np.zeros(3), np.nan)
+    j, best, any_both = 0, -np.inf, False
+    for k in range(K):
+        nx = (k + 1) % K
+        v = -1.0
+        if inband[k] and inband[nx] and np.isfinite(prof[k]) and np.isfinite(prof[nx]):
+            any_both = True
+            v = abs(prof[nx] - prof[k])
+        if v > best:
+            best, j = v, k
+    if not any_both or not span > 0:
+        return none
+    if best < span / 3.0:
+        return none
     phi_j = (j + 1) / K
-    c = (np.arange(K) + 0.5) / K
-    e = (c - phi_j) % 1.0
     guard = 0.5 * L / period_samples + 1.0 / K
-    ok = inband & np.isfinite(prof) & (e > guard) & (e < 1.0 - guard)
-    if ok.sum() < 4:
-        return None
-    deg = 2 if ok.sum() >= 8 else 1
-    coef = np.polyfit(e[ok], prof[ok], deg)
-    res = prof[ok] - np.polyval(coef, e[ok])
-    rms = float(np.sqrt(np.mean(res * res) * ok.sum() / max(ok.sum() - deg - 1, 1)))
+    ee = np.empty(K)
+    pp = np.empty(K)
+    m = 0
+    for k in range(K):
+        c = (k + 0.5) / K
+        e = (c - phi_j) % 1.0                # Python's float % is np.mod: into [0, 1)
+        if inband[k] and np.isfinite(prof[k]) and e > guard and e < 1.0 - guard:
+            ee[m] = e
+            pp[m] = prof[k]
+            m += 1
+    if m < 4:
+        return none
+    deg = 2 if m >= 8 else 1
+    coef = _polyfit(ee[:m], pp[:m], deg)
+    r2 = np.empty(m)
+    for i in range(m):
+        r = pp[i] - _polyval(coef, ee[i])
+        r2[i] = r * r
+    rms = math.sqrt(_pairwise_sum_f64(r2) / m * m / max(m - deg - 1, 1))
     if rms > 0.1 * span:
-        return None
-    return phi_j, coef, rms
+        return none
+    return True, phi_j, coef, rms
 
 
 FOLD_HOPS = 8
@@ -1229,18 +1386,13 @@ def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length
         span_bins = (high - low) / binw if math.isfinite(high - low) else 0.0
         sweeping = bool(span_bins >= 4 or (span_bins >= 2 and p_dir <= SAW_P))
         if present.any():
-            t = np.arange(nfr)
-            kb = np.minimum((np.mod(t / per_fr, 1.0) * K).astype(np.int64), K - 1)
-            sel = present & inband[kb]
-            res = (f - prof[kb])[sel]
-            res = res[np.isfinite(res)]
-            if res.size:
-                fstd = float(np.sqrt(np.mean(res * res)))
-            if sel.sum() >= 20 and math.isfinite(low):
+            rms_fold, nsel, q_lo, q_hi = _fold_residuals(f, present, inband, prof, float(per_fr), 0.02, 0.98)
+            if math.isfinite(rms_fold):
+                fstd = rms_fold
+            if nsel >= 20 and math.isfinite(low):
                 # the profile averages over a phase bin and the frame: the swept band's edges come from the
                 # ridge itself (2 % and 98 % points of the in-band ridge frequencies)
-                q_lo, q_hi = np.percentile(f[sel], (2.0, 98.0))
-                low, high = float(q_lo), float(q_hi)
+                low, high = q_lo, q_hi
                 if shape in (SAWTOOTH_UP, TRIANGLE):
                     start = low
                 elif shape == SAWTOOTH_DOWN:
@@ -1283,14 +1435,14 @@ def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length
         # the block-end error measured on the paper front end (12 blocks, J/N 21 dB) had an RMS of about
         # twice the profile-fit residual (the flyback phase is quantised to a bin, frames smear)
         fstd = max(2.0 * rms, 1e-4 / L)
-        f0, f1 = float(np.polyval(coef, 0.0)), float(np.polyval(coef, 1.0))
+        f0, f1 = _polyval(coef, 0.0), _polyval(coef, 1.0)
         low, high = min(f0, f1), max(f0, f1)
         start = f0
         rate = (f1 - f0) / (per_fr * hop)
         ph_end = float(np.mod(t_end / per_fr, 1.0))
         e_end = (ph_end - phi_j) % 1.0
         if inband_k[min(int(ph_end * inband_k.size), inband_k.size - 1)]:
-            freq = float(np.polyval(coef, e_end))
+            freq = _polyval(coef, e_end)
     elif periodic and prof_k is not None and inband_k is not None:
         K = prof_k.size
         pos = np.mod(t_end / per_fr, 1.0) * K - 0.5
