@@ -71,6 +71,7 @@ from numba import njit
 
 from rfi_monitor import ridge as rg
 from rfi_monitor import sweep_period as sp
+from rfi_monitor.analysis_worker import AnalysisWorker
 from rfi_monitor.classifier import (
     CHIRP,
     CW,
@@ -269,15 +270,19 @@ class RfiMonitor:
         sweep_period, tracker and classifier for each part.
     """
 
-    def __init__(self, params: RfiMonitorParams = RfiMonitorParams()) -> None:
+    def __init__(self, params: RfiMonitorParams = RfiMonitorParams(), worker: AnalysisWorker | None = None) -> None:
         self.params = params
+        self.worker = worker
+        """An AnalysisWorker that runs the "stft" estimator's ridge analysis beside the rest of each block (the
+        analysis_worker module; the results are the same with or without it), or None."""
         self._tpar = params.tracker.as_array()
         self._packed: dict[bool, tuple[np.ndarray, np.ndarray]] = {}
         self._block_counters = {"blocks": 0, "blocks_rejected": 0, "gaps": 0, "rate_changes": 0,
                                 "non_finite_samples": 0, "saturated_samples": 0, "recalibrations": 0,
                                 "calibrations_discarded": 0, "clipped_blocks": 0, "frequency_not_tracked": 0,
                                 "tracker_resets_invalid": 0, "integrated_reports": 0,
-                                "integration_window_blocks": 0, "integration_blocks_thinned": 0}
+                                "integration_window_blocks": 0, "integration_blocks_thinned": 0,
+                                "worker_blocks": 0, "worker_failures": 0}
         self._integrator = Integrator(params.integration, params.classifier.detect_jn_db)
         self.last_integration: IntegratedDecision | None = None
         self._last_single = NONE
@@ -705,7 +710,28 @@ class RfiMonitor:
 
     def _identify_stft(self, xs: np.ndarray, cplx: bool, fs: float, fif: float, stamp_ns: int, first: int,
                        clipped: float, full_scale: float | None, coarse: bool = False) -> JammerEstimate:
-        """Identification and estimates of the "stft" estimator (module docstring)."""
+        """Identification and estimates of the "stft" estimator (module docstring). With a worker (constructor),
+        the block's ridge analysis at the current frame length starts there first, unless the frame length is due
+        to be chosen again (then all of it runs here); the result is used only if the block is analysed at that
+        length and on that part of the block, as it would have been here (analysis_worker module docstring)."""
+        w = self.worker
+        ahead = None
+        if w is not None and w.alive and self._frame_length > 0 and self._blocks_since_select < (
+                RESELECT_BLOCKS if self._tracking else RESELECT_IDLE_BLOCKS):
+            tail = int(self.params.ridge.tracking_samples)
+            part = xs[-tail:] if (self._chirp and 0 < tail < xs.size) else xs
+            if w.submit(part, cplx, fs, self.params.ridge, self._frame_length):
+                ahead = (part.size, self._frame_length)
+        try:
+            return self._identify_stft_block(xs, cplx, fs, fif, stamp_ns, first, clipped, full_scale, coarse, ahead)
+        finally:
+            if w is not None:
+                w.cancel()               # not used (an early return, or another length or part): dropped
+                self._block_counters["worker_failures"] = w.failures
+
+    def _identify_stft_block(self, xs: np.ndarray, cplx: bool, fs: float, fif: float, stamp_ns: int, first: int,
+                             clipped: float, full_scale: float | None, coarse: bool,
+                             ahead: tuple[int, int] | None) -> JammerEstimate:
         p = self.params
         cp = p.classifier
         nan = math.nan
@@ -747,7 +773,16 @@ class RfiMonitor:
         tail = int(p.ridge.tracking_samples)
         part = xs[-tail:] if (self._chirp and 0 < tail < n) else xs
         while True:
-            rr = rg.analyse(part, cplx, fs, p.ridge, self._frame_length)
+            rr = None
+            if ahead is not None and self.worker is not None and ahead == (part.size, self._frame_length):
+                # started on the worker at the top (_identify_stft): the same samples (the whole block, or its
+                # tail: the rule there is this one, on state that has not changed since) at the same length
+                rr = self.worker.collect()
+                self._block_counters["worker_blocks"] += rr is not None
+                self._block_counters["worker_failures"] = self.worker.failures
+            ahead = None
+            if rr is None:
+                rr = rg.analyse(part, cplx, fs, p.ridge, self._frame_length)
             jtype, conf, jn, jn_ref, jn_in, floor = self._decide(power, feat, rr, floor, ref)
             if part.size < n and not rr.sweeping:
                 part = xs            # the tail shows no sweep (any more): the whole block decides

@@ -348,6 +348,24 @@ def test_stale_blocks_are_shed_when_an_age_limit_is_set(probe_factory):
     assert live.values()['blocks_shed_stale'] == '0'
 
 
+def test_analysis_worker_gives_the_same_states(probe_factory):
+    """analysis_worker (issue 14 item 6): the ridge analysis runs in a child process; every JammerState is the one
+    the node publishes without it, the blocks analysed there are counted (core.worker_blocks), and destroying
+    the node stops the child."""
+    fe = FrontEndConfig(noise_bandwidth_hz=NOISE_BW_HZ)
+    msgs, _ = stream(fe, (ChirpJammer(js_db=JS_DB),), 4, 8, seed=25)
+    plain = probe_factory().send_all(msgs)
+    p = probe_factory(analysis_worker=True)
+    assert p.node.worker is not None and p.node.worker.alive
+    with_worker = p.send_all(msgs)
+    assert [serialize_message(a) for a in plain] == [serialize_message(b) for b in with_worker]
+    v = p.values()
+    assert int(v['core.worker_blocks']) >= 8 and v['core.worker_failures'] == '0' and v['accounting_ok'] == 'True'
+    proc = p.node.worker._proc
+    p.node.destroy_node()
+    assert proc.poll() is not None                      # the child has exited
+
+
 def test_no_saturation_check_for_two_bit_front_ends():
     """A 2-bit front end puts about a third of its samples on its top level: that is not saturation."""
     from rfi_monitor.rfi_monitor_node import full_scale
