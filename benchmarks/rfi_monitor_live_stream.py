@@ -77,8 +77,11 @@ def write_stream(path: Path, seed: int = 1) -> int:
 
 
 CONFIGS = (("shipped parameters", []),
-           ("shipped parameters + max_block_age_s 0.05 (the live-stream setting)", ["-p", "max_block_age_s:=0.05"]))
-"""The node's settings of the runs: as shipped, and with the age limit a live front end should use."""
+           ("+ max_block_age_s 0.05", ["-p", "max_block_age_s:=0.05"]),
+           ("+ max_block_age_s 0.05 + analysis_worker (the live-stream setting)",
+            ["-p", "max_block_age_s:=0.05", "-p", "analysis_worker:=true"]))
+"""The node's settings of the runs: as shipped; with the age limit a live front end should use; and with the
+ridge analysis on the second core as well (analysis_worker)."""
 
 
 def run_once(data: Path, n: int, tmp: Path, extra: list[str]) -> list[tuple[str, object]]:
@@ -132,6 +135,8 @@ def run_once(data: Path, n: int, tmp: Path, extra: list[str]) -> list[tuple[str,
     lat = np.array([(t - (s / 1e9 + 1e-3)) * 1e3 for t, s, _ in arrivals]) if arrivals else np.array([math.nan])
     t0 = arrivals[0][1] if arrivals else 0
     chirp = [ty for _, s, ty in arrivals if (s - t0) / 1e9 >= SECONDS[0] + 0.01]
+    n_acq = sum(1 for _, s, _ in arrivals if (s - t0) / 1e9 < SECONDS[0])
+    blk_acq = int(round(SECONDS[0] / 1e-3))
     return [("blocks in the stream", blocks), ("blocks received by the node", last.get("blocks_received", "?")),
             ("analysed (JammerState published)", last.get("blocks_processed", "?")),
             ("shed on purpose (blocks_shed)", last.get("blocks_shed", "?")),
@@ -140,6 +145,10 @@ def run_once(data: Path, n: int, tmp: Path, extra: list[str]) -> list[tuple[str,
             ("rejected", sum(int(v) for k, v in last.items() if k.startswith("rejected_"))),
             ("accounting_ok", last.get("accounting_ok", "?")),
             ("answers received here", len(arrivals)),
+            ("of them in the first second (no jammer: acquisition) / after it (chirp: tracking)",
+             f"{n_acq} of {blk_acq} / {len(arrivals) - n_acq} of {blocks - blk_acq}"),
+            ("worker: blocks analysed there / failures", f"{last.get('core.worker_blocks', '?')} / "
+             f"{last.get('core.worker_failures', '?')}"),
             ("answer latency median / 95 % / max, ms",
              f"{np.median(lat):.1f} / {np.percentile(lat, 95):.1f} / {np.max(lat):.1f}"),
             ("chirp-phase answers CHIRP", f"{chirp.count(2)} of {len(chirp)}")]
@@ -166,7 +175,8 @@ def main() -> None:
         "IF stream at its sample rate (1 ms blocks; the node's input best effort, its default), 1 s without a\n"
         "jammer then 2 s of the paper's saw-tooth at J/N 10 dB; the node runs with its shipped parameters\n"
         "(estimator stft, max_cpu_load 0.9), then again with the age limit a live front end should set\n"
-        "(max_block_age_s 0.05: blocks stamped more than 50 ms behind the clock are shed unread).\n"
+        "(max_block_age_s 0.05: blocks stamped more than 50 ms behind the clock are shed unread), then with\n"
+        "the ridge analysis in a child process on the second core as well (analysis_worker true).\n"
         f"CPU: {cpu}; 1-minute load average at the end: {load:.2f} on 2 cores (shared machine).\n\n"
         + table + "\n\n" + NOTES)
 

@@ -45,7 +45,7 @@ from multiprocessing.connection import Connection
 
 import numpy as np
 
-from rfi_monitor.ridge import RidgeParams, RidgeResult, analyse
+from rfi_monitor.ridge import RidgeParams, RidgeResult, analyse, choose_frame_length
 
 START_TIMEOUT_S = 120.0
 """How long the child may take to start (imports, and the compiled functions compiled or loaded from the cache:
@@ -59,12 +59,22 @@ def _shm_dir() -> str:
     return "/dev/shm" if os.path.isdir("/dev/shm") and os.access("/dev/shm", os.W_OK) else tempfile.gettempdir()
 
 
+def _job(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length: int, tail: int) -> RidgeResult:
+    """The worker's job (also what the caller computes without a worker): ``ridge.analyse`` of x, or of its last
+    ``tail`` samples (0 < tail < x.size), at ``frame_length``, or at the length ``choose_frame_length`` picks on
+    the whole of x when frame_length is 0 (the result's ``frame_length`` says which)."""
+    L = frame_length if frame_length > 0 else choose_frame_length(x, cplx, par)
+    part = x[-tail:] if 0 < tail < x.size else x
+    return analyse(part, cplx, fs, par, L)
+
+
 def _serve(conn: Connection, path: str) -> None:
     """The child: answer ("ridge", n, dtype, cplx, fs, params, frame_length, size) with ``ridge.analyse`` of the
     first n values of the shared file, until None or the socket closes."""
     fd = os.open(path, os.O_RDONLY)
     mm: mmap.mmap | None = None
     size = 0
+    par = RidgeParams()
     try:
         # warm up: the compiled functions compiled or loaded now, not on the first block
         noise = np.random.default_rng(0).standard_normal(8192)
@@ -78,7 +88,9 @@ def _serve(conn: Connection, path: str) -> None:
                 return
             if msg is None:
                 return
-            _, n, dtype, cplx, fs, par, L, need = msg
+            _, n, dtype, cplx, fs, new_par, L, tail, need = msg
+            if new_par is not None:
+                par = new_par                       # sent when it changes, not with every block
             try:
                 if mm is None or size < need:
                     if mm is not None:
@@ -86,7 +98,7 @@ def _serve(conn: Connection, path: str) -> None:
                     mm = mmap.mmap(fd, need, prot=mmap.PROT_READ)
                     size = need
                 x = np.frombuffer(mm, dtype=np.dtype(dtype), count=int(n))
-                rr = analyse(x, bool(cplx), float(fs), par, int(L))
+                rr = _job(x, bool(cplx), float(fs), par, int(L), int(tail))
                 del x
                 conn.send(("ok", rr))
             except Exception:                       # noqa: BLE001 - reported to the parent, which falls back
@@ -116,6 +128,7 @@ class AnalysisWorker:
         """Blocks the child analysed and the caller used."""
         self.last_error = ""
         self._pending = False
+        self._par = RidgeParams()                   # the child's parameters (it starts with the defaults)
         fd, self._path = tempfile.mkstemp(prefix="rfi_monitor_analysis_", dir=_shm_dir())
         self._fd = fd
         self._size = 0
@@ -159,9 +172,12 @@ class AnalysisWorker:
         self._mm = mmap.mmap(self._fd, size)
         self._size = size
 
-    def submit(self, x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length: int) -> bool:
-        """Start ``ridge.analyse(x, cplx, fs, par, frame_length)`` (x finite, float64 or complex128, shape (n,));
-        False if the worker is not alive or still busy (the caller analyses the block itself)."""
+    def submit(self, x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length: int,
+               tail: int = 0) -> bool:
+        """Start ``ridge.analyse`` of x (finite, float64 or complex128, shape (n,)), or of its last ``tail`` samples
+        (0 < tail < n), at ``frame_length``, or at the length ``ridge.choose_frame_length`` picks on the whole of x
+        when frame_length is 0 (the answer's ``frame_length`` says which). False if the worker is not alive or
+        still busy (the caller analyses the block itself)."""
         if not self.alive or self._pending:
             return False
         x = np.ascontiguousarray(x)
@@ -170,8 +186,9 @@ class AnalysisWorker:
                 self._grow(x.nbytes)
             assert self._mm is not None
             np.copyto(np.frombuffer(self._mm, dtype=x.dtype, count=x.size), x)
-            self._conn.send(("ridge", x.size, x.dtype.str, bool(cplx), float(fs), par, int(frame_length),
-                             self._size))
+            self._conn.send(("ridge", x.size, x.dtype.str, bool(cplx), float(fs), par if par != self._par else None,
+                             int(frame_length), int(tail), self._size))
+            self._par = par
         except (OSError, ValueError, EOFError) as err:
             self._fail(f"submit: {type(err).__name__}: {err}")
             return False

@@ -259,6 +259,17 @@ _STATUS_NAMES = {STATUS_OK: "measurements_ok", STATUS_NEAR_ZERO: "rejected_near_
                  STATUS_CORRECTION: "rejected_chirp_correction"}
 
 
+@dataclass
+class _Ahead:
+    """A block's ridge analysis started on the worker (RfiMonitor._identify_stft): on the last ``size`` samples,
+    at ``frame_length`` (0: the worker chose it on the whole block first); its answer once collected."""
+
+    size: int
+    frame_length: int
+    result: rg.RidgeResult | None = None
+    collected: bool = False
+
+
 class RfiMonitor:
     """Jammer identification and tracking over a stream of IF blocks.
 
@@ -711,17 +722,19 @@ class RfiMonitor:
     def _identify_stft(self, xs: np.ndarray, cplx: bool, fs: float, fif: float, stamp_ns: int, first: int,
                        clipped: float, full_scale: float | None, coarse: bool = False) -> JammerEstimate:
         """Identification and estimates of the "stft" estimator (module docstring). With a worker (constructor),
-        the block's ridge analysis at the current frame length starts there first, unless the frame length is due
-        to be chosen again (then all of it runs here); the result is used only if the block is analysed at that
-        length and on that part of the block, as it would have been here (analysis_worker module docstring)."""
+        the block's ridge analysis starts there first, on the part of the block and at the frame length this
+        process would use (when the frame length is due to be chosen again, the worker chooses it on the whole
+        block first, as here); the result is used only if this process then analyses that part at that length,
+        as it would have done itself (analysis_worker module docstring)."""
         w = self.worker
         ahead = None
-        if w is not None and w.alive and self._frame_length > 0 and self._blocks_since_select < (
-                RESELECT_BLOCKS if self._tracking else RESELECT_IDLE_BLOCKS):
+        if w is not None and w.alive:
+            due = self._frame_length == 0 or self._blocks_since_select >= (RESELECT_BLOCKS if self._tracking
+                                                                             else RESELECT_IDLE_BLOCKS)
             tail = int(self.params.ridge.tracking_samples)
-            part = xs[-tail:] if (self._chirp and 0 < tail < xs.size) else xs
-            if w.submit(part, cplx, fs, self.params.ridge, self._frame_length):
-                ahead = (part.size, self._frame_length)
+            tail = tail if (self._chirp and 0 < tail < xs.size) else 0
+            if w.submit(xs, cplx, fs, self.params.ridge, 0 if due else self._frame_length, tail):
+                ahead = _Ahead(tail if tail else xs.size, 0 if due else self._frame_length)
         try:
             return self._identify_stft_block(xs, cplx, fs, fif, stamp_ns, first, clipped, full_scale, coarse, ahead)
         finally:
@@ -729,9 +742,17 @@ class RfiMonitor:
                 w.cancel()               # not used (an early return, or another length or part): dropped
                 self._block_counters["worker_failures"] = w.failures
 
+    def _collect_ahead(self, ahead: _Ahead) -> None:
+        """The worker's answer for this block, into ``ahead.result`` (None if it failed); counted."""
+        assert self.worker is not None
+        ahead.result = self.worker.collect()
+        ahead.collected = True
+        self._block_counters["worker_blocks"] += ahead.result is not None
+        self._block_counters["worker_failures"] = self.worker.failures
+
     def _identify_stft_block(self, xs: np.ndarray, cplx: bool, fs: float, fif: float, stamp_ns: int, first: int,
                              clipped: float, full_scale: float | None, coarse: bool,
-                             ahead: tuple[int, int] | None) -> JammerEstimate:
+                             ahead: _Ahead | None) -> JammerEstimate:
         p = self.params
         cp = p.classifier
         nan = math.nan
@@ -766,7 +787,10 @@ class RfiMonitor:
         reselected = False
         if self._frame_length == 0 or self._blocks_since_select >= (RESELECT_BLOCKS if self._tracking
                                                                     else RESELECT_IDLE_BLOCKS):
-            self._frame_length = rg.choose_frame_length(xs, cplx, p.ridge)
+            if ahead is not None and ahead.frame_length == 0:
+                self._collect_ahead(ahead)       # the worker chose it on the whole block, as below
+            self._frame_length = (ahead.result.frame_length if ahead is not None and ahead.result is not None
+                                  else rg.choose_frame_length(xs, cplx, p.ridge))
             self._blocks_since_select = 0
             reselected = True
         self._blocks_since_select += 1
@@ -774,12 +798,13 @@ class RfiMonitor:
         part = xs[-tail:] if (self._chirp and 0 < tail < n) else xs
         while True:
             rr = None
-            if ahead is not None and self.worker is not None and ahead == (part.size, self._frame_length):
+            if ahead is not None and ahead.size == part.size:
                 # started on the worker at the top (_identify_stft): the same samples (the whole block, or its
                 # tail: the rule there is this one, on state that has not changed since) at the same length
-                rr = self.worker.collect()
-                self._block_counters["worker_blocks"] += rr is not None
-                self._block_counters["worker_failures"] = self.worker.failures
+                if not ahead.collected:
+                    self._collect_ahead(ahead)
+                if ahead.result is not None and ahead.result.frame_length == self._frame_length:
+                    rr = ahead.result
             ahead = None
             if rr is None:
                 rr = rg.analyse(part, cplx, fs, p.ridge, self._frame_length)

@@ -53,6 +53,29 @@ def test_worker_gives_the_local_ridge_analysis_to_the_bit(worker):
     assert worker.jobs == len(cases) and worker.failures == 0
 
 
+def test_worker_chooses_the_frame_length_and_takes_the_tail_as_the_monitor_does(worker):
+    rng = np.random.default_rng(14)
+    t = np.arange(BLOCK)
+    x = rng.standard_normal(BLOCK) + 3.0 * np.cos(2 * np.pi * (0.1 * t + 2e-6 * (t % 2000) ** 2))
+    par = rg.RidgeParams()
+    L = rg.choose_frame_length(x, False, par)
+    for tail in (0, 16384):
+        assert worker.submit(x, False, FE.sample_rate_hz, par, 0, tail)
+        got = worker.collect()
+        assert got is not None and got.frame_length == L
+        assert _same(got, rg.analyse(x[-tail:] if tail else x, False, FE.sample_rate_hz, par, L))
+
+
+def test_changed_parameters_reach_the_worker(worker):
+    x = np.random.default_rng(15).standard_normal(BLOCK)
+    for par in (rg.RidgeParams(presence_nats=3.0, detect_sigma=5.0), rg.RidgeParams()):
+        assert worker.submit(x, False, FE.sample_rate_hz, par, 64)
+        got = worker.collect()
+        assert got is not None and _same(got, rg.analyse(x, False, FE.sample_rate_hz, par, 64))
+    a = rg.analyse(x, False, FE.sample_rate_hz, rg.RidgeParams(presence_nats=3.0, detect_sigma=5.0), 64)
+    assert not _same(a, rg.analyse(x, False, FE.sample_rate_hz, rg.RidgeParams(), 64))   # the change matters
+
+
 def test_cancel_keeps_answers_in_order(worker):
     rng = np.random.default_rng(12)
     par = rg.RidgeParams()
