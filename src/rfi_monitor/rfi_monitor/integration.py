@@ -354,6 +354,27 @@ class Integrator:
         K = np.clip(lag_limit // p, 2, kmax)
         return float(np.trapezoid(2.0 * K, p)) + 1.0
 
+    def skipped(self, samples: int, stamp_ns: int) -> None:
+        """Samples of the stream that were never seen before the block stamped stamp_ns (blocks a node shed because
+        it was behind its stream, a lost message; the monitor calls it for a short gap, ``monitor.FRAME_KEEP_GAP_S``):
+        charged to the processing budget as if they had been integrated, so that a monitor behind its stream spends
+        its time answering blocks rather than integrating more of the few it sees (the budget is a share of the
+        stream, not of the blocks seen). The debt is bounded by the budget's holding (``BUDGET_HOLD_S``)."""
+        par = self.params
+        if not (self.enabled and par.max_samples_per_s > 0 and samples > 0):
+            return
+        hold = par.max_samples_per_s * BUDGET_HOLD_S
+        self._tokens = max(self._bucket(0, stamp_ns) - float(samples), -hold)
+        self._token_stamp = int(stamp_ns)
+
+    def _bucket(self, n: int, stamp_ns: int) -> float:
+        """Tokens of the processing budget at stamp_ns before a block of n samples is taken (module docstring)."""
+        par = self.params
+        cap = max(par.max_samples_per_s * BUDGET_HOLD_S, float(n))
+        if self._token_stamp is None or stamp_ns < self._token_stamp:
+            return cap
+        return min(cap, self._tokens + par.max_samples_per_s * (stamp_ns - self._token_stamp) * 1e-9)
+
     def add(self, x: np.ndarray, cplx: bool, fs: float, stamp_ns: int) -> IntegratedDecision:
         """Add one block (finite samples, float64 or complex128) and decide on the window.
 
@@ -375,11 +396,7 @@ class Integrator:
             self._clear()
         if par.max_samples_per_s > 0:
             # the processing budget: a token bucket filled along the stamps (deterministic, never the wall clock)
-            cap = max(par.max_samples_per_s * BUDGET_HOLD_S, float(x.size))
-            if self._token_stamp is None or stamp_ns < self._token_stamp:
-                self._tokens = cap
-            else:
-                self._tokens = min(cap, self._tokens + par.max_samples_per_s * (stamp_ns - self._token_stamp) * 1e-9)
+            self._tokens = self._bucket(x.size, stamp_ns)
             self._token_stamp = int(stamp_ns)
             if self._tokens < x.size and self._last is not None and self._blocks:
                 self.thinned += 1

@@ -239,6 +239,16 @@ frame length from at most this many blocks later; before that at the current one
 a block that shows anything at all makes it choose again at once). 4 before the speed work of issue 14 item 6:
 choosing costs about 0.8 ms at 38.192 MS/s, 0.2 ms per quiet block at 4; on noise the choice is now the longest
 frame whatever the block (ridge.choose_frame_length), so choosing often bought nothing there."""
+FRAME_KEEP_GAP_S = 0.1
+"""A gap in the sample index shorter than this in stamp time (from the end of the last block to the start of this
+one: blocks a node shed on purpose because it was behind its stream, a dropped message) keeps the "stft" estimator's
+frame length: a jammer's sweep does not change over a few blocks, and the periodic choice (``RESELECT_BLOCKS``,
+``RESELECT_IDLE_BLOCKS``) and the choice at once when a block shows a jammer still apply. After a longer gap (a
+snapshot front end, a restart) the length is chosen again on the next block, as before. (Choosing costs about a
+block's analysis: choosing after every shed block made a node behind its stream fall further behind, measured in
+docs/rfi_monitor/live_stream.md.) The samples of a short gap are also charged to the integration's processing
+budget (``Integrator.skipped``): a node behind its stream answers blocks before it integrates more of them. The
+per-sample state of the "kalman" estimator is reset at any gap."""
 MIN_BLOCK_POWER = 1e-60
 """Smallest block power analysed, sample units^2 (1e-30 rms): below it the block is blank. The Welch PSD is
 computed in single precision, whose numbers lose precision below 1.2e-38 (subnormal) and end at 1.4e-45;
@@ -312,6 +322,7 @@ class RfiMonitor:
         self._blocks_since_select = 0
         self._tracking = False
         self._chirp = False
+        self._last_end_ns: int | None = None
         self.reset()
 
     # ------------------------------------------------------------------------------------------
@@ -385,7 +396,7 @@ class RfiMonitor:
             sample_rate_hz: samples (complex: I/Q pairs) per second, > 0.
             intermediate_frequency_hz: IF, Hz; 0 complex baseband; < 0 spectral inversion (real).
             first_sample_index: running index of samples[0] since the stream started (a jump is a
-                gap: the per-sample state is reset and the gap counted).
+                gap: the per-sample state is reset and the gap counted; ``FRAME_KEEP_GAP_S``).
             stamp_ns: time of the first sample, ns (copied to the result).
             is_complex: see samples; None: complex iff the dtype is complex.
             full_scale: largest magnitude the quantiser delivers (same unit); values at or beyond it
@@ -441,9 +452,17 @@ class RfiMonitor:
             self.reset(keep_calibration=False)
         elif self._next_index is not None and int(first_sample_index) != self._next_index:
             self._block_counters["gaps"] += 1
+            length, missing = self._frame_length, int(first_sample_index) - self._next_index
+            short = (self._last_end_ns is not None
+                     and 0 <= int(stamp_ns) - self._last_end_ns <= int(FRAME_KEEP_GAP_S * 1e9))
             self.reset(keep_calibration=True)
+            if short:
+                self._frame_length = length      # FRAME_KEEP_GAP_S
+                if self.params.estimator == "stft":
+                    self._integrator.skipped(missing, int(stamp_ns))
         self._rate, self._if, self._complex = float(sample_rate_hz), float(intermediate_frequency_hz), cplx
         self._next_index = int(first_sample_index) + n
+        self._last_end_ns = int(stamp_ns) + int(round(n / sample_rate_hz * 1e9))
         self._block_counters["blocks"] += 1
         if self._cal_key is None:
             self._cal_key = key

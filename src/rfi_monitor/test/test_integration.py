@@ -191,3 +191,32 @@ def test_processing_budget_thins_fast_streams_only_and_deterministically():
     assert sum(added) <= math.ceil(16.5e6 * 0.01 / 38192) + 1
     with pytest.raises(ValueError):
         IntegrationParams(max_samples_per_s=-1.0)
+
+
+def test_skipped_samples_are_charged_to_the_budget():
+    """Integrator.skipped (a node behind its stream sheds blocks): the budget is a share of the stream. A node that
+    sees one 38.192 MS/s block in three and says so integrates none of the blocks it sees once the budget held at
+    the start (BUDGET_HOLD_S) is spent: one of 199 (the stream alone is 2.3 times the budget); not told, it would
+    integrate every one of them (3 ms of budget, 49,500 samples, refill between the blocks it sees). A 16.368 MS/s
+    stream seen one block in two stays within the budget: every block it sees is integrated."""
+    x38 = np.random.default_rng(10).standard_normal(38192)
+
+    def share(told: bool, x: np.ndarray, fs: float, every: int) -> float:
+        integ = Integrator(IntegrationParams())
+        added = []
+        for b in range(0, 600, every):
+            if told and b:
+                integ.skipped((every - 1) * x.size, 10**9 + b * 1_000_000)
+            before = integ.thinned
+            integ.add(x, False, fs, 10**9 + b * 1_000_000)
+            added.append(integ.thinned == before)
+        return float(np.mean(added[1:]))
+
+    assert share(False, x38, 38.192e6, 3) == 1.0
+    assert share(True, x38, 38.192e6, 3) == 1 / 199
+    x16 = x38[:16368]
+    assert share(True, x16, 16.368e6, 2) == 1.0
+    integ = Integrator(IntegrationParams())
+    integ.add(x38, False, 38.192e6, 0)
+    integ.skipped(10**9, 1_000_000)                  # a huge gap: the debt is bounded by BUDGET_HOLD_S of budget
+    assert integ._tokens >= -16.5e6 * 0.01

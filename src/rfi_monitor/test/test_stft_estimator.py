@@ -223,3 +223,34 @@ def test_kalman_run_away_track_is_never_published(monkeypatch):
     assert e.valid and e.type == CHIRP and math.isnan(e.frequency_hz) and math.isnan(e.frequency_std_hz)
     assert e.counters["tracker_resets_invalid"] == 1 and e.counters["frequency_not_tracked"] == 1
     assert mon._state.fst[FilterFloat.F] != 1.3e3      # restarted
+
+
+def test_short_gaps_keep_the_frame_length_long_gaps_choose_again(monkeypatch):
+    """FRAME_KEEP_GAP_S (issue 14 item 6): blocks shed by a node behind its stream (a gap of a few ms) do not make
+    the monitor choose its frame length again (that costs about a block's analysis, and made a node behind its
+    stream fall further behind); a gap longer than FRAME_KEEP_GAP_S (a snapshot front end) does, as before."""
+    from rfi_monitor import monitor as monitor_module
+    from rfi_monitor import ridge as rg
+    calls = []
+    real = rg.choose_frame_length
+
+    def counting(*a, **k):
+        calls.append(1)
+        return real(*a, **k)
+
+    monkeypatch.setattr(rg, "choose_frame_length", counting)
+    fs, n = 16.368e6, 16368
+    rng = np.random.default_rng(31)
+    mon = RfiMonitor(RfiMonitorParams())
+
+    def feed(k: int, stamp_ns: int):
+        return mon.process(rng.standard_normal(n), fs, 4.092e6, k * n, stamp_ns)
+
+    feed(0, 10**9)
+    assert len(calls) == 1                                   # chosen on the first block
+    for k in (3, 6, 9):                                      # two blocks shed before each: gaps of 2 ms
+        est = feed(k, 10**9 + k * 10**6)
+    assert len(calls) == 1 and est.counters["gaps"] == 3
+    feed(2000, 10**9 + 2000 * 10**6)                         # a gap of ~2 s: a snapshot front end
+    assert len(calls) == 2
+    assert monitor_module.FRAME_KEEP_GAP_S < 1.0             # snapshots 1 s apart always choose again
