@@ -102,6 +102,28 @@ tail of 16384 samples), many numpy calls of 10-50 us each. The same code on the 
 per tracking block in five back-to-back runs of one script (the host is shared with other virtual machines), so
 the before / now ratio of the alternated rows is the figure to read, not one absolute number.
 """
+THIRD_ROUND = """Third round of speed work on issue 14 item 6 (session 6; kept):
+
+* Tracking blocks: the folded sweep profile, the saw-tooth law fit and the ridge-against-profile residuals and
+  quantiles compiled (``ridge._profile_kernel``, ``_sawtooth_law_kernel`` with np.polyfit's scaled least squares,
+  ``_fold_residuals`` with np.percentile's interpolation and numpy's pairwise mean): the same arithmetic in the same
+  order, bit-identical on the equivalence cases (test_ridge_speed_equivalence.py run with a zero tolerance). A
+  tracking block 0.86 -> 0.58 ms mean (three alternated runs against the commit before, loaded machine).
+* In the node, not in this in-process table: a short gap in the sample index (blocks the node shed because it was
+  behind) keeps the frame length and charges the unseen samples to the integration's budget
+  (``monitor.FRAME_KEEP_GAP_S``, ``Integrator.skipped``). Before, every block a node behind its stream analysed
+  paid for a new frame-length choice (about one block's analysis) and was integrated: the node fell further
+  behind. That is where the live node gained most (live_stream.md: 733 of 2,901 blocks analysed as shipped in the
+  previous session, 2,583 now).
+* Built, tested and off by default: ``analysis_worker`` (the ridge analysis in a child process). On this 2-vCPU
+  virtual machine a block's analysis round trip through the child took 0.94 ms against 0.76 ms for the same
+  analysis in the calling process (median of 300 blocks, nothing else running): the child reads a block another
+  vCPU wrote and wakes from idle for each; the in-process rows above do not use it.
+
+What is left: a quiet block (acquisition) costs about 1 ms per 1 ms block on this CPU (the ridge analysis of the
+whole block ~0.5 ms, the integration over blocks ~0.3 ms averaged over blocks, the Welch PSD and the rest
+~0.2 ms): it does not keep up at 1x in one process; the node then sheds quiet blocks on purpose (counted).
+"""
 LIVE_RUNS = 3
 """The live-stream rows are measured this many times in one run (the table gives the median, the runs are
 listed after it)."""
@@ -333,7 +355,8 @@ def main() -> None:
         f"{BASELINE_COMMIT} (before this round of speed work) and now,\n"
         "each in a child process, alternately; "
         f"{LIVE_RUNS} runs of them in this run, the table gives their median.\n\n"
-        + table + "\n\n" + live_runs_table(runs) + "\n\n" + real_time_verdict(rows) + "\n\n" + SECOND_ROUND
+        + table + "\n\n" + live_runs_table(runs) + "\n\n" + real_time_verdict(rows) + "\n\n" + THIRD_ROUND
+        + "\n" + SECOND_ROUND
         + "\n" + RIDGE_SPEEDUP
         + "\n" + NOT_KEPT)
 

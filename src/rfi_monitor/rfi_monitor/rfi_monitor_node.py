@@ -116,7 +116,15 @@ stamp is more than that many seconds behind the node's clock (counted in ``block
 the newest blocks at once instead of working through a queue (the input keeps up to 1000 blocks, a second of
 1 ms blocks). For live front ends only, whose stamps are the clock's (if_source ``pace: real_time``, an SDR
 driver): a replay's stamps are in the past and would all be shed, so it is off by default; the wall clock
-decides only which blocks are analysed, never what an analysed block gives.
+decides only which blocks are analysed, never what an analysed block gives. A shed block is a gap for the core;
+a gap shorter than ``monitor.FRAME_KEEP_GAP_S`` keeps the frame length and is charged to the integration's budget,
+so shedding makes the next blocks cheaper, not dearer.
+
+Second core: ``analysis_worker`` (off by default) runs each block's ridge analysis in a child process
+(:mod:`rfi_monitor.analysis_worker`) while the node does the rest; the estimates are the same (tested byte for byte
+on the published states); a child that fails is counted (``core.worker_failures``) and the node carries on alone.
+It pays only where a core is idle: on the project's 2-vCPU machine it made the node slower
+(docs/rfi_monitor/live_stream.md).
 
 Stale input: :class:`rfi_node_common.inputs.StaleInputWatch` publishes a STALE status (stamped with
 the node clock, the only wall-clock use; no estimate depends on it) while nothing has arrived for
