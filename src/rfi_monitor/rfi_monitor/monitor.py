@@ -240,15 +240,16 @@ a block that shows anything at all makes it choose again at once). 4 before the 
 choosing costs about 0.8 ms at 38.192 MS/s, 0.2 ms per quiet block at 4; on noise the choice is now the longest
 frame whatever the block (ridge.choose_frame_length), so choosing often bought nothing there."""
 FRAME_KEEP_GAP_S = 0.1
-"""A gap in the sample index shorter than this in stamp time (from the end of the last block to the start of this
-one: blocks a node shed on purpose because it was behind its stream, a dropped message) keeps the "stft" estimator's
-frame length: a jammer's sweep does not change over a few blocks, and the periodic choice (``RESELECT_BLOCKS``,
-``RESELECT_IDLE_BLOCKS``) and the choice at once when a block shows a jammer still apply. After a longer gap (a
-snapshot front end, a restart) the length is chosen again on the next block, as before. (Choosing costs about a
-block's analysis: choosing after every shed block made a node behind its stream fall further behind, measured in
-docs/rfi_monitor/live_stream.md.) The samples of a short gap are also charged to the integration's processing
-budget (``Integrator.skipped``): a node behind its stream answers blocks before it integrates more of them. The
-per-sample state of the "kalman" estimator is reset at any gap."""
+"""A gap in the sample index shorter than this, both in samples (at the sample rate) and in stamp time (from the end
+of the last block to the start of this one), such as blocks a node shed on purpose because it was behind its stream
+or a dropped message, keeps the "stft" estimator's frame length: a jammer's sweep does not change over a few
+blocks, and the periodic choice (``RESELECT_BLOCKS``, ``RESELECT_IDLE_BLOCKS``) and the choice at once when a
+block shows a jammer still apply. After a longer gap (a snapshot front end, a restart) the length is chosen again
+on the next block, as before. (Choosing costs about a block's analysis: choosing after every shed block made a
+node behind its stream fall further behind, measured in docs/rfi_monitor/live_stream.md.) The samples of a short
+gap are also charged to the integration's processing budget (``Integrator.skipped``): a node behind its stream
+answers blocks before it integrates more of them. The per-sample state of the "kalman" estimator is reset at any
+gap."""
 MIN_BLOCK_POWER = 1e-60
 """Smallest block power analysed, sample units^2 (1e-30 rms): below it the block is blank. The Welch PSD is
 computed in single precision, whose numbers lose precision below 1.2e-38 (subnormal) and end at 1.4e-45;
@@ -453,7 +454,7 @@ class RfiMonitor:
         elif self._next_index is not None and int(first_sample_index) != self._next_index:
             self._block_counters["gaps"] += 1
             length, missing = self._frame_length, int(first_sample_index) - self._next_index
-            short = (self._last_end_ns is not None
+            short = (self._last_end_ns is not None and 0 < missing <= FRAME_KEEP_GAP_S * sample_rate_hz
                      and 0 <= int(stamp_ns) - self._last_end_ns <= int(FRAME_KEEP_GAP_S * 1e9))
             self.reset(keep_calibration=True)
             if short:
@@ -750,8 +751,7 @@ class RfiMonitor:
         if w is not None and w.alive:
             due = self._frame_length == 0 or self._blocks_since_select >= (RESELECT_BLOCKS if self._tracking
                                                                              else RESELECT_IDLE_BLOCKS)
-            tail = int(self.params.ridge.tracking_samples)
-            tail = tail if (self._chirp and 0 < tail < xs.size) else 0
+            tail = self._part_samples(xs.size)
             if w.submit(xs, cplx, fs, self.params.ridge, 0 if due else self._frame_length, tail):
                 ahead = _Ahead(tail if tail else xs.size, 0 if due else self._frame_length)
         try:
@@ -760,6 +760,14 @@ class RfiMonitor:
             if w is not None:
                 w.cancel()               # not used (an early return, or another length or part): dropped
                 self._block_counters["worker_failures"] = w.failures
+
+    def _part_samples(self, n: int) -> int:
+        """How many of a block's last samples the ridge analysis takes first (0: the whole block):
+        ``RidgeParams.tracking_samples`` while a chirp is tracked, ``acquisition_samples`` while nothing is (the
+        last block was neither CW nor CHIRP), the whole block while a CW is."""
+        r = self.params.ridge
+        k = int(r.tracking_samples) if self._chirp else (0 if self._tracking else int(r.acquisition_samples))
+        return k if 0 < k < n else 0
 
     def _collect_ahead(self, ahead: _Ahead) -> None:
         """The worker's answer for this block, into ``ahead.result`` (None if it failed); counted."""
@@ -813,8 +821,8 @@ class RfiMonitor:
             self._blocks_since_select = 0
             reselected = True
         self._blocks_since_select += 1
-        tail = int(p.ridge.tracking_samples)
-        part = xs[-tail:] if (self._chirp and 0 < tail < n) else xs
+        tail = self._part_samples(n)
+        part = xs[-tail:] if tail else xs
         while True:
             rr = None
             if ahead is not None and ahead.size == part.size:
@@ -828,8 +836,11 @@ class RfiMonitor:
             if rr is None:
                 rr = rg.analyse(part, cplx, fs, p.ridge, self._frame_length)
             jtype, conf, jn, jn_ref, jn_in, floor = self._decide(power, feat, rr, floor, ref)
-            if part.size < n and not rr.sweeping:
+            if part.size < n and self._chirp and not rr.sweeping:
                 part = xs            # the tail shows no sweep (any more): the whole block decides
+                continue
+            if part.size < n and not self._chirp and (jtype != NONE or rr.sweeping or rr.periodic):
+                part = xs            # a quiet stream's part shows something: the whole block decides
                 continue
             # a jammer seen at a frame length chosen on blocks without one: choose again on this block
             if jtype in (NONE, CW) or reselected or self._tracking or rr.noise_power < MIN_BLOCK_POWER:

@@ -319,6 +319,10 @@ class MonitorNodeParams:
         _R.tracking_samples, 'While a chirp is tracked the stft estimator analyses only the last this many '
         'samples of a block (speed; J/N and the CW test use the whole block); 0: the whole block.',
         minimum=0, maximum=2**31 - 1)
+    ridge_acquisition_samples: int = parameter(
+        _R.acquisition_samples, 'While nothing is tracked the stft estimator analyses only the last this many '
+        'samples of a block first and the whole block when that part shows anything (speed; J/N, the CW test and '
+        'the evidence over blocks use the whole block); 0: the whole block.', minimum=0, maximum=2**31 - 1)
     ridge_max_period_s: float = parameter(
         _R.max_period_s, 'Longest sweep period searched by the stft estimator, s.', minimum=1e-7, maximum=10.0)
     ridge_detect_sigma: float = parameter(
@@ -586,15 +590,28 @@ def check_block(msg: IfSamples, min_block_samples: int, max_block_samples: int =
 
 
 def warm_up(params: RfiMonitorParams) -> None:
-    """Run a throw-away monitor on a real and a complex noise block so that the compiled (numba) functions are
-    compiled or loaded from the cache at start-up, not on the first blocks of a live stream (seconds of CPU on
-    a fresh install, which the load shedding would otherwise pay for by shedding the first blocks)."""
+    """Run a throw-away monitor on real and complex blocks of noise, then of noise with a saw-tooth chirp, so that
+    the compiled (numba) functions of both the quiet and the tracking paths (the sweep profile, law and shape) are
+    compiled or loaded from the cache at start-up, not on the first blocks of a live stream (seconds of CPU on a
+    fresh install, which the load shedding would otherwise pay for by shedding the first blocks, or the input queue
+    by dropping them)."""
     rng = np.random.default_rng(0)
-    n = max(params.min_block_samples, 4096)
+    n = max(params.min_block_samples, 8192)
+    fs = 4.0e6
+    t = np.arange(n) / fs
+    tau = np.mod(t, 64 / fs)                               # a 64-sample saw-tooth over 1 MHz
     for cplx in (False, True):
         mon = RfiMonitor(params)
-        x = rng.standard_normal(2 * n if cplx else n)
-        mon.process(x, 4.0e6, 0.0 if cplx else 1.0e6, 0, 1, is_complex=cplx, full_scale=8.0)
+        fif = 0.0 if cplx else 1.0e6
+        phase = 2 * np.pi * (fif * t - 0.5e6 * tau + 0.5 * (1e6 / (64 / fs)) * tau ** 2)
+        for k, jam in enumerate((0.0, 4.0, 4.0)):
+            if cplx:
+                z = (rng.standard_normal(n) + 1j * rng.standard_normal(n)) / np.sqrt(2) + jam * np.exp(1j * phase)
+                x = np.empty(2 * n)
+                x[0::2], x[1::2] = z.real, z.imag
+            else:
+                x = rng.standard_normal(n) + jam * np.cos(phase)
+            mon.process(x, fs, fif, k * n, 1 + k * int(n / fs * 1e9), is_complex=cplx, full_scale=64.0)
 
 
 def peek_stamp_ns(raw: bytes) -> int | None:

@@ -158,6 +158,12 @@ class RidgeParams:
         tracking_samples: while a chirp is tracked (the last block was CHIRP), only the last this many
             samples of a block are analysed (speed; the J/N and the CW test still use the whole block; a
             block whose tail shows no sweep is analysed whole); 0: always the whole block.
+        acquisition_samples: while nothing is tracked (the last block was neither CW nor CHIRP), only the last
+            this many samples of a block are analysed first: a block whose part shows anything (a type other than
+            NONE, a sweep, a period) is analysed whole, so only quiet blocks are analysed in part (speed: a 1 ms
+            block at the paper's 38.192 MS/s is analysed as a 16.4 MS/s front end's block would be; the J/N, the CW
+            test and the evidence over blocks use the whole block; blocks of at most this many samples are
+            always analysed whole); 0: always the whole block.
     """
 
     min_frame_length: int = 8
@@ -173,6 +179,7 @@ class RidgeParams:
     hook_rate_ratio: float = 2.0
     min_present_fraction: float = 0.5
     tracking_samples: int = 16384
+    acquisition_samples: int = 16384
 
     @property
     def frame_lengths(self) -> tuple[int, ...]:
@@ -196,6 +203,8 @@ class RidgeParams:
             raise ValueError("min_strength and min_present_fraction must be <= 1")
         if int(self.tracking_samples) < 0 or 0 < int(self.tracking_samples) < 1024:
             raise ValueError("tracking_samples must be 0 or >= 1024")
+        if int(self.acquisition_samples) < 0 or 0 < int(self.acquisition_samples) < 1024:
+            raise ValueError("acquisition_samples must be 0 or >= 1024")
         if int(self.min_period_frames) < 3 or int(self.phase_bins) < 8 or int(self.select_samples) < 0:
             raise ValueError("min_period_frames >= 3, phase_bins >= 8, select_samples >= 0")
         if int(self.noise_smooth_bins) < 3 or int(self.noise_smooth_bins) % 2 == 0:

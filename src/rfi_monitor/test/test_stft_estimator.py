@@ -8,6 +8,7 @@ and 16.368 / 38.192 MS/s real, J/N from 0 to 30 dB, on from the first sample. Th
 were not tuned to any of these cases; the bars are the issue's (period within 1 %, CHIRP in every block).
 """
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -254,3 +255,36 @@ def test_short_gaps_keep_the_frame_length_long_gaps_choose_again(monkeypatch):
     feed(2000, 10**9 + 2000 * 10**6)                         # a gap of ~2 s: a snapshot front end
     assert len(calls) == 2
     assert monitor_module.FRAME_KEEP_GAP_S < 1.0             # snapshots 1 s apart always choose again
+
+
+def test_quiet_blocks_are_analysed_in_part_a_jammer_whole(monkeypatch):
+    """RidgeParams.acquisition_samples (issue 14 item 6): while nothing is tracked, the ridge analysis takes the
+    last 16384 samples of a 38.192 MS/s block first; a quiet block stops there, a block whose part shows a sweep is
+    analysed whole (and reported from the whole block, as before); blocks no longer than that are always whole."""
+    from rfi_monitor import ridge as rg
+    sizes: list[int] = []
+    real = rg.analyse
+
+    def recording(x, *a, **k):
+        sizes.append(int(x.size))
+        return real(x, *a, **k)
+
+    monkeypatch.setattr(rg, "analyse", recording)
+    fs, n = 38.192e6, 38192
+    mon = RfiMonitor(RfiMonitorParams())
+    rng = np.random.default_rng(41)
+    for k in range(3):
+        est = mon.process(rng.standard_normal(n), fs, 9.548e6, k * n, 10**9 + k * 10**6)
+        assert est.type == NONE
+    assert sizes == [16384] * 3
+    sizes.clear()
+    t = np.arange(n) / fs
+    tau = np.mod(t, 5.1e-6)
+    chirp = 3.0 * np.cos(2 * np.pi * (9.548e6 * t - 2.55e6 * tau + 0.5e12 * tau ** 2))
+    est = mon.process(rng.standard_normal(n) + chirp, fs, 9.548e6, 3 * n, 10**9 + 3 * 10**6)
+    assert est.type == CHIRP and abs(est.sweep_period_s / 5.1e-6 - 1) < 0.01
+    assert sizes[0] == 16384 and sizes[-1] == n
+    whole = RfiMonitor(RfiMonitorParams(ridge=dataclasses.replace(RfiMonitorParams().ridge, acquisition_samples=0)))
+    sizes.clear()
+    whole.process(rng.standard_normal(n), fs, 9.548e6, 0, 10**9)
+    assert sizes == [n]
