@@ -21,7 +21,8 @@ Usage:
         [--set NAME=VALUE ...] [--flip-anchor-heights] [--out FILE]
 
 (``--set``: a ``FusionParams`` field for the fused and UWB-only filters, e.g.
-``--set pseudorange_correlated_std_m=0.7``; default: the filter's defaults.)
+``--set uwb_range_noise_adaptive=1``; default: the filter's defaults. The UWB-only filters get the
+same settings, so that e.g. ``uwb_tag_side_of_anchor_plane`` helps both columns alike.)
 
 Writes docs/uwb_gnss_fusion/fusion_never_worse.md (only with the default settings unless ``--out``
 is given; the hand-written part after ``NOTES_MARKER`` is kept) and prints the tables.
@@ -203,7 +204,9 @@ def main(argv: list[str] | None = None) -> int:
         "Filter: defaults except accel_psd_m2ps3 = 0.01 (static receiver)"
         + ("" if not extra else "; " + ", ".join(f"{k} = {v}" for k, v in extra.items()))
         + f" (pseudorange_correlated_std_m {fp.pseudorange_correlated_std_m:g}, "
-        f"uwb_mirror_test {getattr(fp, 'uwb_mirror_test', 'n/a')}).",
+        f"uwb_mirror_test {fp.uwb_mirror_test}, uwb_tag_side_of_anchor_plane {fp.uwb_tag_side_of_anchor_plane}, "
+        f"uwb_range_noise_adaptive {fp.uwb_range_noise_adaptive}, "
+        f"uwb_range_curvature_noise {fp.uwb_range_curvature_noise}, max_update_iterations {fp.max_update_iterations}).",
         "",
         "| J/S | GNSS only | 1 anchor | 2 anchors | 3 anchors | 4 anchors | UWB only 3 | UWB only 4 "
         "| never worse (3D), anchors 1/2/3/4 |",

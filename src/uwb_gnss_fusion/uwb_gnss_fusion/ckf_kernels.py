@@ -9,6 +9,8 @@ functions here do the same arithmetic on scalars in numba-compiled loops, in pla
 filter's nominal state and error covariance:
 
 * :func:`predict_inplace`: ``x <- Phi x``, ``P <- Phi P Phi^T + Q`` (Cao et al., eq. 15-16).
+* :func:`range_curvature_variance`: the second-order (curvature) variance of a range over the
+  position uncertainty, added to the range noise (``FusionParams.uwb_range_curvature_noise``).
 * :func:`range_update_inplace`: the cubature update of one range with the position-only
   (``active_dims``) shortcut, gating, the optional skewed Huber weighting and the optional
   Gauss-Newton refinement, exactly as ``CubatureKalmanFilter.update`` with ``k = 1`` (Cao et al.,
@@ -134,6 +136,58 @@ def _gn_evaluate(bb, low, m, n, a0, lat, z, r_chol, xc, pt, hl):  # pragma: no c
     for j in range(m):
         cost += bb[j] * bb[j]
     return res, cost
+
+
+@njit(cache=True)
+def range_curvature_variance(p, nominal, anchor, lever, lat):  # pragma: no cover - compiled
+    """Second-order variance of a range over the position uncertainty, m^2.
+
+    ``0.5 tr(A P_t A P_t)`` with ``A = (I - u u^T) / rho`` the Hessian of ``|t - a|`` (``u`` the
+    unit line of sight from the anchor to the tag, ``rho`` the range) and ``P_t`` the covariance
+    of the tag position ``p + lever - lat v``; equal to ``|T P_t T|_F^2 / (2 rho^2)`` with
+    ``T = I - u u^T``. This is the term a second-order filter adds to the innovation covariance
+    (Bar-Shalom, Li & Kirubarajan, Estimation with Applications to Tracking and Navigation, 2001,
+    sec. 10.3, the second-order EKF): the part of the range that the linearisation at the estimate misses when the tag
+    is uncertain across the line of sight. Reference: ``uwb_update.range_curvature_variance_reference``.
+
+    Args:
+        p: error covariance, (n, n), the first 3 (6 with a latency) components position (velocity).
+        nominal: nominal state, (n,).
+        anchor: anchor position in the state frame, m, (3,).
+        lever: UWB tag minus GNSS antenna, m, (3,).
+        lat: range latency, s (>= 0).
+    """
+    u = np.empty(3)
+    rho2 = 0.0
+    for i in range(3):
+        t = nominal[i] + lever[i] - anchor[i]
+        if lat > 0.0:
+            t -= lat * nominal[i + 3]
+        u[i] = t
+        rho2 += t * t
+    if not rho2 > 0.0:
+        return 0.0
+    rho = math.sqrt(rho2)
+    for i in range(3):
+        u[i] /= rho
+    pt = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            v = p[i, j]
+            if lat > 0.0:
+                v += -lat * (p[i, j + 3] + p[i + 3, j]) + lat * lat * p[i + 3, j + 3]
+            pt[i, j] = v
+    # T P_t T with T = I - u u^T
+    pu = np.empty(3)
+    for i in range(3):
+        pu[i] = pt[i, 0] * u[0] + pt[i, 1] * u[1] + pt[i, 2] * u[2]
+    upu = u[0] * pu[0] + u[1] * pu[1] + u[2] * pu[2]
+    f2 = 0.0
+    for i in range(3):
+        for j in range(3):
+            v = pt[i, j] - u[i] * pu[j] - pu[i] * u[j] + u[i] * u[j] * upu
+            f2 += v * v
+    return f2 / (2.0 * rho2)
 
 
 @njit(cache=True)
@@ -309,7 +363,7 @@ def range_update_inplace(
 
 
 def warm_up() -> None:
-    """Compile (or load from numba's cache) both kernels on a throwaway state.
+    """Compile (or load from numba's cache) the kernels on a throwaway state.
 
     The first call otherwise pays the compilation (10-20 s on a cold cache) inside the first
     measurement callback; a node calls this before it subscribes, so that it is ready, and looks
@@ -320,6 +374,7 @@ def warm_up() -> None:
     nominal[0] = 6.4e6
     p = np.eye(n)
     predict_inplace(nominal, p, np.eye(n), np.eye(n) * 1e-3)
+    range_curvature_variance(p, nominal, np.array([6.4e6 + 10.0, 0.0, 0.0]), np.zeros(3), 0.0)
     range_update_inplace(nominal, p, np.array([6.4e6 + 10.0, 0.0, 0.0]), np.zeros(3), 0.0, 3, 10.0, 0.01,
                          16.0, np.inf, np.inf, 5, 0.05, np.zeros(6))
     range_update_inplace(nominal, p, np.array([6.4e6 + 10.0, 0.0, 0.0]), np.zeros(3), 0.1, 6, 10.0, 0.01,

@@ -60,6 +60,7 @@ from .fusion_params import (  # noqa: F401 (re-exported: the filter's public nam
     MODE_NONE,
     MODE_UWB,
     UWB_FIX_CONSISTENT_SIGMA,
+    UWB_NOISE_PRIOR_WEIGHT,
     FusionParams,
 )
 from .gnss_update import clock_offset_from_residuals, prepare_epoch, screen_common_mode, update_gnss
@@ -67,7 +68,7 @@ from .input_checks import CONSTELLATION_NAMES, PreparedEpoch, skipped_constellat
 from .measurement_models import STATE_DIM, constant_velocity_transition, pseudorange_model, white_acceleration_noise
 from .mirror_test import MirrorTest, anchor_plane, clock_free_chi2, householder, is_range_ambiguous, reflect
 from .reorder_buffer import ReorderBuffer  # noqa: F401 (re-exported)
-from .uwb_update import apply_range
+from .uwb_update import RangeNoiseEstimate, apply_range
 
 _NS = 1_000_000_000
 
@@ -104,7 +105,11 @@ class FusionFilter:
         ``divergence_uwb_ranges`` times in a row while a multilateration explains every anchor
         restarts the position from that fix (``uwb_gated_anchor_reinit``: a wrong local minimum of
         the ranges). Optionally (``uwb_mirror_test``) the mirror of coplanar anchors is resolved by
-        an accumulated GNSS log-likelihood ratio (:mod:`.mirror_test`).
+        an accumulated GNSS log-likelihood ratio (:mod:`.mirror_test`), or by the installer's side
+        of the anchors' plane (``uwb_tag_side_of_anchor_plane``; with and without GNSS). Optionally
+        the range noise carries the second-order variance of the range over the position
+        uncertainty (``uwb_range_curvature_noise``) and each anchor's noise is estimated from its
+        innovations (``uwb_range_noise_adaptive``, :class:`.uwb_update.RangeNoiseEstimate`).
 
     Example:
         >>> f = FusionFilter(FusionParams(use_gnss=False))
@@ -131,6 +136,10 @@ class FusionFilter:
         self._lever = np.asarray(self.params.uwb_lever_arm_m, dtype=float)
         self._uwb_scratch = np.zeros(6)  # diagnostics of the compiled UWB update (.ckf_kernels)
         self._gated_restarted: set[str] = set()  # anchors that restarted the filter (uwb_gated_anchor_reinit)
+        self._side_last_ns: int | None = None  # last side-prior check without GNSS (_side_prior_uwb)
+        # per-anchor range noise estimates (uwb_range_noise_adaptive); a property of the hardware,
+        # kept across reinitialisations
+        self._uwb_noise: dict[str, RangeNoiseEstimate] = {}
         self._anchor_registry: Mapping[str, np.ndarray] = {
             a[0]: np.array([float(a[1]), float(a[2]), float(a[3])]) for a in self.params.anchors
         }
@@ -638,15 +647,9 @@ class FusionFilter:
         tag_m = reflect(tag, *plane)
         if not is_range_ambiguous(tag, tag_m, anchors, p.uwb_range_std_m):
             return
-        side = int(p.uwb_tag_side_of_anchor_plane)
-        if side:
-            # the installation's side of the anchors' plane (a prior, not a test): "up" is the local
-            # vertical (earth frame: the radial direction), the normal oriented along it
-            centroid, normal = plane
-            up = tag / max(float(np.linalg.norm(tag)), 1.0)
-            n_up = normal if float(normal @ up) >= 0.0 else -normal
-            if float((tag - centroid) @ n_up) * side < 0.0:
-                self._jump_to_mirror(tag_m, normal)
+        if p.uwb_tag_side_of_anchor_plane:
+            if self._on_wrong_side(tag, plane):
+                self._jump_to_mirror(tag_m, plane[1])
                 self._count("uwb_side_prior_flip")
                 self._reset_mirror(key)
             return
@@ -661,6 +664,41 @@ class FusionFilter:
             return
         self._jump_to_mirror(tag_m, plane[1])
         self._count("uwb_mirror_switch")
+
+    def _on_wrong_side(self, tag: np.ndarray, plane: tuple[np.ndarray, np.ndarray]) -> bool:
+        """True if ``tag`` lies on the other side of the anchors' ``plane`` (centroid, unit normal)
+        than ``uwb_tag_side_of_anchor_plane`` says (a prior, not a test). "Up" is the local vertical:
+        in the earth frame the radial direction, in the map frame (local ENU) +z."""
+        centroid, normal = plane
+        if self._frame == FRAME_EARTH:
+            up = tag / max(float(np.linalg.norm(tag)), 1.0)
+        else:
+            up = np.array([0.0, 0.0, 1.0])
+        n_up = normal if float(normal @ up) >= 0.0 else -normal
+        return float((tag - centroid) @ n_up) * int(self.params.uwb_tag_side_of_anchor_plane) < 0.0
+
+    def _side_prior_uwb(self, stamp_ns: int) -> None:
+        """The installer's side of the anchors' plane without GNSS (UWB alone, or the map frame),
+        checked after an accepted range at most once per ``uwb_init_window_s``: with GNSS the check
+        runs at every GNSS epoch (:meth:`_mirror_check`); without it the side the UWB
+        multilateration start happened to pick would otherwise stand. Beyond the paper."""
+        p = self.params
+        if self._side_last_ns is not None and stamp_ns - self._side_last_ns < p.uwb_init_window_s * _NS:
+            return
+        self._side_last_ns = stamp_ns
+        window_ns = p.uwb_init_window_s * _NS
+        anchors = [v[1] for v in self._recent_uwb.values() if v[3] == self._frame and stamp_ns - v[0] <= window_ns]
+        if len(anchors) < 3:
+            return
+        arr = np.array(anchors)
+        plane = anchor_plane(arr)
+        if plane is None:
+            return
+        tag = self._nominal[0:3] + self._lever
+        tag_m = reflect(tag, *plane)
+        if is_range_ambiguous(tag, tag_m, arr, p.uwb_range_std_m) and self._on_wrong_side(tag, plane):
+            self._jump_to_mirror(tag_m, plane[1])
+            self._count("uwb_side_prior_flip")
 
     def _jump_to_mirror(self, tag_m: np.ndarray, normal: np.ndarray) -> None:
         """Move the state to the mirror image ``tag_m`` of the tag across the anchors' plane (unit
@@ -834,7 +872,18 @@ class FusionFilter:
         if anchor is None:
             return self._output(False, uwb_rej=1)
         rng = float(meas.range_m)
-        std = float(meas.range_std_m) if math.isfinite(meas.range_std_m) else p.uwb_range_std_m
+        stated = float(meas.range_std_m) if math.isfinite(meas.range_std_m) else p.uwb_range_std_m
+        noise = None
+        if p.uwb_range_noise_adaptive:
+            noise = self._uwb_noise.get(meas.anchor_id)
+            if noise is None:
+                noise = self._uwb_noise[meas.anchor_id] = RangeNoiseEstimate(
+                    p.uwb_range_noise_window, UWB_NOISE_PRIOR_WEIGHT, p.uwb_range_std_floor_m, p.uwb_range_std_ceiling_m
+                )
+                self._count("uwb_noise_estimates")
+            std = noise.std_m(stated)
+        else:
+            std = stated
         if not self._admit_stamp(stamp):
             return self._output(False, uwb_rej=1)
         if self._initialized and meas.frame_id != self._frame:
@@ -855,10 +904,14 @@ class FusionFilter:
             self._count("numerical_failure")
             return self._declare_divergence(stamp)
         self._uwb_gated.push(ok)
+        if ok and noise is not None and self._uwb_scratch[3] == 1.0:
+            noise.add(float(self._uwb_scratch[0]), float(self._uwb_scratch[1]), std, stated)
         if ok:
             if self._anchor_gated_run:
                 self._anchor_gated_run.pop(meas.anchor_id, None)
             self._last_uwb_stamp = stamp
+            if p.uwb_tag_side_of_anchor_plane and not (p.use_gnss and self._frame == FRAME_EARTH):
+                self._side_prior_uwb(stamp)
             if self._position_lost():
                 self._count("divergence")
                 return self._declare_divergence(stamp)
@@ -888,7 +941,8 @@ class FusionFilter:
         return self._output(False, uwb_rej=1)
 
     def _consistent_uwb_fix(self, stamp_ns: int, frame: str, range_std_m: float) -> np.ndarray | None:
-        """A multi-start multilateration on the latest range of at least four anchors within
+        """A multi-start multilateration on the latest range of at least four anchors (three, on
+        the installer's side of their plane, with ``uwb_tag_side_of_anchor_plane``) within
         ``uwb_init_window_s`` whose residuals are all within ``UWB_FIX_CONSISTENT_SIGMA`` range
         1-sigmas, else None (beyond the paper). Asked when one anchor has had
         ``divergence_uwb_ranges`` consecutive ranges gated: if such a fix exists the ranges are
@@ -899,12 +953,20 @@ class FusionFilter:
         that a fix a slightly biased anchor moves by decimetres does not restart the filter."""
         win = self.params.uwb_init_window_s * _NS
         ranged = [(a, r) for (t, a, r, f) in self._recent_uwb.values() if f == frame and stamp_ns - t <= win]
-        if len(ranged) < 4:
+        side = self.params.uwb_tag_side_of_anchor_plane
+        if len(ranged) < (3 if side else 4):
             return None
         pos = init.multilaterate(self._recent_uwb, stamp_ns, frame, self.params.uwb_init_window_s, self._lever)
         if pos is None:
             return None
         anchors = np.array([a for a, _ in ranged])
+        if len(ranged) == 3:
+            # three anchors fix two points, mirrors across their plane: the installer's side picks one
+            plane = anchor_plane(anchors)
+            if plane is None:
+                return None
+            if self._on_wrong_side(pos + self._lever, plane):
+                pos = reflect(pos + self._lever, *plane) - self._lever
         rel = pos + self._lever - anchors
         dist = np.linalg.norm(rel, axis=1)
         res = np.array([r for _, r in ranged]) - dist

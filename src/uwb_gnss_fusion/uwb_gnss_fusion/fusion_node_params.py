@@ -181,9 +181,25 @@ class FusionNodeParams:
         minimum=-1, maximum=1)
     uwb_gated_anchor_reinit: bool = parameter(
         _FP.uwb_gated_anchor_reinit, 'Reinitialise the position from a multilateration fix that explains the '
-        'latest range of every anchor (at least four) and lies outside the 3-dof gate around the state, when one '
+        'latest range of every anchor (at least four; three with uwb_tag_side_of_anchor_plane) and lies outside '
+        'the 3-dof gate around the state, when one '
         'anchor has had divergence_uwb_ranges consecutive ranges gated (the state is in a wrong local minimum); at '
         'most once per anchor id. Beyond the paper; counted as uwb_anchor_gated_reinit.')
+    uwb_range_curvature_noise: bool = parameter(
+        _FP.uwb_range_curvature_noise, 'Add to each range variance the second-order (curvature) variance of the '
+        'range over the position uncertainty across its line of sight (beyond the paper).')
+    uwb_range_noise_adaptive: bool = parameter(
+        _FP.uwb_range_noise_adaptive, "Estimate each anchor's range noise from its innovations, a factor on the "
+        'stated variance (range_std_m of the message or uwb_range_std_m); beyond the paper, counted as '
+        'uwb_noise_estimates.')
+    uwb_range_noise_window: int = parameter(
+        _FP.uwb_range_noise_window, 'Fading memory of that estimate, ranges per anchor.', minimum=10, maximum=100000)
+    uwb_range_std_floor_m: float = parameter(
+        _FP.uwb_range_std_floor_m, 'Smallest estimated range 1-sigma, m (widened to the stated 1-sigma).',
+        minimum=1e-4, maximum=10.0)
+    uwb_range_std_ceiling_m: float = parameter(
+        _FP.uwb_range_std_ceiling_m, 'Largest estimated range 1-sigma, m (widened to the stated 1-sigma).',
+        minimum=1e-3, maximum=100.0)
     elevation_mask_deg: float = parameter(
         _FP.elevation_mask_deg, 'Satellites below this elevation are rejected, deg.',
         minimum=-90.0, maximum=89.0, read_only=False)

@@ -50,6 +50,11 @@ CORRELATED_ERROR_MAX_GAP_TAU = 2.0
 removed (marginalised, exact); if it returns it gets a fresh state with the stationary variance
 (after two correlation times the old estimate keeps less than 2 % of its correlation)."""
 
+UWB_NOISE_PRIOR_WEIGHT = 20
+"""The stated range 1-sigma counts as this many innovation samples when an anchor's noise estimate
+starts (``FusionParams.uwb_range_noise_adaptive``): one second at 20 Hz, so that the first few
+squared innovations (chi-square with one degree of freedom, often near zero) do not swing it."""
+
 
 @dataclass(frozen=True)
 class FusionParams:
@@ -137,7 +142,8 @@ class FusionParams:
             Counted as ``uwb_mirror_switch``.
         uwb_gated_anchor_reinit: when one anchor has had ``divergence_uwb_ranges`` consecutive
             ranges gated while a multi-start multilateration on the latest range of every anchor
-            heard (at least four) explains all of them within ``UWB_FIX_CONSISTENT_SIGMA`` range
+            heard (at least four; three with ``uwb_tag_side_of_anchor_plane``, the fix on that side
+            of their plane) explains all of them within ``UWB_FIX_CONSISTENT_SIGMA`` range
             1-sigmas and lies outside the 3-dof gate around the state, reinitialise the position
             from that fix: the state sits in a wrong local minimum of the ranges (e.g. near the
             mirror of three of four anchors after a GNSS start metres off in height) and the gate
@@ -155,6 +161,24 @@ class FusionParams:
             ``uwb_side_prior_flip``) and the GNSS test (``uwb_mirror_test``) is not used. For tags
             that stay clearly on one side: a tag that crosses the plane is pulled back to the side
             given. Beyond the paper.
+        uwb_range_curvature_noise: add to each range's noise variance the second-order variance of
+            the range over the position uncertainty across its line of sight
+            (:func:`.ckf_kernels.range_curvature_variance`, ``|T P T|_F^2 / (2 rho^2)``): caps the
+            information a stream of precise ranges piles up while the tag is uncertain across the
+            line of sight (1-2 anchors), and vanishes once the position is known. Beyond the paper.
+        uwb_range_noise_adaptive: estimate each anchor's range noise from its own innovations
+            (:class:`.uwb_update.RangeNoiseEstimate`): a factor on the stated variance (the
+            message's ``range_std_m`` or ``uwb_range_std_m``), so that the weight of the ranges
+            follows the hardware. The 1-sigma used stays within
+            [``uwb_range_std_floor_m``, ``uwb_range_std_ceiling_m``] (widened to include the stated
+            1-sigma). Counted as ``uwb_noise_estimates`` once per anchor. Beyond the paper.
+        uwb_range_noise_window: fading memory of that estimate, ranges per anchor (>= 10; 200 is
+            10 s at 20 Hz).
+        uwb_range_std_floor_m / uwb_range_std_ceiling_m: bounds of the estimated 1-sigma, m. The
+            floor (1 cm) lies below the precision of two-way-ranging UWB chips (DW1000 / DW3000
+            datasheets: about 10 cm; 2-5 cm measured static, line of sight): it only stops a run
+            of small innovations from collapsing the weight. The ceiling (1 m) is where an anchor
+            stops being worth more than the gate; NLOS ranges beyond it are the gate's business.
     """
 
     # sensors and models (.measurement_models, .gnss_update, .uwb_update)
@@ -207,6 +231,12 @@ class FusionParams:
     uwb_mirror_switch_log_lr: float = 1.0
     uwb_gated_anchor_reinit: bool = True
     uwb_tag_side_of_anchor_plane: int = 0
+    # range noise: curvature term and adaptive estimate per anchor (issue 15 item 2)
+    uwb_range_curvature_noise: bool = False
+    uwb_range_noise_adaptive: bool = False
+    uwb_range_noise_window: int = 200
+    uwb_range_std_floor_m: float = 0.01
+    uwb_range_std_ceiling_m: float = 1.0
 
     def __post_init__(self) -> None:
         pos = {
@@ -228,6 +258,8 @@ class FusionParams:
             "nonlinearity_threshold": self.nonlinearity_threshold,
             "pseudorange_correlated_tau_s": self.pseudorange_correlated_tau_s,
             "uwb_mirror_switch_log_lr": self.uwb_mirror_switch_log_lr,
+            "uwb_range_std_floor_m": self.uwb_range_std_floor_m,
+            "uwb_range_std_ceiling_m": self.uwb_range_std_ceiling_m,
             # inf switches the Huber weighting off; anything else must be finite and > 0
             "uwb_huber_k": 1.0 if self.uwb_huber_k == math.inf else self.uwb_huber_k,
             "uwb_huber_k_positive": 1.0 if self.uwb_huber_k_positive == math.inf else self.uwb_huber_k_positive,
@@ -270,6 +302,12 @@ class FusionParams:
                 "FusionParams.divergence_uwb_gated_fraction must be in (0, 1], "
                 f"got {self.divergence_uwb_gated_fraction!r}"
             )
+        if not (isinstance(self.uwb_range_noise_window, int) and self.uwb_range_noise_window >= 10):
+            raise ValueError(
+                f"FusionParams.uwb_range_noise_window must be an int >= 10, got {self.uwb_range_noise_window!r}"
+            )
+        if self.uwb_range_std_floor_m > self.uwb_range_std_ceiling_m:
+            raise ValueError("FusionParams.uwb_range_std_floor_m must not exceed uwb_range_std_ceiling_m")
         if self.min_satellites_init < 4:
             raise ValueError(f"FusionParams.min_satellites_init must be >= 4, got {self.min_satellites_init}")
         if self.divergence_gnss_epochs < 1 or self.divergence_uwb_ranges < 1:
