@@ -270,6 +270,19 @@ _STATUS_NAMES = {STATUS_OK: "measurements_ok", STATUS_NEAR_ZERO: "rejected_near_
                  STATUS_CORRECTION: "rejected_chirp_correction"}
 
 
+SUBHARMONIC_TOLERANCE = 0.02
+"""A block's ridge period within this fraction of an integer multiple (>= 3; 2 for a block below the detection J/N)
+of the period the evidence over blocks found is that multiple (a sub-harmonic lock), not a second jammer."""
+
+
+def _multiple(period: float, base: float) -> int:
+    """m if period is an integer multiple m >= 2 of base within SUBHARMONIC_TOLERANCE (relative), else 0."""
+    if not (math.isfinite(period) and math.isfinite(base) and base > 0):
+        return 0
+    m = round(period / base)
+    return m if m >= 2 and abs(period - m * base) <= SUBHARMONIC_TOLERANCE * m * base else 0
+
+
 @dataclass
 class _Ahead:
     """A block's ridge analysis started on the worker (RfiMonitor._identify_stft): on the last ``size`` samples,
@@ -304,7 +317,7 @@ class RfiMonitor:
                                 "calibrations_discarded": 0, "clipped_blocks": 0, "frequency_not_tracked": 0,
                                 "tracker_resets_invalid": 0, "integrated_reports": 0,
                                 "integration_window_blocks": 0, "integration_blocks_thinned": 0,
-                                "worker_blocks": 0, "worker_failures": 0}
+                                "worker_blocks": 0, "worker_failures": 0, "block_periods_from_integration": 0}
         self._integrator = Integrator(params.integration, params.classifier.detect_jn_db)
         self.last_integration: IntegratedDecision | None = None
         self._last_single = NONE
@@ -324,6 +337,7 @@ class RfiMonitor:
         self._tracking = False
         self._chirp = False
         self._last_end_ns: int | None = None
+        self._int_period: tuple[float, int] | None = None
         self.reset()
 
     # ------------------------------------------------------------------------------------------
@@ -343,6 +357,7 @@ class RfiMonitor:
         self._complex: bool | None = None
         if not keep_calibration:
             self._integrator.reset()
+            self._int_period = None
             self._forget_calibration()
             self._cal_key = None
             self._forget_learned()
@@ -761,6 +776,14 @@ class RfiMonitor:
                 w.cancel()               # not used (an early return, or another length or part): dropped
                 self._block_counters["worker_failures"] = w.failures
 
+    def _integrated_period(self, stamp_ns: int) -> float:
+        """The sweep period (samples) of the evidence over blocks' last CHIRP decision, if it was made within the
+        integration window before stamp_ns; else NaN."""
+        if self._int_period is None:
+            return math.nan
+        per, at = self._int_period
+        return per if 0 <= stamp_ns - at <= self._integrator.params.window_s * 1e9 else math.nan
+
     def _part_samples(self, n: int) -> int:
         """How many of a block's last samples the ridge analysis takes first (0: the whole block):
         ``RidgeParams.tracking_samples`` while a chirp is tracked, ``acquisition_samples`` while nothing is (the
@@ -864,9 +887,12 @@ class RfiMonitor:
             # this block alone shows no CW or chirp (a single block that suffices adds no latency)
             if self._last_single in (CW, CHIRP):
                 self._integrator.restart()     # the jammer one block showed is gone: its evidence goes too
+                self._int_period = None
             self._last_single = jtype
             d = self._integrator.add(xs, cplx, fs, stamp_ns)
             self.last_integration = d
+            if d.type == CHIRP and math.isfinite(d.period_samples):
+                self._int_period = (float(d.period_samples), int(stamp_ns))
             self._block_counters["integration_window_blocks"] = d.blocks
             self._block_counters["integration_blocks_thinned"] = self._integrator.thinned
             if d.type == CHIRP and jtype in (NONE, WIDEBAND):
@@ -917,6 +943,24 @@ class RfiMonitor:
                 bw = abs(b - a)
                 if math.isfinite(rr.start):
                     f0 = self._to_rel_hz(rr.start, fs, fif, cplx)
+            m = _multiple(rr.period_samples, self._integrated_period(stamp_ns)) if rr.periodic else 0
+            if m >= 3 or (m == 2 and jn < cp.detect_jn_db):
+                # SUBHARMONIC_TOLERANCE: the block's ridge locked on a multiple of the period the evidence over
+                # the window found (a weak sweep whose period is near a whole number of hops beats with the frame
+                # grid); the window's period is reported, the sweep law fitted on the multiple is not (frequency,
+                # rate, band and start NaN), the shape and in-band fraction come from the block folded on it. Twice
+                # the window's period only from a block below the detection J/N: the window's comb on amplitudes
+                # sees a symmetric triangle (the same in-band pattern on the way up and down) at half its period,
+                # where a strong block is right
+                p_int = self._integrated_period(stamp_ns)
+                self._block_counters["block_periods_from_integration"] += 1
+                per = p_int / fs
+                freq = fstd = rate = f0 = bw = nan
+                shape, inb, _, _ = rg.folded_shape(xs, cplx, p_int, p.ridge)
+                if inverted and shape in (rg.SAWTOOTH_UP, rg.SAWTOOTH_DOWN):
+                    shape = rg.SAWTOOTH_DOWN if shape == rg.SAWTOOTH_UP else rg.SAWTOOTH_UP
+                if shape == rg.SHAPE_UNKNOWN:
+                    inb = nan
         if jtype in (CW, CHIRP) and ref != REF_IN_BLOCK and math.isfinite(jn) and jn == jn_in and jn_in > jn_ref:
             # an AGC (or a gain change) hides the jammer from the block power; the noise measured in the block
             # beside the jammer shows it: J/N against REF_IN_BLOCK, and said so
