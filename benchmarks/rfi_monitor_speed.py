@@ -115,14 +115,23 @@ THIRD_ROUND = """Third round of speed work on issue 14 item 6 (session 6; kept):
   paid for a new frame-length choice (about one block's analysis) and was integrated: the node fell further
   behind. That is where the live node gained most (live_stream.md: 733 of 2,901 blocks analysed as shipped in the
   previous session, 2,583 now).
+* Quiet blocks analysed in part first (``RidgeParams.acquisition_samples`` = 16384, node parameter
+  ``ridge_acquisition_samples``): while nothing is tracked the ridge takes the block's last 16384 samples and the
+  whole block only when that part shows anything, so a quiet 38.192 MS/s block is analysed as a 16.4 MS/s front
+  end's is (0.97 -> 0.83 ms per quiet block; slower front ends' blocks are unchanged).
+* A block whose ridge locks on a multiple of the period the evidence over blocks found reports that period
+  (``monitor.SUBHARMONIC_TOLERANCE``; accuracy, not speed: stft_shapes.md).
+* ``warm_up`` also runs saw-tooth blocks: on a fresh install the first chirp of a live stream compiled the tracking
+  path's functions (seconds), and the node lost a second of blocks there.
 * Built, tested and off by default: ``analysis_worker`` (the ridge analysis in a child process). On this 2-vCPU
   virtual machine a block's analysis round trip through the child took 0.94 ms against 0.76 ms for the same
   analysis in the calling process (median of 300 blocks, nothing else running): the child reads a block another
   vCPU wrote and wakes from idle for each; the in-process rows above do not use it.
 
-What is left: a quiet block (acquisition) costs about 1 ms per 1 ms block on this CPU (the ridge analysis of the
-whole block ~0.5 ms, the integration over blocks ~0.3 ms averaged over blocks, the Welch PSD and the rest
-~0.2 ms): it does not keep up at 1x in one process; the node then sheds quiet blocks on purpose (counted).
+What is left: a quiet block (acquisition) costs about 0.8 ms per 1 ms block on this CPU when nothing else runs
+(the ridge analysis of its last 16384 samples ~0.3 ms, the integration over blocks ~0.3 ms averaged over blocks,
+the Welch PSD and the rest ~0.2 ms), more when the other core is busy: it does not keep up at 1x in one process
+with a margin; the node then sheds quiet blocks on purpose (counted).
 """
 LIVE_RUNS = 3
 """The live-stream rows are measured this many times in one run (the table gives the median, the runs are
