@@ -157,6 +157,12 @@ class AnalysisWorker:
         if not ok:
             self.close()
             raise RuntimeError("the analysis worker process did not start")
+        # both processes hold the file open now: its name can go, so nothing is left behind in /dev/shm even if
+        # this process is killed
+        try:
+            os.unlink(self._path)
+        except OSError:
+            pass
 
     @property
     def alive(self) -> bool:
