@@ -150,3 +150,32 @@ def test_parameters_are_checked() -> None:
         FusionParams(uwb_range_std_floor_m=2.0, uwb_range_std_ceiling_m=1.0)
     with pytest.raises(ValueError):
         FusionParams(uwb_range_std_floor_m=0.0)
+
+
+def test_ranges_are_not_iterated_with_fewer_anchors_than_uwb_iterate_min_anchors() -> None:
+    """uwb_iterate_min_anchors (issue 15 item 2): with GNSS in use, a range is refined (iterated update) only while
+    at least that many anchors were heard within uwb_init_window_s; with 1-2 anchors the iterated point leaks
+    information across the line of sight (docs/uwb_gnss_fusion/fusion_never_worse.md). Off (0, the default): every
+    range may be refined, as before; the UWB-only filter (no GNSS) is never limited."""
+    base = np.array([4_000_000.0, 1_000_000.0, 4_800_000.0])       # an Earth-frame (ECEF) tag position, m
+    anchors = base + _ANCHORS
+
+    def first_range_iterations(n_anchors: int, k: int, use_gnss: bool = True) -> float:
+        f = FusionFilter(FusionParams(use_gnss=use_gnss, uwb_iterate_min_anchors=k))
+        frame = "earth" if use_gnss else "map"
+        a_set = anchors if use_gnss else _ANCHORS
+        f.initialize(0, (base if use_gnss else np.zeros(3)) + np.array([1.5, -1.0, 1.2]), frame_id=frame,
+                     position_std_m=2.0)
+        for i in range(n_anchors):
+            tag = base if use_gnss else np.zeros(3)
+            f.process(UwbRangeMeasurement(1_000_000 * (i + 1), f"A{i + 1}", a_set[i], frame,
+                                          float(np.linalg.norm(tag - a_set[i]))))
+        return float(f._uwb_scratch[4])                      # refinement steps of the last range
+
+    assert first_range_iterations(1, 0) > 0                  # 2 m off across the line of sight: refined
+    assert first_range_iterations(1, 3) == 0
+    assert first_range_iterations(2, 3) == 0
+    assert first_range_iterations(3, 3) > 0
+    assert first_range_iterations(1, 3, use_gnss=False) > 0
+    with pytest.raises(ValueError):
+        FusionParams(uwb_iterate_min_anchors=-1)

@@ -849,6 +849,17 @@ class FusionFilter:
         return init.snapshot_fix(prep.subset(system == best), self.params.min_satellites_init), best
 
     # ------------------------------------------------------------------ UWB
+    def _range_iterations(self, stamp_ns: int) -> int:
+        """Refinement steps allowed for a range (``uwb_iterate_min_anchors``): none while GNSS is used and fewer
+        anchors than that were heard within ``uwb_init_window_s``, else ``max_update_iterations``."""
+        p = self.params
+        k = p.uwb_iterate_min_anchors
+        if k <= 0 or not (p.use_gnss and self._frame == FRAME_EARTH):
+            return p.max_update_iterations
+        window_ns = int(p.uwb_init_window_s * 1e9)
+        heard = sum(1 for v in self._recent_uwb.values() if v[3] == self._frame and stamp_ns - v[0] <= window_ns)
+        return p.max_update_iterations if heard >= k else 0
+
     def process_uwb(self, meas: UwbRangeMeasurement) -> FusionOutput:
         """Predict to the range's stamp and apply it.
 
@@ -898,7 +909,8 @@ class FusionFilter:
         self._predict_to(stamp)
         try:
             ok, nis = apply_range(
-                self._ckf, self._nominal, anchor, self._lever, rng, std, self._gate, p, self._uwb_scratch
+                self._ckf, self._nominal, anchor, self._lever, rng, std, self._gate, p, self._uwb_scratch,
+                self._range_iterations(stamp),
             )
         except CholeskyError:
             self._count("numerical_failure")

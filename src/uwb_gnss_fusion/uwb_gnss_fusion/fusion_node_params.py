@@ -192,6 +192,10 @@ class FusionNodeParams:
         _FP.uwb_range_noise_adaptive, "Estimate each anchor's range noise from its innovations, a factor on the "
         'stated variance (range_std_m of the message or uwb_range_std_m); beyond the paper, counted as '
         'uwb_noise_estimates.')
+    uwb_iterate_min_anchors: int = parameter(
+        _FP.uwb_iterate_min_anchors, 'With GNSS, refine a range by the iterated update only while at least this many '
+        'anchors were heard within uwb_init_window_s (0: always). With 1-2 anchors the iterated point leaks '
+        'information across the lines of sight; beyond the paper.', minimum=0, maximum=64)
     uwb_range_noise_window: int = parameter(
         _FP.uwb_range_noise_window, 'Fading memory of that estimate, ranges per anchor.', minimum=10, maximum=100000)
     uwb_range_std_floor_m: float = parameter(

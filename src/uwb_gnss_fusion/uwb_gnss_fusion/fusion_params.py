@@ -172,6 +172,14 @@ class FusionParams:
             follows the hardware. The 1-sigma used stays within
             [``uwb_range_std_floor_m``, ``uwb_range_std_ceiling_m``] (widened to include the stated
             1-sigma). Counted as ``uwb_noise_estimates`` once per anchor. Beyond the paper.
+        uwb_iterate_min_anchors: with GNSS in use, a range may be refined by the iterated update
+            (``max_update_iterations``) only while at least this many anchors were heard within
+            ``uwb_init_window_s`` (0: always, the default). With one or two anchors the iterated point
+            moves along directions the ranges do not observe and the information of a stream of ranges
+            leaks across their lines of sight (the fused filter got worse than GNSS alone at +22 / +30 dB
+            with the adaptive noise; docs/uwb_gnss_fusion/fusion_never_worse.md); three or more anchors fix
+            the position among themselves and need the refinement. The UWB-only filter is never limited.
+            Beyond the paper.
         uwb_range_noise_window: fading memory of that estimate, ranges per anchor (>= 10; 200 is
             10 s at 20 Hz).
         uwb_range_std_floor_m / uwb_range_std_ceiling_m: bounds of the estimated 1-sigma, m. The
@@ -237,6 +245,7 @@ class FusionParams:
     uwb_range_noise_window: int = 200
     uwb_range_std_floor_m: float = 0.01
     uwb_range_std_ceiling_m: float = 1.0
+    uwb_iterate_min_anchors: int = 0
 
     def __post_init__(self) -> None:
         pos = {
@@ -301,6 +310,10 @@ class FusionParams:
             raise ValueError(
                 "FusionParams.divergence_uwb_gated_fraction must be in (0, 1], "
                 f"got {self.divergence_uwb_gated_fraction!r}"
+            )
+        if not (isinstance(self.uwb_iterate_min_anchors, int) and 0 <= self.uwb_iterate_min_anchors <= 64):
+            raise ValueError(
+                f"FusionParams.uwb_iterate_min_anchors must be an int in [0, 64], got {self.uwb_iterate_min_anchors!r}"
             )
         if not (isinstance(self.uwb_range_noise_window, int) and self.uwb_range_noise_window >= 10):
             raise ValueError(

@@ -40,6 +40,7 @@ def apply_range(
     gate_nis: float,
     params: FusionParams,
     scratch: np.ndarray,
+    max_iterations: int | None = None,
 ) -> tuple[bool, float]:
     """Apply one range to ``ckf`` and fold the correction into ``nominal`` (in place).
 
@@ -76,12 +77,13 @@ def apply_range(
     """
     lat = params.uwb_latency_s
     dims = 6 if lat > 0.0 else 3
+    iterations = params.max_update_iterations if max_iterations is None else int(max_iterations)
     r = range_std_m * range_std_m
     if params.uwb_range_curvature_noise:
         r += range_curvature_variance(ckf.p, nominal, anchor_m, lever_m, lat)
     status = ckf.update_range_compiled(
         nominal, anchor_m, lever_m, lat, dims, range_m, r, gate_nis,
-        params.uwb_huber_k, params.uwb_huber_k_positive, params.max_update_iterations,
+        params.uwb_huber_k, params.uwb_huber_k_positive, iterations,
         params.nonlinearity_threshold, scratch,
     )
     if status != STATUS_CHOLESKY_FAILED:
@@ -99,7 +101,7 @@ def apply_range(
         active_dims=dims,
         huber_k=params.uwb_huber_k,
         huber_k_positive=params.uwb_huber_k_positive,
-        max_iterations=params.max_update_iterations,
+        max_iterations=iterations,
         nonlinearity_threshold=params.nonlinearity_threshold,
     )
     nominal += ckf.reset_error_state()
