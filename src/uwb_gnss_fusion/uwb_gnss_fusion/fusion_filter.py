@@ -71,6 +71,9 @@ from .reorder_buffer import ReorderBuffer  # noqa: F401 (re-exported)
 from .uwb_update import RangeNoiseEstimate, apply_range
 
 _NS = 1_000_000_000
+FIX_AGREEMENT_CHI2_3DOF = float(chi2.ppf(0.9973, 3))
+"""Two snapshot fixes agree (``divergence_fix_confirm_s``) when their position difference is within this
+chi-square (3 dof, the probability of 3 standard deviations) of their combined covariance."""
 
 
 class FusionFilter:
@@ -175,6 +178,7 @@ class FusionFilter:
         self._ckf = CubatureKalmanFilter(np.zeros(STATE_DIM), np.eye(STATE_DIM))
         self._reset_systems(GPS)
         self._bad_gnss_epochs = 0
+        self._held_fix: tuple[int, np.ndarray, np.ndarray] | None = None
         self._uwb_gated = GatedWindow(self.params.divergence_uwb_ranges)
         self._anchor_gated_run: dict[str, int] = {}
         self._reset_mirror()
@@ -553,6 +557,9 @@ class FusionFilter:
             if not self._fix_agrees_with_uwb(stamp, fix[0], self.params.init_position_std_m):
                 self._count("gnss_fix_inconsistent_with_uwb")
                 return self._output(False, sat_rej=n_obs)
+            if self.params.divergence_fix_confirm_s > 0 and not self._fix_confirmed(stamp, fix):
+                self._count("gnss_init_unconfirmed")       # divergence_fix_confirm_s: a second fix must agree
+                return self._output(False, sat_rej=n_obs)
             pos, clk, vel, drift, cov = fix
             self.initialize(stamp, pos, velocity_mps=vel, clock_bias_m=clk, clock_drift_mps=drift,
                             position_clock_covariance_m2=cov)
@@ -612,7 +619,7 @@ class FusionFilter:
             self._count("divergence")
             if not self._position_lost() and self._uwb_agrees(stamp):
                 return self._reset_clock_keep_position(stamp, prep)
-            return self._declare_divergence(stamp)
+            return self._declare_divergence(stamp, gnss_only=not self._position_lost())
         return self._output(False, sat_used=used, sat_rej=pre_rejected + n_screened + gated_pr, nis=nis)
 
     # ------------------------------------------------------------------ mirror ambiguity
@@ -1045,9 +1052,39 @@ class FusionFilter:
         self._bad_gnss_epochs = 0
         return self._output(True)
 
-    def _declare_divergence(self, stamp_ns: int) -> FusionOutput:
+    def _fix_confirmed(self, stamp_ns: int, fix: tuple) -> bool:
+        """``divergence_fix_confirm_s``: whether the held fix, ``divergence_fix_confirm_s`` to ten times that before
+        ``stamp_ns``, agrees with ``fix`` within 3 combined standard deviations (chi-square, 3 dof, of the position
+        difference). A newer fix replaces the held one when it is compared and disagrees, or when the held one is
+        too old; a fix too soon after the held one is not compared (the held one stays)."""
+        new = (int(stamp_ns), np.asarray(fix[0], float), np.asarray(fix[4], float))
+        held = self._held_fix
+        lo = self.params.divergence_fix_confirm_s
+        if held is None:
+            self._held_fix = new
+            return False
+        dt_s = (stamp_ns - held[0]) / _NS
+        if dt_s < lo and dt_s >= 0:
+            return False
+        if not lo <= dt_s <= 10.0 * lo:
+            self._held_fix = new
+            return False
+        d = new[1] - held[1]
+        c = held[2][0:3, 0:3] + new[2][0:3, 0:3]
+        try:
+            q = float(d @ np.linalg.solve(c, d))
+        except np.linalg.LinAlgError:
+            q = math.inf
+        if q <= FIX_AGREEMENT_CHI2_3DOF:
+            self._held_fix = None
+            return True
+        self._held_fix = new
+        return False
+
+    def _declare_divergence(self, stamp_ns: int, gnss_only: bool = False) -> FusionOutput:
         """Reinitialise from (a) the caller's reference solution, (b) a snapshot LS fix of the last
-        GNSS epoch, (c) UWB multilateration; else reset to uninitialised."""
+        GNSS epoch, (c) UWB multilateration; else reset to uninitialised. ``gnss_only``: declared by the
+        GNSS rule alone on a state still within bounds (``divergence_fix_confirm_s`` applies)."""
         self._reinits += 1
         frame = self._frame
         if self._reference_provider is not None and frame == FRAME_EARTH:
@@ -1074,6 +1111,13 @@ class FusionFilter:
             if fix is not None and not self._fix_agrees_with_uwb(stamp_ns, fix[0], self.params.init_position_std_m):
                 self._count("gnss_fix_inconsistent_with_uwb")
                 fix = None
+            if gnss_only and self.params.divergence_fix_confirm_s > 0 and self._initialized:
+                if fix is None or not self._fix_confirmed(stamp_ns, fix):
+                    # divergence_fix_confirm_s: keep the state until a second fix agrees with this one
+                    self._reinits -= 1
+                    self._count("divergence_unconfirmed")
+                    self._bad_gnss_epochs = 0
+                    return self._output(False)
             if fix is not None:
                 self.initialize(
                     stamp_ns, fix[0], velocity_mps=fix[2], clock_bias_m=fix[1], clock_drift_mps=fix[3],

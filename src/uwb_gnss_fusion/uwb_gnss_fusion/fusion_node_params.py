@@ -257,6 +257,11 @@ class FusionNodeParams:
     divergence_gnss_epochs: int = parameter(
         _FP.divergence_gnss_epochs, 'Consecutive GNSS epochs with at least half of >= 4 pseudoranges gated out '
         'that declare divergence.', minimum=1, maximum=100000, read_only=False)
+    divergence_fix_confirm_s: float = parameter(
+        _FP.divergence_fix_confirm_s, 'Start from a GNSS snapshot fix, or re-initialise from one after a GNSS-declared '
+        'divergence, only when an earlier fix this many seconds (up to ten times that) before agrees within 3 '
+        'combined sigmas; meanwhile a diverging state is kept (0: at once). Beyond the paper.',
+        minimum=0.0, maximum=3600.0)
     divergence_uwb_ranges: int = parameter(
         _FP.divergence_uwb_ranges, 'Window of recent UWB ranges (all anchors) examined for divergence.',
         minimum=1, maximum=100000)

@@ -180,6 +180,14 @@ class FusionParams:
             with the adaptive noise; docs/uwb_gnss_fusion/fusion_never_worse.md); three or more anchors fix
             the position among themselves and need the refinement. The UWB-only filter is never limited.
             Beyond the paper.
+        divergence_fix_confirm_s: the filter starts from a GNSS snapshot fix, and a GNSS-declared divergence
+            re-initialises from one, only when an earlier fix, at least this many seconds before (and at most
+            ten times that), agrees with it within 3 combined standard deviations (0: at once, the default).
+            Until then a diverging state is kept (not reset), the fix is held for the next comparison, and
+            the events are counted as ``gnss_init_unconfirmed`` / ``divergence_unconfirmed``. Outlier
+            bursts under jamming (0.2-2 s) make the state gate most pseudoranges for a few epochs while it
+            is right, and a fix of such an epoch is wrong; two fixes a second apart from different bursts
+            rarely agree, while a state that really diverged is outvoted by fixes that do. Beyond the paper.
         uwb_range_noise_window: fading memory of that estimate, ranges per anchor (>= 10; 200 is
             10 s at 20 Hz).
         uwb_range_std_floor_m / uwb_range_std_ceiling_m: bounds of the estimated 1-sigma, m. The
@@ -246,6 +254,7 @@ class FusionParams:
     uwb_range_std_floor_m: float = 0.01
     uwb_range_std_ceiling_m: float = 1.0
     uwb_iterate_min_anchors: int = 0
+    divergence_fix_confirm_s: float = 0.0
 
     def __post_init__(self) -> None:
         pos = {
@@ -310,6 +319,10 @@ class FusionParams:
             raise ValueError(
                 "FusionParams.divergence_uwb_gated_fraction must be in (0, 1], "
                 f"got {self.divergence_uwb_gated_fraction!r}"
+            )
+        if not (math.isfinite(self.divergence_fix_confirm_s) and self.divergence_fix_confirm_s >= 0.0):
+            raise ValueError(
+                f"FusionParams.divergence_fix_confirm_s must be finite and >= 0, got {self.divergence_fix_confirm_s!r}"
             )
         if not (isinstance(self.uwb_iterate_min_anchors, int) and 0 <= self.uwb_iterate_min_anchors <= 64):
             raise ValueError(
