@@ -56,17 +56,16 @@ ANCHOR_SETS = {
     "GNSS+UWB 3 anchors, J/S fed": ("A1", "A2", "A3"),
 }
 HANYANG_LATENCY_S = 0.175
+PAPER_UPDATE = {"max_update_iterations": 0, "divergence_uwb_gated_fraction": 1.0, "uwb_range_curvature_noise": False}
+"""Cao et al.'s range update: one cubature update per range (no iteration), the original divergence rule, and no
+curvature variance (ours, on by default since session 7)."""
 HANYANG_VARIANTS = {
-    "paper CKF": {"max_update_iterations": 0, "divergence_uwb_gated_fraction": 1.0},
+    "paper CKF": PAPER_UPDATE,
     "CKF": {},
     "CKF, latency": {"uwb_latency_s": 0.175},
     "CKF, latency, skewed Huber": {"uwb_latency_s": 0.175, "uwb_huber_k": 3.0, "uwb_huber_k_positive": 1.5},
     "CKF, sigma 0.3 m": {"uwb_range_std_m": 0.3},
-    "paper CKF, sigma 0.3 m": {
-        "uwb_range_std_m": 0.3,
-        "max_update_iterations": 0,
-        "divergence_uwb_gated_fraction": 1.0,
-    },
+    "paper CKF, sigma 0.3 m": {"uwb_range_std_m": 0.3, **PAPER_UPDATE},
 }
 """UWB-only filter variants on the real data: "paper CKF" is Cao et al.'s update with the original
 divergence rule; "CKF" the defaults (iterated update, windowed divergence test)."""

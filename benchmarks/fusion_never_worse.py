@@ -206,7 +206,9 @@ def main(argv: list[str] | None = None) -> int:
         + f" (pseudorange_correlated_std_m {fp.pseudorange_correlated_std_m:g}, "
         f"uwb_mirror_test {fp.uwb_mirror_test}, uwb_tag_side_of_anchor_plane {fp.uwb_tag_side_of_anchor_plane}, "
         f"uwb_range_noise_adaptive {fp.uwb_range_noise_adaptive}, "
-        f"uwb_range_curvature_noise {fp.uwb_range_curvature_noise}, max_update_iterations {fp.max_update_iterations}).",
+        f"uwb_range_curvature_noise {fp.uwb_range_curvature_noise}, uwb_iterate_min_anchors "
+        f"{fp.uwb_iterate_min_anchors}, uwb_range_bias_std_m {fp.uwb_range_bias_std_m:g}, divergence_fix_confirm_s "
+        f"{fp.divergence_fix_confirm_s:g}, max_update_iterations {fp.max_update_iterations}).",
         "",
         "| J/S | GNSS only | 1 anchor | 2 anchors | 3 anchors | 4 anchors | UWB only 3 | UWB only 4 "
         "| never worse (3D), anchors 1/2/3/4 |",

@@ -107,5 +107,7 @@ def test_run_on_the_first_10_s_processes_every_input_and_reports(tmp_path):
     assert 'Traceback' not in done.stderr
     replay = (out / 'replay.md').read_text()
     assert '| /gnss/measurements | in | 50 |' in replay and '| /uwb/ranges | in | 600 |' in replay
-    assert '| /fusion/odometry | out | 650 |' in replay
+    # one status per input; odometry from the start the second GNSS fix confirms (divergence_fix_confirm_s 1 s):
+    # the first 1.0 s of inputs (5 GNSS epochs at 5 Hz, 60 ranges of 3 anchors at 20 Hz) come before it
+    assert '| /fusion/status | out | 650 |' in replay and '| /fusion/odometry | out | 585 |' in replay
     assert 'not scored' in done.stdout

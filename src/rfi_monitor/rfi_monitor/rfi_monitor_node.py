@@ -110,13 +110,15 @@ capped at SHED_CREDIT_CAP_S, and the compiled functions are compiled (or loaded)
 (:func:`warm_up`), so that a one-off cost does not shed seconds of stream.
 ``accounting_ok`` counts shed blocks: received == processed + shed + rejected.
 
-Live streams, latency: ``max_block_age_s`` (0: off, the default) also sheds, before deserialising, a block whose
-stamp is more than that many seconds behind the node's clock (counted in ``blocks_shed`` and in
+Live streams, latency: ``max_block_age_s`` (0.05 s by default; 0: off) also sheds, before deserialising, a block
+whose stamp is more than that many seconds behind the node's clock (counted in ``blocks_shed`` and in
 ``blocks_shed_stale``), so that a node that was starved of CPU (another process, a slower computer) answers
 the newest blocks at once instead of working through a queue (the input keeps up to 1000 blocks, a second of
 1 ms blocks). For live front ends only, whose stamps are the clock's (if_source ``pace: real_time``, an SDR
-driver): a replay's stamps are in the past and would all be shed, so it is off by default; the wall clock
-decides only which blocks are analysed, never what an analysed block gives. A shed block is a gap for the core;
+driver): the stream is taken as live when its first block (after the start, or after a stamp restart) is stamped
+within ``LIVE_STREAM_DETECT_S`` of the node clock (``live_stream`` on /diagnostics); a replay's stamps lie in the
+past and are never shed by age. The wall clock decides only which blocks are analysed, never what an analysed
+block gives. A shed block is a gap for the core;
 a gap shorter than ``monitor.FRAME_KEEP_GAP_S`` keeps the frame length and is charged to the integration's budget,
 so shedding makes the next blocks cheaper, not dearer.
 
@@ -197,6 +199,10 @@ SCALE_MAX = 1.0e3
 CENTER_FREQUENCY_MAX_HZ = 1.0e11
 """Highest RF reference frequency accepted, Hz (GNSS bands are 1.1-2.5 GHz; 100 GHz leaves room for any band)."""
 SHED_CREDIT_CAP_S = 0.1
+LIVE_STREAM_DETECT_S = 1.0
+"""A stream is live (``max_block_age_s`` applies) when its first block, after the node starts or after a stamp
+restart, is stamped within this many seconds of the node clock, either side; a replay's stamps lie further in the
+past, s."""
 """Load shedding: CPU credit saved while idle is capped at this much stream time (times max_cpu_load), s: a burst
 of slow blocks after a quiet spell is absorbed, a lasting overload is not."""
 MAX_SAMPLE_INDEX = 2 ** 53
@@ -267,9 +273,11 @@ class MonitorNodeParams:
         '(blocks_shed on /diagnostics, no JammerState for them) until it fits again; 0: never shed.',
         minimum=0.0, maximum=1000.0)
     max_block_age_s: float = parameter(
-        0.0, 'Live streams only: a block stamped more than this many seconds behind the node clock is shed before '
+        0.05, 'Live streams only: a block stamped more than this many seconds behind the node clock is shed before '
         'it is deserialised (blocks_shed and blocks_shed_stale), so the answers stay within this latency when the '
-        'node was starved of CPU; 0: off (replays: their stamps are in the past).', minimum=0.0, maximum=3600.0)
+        'node is short of CPU. A stream is live when its first block (after the start or a stamp restart) is '
+        'stamped within 1 s of the node clock (live_stream on /diagnostics); a replay, whose stamps lie in the '
+        'past, is never shed by age. 0: off.', minimum=0.0, maximum=3600.0)
     analysis_worker: bool = parameter(
         False, 'Run the ridge analysis of each block (estimator stft) in a child process on another core while this '
         'one does the rest of the block (rfi_monitor.analysis_worker): about half the CPU time per block in this '
@@ -714,6 +722,7 @@ class RfiMonitorNode(Node):
         self._last_clipped_fraction = 0.0
         self._cpu_debt_s = 0.0
         self._last_block_stamp_ns: int | None = None
+        self._live: bool | None = None          # max_block_age_s: decided on the first block of a time line
         self._errors_at_last_report = 0
         self._handler_errors_at_last_report = 0
         self._diag_timer = StampTimer(self.params.diagnostics_period_s)
@@ -813,9 +822,13 @@ class RfiMonitorNode(Node):
         if self._last_block_stamp_ns is None or stamp_ns > self._last_block_stamp_ns:
             self._last_block_stamp_ns = stamp_ns
         age = self.params.max_block_age_s
-        if age > 0 and self.get_clock().now().nanoseconds - stamp_ns > age * NS_PER_S:
-            self.counts['blocks_shed_stale'] += 1
-            return True
+        if age > 0:
+            behind_ns = self.get_clock().now().nanoseconds - stamp_ns
+            if self._live is None:
+                self._live = abs(behind_ns) <= LIVE_STREAM_DETECT_S * NS_PER_S
+            if self._live and behind_ns > age * NS_PER_S:
+                self.counts['blocks_shed_stale'] += 1
+                return True
         if not load > 0:
             return False
         # the debt is capped too: a one-off cost (a garbage collection, a page fault storm) sheds at most
@@ -834,6 +847,7 @@ class RfiMonitorNode(Node):
             return decision.reason, None
         if decision.restart:
             self.counts['stamp_restarts'] += 1
+            self._live = None
             self.get_logger().warn(f'IF block stamps jumped to {stamp_ns} ns (confirmed by '
                                    f'{self.params.stamp_jump_confirmations} blocks): new time line')
         return None, stamp_ns
@@ -899,6 +913,7 @@ class RfiMonitorNode(Node):
         values['calibrated'] = self.monitor.calibrated
         values['last_type'] = 'none yet' if self._last_type is None else TYPE_NAMES.get(self._last_type, '?')
         values['last_clipped_fraction'] = self._last_clipped_fraction
+        values['live_stream'] = 'unknown' if self._live is None else self._live
         values.update(self.health.values())
         received = self.counts['blocks_received']
         values['accounting_ok'] = (self.health.counts[f'{self.subscription.topic_name}.received'] == received

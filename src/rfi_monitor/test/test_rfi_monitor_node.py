@@ -325,26 +325,34 @@ def test_load_shedding_counts_whole_blocks_and_keeps_accounting(probe_factory):
     assert v['blocks_shed'] == '5' and v['blocks_processed'] == '1' and v['accounting_ok'] == 'True'
 
 
-def test_stale_blocks_are_shed_when_an_age_limit_is_set(probe_factory):
-    """max_block_age_s (live streams): blocks stamped more than that behind the node clock are shed before they are
-    deserialised, counted in blocks_shed and blocks_shed_stale; blocks stamped now are analysed. Off (0, the
-    default): old blocks are analysed (a replay)."""
+def test_stale_blocks_of_a_live_stream_are_shed_and_a_replay_is_not(probe_factory):
+    """max_block_age_s (live streams; 0.05 s by default): a stream whose first block is stamped within
+    LIVE_STREAM_DETECT_S of the node clock is live, and its blocks stamped more than the limit behind the clock are
+    shed before they are deserialised, counted in blocks_shed and blocks_shed_stale; blocks stamped now are
+    analysed. A stream stamped further in the past (a replay) is analysed whole, limit or not; 0: off."""
     import time as _time
+
+    from rfi_monitor.rfi_monitor_node import LIVE_STREAM_DETECT_S
     fe = FrontEndConfig(noise_bandwidth_hz=NOISE_BW_HZ)
     msgs, _ = stream(fe, (ChirpJammer(js_db=JS_DB),), 0, 6, seed=23)
-    old = probe_factory(max_block_age_s=0.5)
-    t0 = _time.time_ns() - 2 * 10**9                     # two seconds ago
-    for k, m in enumerate(msgs):
-        m.header.stamp = ns_to_stamp(t0 + k * 10**6)
-    assert all(s is None for s in old.send_all(msgs))
-    v = old.values()
+
+    def stamped(t0_ns: int) -> list:
+        for k, m in enumerate(msgs):
+            m.header.stamp = ns_to_stamp(t0_ns + k * 10**6)
+        return msgs
+
+    behind = probe_factory()                               # the default limit, 0.05 s
+    assert all(s is None for s in behind.send_all(stamped(_time.time_ns() - int(0.5 * 1e9))))   # live, 0.5 s behind
+    v = behind.values()
     assert v['blocks_shed'] == '6' and v['blocks_shed_stale'] == '6' and v['accounting_ok'] == 'True'
-    assert all(s is not None for s in probe_factory().send_all(msgs))     # off: a replay's old stamps are analysed
+    assert v['live_stream'] == 'True'
+    replay = probe_factory()
+    assert all(s is not None for s in replay.send_all(stamped(_time.time_ns() - int(2 * LIVE_STREAM_DETECT_S * 1e9))))
+    assert replay.values()['live_stream'] == 'False' and replay.values()['blocks_shed_stale'] == '0'
+    off = probe_factory(max_block_age_s=0.0)
+    assert all(s is not None for s in off.send_all(stamped(_time.time_ns() - int(0.5 * 1e9))))
     live = probe_factory(max_block_age_s=0.5)
-    t0 = _time.time_ns()
-    for k, m in enumerate(msgs):
-        m.header.stamp = ns_to_stamp(t0 + k * 10**6)
-    assert all(s is not None for s in live.send_all(msgs))
+    assert all(s is not None for s in live.send_all(stamped(_time.time_ns())))
     assert live.values()['blocks_shed_stale'] == '0'
 
 

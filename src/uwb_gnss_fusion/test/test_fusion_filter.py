@@ -194,7 +194,8 @@ def test_outlier_burst_recovery_within_5_s():
 
 def test_bad_inputs_are_counted_never_crash_never_nan():
     rng = np.random.default_rng(9)
-    f = FusionFilter(FusionParams(anchors=(("A1", *ANCHORS[0]), ("A2", *ANCHORS[1]), ("A3", *ANCHORS[2]))))
+    f = FusionFilter(FusionParams(anchors=(("A1", *ANCHORS[0]), ("A2", *ANCHORS[1]), ("A3", *ANCHORS[2])),
+                                  divergence_fix_confirm_s=0.0))   # started by the first epoch
     _run_gnss(f, 10, rng)
     t = T0 + 2 * NS
     good = _epoch(t, rng=rng)
@@ -336,7 +337,7 @@ def test_divergence_when_most_anchors_disagree_even_if_one_agrees(fraction):
 
 
 def test_map_frame_uwb_rejected_by_earth_filter():
-    f = FusionFilter()
+    f = FusionFilter(FusionParams(divergence_fix_confirm_s=0.0))
     _run_gnss(f, 3, None)
     out = f.process_uwb(_uwb(T0 + NS, 0, frame="map"))
     assert dict(out.rejection_counts)["uwb_frame_mismatch"] == 1
@@ -379,7 +380,7 @@ def test_snapshot_fix_inconsistent_with_uwb_ranges_is_refused():
     # excluded must not replace a state the UWB supports. Here the range says the tag is 100 m
     # further from anchor 1 than the fix: refused, until the range is older than the window.
     for offset_m, expect_init in ((100.0, False), (0.0, True)):
-        f = FusionFilter()
+        f = FusionFilter(FusionParams(divergence_fix_confirm_s=0.0))   # a fix may start the filter at once
         r = _uwb(T0, 0)
         f.process_uwb(dataclasses.replace(r, range_m=r.range_m + offset_m))  # one anchor: no multilateration
         out = f.process_gnss(_epoch(T0 + NS // 10))

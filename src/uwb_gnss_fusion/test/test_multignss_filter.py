@@ -99,7 +99,8 @@ def _epoch(k: int, systems=(GPS, GALILEO, BEIDOU, GLONASS), biases=None, rng=Non
 
 
 def _params(**kw) -> FusionParams:
-    return FusionParams(use_uwb=False, accel_psd_m2ps3=0.01, **kw)
+    # started at the first epoch (no second fix to confirm it): these tests follow the state from there
+    return FusionParams(use_uwb=False, accel_psd_m2ps3=0.01, divergence_fix_confirm_s=0.0, **kw)
 
 
 def test_injected_inter_system_biases_are_estimated_and_do_not_move_the_position():
@@ -332,10 +333,11 @@ def test_real_multi_gnss_hour_beats_gps_alone(esbc_epochs):
     systems; 40 deg mask 34 m against 1.8 m). Checked with margins: all systems at most 0.75 x GPS
     alone at the default mask, and with a 40 deg mask the multi-GNSS error stays a few metres."""
     (gps, n_gps), (multi, n_multi) = (_rms(esbc_epochs, multi_gnss=m) for m in (False, True))
-    assert n_gps == n_multi == len(esbc_epochs)
+    # default divergence_fix_confirm_s: the first 30 s epoch's fix is held and confirmed by the second
+    assert n_gps == n_multi == len(esbc_epochs) - 1
     assert multi < 0.75 * gps
     (masked_gps, n_gps), (masked_multi, n_multi) = (
         _rms(esbc_epochs, multi_gnss=m, elevation_mask_deg=40.0) for m in (False, True))
     assert masked_multi < 5.0 < masked_gps
-    assert n_multi == len(esbc_epochs) >= n_gps
+    assert n_multi == len(esbc_epochs) - 1 >= n_gps
 

@@ -35,6 +35,7 @@ the satellite appears and removed (marginalised) when it has been unseen for a w
 
 from __future__ import annotations
 
+import collections
 import math
 from collections.abc import Callable, Mapping
 
@@ -71,9 +72,18 @@ from .reorder_buffer import ReorderBuffer  # noqa: F401 (re-exported)
 from .uwb_update import RangeNoiseEstimate, apply_range
 
 _NS = 1_000_000_000
+UWB_FIX_MIN_ANCHORS = 3
+"""Anchors needed for ranges alone to fix the position (up to the mirror of their plane): below this,
+with GNSS in use, the shared-bias rule (``uwb_range_bias_std_m``) weights the ranges."""
 FIX_AGREEMENT_CHI2_3DOF = float(chi2.ppf(0.9973, 3))
 """Two snapshot fixes agree (``divergence_fix_confirm_s``) when their position difference is within this
 chi-square (3 dof, the probability of 3 standard deviations) of their combined covariance."""
+FIX_CONFIRM_MAX_GAP_S = 300.0
+"""Longest interval over which consecutive snapshot fixes are compared (``divergence_fix_confirm_s``) when the
+receiver reports more slowly than ten times that setting (RINEX observation files at 30 s), s."""
+FIX_CONFIRM_UNKNOWN_SPEED_MPS = 30.0
+"""Speed, per axis, allowed between two compared fixes when the earlier one has no velocity (fewer than four
+pseudorange rates): a road vehicle's, m/s."""
 
 
 class FusionFilter:
@@ -178,9 +188,11 @@ class FusionFilter:
         self._ckf = CubatureKalmanFilter(np.zeros(STATE_DIM), np.eye(STATE_DIM))
         self._reset_systems(GPS)
         self._bad_gnss_epochs = 0
-        self._held_fix: tuple[int, np.ndarray, np.ndarray] | None = None
+        self._held_fix: tuple[int, np.ndarray, np.ndarray, np.ndarray | None] | None = None
+        self._fix_attempt_ns: int | None = None
         self._uwb_gated = GatedWindow(self.params.divergence_uwb_ranges)
         self._anchor_gated_run: dict[str, int] = {}
+        self._shared_bias_stamps: dict[str, collections.deque[int]] = {}
         self._reset_mirror()
 
     def _reset_mirror(self, key: object = None) -> None:
@@ -224,6 +236,12 @@ class FusionFilter:
     def initialized(self) -> bool:
         """True once the filter has a state."""
         return self._initialized
+
+    @property
+    def awaiting_fix_confirmation(self) -> bool:
+        """True while the filter has no state and holds a snapshot fix for a later one to confirm
+        (``divergence_fix_confirm_s``)."""
+        return not self._initialized and self._held_fix is not None
 
     @property
     def time_ns(self) -> int:
@@ -558,8 +576,10 @@ class FusionFilter:
                 self._count("gnss_fix_inconsistent_with_uwb")
                 return self._output(False, sat_rej=n_obs)
             if self.params.divergence_fix_confirm_s > 0 and not self._fix_confirmed(stamp, fix):
-                self._count("gnss_init_unconfirmed")       # divergence_fix_confirm_s: a second fix must agree
-                return self._output(False, sat_rej=n_obs)
+                # divergence_fix_confirm_s: a second fix must agree. The epoch's pseudoranges are held in that
+                # fix, not rejected (the status shows neither used nor rejected satellites).
+                self._count("gnss_init_unconfirmed")
+                return self._output(False)
             pos, clk, vel, drift, cov = fix
             self.initialize(stamp, pos, velocity_mps=vel, clock_bias_m=clk, clock_drift_mps=drift,
                             position_clock_covariance_m2=cov)
@@ -867,6 +887,42 @@ class FusionFilter:
         heard = sum(1 for v in self._recent_uwb.values() if v[3] == self._frame and stamp_ns - v[0] <= window_ns)
         return p.max_update_iterations if heard >= k else 0
 
+    def _range_std_with_shared_bias(self, stamp_ns: int, anchor_id: str, std_m: float) -> float:
+        """The 1-sigma a range is applied with under the shared-bias rule (``uwb_range_bias_std_m``).
+
+        While GNSS is used and fewer than :data:`UWB_FIX_MIN_ANCHORS` anchors were heard within
+        ``uwb_init_window_s`` (the ranges alone do not fix the position), the ranges of one anchor
+        are taken to share an unknown bias of 1-sigma ``sigma_b`` over ``uwb_range_bias_time_s``:
+        the ``n``-th range of the anchor within that time gets the variance
+        ``std_m^2 + n sigma_b^2``. Along one line of sight ``n`` ranges so weighted carry about
+        ``ln(n sigma_b^2 / std_m^2) / sigma_b^2`` of information instead of ``n / std_m^2``: a
+        stream of ranges tells a few times ``sigma_b`` along a line of sight, not millimetres (a
+        variance inflation for errors correlated from range to range; the exact sequential weight
+        of a constant bias would grow like ``n^2`` and leave the ranges almost unused; cf.
+        Bar-Shalom, Li & Kirubarajan 2001 on correlated measurement noise). Without it a 20 Hz
+        stream of 3 cm ranges counts as millimetre knowledge along a line of sight that turns with the estimate, and
+        that information leaks across it: with one anchor at +30 dB the height went 6-10 m wrong
+        with a 0.4 m 1-sigma (docs/uwb_gnss_fusion/fusion_never_worse.md, fifth round). Beyond the
+        paper. Returns ``std_m`` unchanged when the rule does not act.
+        """
+        p = self.params
+        if p.uwb_range_bias_std_m <= 0.0 or not (p.use_gnss and self._frame == FRAME_EARTH):
+            return std_m
+        window_ns = int(p.uwb_init_window_s * 1e9)
+        heard = sum(1 for v in self._recent_uwb.values() if v[3] == self._frame and stamp_ns - v[0] <= window_ns)
+        if heard >= UWB_FIX_MIN_ANCHORS:
+            self._shared_bias_stamps.pop(anchor_id, None)
+            return std_m
+        stamps = self._shared_bias_stamps.setdefault(anchor_id, collections.deque())
+        stamps.append(stamp_ns)
+        oldest = stamp_ns - int(p.uwb_range_bias_time_s * 1e9)
+        while stamps and stamps[0] < oldest:
+            stamps.popleft()
+        n = len(stamps)
+        if n <= 1:
+            return std_m
+        return math.sqrt(std_m * std_m + n * p.uwb_range_bias_std_m**2)
+
     def process_uwb(self, meas: UwbRangeMeasurement) -> FusionOutput:
         """Predict to the range's stamp and apply it.
 
@@ -892,7 +948,9 @@ class FusionFilter:
         rng = float(meas.range_m)
         stated = float(meas.range_std_m) if math.isfinite(meas.range_std_m) else p.uwb_range_std_m
         noise = None
-        if p.uwb_range_noise_adaptive:
+        if p.uwb_range_noise_adaptive and (
+            p.uwb_range_noise_adaptive_without_gnss or (p.use_gnss and meas.frame_id == FRAME_EARTH)
+        ):
             noise = self._uwb_noise.get(meas.anchor_id)
             if noise is None:
                 noise = self._uwb_noise[meas.anchor_id] = RangeNoiseEstimate(
@@ -914,16 +972,17 @@ class FusionFilter:
                 return self._output(False)
             return self._output(False, uwb_used=1)
         self._predict_to(stamp)
+        std_apply = self._range_std_with_shared_bias(stamp, meas.anchor_id, std)
         try:
             ok, nis = apply_range(
-                self._ckf, self._nominal, anchor, self._lever, rng, std, self._gate, p, self._uwb_scratch,
+                self._ckf, self._nominal, anchor, self._lever, rng, std_apply, self._gate, p, self._uwb_scratch,
                 self._range_iterations(stamp),
             )
         except CholeskyError:
             self._count("numerical_failure")
             return self._declare_divergence(stamp)
         self._uwb_gated.push(ok)
-        if ok and noise is not None and self._uwb_scratch[3] == 1.0:
+        if ok and noise is not None and self._uwb_scratch[3] == 1.0 and std_apply == std:
             noise.add(float(self._uwb_scratch[0]), float(self._uwb_scratch[1]), std, stated)
         if ok:
             if self._anchor_gated_run:
@@ -1053,12 +1112,21 @@ class FusionFilter:
         return self._output(True)
 
     def _fix_confirmed(self, stamp_ns: int, fix: tuple) -> bool:
-        """``divergence_fix_confirm_s``: whether the held fix, ``divergence_fix_confirm_s`` to ten times that before
-        ``stamp_ns``, agrees with ``fix`` within 3 combined standard deviations (chi-square, 3 dof, of the position
-        difference). A newer fix replaces the held one when it is compared and disagrees, or when the held one is
-        too old; a fix too soon after the held one is not compared (the held one stays)."""
-        new = (int(stamp_ns), np.asarray(fix[0], float), np.asarray(fix[4], float))
+        """``divergence_fix_confirm_s``: whether the held fix agrees with ``fix`` within 3 combined standard
+        deviations (chi-square, 3 dof, of the position difference).
+
+        The held fix must be at least ``divergence_fix_confirm_s`` older than ``fix`` and at most ten times that,
+        or, when it is the fix attempt just before this one (a receiver that reports every 30 s), at most
+        :data:`FIX_CONFIRM_MAX_GAP_S`. It is moved by its velocity over the interval when it has one (four or
+        more pseudorange rates), and the comparison allows ``init_velocity_std_mps`` (with a velocity) or
+        :data:`FIX_CONFIRM_UNKNOWN_SPEED_MPS` (without) per axis times the interval for the motion in between.
+        A newer fix replaces the held one when it is compared and disagrees, or when the held one is too old; a
+        fix too soon after the held one is not compared (the held one stays)."""
+        new = (int(stamp_ns), np.asarray(fix[0], float), np.asarray(fix[4], float),
+               np.asarray(fix[2], float) if math.isfinite(fix[3]) else None)
         held = self._held_fix
+        previous_attempt = self._fix_attempt_ns
+        self._fix_attempt_ns = int(stamp_ns)
         lo = self.params.divergence_fix_confirm_s
         if held is None:
             self._held_fix = new
@@ -1066,11 +1134,16 @@ class FusionFilter:
         dt_s = (stamp_ns - held[0]) / _NS
         if dt_s < lo and dt_s >= 0:
             return False
-        if not lo <= dt_s <= 10.0 * lo:
+        hi = 10.0 * lo
+        if previous_attempt == held[0]:
+            hi = max(hi, FIX_CONFIRM_MAX_GAP_S)
+        if not lo <= dt_s <= hi:
             self._held_fix = new
             return False
-        d = new[1] - held[1]
-        c = held[2][0:3, 0:3] + new[2][0:3, 0:3]
+        predicted = held[1] if held[3] is None else held[1] + held[3] * dt_s
+        speed_std = self.params.init_velocity_std_mps if held[3] is not None else FIX_CONFIRM_UNKNOWN_SPEED_MPS
+        d = new[1] - predicted
+        c = held[2][0:3, 0:3] + new[2][0:3, 0:3] + np.eye(3) * (speed_std * dt_s) ** 2
         try:
             q = float(d @ np.linalg.solve(c, d))
         except np.linalg.LinAlgError:

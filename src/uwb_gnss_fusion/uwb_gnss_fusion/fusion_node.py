@@ -114,14 +114,15 @@ Outputs.
   (``input.<topic>.received`` / ``lost`` / ``middleware_lost`` / ``callback_errors``), the current
   ``reorder_window_s`` and ``accounting_ok``: for GNSS, UWB and jammer messages, received ==
   rejected by the node + processed + still buffered (lost messages never arrived: counted apart).
-  ``hardware_id`` is the parameter (the receiver and UWB tag). Levels (:meth:`FusionNode.diagnostics`)
-  from fractions over ``diagnostics_window_s`` of stamp time: ERROR when no valid solution is
-  published although input was processed, an estimate was suppressed, the accounting does not add
-  up or the core / a handler raised since the last report; WARN when the inputs are degraded (more
-  than ``warn_rejected_fraction`` rejected, ``warn_lost_fraction`` lost, a divergence, a J/S costing
-  more than ``warn_cn0_loss_db`` of C/N0); else OK. When no input has arrived for ``input_timeout_s``
-  of wall time, a STALE status ("no input for N s", with the counters) is published instead, stamped
-  with the node clock's now: the only use of the wall clock besides ``idle_flush_s``.
+  ``hardware_id`` is the parameter (the receiver and UWB tag). Levels (:meth:`FusionNode.diagnostics`) from
+  fractions over ``diagnostics_window_s`` of stamp time: ERROR when no valid solution is published although
+  input was processed (except OK "starting" while the first GNSS fix waits, up to ten times
+  ``divergence_fix_confirm_s``, for a second to confirm it), an estimate was suppressed, the accounting does
+  not add up or the core / a handler raised since the last report; WARN when the inputs are degraded (more
+  than ``warn_rejected_fraction`` rejected, ``warn_lost_fraction`` lost, a divergence, a J/S costing more than
+  ``warn_cn0_loss_db`` of C/N0); else OK. When no input has arrived for ``input_timeout_s`` of wall time, a
+  STALE status ("no input for N s", with the counters) is published instead, stamped with the node clock's
+  now: the only use of the wall clock besides ``idle_flush_s``.
 * /fusion/local_odometry (nav_msgs/Odometry): every published solution again, in the local ENU
   frame ``map_frame_id`` at ``base_frame_id`` (robot_localization's EKF input; origin, lever arm
   and the attitude assumption: :mod:`uwb_gnss_fusion.local_frame`, :meth:`FusionNode._publish_local`).
@@ -233,6 +234,7 @@ class FusionNode(Node):
         self._datum_published = False
         self._count_window = CountWindow(self.params.diagnostics_window_s)
         self._ever_initialized = False
+        self._first_output_ns: int | None = None   # stamp of the first status published
         self._last_js_db = math.nan
         self.spp = SinglePointPositioner()
         self.spp_cache = SppReferenceCache(self.spp, self.params.reference_max_age_s, self._count_spp)
@@ -615,7 +617,18 @@ class FusionNode(Node):
         if out.initialized:
             self._ever_initialized = True
 
+    def _confirming_first_fix(self, stamp_ns: int) -> bool:
+        """The start-up wait of ``divergence_fix_confirm_s``: never initialised, a fix held for confirmation, and
+        at most ten times that setting since the first status (later, no solution is an ERROR again: fixes that
+        keep disagreeing under jamming)."""
+        confirm_s = self.filter.params.divergence_fix_confirm_s
+        return (not self._ever_initialized and confirm_s > 0 and self.filter.awaiting_fix_confirmation
+                and self._first_output_ns is not None
+                and stamp_ns - self._first_output_ns <= 10.0 * confirm_s * 1e9)
+
     def _publish(self, out: FusionOutput, stamp_ns: int) -> None:
+        if self._first_output_ns is None:
+            self._first_output_ns = stamp_ns
         frame = self._fix_frames.get(out.frame_id, out.frame_id)
         reasons, lists = self._status_reason_lists()
         self.status_pub.publish(status_msg(out, stamp_ns, frame, reasons, lists))
@@ -746,6 +759,8 @@ class FusionNode(Node):
             level, text = ERROR, f'{new["faults"]} core or publishing exceptions since the last report'
         elif new['handler_errors']:
             level, text = ERROR, f'{new["handler_errors"]} input handler exceptions since the last report'
+        elif not self.filter.initialized and processed and self._confirming_first_fix(stamp_ns):
+            level, text = OK, 'starting: waiting for a second GNSS fix to confirm the first (divergence_fix_confirm_s)'
         elif not self.filter.initialized and processed:
             level, text = ERROR, ('no valid solution: filter not initialised' if not self._ever_initialized
                                   else 'no valid solution: filter reset, not re-initialised yet')

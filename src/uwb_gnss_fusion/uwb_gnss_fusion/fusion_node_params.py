@@ -191,11 +191,22 @@ class FusionNodeParams:
     uwb_range_noise_adaptive: bool = parameter(
         _FP.uwb_range_noise_adaptive, "Estimate each anchor's range noise from its innovations, a factor on the "
         'stated variance (range_std_m of the message or uwb_range_std_m); beyond the paper, counted as '
-        'uwb_noise_estimates.')
+        'uwb_noise_estimates. Acts while GNSS is used (the weight of ranges against pseudoranges).')
+    uwb_range_noise_adaptive_without_gnss: bool = parameter(
+        _FP.uwb_range_noise_adaptive_without_gnss, 'Also estimate the range noise without GNSS (use_gnss false or the '
+        'map frame); off by default: with a moving tag the innovations also carry the motion model errors.')
     uwb_iterate_min_anchors: int = parameter(
         _FP.uwb_iterate_min_anchors, 'With GNSS, refine a range by the iterated update only while at least this many '
         'anchors were heard within uwb_init_window_s (0: always). With 1-2 anchors the iterated point leaks '
         'information across the lines of sight; beyond the paper.', minimum=0, maximum=64)
+    uwb_range_bias_std_m: float = parameter(
+        _FP.uwb_range_bias_std_m, 'With GNSS and fewer than three anchors heard, the ranges of one anchor share a bias '
+        'of this 1-sigma over uwb_range_bias_time_s: the n-th range in that time is applied with variance '
+        'std^2 + n * this^2, so a stream of ranges does not leak information across its turning line of sight, m '
+        '(0: off). Beyond the paper.', minimum=0.0, maximum=10.0)
+    uwb_range_bias_time_s: float = parameter(
+        _FP.uwb_range_bias_time_s, 'Time over which the ranges of one anchor share that bias, s.',
+        minimum=0.1, maximum=3600.0)
     uwb_range_noise_window: int = parameter(
         _FP.uwb_range_noise_window, 'Fading memory of that estimate, ranges per anchor.', minimum=10, maximum=100000)
     uwb_range_std_floor_m: float = parameter(
