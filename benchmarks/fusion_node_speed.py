@@ -217,10 +217,19 @@ def output_arrays(info: dict) -> dict[str, np.ndarray]:
 
 
 def compare_outputs(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> dict[str, float]:
-    """Largest differences between two replays' outputs (positions in m, fix in m via M_PER_DEG)."""
-    for key in a:
-        if a[key].shape != b[key].shape:
-            raise RuntimeError(f'{key}: {a[key].shape} vs {b[key].shape} messages')
+    """Largest differences between two replays' outputs (positions in m, fix in m via M_PER_DEG).
+
+    One status per input in both; when one code starts later (publishes fewer odometry / fix messages, e.g.
+    ``divergence_fix_confirm_s``), the solutions are compared over the inputs where both have one (the last
+    ones: every input after the start has one) and the difference in count is reported."""
+    if a['status'].shape != b['status'].shape:
+        raise RuntimeError(f"status: {a['status'].shape} vs {b['status'].shape} messages")
+    only_one = 0.0
+    for key in ('odometry', 'odometry_cov', 'fix', 'fix_cov'):
+        n = min(len(a[key]), len(b[key]))
+        only_one = max(only_one, float(abs(len(a[key]) - len(b[key]))))
+        a = {**a, key: a[key][len(a[key]) - n:]}
+        b = {**b, key: b[key][len(b[key]) - n:]}
     st_a, st_b = a['status'], b['status']
     nis_a, nis_b = st_a[:, 8], st_b[:, 8]
     both = np.isfinite(nis_a) & np.isfinite(nis_b)
@@ -237,6 +246,7 @@ def compare_outputs(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> dict[
         'nis_rel': float(np.max(np.abs(nis_a[both] - nis_b[both]) / np.maximum(np.abs(nis_b[both]), 1e-12),
                                 initial=0.0)),
         'nis_nan_pattern_differs': float(np.count_nonzero(np.isfinite(nis_a) != np.isfinite(nis_b))),
+        'solutions_published_by_one_code_only': only_one,
     }
 
 
@@ -393,6 +403,8 @@ def main() -> None:
             f'{int(d["status_integer_fields_differing"])} |',
             f'| max relative NIS difference (NaN pattern differs in) | {d["nis_rel"]:.3g} '
             f'({int(d["nis_nan_pattern_differs"])}) |',
+            f'| solutions (odometry / fix) published by one code only (a later start) | '
+            f'{int(d["solutions_published_by_one_code_only"])} |',
         ]
     best = max(r['speed'] for _, r in results)
     speeds = ', '.join(f"{r['speed']:.0f}x on {label.split(' (')[0]}" for label, r in results)

@@ -202,7 +202,7 @@ def test_ranges_of_one_anchor_share_a_bias_while_fewer_than_three_anchors_are_he
             for i in range(n_anchors):
                 a = tag + _ANCHORS[i]
                 f._recent_uwb[f"A{i + 1}"] = (stamp, a, 12.0, frame)
-            out.append(f._range_std_with_shared_bias(stamp, "A1", std))
+            out.append(f._range_std_with_shared_bias(stamp, "A1", std, f._anchors_heard(stamp)))
         return out
 
     one = applied(1)

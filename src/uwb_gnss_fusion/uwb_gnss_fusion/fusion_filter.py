@@ -876,18 +876,29 @@ class FusionFilter:
         return init.snapshot_fix(prep.subset(system == best), self.params.min_satellites_init), best
 
     # ------------------------------------------------------------------ UWB
-    def _range_iterations(self, stamp_ns: int) -> int:
+    def _range_iterations(self, heard: int) -> int:
         """Refinement steps allowed for a range (``uwb_iterate_min_anchors``): none while GNSS is used and fewer
-        anchors than that were heard within ``uwb_init_window_s``, else ``max_update_iterations``."""
+        anchors than that were heard within ``uwb_init_window_s`` (``heard``, -1: not counted), else
+        ``max_update_iterations``."""
         p = self.params
         k = p.uwb_iterate_min_anchors
-        if k <= 0 or not (p.use_gnss and self._frame == FRAME_EARTH):
+        if k <= 0 or heard < 0:
             return p.max_update_iterations
-        window_ns = int(p.uwb_init_window_s * 1e9)
-        heard = sum(1 for v in self._recent_uwb.values() if v[3] == self._frame and stamp_ns - v[0] <= window_ns)
         return p.max_update_iterations if heard >= k else 0
 
-    def _range_std_with_shared_bias(self, stamp_ns: int, anchor_id: str, std_m: float) -> float:
+    def _anchors_heard(self, stamp_ns: int) -> int:
+        """Anchors of the filter's frame with a range within ``uwb_init_window_s`` before ``stamp_ns``, when GNSS
+        is used in the earth frame and a rule needs the count (``uwb_iterate_min_anchors``,
+        ``uwb_range_bias_std_m``); else -1."""
+        p = self.params
+        if not (p.use_gnss and self._frame == FRAME_EARTH) or (p.uwb_iterate_min_anchors <= 0
+                                                              and p.uwb_range_bias_std_m <= 0.0):
+            return -1
+        window_ns = int(p.uwb_init_window_s * 1e9)
+        frame = self._frame
+        return sum(1 for v in self._recent_uwb.values() if v[3] == frame and stamp_ns - v[0] <= window_ns)
+
+    def _range_std_with_shared_bias(self, stamp_ns: int, anchor_id: str, std_m: float, heard: int) -> float:
         """The 1-sigma a range is applied with under the shared-bias rule (``uwb_range_bias_std_m``).
 
         While GNSS is used and fewer than :data:`UWB_FIX_MIN_ANCHORS` anchors were heard within
@@ -903,15 +914,15 @@ class FusionFilter:
         stream of 3 cm ranges counts as millimetre knowledge along a line of sight that turns with the estimate, and
         that information leaks across it: with one anchor at +30 dB the height went 6-10 m wrong
         with a 0.4 m 1-sigma (docs/uwb_gnss_fusion/fusion_never_worse.md, fifth round). Beyond the
-        paper. Returns ``std_m`` unchanged when the rule does not act.
+        paper. ``heard``: :meth:`_anchors_heard` (-1: GNSS not in use). Returns ``std_m`` unchanged when the
+        rule does not act.
         """
         p = self.params
-        if p.uwb_range_bias_std_m <= 0.0 or not (p.use_gnss and self._frame == FRAME_EARTH):
+        if p.uwb_range_bias_std_m <= 0.0 or heard < 0:
             return std_m
-        window_ns = int(p.uwb_init_window_s * 1e9)
-        heard = sum(1 for v in self._recent_uwb.values() if v[3] == self._frame and stamp_ns - v[0] <= window_ns)
         if heard >= UWB_FIX_MIN_ANCHORS:
-            self._shared_bias_stamps.pop(anchor_id, None)
+            if self._shared_bias_stamps:
+                self._shared_bias_stamps.pop(anchor_id, None)
             return std_m
         stamps = self._shared_bias_stamps.setdefault(anchor_id, collections.deque())
         stamps.append(stamp_ns)
@@ -972,11 +983,12 @@ class FusionFilter:
                 return self._output(False)
             return self._output(False, uwb_used=1)
         self._predict_to(stamp)
-        std_apply = self._range_std_with_shared_bias(stamp, meas.anchor_id, std)
+        heard = self._anchors_heard(stamp)
+        std_apply = self._range_std_with_shared_bias(stamp, meas.anchor_id, std, heard)
         try:
             ok, nis = apply_range(
                 self._ckf, self._nominal, anchor, self._lever, rng, std_apply, self._gate, p, self._uwb_scratch,
-                self._range_iterations(stamp),
+                self._range_iterations(heard),
             )
         except CholeskyError:
             self._count("numerical_failure")
