@@ -275,6 +275,12 @@ SUBHARMONIC_TOLERANCE = 0.02
 of the period the evidence over blocks found is that multiple (a sub-harmonic lock), not a second jammer."""
 
 
+def _agrees(period: float, base: float) -> bool:
+    """Whether period is within SUBHARMONIC_TOLERANCE (relative) of base (False when either is not finite)."""
+    ok = math.isfinite(period) and math.isfinite(base) and base > 0
+    return ok and abs(period - base) <= SUBHARMONIC_TOLERANCE * base
+
+
 def _multiple(period: float, base: float) -> int:
     """m if period is an integer multiple m >= 2 of base within SUBHARMONIC_TOLERANCE (relative), else 0."""
     if not (math.isfinite(period) and math.isfinite(base) and base > 0):
@@ -317,7 +323,8 @@ class RfiMonitor:
                                 "calibrations_discarded": 0, "clipped_blocks": 0, "frequency_not_tracked": 0,
                                 "tracker_resets_invalid": 0, "integrated_reports": 0,
                                 "integration_window_blocks": 0, "integration_blocks_thinned": 0,
-                                "worker_blocks": 0, "worker_failures": 0, "block_periods_from_integration": 0}
+                                "worker_blocks": 0, "worker_failures": 0, "block_periods_from_integration": 0,
+                                "block_periods_unconfirmed": 0}
         self._integrator = Integrator(params.integration, params.classifier.detect_jn_db)
         self.last_integration: IntegratedDecision | None = None
         self._last_single = NONE
@@ -961,6 +968,15 @@ class RfiMonitor:
                     shape = rg.SAWTOOTH_DOWN if shape == rg.SAWTOOTH_UP else rg.SAWTOOTH_UP
                 if shape == rg.SHAPE_UNKNOWN:
                     inb = nan
+            elif rr.periodic and not jn >= cp.detect_jn_db and not _agrees(rr.period_samples,
+                                                                          self._integrated_period(stamp_ns)):
+                # a block below the detection J/N has a ridge in a few of its frames, and the autocorrelation of
+                # so few can peak at a multiple of the period (stft_shapes.md at J/N -5 dB: 4-100 % off): its
+                # period, and the sweep law fitted on it (frequency, rate, start) and the band read with it, are
+                # published only when the evidence over blocks found the same period; else NaN (counted). The
+                # type, J/N and the block's shape stay.
+                self._block_counters["block_periods_unconfirmed"] += 1
+                per = inb = freq = fstd = rate = f0 = bw = nan
         if jtype in (CW, CHIRP) and ref != REF_IN_BLOCK and math.isfinite(jn) and jn == jn_in and jn_in > jn_ref:
             # an AGC (or a gain change) hides the jammer from the block power; the noise measured in the block
             # beside the jammer shows it: J/N against REF_IN_BLOCK, and said so
