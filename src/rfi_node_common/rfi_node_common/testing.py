@@ -126,6 +126,11 @@ class NodeRig:
         self.spin_until(lambda: taken() and self.outputs_arrived(), what)
 
     def close(self) -> None:
+        """Stop the executor, destroy both nodes and shut the context down (idempotent: a test may close a rig
+        before building the next, so that the first node no longer receives the second one's inputs)."""
+        if getattr(self, "_closed", False):
+            return
+        self._closed = True
         self.executor.shutdown()
         self.node.destroy_node()
         self.io.destroy_node()
