@@ -13,6 +13,7 @@ from gnss_common.coordinates import (
     ecef_to_geodetic,
     ecef_to_geodetic_scalar,
     enu_to_ecef,
+    geodetic_and_enu_covariance_scalar,
     geodetic_to_ecef,
     rotate_covariance_ecef_to_enu,
     rotate_covariance_ecef_to_enu_scalar,
@@ -158,3 +159,20 @@ def test_scalar_covariance_rotation_equals_validated_one():
         fast = rotate_covariance_ecef_to_enu_scalar(cov, lat, lon)
         np.testing.assert_allclose(fast, rotate_covariance_ecef_to_enu(cov, lat, lon), rtol=0.0, atol=1e-14)
         np.testing.assert_allclose(np.trace(fast), np.trace(cov), rtol=1e-14)
+
+
+def test_geodetic_and_enu_covariance_in_one_call_equals_the_two_validated_functions():
+    rng = np.random.default_rng(12)
+    for _ in range(200):
+        lat, lon, h = rng.uniform(-1.5, 1.5), rng.uniform(-3.1, 3.1), rng.uniform(-100.0, 2.0e4)
+        xyz = geodetic_to_ecef(lat, lon, h)
+        a = rng.normal(size=(6, 6))
+        cov = a @ a.T
+        got_lat, got_lon, got_h, got_cov = geodetic_and_enu_covariance_scalar(xyz, cov)
+        ref = ecef_to_geodetic(xyz)
+        assert abs(got_lat - ref[0]) < 1e-14 and abs(got_lon - ref[1]) < 1e-14 and abs(got_h - ref[2]) < 1e-7
+        np.testing.assert_allclose(got_cov, rotate_covariance_ecef_to_enu(cov[:3, :3], ref[0], ref[1]),
+                                   rtol=0.0, atol=1e-12)
+    for bad in ([math.nan, 0.0, 7.0e6], [10.0, 20.0, 30.0]):
+        with pytest.raises(ValueError):
+            geodetic_and_enu_covariance_scalar(np.array(bad), np.eye(3))

@@ -105,3 +105,57 @@ def test_velocity_heading_rotates_lever_arm_and_velocity_into_base_link():
 def test_unknown_heading_source_is_refused():
     with pytest.raises(ValueError, match='heading_source'):
         base_link_solution(0, np.zeros(3), np.zeros(3), np.eye(6), np.zeros(3), 'compass', 0.5)
+
+
+def _reference_base_link(p, v, cov, lever, heading_source, min_speed):
+    """The base_link solution written with numpy matrices (the compiled kernel's oracle)."""
+    speed = math.hypot(v[0], v[1])
+    cov_p, cov_v = cov[:3, :3], cov[3:, 3:]
+    if heading_source == 'velocity' and speed >= min_speed and speed > 0.0:
+        yaw = math.atan2(v[1], v[0])
+        c, s = math.cos(yaw), math.sin(yaw)
+        rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        g = np.array([-s * lever[0] - c * lever[1], c * lever[0] - s * lever[1], 0.0])
+        h = np.array([-v[1], v[0], 0.0]) / (speed * speed)
+        jac = np.hstack([np.eye(3), -np.outer(g, h)])
+        return (p - rot @ lever, jac @ cov @ jac.T, rot.T @ v, rot.T @ cov_v @ rot, yaw, float(h @ cov_v @ h))
+    r2 = lever[0] ** 2 + lever[1] ** 2
+    pos_cov = cov_p + np.diag([r2 / 2.0, r2 / 2.0, 0.0])
+    horizontal = (v[0] ** 2 + v[1] ** 2 + cov_v[0, 0] + cov_v[1, 1]) / 2.0
+    return (p - np.array([0.0, 0.0, lever[2]]), pos_cov, np.array([0.0, 0.0, v[2]]),
+            np.diag([horizontal, horizontal, cov_v[2, 2]]), math.nan, math.nan)
+
+
+@pytest.mark.parametrize('heading_source', ['none', 'velocity'])
+def test_compiled_base_link_equals_the_matrix_formulas(heading_source):
+    for _ in range(50):
+        p, v = RNG.normal(size=3) * 100.0, RNG.normal(size=3) * 3.0
+        cov, lever = random_covariance(6, 0.5), RNG.normal(size=3)
+        sol = base_link_solution(3, p, v, cov, lever, heading_source, 0.5)
+        ref = _reference_base_link(p, v, cov, lever, heading_source, 0.5)
+        got = (sol.position_m, sol.position_covariance_m2, sol.velocity_body_mps, sol.velocity_covariance_m2ps2)
+        for a, b in zip(got, ref[:4], strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose([sol.yaw_rad, sol.yaw_variance_rad2], ref[4:], rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize('heading_source', ['none', 'velocity'])
+def test_frame_base_link_from_ecef_is_from_ecef_then_base_link(heading_source):
+    """The node's one-call path (ECEF estimate, or one already in the local frame) equals the two steps."""
+    frame = LocalFrame()
+    frame.set_origin_ecef(ARL1_ECEF_M)
+    lever = np.array([0.4, -0.2, 1.1])
+    for _ in range(20):
+        p, v, cov = ARL1_ECEF_M + RNG.normal(size=3) * 50.0, RNG.normal(size=3) * 2.0, random_covariance(6, 0.4)
+        one = frame.base_link_solution(9, p, v, cov, True, tuple(lever), heading_source, 0.5)
+        two = base_link_solution(9, *frame.from_ecef(p, v, cov), lever, heading_source, 0.5)
+        for a, b in zip(one, two, strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+        local = frame.base_link_solution(9, p - ARL1_ECEF_M, v, cov, False, lever, heading_source, 0.5)
+        same = base_link_solution(9, p - ARL1_ECEF_M, v, cov, lever, heading_source, 0.5)
+        for a, b in zip(local, same, strict=True):
+            np.testing.assert_array_equal(a, b)
+    with pytest.raises(RuntimeError):
+        LocalFrame().base_link_solution(0, ARL1_ECEF_M, np.zeros(3), np.eye(6), True, lever, 'none', 0.5)
+    with pytest.raises(ValueError, match='heading_source'):
+        frame.base_link_solution(0, ARL1_ECEF_M, np.zeros(3), np.eye(6), True, lever, 'compass', 0.5)

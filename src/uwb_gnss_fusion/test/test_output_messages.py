@@ -114,3 +114,14 @@ def test_fast_path_selected_here_and_refused_with_field_checks(monkeypatch):
 
     monkeypatch.setattr(module, 'ros_python_check_fields', '1')  # as if ROS_PYTHON_CHECK_FIELDS=1 at import
     assert not builders_agree.__wrapped__(om.Odometry)
+
+
+def test_output_finiteness_test_finds_any_nan_or_inf():
+    from uwb_gnss_fusion.fusion_output import all_finite
+    base = np.arange(36.0).reshape(6, 6)
+    assert all_finite(base) and all_finite(base[:3, :3]) and all_finite(np.zeros(0))
+    for bad in (math.nan, math.inf, -math.inf):
+        for k in (0, 17, 35):
+            a = base.copy()
+            a.reshape(36)[k] = bad
+            assert not all_finite(a) and not all_finite(a.T)

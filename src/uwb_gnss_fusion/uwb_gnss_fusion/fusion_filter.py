@@ -894,9 +894,13 @@ class FusionFilter:
         if not (p.use_gnss and self._frame == FRAME_EARTH) or (p.uwb_iterate_min_anchors <= 0
                                                               and p.uwb_range_bias_std_m <= 0.0):
             return -1
-        window_ns = int(p.uwb_init_window_s * 1e9)
+        oldest = stamp_ns - int(p.uwb_init_window_s * 1e9)
         frame = self._frame
-        return sum(1 for v in self._recent_uwb.values() if v[3] == frame and stamp_ns - v[0] <= window_ns)
+        n = 0
+        for t, _, _, f in self._recent_uwb.values():
+            if t >= oldest and f == frame:
+                n += 1
+        return n
 
     def _range_std_with_shared_bias(self, stamp_ns: int, anchor_id: str, std_m: float, heard: int) -> float:
         """The 1-sigma a range is applied with under the shared-bias rule (``uwb_range_bias_std_m``).

@@ -144,7 +144,6 @@ from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
@@ -172,7 +171,7 @@ from rfi_node_common.main import run_node
 from rfi_node_common.params import RuntimeParameters, changed_names, declare
 from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS, LATCHED_QOS
 from rfi_node_common.stamps import stamp_to_ns
-from uwb_gnss_fusion import ckf_kernels
+from uwb_gnss_fusion import ckf_kernels, fusion_output, local_frame
 from uwb_gnss_fusion.conversions import decode_uwb_range_cdr, msg_to_observation, msg_to_uwb
 from uwb_gnss_fusion.fusion_filter import (
     FRAME_EARTH,
@@ -182,8 +181,9 @@ from uwb_gnss_fusion.fusion_filter import (
     ReorderBuffer,
 )
 from uwb_gnss_fusion.fusion_node_params import FusionNodeParams
+from uwb_gnss_fusion.fusion_output import all_finite
 from uwb_gnss_fusion.input_admission import DuplicateFilter, admit_jammer_state
-from uwb_gnss_fusion.local_frame import LocalFrame, base_link_solution
+from uwb_gnss_fusion.local_frame import LocalFrame
 from uwb_gnss_fusion.message_checks import satellite_reason, uwb_range_reason
 from uwb_gnss_fusion.output_messages import (  # noqa: F401 (re-exported: the node's output contract)
     ORIENTATION_UNKNOWN_VARIANCE_RAD2,
@@ -265,7 +265,10 @@ class FusionNode(Node):
         self.datum_pub = self.create_publisher(NavSatFix, 'fusion/datum', LATCHED_QOS)
         self.status_pub = self.create_publisher(FusionStatus, 'fusion/status', DATA_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
-        ckf_kernels.warm_up()  # compile before subscribing: the node appears when it can keep up
+        # compile before subscribing: the node appears when it can keep up
+        ckf_kernels.warm_up()
+        fusion_output.warm_up()
+        local_frame.warm_up()
         # created after the compilation, so that its silence clock starts when the node can listen
         self.health = InputHealth()
         throttle = self.params.warning_throttle_s
@@ -634,16 +637,14 @@ class FusionNode(Node):
         self.status_pub.publish(status_msg(out, stamp_ns, frame, reasons, lists))
         if not out.initialized:
             return
-        # Finite state: six scalar tests and one array test (the covariance).
-        if not (all(map(math.isfinite, out.position_m.tolist() + out.velocity_mps.tolist()))
-                and np.isfinite(out.covariance_pv).all()):
+        if not out.is_finite():
             self.counts['nonfinite_estimates_suppressed'] += 1
             return
         self.odom_pub.publish(odometry_msg(out, frame, self.params.child_frame_id))
         if out.frame_id == FRAME_EARTH:
             fix = fix_msg(out, self.params.child_frame_id)
             if (math.isfinite(fix.latitude) and math.isfinite(fix.longitude) and math.isfinite(fix.altitude)
-                    and np.isfinite(fix.position_covariance).all()):
+                    and all_finite(fix.position_covariance)):
                 self.fix_pub.publish(fix)
             else:
                 self.counts['nonfinite_estimates_suppressed'] += 1
@@ -655,21 +656,20 @@ class FusionNode(Node):
 
         ECEF solutions are expressed in the local ENU frame, whose origin is the datum parameter or
         the first of them (``local_origin``); a map-frame solution (UWB-only) is in the local frame
-        already. Then the antenna estimate is moved to base_link (:func:`base_link_solution`).
+        already. Then the antenna estimate is moved to base_link (:meth:`LocalFrame.base_link_solution`: both in one
+        compiled call).
         """
         p = self.params
-        if out.frame_id == FRAME_EARTH:
-            if not self.local_frame.defined:
-                self.local_frame.set_origin_ecef(out.position_m)
-            pos, vel, cov = self.local_frame.from_ecef(out.position_m, out.velocity_mps, out.covariance_pv)
-            if not self._datum_published:
-                assert self.local_frame.origin_geodetic is not None
-                self.datum_pub.publish(datum_msg(out.stamp_ns, p.map_frame_id, self.local_frame.origin_geodetic))
-                self._datum_published = True
-        else:
-            pos, vel, cov = out.position_m, out.velocity_mps, out.covariance_pv
-        sol = base_link_solution(out.stamp_ns, pos, vel, cov, np.asarray(p.antenna_position_m, dtype=float),
-                                 p.heading_source, p.heading_min_speed_mps)
+        earth = out.frame_id == FRAME_EARTH
+        if earth and not self.local_frame.defined:
+            self.local_frame.set_origin_ecef(out.position_m)
+        if earth and not self._datum_published:
+            assert self.local_frame.origin_geodetic is not None
+            self.datum_pub.publish(datum_msg(out.stamp_ns, p.map_frame_id, self.local_frame.origin_geodetic))
+            self._datum_published = True
+        sol = self.local_frame.base_link_solution(out.stamp_ns, out.position_m, out.velocity_mps, out.covariance_pv,
+                                                  earth, p.antenna_position_m, p.heading_source,
+                                                  p.heading_min_speed_mps)
         self.local_odom_pub.publish(local_odometry_msg(sol, p.map_frame_id, p.base_frame_id))
 
     # ------------------------------------------------------------------ diagnostics

@@ -33,9 +33,10 @@ part needs the yaw, which is known only under an assumption the integrator choos
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 
 from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic_scalar, geodetic_to_ecef
 
@@ -43,9 +44,9 @@ HEADING_SOURCES = ('none', 'velocity')
 """Values of ``heading_source`` (module docstring)."""
 
 
-@dataclass(frozen=True)
-class LocalSolution:
-    """The solution at base_link in the local ENU frame.
+class LocalSolution(NamedTuple):
+    """The solution at base_link in the local ENU frame (immutable; a NamedTuple: built for every published
+    solution, at a third of a frozen dataclass's cost).
 
     Attributes:
         stamp_ns: stamp of the estimate, ns.
@@ -104,25 +105,53 @@ class LocalFrame:
         """An ECEF estimate in the local frame: (position, m; velocity, m/s; 6x6 covariance of [p, v]).
 
         ``R @ (p - origin)``, as :func:`gnss_common.coordinates.ecef_to_enu` (R from
-        :func:`gnss_common.coordinates.ecef_to_enu_rotation` at the origin, computed once).
+        :func:`gnss_common.coordinates.ecef_to_enu_rotation` at the origin, computed once); the covariance
+        ``diag(R, R) P diag(R, R)^T`` (compiled: :func:`_to_local_kernel`).
 
         Raises:
             RuntimeError: the origin is not defined yet.
         """
         if self.origin_ecef_m is None:
             raise RuntimeError('the local frame has no origin yet')
-        r = self._rotation
-        rr = np.zeros((6, 6))
-        rr[:3, :3] = r
-        rr[3:, 3:] = r
-        return r @ (np.asarray(position_m) - self.origin_ecef_m), r @ np.asarray(velocity_mps), \
-            rr @ covariance_pv @ rr.T
+        return _to_local_kernel(_f64(position_m, 3), _f64(velocity_mps, 3), _f64(covariance_pv, 6, 6),
+                                self.origin_ecef_m, self._rotation)
+
+    def base_link_solution(self, stamp_ns: int, position_m: np.ndarray, velocity_mps: np.ndarray,
+                           covariance_pv: np.ndarray, frame_is_earth: bool, antenna_position_m: np.ndarray,
+                           heading_source: str, min_speed_mps: float) -> LocalSolution:
+        """:func:`base_link_solution` of an estimate in ECEF (``frame_is_earth``: first expressed in this frame,
+        as :meth:`from_ecef`) or already in the local frame (the filter's map frame), in one compiled call
+        (``fusion_node`` makes one per published solution).
+
+        Raises:
+            RuntimeError: an ECEF estimate and the origin is not defined yet.
+            ValueError: ``heading_source`` is not one of :data:`HEADING_SOURCES`.
+        """
+        use_velocity = _heading_uses_velocity(heading_source)
+        if frame_is_earth:
+            if self.origin_ecef_m is None:
+                raise RuntimeError('the local frame has no origin yet')
+            origin, rotation = self.origin_ecef_m, self._rotation
+        else:
+            origin, rotation = _ZERO3, _EYE3
+        return LocalSolution(stamp_ns, *_local_base_link_kernel(
+            _f64(position_m, 3), _f64(velocity_mps, 3), _f64(covariance_pv, 6, 6), origin, rotation,
+            _f64(antenna_position_m, 3), use_velocity, float(min_speed_mps)))
 
 
-def _yaw_rotation(yaw_rad: float) -> np.ndarray:
-    """base_link axes -> ENU for a level robot with this yaw."""
-    c, s = math.cos(yaw_rad), math.sin(yaw_rad)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+_ZERO3 = np.zeros(3)
+_EYE3 = np.eye(3)
+
+
+def _f64(a: np.ndarray, *shape: int) -> np.ndarray:
+    """``a`` as a C-contiguous float64 array of ``shape`` (no copy when it is one already)."""
+    return np.ascontiguousarray(a, dtype=np.float64).reshape(shape)
+
+
+def _heading_uses_velocity(heading_source: str) -> bool:
+    if heading_source not in HEADING_SOURCES:
+        raise ValueError(f'heading_source {heading_source!r} is not one of {", ".join(HEADING_SOURCES)}')
+    return heading_source == 'velocity'
 
 
 def base_link_solution(stamp_ns: int, position_m: np.ndarray, velocity_mps: np.ndarray, covariance_pv: np.ndarray,
@@ -138,37 +167,139 @@ def base_link_solution(stamp_ns: int, position_m: np.ndarray, velocity_mps: np.n
         antenna_position_m: antenna position in base_link (forward, left, up), m, shape (3,).
         heading_source: one of :data:`HEADING_SOURCES`.
         min_speed_mps: with ``velocity``: the horizontal speed from which the course is the yaw, m/s.
+
+    Compiled (:func:`_base_link_kernel`); :meth:`LocalFrame.base_link_solution` does the same from ECEF.
     """
-    if heading_source not in HEADING_SOURCES:
-        raise ValueError(f'heading_source {heading_source!r} is not one of {", ".join(HEADING_SOURCES)}')
-    p = np.asarray(position_m, dtype=float)
-    v = np.asarray(velocity_mps, dtype=float)
-    cov = np.asarray(covariance_pv, dtype=float)
-    lever = np.asarray(antenna_position_m, dtype=float)
-    cov_p, cov_v = cov[:3, :3], cov[3:, 3:]
+    use_velocity = _heading_uses_velocity(heading_source)
+    return LocalSolution(stamp_ns, *_base_link_kernel(
+        _f64(position_m, 3), _f64(velocity_mps, 3), _f64(covariance_pv, 6, 6), _f64(antenna_position_m, 3),
+        use_velocity, float(min_speed_mps)))
+
+
+@njit(cache=True)
+def _to_local_kernel(p: np.ndarray, v: np.ndarray, cov: np.ndarray, origin: np.ndarray, r: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(R (p - origin), R v, diag(R, R) cov diag(R, R)^T) with explicit loops (3 x 3 blocks)."""
+    pos = np.zeros(3)
+    vel = np.zeros(3)
+    for i in range(3):
+        for k in range(3):
+            pos[i] += r[i, k] * (p[k] - origin[k])
+            vel[i] += r[i, k] * v[k]
+    tmp = np.zeros((6, 6))      # diag(R, R) cov
+    for bi in range(2):
+        for i in range(3):
+            for j in range(6):
+                acc = 0.0
+                for k in range(3):
+                    acc += r[i, k] * cov[3 * bi + k, j]
+                tmp[3 * bi + i, j] = acc
+    out = np.zeros((6, 6))      # (diag(R, R) cov) diag(R, R)^T
+    for i in range(6):
+        for bj in range(2):
+            for j in range(3):
+                acc = 0.0
+                for k in range(3):
+                    acc += tmp[i, 3 * bj + k] * r[j, k]
+                out[i, 3 * bj + j] = acc
+    return pos, vel, out
+
+
+@njit(cache=True)
+def _base_link_kernel(p: np.ndarray, v: np.ndarray, cov: np.ndarray, lever: np.ndarray, use_velocity: bool,
+                      min_speed_mps: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, float]:
+    """(position, its covariance, velocity in base_link axes, its covariance, yaw, yaw variance) of
+    :func:`base_link_solution` (module docstring), ENU inputs."""
     speed = math.hypot(v[0], v[1])
-    if heading_source == 'velocity' and speed >= min_speed_mps and speed > 0.0:
+    if use_velocity and speed >= min_speed_mps and speed > 0.0:
         yaw = math.atan2(v[1], v[0])
-        rot = _yaw_rotation(yaw)
-        # d(rot @ lever)/dyaw and dyaw/dv: base = p - rot(yaw(v)) lever, linearised in [p, v]
         c, s = math.cos(yaw), math.sin(yaw)
+        rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])     # base_link axes -> ENU
+        # base = p - rot(yaw(v)) lever, linearised in [p, v]: jac = [I, -g h^T] with g = d(rot lever)/dyaw,
+        # h = dyaw/dv
         g = np.array([-s * lever[0] - c * lever[1], c * lever[0] - s * lever[1], 0.0])
         h = np.array([-v[1], v[0], 0.0]) / (speed * speed)
-        jac = np.hstack([np.eye(3), -np.outer(g, h)])
-        return LocalSolution(
-            stamp_ns=stamp_ns, position_m=p - rot @ lever, position_covariance_m2=jac @ cov @ jac.T,
-            velocity_body_mps=rot.T @ v, velocity_covariance_m2ps2=rot.T @ cov_v @ rot,
-            yaw_rad=yaw, yaw_variance_rad2=float(h @ cov_v @ h))
+        jac = np.zeros((3, 6))
+        for i in range(3):
+            jac[i, i] = 1.0
+            for j in range(3):
+                jac[i, 3 + j] = -g[i] * h[j]
+        pos = np.zeros(3)
+        vel = np.zeros(3)
+        for i in range(3):
+            acc = 0.0
+            acc_v = 0.0
+            for k in range(3):
+                acc += rot[i, k] * lever[k]
+                acc_v += rot[k, i] * v[k]
+            pos[i] = p[i] - acc
+            vel[i] = acc_v
+        jc = np.zeros((3, 6))
+        for i in range(3):
+            for j in range(6):
+                acc = 0.0
+                for k in range(6):
+                    acc += jac[i, k] * cov[k, j]
+                jc[i, j] = acc
+        pos_cov = np.zeros((3, 3))
+        for i in range(3):
+            for j in range(3):
+                acc = 0.0
+                for k in range(6):
+                    acc += jc[i, k] * jac[j, k]
+                pos_cov[i, j] = acc
+        rc = np.zeros((3, 3))       # rot^T cov_v
+        for i in range(3):
+            for j in range(3):
+                acc = 0.0
+                for k in range(3):
+                    acc += rot[k, i] * cov[3 + k, 3 + j]
+                rc[i, j] = acc
+        vel_cov = np.zeros((3, 3))  # rot^T cov_v rot
+        for i in range(3):
+            for j in range(3):
+                acc = 0.0
+                for k in range(3):
+                    acc += rc[i, k] * rot[k, j]
+                vel_cov[i, j] = acc
+        yaw_var = 0.0
+        for i in range(3):
+            for j in range(3):
+                yaw_var += h[i] * cov[3 + i, 3 + j] * h[j]
+        return pos, pos_cov, vel, vel_cov, yaw, yaw_var
     # yaw unknown (uniform): horizontal lever arm and horizontal velocity direction unknown
-    radius2 = float(lever[0] ** 2 + lever[1] ** 2)
-    pos_cov = cov_p.copy()
+    radius2 = lever[0] ** 2 + lever[1] ** 2
+    pos_cov = cov[:3, :3].copy()
     pos_cov[0, 0] += radius2 / 2.0
     pos_cov[1, 1] += radius2 / 2.0
     vel_cov = np.zeros((3, 3))
-    horizontal = (v[0] ** 2 + v[1] ** 2 + cov_v[0, 0] + cov_v[1, 1]) / 2.0
-    vel_cov[0, 0] = vel_cov[1, 1] = horizontal
-    vel_cov[2, 2] = cov_v[2, 2]
-    return LocalSolution(
-        stamp_ns=stamp_ns, position_m=p - np.array([0.0, 0.0, lever[2]]), position_covariance_m2=pos_cov,
-        velocity_body_mps=np.array([0.0, 0.0, v[2]]), velocity_covariance_m2ps2=vel_cov,
-        yaw_rad=math.nan, yaw_variance_rad2=math.nan)
+    horizontal = (v[0] ** 2 + v[1] ** 2 + cov[3, 3] + cov[4, 4]) / 2.0
+    vel_cov[0, 0] = horizontal
+    vel_cov[1, 1] = horizontal
+    vel_cov[2, 2] = cov[5, 5]
+    pos = np.array([p[0], p[1], p[2] - lever[2]])
+    vel = np.array([0.0, 0.0, v[2]])
+    return pos, pos_cov, vel, vel_cov, math.nan, math.nan
+
+
+@njit(cache=True)
+def _local_base_link_kernel(p: np.ndarray, v: np.ndarray, cov: np.ndarray, origin: np.ndarray, r: np.ndarray,
+                            lever: np.ndarray, use_velocity: bool, min_speed_mps: float
+                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, float]:
+    """:func:`_to_local_kernel` then :func:`_base_link_kernel`, one call."""
+    pos, vel, cl = _to_local_kernel(p, v, cov, origin, r)
+    return _base_link_kernel(pos, vel, cl, lever, use_velocity, min_speed_mps)
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) this module's kernels and the geodetic one of the origin on a throwaway
+    solution, as :func:`.ckf_kernels.warm_up` does for the filter's (a node calls it before it subscribes)."""
+    frame = LocalFrame((45.0, 7.0, 100.0))
+    assert frame.origin_ecef_m is not None
+    frame.set_origin_ecef(frame.origin_ecef_m)
+    p, v, cov, lever = frame.origin_ecef_m + 1.0, np.ones(3), np.eye(6), np.ones(3)
+    frame.from_ecef(p, v, cov)
+    for heading in HEADING_SOURCES:
+        frame.base_link_solution(0, p, v, cov, True, lever, heading, 0.5)
+        frame.base_link_solution(0, v, v, cov, False, lever, heading, 0.5)
+        base_link_solution(0, v, v, cov, lever, heading, 0.5)

@@ -142,18 +142,38 @@ def _fix(b: Any, out: FusionOutput, frame_id: str) -> Any:
         position_covariance_type=_COVARIANCE_TYPE_KNOWN)
 
 
+def _local_covariance_index() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Flat indices into ``[position cov (9), velocity cov (9), yaw variance, 0.0, ORIENTATION_UNKNOWN_VARIANCE_RAD2]``
+    that give the row-major 6x6 pose covariance with the yaw known, with it unknown, and the twist covariance."""
+    pcov, vcov, yaw, zero, unknown = 0, 9, 18, 19, 20
+    pose = np.full((6, 6), zero, dtype=np.intp)
+    twist = np.full((6, 6), zero, dtype=np.intp)
+    for i in range(3):
+        for j in range(3):
+            pose[i, j] = pcov + 3 * i + j
+            twist[i, j] = vcov + 3 * i + j
+    for k in range(3, 6):
+        pose[k, k] = twist[k, k] = unknown
+    pose_unknown_yaw = pose.copy()
+    pose[5, 5] = yaw
+    return pose.ravel(), pose_unknown_yaw.ravel(), twist.ravel()
+
+
+_LOCAL_POSE_INDEX, _LOCAL_POSE_UNKNOWN_YAW_INDEX, _LOCAL_TWIST_INDEX = _local_covariance_index()
+
+
 def _local_covariances(sol: LocalSolution) -> tuple[np.ndarray, np.ndarray]:
     """Row-major 6x6 pose and twist covariances of the local odometry: the position / velocity blocks,
-    roll and pitch (and yaw when unknown) and the angular velocity :data:`ORIENTATION_UNKNOWN_VARIANCE_RAD2`."""
-    pose = np.zeros((6, 6))
-    twist = np.zeros((6, 6))
-    pose[:3, :3] = sol.position_covariance_m2
-    twist[:3, :3] = sol.velocity_covariance_m2ps2
-    for k in range(3, 6):
-        pose[k, k] = twist[k, k] = ORIENTATION_UNKNOWN_VARIANCE_RAD2
-    if math.isfinite(sol.yaw_variance_rad2):
-        pose[5, 5] = sol.yaw_variance_rad2
-    return pose.reshape(36), twist.reshape(36)
+    roll and pitch (and yaw when unknown) and the angular velocity :data:`ORIENTATION_UNKNOWN_VARIANCE_RAD2`
+    (one gather each, as :func:`_source_covariances`)."""
+    source = np.empty(21)
+    source[0:9] = sol.position_covariance_m2.reshape(9)
+    source[9:18] = sol.velocity_covariance_m2ps2.reshape(9)
+    source[18] = sol.yaw_variance_rad2
+    source[19] = 0.0
+    source[20] = ORIENTATION_UNKNOWN_VARIANCE_RAD2
+    pose = _LOCAL_POSE_INDEX if math.isfinite(sol.yaw_variance_rad2) else _LOCAL_POSE_UNKNOWN_YAW_INDEX
+    return source.take(pose), source.take(_LOCAL_TWIST_INDEX)
 
 
 def local_odometry_msg(sol: LocalSolution, frame_id: str, child_frame_id: str) -> Any:
