@@ -250,6 +250,12 @@ node behind its stream fall further behind, measured in docs/rfi_monitor/live_st
 gap are also charged to the integration's processing budget (``Integrator.skipped``): a node behind its stream
 answers blocks before it integrates more of them. The per-sample state of the "kalman" estimator is reset at any
 gap."""
+HOOK_RECHECK_S = 0.1
+"""While the "stft" estimator tracks a chirp, the sample-resolution hook test of a saw-tooth (``ridge.fine_profile``:
+0.3-1.4 ms per block, as much as the rest of a tracking block's analysis) runs on at most one block per this many
+seconds of stamps; the blocks in between keep its verdict for a saw-tooth of the same period (within
+``SUBHARMONIC_TOLERANCE``): a jammer's sweep shape does not change within a tenth of a second, and a hook is a
+property of the sweep, not of a block. Any block that starts a track, and any change of period, is tested again."""
 MIN_BLOCK_POWER = 1e-60
 """Smallest block power analysed, sample units^2 (1e-30 rms): below it the block is blank. The Welch PSD is
 computed in single precision, whose numbers lose precision below 1.2e-38 (subnormal) and end at 1.4e-45;
@@ -345,6 +351,7 @@ class RfiMonitor:
         self._chirp = False
         self._last_end_ns: int | None = None
         self._int_period: tuple[float, int] | None = None
+        self._hook_memory: tuple[float, bool, int] | None = None   # (period, hooked, stamp) of the last hook test
         self.reset()
 
     # ------------------------------------------------------------------------------------------
@@ -362,6 +369,7 @@ class RfiMonitor:
         self._rate: float | None = None
         self._if: float | None = None
         self._complex: bool | None = None
+        self._hook_memory = None
         if not keep_calibration:
             self._integrator.reset()
             self._int_period = None
@@ -807,6 +815,23 @@ class RfiMonitor:
         self._block_counters["worker_blocks"] += ahead.result is not None
         self._block_counters["worker_failures"] = self.worker.failures
 
+    def _hook_test_due(self, stamp_ns: int) -> bool:
+        """Whether this block's analysis runs the sample-resolution hook test (``HOOK_RECHECK_S``)."""
+        mem = self._hook_memory
+        return not (self._chirp and mem is not None and 0 <= stamp_ns - mem[2] < HOOK_RECHECK_S * 1e9)
+
+    def _remember_hook(self, rr: rg.RidgeResult, stamp_ns: int) -> rg.RidgeResult:
+        """Keep the verdict of a block whose analysis ran the hook test; give it to a saw-tooth of the same period
+        analysed without the test (``HOOK_RECHECK_S``)."""
+        if rr.hook_checked:
+            self._hook_memory = (rr.period_samples, rr.shape == rg.HOOKED_SAWTOOTH, int(stamp_ns))
+            return rr
+        mem = self._hook_memory
+        if (mem is not None and mem[1] and rr.shape in (rg.SAWTOOTH_UP, rg.SAWTOOTH_DOWN)
+                and _agrees(rr.period_samples, mem[0])):
+            return dataclasses.replace(rr, shape=rg.HOOKED_SAWTOOTH)
+        return rr
+
     def _identify_stft_block(self, xs: np.ndarray, cplx: bool, fs: float, fif: float, stamp_ns: int, first: int,
                              clipped: float, full_scale: float | None, coarse: bool,
                              ahead: _Ahead | None) -> JammerEstimate:
@@ -864,7 +889,8 @@ class RfiMonitor:
                     rr = ahead.result
             ahead = None
             if rr is None:
-                rr = rg.analyse(part, cplx, fs, p.ridge, self._frame_length)
+                rr = rg.analyse(part, cplx, fs, p.ridge, self._frame_length, fine_hook=self._hook_test_due(stamp_ns))
+            rr = self._remember_hook(rr, stamp_ns)
             jtype, conf, jn, jn_ref, jn_in, floor = self._decide(power, feat, rr, floor, ref)
             if part.size < n and self._chirp and not rr.sweeping:
                 part = xs            # the tail shows no sweep (any more): the whole block decides

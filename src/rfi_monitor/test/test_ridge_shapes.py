@@ -281,3 +281,152 @@ def test_compiled_fold_and_shape_same_as_numpy_reference():
             assert a[0] == b[0] and np.allclose(a[1:], b[1:], rtol=0, atol=0, equal_nan=True), (t, a, b)
         for up in (True, False):
             assert tuple(rg._return_bins(prof, inband, up)) == tuple(ref._return_bins(prof, inband, up))
+
+
+# ----- fine_profile: the sample-resolution profile of lag products (a hook shorter than a frame) -----
+
+def test_fine_profile_frequency_is_the_closed_form():
+    """A clean linear chirp: the fine profile's frequency per phase bin is the sweep law at the bin's phase (the lag
+    product's mean frequency over one sample), within a few standard errors."""
+    fs, T = 10e6, 200
+    jam = SweepJammer("saw_up", -3e6, 3e6, T / fs)
+    law = sweep_law(jam)
+    x = _swept(20000, fs, True, jam, 20.0, 1)
+    fp = rg.fine_profile(x, True, float(T))
+    assert fp is not None and fp.present.all() and fp.bin_samples == pytest.approx(1.0)
+    tau = (np.mod((np.arange(T) + 0.5) / fs + 0.37 * T / fs, T / fs))       # the generator starts at 0.37 T
+    f_true = law.frequency_hz(tau) / fs
+    inner = np.abs(f_true) < 0.28                                              # away from the flyback
+    err = (fp.frequency - f_true)[inner]
+    assert np.sqrt(np.mean(err ** 2)) < 0.003, np.sqrt(np.mean(err ** 2))
+
+
+@pytest.mark.parametrize("seed", range(1, 7))
+def test_short_hook_like_real_jammers_row_s_is_hooked(seed):
+    """real_jammers.md row S: a hooked saw-tooth -3.5..+4 MHz in 12 us at 10 MS/s complex whose hook (15 % of the
+    period, 0.8 MHz below the start) lasts 18 samples: shorter than two profile bins and a frame, so the STFT
+    profile sees a plain saw-tooth; the sample-resolution profile sees the return."""
+    fs = 10e6
+    jam = SweepJammer("hooked_saw", -3.5e6, 4e6, 12e-6, hook_fraction=0.15, hook_overshoot_hz=0.8e6)
+    x = _swept(int(1e-3 * fs), fs, True, jam, 10.0, seed)
+    r = rg.analyse(x, True, fs, rg.RidgeParams())
+    assert r.periodic and r.period_samples == pytest.approx(120.0, rel=1e-3)
+    assert r.shape == rg.HOOKED_SAWTOOTH, rg.SHAPE_NAMES[r.shape]
+
+
+def test_hooks_of_a_few_samples_across_front_ends():
+    """Hooks whose swept return crosses the band in 5-20 samples (too short for the STFT profile), at the four front
+    ends and J/N 10-20 dB: hooked in most blocks, a saw-tooth of the right direction otherwise, never anything
+    else."""
+    got = []
+    for fe, period in (("4 MS/s complex", 30e-6), ("10 MS/s complex", 12e-6), ("16.368 MS/s real", 9e-6),
+                       ("38.192 MS/s real", 5e-6)):
+        for seed, jn in ((1, 10.0), (2, 20.0)):
+            r = _shape_of(fe, lambda h, p=period: SweepJammer("hooked_saw", -0.8 * h, 0.8 * h, p, hook_fraction=0.15,
+                                                              hook_overshoot_hz=0.15 * 1.6 * h), jn, seed)
+            got.append(r.shape)
+    assert set(got) <= {rg.HOOKED_SAWTOOTH, rg.SAWTOOTH_UP}, [rg.SHAPE_NAMES[s] for s in got]
+    assert got.count(rg.HOOKED_SAWTOOTH) >= 6, [rg.SHAPE_NAMES[s] for s in got]
+
+
+def test_plain_sawtooths_never_hooked_random():
+    """Random plain saw-tooths (up or down, rate ratio 1-1.5, 30-100 % of the band, periods 5-100 us, J/N 0-30 dB)
+    at the four front ends: never HOOKED (the fine profile's flyback gives at most two bins inside the span)."""
+    rng = np.random.default_rng(21)
+    shapes = []
+    for t in range(48):
+        fe = list(FRONT_ENDS)[t % 4]
+        fs, cplx, fif, half = FRONT_ENDS[fe]
+        frac = float(rng.uniform(0.3, 1.0))
+        jam = SweepJammer(str(rng.choice(["saw_up", "saw_down"])), -frac * half, frac * half,
+                          float(rng.choice([5e-6, 8.972e-6, 12e-6, 20e-6, 50e-6, 100e-6])),
+                          rate_ratio=float(rng.uniform(1.0, 1.5)))
+        x = _swept(int(1e-3 * fs), fs, cplx, jam, float(rng.choice([0.0, 5.0, 10.0, 20.0, 30.0])),
+                   int(rng.integers(1, 1000)), fif)
+        shapes.append(rg.analyse(x, cplx, fs, rg.RidgeParams()).shape)
+    assert rg.HOOKED_SAWTOOTH not in shapes and rg.TRIANGLE not in shapes, [rg.SHAPE_NAMES[s] for s in shapes]
+
+
+def _clean_captures():
+    from pathlib import Path
+    d = Path(__file__).parent / "data"
+    iq = np.fromfile(d / "pocketsdr_L1_4MHz_IQ_10ms.bin", dtype=np.int8).astype(float)
+    re_ = np.fromfile(d / "pocketsdr_L1_12MHz_I_10ms.bin", dtype=np.int8).astype(float)
+    g = np.fromfile(d / "gnsssdr_cttc_4Msps_4ms.dat", dtype=np.float32).astype(float)
+    return [(iq[0::2][:4000] + 1j * iq[1::2][:4000], True, 4e6), (re_[:12000], False, 12e6),
+            (g[0::2][:4000] + 1j * g[1::2][:4000], True, 4e6)]
+
+
+def test_fine_profile_noise_alone_shows_nothing():
+    """White noise (real and complex) and the real clean captures (2-bit PocketSDR, 16-bit GNSS-SDR; coloured by their
+    front ends, the noise's lag product removed from the in-block spectrum): folded on any period, no phase bin holds a
+    jammer, so no way back either."""
+    rng = np.random.default_rng(4)
+    par = rg.RidgeParams()
+    blocks = [(rng.standard_normal(n) + (1j * rng.standard_normal(n) if c else 0.0), c, 10e6)
+              for n, c in ((10000, True), (16368, False), (38192, False), (4000, True))] + _clean_captures()
+    for x, cplx, fs in blocks:
+        S, freqs = rg.stft_power(np.asarray(x), 32, cplx)
+        lvl = rg.noise_levels(S, par.noise_smooth_bins, cplx)
+        r = rg.analyse(np.asarray(x), cplx, fs, par, 32)
+        R = rg.noise_lag_product(lvl, freqs, r.noise_power, cplx)
+        for period in (37.3, 90.0, 120.02, 250.7, 700.1):
+            fp = rg.fine_profile(np.asarray(x), cplx, period, R, r.noise_power)
+            if fp is None:
+                continue
+            assert not fp.present.any(), (cplx, fs, period, int(fp.present.sum()))
+            assert rg.fine_return(fp, True) == (0, 0)
+
+
+def test_weak_chirp_with_known_period_right_or_unknown():
+    """make demo's chirp at J/S +6 dB (38.192 MS/s real, J/N -13 dB, 5.1 MHz in 5.102 us), period known: the lag
+    products are too weak for the fine profile (no phase bin present, so never hooked), and the folded spectrum
+    gives the saw-tooth up or, honestly, unknown; never another label."""
+    fs, cplx, fif, half = FRONT_ENDS["38.192 MS/s real"]
+    jam = SweepJammer("saw_up", -2.55e6, 2.55e6, 5.102e-6)
+    got = []
+    par = rg.RidgeParams()
+    for seed in range(1, 7):
+        x = _swept(int(1e-3 * fs), fs, cplx, jam, -13.0, seed, fif)
+        S, freqs = rg.stft_power(x, 32, cplx)
+        r = rg.analyse(x, cplx, fs, par, 32)
+        R = rg.noise_lag_product(rg.noise_levels(S, par.noise_smooth_bins, cplx), freqs, r.noise_power, cplx)
+        fp = rg.fine_profile(x, cplx, 5.102e-6 * fs, R, r.noise_power)
+        assert fp is not None and fp.present.mean() < 0.05 and rg.fine_return(fp, True)[0] < rg.FINE_MIN_RETURN
+        got.append(rg.folded_shape(x, cplx, 5.102e-6 * fs, rg.RidgeParams())[0])
+    assert set(got) <= {rg.SAWTOOTH_UP, rg.SHAPE_UNKNOWN}, [rg.SHAPE_NAMES[s] for s in got]
+
+
+def test_monitor_tests_a_tracked_hook_once_per_recheck_interval(monkeypatch):
+    """The monitor runs the sample-resolution hook test on the block that starts a track and then at most once per
+    HOOK_RECHECK_S of stamps (it costs as much as the rest of a tracking block); the blocks in between report the
+    tested verdict for a saw-tooth of the same period: row S's hooked saw-tooth is HOOKED in every block, a plain
+    saw-tooth never."""
+    from rfi_monitor import monitor as mon_module
+    from rfi_monitor.monitor import RfiMonitor, RfiMonitorParams
+
+    calls = []
+    real_fine = rg.fine_profile
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return real_fine(*args, **kwargs)
+    monkeypatch.setattr(rg, "fine_profile", counted)
+    fs, n = 10e6, 10_000
+    for shape, want in (("hooked_saw", rg.HOOKED_SAWTOOTH), ("saw_up", rg.SAWTOOTH_UP)):
+        jam = SweepJammer(shape, -3.5e6, 4e6, 12e-6, hook_fraction=0.15, hook_overshoot_hz=0.8e6)
+        x = _swept(30 * n, fs, True, jam, 10.0, 5)
+        mon = RfiMonitor(RfiMonitorParams())
+        calls.clear()
+        shapes = []
+        for k in range(30):          # 30 blocks of 1 ms, stamps 1 ms apart: 0.03 s < HOOK_RECHECK_S
+            e = mon.process(x[k * n:(k + 1) * n], fs, 0.0, k * n, 10**9 + k * 10**6)
+            shapes.append(e.sweep_shape)
+        assert shapes == [want] * 30, (shape, [rg.SHAPE_NAMES[s] for s in shapes])
+        assert 1 <= len(calls) <= 2, (shape, len(calls))     # the first block (and its whole-block retry, if any)
+        # past the interval the test runs again
+        calls.clear()
+        k = 30
+        later = 10**9 + 30 * 10**6 + int(mon_module.HOOK_RECHECK_S * 1e9)
+        e = mon.process(x[:n], fs, 0.0, k * n, later)
+        assert e.sweep_shape == want and len(calls) >= 1
