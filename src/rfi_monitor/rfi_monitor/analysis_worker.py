@@ -59,13 +59,14 @@ def _shm_dir() -> str:
     return "/dev/shm" if os.path.isdir("/dev/shm") and os.access("/dev/shm", os.W_OK) else tempfile.gettempdir()
 
 
-def _job(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length: int, tail: int) -> RidgeResult:
+def _job(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length: int, tail: int,
+         fine_hook: bool = True) -> RidgeResult:
     """The worker's job (also what the caller computes without a worker): ``ridge.analyse`` of x, or of its last
     ``tail`` samples (0 < tail < x.size), at ``frame_length``, or at the length ``choose_frame_length`` picks on
     the whole of x when frame_length is 0 (the result's ``frame_length`` says which)."""
     L = frame_length if frame_length > 0 else choose_frame_length(x, cplx, par)
     part = x[-tail:] if 0 < tail < x.size else x
-    return analyse(part, cplx, fs, par, L)
+    return analyse(part, cplx, fs, par, L, fine_hook=fine_hook)
 
 
 def _serve(conn: Connection, path: str) -> None:
@@ -88,7 +89,7 @@ def _serve(conn: Connection, path: str) -> None:
                 return
             if msg is None:
                 return
-            _, n, dtype, cplx, fs, new_par, L, tail, need = msg
+            _, n, dtype, cplx, fs, new_par, L, tail, need, fine_hook = msg
             if new_par is not None:
                 par = new_par                       # sent when it changes, not with every block
             try:
@@ -98,7 +99,7 @@ def _serve(conn: Connection, path: str) -> None:
                     mm = mmap.mmap(fd, need, prot=mmap.PROT_READ)
                     size = need
                 x = np.frombuffer(mm, dtype=np.dtype(dtype), count=int(n))
-                rr = _job(x, bool(cplx), float(fs), par, int(L), int(tail))
+                rr = _job(x, bool(cplx), float(fs), par, int(L), int(tail), bool(fine_hook))
                 del x
                 conn.send(("ok", rr))
             except Exception:                       # noqa: BLE001 - reported to the parent, which falls back
@@ -179,11 +180,12 @@ class AnalysisWorker:
         self._size = size
 
     def submit(self, x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length: int,
-               tail: int = 0) -> bool:
+               tail: int = 0, fine_hook: bool = True) -> bool:
         """Start ``ridge.analyse`` of x (finite, float64 or complex128, shape (n,)), or of its last ``tail`` samples
         (0 < tail < n), at ``frame_length``, or at the length ``ridge.choose_frame_length`` picks on the whole of x
-        when frame_length is 0 (the answer's ``frame_length`` says which). False if the worker is not alive or
-        still busy (the caller analyses the block itself)."""
+        when frame_length is 0 (the answer's ``frame_length`` says which), with or without its sample-resolution hook
+        test (``fine_hook``). False if the worker is not alive or still busy (the caller analyses the block
+        itself)."""
         if not self.alive or self._pending:
             return False
         x = np.ascontiguousarray(x)
@@ -193,7 +195,7 @@ class AnalysisWorker:
             assert self._mm is not None
             np.copyto(np.frombuffer(self._mm, dtype=x.dtype, count=x.size), x)
             self._conn.send(("ridge", x.size, x.dtype.str, bool(cplx), float(fs), par if par != self._par else None,
-                             int(frame_length), int(tail), self._size))
+                             int(frame_length), int(tail), self._size, bool(fine_hook)))
             self._par = par
         except (OSError, ValueError, EOFError) as err:
             self._fail(f"submit: {type(err).__name__}: {err}")

@@ -369,8 +369,8 @@ class RfiMonitor:
         self._rate: float | None = None
         self._if: float | None = None
         self._complex: bool | None = None
-        self._hook_memory = None
         if not keep_calibration:
+            self._hook_memory = None   # a new stream; a gap (shed blocks) keeps it: the sweep is the same
             self._integrator.reset()
             self._int_period = None
             self._forget_calibration()
@@ -782,7 +782,8 @@ class RfiMonitor:
             due = self._frame_length == 0 or self._blocks_since_select >= (RESELECT_BLOCKS if self._tracking
                                                                              else RESELECT_IDLE_BLOCKS)
             tail = self._part_samples(xs.size)
-            if w.submit(xs, cplx, fs, self.params.ridge, 0 if due else self._frame_length, tail):
+            if w.submit(xs, cplx, fs, self.params.ridge, 0 if due else self._frame_length, tail,
+                        fine_hook=self._hook_test_due(stamp_ns)):
                 ahead = _Ahead(tail if tail else xs.size, 0 if due else self._frame_length)
         try:
             return self._identify_stft_block(xs, cplx, fs, fif, stamp_ns, first, clipped, full_scale, coarse, ahead)
