@@ -87,6 +87,7 @@ from rfi_monitor.classifier import (
     smooth_template,
     welch_psd,
 )
+from rfi_monitor.constant_envelope import constant_envelope_jn_db
 from rfi_monitor.if_measurement import (
     STATUS_CORRECTION,
     STATUS_DOMAIN,
@@ -250,6 +251,11 @@ node behind its stream fall further behind, measured in docs/rfi_monitor/live_st
 gap are also charged to the integration's processing budget (``Integrator.skipped``): a node behind its stream
 answers blocks before it integrates more of them. The per-sample state of the "kalman" estimator is reset at any
 gap."""
+ENVELOPE_MIN_IN_BAND = 0.9
+"""The J/N of a chirp with an in-block noise reference is also read from the block's moments
+(``constant_envelope``) only when the chirp is in band for at least this share of its period: a sweep that leaves
+the band is pulsed in band, not of constant envelope (its estimate would err low, and the spectral one is kept
+anyway; this spares the cost)."""
 HOOK_RECHECK_S = 0.1
 """While the "stft" estimator tracks a chirp, the sample-resolution hook test of a saw-tooth (``ridge.fine_profile``:
 0.3-1.4 ms per block, as much as the rest of a tracking block's analysis) runs on at most one block per this many
@@ -330,7 +336,7 @@ class RfiMonitor:
                                 "tracker_resets_invalid": 0, "integrated_reports": 0,
                                 "integration_window_blocks": 0, "integration_blocks_thinned": 0,
                                 "worker_blocks": 0, "worker_failures": 0, "block_periods_from_integration": 0,
-                                "block_periods_unconfirmed": 0}
+                                "block_periods_unconfirmed": 0, "jn_from_envelope": 0}
         self._integrator = Integrator(params.integration, params.classifier.detect_jn_db)
         self.last_integration: IntegratedDecision | None = None
         self._last_single = NONE
@@ -941,6 +947,19 @@ class RfiMonitor:
             jn = max(jn, 5.0 * math.log10((1.0 if cplx else 2.0) / (frames * cp.nfft)))
         if integrated is not None:
             return self._integrated_estimate(integrated, jn, stamp_ns, fs, fif, cplx, first, n, ref, clipped, xs)
+        if jtype in (CW, CHIRP) and ref != REF_IN_BLOCK and math.isfinite(jn) and jn == jn_in and jn_in > jn_ref:
+            # an AGC (or a gain change) hides the jammer from the block power; the noise measured in the block
+            # beside the jammer shows it: J/N against REF_IN_BLOCK, and said so
+            ref = REF_IN_BLOCK
+        if (jtype in (CW, CHIRP) and ref == REF_IN_BLOCK and not coarse and clipped <= p.clip_lower_bound_fraction
+                and (jtype == CW or rr.in_band_fraction >= ENVELOPE_MIN_IN_BAND)):
+            # the in-block noise beside a strong fast sweep reads high (its leakage fills every bin of every frame):
+            # the noise from the block's moments under a constant envelope (constant_envelope module) errs only
+            # low in J/N, so the larger of the two J/Ns is kept
+            jn_env = constant_envelope_jn_db(xs, cplx)
+            if math.isfinite(jn_env) and jn_env > jn:
+                jn = jn_env
+                self._block_counters["jn_from_envelope"] += 1
         if jtype == NONE:
             # the floor learns only from blocks that pass as noise inside the block too
             if clipped <= p.clip_lower_bound_fraction and not rr.periodic and jn_in < cp.detect_jn_db:
@@ -1004,10 +1023,6 @@ class RfiMonitor:
                 # type, J/N and the block's shape stay.
                 self._block_counters["block_periods_unconfirmed"] += 1
                 per = inb = freq = fstd = rate = f0 = bw = nan
-        if jtype in (CW, CHIRP) and ref != REF_IN_BLOCK and math.isfinite(jn) and jn == jn_in and jn_in > jn_ref:
-            # an AGC (or a gain change) hides the jammer from the block power; the noise measured in the block
-            # beside the jammer shows it: J/N against REF_IN_BLOCK, and said so
-            ref = REF_IN_BLOCK
         self._tracking = jtype in (CW, CHIRP)
         self._chirp = jtype == CHIRP
         lower = (clipped > p.clip_lower_bound_fraction or coarse) and jtype != NONE
