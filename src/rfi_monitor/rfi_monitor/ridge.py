@@ -58,8 +58,10 @@ Steps (``analyse``):
    on the period and averaged over the block's periods, the noise's own lag product removed; ``fine_return``:
    hooked when the way back crosses the span in >= ``FINE_MIN_RETURN`` bins at full strength, where an
    instantaneous flyback gives at most two). A hook whose return crosses the span in fewer than about 4 samples,
-   or a saw-tooth below about J/N 0 dB (``FINE_MIN_JN``), is not resolved: the jammer is reported as the
-   saw-tooth it is otherwise. Rate: the median counted step of the main direction; swept band: the
+   or a weak one, is not resolved: the jammer is reported as the saw-tooth it is otherwise. Measured (a hook of
+   15 % of an 18 us period overshooting by 10 % of the span, 4 seeds, 1 ms blocks): hooked in 4 of 4 from J/N 6 dB
+   at 10 MS/s I/Q and from 10-15 dB at 16.368 and 38.192 MS/s real (2 of 4 and 1 of 4 at 6 dB), never at 0-3 dB;
+   at 4 MS/s I/Q (a return of about 5 samples) in at most 2 of 4. Rate: the median counted step of the main direction; swept band: the
    extremes of the profile (of its in-band part: a lower bound of a sweep wider than the band).
    A periodic ridge is a sweep when it moves over >= 4 bins, or over >= 2 bins with a saw-tooth
    direction whose sign test is <= ``SAW_P`` (a narrow saw-tooth seen with short frames); a pulsed tone
@@ -1731,7 +1733,11 @@ def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length
             # (fine_profile) sees it, or sees the flyback instantaneous
             hook_checked = True
             fp = fine_profile(x, cplx, per_fr * hop, noise_lag_product(lvl, freqs, noise, cplx), noise)
-            if fp is not None and fine_return(fp, shape == SAWTOOTH_UP)[0] >= FINE_MIN_RETURN:
+            n_back = fine_return(fp, shape == SAWTOOTH_UP)[0] if fp is not None else 0
+            if fp is not None and n_back >= TRIANGLE_SIDE * fp.frequency.size:
+                # a way back lasting a triangle's side (the coarse profile saw the sweep in pieces): _shape's rule
+                shape = TRIANGLE
+            elif n_back >= FINE_MIN_RETURN:
                 shape = HOOKED_SAWTOOTH
         if shape == SHAPE_UNKNOWN:
             # the per-frame ridge's profile shows no shape (a weak sweep, or one seen in pieces): the spectrum
