@@ -61,8 +61,9 @@ Steps (``analyse``):
    or a weak one, is not resolved: the jammer is reported as the saw-tooth it is otherwise. Measured (a hook of
    15 % of an 18 us period overshooting by 10 % of the span, 4 seeds, 1 ms blocks): hooked in 4 of 4 from J/N 6 dB
    at 10 MS/s I/Q and from 10-15 dB at 16.368 and 38.192 MS/s real (2 of 4 and 1 of 4 at 6 dB), never at 0-3 dB;
-   at 4 MS/s I/Q (a return of about 5 samples) in at most 2 of 4. Rate: the median counted step of the main direction; swept band: the
-   extremes of the profile (of its in-band part: a lower bound of a sweep wider than the band).
+   at 4 MS/s I/Q (a return of about 5 samples) in at most 2 of 4. Rate: the median counted step of the main
+   direction; swept band: the extremes of the profile (of its in-band part: a lower bound of a sweep wider than
+   the band).
    A periodic ridge is a sweep when it moves over >= 4 bins, or over >= 2 bins with a saw-tooth
    direction whose sign test is <= ``SAW_P`` (a narrow saw-tooth seen with short frames); a pulsed tone
    is periodic but does not move.
