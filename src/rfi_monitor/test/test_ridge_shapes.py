@@ -263,6 +263,8 @@ def test_compiled_fold_and_shape_same_as_numpy_reference():
              else rng.standard_normal(n) + amp * np.cos(ph + 0.3 * tt))
         S, fr = rg.stft_power(x, L, cplx)
         a, b = rg._fold_shape(S, fr, per, L, cplx, 2.0), ref._fold_shape(S, fr, per, L, cplx, 2.0)
+        if b[0] == rg.SHAPE_UNKNOWN and a[0] != rg.SHAPE_UNKNOWN and math.isnan(a[1]):
+            continue     # the reference has no line search (_line_shape, newer): it found a law the profile did not
         assert a[0] == b[0] and np.allclose(a[1:], b[1:], rtol=1e-9, equal_nan=True), (t, a, b)
         labelled += a[0] != rg.SHAPE_UNKNOWN
     assert labelled > 40
@@ -468,3 +470,27 @@ def test_random_shapes_keep_their_label_across_front_ends():
                 assert got in (rg.HOOKED_SAWTOOTH, rg.SAWTOOTH_UP, rg.SHAPE_UNKNOWN), rg.SHAPE_NAMES[got]
                 hooked += got == rg.HOOKED_SAWTOOTH
     assert hooked >= 24, hooked
+
+
+@pytest.mark.parametrize("shape,want", [("saw_up", rg.SAWTOOTH_UP), ("saw_down", rg.SAWTOOTH_DOWN),
+                                        ("triangle", rg.TRIANGLE)])
+def test_weak_sweep_shape_from_the_line_through_the_folded_map(shape, want):
+    """The demo's weak chirp (5.1 MHz in 5.102 us at 38.192 MS/s real, J/N -13 dB over the block): too weak for any
+    phase bin of the folded spectrum alone, its law is found from the line sum through all of them (_line_shape):
+    the shape in most blocks, never another class; noise alone never gives one (below)."""
+    fs = 38.192e6
+    jam = SweepJammer(shape, -2.55e6, 2.55e6, 5.102e-6)
+    T = sweep_law(jam).period_s * fs
+    got = [rg.folded_shape(_swept(38192, fs, False, jam, -13.0, seed, 9.548e6), False, T, rg.RidgeParams())[0]
+           for seed in range(6)]
+    assert set(got) <= {want, rg.SHAPE_UNKNOWN}, [rg.SHAPE_NAMES[s] for s in got]
+    assert got.count(want) >= 4, [rg.SHAPE_NAMES[s] for s in got]
+
+
+def test_folded_shape_of_noise_is_unknown():
+    rng = np.random.default_rng(5)
+    for t in range(120):
+        cplx = t % 2 == 0
+        n = int(rng.choice([4000, 10000, 38192]))
+        x = rng.standard_normal(n) + (1j * rng.standard_normal(n) if cplx else 0.0)
+        assert rg.folded_shape(x, cplx, float(rng.uniform(30, 600)), rg.RidgeParams())[0] == rg.SHAPE_UNKNOWN
