@@ -40,9 +40,11 @@ def run_node(node_factory: Callable[[], Any], *, executable: str, summary: str, 
         print(f'{executable}: error: unrecognised arguments {" ".join(user_args)} (parameters go after --ros-args)',
               file=sys.stderr)
         return 2
-    rclpy.init(args=argv)
+    restore = _SigintHandler()
     node = None
     try:
+        rclpy.init(args=argv)
+        restore.ros_running = True
         node = node_factory()
         unknown = unknown_parameters(node)
         if unknown:
@@ -68,3 +70,37 @@ def run_node(node_factory: Callable[[], Any], *, executable: str, summary: str, 
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+        restore()
+
+
+class _SigintHandler:
+    """The Python-level SIGINT handler while a node runs (``run_node``); calling the object puts the previous one back.
+
+    rclpy.init installs rclpy's own SIGINT handler, which shuts the context down (``executor.spin`` then ends with
+    ExternalShutdownException) and then calls the Python-level handler that was there before it. Python's default
+    one raises KeyboardInterrupt in the main thread at whatever bytecode it is running: inside an rclpy object's
+    constructor (the executor builds a Task for every callback) it leaves a half-built object whose ``__del__``
+    prints a traceback at exit (seen on Ctrl-C of ubx_source while it read a port). Once ROS runs this handler does
+    nothing, and the context's shutdown alone ends the node; before (imports, rclpy.init itself) it raises
+    KeyboardInterrupt as usual."""
+
+    def __init__(self) -> None:
+        import signal
+        import threading
+
+        self.ros_running = False
+        self._previous = None
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.getsignal(signal.SIGINT)
+            signal.signal(signal.SIGINT, self._on_sigint)
+
+    def _on_sigint(self, signum: int, frame: Any) -> None:
+        if not self.ros_running:
+            raise KeyboardInterrupt
+
+    def __call__(self) -> None:
+        import signal
+
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+            self._previous = None

@@ -1,0 +1,43 @@
+"""run_node (rfi_node_common.main): Ctrl-C while a node runs ends it through the context's shutdown, never through a
+KeyboardInterrupt raised inside whatever Python was running (a half-built rclpy object then printed a traceback)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+
+CHILD = textwrap.dedent('''
+    import os, signal, sys, time
+    import rclpy
+    from rclpy.node import Node
+    from rfi_node_common.main import run_node
+
+    class Node_(Node):
+        def __init__(self):
+            super().__init__('sigint_probe')
+            self.create_timer(0.05, self.tick)
+            self.n = 0
+
+        def tick(self):
+            self.n += 1
+            if self.n == 3:
+                os.kill(os.getpid(), signal.SIGINT)   # Ctrl-C arrives in the middle of a callback
+                t0 = time.monotonic()
+                while time.monotonic() - t0 < 0.2:
+                    pass
+                print('callback completed', flush=True)
+
+    code = run_node(Node_, executable='sigint_probe', summary='probe', topics='')
+    print('exit', code, 'handler restored', signal.getsignal(signal.SIGINT) is signal.default_int_handler, flush=True)
+    sys.exit(code)
+''')
+
+
+def test_ctrl_c_during_a_callback_ends_the_node_after_it_cleanly():
+    done = subprocess.run([sys.executable, '-c', CHILD], capture_output=True, text=True, timeout=60)
+    text = done.stdout + done.stderr
+    assert done.returncode == 0, text
+    assert 'callback completed' in done.stdout, text          # not interrupted half-way
+    assert 'exit 0 handler restored True' in done.stdout, text
+    assert 'Traceback' not in text and 'KeyboardInterrupt' not in text, text
