@@ -60,3 +60,8 @@ def test_levels_are_ok_on_clean_input_and_warn_under_the_jammer(tmp_path):
     assert all(level == DiagnosticStatus.OK for level, _ in clean.values()), clean
     assert all(level == DiagnosticStatus.WARN and 'costs 7.7 dB of C/N0' in text for level, text in jammed.values())
     assert not any(level == DiagnosticStatus.ERROR for level, _ in levels.values())
+    # three anchors and no side given (the scenario's): the mirror across their plane is said, never a fault
+    values = [{kv.key: kv.value for kv in r.status[0].values} for r in reports]
+    fusing = [(v, text) for v, (_, text) in zip(values, levels.values(), strict=True) if text.startswith('fusing')]
+    assert fusing and all(v['uwb_anchors_heard'] == '3' and v['uwb_mirror_ambiguous'] == 'True'
+                          and 'mirror' in text for v, text in fusing), fusing[:2]

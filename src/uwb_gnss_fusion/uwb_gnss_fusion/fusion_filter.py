@@ -902,6 +902,14 @@ class FusionFilter:
                 n += 1
         return n
 
+    def uwb_anchors_heard(self, stamp_ns: int) -> int:
+        """Anchors (of the filter's frame, when it has one) with a range within ``uwb_init_window_s`` before
+        ``stamp_ns``: for diagnostics (three anchors leave a mirror solution across their plane that the ranges cannot
+        rule out, ``uwb_tag_side_of_anchor_plane``)."""
+        oldest = stamp_ns - int(self.params.uwb_init_window_s * 1e9)
+        frame = self._frame if self._initialized else None
+        return sum(1 for t, _, _, f in self._recent_uwb.values() if t >= oldest and (frame is None or f == frame))
+
     def _range_std_with_shared_bias(self, stamp_ns: int, anchor_id: str, std_m: float, heard: int) -> float:
         """The 1-sigma a range is applied with under the shared-bias rule (``uwb_range_bias_std_m``).
 

@@ -234,6 +234,7 @@ class FusionNode(Node):
         self._datum_published = False
         self._count_window = CountWindow(self.params.diagnostics_window_s)
         self._ever_initialized = False
+        self._mirror_warned = False   # the three-anchor warning is logged once
         self._first_output_ns: int | None = None   # stamp of the first status published
         self._last_js_db = math.nan
         self.spp = SinglePointPositioner()
@@ -730,7 +731,10 @@ class FusionNode(Node):
         node was lost; the filter diverged (and re-initialised) within the window; the J/S in use costs
         more than ``warn_cn0_loss_db`` of C/N0 (eq. 4 at ``nominal_cn0_dbhz``: 3 dB at about 15 dB J/S).
         OK otherwise, also before anything was processed ("starting"). Isolated rejections (a range
-        gated now and then on clean data) stay OK.
+        gated now and then on clean data) stay OK. With exactly three anchors heard within
+        ``uwb_init_window_s`` and ``uwb_tag_side_of_anchor_plane`` 0, the OK message says that the mirror
+        solution across their plane is not ruled out (values ``uwb_anchors_heard``, ``uwb_mirror_ambiguous``;
+        a warning is logged once).
         """
         if self.runtime.pending:
             self.apply_parameter_changes()
@@ -752,6 +756,16 @@ class FusionNode(Node):
         values['window_s'] = p.diagnostics_window_s
         values['jammer_to_signal_db'] = self._last_js_db
         values['parameter_changes_refused'] = self.runtime.changes_refused
+        anchors = self.filter.uwb_anchors_heard(stamp_ns)
+        mirror = anchors == 3 and self.filter.params.uwb_tag_side_of_anchor_plane == 0
+        values['uwb_anchors_heard'] = anchors
+        values['uwb_mirror_ambiguous'] = mirror
+        if mirror and not self._mirror_warned:
+            self._mirror_warned = True
+            self.get_logger().warning(
+                'three UWB anchors heard and uwb_tag_side_of_anchor_plane is 0: the tag\'s mirror image across the '
+                'anchors\' plane fits their ranges as well, and GNSS heights may not tell them apart; set the side '
+                '(-1 below the plane, +1 above) if you know it (README, "UWB anchors")')
         processed = self.counts['gnss_processed'] + self.counts['uwb_processed']
         if not values['accounting_ok']:
             level, text = ERROR, 'input accounting does not add up'
@@ -783,6 +797,8 @@ class FusionNode(Node):
                                      + '; '.join(degraded))
             else:
                 level, text = OK, 'fusing'
+        if mirror and level == OK and text == 'fusing':
+            text = 'fusing; three UWB anchors: mirror across their plane not ruled out (uwb_tag_side_of_anchor_plane)'
         return diagnostic_array(stamp_ns, 'uwb_gnss_fusion', p.hardware_id, level, text, values)
 
     def _report(self) -> None:
