@@ -376,7 +376,7 @@ def test_analysis_worker_gives_the_same_states(probe_factory):
     assert p.node.worker is not None and p.node.worker.alive
     with_worker = p.send_all(msgs)
     # field by field (NaN equal to NaN), not serialised bytes: CDR alignment padding is not initialised
-    assert len(plain) == len(with_worker) and all(messages_equal(a, b) for a, b in zip(plain, with_worker))
+    assert len(plain) == len(with_worker) and all(messages_equal(a, b) for a, b in zip(plain, with_worker, strict=True))
     v = p.values()
     assert int(v['core.worker_blocks']) >= 8 and v['core.worker_failures'] == '0' and v['accounting_ok'] == 'True'
     proc = p.node.worker._proc
