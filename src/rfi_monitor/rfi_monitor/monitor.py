@@ -97,6 +97,7 @@ from rfi_monitor.if_measurement import (
 )
 from rfi_monitor.integration import IntegratedDecision, Integrator
 from rfi_monitor.params import RfiMonitorParams
+from rfi_monitor.spectral_step import SpectralStep, StepDecision
 from rfi_monitor.sweep_analysis import SweepAnalysis, analyse
 from rfi_monitor.sweep_period import SweepFloat, SweepInt
 from rfi_monitor.tracker import MAX_ABS_RATE, lattice_init, track_block
@@ -336,8 +337,11 @@ class RfiMonitor:
                                 "tracker_resets_invalid": 0, "integrated_reports": 0,
                                 "integration_window_blocks": 0, "integration_blocks_thinned": 0,
                                 "worker_blocks": 0, "worker_failures": 0, "block_periods_from_integration": 0,
-                                "block_periods_unconfirmed": 0, "jn_from_envelope": 0}
+                                "block_periods_unconfirmed": 0, "jn_from_envelope": 0,
+                                "spectral_step_reports": 0}
         self._integrator = Integrator(params.integration, params.classifier.detect_jn_db)
+        self._step = SpectralStep(params.spectral_step, params.classifier.nfft)
+        self.last_step: StepDecision | None = None
         self.last_integration: IntegratedDecision | None = None
         self._last_single = NONE
         self._off_floor_run = 0
@@ -378,6 +382,7 @@ class RfiMonitor:
         if not keep_calibration:
             self._hook_memory = None   # a new stream; a gap (shed blocks) keeps it: the sweep is the same
             self._integrator.reset()
+            self._step.reset()
             self._int_period = None
             self._forget_calibration()
             self._cal_key = None
@@ -943,6 +948,24 @@ class RfiMonitor:
             if jtype == NONE and d.type != NONE:
                 integrated = d
                 self._block_counters["integrated_reports"] += 1
+        step: StepDecision | None = None
+        if p.spectral_step.enabled:
+            # a noise jammer in part of the band behind an AGC: the step it makes in the spectrum's shape against
+            # the shape of the blocks that passed as noise (spectral_step module); blocks with a tone or a sweep
+            # are not summed
+            if jtype in (NONE, WIDEBAND) and integrated is None:
+                step = self._step.test(norm, frames, cplx, stamp_ns)
+                self.last_step = step
+                if jtype == NONE and step.detected:
+                    jtype = WIDEBAND
+                    conf = logistic(step.z - step.threshold, 1.0)
+                    if step.jn_db > jn:
+                        jn, ref = step.jn_db, REF_LEARNED     # measured against the learned noise shape
+                    self._block_counters["spectral_step_reports"] += 1
+                else:
+                    step = None
+            else:
+                self._step.restart()
         if jtype == NONE:
             jn = max(jn, 5.0 * math.log10((1.0 if cplx else 2.0) / (frames * cp.nfft)))
         if integrated is not None:
@@ -964,6 +987,7 @@ class RfiMonitor:
             # the floor learns only from blocks that pass as noise inside the block too
             if clipped <= p.clip_lower_bound_fraction and not rr.periodic and jn_in < cp.detect_jn_db:
                 self._learn(power, norm)
+                self._step.learn()
         bw_noise = p.noise_bandwidth_hz if p.noise_bandwidth_hz > 0 else (fs if cplx else fs / 2)
         n_dbm = p.noise_density_dbm_per_mhz + 10 * math.log10(bw_noise / 1e6)
         if not math.isfinite(jn):
@@ -976,6 +1000,10 @@ class RfiMonitor:
             freq = self._to_rel_hz(feat.peak_frequency, fs, fif, cplx)
             fstd = fs / cp.nfft / math.sqrt(12.0)
             rate = 0.0
+        elif step is not None:
+            # the band that rose: its centre, and the std of a uniform spread over it
+            freq = self._to_rel_hz(0.5 * (step.low + step.high), fs, fif, cplx)
+            fstd = (step.high - step.low) * fs / math.sqrt(12.0)
         elif jtype == CHIRP:
             lo_dig = -0.5 if cplx else 0.0
             if math.isfinite(rr.frequency) and lo_dig <= rr.frequency <= 0.5:

@@ -33,6 +33,7 @@ from typing import Any
 from rfi_monitor.classifier import ClassifierParams
 from rfi_monitor.integration import IntegrationParams
 from rfi_monitor.ridge import RidgeParams
+from rfi_monitor.spectral_step import SpectralStepParams
 from rfi_monitor.sweep_analysis import SweepAnalysisParams
 from rfi_monitor.sweep_period import SweepPeriodParams
 from rfi_monitor.tracker import MAX_REFINE_WINDOW
@@ -103,6 +104,8 @@ class RfiMonitorParams:
         ridge: RidgeParams of the "stft" estimator.
         integration: IntegrationParams of the "stft" estimator's evidence over blocks (rfi_monitor.integration:
             a weak stationary CW or chirp that no single block shows; window_s 0: off).
+        spectral_step: SpectralStepParams of the "stft" estimator's test for a noise jammer in part of the band
+            behind an AGC (rfi_monitor.spectral_step: the step it makes in the spectrum's shape).
         noise_floor_dbfs: the front end's thermal noise power per real component relative to
             full_scale^2 (as passed to ``process``), dB (e.g. -30: rms 3.2 % of full scale); 0: not
             documented (noise at full scale is no working front end). Used as the J/N reference when
@@ -174,6 +177,7 @@ class RfiMonitorParams:
     noise_floor_dbfs: float = 0.0
     clip_lower_bound_fraction: float = 1e-3
     integration: IntegrationParams = field(default_factory=IntegrationParams)
+    spectral_step: SpectralStepParams = field(default_factory=SpectralStepParams)
 
     def __post_init__(self) -> None:
         if self.estimator not in ESTIMATORS:

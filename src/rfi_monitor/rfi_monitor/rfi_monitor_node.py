@@ -152,6 +152,7 @@ from rfi_monitor.integration import IntegrationParams
 from rfi_monitor.monitor import NON_FINITE, JammerEstimate, RfiMonitor, RfiMonitorParams
 from rfi_monitor.params import ESTIMATORS
 from rfi_monitor.ridge import RidgeParams
+from rfi_monitor.spectral_step import SpectralStepParams
 from rfi_monitor.sweep_analysis import SweepAnalysisParams
 from rfi_monitor.sweep_period import SweepPeriodParams
 from rfi_monitor.tracker import MAX_REFINE_WINDOW
@@ -223,7 +224,8 @@ SAMPLE_DTYPES = {IfSamples.INT8: np.dtype('<i1'), IfSamples.INT16: np.dtype('<i2
 
 NESTED = (('tracker', 'tracker_', TrackingFilterParams), ('sweep', 'sweep_', SweepPeriodParams),
           ('classifier', 'classifier_', ClassifierParams), ('analysis', 'analysis_', SweepAnalysisParams),
-          ('ridge', 'ridge_', RidgeParams), ('integration', 'integration_', IntegrationParams))
+          ('ridge', 'ridge_', RidgeParams), ('integration', 'integration_', IntegrationParams),
+          ('spectral_step', 'spectral_step_', SpectralStepParams))
 """(RfiMonitorParams field, node parameter prefix, dataclass) of the core's nested parameter groups."""
 
 _M = RfiMonitorParams()
@@ -233,6 +235,7 @@ _C = _M.classifier
 _A = _M.analysis
 _R = _M.ridge
 _I = _M.integration
+_P = _M.spectral_step
 
 
 @dataclass(frozen=True)
@@ -367,6 +370,43 @@ class MonitorNodeParams:
         _I.max_samples_per_s, 'stft: processing budget of the evidence over blocks, samples per second of stamps '
         '(deterministic): beyond it blocks are left out of the sums (counted, integration_blocks_thinned); 0: no '
         'limit.', minimum=0.0, maximum=1e12)
+    spectral_step_enabled: bool = parameter(
+        _P.enabled, 'stft: look for a band of the spectrum that rose against the shape of the blocks that passed as '
+        'noise (a noise jammer in part of the band, seen behind an AGC that hides its power): WIDEBAND with the '
+        'band\'s centre in frequency_hz.')
+    spectral_step_window_s: float = parameter(
+        _P.window_s, 'stft: the spectral-step test sums the blocks stamped within this many seconds (1, 4, 16, ... '
+        'and all of them), s.', minimum=0.0, maximum=60.0)
+    spectral_step_groups: int = parameter(
+        _P.groups, 'stft: groups (of >= 2 Welch bins) the band is cut into by the spectral-step test.', minimum=8,
+        maximum=4096)
+    spectral_step_false_alarm_per_block: float = parameter(
+        _P.false_alarm_per_block, 'stft: false-alarm probability per block of the spectral-step test under Gaussian '
+        'noise (Bonferroni over bands and scales), (0, 0.1].', minimum=1e-12, maximum=0.1)
+    spectral_step_min_step_db: float = parameter(
+        _P.min_step_db, 'stft: smallest rise of a band over the rest of the spectrum reported, dB (drift of the '
+        'front end\'s shape is no jammer).', minimum=1e-3, maximum=60.0)
+    spectral_step_max_band_fraction: float = parameter(
+        _P.max_band_fraction, 'stft: widest band that rose reported, share of the sampled band, (0, 0.5].',
+        minimum=0.01, maximum=0.5)
+    spectral_step_reference_blocks: int = parameter(
+        _P.reference_blocks, 'stft: memory of the spectral-step reference shape, blocks (exponential).', minimum=1,
+        maximum=10**7)
+    spectral_step_min_reference_blocks: int = parameter(
+        _P.min_reference_blocks, 'stft: blocks in the reference shape before the spectral-step test runs.',
+        minimum=1, maximum=10**7)
+    spectral_step_learn_z: float = parameter(
+        _P.learn_z, 'stft: a block whose spectral-step z (any scale) exceeds this does not enter the reference.',
+        minimum=0.1, maximum=1e3)
+    spectral_step_relearn_after_s: float = parameter(
+        _P.relearn_after_s, 'stft: a spectrum that differs from the spectral-step reference (z over '
+        'spectral_step_learn_z) without a break for this long makes the reference be learned again, s (a changed '
+        'front end; also a partial-band noise jammer behind an AGC that stays on longer); 0: never.', minimum=0.0,
+        maximum=1e6)
+    spectral_step_decide_interval_s: float = parameter(
+        _P.decide_interval_s, 'stft: the spectral-step sums are tested at most once per this many seconds of stamps '
+        '(speed); blocks in between are added and get the last decision, s; 0: every block.', minimum=0.0,
+        maximum=10.0)
     chirp_correction: bool = parameter(
         _M.chirp_correction, 'Correct the three-sample IF measurement for the sweep (Kang et al., eq. 10; '
         'real samples only).')
