@@ -418,6 +418,8 @@ class RfiMonitor:
         d["sweep_resets"] = int(self._state.mist[MonitorInt.NRESETS])
         d["sweep_start_fits"] = int(self._state.mist[MonitorInt.NFIT])
         d["period_search_suspensions"] = int(self._state.mist[MonitorInt.NSUSP])
+        d["spectral_step_not_flat"] = self._step.not_flat
+        d["spectral_step_relearned"] = self._step.relearned
         return MappingProxyType(d)
 
     def _to_rel_hz(self, f_dig: float, fs: float, fif: float, cplx: bool) -> float:

@@ -249,6 +249,8 @@ class SpectralStep:
     def __init__(self, params: SpectralStepParams, nfft: int = 256) -> None:
         self.params = params
         self.nfft = int(nfft)
+        self.relearned = 0           # references learned again (relearn_after_s), since construction
+        self.not_flat = 0            # tests where something rose beyond the threshold but no band passed (step 5)
         self.reset()
 
     def reset(self) -> None:
@@ -259,8 +261,6 @@ class SpectralStep:
         self._ref_blocks = 0.0
         self._ref_count = 0                        # blocks learned since the reference was (re)started
         self._run_start_ns: int | None = None      # stamp of the first block of the current run of z > learn_z
-        self.relearned = 0
-        self.not_flat = 0
         # the recent blocks: a ring of cumulative group powers / frames / stamps; row head is the newest block,
         # rows head - count .. head - 1 the ones before it, row head - count the sums before the oldest (its base)
         self._cum: np.ndarray | None = None
