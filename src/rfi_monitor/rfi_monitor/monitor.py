@@ -958,9 +958,11 @@ class RfiMonitor:
             if jtype in (NONE, WIDEBAND) and integrated is None:
                 step = self._step.test(norm, frames, cplx, stamp_ns)
                 self.last_step = step
-                if jtype == NONE and step.detected:
-                    jtype = WIDEBAND
-                    conf = logistic(step.z - step.threshold, 1.0)
+                if step.detected:
+                    # a block already WIDEBAND from its power or spectral excess gets the band (and the larger J/N)
+                    if jtype == NONE:
+                        jtype = WIDEBAND
+                        conf = logistic(step.z - step.threshold, 1.0)
                     if step.jn_db > jn:
                         jn, ref = step.jn_db, REF_LEARNED     # measured against the learned noise shape
                     self._block_counters["spectral_step_reports"] += 1

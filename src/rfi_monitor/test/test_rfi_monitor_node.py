@@ -36,7 +36,7 @@ from rfi_node_common.message_builder import messages_equal
 from rfi_node_common.qos import DATA_QOS
 from rfi_node_common.stamps import ns_to_stamp, stamp_to_ns
 from rfi_node_common.testing import NodeRig
-from rfi_sim.if_signal import ChirpJammer, CwJammer, FrontEndConfig, IfBlock, IfSimulator
+from rfi_sim.if_signal import ChirpJammer, CwJammer, FrontEndConfig, IfBlock, IfSimulator, NoiseJammer, js_for_jn_db
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'rfi_monitor.yaml'
 START_NS = 1_700_000_000_000_000_000
@@ -359,6 +359,31 @@ def test_stale_blocks_of_a_live_stream_are_shed_and_a_replay_is_not(probe_factor
     live = probe_factory(max_block_age_s=0.5)
     assert all(s is not None for s in live.send_all(stamped(_time.time_ns())))
     assert live.values()['blocks_shed_stale'] == '0'
+
+
+def test_partial_band_noise_jammer_behind_an_agc(probe_factory):
+    """The spectral-step test through the node (issue 14 item 5): a 2-bit I/Q front end whose AGC has settled on
+    the total power (the block power does not rise), a noise jammer of 1 MHz at +0.75 MHz, J/N -3 dB, after 60
+    clean blocks. As shipped: the step is reported in most jammed blocks as WIDEBAND with frequency_hz at the
+    band's centre and J/N against the learned shape, and counted on /diagnostics; with spectral_step_enabled
+    false it is not (the single block's spectral excess may still call some blocks WIDEBAND, without a
+    frequency)."""
+    fe = FrontEndConfig(sample_rate_hz=4e6, intermediate_frequency_hz=0.0, is_complex=True, bits=2)
+    jam = NoiseJammer(center_frequency_hz=0.75e6, bandwidth_hz=1.0e6, js_db=js_for_jn_db(fe, -3.0))
+    msgs, _ = stream(fe, (jam,), 60, 30, seed=31)
+    on = probe_factory()
+    states = on.send_all(msgs)
+    assert all(s is not None and s.type in (JammerState.NONE, JammerState.UNKNOWN) for s in states[:60])
+    step = [s for s in states[60:] if s is not None and s.type == JammerState.WIDEBAND
+            and math.isfinite(s.frequency_hz)]
+    assert len(step) >= 20
+    assert all(abs(s.frequency_hz - 0.75e6) < 0.2e6 and s.noise_reference == JammerState.REF_LEARNED for s in step)
+    assert int(on.values()['core.spectral_step_reports']) == len(step)
+    on.close()
+    off = probe_factory(spectral_step_enabled=False)
+    states = off.send_all(msgs)
+    assert not any(s is not None and math.isfinite(s.frequency_hz) for s in states)
+    assert off.values()['core.spectral_step_reports'] == '0'
 
 
 def test_analysis_worker_gives_the_same_states(probe_factory):
