@@ -18,7 +18,10 @@ snapshots once a second are integrated as well as a continuous stream):
 * **CHIRP** (any periodic sweep): the 2-D autocorrelation over frames of the short-time spectrum,
   ``r(l) = sum_t sum_b E(t, b) E(t + l, b)`` with ``E = |X| / mean_t |X| - 1`` per bin (amplitudes: lighter
   tails than powers) (zero mean per bin
-  and block: a CW and the front end's shape drop out), summed over blocks, together with its variance
+  and block: a CW and the front end's shape drop out), minus each frame's mean over the bins (a change of the
+  block's power within it, as an AGC settling after a gain step, moves every bin of a frame alike; measured: a
+  2-bit front end whose AGC settled from +10 dB in its first block was reported CHIRP for 8 blocks), summed
+  over blocks, together with its variance
   under noise ``(T - l) sum_bb' C_bb'^2`` (``C``: the block's covariance between bins, measured, so the
   window's leakage between bins and a jammer's own variance are accounted for). A periodic sweep puts
   the same spectrum at every multiple of its period, so the statistic is the comb
@@ -242,6 +245,17 @@ def _normalised_amplitudes(S: np.ndarray, drop_edges: bool, neighbours: int) -> 
         m = np.float32(max(acc / nfr, 1e-300))
         for t in range(nfr):
             Et[b, t] = Et[b, t] / m - np.float32(1.0)
+    # minus each frame's mean over the bins: a change of the whole block's power within it (an AGC settling, a
+    # gain step, a broadband pulse) raises every bin of a frame alike and would correlate all lags; a sweep puts
+    # its excess in one bin per frame, which the mean over the bins hardly moves
+    if nb > 1:
+        for t in range(nfr):
+            acc = 0.0
+            for b in range(nb):
+                acc += float(Et[b, t])
+            mf = np.float32(acc / nb)
+            for b in range(nb):
+                Et[b, t] -= mf
     q = 0.0
     for d in range(min(neighbours + 1, nb)):
         for b in range(nb - d):

@@ -88,6 +88,25 @@ def test_weak_chirp_at_the_paper_front_end_continuous_stream():
     assert t_off.count(CHIRP) <= 2, t_off
 
 
+def test_a_gain_that_settles_within_a_block_is_no_sweep():
+    """A 2-bit front end whose AGC starts 10 dB high and settles within the first block (steps every 64 samples):
+    the power falls across that block's frames in every bin alike. Without the per-frame mean removed, the comb
+    saw a periodic sweep in it and the monitor reported CHIRP for the first 8 blocks; now NONE throughout, and the
+    integrated chirp statistic of the first block stays below its threshold."""
+    fe = FrontEndConfig(sample_rate_hz=16.368e6, intermediate_frequency_hz=4.092e6, bits=2, gain_mode="agc",
+                        agc_initial_gain_db=10.0)
+    sim = IfSimulator(fe, (), seed=7)
+    n = int(fe.sample_rate_hz * 1e-3)
+    blocks = [sim.generate(n) for _ in range(20)]
+    integ = Integrator(IntegrationParams())
+    d = integ.add(blocks[0].counts.astype(float) * blocks[0].scale, False, fe.sample_rate_hz, 0)
+    assert d.type == NONE and not d.chirp_z > d.chirp_threshold
+    mon = RfiMonitor(RfiMonitorParams())
+    types = [mon.process(b.counts.astype(float) * b.scale, fe.sample_rate_hz, fe.intermediate_frequency_hz,
+                         b.first_sample_index, stamp_ns=k * 1_000_000, bits=2).type for k, b in enumerate(blocks)]
+    assert types == [NONE] * 20
+
+
 def test_integrated_cw_needs_significance_and_the_detection_level():
     """A tone at J/N -5 dB in 1024-sample complex blocks (one Welch frame each): CW from the window, at its
     frequency; the same tone at J/N -12 dB (as the clean captures' front-end spurs) is significant but no jammer."""
