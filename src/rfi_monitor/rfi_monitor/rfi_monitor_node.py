@@ -153,6 +153,7 @@ from rfi_monitor.monitor import NON_FINITE, JammerEstimate, RfiMonitor, RfiMonit
 from rfi_monitor.params import ESTIMATORS
 from rfi_monitor.ridge import RidgeParams
 from rfi_monitor.spectral_step import SpectralStepParams
+from rfi_monitor.spectral_step import warm_up as spectral_step_warm_up
 from rfi_monitor.sweep_analysis import SweepAnalysisParams
 from rfi_monitor.sweep_period import SweepPeriodParams
 from rfi_monitor.tracker import MAX_REFINE_WINDOW
@@ -660,6 +661,8 @@ def warm_up(params: RfiMonitorParams) -> None:
             else:
                 x = rng.standard_normal(n) + jam * np.cos(phase)
             mon.process(x, fs, fif, k * n, 1 + k * int(n / fs * 1e9), is_complex=cplx, full_scale=64.0)
+    if params.spectral_step.enabled:
+        spectral_step_warm_up(params.classifier.nfft)
 
 
 def peek_stamp_ns(raw: bytes) -> int | None:

@@ -393,6 +393,19 @@ class SpectralStep:
         return True
 
 
+def warm_up(nfft: int = 256) -> None:
+    """Compile (or load from numba's cache) the test's kernels on throw-away blocks of both layouts, so that a node
+    does not pay for it on its first blocks (the monitor's own warm-up stops before a reference exists)."""
+    rng = np.random.default_rng(0)
+    for cplx in (False, True):
+        st = SpectralStep(SpectralStepParams(min_reference_blocks=1, decide_interval_s=0.0), nfft)
+        n_bins = nfft if cplx else nfft // 2 + 1
+        for k in range(3):
+            p = 1.0 + 0.1 * rng.random(n_bins)
+            st.test(p / p.sum(), 16, cplx, stamp_ns=k * 1_000_000)
+            st.learn()
+
+
 def _add_block(p: np.ndarray, cplx: bool, first: int, g: int, frames: float, cum: np.ndarray, kcum: np.ndarray,
                head: int) -> np.ndarray | None:
     """The block's group powers (step 1), written as the ring's next cumulative row; None if not finite."""

@@ -218,3 +218,12 @@ def test_monitor_reports_the_band_of_a_noise_jammer_behind_a_2_bit_agc():
     assert e.frequency_hz == pytest.approx(0.75e6, abs=0.2e6)
     assert e.noise_reference == REF_LEARNED
     assert e.counters["spectral_step_reports"] >= 1
+
+
+def test_warm_up_compiles_the_kernels():
+    """The node's warm-up reaches the kernels that only run once a reference exists (a cold first stream shed a
+    block of the demo while they compiled)."""
+    from rfi_monitor import spectral_step as ss
+    ss.warm_up(NFFT)
+    for kernel in (ss._best_band, ss._scan, ss._band, ss._prefix, ss._line, ss._group_powers):
+        assert kernel.signatures, kernel.__name__
