@@ -870,6 +870,7 @@ class RfiMonitor:
                 if ref == REF_LEARNED and self._off_floor_run >= p.calibration_blocks:
                     self._block_counters["recalibrations"] += 1
                     self._forget_learned()
+                    self._step.reset()           # the shape learned with that floor is as doubtful
                     self._off_floor_run = 0
                 return self._rejected(off, stamp_ns, fs, first, n, None)
         self._off_floor_run = 0

@@ -225,5 +225,7 @@ def test_warm_up_compiles_the_kernels():
     block of the demo while they compiled)."""
     from rfi_monitor import spectral_step as ss
     ss.warm_up(NFFT)
-    for kernel in (ss._best_band, ss._scan, ss._band, ss._prefix, ss._line, ss._group_powers):
+    # the kernels called from Python (those they call are compiled into them, and have no signatures of their own
+    # when loaded from numba's cache)
+    for kernel in (ss._best_band, ss._group_powers):
         assert kernel.signatures, kernel.__name__
