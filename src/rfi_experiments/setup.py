@@ -25,7 +25,7 @@ setup(
     entry_points={
         'console_scripts': [
             'play = rfi_experiments.play:main',
-            'record = rfi_experiments.record:main',
+            'record = rfi_experiments.record:cli',
             'run = rfi_experiments.run:main',
             'simulate = rfi_experiments.simulate:main',
             'rinex_to_bag = rfi_experiments.rinex_to_bag:main',
