@@ -314,6 +314,15 @@ def test_node_survives_hostile_input_and_accounts_for_every_message(name):
             rig.spin(0.001)
         rig.settle(pubs, timeout_s=SETTLE_S)
         values = rig.latest_values(time.monotonic() + 1.0, level=DiagnosticStatus.STALE, timeout_s=SETTLE_S)
+        # the fusion node's re-ordering buffer holds the last messages until it has been idle for
+        # idle_flush_s (1 s), the same silence that makes it STALE (input_timeout_s 1 s): the STALE
+        # report may come first, so the tail's last outputs are awaited here (the CI run of session 9
+        # failed on this race)
+        answer_in, answer_out = ANSWERS[name]
+        tail = [_stamp(m) for t, m in valid[2 * prime_count:] if t == answer_in]
+        end = time.monotonic() + 10.0
+        while time.monotonic() < end and not set(tail) <= {_stamp(m) for m in rig.out[answer_out]}:
+            rig.spin(0.1)
         alive = rig.alive()
     finally:
         stderr = rig.close()
@@ -326,11 +335,13 @@ def test_node_survives_hostile_input_and_accounts_for_every_message(name):
     assert values['accounting_ok'] == 'True', values
     invalid = [(t, why) for t in outputs for m in rig.out[t] for why in invalid_outputs(t, m)]
     assert not invalid, invalid[:20]
-    answered = {_stamp(m) for m in rig.out[ANSWERS[name][1]]}
-    tail = [_stamp(m) for t, m in valid[2 * prime_count:] if t == ANSWERS[name][0]]
-    assert tail and all(stamp in answered for stamp in tail), (
-        'the valid messages after the fuzz were not all answered',
-        ' '.join(f'{k}={v}' for k, v in values.items() if 'stamp' in k))
+    answered = {_stamp(m) for m in rig.out[answer_out]}
+    missing = [stamp for stamp in tail if stamp not in answered]
+    assert tail and not missing, (
+        f'{len(missing)} of the {len(tail)} valid messages after the fuzz were not answered '
+        f'(first {missing[:5]}; answered up to {max(answered, default=None)})',
+        ' '.join(f'{k}={v}' for k, v in values.items() if 'reject' in k or 'late' in k or 'buffer' in k
+                 or 'flush' in k or 'window' in k or 'restart' in k))
 
 
 @pytest.mark.parametrize('name', list(NODES))
