@@ -24,7 +24,7 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'play = rfi_experiments.play:main',
+            'play = rfi_experiments.play:cli',
             'record = rfi_experiments.record:cli',
             'run = rfi_experiments.run:main',
             'simulate = rfi_experiments.simulate:main',

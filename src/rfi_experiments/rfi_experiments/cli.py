@@ -8,10 +8,13 @@ that started but failed exits with :data:`EXIT_FAILED`.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import threading
 from collections.abc import Callable, Sequence
 from functools import partial
 from pathlib import Path
+from typing import Any
 
 EXIT_FAILED = 1
 """Exit code of a run that started but failed (a node died, messages were lost)."""
@@ -75,3 +78,35 @@ def converter_start(parser: argparse.ArgumentParser, argv: Sequence[str] | None,
     out = Path(args.out)
     refusal = output_refusal(out, args.overwrite)
     return report(refusal) if refusal else (args, out)
+
+
+TEARDOWN_TIMEOUT_S = 10.0
+"""Longest wait for a tool's node and ROS to shut down once its work is done; then the process exits anyway."""
+
+
+def bounded_teardown(prog: str, executor: Any, node: Any, rclpy: Any) -> None:
+    """Remove and destroy ``node`` and shut ROS down in a daemon thread, waiting at most
+    :data:`TEARDOWN_TIMEOUT_S`. Once in several hundred test-suite runs the recorder had written and
+    closed every message and still did not exit (the shutdown hung in the middleware); the tool's
+    work is complete by then, so a hang is reported on stderr and left behind (:func:`exit_now`)."""
+    def run() -> None:
+        executor.remove_node(node)
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+    worker = threading.Thread(target=run, name=f'{prog}-teardown', daemon=True)
+    worker.start()
+    worker.join(TEARDOWN_TIMEOUT_S)
+    if worker.is_alive():
+        print(f'{prog}: ROS shutdown did not finish within {TEARDOWN_TIMEOUT_S:g} s; exiting anyway',
+              file=sys.stderr, flush=True)
+
+
+def exit_now(main: Callable[[], int]) -> None:
+    """Run a tool's ``main`` and end the process at once with its exit code: stdout and stderr are
+    flushed, but the interpreter is not finalised, where a middleware thread left by a hung shutdown
+    (:func:`bounded_teardown`) could keep it alive. For the console-script entry points."""
+    code = main()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from rfi_experiments.bag_io import BagError, BagReader, message_class
-from rfi_experiments.cli import error_reporter
+from rfi_experiments.cli import bounded_teardown, error_reporter, exit_now
 
 fail = error_reporter('play')
 
@@ -367,9 +367,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f'play: interrupted after {played} of {total} messages', file=sys.stderr)
             return 130
         finally:
-            executor.remove_node(node)
-            node.destroy_node()
-            rclpy.try_shutdown()
+            bounded_teardown('play', executor, node, rclpy)
 
 
 def print_summary(topics: Sequence[str], available: dict[str, tuple[str, int]], delivery: dict[str, Delivery],
@@ -437,3 +435,8 @@ def _answer_recorder(answered: dict[str, int], topic: str):
 
 if __name__ == '__main__':
     sys.exit(main())
+
+
+def cli() -> None:
+    """The ``play`` executable: :func:`main`, then the process ends at once with its exit code."""
+    exit_now(main)

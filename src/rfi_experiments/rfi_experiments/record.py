@@ -18,17 +18,15 @@ that names the folder and the number of messages written before, and exits with 
 from __future__ import annotations
 
 import argparse
-import os
 import signal
 import sys
-import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from rfi_experiments.bag_io import BagError, BagWriter, message_class
-from rfi_experiments.cli import EXIT_FAILED, error_reporter
+from rfi_experiments.cli import EXIT_FAILED, bounded_teardown, error_reporter, exit_now
 
 fail = error_reporter('record')
 
@@ -195,41 +193,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                       f'the bag there is {"gone" if not out.is_dir() else "incomplete"}', file=sys.stderr)
             else:
                 print(f'record: wrote {written} messages to {out}')
-        _teardown(executor, node, rclpy)
+        bounded_teardown('record', executor, node, rclpy)
     return EXIT_FAILED if failure else 0
 
 
-TEARDOWN_TIMEOUT_S = 10.0
-"""Longest wait for the node's and ROS's shutdown once the bag is closed; then the process exits anyway."""
-
-
-def _teardown(executor: Any, node: Any, rclpy: Any) -> None:
-    """Remove and destroy the node and shut ROS down, in a daemon thread bounded by TEARDOWN_TIMEOUT_S: once in
-    several hundred runs of the test suite the recorder had written and closed every message but did not exit
-    (test_play_record timed out after 120 s). The bag is complete by then; a shutdown that hangs is reported on
-    stderr and left behind (``cli`` exits without waiting for it)."""
-    def run() -> None:
-        executor.remove_node(node)
-        node.destroy_node()
-        rclpy.try_shutdown()
-
-    worker = threading.Thread(target=run, name='record-teardown', daemon=True)
-    worker.start()
-    worker.join(TEARDOWN_TIMEOUT_S)
-    if worker.is_alive():
-        print(f'record: ROS shutdown did not finish within {TEARDOWN_TIMEOUT_S:g} s; exiting anyway (the bag is '
-              'closed)', file=sys.stderr, flush=True)
-
-
 def cli() -> None:
-    """The ``record`` executable: ``main``, then the process ends at once with its exit code (stdout and stderr
-    flushed; no interpreter finalisation, where a middleware thread left by a hung shutdown could keep it
-    alive)."""
-    code = main()
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(code)
-
-
-if __name__ == '__main__':
-    cli()
+    """The ``record`` executable: :func:`main`, then the process ends at once with its exit code."""
+    exit_now(main)
