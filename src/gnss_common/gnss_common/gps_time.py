@@ -15,9 +15,9 @@ up with an IMU, wheel odometry or tf. GPS time is kept exact in the messages' ow
 header stamp: it runs ahead of ROS time by the leap seconds (17 s from 2015-07-01, 18 s since
 2017-01-01).
 
-Leap seconds come from one table, :data:`LEAP_SECONDS`, taken from IERS Bulletin C 70 (see
+Leap seconds come from one table, :data:`LEAP_SECONDS`, as of IERS Bulletin C 72 (see
 :data:`LEAP_TABLE_SOURCE`). It is valid to :data:`LEAP_TABLE_VALID_UNTIL_UNIX_S`
-(2026-06-28 00:00 UTC, the expiry the IERS gives its ``leap-seconds.list`` of that bulletin).
+(2027-06-28 00:00 UTC, the expiry the IERS gives its ``leap-seconds.list`` of that bulletin).
 Beyond that date the conversions keep the last offset (18 s) and emit a
 :class:`LeapTableExpiredWarning` (once per call site, Python's default warning filter): a
 receiver on a robot must keep running, and the error is at most the leap seconds announced after
@@ -76,12 +76,14 @@ def _utc_unix_s(year: int, month: int, day: int) -> int:
 LEAP_TABLE_SOURCE = (
     "IERS Bulletin C 70 (Paris, 7 July 2025): UTC - TAI = -37 s from 2017-01-01 until further "
     "notice, no leap second at the end of December 2025; GPS - UTC = (TAI - UTC) - 19 s. "
-    "Cross-checked against IERS leap-seconds.list (updated 2025-07-07, expires 2026-06-28)."
+    "Bulletins C 71 and 72 added none (no leap second at the end of June 2026 nor of December 2026): "
+    "checked against the tz database's leapseconds of tzdata 2026.6 (updated from the IERS "
+    "leap-seconds.list of 2026-07-06, expires 2027-06-28)."
 )
 """Where :data:`LEAP_SECONDS` comes from."""
 
-LEAP_TABLE_VALID_UNTIL_UNIX_S = _utc_unix_s(2026, 6, 28)
-"""UTC instant (Unix s) up to which :data:`LEAP_SECONDS` is known complete: 2026-06-28 00:00 UTC."""
+LEAP_TABLE_VALID_UNTIL_UNIX_S = _utc_unix_s(2027, 6, 28)
+"""UTC instant (Unix s) up to which :data:`LEAP_SECONDS` is known complete: 2027-06-28 00:00 UTC."""
 
 LEAP_SECONDS: tuple[tuple[int, int], ...] = tuple(
     (_utc_unix_s(y, m, d), gps_minus_utc_s)
@@ -121,8 +123,8 @@ _VALID_UNTIL_NS = LEAP_TABLE_VALID_UNTIL_UNIX_S * NS_PER_S
 def _warn_if_beyond_table(utc_ns: int) -> None:
     if utc_ns >= _VALID_UNTIL_NS:
         warnings.warn(
-            "time converted beyond the leap-second table's validity (2026-06-28 UTC, "
-            "IERS Bulletin C 70): GPS - UTC = 18 s assumed; update gnss_common.gps_time.LEAP_SECONDS "
+            "time converted beyond the leap-second table's validity (2027-06-28 UTC, "
+            "IERS Bulletin C 72): GPS - UTC = 18 s assumed; update gnss_common.gps_time.LEAP_SECONDS "
             "from the current IERS Bulletin C",
             LeapTableExpiredWarning,
             stacklevel=3,

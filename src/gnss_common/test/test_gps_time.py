@@ -1,6 +1,7 @@
 """Tests for gnss_common.gps_time: known dates, round trips, week rollover, crossover, ROS stamps
 and the leap-second table (boundaries, a stamp inside a leap second, expiry)."""
 
+import calendar
 import datetime as dt
 import pathlib
 import warnings
@@ -118,9 +119,28 @@ _NS = 1_000_000_000
 def test_leap_table_equals_the_iers_list():
     expected = tuple((ntp - _NTP_TO_UNIX_S, dtai - 19) for ntp, dtai in _IERS_NTP_TAI_MINUS_UTC)
     assert LEAP_SECONDS == expected
-    # The expiry the IERS gives that list: 3991593600 NTP = 2026-06-28 00:00 UTC.
-    assert LEAP_TABLE_VALID_UNTIL_UNIX_S == 3991593600 - _NTP_TO_UNIX_S
-    assert "Bulletin C 70" in LEAP_TABLE_SOURCE
+    # No leap second since (Bulletins C 71 and 72); the list of Bulletin C 72 expires 2027-06-28 00:00 UTC.
+    assert LEAP_TABLE_VALID_UNTIL_UNIX_S == 1814140800
+    assert "Bulletin C 70" in LEAP_TABLE_SOURCE and "72" in LEAP_TABLE_SOURCE
+
+
+def test_leap_table_equals_the_tz_database():
+    """The tz database's leapseconds file (PyPI tzdata, in the venv): every leap second since the GPS epoch and the
+    expiry. A newer tzdata that announces a leap second, or a later expiry, fails here: update the table."""
+    tzdata = pytest.importorskip("tzdata")
+    text = (pathlib.Path(tzdata.__file__).parent / "zoneinfo" / "leapseconds").read_text()
+    months = {m: i for i, m in enumerate(calendar.month_abbr) if m}
+    starts = []
+    for line in text.splitlines():
+        f = line.split()
+        if f[:1] == ["Leap"]:
+            assert f[5] == "+", line  # a negative leap second has never happened; the table has no sign for it
+            day = dt.datetime(int(f[1]), months[f[2]], int(f[3]), tzinfo=dt.timezone.utc) + dt.timedelta(days=1)
+            starts.append(int(day.timestamp()))
+    expires = [int(line.split()[1]) for line in text.splitlines() if line.startswith("#expires")]
+    gps_era = [t for t in starts if t > 315964800]  # after 1980-01-06
+    assert tuple((t, i + 1) for i, t in enumerate(gps_era)) == LEAP_SECONDS
+    assert expires == [LEAP_TABLE_VALID_UNTIL_UNIX_S]
 
 
 def test_leap_table_equals_the_system_list_where_it_has_one():
@@ -210,8 +230,8 @@ def test_ros_round_trips_over_the_whole_table():
 def test_beyond_the_table_warns_and_keeps_the_last_offset():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        gps_to_ros_stamp_ns(2420, 0.0)  # 2026-05-24: inside the table, no warning
-    week_2027 = 2450  # 2026-12-20
+        gps_to_ros_stamp_ns(2450, 0.0)  # 2026-12-20: inside the table, no warning
+    week_2027 = 2480  # 2027-07-18
     with pytest.warns(LeapTableExpiredWarning):
         stamp = gps_to_ros_stamp_ns(week_2027, 0.0)
     assert stamp == gps_to_gps_ns(week_2027, 0.0) - 18 * _NS
