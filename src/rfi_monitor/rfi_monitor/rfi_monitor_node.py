@@ -367,6 +367,14 @@ class MonitorNodeParams:
     integration_decide_interval_s: float = parameter(
         _I.decide_interval_s, 'stft: the integrated statistics are tested at most once per this many seconds of '
         'stamps (speed); blocks in between get the last decision, s; 0: every block.', minimum=0.0, maximum=10.0)
+    integration_min_chirp_strength: float = parameter(
+        _I.min_chirp_strength, 'stft: a periodic sweep found over blocks is reported only when this share of the '
+        'amplitudes\' variance repeats at its period (the faint periodic modulations of real front ends stay below '
+        'it; a chirp at J/N -5 dB measures 0.017 or more), [0, 1).', minimum=0.0, maximum=0.999)
+    integration_sub_windows: int = parameter(
+        _I.sub_windows, 'stft: the integrated statistics are also tested on the newest integration_window_s / 4**k '
+        'seconds, k = 1..this (a jammer that just switched on is found without the dilution of a window of clean '
+        'blocks; Bonferroni over the sums tested); 0: the whole window only.', minimum=0, maximum=4)
     integration_max_samples_per_s: float = parameter(
         _I.max_samples_per_s, 'stft: processing budget of the evidence over blocks, samples per second of stamps '
         '(deterministic): beyond it blocks are left out of the sums (counted, integration_blocks_thinned); 0: no '
