@@ -295,8 +295,8 @@ with the evidence over blocks' period when there is one, else, from ``detect_jn_
 ``PERIOD_HISTORY`` blocks' own periods (within ``PERIOD_AGREEMENT``; consecutive weak blocks can agree on twice the
 period, so the window's period, when there is one, decides).
 Measured (3 rates x 6 periods x 3 J/N, saw-tooths, I/Q): before, 14 of 2,036 published periods were 1.1-100 % off, all
-from single blocks at J/N -5 dB, just above the detection level, mostly isolated among right ones; after, 2 of 2,004
-(1.1 and 1.3 % off)."""
+from single blocks at J/N -5 dB, just above the detection level, mostly isolated among right ones; after, 0 of 2,002
+(the window's period agreeing within PERIOD_AGREEMENT, not SUBHARMONIC_TOLERANCE: 2 of 2,004, 1.1 and 1.3 % off)."""
 PERIOD_HISTORY = 4
 """Recent blocks' own periods kept for the confirmation above (stamped within PERIOD_HISTORY_S)."""
 PERIOD_HISTORY_S = 1.0
@@ -839,7 +839,7 @@ class RfiMonitor:
         blocks' own periods stamped within PERIOD_HISTORY_S, within PERIOD_AGREEMENT."""
         p_int = self._integrated_period(stamp_ns)
         if math.isfinite(p_int):
-            return _agrees(period, p_int)
+            return _agrees(period, p_int, PERIOD_AGREEMENT)
         horizon = PERIOD_HISTORY_S * 1e9
         return detected and any(0 < stamp_ns - at <= horizon and _agrees(period, p, PERIOD_AGREEMENT)
                                 for p, at in self._block_periods)
