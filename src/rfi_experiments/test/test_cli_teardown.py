@@ -1,0 +1,77 @@
+"""The tools' bounded teardown and immediate exit (rfi_experiments.cli): a ROS shutdown that hangs does not keep
+``play`` or ``record`` alive after their work is done (once in several hundred test-suite runs ``record`` had
+closed its bag and never exited)."""
+
+import subprocess
+import sys
+import threading
+import time
+
+from rfi_experiments import cli
+
+
+class _Node:
+    def __init__(self) -> None:
+        self.destroyed = False
+
+    def destroy_node(self) -> None:
+        self.destroyed = True
+
+
+class _Executor:
+    def __init__(self, hang: threading.Event | None = None) -> None:
+        self.hang = hang
+        self.removed = False
+
+    def remove_node(self, node) -> None:
+        if self.hang is not None:
+            self.hang.wait()          # a middleware call that never returns
+        self.removed = True
+
+
+class _Rclpy:
+    def __init__(self) -> None:
+        self.shut_down = False
+
+    def try_shutdown(self) -> None:
+        self.shut_down = True
+
+
+def test_a_teardown_that_returns_is_complete(capsys):
+    node, executor, rclpy = _Node(), _Executor(), _Rclpy()
+    cli.bounded_teardown("play", executor, node, rclpy)
+    assert executor.removed and node.destroyed and rclpy.shut_down
+    assert capsys.readouterr().err == ""
+
+
+def test_a_teardown_that_hangs_is_left_behind_and_reported(monkeypatch, capsys):
+    monkeypatch.setattr(cli, "TEARDOWN_TIMEOUT_S", 0.2)
+    hang = threading.Event()
+    node, executor, rclpy = _Node(), _Executor(hang), _Rclpy()
+    t0 = time.monotonic()
+    try:
+        cli.bounded_teardown("record", executor, node, rclpy)
+        elapsed = time.monotonic() - t0
+    finally:
+        hang.set()                    # release the daemon thread
+    assert 0.15 < elapsed < 5.0
+    assert not node.destroyed
+    assert "record: ROS shutdown did not finish within 0.2 s; exiting anyway" in capsys.readouterr().err
+
+
+def test_exit_now_ends_the_process_with_main_s_code_despite_a_live_thread():
+    """A non-daemon thread that never ends would keep an ordinary interpreter alive at exit; exit_now does not
+    wait for it, and what main printed is flushed."""
+    code = (
+        "import threading, time\n"
+        "from rfi_experiments.cli import exit_now\n"
+        "threading.Thread(target=lambda: time.sleep(60)).start()\n"
+        "def main():\n"
+        "    print('done', end='')\n"
+        "    return 3\n"
+        "exit_now(main)\n"
+    )
+    t0 = time.monotonic()
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=30)
+    assert time.monotonic() - t0 < 20
+    assert proc.returncode == 3 and proc.stdout == "done"
