@@ -51,7 +51,9 @@ The window restarts on a change of sample rate, IF or real/complex (``reset``), 
 single-block analysis stops seeing a jammer it saw in the block before (``restart``: a jammer switched
 off is not reported on for window_s), and drops blocks older than ``window_s`` (a stamp that goes
 backwards restarts it). A jammer too weak for any single block that switches off is still reported
-until its evidence leaves the window (at most ``window_s``). The decision says how many blocks and
+until its evidence leaves the window (at most ``window_s``), unless a shorter sum shows that a periodic sweep is
+gone (``SWITCH_OFF_SIGMA``: the window then restarts; counted as ``Integrator.switch_offs``). The decision says how
+many blocks and
 seconds it rests on (``IntegratedDecision``).
 
 Example
@@ -196,6 +198,11 @@ COARSE_MULTIPLES = 16
 """Multiples summed by the coarse comb that selects the candidates of the fine one."""
 FINE_CANDIDATES = 12
 """Best coarse candidates refined with ``max_multiples`` multiples."""
+SWITCH_OFF_SIGMA = 5.0
+"""A periodic sweep found over a window is gone when a shorter sum (a sub-window) at its period reads this many standard
+deviations below what the sweep, at the strength the window measured, would give it (``Integrator.switch_offs``)."""
+SWITCH_OFF_MIN_EXPECTED = 8.0
+"""... and that shorter sum would show the sweep at no less than this many standard deviations (else it cannot tell)."""
 FINE_HALF_WIDTH = 1.5
 """Half-width of the fine search around a coarse candidate, in units of 1 / K_p frames (K_p: the coarse multiples):
 the coarse comb is flat over up to two of its steps (0.5 / K_p), and the true period may lie at either end."""
@@ -438,6 +445,9 @@ class Integrator:
         self._med: dict[int, float] = {}
         self._chirp_thr: dict[tuple[int, int, int, int, float], float] = {}
         self.thinned = 0
+        self.switch_offs = 0
+        """Windows restarted because a sweep found over them is gone from the newest blocks (SWITCH_OFF_SIGMA), since
+        construction."""
         """Blocks not added because of the processing budget (``IntegrationParams.max_samples_per_s``), since
         construction."""
         self._tokens = math.inf
@@ -585,9 +595,43 @@ class Integrator:
                 and int(stamp_ns) - self._last_stamp < int(round(par.decide_interval_s * 1e9))):
             return dataclasses.replace(self._last, blocks=self._last_sums.count)
         self._last = self._decide_all(cplx, fs, lmin, lmax, lag_limit)
+        if self._last.type == CHIRP and self._switched_off(self._last, lag_limit, fs):
+            # a sweep found only over the blocks gone by: the window restarts with this block (without this, a weak
+            # jammer that switched off was reported until its evidence left the window, up to window_s)
+            self.switch_offs += 1
+            newest = self._blocks[-1]
+            self._clear()
+            self._push(newest)
+            self._last = self._decide_all(cplx, fs, lmin, lmax, lag_limit)
+            n_frames = self._sums[0].frames
         self._last_stamp = int(stamp_ns)
         self._last_frames = n_frames
         return self._last
+
+    def _switched_off(self, d: IntegratedDecision, lag_limit: int, fs: float) -> bool:
+        """Whether the sweep of decision d (CHIRP, from the sum self._last_sums) is gone from a shorter sum: at d's
+        period, the shorter sum's comb reads SWITCH_OFF_SIGMA below what d's strength predicts for it, where that
+        prediction is at least SWITCH_OFF_MIN_EXPECTED (the comb over K multiples of the strength's reference)."""
+        if not (math.isfinite(d.chirp_strength) and d.chirp_strength > 0 and math.isfinite(d.period_samples)):
+            return False
+        p = d.period_samples / (frame_length(fs, self.params) // 2)
+        _, idx, mask = self._comb_lags(np.asarray([p]), lag_limit, int(self.params.max_multiples))
+        lags = idx[0][mask[0]]
+        if lags.size == 0:
+            return False
+        for sums in self._sums:
+            if sums.count >= self._last_sums.count or sums.frames < MIN_CHIRP_FRAMES:
+                continue
+            assert sums.r is not None and sums.v is not None
+            var = float(sums.v[lags].sum())
+            if not var > 0:
+                continue
+            scale = lags.size * sums.spread_frames - sums.spread * float(lags.sum())
+            expected = d.chirp_strength * scale / math.sqrt(var)
+            z = float(sums.r[lags].sum()) / math.sqrt(var)
+            if expected >= SWITCH_OFF_MIN_EXPECTED and z < min(expected - SWITCH_OFF_SIGMA, 0.5 * expected):
+                return True
+        return False
 
     def _median_ratio(self, K: int) -> float:
         """Median over mean of Gamma(K, 1/K) (cached)."""

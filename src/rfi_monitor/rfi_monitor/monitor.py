@@ -353,6 +353,7 @@ class RfiMonitor:
                                 "calibrations_discarded": 0, "clipped_blocks": 0, "frequency_not_tracked": 0,
                                 "tracker_resets_invalid": 0, "integrated_reports": 0,
                                 "integration_window_blocks": 0, "integration_blocks_thinned": 0,
+                                "integration_switch_offs": 0,
                                 "worker_blocks": 0, "worker_failures": 0, "block_periods_from_integration": 0,
                                 "block_periods_unconfirmed": 0, "jn_from_envelope": 0,
                                 "spectral_step_reports": 0}
@@ -974,6 +975,7 @@ class RfiMonitor:
                 self._int_period = (float(d.period_samples), int(stamp_ns))
             self._block_counters["integration_window_blocks"] = d.blocks
             self._block_counters["integration_blocks_thinned"] = self._integrator.thinned
+            self._block_counters["integration_switch_offs"] = self._integrator.switch_offs
             if d.type == CHIRP and jtype in (NONE, WIDEBAND):
                 # a periodic sweep in the window: no noise jammer makes one (the per-bin mean is removed, its
                 # frames are independent), so a block reported WIDEBAND from its broad excess is a sweep seen

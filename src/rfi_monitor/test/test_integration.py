@@ -216,6 +216,26 @@ def test_a_block_just_above_the_detection_level_publishes_a_confirmed_period(fs,
     assert all(abs(p - 1.0) < 0.01 for p in periods), sorted(periods, key=lambda p: abs(p - 1))[-3:]
 
 
+def test_a_weak_sweep_that_switches_off_is_dropped_within_tens_of_blocks():
+    """A saw-tooth at J/N -8 dB (4 MS/s I/Q, found only over blocks) on for 300 blocks, then noise: CHIRP in every
+    block while on, and the window restarts once the newest sub-window's comb at the sweep's period reads far below
+    what the window's strength predicts (Integrator.switch_offs, once); the last CHIRP comes at most 30 blocks after
+    the switch-off (measured 13; without the test the window's evidence was reported for up to window_s, 1,000
+    blocks)."""
+    fe = FrontEndConfig(sample_rate_hz=4e6, intermediate_frequency_hz=0.0, is_complex=True, bits=8,
+                        gain_mode="fixed", filter_low_hz=-1.8e6, filter_high_hz=1.8e6)
+    jam = SweepJammer("saw_up", -1.5e6, 1.5e6, 8.972e-6, js_db=js_for_jn_db(fe, -8.0))
+    on = IfSimulator(fe, (jam,), satellites=(), seed=5)
+    off = IfSimulator(fe, (), satellites=(), seed=6)
+    blocks = [on.generate(4000).values() for _ in range(300)] + [off.generate(4000).values() for _ in range(200)]
+    integ = Integrator(IntegrationParams())
+    types = [integ.add(x, True, 4e6, 1_000_000_000 + k * 1_000_000).type for k, x in enumerate(blocks)]
+    assert types[:300] == [CHIRP] * 300
+    after = [k for k, t in enumerate(types[300:]) if t == CHIRP]
+    assert after and max(after) < 30, after[-5:]
+    assert integ.switch_offs == 1
+
+
 def test_a_faint_periodic_modulation_is_not_a_jammer():
     """A saw-tooth at J/N -15 dB on 4 MS/s I/Q, on for 300 blocks: the comb finds it (z 24 over the window), but it
     repeats only 0.27 % of the amplitudes' variance, below min_chirp_strength (0.5 %; the clean 4 MS/s PocketSDR
