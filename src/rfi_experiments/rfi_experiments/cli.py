@@ -8,6 +8,7 @@ that started but failed exits with :data:`EXIT_FAILED`.
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import os
 import sys
 import threading
@@ -86,9 +87,11 @@ TEARDOWN_TIMEOUT_S = 10.0
 
 def bounded_teardown(prog: str, executor: Any, node: Any, rclpy: Any) -> None:
     """Remove and destroy ``node`` and shut ROS down in a daemon thread, waiting at most
-    :data:`TEARDOWN_TIMEOUT_S`. Once in several hundred test-suite runs the recorder had written and
-    closed every message and still did not exit (the shutdown hung in the middleware); the tool's
-    work is complete by then, so a hang is reported on stderr and left behind (:func:`exit_now`)."""
+    :data:`TEARDOWN_TIMEOUT_S`; a hang is reported on stderr and left behind. For a tool's ``main``
+    run in process. The executables release their endpoints and end at once (:func:`exit_now`):
+    once in several hundred test-suite runs the recorder had written and closed every message and
+    still did not exit, also with this bound (session 10's CI: a teardown that hangs in the
+    middleware while holding the GIL stops the waiting thread too)."""
     def run() -> None:
         executor.remove_node(node)
         node.destroy_node()
@@ -104,9 +107,26 @@ def bounded_teardown(prog: str, executor: Any, node: Any, rclpy: Any) -> None:
 
 def exit_now(main: Callable[[], int]) -> None:
     """Run a tool's ``main`` and end the process at once with its exit code: stdout and stderr are
-    flushed, but the interpreter is not finalised, where a middleware thread left by a hung shutdown
-    (:func:`bounded_teardown`) could keep it alive. For the console-script entry points."""
+    flushed, but neither ROS nor the interpreter is shut down (the middleware's threads and
+    participants end with the process; other participants see it leave). For the console-script
+    entry points, whose ``main`` skips the ROS teardown after :func:`release_endpoints`."""
     code = main()
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(code)
+
+
+def release_endpoints(node: Any, timeout_s: float = TEARDOWN_TIMEOUT_S) -> None:
+    """Destroy ``node``'s subscriptions and publishers, so that their peers see them leave at once (a player waiting for
+    a recorder's acknowledgements is released), before an executable ends without the ROS teardown
+    (:func:`exit_now`). Under a C-level watchdog (``faulthandler``): should the middleware hang here holding the GIL,
+    which no Python thread or signal handler can then interrupt, the process prints every thread's stack on stderr
+    and exits with status 1 after ``timeout_s``, instead of hanging."""
+    faulthandler.dump_traceback_later(timeout_s, exit=True)
+    try:
+        for sub in list(node.subscriptions):
+            node.destroy_subscription(sub)
+        for pub in list(node.publishers):
+            node.destroy_publisher(pub)
+    finally:
+        faulthandler.cancel_dump_traceback_later()

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from rfi_experiments.bag_io import BagError, BagReader, message_class
-from rfi_experiments.cli import bounded_teardown, error_reporter, exit_now
+from rfi_experiments.cli import bounded_teardown, error_reporter, exit_now, release_endpoints
 
 fail = error_reporter('play')
 
@@ -225,7 +225,9 @@ LATE_REASON = 'late_beyond_reorder_window'
 """The fusion node's rejection reason for a message that came after its re-ordering window."""
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def main(argv: Sequence[str] | None = None, *, teardown: bool = True) -> int:
+    """Play (module docstring); the exit code. ``teardown`` False: leave the node and ROS as they are once the
+    messages are delivered (the executable, which ends the process at once: :func:`cli`)."""
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from rclpy.utilities import remove_ros_args
@@ -367,7 +369,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f'play: interrupted after {played} of {total} messages', file=sys.stderr)
             return 130
         finally:
-            bounded_teardown('play', executor, node, rclpy)
+            if teardown:
+                bounded_teardown('play', executor, node, rclpy)
+            else:
+                release_endpoints(node)
 
 
 def print_summary(topics: Sequence[str], available: dict[str, tuple[str, int]], delivery: dict[str, Delivery],
@@ -438,5 +443,7 @@ if __name__ == '__main__':
 
 
 def cli() -> None:
-    """The ``play`` executable: :func:`main`, then the process ends at once with its exit code."""
-    exit_now(main)
+    """The ``play`` executable: :func:`main` without the ROS teardown (only its endpoints are released:
+    ``rfi_experiments.cli.release_endpoints``), then the process ends at once with its exit code
+    (``rfi_experiments.cli.exit_now``: a teardown that hangs holding the GIL cannot be bounded by a thread)."""
+    exit_now(lambda: main(teardown=False))

@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from rfi_experiments.bag_io import BagError, BagWriter, message_class
-from rfi_experiments.cli import EXIT_FAILED, bounded_teardown, error_reporter, exit_now
+from rfi_experiments.cli import EXIT_FAILED, bounded_teardown, error_reporter, exit_now, release_endpoints
 
 fail = error_reporter('record')
 
@@ -88,7 +88,9 @@ class RecordingFailed(Exception):
     """The bag could not be written any more (its folder disappeared, a write failed)."""
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def main(argv: Sequence[str] | None = None, *, teardown: bool = True) -> int:
+    """Record (module docstring); the exit code. ``teardown`` False: leave the node and ROS as they are once the bag is
+    closed (the executable, which ends the process at once: :func:`cli`)."""
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from rclpy.utilities import remove_ros_args
@@ -193,10 +195,15 @@ def main(argv: Sequence[str] | None = None) -> int:
                       f'the bag there is {"gone" if not out.is_dir() else "incomplete"}', file=sys.stderr)
             else:
                 print(f'record: wrote {written} messages to {out}')
-        bounded_teardown('record', executor, node, rclpy)
+        if teardown:
+            bounded_teardown('record', executor, node, rclpy)
+        else:
+            release_endpoints(node)
     return EXIT_FAILED if failure else 0
 
 
 def cli() -> None:
-    """The ``record`` executable: :func:`main`, then the process ends at once with its exit code."""
-    exit_now(main)
+    """The ``record`` executable: :func:`main` without the ROS teardown (only its endpoints are released:
+    ``rfi_experiments.cli.release_endpoints``), then the process ends at once with its exit code
+    (``rfi_experiments.cli.exit_now``: a teardown that hangs holding the GIL cannot be bounded by a thread)."""
+    exit_now(lambda: main(teardown=False))

@@ -75,3 +75,43 @@ def test_exit_now_ends_the_process_with_main_s_code_despite_a_live_thread():
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=30)
     assert time.monotonic() - t0 < 20
     assert proc.returncode == 3 and proc.stdout == "done"
+
+
+class _EndpointNode:
+    def __init__(self) -> None:
+        self.subscriptions = ['s1', 's2']
+        self.publishers = ['p1']
+        self.destroyed: list[str] = []
+
+    def destroy_subscription(self, sub) -> None:
+        self.destroyed.append(sub)
+
+    def destroy_publisher(self, pub) -> None:
+        self.destroyed.append(pub)
+
+
+def test_release_endpoints_destroys_subscriptions_and_publishers():
+    node = _EndpointNode()
+    cli.release_endpoints(node, timeout_s=5.0)
+    assert node.destroyed == ['s1', 's2', 'p1']
+
+
+def test_release_endpoints_that_hang_end_the_process_with_its_stacks():
+    """The watchdog is C-level (faulthandler): a release that never returns ends the process (status 1, every
+    thread's stack on stderr) instead of hanging it."""
+    code = (
+        "import time\n"
+        "from rfi_experiments.cli import release_endpoints\n"
+        "class Node:\n"
+        "    subscriptions = ['s']\n"
+        "    publishers = []\n"
+        "    def destroy_subscription(self, sub):\n"
+        "        time.sleep(60)\n"
+        "release_endpoints(Node(), timeout_s=0.5)\n"
+        "print('not reached')\n"
+    )
+    t0 = time.monotonic()
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=30)
+    assert time.monotonic() - t0 < 20
+    assert proc.returncode == 1 and 'not reached' not in proc.stdout
+    assert 'Timeout' in proc.stderr and 'destroy_subscription' in proc.stderr
