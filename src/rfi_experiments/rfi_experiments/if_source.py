@@ -20,7 +20,10 @@ period, 3 s with Fast DDS, per block). A subscriber that does not drain its own 
 blocks) in time loses blocks and counts them as lost; to lose nothing whatever the subscriber's speed, write a
 bag with ``if_to_bag`` and play it with ``play`` / ``run``. A live stream is paced by its source in both modes.
 ``wait_for_subscribers`` (default 0) holds the input until that many subscribers have matched (a file
-replayed into a monitor started at the same time loses nothing), for at most ``wait_timeout_s``.
+replayed into a monitor started at the same time loses nothing), for at most ``wait_timeout_s``, then
+``SUBSCRIBER_SETTLE_S`` more: discovery completes on each side separately, and a subscriber this publisher has
+matched may not yet have matched it (measured: a 38.192 MS/s best-effort stream into a monitor started with it lost
+its first 99 blocks, never seen by the monitor, so never counted there).
 
 QoS (``reliability``): ``reliable`` (default: the suite's DATA_QOS, reliable, keep last 1000) or
 ``best_effort`` (rclpy's sensor-data profile, REP 2003: a slow subscriber loses blocks instead of slowing
@@ -92,6 +95,10 @@ READ_BYTES = 1 << 16
 ACK_TIMEOUT_S = 30.0
 """Longest wait for the subscribers' acknowledgements (``max`` pace and end of input, reliable), s; then
 ``unacknowledged_waits`` counts it and reading goes on."""
+
+SUBSCRIBER_SETTLE_S = 0.5
+"""After ``wait_for_subscribers`` have matched, the input waits this much longer before reading, s (module
+docstring)."""
 
 ACK_EVERY_BLOCKS = 500
 """In ``max`` pace (reliable), wait for the acknowledgements after this many blocks (half DATA_QOS's depth)."""
@@ -296,6 +303,7 @@ class IfSourceNode(Node):
                                        f'{self.params.wait_timeout_s} s: starting anyway')
                 return
             self.stop.wait(0.02)
+        self.stop.wait(SUBSCRIBER_SETTLE_S)
 
     def _read_loop(self) -> None:
         if self._fd is None:  # a named pipe

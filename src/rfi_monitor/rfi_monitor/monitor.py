@@ -186,6 +186,8 @@ class JammerEstimate:
         sweep_shape: ridge.SHAPE_* code (CHIRP only, else 0 = unknown).
         in_band_fraction: share of the sweep period with the jammer inside the sampled band (CHIRP with
             a period; NaN otherwise).
+        light: the block had the light analysis (``process(light=True)``): type and J/N measured on its spectrum,
+            the sweep fields carried from the last full analysis, ``frequency_hz`` of a chirp NaN.
     """
 
     stamp_ns: int
@@ -211,6 +213,7 @@ class JammerEstimate:
     clipped_fraction: float = 0.0
     sweep_shape: int = 0
     in_band_fraction: float = math.nan
+    light: bool = False
 
 
 SATURATED = "saturated"
@@ -319,6 +322,42 @@ def _multiple(period: float, base: float) -> int:
     return m if m >= 2 and abs(period - m * base) <= SUBHARMONIC_TOLERANCE * m * base else 0
 
 
+LIGHT_MAX_AGE_S = 0.01
+"""A light analysis (``RfiMonitor.process(light=True)``) carries the last full analysis of a jammer only if that block
+is stamped at most this long before, s: a jammer's type, sweep period, band and shape do not change within 10 ms, and
+a node behind its stream analyses a block in full at least this often while it reports one (the light path
+escalates itself when the last full analysis is older)."""
+LIGHT_MAX_AGE_QUIET_S = 0.05
+"""... and of a block without a jammer (NONE), s. A quiet block's full analysis costs most (the evidence over blocks
+decides with it: 3-5 ms at 38.192 MS/s on a 2-vCPU AMD EPYC, against 1 ms for a tracked chirp's), so one in 10 would
+keep a node behind its stream behind (measured in live_stream.md); a jammer that appears is seen by the light
+analysis itself from ``detect_jn_db`` - ``LIGHT_NONE_MARGIN_DB``, a weaker one by the next full analysis, at most
+this much later."""
+LIGHT_JN_TOLERANCE_DB = 3.0
+"""A light analysis of a block whose jammer's power J/N moved more than this from the last full analysis's escalates
+to a full analysis, dB (a jammer switching on, off, or changing: twice the 1-sigma scatter of a weak jammer's block
+J/N at the common front ends)."""
+LIGHT_NONE_MARGIN_DB = 3.0
+"""... and a block after a NONE answer escalates from ``detect_jn_db`` minus this (power or spectral J/N), dB: what the
+light path cannot see (a sweep the ridge analysis finds below the detection J/N) is left to the next full block."""
+
+
+@dataclass(frozen=True)
+class _LastFull:
+    """What a light analysis carries (RfiMonitor._identify_light): the last fully analysed block's estimate, its block
+    power, the noise power its J/N was measured against, its power J/N (dB) and the digital frequency of its spectral
+    peak (cycles per sample), whether the estimate came from the evidence over blocks, and the stream it was on."""
+
+    est: JammerEstimate
+    power: float
+    noise: float
+    jn_power_db: float
+    peak: float
+    integrated: bool
+    fs: float
+    cplx: bool
+
+
 @dataclass
 class _Ahead:
     """A block's ridge analysis started on the worker (RfiMonitor._identify_stft): on the last ``size`` samples,
@@ -356,7 +395,9 @@ class RfiMonitor:
                                 "integration_switch_offs": 0,
                                 "worker_blocks": 0, "worker_failures": 0, "block_periods_from_integration": 0,
                                 "block_periods_unconfirmed": 0, "jn_from_envelope": 0,
-                                "spectral_step_reports": 0}
+                                "spectral_step_reports": 0, "light_blocks": 0, "light_escalations": 0}
+        self._last_full: _LastFull | None = None
+        self._full_levels: tuple[float, float, float, bool] | None = None
         self._integrator = Integrator(params.integration, params.classifier.detect_jn_db)
         self._step = SpectralStep(params.spectral_step, params.classifier.nfft)
         self.last_step: StepDecision | None = None
@@ -407,6 +448,7 @@ class RfiMonitor:
             self._forget_calibration()
             self._cal_key = None
             self._forget_learned()
+            self._last_full = None
         self._frame_length = 0
 
     def _forget_learned(self) -> None:
@@ -450,7 +492,7 @@ class RfiMonitor:
     def process(self, samples: np.ndarray, sample_rate_hz: float, intermediate_frequency_hz: float,
                 first_sample_index: int, stamp_ns: int, is_complex: bool | None = None,
                 full_scale: float | None = None, return_traces: bool = False,
-                bits: int | None = None) -> JammerEstimate:
+                bits: int | None = None, light: bool = False) -> JammerEstimate:
         """Analyse one block.
 
         Args:
@@ -470,6 +512,14 @@ class RfiMonitor:
                 of a reported jammer is flagged as a lower bound: a coarse quantiser compresses a strong
                 jammer's power (measured: a J/N 10 dB saw-tooth added to 2-bit PocketSDR captures read
                 4.9-6.5 dB), and its top level is a normal value, so no clipping is counted.
+            light: a light analysis will do ("stft" estimator; a node behind its stream asks for it rather than shed
+                the block): the block's Welch spectrum only, its type and J/N checked against the last full analysis
+                (at most ``LIGHT_MAX_AGE_S`` older, ``LIGHT_MAX_AGE_QUIET_S`` after a NONE), whose sweep period,
+                band, rate and shape it carries; a chirp's
+                frequency is NaN (not tracked in this block). The block is analysed in full instead when there is no
+                such analysis or the spectrum disagrees with it (a jammer appearing, leaving or changing power by
+                ``LIGHT_JN_TOLERANCE_DB``): counted as ``light_escalations``; light answers as ``light_blocks``. The
+                evidence over blocks, the spectral-step test and the floor learning skip light blocks.
 
         Returns:
             JammerEstimate.
@@ -546,9 +596,22 @@ class RfiMonitor:
                                   None)
         xs = xc if n_bad == 0 else np.where(np.isfinite(xc), xc, 0)
         if self.params.estimator == "stft":
-            return self._identify_stft(xs, cplx, float(sample_rate_hz), float(intermediate_frequency_hz),
-                                       int(stamp_ns), int(first_sample_index), clipped, full_scale,
-                                       bits is not None and int(bits) <= COARSE_BITS)
+            coarse = bits is not None and int(bits) <= COARSE_BITS
+            if light:
+                est = self._identify_light(xs, cplx, float(sample_rate_hz), float(intermediate_frequency_hz),
+                                           int(stamp_ns), int(first_sample_index), clipped, full_scale, coarse)
+                if est is not None:
+                    return est
+                self._block_counters["light_escalations"] += 1
+            est = self._identify_stft(xs, cplx, float(sample_rate_hz), float(intermediate_frequency_hz),
+                                      int(stamp_ns), int(first_sample_index), clipped, full_scale, coarse)
+            levels, self._full_levels = self._full_levels, None
+            self._last_full = None
+            if est.valid and levels is not None:
+                power, noise, peak, integrated = levels
+                jn_pow = 10 * math.log10(power / noise - 1.0) if power > noise > 0 else -math.inf
+                self._last_full = _LastFull(est, power, noise, jn_pow, peak, integrated, float(sample_rate_hz), cplx)
+            return est
         # --- per-sample loop (always run: keeps the state continuous) ---------------------------
         resets_before = int(self._state.mist[MonitorInt.NRESETS])
         if self._stream_first is None:
@@ -825,6 +888,89 @@ class RfiMonitor:
                 w.cancel()               # not used (an early return, or another length or part): dropped
                 self._block_counters["worker_failures"] = w.failures
 
+    def _identify_light(self, xs: np.ndarray, cplx: bool, fs: float, fif: float, stamp_ns: int, first: int,
+                        clipped: float, full_scale: float | None, coarse: bool) -> JammerEstimate | None:
+        """The light analysis of a block (``process(light=True)``), or None when the block needs the full one.
+
+        The block's Welch PSD gives its power, its J/N against the reference of the last full analysis and its
+        spectral features (the first steps of the full analysis, docs/rfi_monitor/stft_estimator.md). The answer
+        keeps the last full analysis's type when the block agrees with it:
+
+        * NONE (or a jammer found only by the evidence over blocks): a floor is known and neither the power nor the
+          spectral J/N reaches ``detect_jn_db`` - ``LIGHT_NONE_MARGIN_DB``;
+        * CW: the block still shows a narrow line (the full analysis's CW rule) within two bins of the last one's;
+          its frequency is this block's spectral peak, as in the full analysis;
+        * CHIRP, WIDEBAND: the block power's J/N against the last full analysis's noise power is within
+          ``LIGHT_JN_TOLERANCE_DB`` of that analysis's own; the J/N published is the last one moved by the change.
+
+        The sweep period, band, rate, start, shape and in-band fraction (and a wideband jammer's band) are the last
+        full analysis's; a chirp's frequency is NaN (the ridge, which tracks it, does not run). J/S, the clipped
+        fraction and the lower-bound flag are this block's."""
+        lf = self._last_full
+        p = self.params
+        cp = p.classifier
+        if lf is None or lf.fs != fs or lf.cplx != cplx or lf.est.type == UNKNOWN:
+            return None
+        max_age_s = LIGHT_MAX_AGE_QUIET_S if lf.est.type == NONE and not lf.integrated else LIGHT_MAX_AGE_S
+        if not 0 < stamp_ns - lf.est.stamp_ns <= max_age_s * 1e9:
+            return None
+        psd, frames = welch_psd(xs, cp.nfft, cp.max_frames)
+        power = float(psd.sum())
+        if not (math.isfinite(power) and power >= MIN_BLOCK_POWER):
+            return None                               # the full analysis rejects it, counted
+        floor, ref = self._reference(fs, cplx, full_scale, math.nan)
+        if ref != REF_IN_BLOCK and not (floor * 10 ** (-BELOW_FLOOR_DB / 10) <= power
+                                        <= floor * 10 ** (MAX_POWER_JN_DB / 10)):
+            return None
+        norm = psd / power
+        tpl = self._ltemplate if self._ltemplate is not None else smooth_template(norm, cp.template_smooth_bins)
+        feat = features_from_psd(psd, frames, tpl, cp, cplx)
+        thr = cp.detect_jn_db
+        last = lf.est
+        jtype = last.type
+        conf = last.confidence
+        freq, fstd = last.frequency_hz, last.frequency_std_hz
+        if jtype == NONE or lf.integrated:
+            if ref == REF_IN_BLOCK:
+                return None                           # no floor: only the ridge's in-block noise tells
+            jn_ref = 10 * math.log10(power / floor - 1.0) if power > floor else -math.inf
+            jn = max(jn_ref, feat.jn_spectral_db)
+            if not jn < thr - LIGHT_NONE_MARGIN_DB:
+                return None
+            if jtype == NONE:
+                conf = 1.0 - logistic(jn - thr, cp.confidence_slope_db)
+            jn = max(jn, 5.0 * math.log10((1.0 if cplx else 2.0) / (frames * cp.nfft)))   # the resolution
+        elif jtype == CW:
+            narrow = feat.jn_spectral_db >= thr
+            cw = narrow and (feat.occupancy <= cp.cw_max_occupancy or feat.line_fraction >= CW_MIN_LINE_FRACTION)
+            if not cw or not abs(feat.peak_frequency - lf.peak) <= 2.0 / cp.nfft:
+                return None
+            noise = floor if ref != REF_IN_BLOCK else lf.noise
+            jn_ref = 10 * math.log10(power / noise - 1.0) if power > noise else -math.inf
+            jn = max(jn_ref, feat.jn_spectral_db)
+            if not abs(jn - last.jammer_to_noise_db) <= LIGHT_JN_TOLERANCE_DB:
+                return None
+            conf = logistic(feat.jn_spectral_db - thr, cp.confidence_slope_db)
+            freq = self._to_rel_hz(feat.peak_frequency, fs, fif, cplx)
+        else:
+            jn_pow = 10 * math.log10(power / lf.noise - 1.0) if power > lf.noise > 0 else -math.inf
+            delta = jn_pow - lf.jn_power_db
+            if not abs(delta) <= LIGHT_JN_TOLERANCE_DB:
+                return None
+            jn = last.jammer_to_noise_db + delta
+            if jtype == CHIRP:
+                freq = fstd = math.nan
+        bw_noise = p.noise_bandwidth_hz if p.noise_bandwidth_hz > 0 else (fs if cplx else fs / 2)
+        n_dbm = p.noise_density_dbm_per_mhz + 10 * math.log10(bw_noise / 1e6)
+        js = jn + n_dbm - p.signal_power_dbm
+        lower = (clipped > p.clip_lower_bound_fraction or coarse) and jtype != NONE
+        self._block_counters["light_blocks"] += 1
+        return dataclasses.replace(
+            last, stamp_ns=int(stamp_ns), confidence=float(conf), jammer_to_noise_db=float(jn),
+            jammer_to_signal_db=float(js), frequency_hz=float(freq), frequency_std_hz=float(fstd),
+            first_sample_index=int(first), n_samples=int(xs.size), counters=self._counters(), traces=None,
+            jammer_to_noise_is_lower_bound=bool(lower or lf.integrated), clipped_fraction=float(clipped), light=True)
+
     def _integrated_period(self, stamp_ns: int) -> float:
         """The sweep period (samples) of the evidence over blocks' last CHIRP decision, if it was made within the
         integration window before stamp_ns; else NaN."""
@@ -885,6 +1031,7 @@ class RfiMonitor:
         cp = p.classifier
         nan = math.nan
         n = xs.size
+        self._full_levels = None
         psd, frames = welch_psd(xs, cp.nfft, cp.max_frames)
         power = float(psd.sum())
         if not math.isfinite(power):
@@ -939,6 +1086,7 @@ class RfiMonitor:
                 rr = rg.analyse(part, cplx, fs, p.ridge, self._frame_length, fine_hook=self._hook_test_due(stamp_ns))
             rr = self._remember_hook(rr, stamp_ns)
             jtype, conf, jn, jn_ref, jn_in, floor = self._decide(power, feat, rr, floor, ref)
+            self._full_levels = (power, floor, feat.peak_frequency, False)   # for the light analysis
             if part.size < n and self._chirp and not rr.sweeping:
                 part = xs            # the tail shows no sweep (any more): the whole block decides
                 continue
@@ -1007,6 +1155,8 @@ class RfiMonitor:
         if jtype == NONE:
             jn = max(jn, 5.0 * math.log10((1.0 if cplx else 2.0) / (frames * cp.nfft)))
         if integrated is not None:
+            if self._full_levels is not None:
+                self._full_levels = self._full_levels[:3] + (True,)
             return self._integrated_estimate(integrated, jn, stamp_ns, fs, fif, cplx, first, n, ref, clipped, xs)
         if jtype in (CW, CHIRP) and ref != REF_IN_BLOCK and math.isfinite(jn) and jn == jn_in and jn_in > jn_ref:
             # an AGC (or a gain change) hides the jammer from the block power; the noise measured in the block

@@ -96,18 +96,28 @@ reaching the node (one rejected block among many stays OK); else OK. ``hardware_
 the parameter (the front end), and it, the window, the thresholds and ``warning_throttle_s`` can be set
 while the node runs (rfi_node_common.params.RuntimeParameters; the core's parameters are read-only).
 
-Load shedding (issue 14 item 6): a front end delivers a continuous stream, and a node that takes longer
-per block than the block lasts falls behind until the middleware drops blocks it never sees. Instead the
-node spends at most ``max_cpu_load`` of one core over the stream time the blocks cover, measured with the
-CPU time of its own thread in the callbacks, deserialising included (``time.thread_time``: resource
-accounting only, no estimate depends on it), and sheds whole blocks on purpose when it is over that budget,
-judged on the stamp read from the raw bytes before they are deserialised (``peek_stamp_ns``; a shed block
-costs almost nothing): counted as ``blocks_shed`` on /diagnostics,
-no JammerState, and the block after a shed one is a gap for the core (the "stft" estimator keeps no
-per-sample state, so its estimates stay valid). Which blocks are shed depends on the machine's speed, not
-on the replay rate (the budget is stream time). Snapshot front ends (1 ms per second) never shed. The debt is
-capped at SHED_CREDIT_CAP_S, and the compiled functions are compiled (or loaded) at start-up
-(:func:`warm_up`), so that a one-off cost does not shed seconds of stream.
+Load shedding (issue 14 item 6): a front end delivers a continuous stream, and a node that takes longer per block
+than the block lasts falls behind until the middleware drops blocks it never sees. Instead the node spends at most
+``max_cpu_load`` of one core over the stream time the blocks cover, measured with the CPU time of its own thread
+in the callbacks, deserialising included (``time.thread_time``: resource accounting only, no estimate depends on
+it). A block that arrives while the node is over that budget gets the light analysis (estimator stft;
+``RfiMonitor.process(light=True)``: its Welch spectrum only, about a quarter of a quiet block's full analysis; its
+type and J/N checked against the last full analysis at most 10 ms of stamps before (50 ms after a NONE), whose
+sweep period, band, rate and shape it carries, a chirp's frequency NaN; a block that disagrees, a jammer appearing
+or leaving, is analysed in full): counted as ``blocks_light`` (within ``blocks_processed``) and
+``core.light_escalations``. On a live stream (below), a block that waited more than ``LIGHT_QUEUE_S`` (10 ms) in
+the input queue, or one stamped more than ``LIGHT_LAG_FRACTION`` of ``max_block_age_s`` behind the node clock,
+gets the light analysis too (the CPU budget does not see a machine that leaves the node less than a core); a
+replay never does (its blocks queue up by design). So a node that cannot analyse every block in full still answers
+every block, the detail of one block in a few. Only when it is over budget by more than ``light_analysis_debt_s``
+(the light analysis does not keep up either) does it shed whole blocks on purpose, judged on the stamp read from
+the raw bytes before they are deserialised (``peek_stamp_ns``; a shed block costs almost nothing): counted as
+``blocks_shed`` on /diagnostics, no JammerState, and the block after a shed one is a gap for the core (the "stft"
+estimator keeps no per-sample state, so its estimates stay valid). Which blocks are shed depends on the machine's
+speed, not on the replay rate (the budget is stream time). Snapshot front ends (1 ms per second) never shed. The
+debt is capped at SHED_CREDIT_CAP_S, and the compiled functions are compiled (or loaded) at start-up
+(:func:`warm_up`), so that a one-off cost does not shed seconds of stream. ``max_cpu_load`` 0 switches all of this
+off: every block is analysed in full, as by the core.
 ``accounting_ok`` counts shed blocks: received == processed + shed + rejected.
 
 Live streams, latency: ``max_block_age_s`` (0.05 s by default; 0: off) also sheds, before deserialising, a block
@@ -200,13 +210,26 @@ SCALE_MAX = 1.0e3
 """Largest volts (or full-scale units) per count accepted (module docstring)."""
 CENTER_FREQUENCY_MAX_HZ = 1.0e11
 """Highest RF reference frequency accepted, Hz (GNSS bands are 1.1-2.5 GHz; 100 GHz leaves room for any band)."""
+FULL, LIGHT, SHED = 'full', 'light', 'shed'
+"""What the load decision gives a block (RfiMonitorNode._load_mode): the full analysis, the light one, none."""
+LIGHT_QUEUE_S = 0.01
+"""On a live stream (``max_block_age_s``), a block that waited longer than this in the input queue (from its reception
+by the middleware, rmw's ``received_timestamp``, to its callback), s, gets the light analysis even when the CPU budget
+allows the full one (``max_cpu_load`` > 0): the budget counts this thread's CPU time in the callbacks, not what the
+machine leaves it (the source and other processes on the same cores, the middleware's threads), so the queue is what
+shows that the node does not get the core it is budgeted. Never on a replay: a replay sent faster than the node
+analyses (a burst of blocks, a bag played at 10x) queues up by design, and its blocks are analysed as the machine's
+speed allows (the CPU budget), not as the replay rate would have it."""
+LIGHT_LAG_FRACTION = 0.2
+"""... and so does, on a live stream, a block stamped more than this share of ``max_block_age_s`` behind the node
+clock (the same for a middleware that does not report reception times)."""
 SHED_CREDIT_CAP_S = 0.1
+"""Load shedding: CPU credit saved while idle is capped at this much stream time (times max_cpu_load), s: a burst
+of slow blocks after a quiet spell is absorbed, a lasting overload is not."""
 LIVE_STREAM_DETECT_S = 1.0
 """A stream is live (``max_block_age_s`` applies) when its first block, after the node starts or after a stamp
 restart, is stamped within this many seconds of the node clock, either side; a replay's stamps lie further in the
 past, s."""
-"""Load shedding: CPU credit saved while idle is capped at this much stream time (times max_cpu_load), s: a burst
-of slow blocks after a quiet spell is absorbed, a lasting overload is not."""
 MAX_SAMPLE_INDEX = 2 ** 53
 """first_sample_index + samples may not exceed this: the core's sample positions are float64, exact to 2^53."""
 
@@ -273,9 +296,16 @@ class MonitorNodeParams:
         'analysed, its clipped fraction reported and its J/N flagged as a lower bound.')
     max_cpu_load: float = parameter(
         0.9, 'Share of one core the analysis may use, over the stream time the blocks cover (a continuous stream: '
-        'the block durations; snapshots: the time between them). Beyond it whole blocks are shed on purpose '
-        '(blocks_shed on /diagnostics, no JammerState for them) until it fits again; 0: never shed.',
+        'the block durations; snapshots: the time between them). Beyond it blocks get the light analysis '
+        '(light_analysis_debt_s) and, beyond that, are shed whole on purpose (blocks_shed on /diagnostics, no '
+        'JammerState for them) until it fits again; 0: never shed.',
         minimum=0.0, maximum=1000.0)
+    light_analysis_debt_s: float = parameter(
+        0.02, 'Estimator stft: while the node is over its max_cpu_load budget by at most this much CPU time, a block '
+        'gets the light analysis instead of being shed (its Welch spectrum: type and J/N checked against the last full '
+        'analysis, whose sweep period, band and shape it carries; a chirp\'s frequency NaN; blocks_light on '
+        '/diagnostics), so that every block is answered while the light analysis keeps up; beyond it blocks are shed. '
+        '0: no light analysis (shed at once, as before session 11).', minimum=0.0, maximum=SHED_CREDIT_CAP_S)
     max_block_age_s: float = parameter(
         0.05, 'Live streams only: a block stamped more than this many seconds behind the node clock is shed before '
         'it is deserialised (blocks_shed and blocks_shed_stale), so the answers stay within this latency when the '
@@ -802,7 +832,8 @@ class RfiMonitorNode(Node):
         cpu0 = time.thread_time()
         try:
             stamp = peek_stamp_ns(raw)
-            if stamp is not None and self._shed(stamp, None):
+            mode = self._load_mode(stamp, None) if stamp is not None else None
+            if mode == SHED:
                 # shed before the bytes are even deserialised: a node behind its stream must get cheaper
                 self.counts['blocks_received'] += 1
                 decision = self._gate.admit(stamp)
@@ -821,7 +852,7 @@ class RfiMonitorNode(Node):
                 self.get_logger().warn(f'IF block rejected: malformed message ({len(raw)} bytes: '
                                        f'{type(err).__name__})', throttle_duration_sec=self.params.warning_throttle_s)
                 return
-            self._handle(msg, shed_checked=stamp is not None)
+            self._handle(msg, load_mode=mode)
         finally:
             self._cpu_debt_s += time.thread_time() - cpu0
 
@@ -830,22 +861,25 @@ class RfiMonitorNode(Node):
         raises."""
         cpu0 = time.thread_time()
         try:
-            self._handle(msg, shed_checked=False)
+            self._handle(msg, load_mode=None)
         finally:
             self._cpu_debt_s += time.thread_time() - cpu0
 
-    def _handle(self, msg: IfSamples, shed_checked: bool) -> None:
-        """on_block's work; ``shed_checked``: the shedding decision was made on the raw bytes already."""
+    def _handle(self, msg: IfSamples, load_mode: str | None) -> None:
+        """on_block's work; ``load_mode``: FULL or LIGHT when the load decision (:meth:`_load_mode`) was made on the
+        raw bytes already, None when it is to be made here."""
         self.counts['blocks_received'] += 1
         stamp_ns: int | None = None
         try:
             reason, stamp_ns = self._admit_stamp(msg)
             if reason is None:
                 reason = check_block(msg, self.params.min_block_samples, self.params.max_block_samples)
-            if reason is None and stamp_ns is not None and not shed_checked and self._shed(stamp_ns, msg):
+            mode = load_mode if load_mode is not None else (
+                self._load_mode(stamp_ns, msg) if reason is None and stamp_ns is not None else FULL)
+            if reason is None and mode == SHED:
                 self.counts['blocks_shed'] += 1
             elif reason is None:
-                reason = self._analyse(stamp_ns, msg)
+                reason = self._analyse(stamp_ns, msg, light=mode == LIGHT)
         except Exception as err:  # noqa: BLE001 - a bug in the checks: count it, never lose the block
             self.get_logger().error(f'IF block dropped, the node raised {type(err).__name__}: {err}',
                                     throttle_duration_sec=self.params.warning_throttle_s)
@@ -857,12 +891,13 @@ class RfiMonitorNode(Node):
         if stamp_ns is not None and self._diag_timer.due(stamp_ns):
             self._publish(lambda: self.diagnostics(stamp_ns))
 
-    def _shed(self, stamp_ns: int, msg: IfSamples | None) -> bool:
-        """Whether to shed this block (module docstring, "Load shedding"): every block earns ``max_cpu_load``
+    def _load_mode(self, stamp_ns: int, msg: IfSamples | None) -> str:
+        """FULL, LIGHT or SHED for this block (module docstring, "Load shedding"): every block earns ``max_cpu_load``
         times the stream time it covers (its duration, or the time since the last block when longer; only the
         latter for a block judged on its raw bytes, ``msg`` None), each callback spends the CPU time it takes
-        (deserialising included); a block arriving while the balance is in debt is shed. The credit saved is
-        capped at SHED_CREDIT_CAP_S times max_cpu_load (a burst allowance)."""
+        (deserialising included); a block arriving while the balance is in debt gets the light analysis while the
+        debt is at most ``light_analysis_debt_s`` (estimator stft), else it is shed. The credit saved is capped at
+        SHED_CREDIT_CAP_S times max_cpu_load (a burst allowance)."""
         load = self.params.max_cpu_load
         covered_s = 0.0
         if msg is not None and msg.sample_format in SAMPLE_WIDTH_BYTES and msg.sample_rate_hz > 0:
@@ -873,20 +908,27 @@ class RfiMonitorNode(Node):
         if self._last_block_stamp_ns is None or stamp_ns > self._last_block_stamp_ns:
             self._last_block_stamp_ns = stamp_ns
         age = self.params.max_block_age_s
+        behind_ns = 0
         if age > 0:
             behind_ns = self.get_clock().now().nanoseconds - stamp_ns
             if self._live is None:
                 self._live = abs(behind_ns) <= LIVE_STREAM_DETECT_S * NS_PER_S
             if self._live and behind_ns > age * NS_PER_S:
                 self.counts['blocks_shed_stale'] += 1
-                return True
+                return SHED
         if not load > 0:
-            return False
+            return FULL
+        light = self.params.light_analysis_debt_s > 0 and self.params.estimator == 'stft'
+        queued = self.health.queued_s() if light and self._live else None
+        lagging = light and bool(self._live) and ((queued is not None and queued > LIGHT_QUEUE_S)
+                                                  or behind_ns > LIGHT_LAG_FRACTION * age * NS_PER_S)
         # the debt is capped too: a one-off cost (a garbage collection, a page fault storm) sheds at most
         # SHED_CREDIT_CAP_S of stream; a lasting overload adds its cost again with every analysed block
         self._cpu_debt_s = min(max(self._cpu_debt_s - load * covered_s, -load * SHED_CREDIT_CAP_S),
                                SHED_CREDIT_CAP_S)
-        return self._cpu_debt_s > 0.0
+        if not self._cpu_debt_s > 0.0:
+            return LIGHT if lagging else FULL
+        return LIGHT if light and self._cpu_debt_s <= self.params.light_analysis_debt_s else SHED
 
     def _admit_stamp(self, msg: IfSamples) -> tuple[str | None, int | None]:
         """(rejection reason or None, the stamp in ns if the StampGate accepted it)."""
@@ -903,8 +945,9 @@ class RfiMonitorNode(Node):
                                    f'{self.params.stamp_jump_confirmations} blocks): new time line')
         return None, stamp_ns
 
-    def _analyse(self, stamp_ns: int, msg: IfSamples) -> str | None:
-        """Run the core on a well-formed block and publish its estimate; return a rejection reason."""
+    def _analyse(self, stamp_ns: int, msg: IfSamples, light: bool = False) -> str | None:
+        """Run the core on a well-formed block (``light``: the light analysis will do) and publish its estimate;
+        return a rejection reason."""
         counts = decode_counts(msg)
         if is_blank(counts, bool(msg.is_complex)):
             return 'blank_block'
@@ -912,7 +955,8 @@ class RfiMonitorNode(Node):
             est = self.monitor.process(
                 counts.astype(np.float64) * msg.scale, msg.sample_rate_hz, msg.intermediate_frequency_hz,
                 msg.first_sample_index, stamp_ns, is_complex=bool(msg.is_complex),
-                full_scale=full_scale(msg) if self.params.check_saturation else None, bits=int(msg.bits_per_sample))
+                full_scale=full_scale(msg) if self.params.check_saturation else None, bits=int(msg.bits_per_sample),
+                light=light)
         except Exception as err:  # noqa: BLE001 - the checks should make this unreachable; count it, keep going
             self.get_logger().error(f'core raised on a checked IF block ({type(err).__name__}: {err})',
                                     throttle_duration_sec=self.params.warning_throttle_s)
@@ -921,6 +965,8 @@ class RfiMonitorNode(Node):
         if not est.valid:
             return est.rejection or NON_FINITE
         self.counts['blocks_processed'] += 1
+        if est.light:
+            self.counts['blocks_light'] += 1
         self._last_type = int(est.type)
         self._last_clipped_fraction = float(est.clipped_fraction)
         self.state_pub.publish(jammer_state_msg(est, msg))
@@ -954,8 +1000,8 @@ class RfiMonitorNode(Node):
     def accounting(self) -> dict[str, object]:
         """Counters of the node, the core and the subscription, and whether every block received is accounted for."""
         values: dict[str, object] = dict(sorted(self.counts.items()))
-        for key in ('blocks_received', 'blocks_processed', 'states_published', 'stamp_restarts', 'blocks_shed',
-                    'blocks_shed_stale'):
+        for key in ('blocks_received', 'blocks_processed', 'blocks_light', 'states_published', 'stamp_restarts',
+                    'blocks_shed', 'blocks_shed_stale'):
             values.setdefault(key, 0)
         core = self._core_counters
         values['gaps'] = core.get('gaps', 0)

@@ -318,12 +318,65 @@ def test_load_shedding_counts_whole_blocks_and_keeps_accounting(probe_factory):
     any analysis costs, so after the first block every block of this short stream is shed."""
     fe = FrontEndConfig(noise_bandwidth_hz=NOISE_BW_HZ)
     msgs, _ = stream(fe, (ChirpJammer(js_db=JS_DB),), 0, 6, seed=21)
-    p = probe_factory(max_cpu_load=1e-4)
+    p = probe_factory(max_cpu_load=1e-4, light_analysis_debt_s=0.0)     # no light analysis: shed at once
     states = p.send_all(msgs)
     assert states[0] is not None and states[0].type == JammerState.CHIRP
     assert all(s is None for s in states[1:])
     v = p.values()
     assert v['blocks_shed'] == '5' and v['blocks_processed'] == '1' and v['accounting_ok'] == 'True'
+    assert v['blocks_light'] == '0'
+
+
+def test_over_budget_blocks_get_the_light_analysis_before_any_is_shed(probe_factory):
+    """Session 11, issue 14 item 6: over its CPU budget by at most light_analysis_debt_s the node answers every block
+    with the light analysis instead of shedding it: a chirp's type and J/N measured in the block, its sweep period
+    carried from the last full analysis, its frequency NaN; counted as blocks_light within blocks_processed. With
+    max_cpu_load 1e-4 every block after the first is over budget, and the debt stays within the cap (0.1 s)."""
+    fe = FrontEndConfig(noise_bandwidth_hz=NOISE_BW_HZ)
+    msgs, _ = stream(fe, (ChirpJammer(js_db=JS_DB),), 0, 6, seed=21)
+    p = probe_factory(max_cpu_load=1e-4, light_analysis_debt_s=0.1)
+    states = p.send_all(msgs)
+    assert all(s is not None for s in states)
+    first = states[0]
+    assert first.type == JammerState.CHIRP and math.isfinite(first.frequency_hz)
+    light = [s for s in states[1:] if math.isnan(s.frequency_hz)]
+    v = p.values()
+    assert int(v['blocks_light']) == len(light) >= 3          # at most 10 ms after a full analysis: all light
+    assert int(v['blocks_light']) + int(v['core.light_escalations']) == 5
+    for s in light:
+        assert s.type == JammerState.CHIRP and s.sweep_period_s == first.sweep_period_s
+        assert abs(s.jammer_to_noise_db - first.jammer_to_noise_db) < 1.0
+    assert v['blocks_shed'] == '0' and v['blocks_processed'] == '6' and v['accounting_ok'] == 'True'
+
+
+def test_a_block_of_a_live_stream_that_waited_in_the_input_queue_gets_the_light_analysis(probe_factory):
+    """LIGHT_QUEUE_S: on a live stream, a block that waited more than 10 ms between its reception by the middleware and
+    its callback gets the light analysis (the CPU budget cannot see a machine that leaves the node less than a core).
+    Never on a replay (stamps in the past: its blocks queue up by design), nor with max_cpu_load 0 (every block in
+    full, as by the core) or light_analysis_debt_s 0."""
+    import time as _time
+
+    from rfi_monitor.rfi_monitor_node import FULL, LIGHT, LIGHT_QUEUE_S
+    waited_ns = int(5 * LIGHT_QUEUE_S * 1e9)
+    p = probe_factory(max_cpu_load=0.9)
+    node = p.node
+    stamp = _time.time_ns()                               # a live stream: stamped with the clock
+    node.health.last_received_ns = _time.time_ns() - waited_ns
+    assert node._load_mode(stamp, None) == LIGHT
+    node.health.last_received_ns = _time.time_ns()
+    assert node._load_mode(stamp + 10**6, None) == FULL
+    node.health.last_received_ns = 0                      # a middleware that does not report receptions
+    assert node._load_mode(stamp + 2 * 10**6, None) == FULL
+    p.close()
+    replay = probe_factory(max_cpu_load=0.9)
+    replay.node.health.last_received_ns = _time.time_ns() - waited_ns
+    assert replay.node._load_mode(START_NS, None) == FULL
+    replay.close()
+    for off in ({'max_cpu_load': 0.0}, {'max_cpu_load': 0.9, 'light_analysis_debt_s': 0.0}):
+        q = probe_factory(**off)
+        q.node.health.last_received_ns = _time.time_ns() - waited_ns
+        assert q.node._load_mode(_time.time_ns(), None) == FULL
+        q.close()
 
 
 def test_stale_blocks_of_a_live_stream_are_shed_and_a_replay_is_not(probe_factory):

@@ -48,6 +48,9 @@ class InputHealth:
         self.publishers: dict[str, int] = {}
         self.started_s = clock()
         self.last_activity_s: float | None = None
+        self.last_received_ns = 0
+        """When the middleware received the message being handled (rmw ``received_timestamp``, ns of the system
+        clock; 0 when the middleware does not report it): :meth:`queued_s` (resource accounting only)."""
 
     def add_topic(self, topic: str) -> None:
         if topic not in self._loss:
@@ -65,6 +68,13 @@ class InputHealth:
         if lost:
             self.counts[f'{topic}.lost'] += lost
         return lost
+
+    def queued_s(self) -> float | None:
+        """How long the message being handled waited between its reception by the middleware and now, s (its time in
+        the subscription's queue: a node behind its input); None when the middleware does not report receptions."""
+        if self.last_received_ns <= 0:
+            return None
+        return (time.time_ns() - self.last_received_ns) * 1e-9
 
     def matched(self, topic: str, publishers: int) -> None:
         """The middleware now matches ``publishers`` publishers with the subscription of ``topic``."""
@@ -122,6 +132,7 @@ def subscribe_input(node: Any, msg_type: Any, topic: str, callback: Callable[[An
     logger = node.get_logger()
 
     def on_message(msg: Any, info: Any) -> None:
+        health.last_received_ns = int(info.get('received_timestamp', 0) or 0) if info else 0
         lost = health.arrived(topic, info.get('publication_sequence_number', 0) if info else 0)
         if lost:
             logger.warn(f'{topic}: {lost} messages lost before this one (publisher sequence gap; '

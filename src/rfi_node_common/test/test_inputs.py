@@ -95,3 +95,26 @@ def test_stale_watch_reports_silence_since_start_and_after_the_last_message():
     now[0] = 110.5
     assert watch.check() and reports[-1] == pytest.approx(5.5)
     assert StaleInputWatch(FakeNode(), health, 0.0, reports.append).timer is None
+
+
+def test_queued_s_is_the_time_a_message_waited_since_the_middleware_received_it(context):
+    """The input records rmw's received_timestamp of the message being handled: a handler that runs 50 ms after the
+    message arrived reads at least 50 ms of queueing (rfi_monitor_node's light analysis uses it); None before any."""
+    node = rclpy.create_node('inputs_queue_under_test', context=context)
+    health = InputHealth()
+    assert health.queued_s() is None
+    seen: list[float | None] = []
+    subscribe_input(node, String, TOPIC + '_queue', lambda msg: seen.append(health.queued_s()), health)
+    io = rclpy.create_node('io_queue', context=context)
+    pub = io.create_publisher(String, TOPIC + '_queue', DATA_QOS)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    executor.add_node(io)
+    spin_until(executor, lambda: pub.get_subscription_count() and health.publishers[TOPIC + '_queue'] >= 1)
+    pub.publish(String(data='now'))
+    spin_until(executor, lambda: len(seen) == 1)
+    pub.publish(String(data='later'))
+    time.sleep(0.05)                                # the message waits in the subscription's queue
+    spin_until(executor, lambda: len(seen) == 2)
+    assert seen[0] is not None and seen[1] is not None   # this middleware reports reception times
+    assert 0.0 <= seen[0] < seen[1] and seen[1] >= 0.05
