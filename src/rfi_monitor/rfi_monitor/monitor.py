@@ -896,8 +896,9 @@ class RfiMonitor:
         spectral features (the first steps of the full analysis, docs/rfi_monitor/stft_estimator.md). The answer
         keeps the last full analysis's type when the block agrees with it:
 
-        * NONE (or a jammer found only by the evidence over blocks): a floor is known and neither the power nor the
-          spectral J/N reaches ``detect_jn_db`` - ``LIGHT_NONE_MARGIN_DB``;
+        * NONE (or a jammer found only by the evidence over blocks): neither the power J/N (against the floor, or
+          before one is learned against the last full analysis's in-block noise level) nor the spectral J/N reaches
+          ``detect_jn_db`` - ``LIGHT_NONE_MARGIN_DB``;
         * CW: the block still shows a narrow line (the full analysis's CW rule) within two bins of the last one's;
           its frequency is this block's spectral peak, as in the full analysis;
         * CHIRP, WIDEBAND: the block power's J/N against the last full analysis's noise power is within
@@ -932,7 +933,9 @@ class RfiMonitor:
         freq, fstd = last.frequency_hz, last.frequency_std_hz
         if jtype == NONE or lf.integrated:
             if ref == REF_IN_BLOCK:
-                return None                           # no floor: only the ridge's in-block noise tells
+                floor = lf.noise                      # no floor yet: the last full analysis's in-block noise level
+                if not (math.isfinite(floor) and floor > 0):
+                    return None
             jn_ref = 10 * math.log10(power / floor - 1.0) if power > floor else -math.inf
             jn = max(jn_ref, feat.jn_spectral_db)
             if not jn < thr - LIGHT_NONE_MARGIN_DB:

@@ -127,12 +127,15 @@ def test_an_old_full_analysis_is_not_carried():
     assert not est.light and est.type == CHIRP
 
 
-def test_without_a_learned_floor_a_quiet_block_is_analysed_in_full():
-    """The light NONE needs a floor (REF_LEARNED or REF_FIXED): the in-block noise level is the ridge's."""
+def test_before_the_floor_is_learned_a_light_none_uses_the_last_in_block_noise_level():
+    """A node behind its stream from its first blocks (its start-up) answers them light too: before a floor is learned
+    the light NONE's power J/N is against the last full analysis's in-block noise level; a jammer still escalates."""
     mon = RfiMonitor(RfiMonitorParams())
     feed(mon, 0, noise(0, 1), light=False)
     est = feed(mon, 1, noise(1, 1), light=True)
-    assert not est.light
+    assert est.light and est.type == NONE and est.noise_reference == 0      # REF_IN_BLOCK, as the full analysis's
+    on = feed(mon, 2, tone(2, 10.0), light=True)
+    assert not on.light and on.type == CW
 
 
 def test_the_kalman_estimator_ignores_the_light_request():
