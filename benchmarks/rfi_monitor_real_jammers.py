@@ -136,8 +136,9 @@ class NodeLikeMonitor:
                 first: int, stamp_ns: int, light: bool = False):
         full = (2 ** (bits - 1) - 1) * scale if (bits >= 4 and self.check_saturation) else None
         # bits as the node passes them (IfSamples.bits_per_sample): with 1-3 bits the J/N is flagged a lower bound
+        extra = {"light": True} if light else {}    # (a monitor older than session 11 has no light analysis)
         return self.monitor.process(counts.astype(np.float64) * scale, fs, fif, first, stamp_ns,
-                                    is_complex=cplx, full_scale=full, bits=int(bits), light=light)
+                                    is_complex=cplx, full_scale=full, bits=int(bits), **extra)
 
 
 # ---------------------------------------------------------------------------------------------
