@@ -1,4 +1,4 @@
-"""RINEX 2.10/2.11 and 3.0x observation and navigation readers (GPS, Galileo, BeiDou, QZSS, GLONASS).
+"""RINEX 2.10/2.11, 3.0x and 4.0x observation and navigation readers (GPS, Galileo, BeiDou, QZSS, GLONASS).
 
 Readers return plain frozen dataclasses; malformed input raises :class:`RinexFormatError`
 (a ``ValueError``) whose message names the file and the 1-based line number.
@@ -11,19 +11,24 @@ corrupted compressed file raises :class:`RinexFormatError` naming the file.
 Scope
 -----
 - Observation files, RINEX 2.x (``# / TYPES OF OBSERV``, 80-column epoch records with
-  continuation lines for > 12 satellites and > 5 observables) and RINEX 3.x
-  (``SYS / # / OBS TYPES``, ``>`` epoch records). Event flags 2-5 (header records inside the
-  data) and 6 (cycle-slip records) are skipped. Blank or zero-filled fields become NaN.
-  Satellite ids are normalised to ``"G05"`` style (RINEX 2 blank system letter means GPS).
+  continuation lines for > 12 satellites and > 5 observables) and RINEX 3.x / 4.x
+  (``SYS / # / OBS TYPES``, ``>`` epoch records; RINEX 4 observation records are those of 3.05).
+  Event flags 2-5 (header records inside the data) and 6 (cycle-slip records) are skipped. Blank
+  or zero-filled fields become NaN. Satellite ids are normalised to ``"G05"`` style (RINEX 2 blank
+  system letter means GPS).
 - Navigation files: GPS LNAV records from RINEX 2.x GPS nav files (``N``), GLONASS records from
-  RINEX 2.x GLONASS nav files (``G``), and, from RINEX 3.x
-  (``N``, mixed or one file per system), GPS, Galileo (I/NAV; F/NAV records only for satellites
-  without an I/NAV record in the file, the others skipped and counted), BeiDou, QZSS and GLONASS
-  records. SBAS and NavIC
-  records are skipped and counted by system; records of a supported system that describe no
-  usable orbit (e.g. sqrt(A) of a few sqrt(m)) are skipped and counted too, with the reason.
-  Klobuchar parameters from ``ION ALPHA`` / ``ION BETA`` (2.x) or ``IONOSPHERIC CORR GPSA/GPSB``
-  (3.x). Several nav files (one per system, as some archives publish them) are merged with
+  RINEX 2.x GLONASS nav files (``G``), and, from RINEX 3.x (``N``, mixed or one file per system),
+  GPS, Galileo (I/NAV; F/NAV records only for satellites without an I/NAV record in the file, the
+  others skipped and counted), BeiDou, QZSS and GLONASS records. SBAS and NavIC records are
+  skipped and counted by system; records of a supported system that describe no usable orbit
+  (e.g. sqrt(A) of a few sqrt(m)) are skipped and counted too, with the reason. Klobuchar
+  parameters from ``ION ALPHA`` / ``ION BETA`` (2.x) or ``IONOSPHERIC CORR GPSA/GPSB`` (3.x).
+- RINEX 4.x navigation files (records under ``> EPH SAT MESSAGE`` lines, e.g. the IGS / DLR
+  ``BRD400DLR`` daily files): the ephemeris messages that have a RINEX 3 record (GPS and QZSS
+  LNAV, Galileo I/NAV and F/NAV, BeiDou D1/D2, GLONASS FDMA) are read as above; CNAV, CNV1-3,
+  SBAS and NavIC messages and the ``STO`` / ``EOP`` records are counted, not used; Klobuchar from
+  the first ``ION G.. LNAV`` record (a RINEX 4 header has no ``IONOSPHERIC CORR``).
+- Several nav files (one per system, as some archives publish them) are merged with
   :func:`read_rinex_navs`.
 - Observation epochs are converted to GPS time from the file's time system (GPS, GAL, QZS, BDT,
   GLO; :data:`OBS_TIME_SYSTEMS`); others are rejected with a clear error. In nav records, Galileo
@@ -33,7 +38,8 @@ Scope
 
 Notes
 -----
-Gurtner & Estey, RINEX 2.11 (2007), tables A1-A4; IGS RINEX 3.04/3.05 (2020), tables A1-A8.
+Gurtner & Estey, RINEX 2.11 (2007), tables A1-A4; IGS RINEX 3.04/3.05 (2020), tables A1-A8;
+IGS RINEX 4.01 (2022): the navigation record types (EPH, STO, EOP, ION) and message types.
 """
 
 from __future__ import annotations
@@ -60,7 +66,10 @@ _NAV3_LINES = {"G": 8, "E": 8, "C": 8, "J": 8, "I": 8, "R": 4, "S": 4}
 SYSTEM_NAMES = {"G": "gps", "R": "glonass", "E": "galileo", "C": "beidou", "J": "qzss", "S": "sbas", "I": "navic"}
 """RINEX system letter -> lower-case constellation name (used as counter keys)."""
 
-NAV_SKIP_REASONS = ("unsupported_system", "non_physical_orbit", "galileo_fnav")
+NAV_SKIP_REASONS = (
+    "unsupported_system", "non_physical_orbit", "galileo_fnav", "unsupported_message", "sto_record", "eop_record",
+    "ion_record", "unknown_record",
+)
 """Reasons a navigation record is not used (keys of :attr:`RinexNav.skipped_reasons` entries)."""
 
 _GALILEO_INAV_SOURCES = 0b101  # data source bits 0 (I/NAV E1-B) and 2 (I/NAV E5b-I)
@@ -297,7 +306,7 @@ def _sat_id(token: str, default_system: str) -> str:
 
 
 def read_rinex_obs(path: str | Path) -> RinexObs:
-    """Read a RINEX 2.10/2.11 or 3.0x observation file.
+    """Read a RINEX 2.10/2.11, 3.0x or 4.0x observation file.
 
     Args:
         path: file path.
@@ -325,7 +334,7 @@ def _parse_obs_header(lines: list[str], path: str | Path) -> tuple[RinexObsHeade
     if _label(first) != "RINEX VERSION / TYPE":
         raise RinexFormatError(path, 1, "first line is not 'RINEX VERSION / TYPE'")
     version = _float_field(first[0:9], path, 1, "RINEX version")
-    if not (2.0 <= version < 4.0):
+    if not (2.0 <= version < 5.0):
         raise RinexFormatError(path, 1, f"unsupported RINEX version {version}")
     if first[20:21].upper() != "O":
         raise RinexFormatError(path, 1, f"not an observation file (type {first[20:21]!r})")
@@ -579,7 +588,7 @@ def _iter_obs3(
 
 
 def read_rinex_nav(path: str | Path) -> RinexNav:
-    """Read broadcast ephemerides and Klobuchar parameters from a RINEX 2.x or 3.x nav file.
+    """Read broadcast ephemerides and Klobuchar parameters from a RINEX 2.x, 3.x or 4.x nav file.
 
     Args:
         path: file path (plain or compressed, see the module docstring).
@@ -597,7 +606,7 @@ def read_rinex_nav(path: str | Path) -> RinexNav:
         raise RinexFormatError(path, 1, "first line is not 'RINEX VERSION / TYPE'")
     version = _float_field(lines[0][0:9], path, 1, "RINEX version")
     ftype = lines[0][20:21].upper()
-    if not (2.0 <= version < 4.0):
+    if not (2.0 <= version < 5.0):
         raise RinexFormatError(path, 1, f"unsupported RINEX version {version}")
     glonass_v2 = version < 3.0 and ftype == "G"  # RINEX 2 GLONASS nav file (".g")
     if ftype != "N" and not glonass_v2:
@@ -653,8 +662,35 @@ def read_rinex_nav(path: str | Path) -> RinexNav:
         by = reasons.setdefault(sys_char, {})
         by[reason] = by.get(reason, 0) + 1
 
+    def take(sys_char: str, rec: list[str], rec_no: int, first_vals_start: int, lead: int) -> None:
+        """One ephemeris record (its lines in the RINEX 2 / 3 layout) into the lists above."""
+        if sys_char == "G":
+            ephs.append(_parse_gps_record(rec, rec_no, version, first_vals_start, lead, path))
+        elif sys_char in ("E", "C", "J"):
+            eph, reason = _parse_kepler_record(rec, rec_no, sys_char, path)
+            if eph is None:
+                skip(sys_char, reason)
+            elif reason == "galileo_fnav":
+                fnav.append(eph)
+            else:
+                others.append(eph)
+        elif sys_char == "R":
+            glo, reason = _parse_glonass_record(rec, rec_no, leap, path, rinex2=version < 3.0)
+            if glo is None:
+                skip(sys_char, reason)
+            else:
+                glonass.append(glo)
+        else:
+            skip(sys_char, "unsupported_system")
+
     idx = end
     n = len(lines)
+    if version >= 4.0:
+        ion = _read_nav4_records(lines, end, path, take, skip)
+        if ion is not None and not (np.all(np.isfinite(alpha)) and np.all(np.isfinite(beta))):
+            alpha, beta = ion
+            header = RinexNavHeader(version=version, iono_alpha=alpha, iono_beta=beta, leap_seconds=leap)
+        idx = n
     while idx < n:
         line = lines[idx]
         if not line.strip():
@@ -686,24 +722,7 @@ def read_rinex_nav(path: str | Path) -> RinexNav:
             # Optional further lines (RINEX 3.05 adds a fifth GLONASS line): blank first column.
             while idx < n and lines[idx].strip() and not lines[idx][0:1].strip():
                 idx += 1
-        if sys_char == "G":
-            ephs.append(_parse_gps_record(rec, rec_no, version, first_vals_start, lead, path))
-        elif sys_char in ("E", "C", "J"):
-            eph, reason = _parse_kepler_record(rec, rec_no, sys_char, path)
-            if eph is None:
-                skip(sys_char, reason)
-            elif reason == "galileo_fnav":
-                fnav.append(eph)
-            else:
-                others.append(eph)
-        elif sys_char == "R":
-            glo, reason = _parse_glonass_record(rec, rec_no, leap, path, rinex2=version < 3.0)
-            if glo is None:
-                skip(sys_char, reason)
-            else:
-                glonass.append(glo)
-        else:
-            skip(sys_char, "unsupported_system")
+        take(sys_char, rec, rec_no, first_vals_start, lead)
     # Galileo F/NAV records only for satellites the file gives no I/NAV record of (the E1 user's
     # own message); the others are counted as not used.
     inav = {e.prn for e in others if e.system == "E"}
@@ -767,6 +786,79 @@ def read_rinex_navs(paths: Sequence[str | Path]) -> RinexNav:
         glonass_ephemerides=tuple(e for v in navs for e in v.glonass_ephemerides),
         skipped_reasons=reasons,
     )
+
+
+_NAV4_MESSAGES = {"G": ("LNAV",), "J": ("LNAV",), "E": ("INAV", "FNAV"), "C": ("D1", "D2"), "R": ("FDMA",)}
+"""RINEX 4 ephemeris message types read, by system: those whose records have the RINEX 3 layout
+(RINEX 4.01); CNAV, CNV1-3 and the SBAS and NavIC records are counted, not used."""
+
+
+def _read_nav4_records(
+    lines: list[str], start: int, path: str | Path, take, skip
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The data section of a RINEX 4 navigation file: records introduced by ``> TYPE SAT MESSAGE``.
+
+    ``EPH`` records of the messages in :data:`_NAV4_MESSAGES` go to ``take(sys_char, lines,
+    line_no, 23, 4)`` (their lines are those of RINEX 3); other ``EPH`` messages are counted with
+    ``skip(sys_char, "unsupported_message")``, ``STO`` / ``EOP`` records with ``"sto_record"`` /
+    ``"eop_record"``, ``ION`` records other than the first GPS ``LNAV`` one with ``"ion_record"``.
+
+    Returns:
+        The Klobuchar ``(alpha, beta)`` of the first ``ION G.. LNAV`` record (alpha0-2 on its
+        epoch line, alpha3 and beta0-2 on the next, beta3 on the third), or None when the file
+        has none.
+
+    Raises:
+        RinexFormatError: a record line before the first ``>``, a malformed ``>`` line, a record
+            shorter than its message needs or whose first line names another satellite.
+    """
+    ion: tuple[np.ndarray, np.ndarray] | None = None
+    n = len(lines)
+    idx = start
+    while idx < n and not lines[idx].strip():
+        idx += 1
+    while idx < n:
+        head = lines[idx]
+        head_no = idx + 1
+        if not head.startswith(">"):
+            raise RinexFormatError(path, head_no, "RINEX 4 navigation data: expected a '> TYPE SAT MESSAGE' line")
+        parts = head[1:].split()
+        if len(parts) < 2 or len(parts[1]) != 3 or not parts[1][1:].isdigit():
+            raise RinexFormatError(path, head_no, f"malformed RINEX 4 record line {head.rstrip()!r}")
+        kind, sat = parts[0].upper(), parts[1].upper()
+        msg = parts[2].upper() if len(parts) > 2 else ""
+        sys_char = sat[0]
+        idx += 1
+        body_start = idx
+        while idx < n and not lines[idx].startswith(">"):
+            idx += 1
+        body = [ln for ln in lines[body_start:idx] if ln.strip()]
+        rec_no = body_start + 1
+        if kind == "EPH":
+            if msg not in _NAV4_MESSAGES.get(sys_char, ()):
+                skip(sys_char, "unsupported_system" if sys_char not in _NAV4_MESSAGES else "unsupported_message")
+                continue
+            need = _NAV3_LINES[sys_char]
+            if len(body) < need:
+                raise RinexFormatError(path, head_no, f"{sat} {msg} record truncated (needs {need} lines)")
+            if body[0][0:3].upper() != sat:
+                raise RinexFormatError(path, rec_no, f"record of {body[0][0:3]!r} under '> EPH {sat}'")
+            take(sys_char, body[:need], rec_no, 23, 4)
+        elif kind == "ION" and sys_char == "G" and msg == "LNAV" and ion is None:
+            if len(body) < 3:
+                raise RinexFormatError(path, head_no, f"ION {sat} LNAV record truncated (needs 3 lines)")
+            vals = [_float_field(body[0][23 + 19 * k: 42 + 19 * k], path, rec_no, "Klobuchar alpha") for k in range(3)]
+            vals += [_float_field(body[1][4 + 19 * k: 23 + 19 * k], path, rec_no + 1, "Klobuchar parameter")
+                     for k in range(4)]
+            vals.append(_float_field(body[2][4:23], path, rec_no + 2, "Klobuchar beta3"))
+            v = np.array(vals)
+            if np.all(np.isfinite(v)):
+                ion = (v[0:4], v[4:8])
+        elif kind in ("STO", "EOP", "ION"):
+            skip(sys_char, f"{kind.lower()}_record")
+        else:
+            skip(sys_char, "unknown_record")
+    return ion
 
 
 def _record_values(

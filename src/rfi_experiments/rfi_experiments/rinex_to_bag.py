@@ -1,6 +1,6 @@
 """``rinex_to_bag OBS NAV [NAV ...] OUT``: real RINEX observations -> a bag the fusion node can replay.
 
-Each observation epoch of the RINEX 2/3 file (plain or compressed: ``.gz``, ``.Z``, Hatanaka
+Each observation epoch of the RINEX 2/3/4 file (plain or compressed: ``.gz``, ``.Z``, Hatanaka
 ``.crx`` / ``.crx.gz`` as stations publish them) becomes one ``rfi_msgs/GnssMeasurementArray`` on
 ``/gnss/measurements``, built by :class:`gnss_common.measurements.GnssEpochBuilder` for every
 constellation whose satellite state can be computed from the navigation file(s) given (one mixed
@@ -232,7 +232,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog=PROG,
         description=(
-            "Convert a RINEX 2/3 observation file (plain, .gz, .Z, Hatanaka .crx / .crx.gz) and its broadcast "
+            "Convert a RINEX 2/3/4 observation file (plain, .gz, .Z, Hatanaka .crx / .crx.gz) and its broadcast "
             "navigation file(s) (one mixed file or one per system) into a bag: "
             f"{MEASUREMENTS_TOPIC} (rfi_msgs/GnssMeasurementArray, one per epoch: GPS and QZSS L1 C/A, Galileo "
             "E1, BeiDou B1I, GLONASS G1, each where the navigation files carry its ephemerides) and "

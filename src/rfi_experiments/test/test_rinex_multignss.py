@@ -19,6 +19,7 @@ from uwb_gnss_fusion.conversions import msg_to_epoch
 DATA = Path(__file__).resolve().parents[2] / "gnss_common" / "test" / "data"
 OBS = DATA / "ESBC00DNK_R_20201770000_01H_30S_MO.crx.gz"
 NAV = DATA / "ESBC00DNK_R_20201770000_01H_MN.rnx.gz"
+NAV4 = DATA / "ESBC00DNK_R_20201770000_01H_MN_rinex4.rnx.gz"  # the same records, RINEX 4 layout
 STATION_ECEF_M = np.array([3582105.2910, 532589.7313, 5232754.8054])
 
 
@@ -90,6 +91,27 @@ def test_restricted_constellations_and_per_system_nav_files(tmp_path: Path) -> N
     with BagReader(out) as reader:
         seen = {m.constellation for msg in reader.messages([MEASUREMENTS_TOPIC]) for m in msg.decode().measurements}
     assert seen == {GPS, GALILEO}
+
+
+def test_rinex4_nav_file_gives_the_same_measurements(tmp_path: Path) -> None:
+    """A RINEX 4 nav file (records under '> EPH' lines, Klobuchar in an ION record) converts to the
+    measurements of its RINEX 3 original; the records it cannot use are named in the summary."""
+    systems = ("G", "E", "C", "R")
+    rinex3 = convert_rinex(OBS, NAV, 5.0, systems)
+    rinex4 = convert_rinex(OBS, NAV4, 5.0, systems)
+    assert rinex4.measurements_by_constellation() == rinex3.measurements_by_constellation()
+    assert len(rinex4.epochs) == len(rinex3.epochs) == 120
+    for a, b in zip(rinex4.epochs[::10], rinex3.epochs[::10], strict=True):
+        ids = [(o.constellation, o.svid) for o in b.observations]
+        assert [(o.constellation, o.svid) for o in a.observations] == ids
+        for x, y in zip(a.observations, b.observations, strict=True):
+            assert x.pseudorange_m == y.pseudorange_m
+            np.testing.assert_array_equal(x.satellite_position_ecef_m, y.satellite_position_ecef_m)
+            assert x.ionosphere_delay_m == y.ionosphere_delay_m != 0.0  # the Klobuchar parameters of the ION record
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        assert _run(OBS, NAV4, tmp_path / "bag", "--constellations", "G,E") == 0
+    assert "unsupported_message" in buf.getvalue() and "sto_record" in buf.getvalue()
 
 
 def _one_line_error(capsys: pytest.CaptureFixture[str], fragment: str) -> None:
