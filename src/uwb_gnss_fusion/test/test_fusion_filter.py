@@ -390,12 +390,14 @@ def test_snapshot_fix_inconsistent_with_uwb_ranges_is_refused():
     assert out.initialized
 
 
-def test_gnss_divergence_while_uwb_agrees_resets_the_clock_not_the_position():
-    # A receiver clock step of 3 km: every pseudorange is gated for divergence_gnss_epochs epochs
-    # and GNSS declares divergence. The UWB ranges still agree with the state, so the position is
-    # kept and only the clock is re-solved (no snapshot reinitialisation, no reset).
+@pytest.mark.parametrize("clock_steps", [False, True])
+def test_gnss_divergence_while_uwb_agrees_resets_the_clock_not_the_position(clock_steps):
+    # A receiver clock step of 3 km. Without the clock-step rule every pseudorange is gated for
+    # divergence_gnss_epochs epochs and GNSS declares divergence; the UWB ranges still agree with the
+    # state, so the position is kept and only the clock is re-solved (no snapshot reinitialisation, no
+    # reset). With it (the default) the step is found at its first epoch and the clock moved by it.
     rng = np.random.default_rng(31)
-    f = FusionFilter(FusionParams(accel_psd_m2ps3=0.01))
+    f = FusionFilter(FusionParams(accel_psd_m2ps3=0.01, receiver_clock_steps=clock_steps))
     out = None
     errors = []
     for k in range(5 * 30):  # 30 s of GNSS at 5 Hz, 3 anchors at 20 Hz each in between
@@ -407,8 +409,12 @@ def test_gnss_divergence_while_uwb_agrees_resets_the_clock_not_the_position():
         if k >= 5 * 5:
             errors.append(_horizontal_error(out))
     counts = dict(out.rejection_counts)
-    assert counts["clock_reset_uwb_consistent"] >= 1
-    assert "reset_uninitialized" not in counts and out.reinitializations == counts["clock_reset_uwb_consistent"]
+    if clock_steps:
+        assert counts["receiver_clock_step"] == 1 and "divergence" not in counts and out.reinitializations == 0
+        assert "innovation_gate_pseudorange" not in counts
+    else:
+        assert counts["clock_reset_uwb_consistent"] >= 1 and "receiver_clock_step" not in counts
+        assert "reset_uninitialized" not in counts and out.reinitializations == counts["clock_reset_uwb_consistent"]
     assert max(errors) < 0.1
     assert out.clock_bias_m == pytest.approx(3150.0, abs=1.0)
 
@@ -419,9 +425,10 @@ def test_clock_drift_unobserved_without_doppler_and_kept_on_reinitialisation():
     # epoch solves it. With a 1 m/s prior the 12 km clock error gates every pseudorange.
     def run(unobserved_std):
         rng = np.random.default_rng(37)
-        f = FusionFilter(
-            FusionParams(use_uwb=False, use_doppler=False, init_clock_drift_unobserved_std_mps=unobserved_std)
-        )
+        # receiver_clock_steps off: this is the drift prior's test (the clock-step rule would take the 12 km
+        # of an unsolved drift for steps and move the clock epoch after epoch)
+        f = FusionFilter(FusionParams(use_uwb=False, use_doppler=False, receiver_clock_steps=False,
+                                      init_clock_drift_unobserved_std_mps=unobserved_std))
         out = None
         for k in range(8):
             out = f.process_gnss(_epoch(T0 + 30 * k * NS, clock_m=150.0 + 400.0 * 30 * k, rng=rng))

@@ -985,7 +985,7 @@ SETTABLE_FILTER_VALUES = {
     'loop_fll_bandwidth_hz': 10.0, 'loop_code_floor_m': 3.0, 'loop_rate_floor_mps': 0.5,
     'max_position_std_m': 0.02, 'divergence_gnss_epochs': 1, 'divergence_uwb_gated_fraction': 0.01,
     'uwb_huber_k': 0.3, 'uwb_huber_k_positive': 0.3, 'nonlinearity_threshold': 1e-6, 'max_update_iterations': 0,
-    'common_mode_screen': False,
+    'common_mode_screen': False, 'receiver_clock_steps': False,
 }
 NO_EFFECT_HERE: dict[str, str] = {}
 """Settable filter parameters whose test value does not change the outputs of this short clean run, and why."""
@@ -1012,6 +1012,9 @@ def test_every_settable_filter_parameter_is_read_by_the_core_at_each_update(clea
                 observations = tuple(dataclasses.replace(o, pseudorange_m=o.pseudorange_m + 150.0 * (k + 1))
                                      if k < 5 else o for k, o in enumerate(epoch.observations))
                 epoch = dataclasses.replace(epoch, observations=observations)
+            if rel_s >= 8.0:   # the receiver steps its clock by 1 ms (every pseudorange + 299,792.458 m)
+                epoch = dataclasses.replace(epoch, observations=tuple(
+                    dataclasses.replace(o, pseudorange_m=o.pseudorange_m + 299_792.458) for o in epoch.observations))
             items.append((stamp, 'gnss', epoch))
         else:
             uwb = msg_to_uwb(msg, frame_id='earth')

@@ -64,7 +64,13 @@ from .fusion_params import (  # noqa: F401 (re-exported: the filter's public nam
     UWB_NOISE_PRIOR_WEIGHT,
     FusionParams,
 )
-from .gnss_update import clock_offset_from_residuals, prepare_epoch, screen_common_mode, update_gnss
+from .gnss_update import (
+    clock_offset_from_residuals,
+    prepare_epoch,
+    receiver_clock_step,
+    screen_common_mode,
+    update_gnss,
+)
 from .input_checks import CONSTELLATION_NAMES, PreparedEpoch, skipped_constellations, validate_uwb_range
 from .measurement_models import STATE_DIM, constant_velocity_transition, pseudorange_model, white_acceleration_noise
 from .mirror_test import MirrorTest, anchor_plane, clock_free_chi2, householder, is_range_ambiguous, reflect
@@ -84,6 +90,7 @@ receiver reports more slowly than ten times that setting (RINEX observation file
 FIX_CONFIRM_UNKNOWN_SPEED_MPS = 30.0
 """Speed, per axis, allowed between two compared fixes when the earlier one has no velocity (fewer than four
 pseudorange rates): a road vehicle's, m/s."""
+
 
 
 class FusionFilter:
@@ -600,10 +607,12 @@ class FusionFilter:
         cols = self._update_bias_states(stamp, prep)
         err_cols = self._update_error_states(stamp, prep)
         n_screened = 0
+        find_step = self.params.receiver_clock_steps
         if self.params.common_mode_screen:
-            prep, n_screened = screen_common_mode(
-                prep, self._nominal, self._ckf.p, self._gate, self._count, cols, err_cols
+            prep, n_screened, step = screen_common_mode(
+                prep, self._nominal, self._ckf.p, self._gate, self._count, cols, err_cols, find_step
             )
+            self._apply_clock_step(step)
             if prep.pr.size == 0:
                 self._count("no_valid_satellites")
                 return self._output(False, sat_rej=n_obs)
@@ -611,6 +620,8 @@ class FusionFilter:
             if n_screened:
                 cols = self._bias_columns(prep)
                 err_cols = self._error_columns(prep)
+        elif find_step:
+            self._apply_clock_step(receiver_clock_step(prep, self._nominal, self._ckf.p, self._gate, cols, err_cols))
         try:
             res = update_gnss(self._ckf, self._nominal, prep, self._gate, self.params, cols, err_cols)
         except CholeskyError:
@@ -641,6 +652,24 @@ class FusionFilter:
                 return self._reset_clock_keep_position(stamp, prep)
             return self._declare_divergence(stamp, gnss_only=not self._position_lost())
         return self._output(False, sat_used=used, sat_rej=pre_rejected + n_screened + gated_pr, nis=nis)
+
+    def _apply_clock_step(self, step: tuple[float, bool, float]) -> None:
+        """``receiver_clock_steps``: move the clock bias by a step of the receiver clock
+        (:func:`.gnss_update.receiver_clock_step`, found with the common-mode screen) before the update. A
+        whole number of milliseconds is a known adjustment: the clock keeps its variance (counted as
+        ``receiver_clock_step_ms``); any other step moves it by the consensus's common innovation and
+        adds that estimate's variance to the clock's (``receiver_clock_step``; resetting the clock block
+        instead, as after a divergence, gave the same errors on the real stations of
+        ``benchmarks/fusion_clock_steps.py``). Beyond the paper."""
+        step_m, whole_ms, step_var = step
+        if step_m == 0.0:
+            return
+        self._nominal[6] += step_m
+        if whole_ms:
+            self._count("receiver_clock_step_ms")
+            return
+        self._count("receiver_clock_step")
+        self._ckf.p[6, 6] += step_var
 
     # ------------------------------------------------------------------ mirror ambiguity
     def _mirror_check(self, stamp_ns: int, prep: PreparedEpoch, accepted: np.ndarray,

@@ -157,6 +157,11 @@ class FusionNodeParams:
         _FP.common_mode_screen, 'Drop pseudoranges / rates whose innovation departs from the epoch median '
         '(common clock) beyond the gate with the clock-free variance, before the CKF update (beyond the paper).',
         read_only=False)
+    receiver_clock_steps: bool = parameter(
+        _FP.receiver_clock_steps, 'Take a pseudorange step common to all satellites (>= 5 and more than half '
+        'agreeing) that the predicted clock cannot explain for a receiver clock step (e.g. 1 ms adjustments) and '
+        'move the clock by it, instead of rejecting every pseudorange (beyond the paper).',
+        read_only=False)
     multi_gnss: bool = parameter(
         _FP.multi_gnss, 'Use Galileo, BeiDou, GLONASS and QZSS as well as GPS, each with an inter-system clock '
         'bias state (false: GPS only, the others counted as skipped_constellation.<name>).')

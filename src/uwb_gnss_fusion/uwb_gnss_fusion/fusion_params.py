@@ -119,6 +119,13 @@ class FusionParams:
             gate allows with the clock-free variance (:mod:`.robust_screen`; beyond the paper).
             Counted as ``common_mode_pseudorange`` / ``common_mode_doppler``; they count as gated
             for the divergence rule.
+        receiver_clock_steps: take a step common to every pseudorange that the predicted clock
+            cannot explain (at least five satellites and more than half agreeing) for a step of the
+            receiver clock and move the clock bias by it before the screen and the update, instead
+            of rejecting every pseudorange and rebuilding the position
+            (:func:`.gnss_update.receiver_clock_step`; beyond the paper). Whole milliseconds (the
+            usual adjustment of receivers whose clock drifts) are counted as
+            ``receiver_clock_step_ms``, other steps as ``receiver_clock_step``.
         multi_gnss: use Galileo, BeiDou, GLONASS and QZSS satellites as well as GPS, each system
             other than the reference (GPS) with an inter-system clock bias state (appended to the
             state when the system is first seen, so that a GPS-only stream keeps the 8-state
@@ -254,6 +261,7 @@ class FusionParams:
     uwb_huber_k: float = math.inf
     uwb_huber_k_positive: float = math.inf
     common_mode_screen: bool = True
+    receiver_clock_steps: bool = True
     # multi-GNSS: inter-system clock biases (issue 15 item 1)
     multi_gnss: bool = True
     # time-correlated pseudorange errors, one Gauss-Markov state per satellite (issue 15 item 2)
