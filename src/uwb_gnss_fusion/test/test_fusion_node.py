@@ -985,7 +985,8 @@ SETTABLE_FILTER_VALUES = {
     'loop_fll_bandwidth_hz': 10.0, 'loop_code_floor_m': 3.0, 'loop_rate_floor_mps': 0.5,
     'max_position_std_m': 0.02, 'divergence_gnss_epochs': 1, 'divergence_uwb_gated_fraction': 0.01,
     'uwb_huber_k': 0.3, 'uwb_huber_k_positive': 0.3, 'nonlinearity_threshold': 1e-6, 'max_update_iterations': 0,
-    'common_mode_screen': False, 'receiver_clock_steps': False,
+    'common_mode_screen': False, 'receiver_clock_steps': False, 'uwb_mirror_covariance': False,
+    'uwb_mirror_gnss_std_m': 0.5,
 }
 NO_EFFECT_HERE: dict[str, str] = {}
 """Settable filter parameters whose test value does not change the outputs of this short clean run, and why."""
@@ -1028,8 +1029,8 @@ def test_every_settable_filter_parameter_is_read_by_the_core_at_each_update(clea
             if k % 50 == 0:
                 f.set_jammer_to_signal(stamp, 20.0)
             o = f.process_gnss(payload) if kind == 'gnss' else f.process_uwb(payload)
-            out.append(np.concatenate([o.position_m, o.velocity_mps, [o.satellites_used, o.uwb_used,
-                                                                       o.reinitializations]]))
+            out.append(np.concatenate([o.position_m, o.velocity_mps, np.diag(o.covariance_pv),
+                                       [o.satellites_used, o.uwb_used, o.reinitializations]]))
         return np.array(out)
 
     reference = run(FusionFilter(FusionNodeParams().fusion_params()))

@@ -300,3 +300,63 @@ def test_gated_anchor_restart_with_three_anchors_needs_the_side(side: int) -> No
     else:
         assert "uwb_anchor_gated_reinit" not in f.rejection_counts
         assert np.linalg.norm(out.position_m - tag) > 1.0
+
+
+# ------------------------------------------------------------------ the ambiguity in the published covariance
+def test_mirror_probability_oracle() -> None:
+    from uwb_gnss_fusion.mirror_test import mirror_wrong_side_probability
+
+    # Phi(-d / (2 sigma)): d = 2 sigma -> Phi(-1) = 0.15866
+    assert mirror_wrong_side_probability(4.0, 2.0) == pytest.approx(0.158655, abs=1e-6)
+    assert mirror_wrong_side_probability(0.0, 2.0) == pytest.approx(0.5)
+    assert mirror_wrong_side_probability(1.28, None) == 0.5      # without GNSS nothing picks the side
+    assert mirror_wrong_side_probability(50.0, 2.0) < 1e-10     # a mirror far away: GNSS tells
+
+
+def _uwb_only_from(start: np.ndarray, anchors: np.ndarray, **params) -> tuple[FusionFilter, object]:
+    """UWB alone in the map frame, the tag at the origin, started at ``start``; 2 s of ranges."""
+    f = FusionFilter(FusionParams(use_gnss=False, accel_psd_m2ps3=0.01, **params))
+    f.initialize(0, start, frame_id="map", position_std_m=0.1)
+    rng = np.random.default_rng(5)
+    out = None
+    for k in range(1, 41):
+        for i, a in enumerate(anchors):
+            r = float(np.linalg.norm(a)) + 0.03 * rng.standard_normal()
+            out = f.process(UwbRangeMeasurement(k * 50_000_000 + i * 1_000_000, f"A{i + 1}", a, "map", r))
+    return f, out
+
+
+def test_published_covariance_covers_the_mirror_of_three_anchors() -> None:
+    """Three anchors, UWB alone, started on the mirror of the tag (0.64 m on the other side of the
+    anchors' plane): the filter stays on that side. The published covariance is the filter's own plus
+    p d^2 along the plane's normal, p = 0.5 without GNSS and d the distance from the estimate to its own
+    mirror. The installer's side (the ambiguity resolved) or uwb_mirror_covariance false publish the
+    filter's own covariance, and a fourth anchor off the plane removes the ambiguity and the term."""
+    anchors = _local_anchors()
+    c, n = anchor_plane(anchors[:3])
+    assert float((np.zeros(3) - c) @ n) == pytest.approx(-0.639, abs=1e-3)
+    mirror = reflect(np.zeros(3), c, n)
+    f, out = _uwb_only_from(mirror, anchors[:3])
+    side = float((out.position_m - c) @ n)
+    assert side > 0.0                                           # on the mirror's side (the truth is the origin)
+    own = f._ckf.p[0:3, 0:3]
+    pub = out.covariance_pv[0:3, 0:3]
+    # the filter's own covariance plus p d^2 n n^T (rank one, along the normal), p = 0.5 without GNSS
+    np.testing.assert_allclose(pub - own, 0.5 * (2.0 * side) ** 2 * np.outer(n, n), rtol=1e-9, atol=1e-12)
+    pub = float(n @ pub @ n)
+    err_n = abs(float(out.position_m @ n))
+    assert err_n < 2.0 * math.sqrt(pub)
+    np.testing.assert_array_equal(out.covariance_pv[3:6, 3:6], f._ckf.p[3:6, 3:6])  # velocity untouched
+    for params in ({"uwb_mirror_covariance": False}, {"uwb_tag_side_of_anchor_plane": 1}):
+        g, o = _uwb_only_from(mirror, anchors[:3], **params)
+        np.testing.assert_array_equal(o.covariance_pv, g._ckf.p[0:6, 0:6])
+    g, o = _uwb_only_from(np.zeros(3), anchors)                 # four anchors, not coplanar
+    np.testing.assert_array_equal(o.covariance_pv, g._ckf.p[0:6, 0:6])
+    # four anchors in one plane: as ambiguous as three (the fourth moved into the plane of A1-A3)
+    coplanar = anchors.copy()
+    coplanar[3] -= ((coplanar[3] - c) @ n) * n
+    g, o = _uwb_only_from(mirror, coplanar)
+    side4 = float((o.position_m - c) @ n)
+    np.testing.assert_allclose(o.covariance_pv[0:3, 0:3] - g._ckf.p[0:3, 0:3],
+                               0.5 * (2.0 * side4) ** 2 * np.outer(n, n), rtol=1e-9, atol=1e-12)
+    assert is_range_ambiguous(o.position_m, reflect(o.position_m, c, n), coplanar, 0.1)

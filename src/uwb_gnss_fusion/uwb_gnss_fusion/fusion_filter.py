@@ -73,7 +73,16 @@ from .gnss_update import (
 )
 from .input_checks import CONSTELLATION_NAMES, PreparedEpoch, skipped_constellations, validate_uwb_range
 from .measurement_models import STATE_DIM, constant_velocity_transition, pseudorange_model, white_acceleration_noise
-from .mirror_test import MirrorTest, anchor_plane, clock_free_chi2, householder, is_range_ambiguous, reflect
+from .mirror_test import (
+    MIRROR_MAX_RANGE_CHANGE_SIGMA,
+    MirrorTest,
+    anchor_plane,
+    clock_free_chi2,
+    householder,
+    is_range_ambiguous,
+    mirror_wrong_side_probability,
+    reflect,
+)
 from .reorder_buffer import ReorderBuffer  # noqa: F401 (re-exported)
 from .uwb_update import RangeNoiseEstimate, apply_range
 
@@ -154,6 +163,7 @@ class FusionFilter:
         clock = self.params.clock
         self._clock_q = lambda dt_s: _clock_q(clock, dt_s)
         self._lever = np.asarray(self.params.uwb_lever_arm_m, dtype=float)
+        self._lever_floats = tuple(float(v) for v in self._lever)
         self._uwb_scratch = np.zeros(6)  # diagnostics of the compiled UWB update (.ckf_kernels)
         self._gated_restarted: set[str] = set()  # anchors that restarted the filter (uwb_gated_anchor_reinit)
         self._side_last_ns: int | None = None  # last side-prior check without GNSS (_side_prior_uwb)
@@ -182,6 +192,12 @@ class FusionFilter:
             self.params.uwb_mirror_switch_log_lr,
         )
         self._mirror_last_ns: int | None = None
+        # uwb_mirror_covariance: the plane of the anchors heard, per (_anchor_version, frame), until
+        # _mirror_valid_until_ns
+        self._mirror_plane_key: tuple = (-1, "")
+        self._mirror_valid_until_ns = -1
+        self._mirror_plane: tuple | None = None  # (n n^T in 6x6, c . n, normal, anchors with their off-plane distance)
+        self._anchor_version = 0  # counts changes of the set of anchors heard: new, back after silence, moved
         self._reset_state()
 
     # ------------------------------------------------------------------ state handling
@@ -502,7 +518,8 @@ class FusionFilter:
         if init:
             pos = self._nominal[0:3].copy()
             vel = self._nominal[3:6].copy()
-            cov = self._ckf.p[0:6, 0:6].copy()
+            extra = self._mirror_covariance() if self.params.uwb_mirror_covariance and self.params.use_uwb else None
+            cov = self._ckf.p[0:6, 0:6].copy() if extra is None else self._ckf.p[0:6, 0:6] + extra[0] * extra[1]
         else:
             pos = np.full(3, math.nan)
             vel = np.full(3, math.nan)
@@ -720,6 +737,65 @@ class FusionFilter:
             return
         self._jump_to_mirror(tag_m, plane[1])
         self._count("uwb_mirror_switch")
+
+    def _mirror_covariance(self) -> tuple[float, np.ndarray] | None:
+        """``uwb_mirror_covariance``: the covariance the mirror ambiguity adds to the published position,
+        ``p d^2 n n^T`` (``d`` the distance from the tag to its mirror across the anchors' plane, ``n`` the
+        plane's normal, ``p`` :func:`.mirror_test.mirror_wrong_side_probability`), as ``(p d^2, n n^T
+        padded to the (6, 6) position-velocity block)``, or None when there is none: fewer than three
+        anchors heard within ``uwb_init_window_s``, anchors that do not span a plane, a mirror that
+        changes some range by a range 1-sigma (four or more anchors off their plane), or the side
+        given by ``uwb_tag_side_of_anchor_plane``. The filter's own covariance is not changed: it
+        describes the solution on the side the filter holds. With GNSS the probability of the wrong
+        side uses ``uwb_mirror_gnss_std_m``, without GNSS it is 0.5. Beyond the paper."""
+        p = self.params
+        if p.uwb_tag_side_of_anchor_plane:
+            return None
+        t = self._t_ns
+        frame = self._frame
+        if (t > self._mirror_valid_until_ns or self._anchor_version != self._mirror_plane_key[0]
+                or frame != self._mirror_plane_key[1]):
+            # the anchors heard within uwb_init_window_s: recomputed when an anchor appears, comes back,
+            # moves or changes frame (_anchor_version), or when the first of them may have fallen silent
+            window_ns = p.uwb_init_window_s * _NS
+            heard = [(aid, v) for aid, v in self._recent_uwb.items() if v[3] == frame and t - v[0] <= window_ns]
+            self._mirror_plane_key = (self._anchor_version, frame)
+            self._mirror_valid_until_ns = min((v[0] for _, v in heard), default=t) + window_ns
+            self._mirror_plane = None
+            if len(heard) >= 3:
+                anchors = np.array([v[1] for _, v in heard])
+                plane = anchor_plane(anchors)
+                if plane is not None:
+                    nn6 = np.zeros((6, 6))
+                    nn6[0:3, 0:3] = np.outer(plane[1], plane[1])
+                    off_plane = (anchors - plane[0]) @ plane[1]  # each anchor's distance from the plane
+                    # farthest from the plane first: the one whose range the mirror changes most, usually
+                    # the only one the test below has to look at
+                    listed = tuple(sorted(((*map(float, a), float(o)) for a, o in zip(anchors, off_plane, strict=True)),
+                                          key=lambda row: -abs(row[3])))
+                    self._mirror_plane = (nn6, float(plane[0] @ plane[1]), tuple(float(v) for v in plane[1]), listed)
+        cached = self._mirror_plane
+        if cached is None:
+            return None
+        nn6, c_dot_n, (n0, n1, n2), anchors = cached
+        # in Python floats (this runs at every output): s the tag's signed distance from the plane, d = 2 |s|
+        x0, x1, x2 = self._nominal[0:3].tolist()
+        l0, l1, l2 = self._lever_floats
+        t0, t1, t2 = x0 + l0, x1 + l1, x2 + l2
+        s = t0 * n0 + t1 * n1 + t2 * n2 - c_dot_n
+        d = 2.0 * abs(s)
+        if len(anchors) > 3:
+            # four or more anchors: ambiguous only if the mirror (tag - 2 s n) changes no range by a range
+            # 1-sigma (MIRROR_MAX_RANGE_CHANGE_SIGMA, as mirror_test.is_range_ambiguous); its squared range
+            # to anchor i is r_i^2 + 4 s o_i, o_i the anchor's distance from the plane
+            limit = MIRROR_MAX_RANGE_CHANGE_SIGMA * p.uwb_range_std_m
+            for a0, a1, a2, o in anchors:
+                r2 = (a0 - t0) ** 2 + (a1 - t1) ** 2 + (a2 - t2) ** 2
+                if abs(math.sqrt(max(r2 + 4.0 * s * o, 0.0)) - math.sqrt(r2)) >= limit:
+                    return None
+        with_gnss = p.use_gnss and frame == FRAME_EARTH and self._clock_initialized
+        prob = mirror_wrong_side_probability(d, p.uwb_mirror_gnss_std_m if with_gnss else None)
+        return prob * d * d, nn6
 
     def _on_wrong_side(self, tag: np.ndarray, plane: tuple[np.ndarray, np.ndarray]) -> bool:
         """True if ``tag`` lies on the other side of the anchors' ``plane`` (centroid, unit normal)
@@ -1017,6 +1093,10 @@ class FusionFilter:
         if self._initialized and meas.frame_id != self._frame:
             self._count("uwb_frame_mismatch")
             return self._output(False, uwb_rej=1)
+        prev = self._recent_uwb.get(meas.anchor_id)
+        if (prev is None or stamp - prev[0] > p.uwb_init_window_s * _NS or prev[3] != meas.frame_id
+                or prev[1][0] != anchor[0] or prev[1][1] != anchor[1] or prev[1][2] != anchor[2]):
+            self._anchor_version += 1
         self._recent_uwb[meas.anchor_id] = (stamp, anchor, rng, meas.frame_id)
         if not self._initialized:
             if not self._init_from_uwb(stamp, meas.frame_id):

@@ -184,6 +184,14 @@ class FusionNodeParams:
         'or unknown (0): with -1/+1 an estimate on the other side (the mirror ambiguity of three anchors) is '
         'reflected back across the plane (counted as uwb_side_prior_flip) and uwb_mirror_test is not used.',
         minimum=-1, maximum=1)
+    uwb_mirror_covariance: bool = parameter(
+        _FP.uwb_mirror_covariance, 'While the side of the anchors\' plane is unknown and the anchors heard are '
+        'coplanar, add the mirror ambiguity (p d^2 along the plane normal) to the published position covariance '
+        '(beyond the paper).', read_only=False)
+    uwb_mirror_gnss_std_m: float = parameter(
+        _FP.uwb_mirror_gnss_std_m, '1-sigma of the GNSS position error along the normal of the anchors\' plane, '
+        'm: the probability of the wrong side is Phi(-d / (2 sigma)) with GNSS, 0.5 without.',
+        minimum=0.01, maximum=100.0, read_only=False)
     uwb_gated_anchor_reinit: bool = parameter(
         _FP.uwb_gated_anchor_reinit, 'Reinitialise the position from a multilateration fix that explains the '
         'latest range of every anchor (at least four; three with uwb_tag_side_of_anchor_plane) and lies outside '

@@ -102,6 +102,30 @@ def clock_free_chi2(residuals_m: np.ndarray, sigma_m: np.ndarray) -> np.ndarray:
     return ((r - clock) ** 2 * w).sum(axis=1)
 
 
+def mirror_wrong_side_probability(separation_m: float, gnss_std_m: float | None) -> float:
+    """Probability that an estimate that settled on one side of the anchors' plane is on the mirror.
+
+    The estimate sits at one of two points ``d`` apart along the plane's normal ``n``, on the wrong
+    one with this probability ``p``: its mean squared error along ``n`` is ``p d^2``, which a
+    covariance from the ranges leaves out (``uwb_mirror_covariance`` publishes it).
+
+    With GNSS the side is the one the GNSS position was nearer to when the ranges took over: wrong
+    when the GNSS error along the plane's normal exceeds half the separation ``d`` of the tag and
+    its mirror, ``p = Phi(-d / (2 sigma))`` for a GNSS error of 1-sigma ``sigma`` along the normal
+    (``docs/uwb_gnss_fusion/fusion_mirror_bound.md`` measures how often that happens). Without GNSS
+    (``gnss_std_m`` None) nothing picks the side: ``p = 0.5``.
+
+    Example:
+        >>> round(mirror_wrong_side_probability(1.28, 2.0), 3)
+        0.374
+    """
+    if gnss_std_m is None:
+        return 0.5
+    if not gnss_std_m > 0.0:
+        return 0.0
+    return 0.5 * math.erfc(separation_m / (2.0 * math.sqrt(2.0) * gnss_std_m))
+
+
 class MirrorTest:
     """Accumulated GNSS log-likelihood ratio of the mirror solution against the current one.
 
