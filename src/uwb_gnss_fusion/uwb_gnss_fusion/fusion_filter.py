@@ -760,7 +760,7 @@ class FusionFilter:
             window_ns = p.uwb_init_window_s * _NS
             heard = [(aid, v) for aid, v in self._recent_uwb.items() if v[3] == frame and t - v[0] <= window_ns]
             self._mirror_plane_key = (self._anchor_version, frame)
-            self._mirror_valid_until_ns = min((v[0] for _, v in heard), default=t) + window_ns
+            self._mirror_valid_until_ns = int(min((v[0] for _, v in heard), default=t) + window_ns)
             self._mirror_plane = None
             if len(heard) >= 3:
                 anchors = np.array([v[1] for _, v in heard])
