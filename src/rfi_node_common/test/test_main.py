@@ -10,6 +10,9 @@ import textwrap
 CHILD = textwrap.dedent('''
     import os, signal, sys, time
     import rclpy
+    # Python's own Ctrl-C handler, whatever disposition this process inherited (a parent that ignores
+    # SIGINT passes SIG_IGN on to its children, and Python then installs no handler at start)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     from rclpy.node import Node
     from rfi_node_common.main import run_node
 
