@@ -109,7 +109,7 @@ def run_filter(run, anchors, feed_js=False, **overrides):
 
 
 def run_spp(run):
-    from uwb_gnss_fusion.spp import SinglePointPositioner
+    from gnss_common.spp import SinglePointPositioner
 
     spp = SinglePointPositioner()
     pos = np.full((len(run.gnss_epochs), 3), np.nan)

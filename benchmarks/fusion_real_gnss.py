@@ -41,11 +41,11 @@ import rclpy  # noqa: E402
 from rclpy.context import Context  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
+from gnss_common.spp import SinglePointPositioner  # noqa: E402
 from rfi_experiments.replay import ReplayHarness  # noqa: E402
 from rfi_experiments.rinex_to_bag import convert_rinex, write_bag  # noqa: E402
 from rfi_sim.evaluation import ecef_errors_enu, error_3d_m, error_stats, horizontal_error_m  # noqa: E402
 from uwb_gnss_fusion.fusion_node import FusionNode  # noqa: E402
-from uwb_gnss_fusion.spp import SinglePointPositioner  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "src" / "gnss_common" / "test" / "data"

@@ -26,7 +26,7 @@ import numpy as np  # noqa: E402
 from gnss_common.coordinates import ecef_to_enu  # noqa: E402
 from gnss_common.measurements import build_epochs  # noqa: E402
 from gnss_common.rinex import read_rinex_nav, read_rinex_obs  # noqa: E402
-from uwb_gnss_fusion.spp import SinglePointPositioner, SppParams  # noqa: E402
+from gnss_common.spp import SinglePointPositioner, SppParams  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "src" / "gnss_common" / "test" / "data"

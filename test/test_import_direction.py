@@ -31,7 +31,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ('gnss_common',),
     ('rfi_node_common',),
     ('rfi_sim',),
-    ('rfi_monitor', 'uwb_gnss_fusion', 'imm_carrier'),
+    ('rfi_monitor', 'uwb_gnss_fusion', 'imm_carrier', 'gnss_integrity'),
     ('rfi_experiments',),
 )
 """The declared order, lowest first; packages of one layer do not import each other."""

@@ -190,9 +190,9 @@ def _jammer_section(truth: list[Any], estimates: list[Any], out: Path, summary: 
 # -- positioning ----------------------------------------------------------------------------------
 def _baselines(gnss_msgs: list[Any]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """SPP and the GNSS-only filter on the bag's GNSS epochs: name -> (stamps s, ECEF positions)."""
+    from gnss_common.spp import SinglePointPositioner, SppParams
     from uwb_gnss_fusion.conversions import msg_to_epoch
     from uwb_gnss_fusion.fusion_filter import FusionFilter, FusionParams
-    from uwb_gnss_fusion.spp import SinglePointPositioner, SppParams
 
     spp = SinglePointPositioner(SppParams())
     gnss_filter = FusionFilter(FusionParams(use_uwb=False))

@@ -153,6 +153,7 @@ from sensor_msgs.msg import NavSatFix
 
 from gnss_common.jamming_weights import effective_cn0_dbhz
 from gnss_common.observations import GnssEpoch, UwbRangeMeasurement
+from gnss_common.spp import SinglePointPositioner
 from rfi_msgs.msg import FusionStatus, GnssMeasurementArray, JammerState, UwbRange
 from rfi_node_common.diagnostics import (
     ERROR,
@@ -195,7 +196,6 @@ from uwb_gnss_fusion.output_messages import (  # noqa: F401 (re-exported: the no
     status_msg,
 )
 from uwb_gnss_fusion.reorder_buffer import widened_window_ns
-from uwb_gnss_fusion.spp import SinglePointPositioner
 from uwb_gnss_fusion.spp_reference import SppReferenceCache
 
 TOPICS = """topics:

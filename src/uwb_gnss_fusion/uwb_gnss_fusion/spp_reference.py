@@ -15,8 +15,7 @@ from collections.abc import Callable
 import numpy as np
 
 from gnss_common.observations import GnssEpoch
-
-from .spp import SinglePointPositioner, SppResult
+from gnss_common.spp import SinglePointPositioner, SppResult
 
 NS_PER_S = 1_000_000_000
 

@@ -1,4 +1,4 @@
-"""Tests for uwb_gnss_fusion.spp: closed-form synthetic fixes, WLS optimality, FDE, bad input, real data."""
+"""Tests for gnss_common.spp: closed-form synthetic fixes, WLS optimality, FDE, bad input, real data."""
 
 import math
 from dataclasses import replace
@@ -10,9 +10,9 @@ import pytest
 from gnss_common.constants import EARTH_ROTATION_RATE_RADPS, SPEED_OF_LIGHT_MPS
 from gnss_common.coordinates import ecef_to_enu, ecef_to_enu_rotation, ecef_to_geodetic, enu_to_ecef
 from gnss_common.measurements import build_epochs
-from gnss_common.observations import GALILEO, GPS, GnssEpoch, SatelliteObservation
+from gnss_common.observations import GALILEO, GnssEpoch
 from gnss_common.rinex import read_rinex_nav, read_rinex_obs
-from uwb_gnss_fusion.spp import (
+from gnss_common.spp import (
     REJECTION_REASONS,
     STATUS_OK,
     STATUS_OK_WITH_EXCLUSIONS,
@@ -20,67 +20,26 @@ from uwb_gnss_fusion.spp import (
     SinglePointPositioner,
     SppParams,
 )
-from uwb_gnss_fusion.spp_reference import SppReferenceCache
+from gnss_common.synthetic_sky import (
+    CLOCK_BIAS_M,
+    CLOCK_DRIFT_MPS,
+    RECEIVER_ECEF_M,
+    RECEIVER_VELOCITY_ECEF_MPS,
+    SKY_AZ_EL_DEG,
+)
+from gnss_common.synthetic_sky import synthetic_epoch as _synthetic_epoch
 
-DATA = Path(__file__).resolve().parents[2] / "gnss_common" / "test" / "data"
-RX = np.array([-740289.918, -5457071.734, 3207245.542])
-RX_VEL = np.array([3.0, -2.0, 0.5])
-CLOCK_M = 12345.678
-DRIFT_MPS = -45.6
-# (azimuth deg, elevation deg) of a fixed 9-satellite sky
-SKY = [(0, 80), (40, 35), (95, 60), (140, 20), (185, 45), (230, 15), (275, 55), (320, 25), (10, 12)]
+DATA = Path(__file__).resolve().parent / "data"
+RX = RECEIVER_ECEF_M
+RX_VEL = RECEIVER_VELOCITY_ECEF_MPS
+CLOCK_M = CLOCK_BIAS_M
+DRIFT_MPS = CLOCK_DRIFT_MPS
+SKY = list(SKY_AZ_EL_DEG)
 
 
 def _rz(a):
     c, s = math.cos(a), math.sin(a)
     return np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def _synthetic_epoch(sky=SKY, noise_m=None, svids=None, std_m=math.nan, cn0=45.0):
-    """Exact Cao et al. eq. 5/6 measurements for a receiver at RX with Earth rotation during flight."""
-    lat, lon, _ = ecef_to_geodetic(RX)
-    r_enu = ecef_to_enu_rotation(lat, lon)
-    obs = []
-    for k, (az, el) in enumerate(sky):
-        a, e = math.radians(az), math.radians(el)
-        u = r_enu.T @ np.array([math.sin(a) * math.cos(e), math.cos(a) * math.cos(e), math.sin(e)])
-        # distance so that the satellite sits at |r| = 26 560 km
-        b = RX @ u
-        d = -b + math.sqrt(b * b - RX @ RX + 2.656e7**2)
-        sat_rx = RX + d * u  # receive-time ECEF frame
-        tau = d / SPEED_OF_LIGHT_MPS
-        for _ in range(3):
-            sat_tx = _rz(-EARTH_ROTATION_RATE_RADPS * tau) @ sat_rx  # transmit-time ECEF frame
-            tau = np.linalg.norm(_rz(EARTH_ROTATION_RATE_RADPS * tau) @ sat_tx - RX) / SPEED_OF_LIGHT_MPS
-        rng = np.linalg.norm(sat_rx - RX)
-        v_sat_tx = np.cross(u, [0.0, 0.0, 1.0]) * 3000.0 + np.array([100.0, -50.0, 10.0]) * k
-        v_sat_rx = _rz(EARTH_ROTATION_RATE_RADPS * tau) @ v_sat_tx
-        los = (sat_rx - RX) / rng
-        sat_clock_m, sat_drift = 1000.0 * k, 0.01 * k
-        iono, tropo = 3.0 + 0.1 * k, 2.5 / max(math.sin(e), 0.1)
-        pr = rng + CLOCK_M - sat_clock_m + iono + tropo
-        if noise_m is not None:
-            pr += noise_m[k]
-        rate = (v_sat_rx - RX_VEL) @ los + DRIFT_MPS - sat_drift
-        obs.append(
-            SatelliteObservation(
-                constellation=GPS,
-                svid=(svids[k] if svids else k + 1),
-                pseudorange_m=pr,
-                pseudorange_rate_mps=rate,
-                cn0_dbhz=cn0,
-                satellite_position_ecef_m=sat_tx,
-                satellite_velocity_ecef_mps=v_sat_tx,
-                satellite_clock_bias_m=sat_clock_m,
-                satellite_clock_drift_mps=sat_drift,
-                ionosphere_delay_m=iono,
-                troposphere_delay_m=tropo,
-                pseudorange_std_m=std_m,
-            )
-        )
-    return GnssEpoch(
-        stamp_ns=1_437_263_983_000_000_000, gps_week=1854, gps_time_of_week_s=0.0, observations=tuple(obs)  # ROS (UTC)
-    )
 
 
 def test_noise_free_fix_recovers_truth_to_a_millimetre():
@@ -273,32 +232,3 @@ def test_replay_is_deterministic(real_runs):
     assert all(np.array_equal(x.position_ecef_m, y.position_ecef_m) for x, y in zip(r1, r2, strict=True))
     assert np.linalg.norm(a[0].position_ecef_m - r1[0].position_ecef_m) == 0.0
     assert enu_to_ecef(np.zeros(3), r1[0].position_ecef_m) == pytest.approx(r1[0].position_ecef_m)
-
-
-# ----------------------------------------------------------------------------- SPP reference cache
-_T0 = 1_437_263_983_000_000_000  # ROS (UTC) stamp of GPS week 1854, TOW 0
-_NS = 1_000_000_000
-
-
-def _at(stamp_ns: int, valid: bool = True):
-    epoch = _synthetic_epoch()
-    if not valid:  # three satellites: no fix
-        epoch = replace(epoch, observations=epoch.observations[:3])
-    return replace(epoch, stamp_ns=stamp_ns)
-
-
-def test_reference_is_the_newest_valid_fix_within_the_age_and_each_epoch_is_solved_once():
-    solved = []
-    cache = SppReferenceCache(SinglePointPositioner(), 5.0, solved.append)
-    for k in range(8):
-        cache.add(_at(_T0 + k * _NS, valid=k != 6))
-    assert len(cache) == 6  # the last 5 s: stamps _T0 + 2 s .. _T0 + 7 s
-    assert cache.reference(_T0 + 7 * _NS - 1) is not None and solved == [False, True]  # 6 s invalid, then 5 s
-    stamp, pos, std, clock = cache.reference(_T0 + 7 * _NS - 1)
-    assert stamp == _T0 + 5 * _NS and solved == [False, True]  # nothing solved twice
-    assert np.linalg.norm(pos - RX) < 1e-3 and 0.0 < std < 10.0 and math.isfinite(clock)
-    assert cache.reference(_T0 + 7 * _NS)[0] == _T0 + 7 * _NS
-    assert cache.reference(_T0 + 20 * _NS) is None  # every kept epoch is older than 5 s before that
-    assert cache.reference(_T0) is None  # dropped already
-    cache.clear()
-    assert len(cache) == 0 and cache.reference(_T0 + 7 * _NS) is None

@@ -1,0 +1,3 @@
+"""GNSS integrity: jamming and spoofing detection from any receiver (C/N0, AGC, flags, spectrum,
+clock, kinematics, consistency), published as a vendor-neutral state that the fusion acts on.
+"""

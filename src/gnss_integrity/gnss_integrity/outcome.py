@@ -1,0 +1,112 @@
+"""What every integrity test returns: statistic, thresholds, decision, and what it implicates.
+
+Pure (no rclpy). The constants mirror rfi_msgs/IntegrityTest and rfi_msgs/GnssIntegrity (a test
+checks they are equal), so the cores never import ROS types.
+
+Thresholds come from a false-alarm probability per evaluation, not from a tuned number:
+:func:`normal_threshold` and :func:`chi2_threshold` turn ``false_alarm_probability`` into the
+statistic's threshold under the test's clean-data model (documented per test).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from scipy.special import chdtri, ndtri
+
+# rfi_msgs/IntegrityTest CATEGORY_*
+CATEGORY_JAMMING = 1
+CATEGORY_CN0 = 2
+CATEGORY_CLOCK = 3
+CATEGORY_KINEMATICS = 4
+CATEGORY_CONSISTENCY = 5
+CATEGORY_EXTERNAL = 6
+
+# rfi_msgs/IntegrityTest DECISION_*
+DECISION_UNKNOWN = 0
+DECISION_PASS = 1
+DECISION_SUSPECT = 2
+DECISION_ALARM = 3
+
+# rfi_msgs/GnssIntegrity STATE_*
+STATE_UNKNOWN = 0
+STATE_NONE = 1
+STATE_SUSPECTED = 2
+STATE_DETECTED = 3
+
+# rfi_msgs/GnssIntegrity SCOPE_*
+SCOPE_NONE = 0
+SCOPE_SATELLITES = 1
+SCOPE_CONSTELLATIONS = 2
+SCOPE_ALL = 3
+
+# rfi_msgs/GnssIntegrity EVIDENCE_* (jamming_evidence bits)
+EVIDENCE_CN0_ELEVATION = 1
+EVIDENCE_CN0_COMMON_DROP = 2
+EVIDENCE_RECEIVER_AGC = 4
+EVIDENCE_RECEIVER_FLAG = 8
+EVIDENCE_RECEIVER_SPECTRUM = 16
+EVIDENCE_SDR_MONITOR = 32
+
+
+@dataclass(frozen=True)
+class TestOutcome:
+    """One test at one evaluation (see rfi_msgs/IntegrityTest).
+
+    Attributes:
+        name: stable test name (``docs/gnss_integrity/tests.md``).
+        category: ``CATEGORY_*``.
+        decision: ``DECISION_*``; UNKNOWN whenever the inputs are missing (statistic NaN).
+        statistic: the statistic, in ``unit``.
+        suspect_threshold, alarm_threshold: thresholds of SUSPECT and ALARM, in ``unit``.
+        false_alarm_probability: per-evaluation probability on clean data of reaching
+            ``suspect_threshold`` (the parameter that set it).
+        unit: unit of statistic and thresholds ("1" dimensionless, "dB", "m", ...).
+        scope: ``SCOPE_*`` the test implicates when it is SUSPECT or ALARM.
+        constellations: constellations it implicates (rfi_msgs/GnssMeasurement codes).
+        satellites: ``(constellation, svid)`` pairs it implicates.
+    """
+
+    __test__ = False  # not a pytest class despite its name
+
+    name: str
+    category: int
+    decision: int
+    statistic: float
+    suspect_threshold: float
+    alarm_threshold: float
+    false_alarm_probability: float
+    unit: str = "1"
+    scope: int = SCOPE_NONE
+    constellations: tuple[int, ...] = ()
+    satellites: tuple[tuple[int, int], ...] = ()
+
+
+def decide(statistic: float, suspect_threshold: float, alarm_threshold: float) -> int:
+    """DECISION_* of a statistic against its thresholds (NaN statistic: UNKNOWN)."""
+    if not math.isfinite(statistic):
+        return DECISION_UNKNOWN
+    if statistic >= alarm_threshold:
+        return DECISION_ALARM
+    if statistic >= suspect_threshold:
+        return DECISION_SUSPECT
+    return DECISION_PASS
+
+
+def unknown(name: str, category: int, suspect_threshold: float = math.nan, alarm_threshold: float = math.nan,
+            false_alarm_probability: float = math.nan, unit: str = "1") -> TestOutcome:
+    """The outcome of a test that could not run (inputs missing or not enough history)."""
+    return TestOutcome(name, category, DECISION_UNKNOWN, math.nan, suspect_threshold, alarm_threshold,
+                       false_alarm_probability, unit)
+
+
+def normal_threshold(false_alarm_probability: float, two_sided: bool = False) -> float:
+    """Threshold of a standard normal statistic (|z| if two-sided) exceeded with that probability."""
+    p = false_alarm_probability / (2.0 if two_sided else 1.0)
+    return float(-ndtri(p))
+
+
+def chi2_threshold(false_alarm_probability: float, dof: int) -> float:
+    """Threshold of a chi-square statistic with ``dof`` degrees of freedom exceeded with that probability."""
+    return float(chdtri(dof, false_alarm_probability))
