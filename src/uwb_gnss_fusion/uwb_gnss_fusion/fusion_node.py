@@ -154,7 +154,7 @@ from sensor_msgs.msg import NavSatFix
 from gnss_common.jamming_weights import effective_cn0_dbhz
 from gnss_common.observations import GnssEpoch, UwbRangeMeasurement
 from gnss_common.spp import SinglePointPositioner
-from rfi_msgs.msg import FusionStatus, GnssMeasurementArray, JammerState, UwbRange
+from rfi_msgs.msg import FusionStatus, GnssIntegrity, GnssMeasurementArray, JammerState, UwbRange
 from rfi_node_common.diagnostics import (
     ERROR,
     OK,
@@ -184,6 +184,7 @@ from uwb_gnss_fusion.fusion_filter import (
 from uwb_gnss_fusion.fusion_node_params import FusionNodeParams
 from uwb_gnss_fusion.fusion_output import all_finite
 from uwb_gnss_fusion.input_admission import DuplicateFilter, admit_jammer_state
+from uwb_gnss_fusion.integrity_policy import GnssExclusion, integrity_jammer_to_signal, verdict_of
 from uwb_gnss_fusion.local_frame import LocalFrame
 from uwb_gnss_fusion.message_checks import satellite_reason, uwb_range_reason
 from uwb_gnss_fusion.output_messages import (  # noqa: F401 (re-exported: the node's output contract)
@@ -210,7 +211,7 @@ JAMMER_TYPES = frozenset((JammerState.NONE, JammerState.CW, JammerState.CHIRP, J
 """The ``type`` constants of rfi_msgs/JammerState; any other value is rejected (``jammer_state_unknown_type``)."""
 
 _NS = 1_000_000_000
-KINDS = ('gnss', 'uwb', 'jammer')
+KINDS = ('gnss', 'uwb', 'jammer', 'integrity')
 """Input kinds, as used in the counter names (``<kind>_received`` ...)."""
 
 @dataclass(frozen=True)
@@ -240,6 +241,9 @@ class FusionNode(Node):
         self.spp = SinglePointPositioner()
         self.spp_cache = SppReferenceCache(self.spp, self.params.reference_max_age_s, self._count_spp)
         self.filter = self._new_filter()
+        self.exclusion = GnssExclusion(self.params.integrity_readmit_clean_s, self.params.act_on_integrity)
+        self._sdr_js_ns: int | None = None  # stamp of the last SDR J/S processed (it takes precedence)
+        self._excluded_now = 0  # satellites excluded from the epoch being published
         self.counts: Counter[str] = Counter({f'{k}_{what}': 0 for k in KINDS
                                              for what in ('received', 'rejected', 'processed')})
         for name in ('reorder_window_growths', 'idle_flushes', 'end_of_input_flushes', 'publish_exceptions',
@@ -283,6 +287,8 @@ class FusionNode(Node):
                         warning_throttle_s=throttle)
         subscribe_input(self, JammerState, 'rfi/jammer_state', self.on_jammer_raw, self.health, raw=True,
                         warning_throttle_s=throttle)
+        subscribe_input(self, GnssIntegrity, 'gnss/integrity', self.on_integrity_raw, self.health, raw=True,
+                        warning_throttle_s=throttle)
         self.stale_watch = StaleInputWatch(self, self.health, self.params.input_timeout_s, self._publish_stale)
         self.idle_flush_timer = None
         if self.params.idle_flush_s > 0:
@@ -312,6 +318,21 @@ class FusionNode(Node):
         msg = self._deserialize(raw, JammerState, 'jammer')
         if msg is not None:
             self.on_jammer(msg)
+
+    def on_integrity_raw(self, raw: bytes) -> None:
+        msg = self._deserialize(raw, GnssIntegrity, 'integrity')
+        if msg is not None:
+            self.on_integrity(msg)
+
+    def on_integrity(self, msg: GnssIntegrity) -> None:
+        """A /gnss/integrity verdict: buffered in stamp order like every input (integrity_policy)."""
+        self.counts['integrity_received'] += 1
+        verdict, reason = verdict_of(msg)
+        if verdict is None:
+            self._reject('integrity', str(reason), f'GnssIntegrity at {stamp_to_ns(msg.header.stamp)} ns ignored')
+        else:
+            self._enqueue(_Item(verdict.stamp_ns, 'integrity', verdict))
+        self._report()
 
     def on_gnss(self, msg: GnssMeasurementArray) -> None:
         stamp_ns = stamp_to_ns(msg.header.stamp)
@@ -527,16 +548,29 @@ class FusionNode(Node):
         try:
             if item.kind == 'jammer':
                 self.filter.set_jammer_to_signal(item.stamp_ns, item.payload)
+                self._sdr_js_ns = item.stamp_ns
                 self.counts['jammer_processed'] += 1
                 return
+            if item.kind == 'integrity':
+                self._apply_integrity(item.payload)
+                self.counts['integrity_processed'] += 1
+                return
             if item.kind == 'gnss':
+                epoch, excluded = self.exclusion.filter_epoch(item.payload)
+                self._excluded_now = excluded
+                if epoch is None:  # all GNSS excluded for spoofing: counted, never applied
+                    self.counts['gnss_processed'] += 1
+                    self.counts['satellites_excluded_spoofing'] += excluded
+                    return
+                self.counts['satellites_excluded_spoofing'] += excluded
                 if self.params.use_spp_reference and self.params.use_gnss:
-                    self.spp_cache.add(item.payload)
-                out = self.filter.process_gnss(item.payload)
+                    self.spp_cache.add(epoch)
+                out = self.filter.process_gnss(epoch)
                 if item.dropped_satellites:  # dropped by the node's checks: rejected satellites too
                     out = dataclasses.replace(
                         out, satellites_rejected=out.satellites_rejected + item.dropped_satellites)
             else:
+                self._excluded_now = 0
                 out = self.filter.process_uwb(item.payload)
         except Exception as err:
             # The core validates its input and counts rejections; an exception here is a core bug.
@@ -556,6 +590,25 @@ class FusionNode(Node):
             self.get_logger().error(
                 f'publishing the output of a {item.kind} message at {item.stamp_ns} ns failed: '
                 f'{type(err).__name__}: {err}', throttle_duration_sec=self.params.warning_throttle_s)
+
+    def _apply_integrity(self, verdict) -> None:
+        """Exclusion and readmission of GNSS (logged), and the C/N0 J/S where no SDR J/S is fresh."""
+        change = self.exclusion.update(verdict)
+        if change == 'excluded':
+            self.spp_cache.clear()  # the SPP reference must not bring the spoofed position back
+            self.get_logger().warn(f'spoofing detected at {verdict.stamp_ns} ns: excluding '
+                                   f'{self.exclusion.describe()} from the fusion (gnss_integrity)')
+        elif change == 'readmitted':
+            self.get_logger().warn(f'GNSS readmitted at {verdict.stamp_ns} ns after '
+                                   f'{self.params.integrity_readmit_clean_s:g} s without spoofing')
+        if not self.params.act_on_integrity:
+            return
+        js = integrity_jammer_to_signal(verdict)
+        timeout_ns = self.filter.params.jammer_info_timeout_s * _NS
+        sdr_fresh = self._sdr_js_ns is not None and verdict.stamp_ns - self._sdr_js_ns <= timeout_ns
+        if js is not None and not sdr_fresh:
+            self.filter.set_jammer_to_signal(verdict.stamp_ns, js)
+            self.counts['integrity_js_applied'] += 1
 
     def apply_parameter_changes(self) -> bool:
         """Apply a change of the settable parameters (validated when it was set, :class:`RuntimeParameters`)
@@ -635,7 +688,8 @@ class FusionNode(Node):
             self._first_output_ns = stamp_ns
         frame = self._fix_frames.get(out.frame_id, out.frame_id)
         reasons, lists = self._status_reason_lists()
-        self.status_pub.publish(status_msg(out, stamp_ns, frame, reasons, lists))
+        self.status_pub.publish(status_msg(out, stamp_ns, frame, reasons, lists, self.exclusion.scope,
+                                           self._excluded_now))
         if not out.initialized:
             return
         if not out.is_finite():
@@ -756,6 +810,8 @@ class FusionNode(Node):
         values['window_s'] = p.diagnostics_window_s
         values['jammer_to_signal_db'] = self._last_js_db
         values['parameter_changes_refused'] = self.runtime.changes_refused
+        values['gnss_excluded_for_spoofing'] = self.exclusion.describe()
+        values.update({f'integrity.{k}': v for k, v in self.exclusion.counts.items()})
         anchors = self.filter.uwb_anchors_heard(stamp_ns)
         mirror = anchors == 3 and self.filter.params.uwb_tag_side_of_anchor_plane == 0
         values['uwb_anchors_heard'] = anchors
@@ -788,6 +844,8 @@ class FusionNode(Node):
                         + degraded_inputs([lost], p.warn_lost_fraction))
             if w['divergences']:
                 degraded.append(f'filter diverged {w["divergences"]} times')
+            if self.exclusion.active:
+                degraded.append(f'spoofing: {self.exclusion.describe()} excluded (gnss_integrity)')
             loss_db = self.jammer_cn0_loss_db()
             values['jammer_cn0_loss_db'] = round(loss_db, 2)
             if loss_db > p.warn_cn0_loss_db:

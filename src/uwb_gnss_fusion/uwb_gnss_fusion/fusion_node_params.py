@@ -123,6 +123,14 @@ class FusionNodeParams:
     max_stamp_jump_s: float = max_stamp_jump_parameter(120.0)  # type: ignore[assignment]
     stamp_jump_confirmations: int = stamp_jump_confirmations_parameter(5)  # type: ignore[assignment]
     input_timeout_s: float = input_timeout_parameter()  # type: ignore[assignment]
+    act_on_integrity: bool = parameter(
+        True, 'Act on /gnss/integrity (gnss_integrity node): a DETECTED spoofing state excludes the GNSS it '
+        'implicates (all, constellations or satellites) until integrity_readmit_clean_s of NONE; its jamming J/S '
+        'weights the GNSS (Cao et al., eq. 4) where no SDR /rfi/jammer_state is fresh. False: received and '
+        'counted, not used.', read_only=False)
+    integrity_readmit_clean_s: float = parameter(
+        30.0, 'Spoofing NONE for this long without a break readmits the excluded GNSS (hysteresis), s.',
+        minimum=0.0, maximum=3600.0)
     use_spp_reference: bool = parameter(
         True, 'Re-initialise after a divergence from the newest valid single-point (SPP) fix of the last '
         'reference_max_age_s of GNSS epochs (solved on demand).')

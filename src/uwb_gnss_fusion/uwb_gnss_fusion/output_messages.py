@@ -101,7 +101,8 @@ _STATUS_FIX, _SERVICE_GPS = int(NavSatStatus.STATUS_FIX), int(NavSatStatus.SERVI
 _COVARIANCE_TYPE_KNOWN = int(NavSatFix.COVARIANCE_TYPE_KNOWN)
 
 
-def _status(b: Any, out: FusionOutput, stamp_ns: int, frame_id: str, names: list[str], counts: list[int]) -> Any:
+def _status(b: Any, out: FusionOutput, stamp_ns: int, frame_id: str, names: list[str], counts: list[int],
+            gnss_excluded: int = 0, satellites_excluded: int = 0) -> Any:
     sec, nanosec = _split_stamp(stamp_ns)
     return b.FusionStatus(
         header__stamp__sec=sec, header__stamp__nanosec=nanosec, header__frame_id=frame_id, mode=int(out.mode),
@@ -113,7 +114,8 @@ def _status(b: Any, out: FusionOutput, stamp_ns: int, frame_id: str, names: list
         normalized_innovation_squared=float(out.normalized_innovation_squared),
         clock_bias_m=float(out.clock_bias_m), clock_drift_mps=float(out.clock_drift_mps),
         jammer_to_signal_db=float(out.jammer_to_signal_db),
-        rejection_reasons=list(names), rejection_counts=counts)  # the setter copies counts into array('I')
+        rejection_reasons=list(names), rejection_counts=counts,  # the setter copies counts into array('I')
+        gnss_excluded=int(gnss_excluded), satellites_excluded=min(int(satellites_excluded), UINT16_MAX))
 
 
 def _odometry(b: Any, out: FusionOutput, frame_id: str, child_frame_id: str) -> Any:
@@ -210,14 +212,15 @@ def datum_msg(stamp_ns: int, frame_id: str, geodetic: tuple[float, float, float]
 
 
 def status_msg(out: FusionOutput, stamp_ns: int, frame_id: str, reasons: dict[str, int],
-               lists: tuple[list[str], list[int]] | None = None) -> Any:
+               lists: tuple[list[str], list[int]] | None = None, gnss_excluded: int = 0,
+               satellites_excluded: int = 0) -> Any:
     """FusionOutput -> rfi_msgs/FusionStatus (counts clamped to their integer types).
 
     ``lists``: ``reason_lists(reasons)`` if the caller has it already (copied into the message,
     never shared between messages).
     """
     names, counts = reason_lists(reasons) if lists is None else lists
-    return _status(_FAST, out, stamp_ns, frame_id, names, counts)
+    return _status(_FAST, out, stamp_ns, frame_id, names, counts, gnss_excluded, satellites_excluded)
 
 
 def odometry_msg(out: FusionOutput, frame_id: str, child_frame_id: str) -> Any:
