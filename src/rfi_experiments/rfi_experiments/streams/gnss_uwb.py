@@ -6,7 +6,9 @@ rooftop set-up moved to the ARL1 station, Cao et al., Sec. IV-1 and Table 1)::
     gnss_uwb:
       start_gps_week: 1854            # continuous GPS week of the first epoch (the ARL1 nav file's week)
       start_gps_tow_s: 3600.0         # GPS time of week of the first epoch, s
-      receiver_ecef_m: [-740289.918, -5457071.734, 3207245.542]   # static antenna = tag, ECEF, m
+      receiver_ecef_m: [-740289.918, -5457071.734, 3207245.542]   # antenna = tag at the start, ECEF, m
+      receiver_velocity_enu_mps: [0.0, 0.0, 0.0]   # constant velocity, m/s, ENU at the start (straight
+                                      # line; the anchors stay around the start position)
       gnss_rate_hz: 5.0               # GNSS epoch rate, Hz
       uwb_rate_hz: 20.0               # ranging rate per anchor, Hz (anchors interleaved)
       anchors:                        # one entry per anchor, ids A1, A2, ... in this order
@@ -27,6 +29,9 @@ rooftop set-up moved to the ARL1 station, Cao et al., Sec. IV-1 and Table 1)::
       jamming:                        # the schedule: consecutive phases from the start
         - {jsr_db: null, duration_s: 30.0}   # null: no jammer
         - {jsr_db: 22.0}                     # the last phase may omit duration_s: it runs to the end
+      spoofing:                       # optional: attacks on the GNSS measurements (rfi_experiments.attacks)
+        - {kind: position_push, start_s: 60.0, push_velocity_enu_mps: [1.0, 0.0, 0.0],
+           doppler_consistent: true, power_advantage_db: 3.0}
 
 Each phase's ``duration_s`` must be a whole number of GNSS and UWB periods, and the phases must
 cover the scenario's ``duration_s`` exactly.
@@ -34,10 +39,12 @@ cover the scenario's ``duration_s`` exactly.
 Simulation. :func:`rfi_sim.gnss_uwb.simulate` takes one J/S per run, so the builder
 simulates each phase as its own run (seeded from ``seed`` and the phase index) and joins them:
 the stamps continue on the same GNSS/UWB grid, the receiver clock of a phase starts where the
-previous one ended (bias extrapolated by one GNSS period with the last drift), the geometry, anchors
-and receiver are the same. Not continuous across a phase boundary: the per-satellite Gauss-Markov
-errors (re-drawn from their stationary distribution, so their statistics are unchanged), the state
-of outlier bursts (a burst ends at a boundary) and the random number streams.
+previous one ended (bias extrapolated by one GNSS period with the last drift), the geometry and
+anchors are the same, and a moving receiver starts a phase where its straight line puts it. Not
+continuous across a phase boundary: the per-satellite Gauss-Markov errors (re-drawn from their
+stationary distribution, so their statistics are unchanged), the state of outlier bursts (a burst
+ends at a boundary) and the random number streams. The spoofing attacks run across the phases
+without a break (one injector per attack for the whole stream).
 
 Output, in stamp order, per GNSS epoch k (stamp = receive time as a ROS (UTC) stamp,
 gnss_common.gps_time.gps_to_ros_stamp_ns of the message's gps_week / gps_time_of_week_s; UWB
@@ -45,12 +52,16 @@ ranges stamped by the same conversion; at equal stamps in this order):
 
 * ``/gnss/measurements`` (rfi_msgs/GnssMeasurementArray, frame "earth");
 * ``/truth/position`` (geometry_msgs/PointStamped, frame "earth"): the true antenna (= tag)
-  position, ECEF, m, at every GNSS epoch (static receiver);
+  position, ECEF, m, at every GNSS epoch (at its receive time for a moving receiver);
 * ``/truth/jammer_state`` (rfi_msgs/JammerState, only with ``truth_jammer_state``) at the start of
   each phase and then once per second: ``type`` CHIRP (the paper's linear chirp) or NONE,
   ``jammer_to_signal_db`` the phase's J/S (NaN without a jammer), ``confidence`` 1, every other
   float NaN. It has the layout of the RFI monitor's output, so remapping it to /rfi/jammer_state
   gives the fusion node an ideal monitor;
+* with a ``spoofing`` list: the measurements are those under the attacks
+  (:mod:`rfi_sim.spoofing`, injected epoch by epoch with the true receiver state), and
+  ``/truth/integrity``, ``/truth/spoofed_position``, ``/truth/spoofed_time`` (see
+  :mod:`rfi_experiments.attacks`);
 
 and the UWB ranges ``/uwb/ranges`` (rfi_msgs/UwbRange, frame "earth", anchor ids A1...), each
 anchor at ``uwb_rate_hz``, interleaved. Nothing else of the simulator's truth (clock, outlier
@@ -83,6 +94,7 @@ import numpy as np
 
 from gnss_common.constants import SPEED_OF_LIGHT_MPS
 from gnss_common.gps_time import gps_to_ros_stamp_ns
+from rfi_experiments.attacks import StreamSpoofer, parse_spoofing
 from rfi_experiments.scenario import Scenario, data_path
 from rfi_experiments.schema import (
     JsrPhases,
@@ -99,6 +111,7 @@ from rfi_sim.gnss_uwb import (
     PAPER_ANCHOR_RANGES_M,
     BroadcastGeometry,
     GnssUwbScenario,
+    receiver_velocity_ecef,
     simulate,
 )
 
@@ -124,8 +137,10 @@ class GnssUwbSection:
     """The ``gnss_uwb`` section: every key with its default (the simulator's; no jamming), validated
     and converted on construction (module docstring for each key).
 
-    After construction ``anchors`` is ``(ranges m, azimuths deg, ups m)``, ``receiver_ecef_m`` a
-    tuple of 3 floats and ``uwb_reported_std_m`` NaN when not given; ``jamming`` and ``nav_file``
+    After construction ``anchors`` is ``(ranges m, azimuths deg, ups m)``, ``receiver_ecef_m`` and
+    ``receiver_velocity_enu_mps`` tuples of 3 floats, ``uwb_reported_std_m`` NaN when not given and
+    ``spoofing`` a tuple of :class:`rfi_sim.spoofing.SpoofingAttack` (checked against the
+    scenario's duration by :func:`parse_section`); ``jamming`` and ``nav_file``
     stay as written (they depend on the scenario: :func:`parse_section` resolves them).
 
     Raises:
@@ -135,6 +150,7 @@ class GnssUwbSection:
     start_gps_week: int = _DEFAULT_SIM.start_week
     start_gps_tow_s: float = _DEFAULT_SIM.start_tow_s
     receiver_ecef_m: Any = ARL1_ECEF_M
+    receiver_velocity_enu_mps: Any = (0.0, 0.0, 0.0)
     gnss_rate_hz: float = _DEFAULT_SIM.gnss_rate_hz
     uwb_rate_hz: float = _DEFAULT_SIM.uwb_rate_hz
     anchors: Any = _PAPER_ANCHORS
@@ -150,6 +166,7 @@ class GnssUwbSection:
     nav_file: str | None = None
     truth_jammer_state: bool = True
     jamming: Any = ({'jsr_db': None},)
+    spoofing: Any = None
 
     def __post_init__(self) -> None:
         def put(key: str, value: Any) -> None:
@@ -164,6 +181,12 @@ class GnssUwbSection:
         if not 6.0e6 < math.hypot(*rx) < 6.5e6:
             raise ScenarioError(f'gnss_uwb.receiver_ecef_m {rx} is not near the Earth surface')
         put('receiver_ecef_m', rx)
+        vel = self.receiver_velocity_enu_mps
+        if not isinstance(vel, (list, tuple)) or len(vel) != 3:
+            raise ScenarioError(f'gnss_uwb.receiver_velocity_enu_mps must be a list of 3 numbers, m/s, got {vel!r}')
+        put('receiver_velocity_enu_mps',
+            tuple(number(v, 'gnss_uwb.receiver_velocity_enu_mps', -1000.0, 1000.0) for v in vel))
+        put('spoofing', parse_spoofing(self.spoofing, math.inf, 'gnss_uwb.spoofing'))
         put('gnss_rate_hz', number(self.gnss_rate_hz, 'gnss_uwb.gnss_rate_hz', 0.0, 100.0, low_open=True))
         put('uwb_rate_hz', number(self.uwb_rate_hz, 'gnss_uwb.uwb_rate_hz', 0.0, 1000.0, low_open=True))
         put('anchors', anchors(self.anchors, 'gnss_uwb.anchors'))
@@ -222,6 +245,10 @@ def parse_section(scenario: Scenario, section: Mapping[str, Any]) -> tuple[GnssU
             raise ScenarioError(f'gnss_uwb.nav_file {nav} does not exist')
     phases = jsr_phases(s.jamming, scenario.duration_s, 'gnss_uwb.jamming',
                         {'GNSS': s.gnss_rate_hz, 'UWB': s.uwb_rate_hz})
+    for i, attack in enumerate(s.spoofing):
+        if attack.start_s >= scenario.duration_s:
+            raise ScenarioError(f'gnss_uwb.spoofing[{i}].start_s {attack.start_s} is not before the end of the '
+                                f'scenario ({scenario.duration_s} s)')
     end_tow = s.start_gps_tow_s + scenario.duration_s
     if end_tow >= 604800.0:
         raise ScenarioError(f'gnss_uwb: the scenario runs past the end of GPS week {s.start_gps_week} '
@@ -271,6 +298,15 @@ def build(scenario: Scenario, section: Mapping[str, Any], seed: int) -> Iterator
     return _generate(s, phases, geometry, seed)
 
 
+def _enu_velocity(rx_ecef_m: np.ndarray, v_ecef_mps: np.ndarray) -> tuple[float, float, float]:
+    """An ECEF velocity (m/s) in ENU at ``rx_ecef_m``, m/s."""
+    from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic
+
+    lat, lon, _ = ecef_to_geodetic(np.asarray(rx_ecef_m, dtype=float))
+    east, north, up = (float(v) for v in ecef_to_enu_rotation(lat, lon) @ v_ecef_mps)
+    return east, north, up
+
+
 def _generate(s: GnssUwbSection, phases: JsrPhases, geometry: BroadcastGeometry, seed: int
               ) -> Iterator[tuple[int, str, Any]]:
     from uwb_gnss_fusion.conversions import epoch_to_msg, point_to_msg, uwb_to_msg
@@ -283,13 +319,21 @@ def _generate(s: GnssUwbSection, phases: JsrPhases, geometry: BroadcastGeometry,
     bias0_s, drift0 = _DEFAULT_SIM.clock_bias0_s, _DEFAULT_SIM.clock_drift0
     dt_g = 1.0 / s.gnss_rate_hz
     n_jam = max(1, round(TRUTH_JAMMER_PERIOD_S * s.gnss_rate_hz))
-    rx = np.asarray(s.receiver_ecef_m, dtype=float)
+    rx0 = np.asarray(s.receiver_ecef_m, dtype=float)
+    v_ecef = receiver_velocity_ecef(rx0, s.receiver_velocity_enu_mps)
+    moving = bool(np.any(v_ecef != 0.0))
+    spoofer = StreamSpoofer(s.spoofing, gps_to_ros_stamp_ns(week, tow0), seed) if s.spoofing else None
     t_start = 0.0
     for (jsr, dur), phase_seed in zip(phases, phase_seeds, strict=True):
+        # A moving receiver starts the phase on its straight line, with the same ECEF velocity
+        # (expressed in ENU at the phase's start) and the anchors around the first start.
+        rx = rx0 + v_ecef * t_start if moving else rx0
+        vel_enu = _enu_velocity(rx, v_ecef) if moving else (0.0, 0.0, 0.0)
         sim = GnssUwbScenario(
             jsr_db=jsr, duration_s=dur, seed=int(phase_seed), start_week=week, start_tow_s=tow0 + t_start,
-            receiver_ecef_m=tuple(rx), gnss_rate_hz=s.gnss_rate_hz, uwb_rate_hz=s.uwb_rate_hz,
-            anchor_ranges_m=ranges, anchor_azimuths_deg=azimuths, anchor_up_m=ups,
+            receiver_ecef_m=tuple(rx), receiver_velocity_enu_mps=vel_enu,
+            anchor_origin_ecef_m=tuple(rx0) if moving else None, gnss_rate_hz=s.gnss_rate_hz,
+            uwb_rate_hz=s.uwb_rate_hz, anchor_ranges_m=ranges, anchor_azimuths_deg=azimuths, anchor_up_m=ups,
             uwb_noise_std_m=s.uwb_noise_std_m, uwb_reported_std_m=s.uwb_reported_std_m,
             elevation_mask_deg=s.elevation_mask_deg, cn0_zenith_dbhz=s.cn0_zenith_dbhz,
             cn0_horizon_dbhz=s.cn0_horizon_dbhz, correlated_error_std_m=s.correlated_error_std_m,
@@ -301,11 +345,16 @@ def _generate(s: GnssUwbSection, phases: JsrPhases, geometry: BroadcastGeometry,
         bias0_s = float(run.truth.clock_bias_m[-1]) / SPEED_OF_LIGHT_MPS + drift0 * dt_g
         items: list[tuple[int, int, str, Any]] = []
         for k, epoch in enumerate(run.gnss_epochs):
+            rx_k = run.truth.receiver_ecef_m_per_epoch[k]
+            truth_items: list[tuple[str, Any]] = []
+            if spoofer is not None:
+                epoch, truth_items = spoofer.apply(epoch, rx_k, v_ecef, jsr)
             items.append((epoch.stamp_ns, 0, GNSS_TOPIC, epoch_to_msg(epoch)))
-            items.append((epoch.stamp_ns, 1, TRUTH_POSITION_TOPIC, point_to_msg(epoch.stamp_ns, rx, EARTH_FRAME)))
+            items.append((epoch.stamp_ns, 1, TRUTH_POSITION_TOPIC, point_to_msg(epoch.stamp_ns, rx_k, EARTH_FRAME)))
             if s.truth_jammer_state and k % n_jam == 0:
                 items.append((epoch.stamp_ns, 2, TRUTH_JAMMER_TOPIC, _jammer_truth(epoch.stamp_ns, jsr)))
-        items += [(u.stamp_ns, 3, UWB_TOPIC, uwb_to_msg(u)) for u in run.uwb_ranges]
+            items += [(epoch.stamp_ns, 3 + j, topic, msg) for j, (topic, msg) in enumerate(truth_items)]
+        items += [(u.stamp_ns, 9, UWB_TOPIC, uwb_to_msg(u)) for u in run.uwb_ranges]
         items.sort(key=lambda item: (item[0], item[1]))
         for stamp_ns, _, topic, msg in items:
             yield stamp_ns, topic, msg
