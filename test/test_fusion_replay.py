@@ -219,7 +219,7 @@ def test_phases_join_on_one_grid_with_a_continuous_receiver_clock():
     pseudorange minus modelled range over the satellites) steps across the boundary as within a
     phase (drift x 0.2 s), not back to its initial value."""
     from rfi_experiments.streams import gnss_uwb
-    from uwb_gnss_fusion.conversions import msg_to_epoch
+    from rfi_node_common.conversions import msg_to_epoch
     from uwb_gnss_fusion.measurement_models import pseudorange_model
 
     scenario, section = _scenario(jamming=[{'jsr_db': None, 'duration_s': 2.0}, {'jsr_db': -10.0}])

@@ -214,7 +214,7 @@ def test_the_checks_catch_what_they_are_for():
     """The checkers on made-up imports: an upward import, a same-layer import, an undeclared one, a cycle."""
     here = SRC / 'rfi_monitor' / 'rfi_monitor' / 'x.py'
     up = Import('rfi_monitor', True, here, 1, 'rfi_experiments.scenario', ('Scenario',))
-    side = Import('rfi_monitor', False, here, 2, 'uwb_gnss_fusion.conversions', ())
+    side = Import('rfi_monitor', False, here, 2, 'uwb_gnss_fusion.fusion_filter', ())
     down = Import('rfi_monitor', False, here, 3, 'gnss_common.constants', ())
     assert len(layering_violations([up, side, down])) == 2
     assert any('rfi_experiments' in m for m in undeclared([up]))

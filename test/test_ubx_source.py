@@ -27,9 +27,9 @@ from rfi_experiments.ubx_decode import EpochOutput
 from rfi_experiments.ubx_messages import report_to_msg
 from rfi_experiments.ubx_synth import ephemeris_frames, mon_hw_frame, rawx_frame
 from rfi_msgs.msg import GnssMeasurementArray, ReceiverInterference
+from rfi_node_common.conversions import epoch_to_msg
 from rfi_node_common.qos import DATA_QOS
 from rfi_sim.gnss_uwb import BroadcastGeometry, GnssUwbScenario, simulate
-from uwb_gnss_fusion.conversions import epoch_to_msg
 
 NAV = Path(__file__).resolve().parents[1] / 'src' / 'rfi_experiments' / 'data' / 'arlm2000.15n'
 DEADLINE_S = 60.0

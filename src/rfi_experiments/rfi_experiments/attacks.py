@@ -121,7 +121,7 @@ class StreamSpoofer:
         items: list[tuple[str, Any]] = [(TRUTH_INTEGRITY_TOPIC, integrity_truth_msg(
             stamp, row, attack, self._first_attacked_ns.get(index, 0), jsr_db))]
         if row is not None and attack is not None:
-            from uwb_gnss_fusion.conversions import point_to_msg
+            from rfi_node_common.conversions import point_to_msg
             items.append((TRUTH_SPOOFED_POSITION_TOPIC, point_to_msg(stamp, row.spoofed_position_ecef_m, 'earth')))
             items.append((TRUTH_SPOOFED_TIME_TOPIC, _time_truth(stamp, row.time_offset_s, attack.kind)))
         return epoch, items

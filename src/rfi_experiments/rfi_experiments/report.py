@@ -191,7 +191,7 @@ def _jammer_section(truth: list[Any], estimates: list[Any], out: Path, summary: 
 def _baselines(gnss_msgs: list[Any]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """SPP and the GNSS-only filter on the bag's GNSS epochs: name -> (stamps s, ECEF positions)."""
     from gnss_common.spp import SinglePointPositioner, SppParams
-    from uwb_gnss_fusion.conversions import msg_to_epoch
+    from rfi_node_common.conversions import msg_to_epoch
     from uwb_gnss_fusion.fusion_filter import FusionFilter, FusionParams
 
     spp = SinglePointPositioner(SppParams())

@@ -56,7 +56,7 @@ from gnss_common.rinex import SYSTEM_NAMES, RinexFormatError, read_rinex_navs, r
 from rfi_experiments import cli
 from rfi_experiments.bag_io import BagError, BagWriter
 from rfi_experiments.cli import error_reporter
-from uwb_gnss_fusion.conversions import epoch_to_msg, point_to_msg
+from rfi_node_common.conversions import epoch_to_msg, point_to_msg
 
 PROG = "rinex_to_bag"
 _fail = error_reporter(PROG)

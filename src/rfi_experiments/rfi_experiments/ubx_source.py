@@ -300,7 +300,7 @@ class UbxSourceNode(Node):
     # ------------------------------------------------------------------------------------------- output
     def _publish(self, item: Any) -> None:
         from rfi_experiments.ubx_messages import report_to_msg
-        from uwb_gnss_fusion.conversions import epoch_to_msg
+        from rfi_node_common.conversions import epoch_to_msg
 
         try:
             if isinstance(item, EpochOutput):

@@ -91,7 +91,7 @@ def write_bag(conversion: UbxConversion, out: str | Path, *, overwrite: bool = F
               receiver_frame_id: str = "gnss") -> dict[str, int]:
     """Write epochs and interference reports, in stream order of their stamps; log time = stamp."""
     from rfi_experiments.ubx_messages import report_to_msg
-    from uwb_gnss_fusion.conversions import epoch_to_msg
+    from rfi_node_common.conversions import epoch_to_msg
 
     items: list[tuple[int, int, str, object]] = []
     for i, e in enumerate(conversion.epochs):

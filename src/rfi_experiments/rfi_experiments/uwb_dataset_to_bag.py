@@ -75,7 +75,7 @@ from gnss_common.observations import UwbRangeMeasurement
 from rfi_experiments import cli
 from rfi_experiments.bag_io import BagError, BagWriter
 from rfi_experiments.cli import error_reporter
-from uwb_gnss_fusion.conversions import point_to_msg, uwb_to_msg
+from rfi_node_common.conversions import point_to_msg, uwb_to_msg
 
 PROG = "uwb_dataset_to_bag"
 _fail = error_reporter(PROG)

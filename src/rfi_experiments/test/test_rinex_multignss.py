@@ -14,7 +14,7 @@ import pytest
 from gnss_common.observations import BEIDOU, GALILEO, GLONASS, GPS
 from rfi_experiments.bag_io import BagReader
 from rfi_experiments.rinex_to_bag import MEASUREMENTS_TOPIC, TRUTH_TOPIC, convert_rinex, main
-from uwb_gnss_fusion.conversions import msg_to_epoch
+from rfi_node_common.conversions import msg_to_epoch
 
 DATA = Path(__file__).resolve().parents[2] / "gnss_common" / "test" / "data"
 OBS = DATA / "ESBC00DNK_R_20201770000_01H_30S_MO.crx.gz"

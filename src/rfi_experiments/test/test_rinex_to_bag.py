@@ -16,7 +16,7 @@ from gnss_common.measurements import GnssEpochBuilder
 from gnss_common.rinex import read_rinex_nav, read_rinex_obs
 from rfi_experiments.bag_io import BagReader
 from rfi_experiments.rinex_to_bag import MEASUREMENTS_TOPIC, TRUTH_TOPIC, convert_rinex, main
-from uwb_gnss_fusion.conversions import msg_to_epoch, msg_to_point
+from rfi_node_common.conversions import msg_to_epoch, msg_to_point
 
 DATA = Path(__file__).resolve().parents[2] / "gnss_common" / "test" / "data"
 OBS = DATA / "arlm200a.15o"

@@ -82,7 +82,7 @@ def test_spoofed_stream_topics_and_truth(spoofed_run):
 
 
 def test_the_snapshot_solution_is_dragged_east(spoofed_run):
-    from uwb_gnss_fusion.conversions import msg_to_epoch
+    from rfi_node_common.conversions import msg_to_epoch
 
     truth = {stamp: np.array([m.point.x, m.point.y, m.point.z]) for stamp, m in spoofed_run['/truth/position']}
     rx = next(iter(truth.values()))

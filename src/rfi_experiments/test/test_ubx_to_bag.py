@@ -18,8 +18,8 @@ from gnss_common.rinex import read_rinex_nav
 from rfi_experiments import ubx_to_bag
 from rfi_experiments.bag_io import BagReader
 from rfi_experiments.ubx_synth import ephemeris_frames, klobuchar_frame, mon_hw_frame, rawx_frame
+from rfi_node_common.conversions import msg_to_epoch
 from rfi_sim.gnss_uwb import BroadcastGeometry, GnssUwbScenario, simulate
-from uwb_gnss_fusion.conversions import msg_to_epoch
 from uwb_gnss_fusion.fusion_filter import FusionFilter
 from uwb_gnss_fusion.fusion_params import FusionParams
 

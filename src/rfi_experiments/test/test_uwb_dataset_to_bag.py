@@ -21,7 +21,7 @@ from rfi_experiments.uwb_dataset_to_bag import (
     read_case,
     read_position_csv,
 )
-from uwb_gnss_fusion.conversions import msg_to_point, msg_to_uwb
+from rfi_node_common.conversions import msg_to_point, msg_to_uwb
 
 CASE = Path(__file__).resolve().parent / "data" / "uwb_hanyang_los_a1"
 ANCHORS = ("A3", "A5", "A9", "A12")

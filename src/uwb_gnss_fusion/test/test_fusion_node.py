@@ -28,12 +28,12 @@ from gnss_common.coordinates import ecef_to_enu, ecef_to_enu_rotation, ecef_to_g
 from gnss_common.observations import UwbRangeMeasurement
 from rfi_msgs.msg import FusionStatus, GnssMeasurementArray, JammerState, UwbRange
 from rfi_node_common import testing
+from rfi_node_common.conversions import epoch_to_msg, msg_to_uwb, uwb_to_msg
 from rfi_node_common.qos import DATA_QOS
 from rfi_node_common.stamps import ns_to_stamp, stamp_to_ns
 from rfi_node_common.testing import NodeRig
 from rfi_sim.evaluation import ecef_errors_enu, horizontal_error_m
 from rfi_sim.gnss_uwb import BroadcastGeometry, GnssUwbScenario, simulate
-from uwb_gnss_fusion.conversions import epoch_to_msg, msg_to_uwb, uwb_to_msg
 from uwb_gnss_fusion.fusion_node import ORIENTATION_UNKNOWN_VARIANCE_RAD2, FusionNode, FusionNodeParams
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'fusion.yaml'
@@ -995,8 +995,8 @@ NO_EFFECT_HERE: dict[str, str] = {}
 def test_every_settable_filter_parameter_is_read_by_the_core_at_each_update(clean_stream):
     import dataclasses
 
+    from rfi_node_common.conversions import msg_to_epoch
     from rfi_node_common.params import runtime_parameter_names
-    from uwb_gnss_fusion.conversions import msg_to_epoch
     from uwb_gnss_fusion.fusion_filter import FusionFilter, FusionParams
 
     core_names = {f.name for f in dataclasses.fields(FusionParams)} | {

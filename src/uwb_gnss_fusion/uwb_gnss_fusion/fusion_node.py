@@ -2,7 +2,7 @@
 
 The node is thin. It declares the parameters (one frozen dataclass, :class:`FusionNodeParams`,
 documented for users in config/fusion.yaml), converts messages to the ``gnss_common.observations``
-dataclasses (:mod:`uwb_gnss_fusion.conversions`), puts them in stamp order, hands them to the pure
+dataclasses (:mod:`rfi_node_common.conversions`), puts them in stamp order, hands them to the pure
 core (:class:`uwb_gnss_fusion.fusion_filter.FusionFilter`, the tightly-coupled cubature Kalman
 filter of Cao et al.) and publishes what the core returns. Each GNSS epoch or UWB range is one
 predict-to-stamp + update of the core and gives one /fusion/status; /fusion/odometry and
@@ -155,6 +155,7 @@ from gnss_common.jamming_weights import effective_cn0_dbhz
 from gnss_common.observations import GnssEpoch, UwbRangeMeasurement
 from gnss_common.spp import SinglePointPositioner
 from rfi_msgs.msg import FusionStatus, GnssIntegrity, GnssMeasurementArray, JammerState, UwbRange
+from rfi_node_common.conversions import decode_uwb_range_cdr, msg_to_observation, msg_to_uwb
 from rfi_node_common.diagnostics import (
     ERROR,
     OK,
@@ -173,7 +174,6 @@ from rfi_node_common.params import RuntimeParameters, changed_names, declare
 from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS, LATCHED_QOS
 from rfi_node_common.stamps import stamp_to_ns
 from uwb_gnss_fusion import ckf_kernels, fusion_output, local_frame
-from uwb_gnss_fusion.conversions import decode_uwb_range_cdr, msg_to_observation, msg_to_uwb
 from uwb_gnss_fusion.fusion_filter import (
     FRAME_EARTH,
     FRAME_MAP,

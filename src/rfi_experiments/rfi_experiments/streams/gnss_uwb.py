@@ -309,7 +309,7 @@ def _enu_velocity(rx_ecef_m: np.ndarray, v_ecef_mps: np.ndarray) -> tuple[float,
 
 def _generate(s: GnssUwbSection, phases: JsrPhases, geometry: BroadcastGeometry, seed: int
               ) -> Iterator[tuple[int, str, Any]]:
-    from uwb_gnss_fusion.conversions import epoch_to_msg, point_to_msg, uwb_to_msg
+    from rfi_node_common.conversions import epoch_to_msg, point_to_msg, uwb_to_msg
 
     week, tow0 = s.start_gps_week, s.start_gps_tow_s
     alpha = geometry.iono_alpha if s.ionosphere else None

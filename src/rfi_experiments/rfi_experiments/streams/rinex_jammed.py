@@ -435,7 +435,7 @@ def build(scenario: Scenario, section: Mapping[str, Any], seed: int) -> Iterator
 def _generate(scenario: Scenario, sec: Section, epochs: tuple[GnssEpoch, ...], truth: np.ndarray, t0: int,
               seed: int) -> Iterator[tuple[int, str, Any]]:
     from rfi_experiments.streams.gnss_uwb import _jammer_truth
-    from uwb_gnss_fusion.conversions import epoch_to_msg, point_to_msg, uwb_to_msg
+    from rfi_node_common.conversions import epoch_to_msg, point_to_msg, uwb_to_msg
 
     gnss_rng, uwb_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
     jammed = jam_epochs(epochs, truth, t0, sec, gnss_rng)

@@ -11,7 +11,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 
 from gnss_common.observations import GALILEO, GPS, GnssEpoch, SatelliteObservation, UwbRangeMeasurement
 from rfi_msgs.msg import GnssMeasurementArray, UwbRange
-from uwb_gnss_fusion.conversions import (
+from rfi_node_common.conversions import (
     epoch_to_msg,
     msg_to_epoch,
     msg_to_point,
@@ -171,7 +171,7 @@ def test_point_round_trip() -> None:
 def test_uwb_range_cdr_decoder_equals_rclpy():
     from rclpy.serialization import serialize_message
 
-    from uwb_gnss_fusion.conversions import decode_uwb_range_cdr
+    from rfi_node_common.conversions import decode_uwb_range_cdr
 
     rng = np.random.default_rng(12)
     for k in range(200):
@@ -245,7 +245,7 @@ def test_uwb_range_cdr_decoder_never_raises_and_agrees_with_rclpy_on_fuzzed_byte
     rclpy deserialises the same bytes, the two agree field for field."""
     from rclpy.serialization import deserialize_message
 
-    from uwb_gnss_fusion.conversions import decode_uwb_range_cdr
+    from rfi_node_common.conversions import decode_uwb_range_cdr
 
     decoded = 0
     for raw in _fuzzed_uwb_payloads(seed=2024, count=4000):
