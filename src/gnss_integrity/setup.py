@@ -20,9 +20,5 @@ setup(
     description='GNSS jamming and spoofing detection (integrity monitor).',
     license='Apache-2.0',
     tests_require=['pytest'],
-    entry_points={
-        'console_scripts': [
-            'gnss_integrity_node = gnss_integrity.gnss_integrity_node:main',
-        ],
-    },
+    # the node (gnss_integrity_node) and its console script come with the monitor (issue 25)
 )
