@@ -1,0 +1,498 @@
+"""Multi-constellation snapshot solution: position with one receiver clock per constellation, velocity
+with one common drift, and the per-satellite residuals that residual and consistency tests read.
+
+Pure core (no rclpy, no state): :func:`solve_multi_gnss` (GnssEpoch -> frozen :class:`MultiGnssFix`).
+Unlike ``gnss_common.spp`` it uses every constellation, excludes nothing (fault detection is the
+caller's, e.g. ``gnss_integrity.consistency``) and keeps its design matrix and weights: the solution
+of any subset of its satellites is one linear step (:func:`subset_solution`). Satellite i of
+constellation k(i) (Cao et al., eq. 5, 6)::
+
+    P_i + c dt_i - I_i - T_i = |R3(w tau_i) p_i - p_r| + c dt_r,k(i) + e_i
+    rate_i + c ddt_i - (R3(w tau_i) v_i) . u_i = -v_r . u_i + c ddt_r + e'_i
+
+A clock bias per constellation (receiver clock, system time offset, hardware delay) but ONE drift:
+every signal comes from one oscillator, whose frequency error df / f shifts every rate ``-lambda D``
+by ``c df / f`` whatever the carrier; system time offsets drift by < 1e-13 (< 1 mm/s). On ESBC00DNK
+the per-constellation mean rate residual against the common drift is < 1 mm/s (``test_real_common_drift``).
+Weights: RTKLIB ``varerr`` as in ``gnss_common.spp`` (:func:`code_variance_m2`), SISRE per constellation.
+
+Notes
+-----
+Kaplan & Hegarty 3rd ed., sec. 11.2.1, eq. 11.40-11.45 (iterated WLS); Baarda's w-test
+``r_i / sqrt((W^-1 - H (H^T W H)^-1 H^T)_ii)``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+from gnss_common.constants import WGS84_ECCENTRICITY_SQUARED, WGS84_SEMI_MAJOR_AXIS_M
+from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic_scalar
+from gnss_common.earth_rotation import rotate_about_z, sagnac_rotate
+from gnss_common.observations import BEIDOU, GALILEO, GLONASS, GPS, QZSS, GnssEpoch
+from gnss_common.spp import SppParams
+
+STATUS_OK = "ok"
+STATUS_TOO_FEW = "too_few_satellites"
+STATUS_SINGULAR = "singular_geometry"
+STATUS_NOT_CONVERGED = "not_converged"
+
+REJECTION_REASONS = ("unsupported_constellation", "not_selected", "invalid_input", "non_physical", "duplicate_svid",
+                     "below_elevation_mask")
+"""Keys of :attr:`MultiGnssFix.rejection_counts` (``not_selected``: left out by the caller's
+``use`` mask or ``constellations``; ``invalid_input``: a NaN pseudorange or satellite state)."""
+
+_NEAR_SURFACE_R_M = 0.9 * WGS84_SEMI_MAJOR_AXIS_M * math.sqrt(1.0 - WGS84_ECCENTRICITY_SQUARED)
+_MAX_VARIANCE_M2 = 1.0e10
+
+
+@dataclass(frozen=True)
+class MultiGnssFixParams:
+    """Validated parameters of :func:`solve_multi_gnss`.
+
+    Attributes:
+        weights: elevation mask, iterations, convergence and the ``varerr`` model (``SppParams``;
+            its RAIM fields unused). constellations: codes solved (others ``unsupported_constellation``).
+        sigma_broadcast_m: ``((constellation, SISRE 1-sigma m), ...)``; others ``weights.sigma_broadcast_m``.
+    """
+
+    weights: SppParams = field(default_factory=SppParams)
+    constellations: tuple[int, ...] = (GPS, GLONASS, GALILEO, BEIDOU, QZSS)
+    sigma_broadcast_m: tuple[tuple[int, float], ...] = ()
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.weights, SppParams):
+            raise ValueError(f"MultiGnssFixParams.weights must be SppParams, got {type(self.weights).__name__}")
+        if not self.constellations or any(not isinstance(c, int) or c < 1 for c in self.constellations):
+            raise ValueError(f"MultiGnssFixParams.constellations must be codes >= 1, got {self.constellations!r}")
+        if any(len(e) != 2 or not (math.isfinite(e[1]) and e[1] >= 0.0) for e in self.sigma_broadcast_m):
+            raise ValueError(f"MultiGnssFixParams.sigma_broadcast_m: (code, sigma >= 0), got {self.sigma_broadcast_m}")
+
+
+@dataclass(frozen=True)
+class MultiGnssFix:
+    """One epoch's multi-constellation snapshot solution.
+
+    Per-satellite arrays (n,) have one row per satellite with a usable state (``satellites``, sorted by
+    (constellation, svid)), used in the fix or not (``used``); rows not used keep their elevation,
+    azimuth and predicted residual where their constellation's clock is solved (else NaN). ``sse`` is
+    chi-square with ``dof`` degrees of freedom under the weight model (NaN when dof < 1).
+    """
+
+    stamp_ns: int  # the epoch's stamp, ns
+    valid: bool  # status ok: >= 3 + k satellites, converged near the Earth's surface
+    status: str  # ok, too_few_satellites, singular_geometry, not_converged
+    position_ecef_m: np.ndarray  # receiver position, ECEF m, (3,)
+    clock_constellations: tuple[int, ...]  # the constellation of each clock, ascending codes, (k,)
+    clock_biases_m: np.ndarray  # c dt_r,k of each, m, (k,)
+    covariance: np.ndarray  # of [x, y, z, c dt_1 .. c dt_k], m^2, ECEF
+    covariance_enu_m2: np.ndarray  # of the position in local ENU, m^2, (3, 3)
+    enu_rotation: np.ndarray  # ECEF -> ENU at the solution, (3, 3)
+    velocity_valid: bool  # solved from >= 4 rates of used rows
+    velocity_ecef_mps: np.ndarray  # receiver velocity, ECEF m/s, (3,)
+    clock_drift_mps: float  # the one receiver clock drift c ddt_r, m/s
+    velocity_covariance: np.ndarray  # of [vx, vy, vz, c ddt_r], (m/s)^2, (4, 4)
+    satellites: tuple[tuple[int, int], ...]  # (constellation, svid) of each row
+    used: np.ndarray  # row in the position fix, bool
+    elevations_rad: np.ndarray  # at the solution, rad
+    azimuths_rad: np.ndarray  # from north, clockwise, rad
+    residuals_m: np.ndarray  # corrected pseudorange minus the model at the solution, m
+    standardised_residuals: np.ndarray  # w-test r / sqrt(Qr_ii) of used rows (NaN without redundancy)
+    rate_used: np.ndarray  # row in the velocity fix, bool
+    rate_residuals_mps: np.ndarray  # corrected rate minus the model, m/s
+    rate_standardised_residuals: np.ndarray  # their w-test values
+    design_matrix: np.ndarray  # rows [-u_i, one-hot clock of k(i)] at the solution, (n, 3 + k)
+    weights: np.ndarray  # 1 / sigma^2 of the pseudoranges, 1/m^2
+    noise_variances_m2: np.ndarray  # the white part (code noise) of each variance, m^2; the rest is
+    # atmosphere, orbit and clock, correlated over tens of minutes (code_noise_variance_m2, or a stated std^2)
+    rate_weights: np.ndarray  # 1 / sigma^2 of the rates, (m/s)^-2
+    sigma_scales: np.ndarray  # the weight model's sqrt(k_cn0) / max(sin el, 0.05) (rate sigma: sigma_rate_mps x it)
+    sse: float  # weighted residual sum of squares of the used rows
+    dof: int  # n_used - 3 - k
+    rate_sse: float  # the same for the rates
+    rate_dof: int  # n_rate_used - 4
+    iterations: int  # Gauss-Newton linearisations
+    rejected: tuple[tuple[tuple[int, int], str], ...]  # ((constellation, svid), reason) not in the rows or unused
+    rejection_counts: dict[str, int]  # reason -> count, every key of REJECTION_REASONS
+
+    @property
+    def constellation_of_row(self) -> np.ndarray:
+        """Constellation code of each row, (n,)."""
+        return np.array([c for c, _ in self.satellites], dtype=int)
+
+    def clock_bias_m(self, constellation: int) -> float:
+        """The clock bias of one constellation, m (NaN when not solved)."""
+        if constellation in self.clock_constellations:
+            return float(self.clock_biases_m[self.clock_constellations.index(constellation)])
+        return math.nan
+
+
+def code_variance_m2(params: SppParams, sin_el: np.ndarray, cn0_dbhz: np.ndarray, iono_m: np.ndarray,
+                     sigma_broadcast_m: np.ndarray | float) -> np.ndarray:
+    """Pseudorange error variance of the RTKLIB ``varerr`` model with the C/N0 factor, m^2, (n,).
+
+    ``[a^2 + b^2 / sin^2 el] k_cn0 + (f_I I)^2 + (s_T / (sin el + 0.1))^2 + s_eph^2`` with the fields of
+    ``params``, sin el floored at 0.05, the modelled ionospheric delay ``iono_m`` (m) and the SISRE
+    ``sigma_broadcast_m`` (m, scalar or (n,)); the formula of ``gnss_common.spp`` (Takasu, RTKLIB 2.4.2
+    manual, E.6; ``k_cn0 = max(1, 10^((cn0_ref - cn0) / 10))``, Hartinger & Brunner 1999).
+    """
+    s_el = np.maximum(sin_el, 0.05)
+    return (code_noise_variance_m2(params, sin_el, cn0_dbhz) + (params.iono_error_fraction * iono_m) ** 2
+            + (params.sigma_tropo_zenith_m / (s_el + 0.1)) ** 2 + np.asarray(sigma_broadcast_m, dtype=float) ** 2)
+
+
+def code_noise_variance_m2(params: SppParams, sin_el: np.ndarray, cn0_dbhz: np.ndarray) -> np.ndarray:
+    """The white (code noise, fast multipath) term ``[a^2 + b^2 / sin^2 el] k_cn0`` of
+    :func:`code_variance_m2`, m^2, (n,)."""
+    return (params.sigma_code_a_m**2 + (params.sigma_code_b_m / np.maximum(sin_el, 0.05)) ** 2) * cn0_factor(
+        params, cn0_dbhz)
+
+
+def cn0_factor(params: SppParams, cn0_dbhz: np.ndarray) -> np.ndarray:
+    """C/N0 variance factor ``max(1, 10^((cn0_ref - cn0) / 10))`` (1 where C/N0 is NaN or unused), (n,)."""
+    cn0 = np.asarray(cn0_dbhz, dtype=float)
+    if not params.use_cn0_weighting:
+        return np.ones(cn0.shape)
+    with np.errstate(invalid="ignore"):
+        f = np.maximum(1.0, 10.0 ** ((params.cn0_reference_dbhz - cn0) / 10.0))
+    return np.where(np.isfinite(f), f, 1.0)
+
+
+def _invert(nmat: np.ndarray, max_variance: float = math.inf) -> np.ndarray | None:
+    """Inverse of a normal matrix, or None when singular or with a variance <= 0 or above the bound."""
+    try:
+        cov = np.linalg.inv(nmat)
+    except np.linalg.LinAlgError:
+        return None
+    d = np.diag(cov)
+    return cov if np.all(np.isfinite(d)) and np.all(d > 0.0) and float(np.max(d)) < max_variance else None
+
+
+def _w_test(resid: np.ndarray, var: np.ndarray, h: np.ndarray, cov: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """Standardised residuals ``r_i / sqrt((R - H cov H^T)_ii)`` of ``rows`` (NaN elsewhere and without
+    redundancy), (n,)."""
+    qr = var - np.sum((h @ cov) * h, axis=1)
+    with np.errstate(invalid="ignore"):
+        return np.where(rows & (qr > 1e-9 * var), resid / np.sqrt(np.maximum(qr, 1e-300)), math.nan)
+
+
+class _Rows(NamedTuple):
+    """Screened satellites, one row each, by (constellation, svid): ``y = P + c dt_s - I - T`` (m),
+    ``rate + c ddt_s`` (m/s, NaN if unusable), ``selected`` by the caller's mask and constellations."""
+
+    sats: tuple[tuple[int, int], ...]
+    system: np.ndarray
+    sat_pos: np.ndarray
+    sat_vel: np.ndarray
+    y: np.ndarray
+    rate: np.ndarray
+    cn0: np.ndarray
+    iono: np.ndarray
+    pr_std: np.ndarray
+    rate_std: np.ndarray
+    selected: np.ndarray
+
+
+def _stack3(values: list, n: int) -> np.ndarray:
+    """Stack per-observation 3-vectors into (n, 3); a malformed one becomes a NaN row."""
+    try:
+        out = np.array(values, dtype=float)
+    except (ValueError, TypeError):
+        out = np.zeros(0)
+    return out if out.shape == (n, 3) else np.array([a if (a := np.asarray(v, dtype=float).reshape(-1)).shape == (3,)
+                                                     else np.full(3, math.nan) for v in values]).reshape(n, 3)
+
+
+def _screen(epoch: GnssEpoch, params: MultiGnssFixParams, use: np.ndarray | None,
+            constellations: tuple[int, ...] | None,
+            reject: dict[str, int], rejected: list[tuple[tuple[int, int], str]]) -> _Rows:
+    """Screen the observations of an epoch into rows (counts every rejection), vectorised."""
+    obs = epoch.observations
+    n_obs = len(obs)
+    selected = np.ones(n_obs, dtype=bool) if use is None else np.asarray(use, dtype=bool).reshape(-1)
+    if selected.shape != (n_obs,):
+        raise ValueError(f"use must have one entry per observation ({n_obs}), got shape {selected.shape}")
+    keys = [(int(o.constellation), int(o.svid)) for o in obs]
+    s = np.array([(o.pseudorange_m, o.satellite_clock_bias_m, o.ionosphere_delay_m, o.troposphere_delay_m,
+                   o.pseudorange_rate_mps, o.satellite_clock_drift_mps, o.cn0_dbhz, o.pseudorange_std_m,
+                   o.pseudorange_rate_std_mps) for o in obs], dtype=float).reshape(n_obs, 9)
+    pos = _stack3([o.satellite_position_ecef_m for o in obs], n_obs)
+    vel = _stack3([o.satellite_velocity_ecef_mps for o in obs], n_obs)
+    system = np.array([k[0] for k in keys], dtype=int)
+    unique = np.ones(n_obs, dtype=bool) if len(set(keys)) == n_obs else np.array([keys.count(k) == 1 for k in keys])
+    supported = np.isin(system, params.constellations)
+    finite = np.all(np.isfinite(s[:, :4]), axis=1) & np.all(np.isfinite(pos), axis=1)
+    with np.errstate(invalid="ignore"):
+        r_sat = np.sqrt(np.sum(pos * pos, axis=1))
+        physical = ((s[:, 0] >= 1.0e7) & (s[:, 0] <= 5.0e7) & (r_sat >= 2.0e7) & (r_sat <= 5.0e7)
+                    & (np.abs(s[:, 1]) < 3.0e6) & (s[:, 2] >= 0.0) & (s[:, 2] <= 200.0) & (s[:, 3] >= 0.0)
+                    & (s[:, 3] <= 100.0))
+        rate_ok = (np.isfinite(s[:, 4]) & np.isfinite(s[:, 5]) & np.all(np.isfinite(vel), axis=1)
+                   & (np.abs(s[:, 4]) < 1.0e5))
+    ok = supported & unique & finite & physical
+    for j in np.flatnonzero(~ok):
+        reason = ("unsupported_constellation" if not supported[j] else "duplicate_svid" if not unique[j]
+                  else "invalid_input" if not finite[j] else "non_physical" if not physical[j] else "")
+        if reason:
+            reject[reason] += 1
+            rejected.append((keys[j], reason))
+    if constellations is not None:
+        selected = selected & np.isin(system, constellations)
+    idx = np.flatnonzero(ok)
+    idx = idx[np.lexsort((np.array([keys[j][1] for j in idx], dtype=int), system[idx]))] if idx.size else idx
+    for j in idx[~selected[idx]]:
+        reject["not_selected"] += 1
+        rejected.append((keys[j], "not_selected"))
+    sv = s[idx]
+    y = sv[:, 0] + sv[:, 1] - sv[:, 2] - sv[:, 3]
+    return _Rows(tuple(keys[j] for j in idx), system[idx], pos[idx], vel[idx], y,
+                 np.where(rate_ok[idx], sv[:, 4] + sv[:, 5], math.nan), sv[:, 6], sv[:, 2], sv[:, 7], sv[:, 8],
+                 selected[idx])
+
+
+def _enu_rotation(pos: np.ndarray) -> np.ndarray | None:
+    """ECEF->ENU rotation at a near-surface point (row 2: the local up), else None."""
+    if not (np.all(np.isfinite(pos)) and float(np.linalg.norm(pos)) > _NEAR_SURFACE_R_M):
+        return None
+    lat, lon, _ = ecef_to_geodetic_scalar(float(pos[0]), float(pos[1]), float(pos[2]))
+    return ecef_to_enu_rotation(lat, lon)
+
+
+class _Geometry(NamedTuple):
+    """Ranges, unit vectors, Sagnac rotation and elevation sines of every row at one position."""
+
+    rng: np.ndarray
+    los: np.ndarray
+    cos_s: np.ndarray
+    sin_s: np.ndarray
+    rot: np.ndarray | None
+    sin_el: np.ndarray
+
+
+def _geometry(rows: _Rows, pos: np.ndarray) -> _Geometry:
+    """The geometry of every row seen from ``pos`` (ECEF m)."""
+    rs, c, s, _ = sagnac_rotate(rows.sat_pos, pos)
+    diff = rs - pos
+    rng = np.sqrt(np.einsum("ij,ij->i", diff, diff))
+    los = diff / rng[:, None]
+    rot = _enu_rotation(pos)
+    sin_el = np.clip(los @ rot[2], -1.0, 1.0) if rot is not None else np.ones(rng.size)
+    return _Geometry(rng, los, c, s, rot, sin_el)
+
+
+def _variance(rows: _Rows, geo: _Geometry, params: SppParams, sisre: np.ndarray) -> np.ndarray:
+    """Pseudorange variance of every row at a geometry (a finite stated std overrides), m^2, (n,)."""
+    var = code_variance_m2(params, geo.sin_el, rows.cn0, rows.iono, sisre)
+    given = np.isfinite(rows.pr_std) & (rows.pr_std > 0.0)
+    return np.where(given, rows.pr_std**2, var) if np.any(given) else var
+
+
+def _gauss_newton(rows: _Rows, idx: np.ndarray, cols: np.ndarray, x0: np.ndarray, geo: _Geometry,
+                  params: SppParams, sisre: np.ndarray
+                  ) -> tuple[str, np.ndarray, np.ndarray | None, int, _Geometry, np.ndarray]:
+    """Iterated WLS for ``[x, y, z, c dt_1 .. c dt_k]`` on rows ``idx`` (clock one-hot ``cols``) from
+    ``x0`` (geometry ``geo``): (status, x, covariance or None, iterations, geometry at x, row variances)."""
+    x = x0.copy()
+    h = np.empty((idx.size, cols.shape[1] + 3))
+    h[:, 3:] = cols
+    var = np.full(len(rows.sats), math.nan)
+    for it in range(1, params.max_iterations + 1):
+        var = _variance(rows, geo, params, sisre)
+        w = 1.0 / var[idx]
+        h[:, :3] = -geo.los[idx]
+        r = rows.y[idx] - (geo.rng[idx] + cols @ x[3:])
+        cov = _invert(h.T @ (h * w[:, None]), _MAX_VARIANCE_M2)
+        if cov is None:
+            return STATUS_SINGULAR, x, None, it, geo, var
+        dx = cov @ (h.T @ (w * r))
+        x = x + dx
+        geo = _geometry(rows, x[:3])
+        if float(np.linalg.norm(dx)) < params.convergence_m:
+            return (STATUS_OK if geo.rot is not None else STATUS_NOT_CONVERGED), x, cov, it, geo, var
+    return STATUS_NOT_CONVERGED, x, cov, params.max_iterations, geo, var
+
+
+def _clock_columns(system: np.ndarray, idx: np.ndarray) -> tuple[tuple[int, ...], np.ndarray]:
+    """Clocks of the constellations among rows ``idx`` and their one-hot columns, (idx.size, k)."""
+    clocks = tuple(int(c) for c in np.unique(system[idx]))
+    cols = (system[idx][:, None] == np.array(clocks, dtype=int)[None, :]).astype(float)
+    return clocks, cols
+
+
+def solve_multi_gnss(epoch: GnssEpoch, params: MultiGnssFixParams | None = None, *,
+                     use: np.ndarray | None = None, constellations: tuple[int, ...] | None = None,
+                     initial_position_ecef_m: np.ndarray | None = None) -> MultiGnssFix:
+    """Solve one epoch: position and a clock per constellation, then velocity and one drift.
+
+    Args:
+        epoch: one receive epoch, any constellations (satellite states at transmit time in the ECEF
+            frame of transmission; delays as the message gives them).
+        params: :class:`MultiGnssFixParams` (defaults if None).
+        use: optional bool mask, one per ``epoch.observations`` (False: ``not_selected``; the row
+            still gets its elevation and predicted residual).
+        constellations: optional subset of codes to solve with (per-constellation solutions).
+        initial_position_ecef_m: starting point, m, (3,) (default the Earth's centre; the previous
+            fix saves iterations and applies the elevation mask from the start).
+
+    Returns:
+        :class:`MultiGnssFix`; never raises on measurement content (see ``status``).
+
+    Raises:
+        ValueError: ``use`` of the wrong length, or a non-finite initial position.
+
+    Notes
+    -----
+    Cao et al., eq. 5 (a clock per constellation) and eq. 6 (one drift), iterated WLS (Kaplan &
+    Hegarty, eq. 11.40-11.45); the elevation mask is applied at convergence and the fix recomputed.
+    """
+    p = params if params is not None else MultiGnssFixParams()
+    wp = p.weights
+    counts = dict.fromkeys(REJECTION_REASONS, 0)
+    rejected: list[tuple[tuple[int, int], str]] = []
+    rows = _screen(epoch, p, use, constellations, counts, rejected)
+    sisre = np.array([dict(p.sigma_broadcast_m).get(int(c), wp.sigma_broadcast_m) for c in rows.system])
+    x_start = np.zeros(3) if initial_position_ecef_m is None else np.asarray(initial_position_ecef_m, float).reshape(3)
+    if not np.all(np.isfinite(x_start)):
+        raise ValueError("initial_position_ecef_m must be finite")
+    active = rows.selected.copy()
+    sin_mask = math.sin(math.radians(wp.elevation_mask_deg))
+    geo = _geometry(rows, x_start)
+    below = active & (geo.sin_el < sin_mask) if geo.rot is not None else np.zeros(active.size, dtype=bool)
+    status, iterations, cov, x = STATUS_TOO_FEW, 0, None, np.zeros(3)
+    clocks: tuple[int, ...] = ()
+    var = np.full(active.size, math.nan)
+    while True:  # the elevation mask only removes rows: re-solve from the last fix until none is below
+        for i in np.flatnonzero(below):
+            counts["below_elevation_mask"] += 1
+            rejected.append((rows.sats[i], "below_elevation_mask"))
+        active &= ~below
+        idx = np.flatnonzero(active)
+        clocks, cols = _clock_columns(rows.system, idx)
+        if idx.size == 0 or idx.size < 3 + len(clocks):
+            status = STATUS_TOO_FEW
+            break
+        x0 = np.concatenate([x_start, np.zeros(len(clocks))])
+        if geo.rot is not None:  # start near the surface: each clock at its rows' mean offset
+            x0[3:] = ((rows.y[idx] - geo.rng[idx]) @ cols) / np.sum(cols, axis=0)
+        status, x, cov, its, geo, var = _gauss_newton(rows, idx, cols, x0, geo, wp, sisre)
+        iterations += its
+        below = active & (geo.sin_el < sin_mask)
+        if status != STATUS_OK or not np.any(below):
+            break
+        x_start = x[:3].copy()
+    return _assemble(epoch.stamp_ns, status, rows, active, clocks, x, cov, geo, var, iterations, wp, counts,
+                     rejected)
+
+
+def _velocity(rows: _Rows, geo: _Geometry, active: np.ndarray, wp: SppParams) -> dict:
+    """Velocity and one clock drift from the rates of the active rows (Cao et al., eq. 6)."""
+    n = len(rows.sats)
+    scales = np.sqrt(cn0_factor(wp, rows.cn0)) / np.maximum(geo.sin_el, 0.05)
+    var_v = np.where(np.isfinite(rows.rate_std) & (rows.rate_std > 0.0), rows.rate_std, wp.sigma_rate_mps * scales) ** 2
+    out: dict = {"velocity_valid": False, "velocity_ecef_mps": np.full(3, math.nan), "clock_drift_mps": math.nan,
+                 "velocity_covariance": np.full((4, 4), math.nan), "rate_used": np.zeros(n, dtype=bool),
+                 "rate_residuals_mps": np.full(n, math.nan), "rate_standardised_residuals": np.full(n, math.nan),
+                 "rate_sse": math.nan, "rate_dof": 0, "sigma_scales": scales, "rate_weights": 1.0 / var_v}
+    yv = rows.rate - np.einsum("ij,ij->i", rotate_about_z(rows.sat_vel, geo.cos_s, geo.sin_s), geo.los)
+    hv = np.hstack([-geo.los, np.ones((n, 1))])
+    used = active & np.isfinite(yv)
+    rv = np.flatnonzero(used)
+    wv = 1.0 / var_v[rv]
+    vcov = _invert(hv[rv].T @ (hv[rv] * wv[:, None])) if rv.size >= 4 else None
+    if vcov is not None:
+        xv = vcov @ (hv[rv].T @ (wv * yv[rv]))
+        res = yv - hv @ xv
+        out.update(velocity_valid=True, velocity_ecef_mps=xv[:3].copy(), clock_drift_mps=float(xv[3]),
+                   velocity_covariance=vcov, rate_used=used, rate_residuals_mps=res, rate_dof=rv.size - 4,
+                   rate_standardised_residuals=_w_test(res, var_v, hv, vcov, used),
+                   rate_sse=float(np.sum(wv * res[rv] ** 2)) if rv.size > 4 else math.nan)
+    return out
+
+
+def _assemble(stamp_ns: int, status: str, rows: _Rows, active: np.ndarray, clocks: tuple[int, ...],
+              x: np.ndarray, cov: np.ndarray | None, geo: _Geometry, var: np.ndarray, iterations: int,
+              wp: SppParams, counts: dict[str, int], rejected: list[tuple[tuple[int, int], str]]
+              ) -> MultiGnssFix:
+    """Residuals, weights, w-tests, azimuth/elevation and the velocity at the final solution."""
+    n, k = len(rows.sats), len(clocks)
+    match = rows.system[:, None] == np.array(clocks, dtype=int)[None, :]
+    h = np.hstack([-geo.los, match.astype(float)])
+    nan = np.full(n, math.nan)
+    el, az, resid, wstd, w, noise, sse = nan, nan, nan, nan, nan, nan, math.nan
+    rot = geo.rot if status in (STATUS_OK, STATUS_NOT_CONVERGED) and cov is not None and n else None
+    dof = int(active.sum()) - 3 - k
+    if rot is not None and cov is not None:
+        resid = np.where(np.any(match, axis=1), rows.y - geo.rng - match @ x[3:], math.nan)
+        w = 1.0 / var
+        given = np.isfinite(rows.pr_std) & (rows.pr_std > 0.0)
+        noise = np.where(given, rows.pr_std**2, code_noise_variance_m2(wp, geo.sin_el, rows.cn0))
+        wstd = _w_test(resid, var, h, cov, active)
+        sse = float(np.sum(w[active] * resid[active] ** 2)) if dof >= 1 else math.nan
+        enu = geo.los @ rot.T
+        el = np.arcsin(np.clip(enu[:, 2], -1.0, 1.0))
+        az = np.mod(np.arctan2(enu[:, 0], enu[:, 1]), 2.0 * math.pi)
+        vel = _velocity(rows, geo, active, wp)
+    else:
+        x, cov = np.full(3 + k, math.nan), np.full((3 + k, 3 + k), math.nan)
+        vel = _velocity(rows, geo, np.zeros(n, dtype=bool), wp)
+        vel["rate_weights"] = nan
+    nan33 = np.full((3, 3), math.nan)
+    return MultiGnssFix(
+        stamp_ns=int(stamp_ns), valid=status == STATUS_OK and rot is not None, status=status,
+        position_ecef_m=np.asarray(x[:3], dtype=float).copy(), clock_constellations=clocks,
+        clock_biases_m=np.asarray(x[3:], dtype=float).copy(), covariance=cov,
+        covariance_enu_m2=rot @ cov[:3, :3] @ rot.T if rot is not None else nan33,
+        enu_rotation=rot if rot is not None else nan33, satellites=rows.sats, used=active.copy(),
+        elevations_rad=el, azimuths_rad=az, residuals_m=resid, standardised_residuals=wstd, design_matrix=h,
+        weights=w, noise_variances_m2=noise, sse=sse, dof=max(dof, 0), iterations=iterations,
+        rejected=tuple(rejected), rejection_counts=counts, **vel)
+
+
+@dataclass(frozen=True)
+class SubsetSolution:
+    """A linearised solution from a subset of a fix's rows (:func:`subset_solution`)."""
+
+    valid: bool  # enough rows (>= 3 + clocks), invertible normal matrix
+    position_ecef_m: np.ndarray  # ECEF m, (3,)
+    clock_constellations: tuple[int, ...]  # its clocks
+    clock_biases_m: np.ndarray  # m
+    covariance: np.ndarray  # of [x, y, z, clocks], m^2
+    noise_covariance: np.ndarray  # its part from the rows' white noise (fix.noise_variances_m2), m^2
+    standardised_residuals: np.ndarray  # w-test of the subset's rows after the step, NaN elsewhere, (n,)
+    sse: float  # weighted residual sum of squares of the subset (NaN when dof < 1)
+    dof: int
+
+
+def subset_solution(fix: MultiGnssFix, rows: np.ndarray) -> SubsetSolution:
+    """The solution of the rows ``rows`` (bool over ``fix.satellites``; NaN residuals ignored) alone.
+
+    One Gauss-Newton step from ``fix``: ``dx = (H_S^T W_S H_S)^-1 H_S^T W_S r_S`` with a clock column
+    per constellation of the subset and ``r_S`` the residuals at ``fix`` (Kaplan & Hegarty, eq.
+    11.40-11.45). The neglected second-order term is ``|dx|^2 / (2 range)``: 25 mm 1 km away.
+    """
+    sel = np.flatnonzero(np.asarray(rows, dtype=bool) & np.isfinite(fix.residuals_m) & np.isfinite(fix.weights))
+    system = fix.constellation_of_row
+    clocks, cols = _clock_columns(system, sel)
+    k = len(clocks)
+    h = np.hstack([fix.design_matrix[sel, :3], cols])
+    w = fix.weights[sel]
+    cov = _invert(h.T @ (h * w[:, None])) if sel.size >= max(3 + k, 1) else None
+    wstd = np.full(len(fix.satellites), math.nan)
+    if cov is None:
+        nan_cov = np.full((3 + k, 3 + k), math.nan)
+        return SubsetSolution(False, np.full(3, math.nan), clocks, np.full(k, math.nan), nan_cov, nan_cov, wstd,
+                              math.nan, 0)
+    r = fix.residuals_m[sel]
+    gain = cov @ (h.T * w)
+    dx = gain @ r
+    post = r - h @ dx
+    base_clocks = np.array([fix.clock_bias_m(c) for c in clocks])
+    dof = sel.size - 3 - k
+    noise_cov = (gain * fix.noise_variances_m2[sel]) @ gain.T
+    wstd[sel] = _w_test(post, 1.0 / w, h, cov, np.ones(sel.size, dtype=bool))
+    return SubsetSolution(True, fix.position_ecef_m + dx[:3], clocks, base_clocks + dx[3:], cov, noise_cov, wstd,
+                          float(np.sum(w * post**2)) if dof >= 1 else math.nan, dof)
