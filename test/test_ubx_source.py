@@ -1,8 +1,10 @@
 """ubx_source as its own process: a UBX log generated from the simulator gives, on gnss/measurements and
-gnss/receiver_interference, exactly the messages ubx_to_bag writes for it (one decoder, one conversion), and the
-process exits 0 at the end; a serial port that disappears mid-stream (a pseudo-terminal whose master is closed)
-is reported and retried, then the node exits 1 with a one-line reason and no traceback; a port that cannot be
-opened is refused at start (exit 2). Spins are bounded."""
+gnss/receiver_interference, exactly the messages ubx_to_bag writes for it (one decoder, one conversion; the epochs
+before the ephemerides with NaN satellite states), and the process exits 0 at the end; a serial port that
+disappears mid-stream (a pseudo-terminal whose master is closed) is reported and retried, then the node exits 1
+with a one-line reason and no traceback; a port that cannot be opened is refused at start (exit 2). In process:
+pyubx2's real logs give the receiver's spectra (gnss/receiver_spectrum) and measurements without ephemeris. Spins
+are bounded."""
 
 from __future__ import annotations
 
@@ -32,6 +34,7 @@ from rfi_node_common.qos import DATA_QOS
 from rfi_sim.gnss_uwb import BroadcastGeometry, GnssUwbScenario, simulate
 
 NAV = Path(__file__).resolve().parents[1] / 'src' / 'rfi_experiments' / 'data' / 'arlm2000.15n'
+REAL = Path(__file__).resolve().parents[1] / 'src' / 'rfi_experiments' / 'test' / 'data' / 'ubx'
 DEADLINE_S = 60.0
 FRAME_ID = 'ubx_source_test'
 
@@ -131,12 +134,15 @@ def test_file_gives_the_messages_of_ubx_to_bag(ubx_log):
     assert b'Traceback' not in done.stderr
     conversion = ubx_to_bag.convert_ubx(ubx_log, ubx_to_bag.make_decoder())
     expected = [epoch_to_msg(e.epoch) for e in conversion.epochs if isinstance(e, EpochOutput)]
-    assert len(expected) == 20 - 2 - 1  # two epochs before the ephemerides, one corrupted RAWX frame (epoch 5)
+    assert len(expected) == 20 - 1  # one corrupted RAWX frame (epoch 5)
     assert [fields(m) for m in probe.arrays] == [fields(m) for m in expected]
+    without = [o for e in conversion.epochs[:2] for o in e.epoch.observations]  # before the ephemerides
+    assert without and all(math.isnan(o.satellite_clock_bias_m) for o in without)
     reports = [report_to_msg(r, FRAME_ID) for r in conversion.interference]
     assert [fields(m) for m in probe.reports] == [fields(m) for m in reports]
     assert probe.final is not None
-    assert probe.final['bad_checksum'] == '1' and probe.final['epochs_waiting_for_ephemeris'] == '2'
+    assert probe.final['bad_checksum'] == '1' and probe.final['epochs_waiting_for_ephemeris'] == '0'
+    assert probe.final['satellites_without_ephemeris'] == str(len(without))
     assert probe.final['leap_seconds_disagree'] == '0' and probe.final['port_losses'] == '0'
     assert probe.final['epochs_sent'] == str(len(expected)) and probe.final['port_state'] == 'closed'
 
@@ -264,3 +270,55 @@ def test_a_lost_port_that_comes_back_is_reopened_and_decoding_goes_on(ubx_log, m
         back.close()
         for fd in (s1, m2, s2):
             os.close(fd)
+
+
+def test_real_logs_in_process_give_the_spectra_and_measurements_without_ephemeris(tmp_path):
+    """pyubx2's real captures (14 RXM-RAWX epochs without navigation data, then MON-HW / MON-RF /
+    MON-SPAN): the node publishes what ubx_to_bag writes for them, the measurements with NaN satellite
+    states, one ReceiverSpectrum per MON-SPAN block stamped with the latest RAWX epoch, and counts them."""
+    from rfi_experiments.ubx_messages import spectrum_to_msg
+    from rfi_experiments.ubx_source import UbxSourceNode
+    from rfi_msgs.msg import ReceiverSpectrum
+    from rfi_node_common.testing import NodeRig
+
+    log = tmp_path / 'real.ubx'
+    log.write_bytes(b''.join((REAL / f'pygpsdata-{k}.log').read_bytes() for k in ('RXMRAWX', 'MON', 'ALL')))
+
+    def make(context, overrides):
+        node = UbxSourceNode(context=context, parameter_overrides=overrides)
+        node._start_timer.cancel()  # read only once the rig has discovered every output
+        return node
+
+    def ours(msg):
+        return msg.header.frame_id == FRAME_ID
+
+    rig = NodeRig(make, inputs={}, params={'input': str(log), 'pace': 'max', 'exit_at_end': False,
+                                           'frame_id': FRAME_ID},
+                  outputs={'/gnss/measurements': (GnssMeasurementArray, lambda m: m.gps_week == 2327),
+                           '/gnss/receiver_interference': (ReceiverInterference, ours),
+                           '/gnss/receiver_spectrum': (ReceiverSpectrum, ours)}, spin_deadline_s=DEADLINE_S)
+    try:
+        rig.node._start_reading()
+        rig.settle_until(rig.node.done.is_set, 'the end of the log')
+        counts = rig.node.values()
+    finally:
+        rig.close()
+    conversion = ubx_to_bag.convert_ubx(log, ubx_to_bag.make_decoder())
+    assert (len(conversion.epochs), len(conversion.interference), len(conversion.spectra)) == (14, 5, 2)
+    assert [fields(m) for m in rig.out['/gnss/receiver_spectrum']] == [
+        fields(spectrum_to_msg(s, FRAME_ID)) for s in conversion.spectra]
+    assert [fields(m) for m in rig.out['/gnss/measurements']] == [
+        fields(epoch_to_msg(e.epoch)) for e in conversion.epochs]
+    assert len(rig.out['/gnss/receiver_interference']) == 5
+    spectrum = rig.out['/gnss/receiver_spectrum'][0]
+    assert (spectrum.header.stamp.sec, spectrum.gps_time_of_week_s) == (1723558188, 223806.0)  # last RAWX epoch
+    assert spectrum.center_frequency_hz == 1583.4e6 and len(spectrum.power_db) == 256
+    n_sat = 0
+    for msg in rig.out['/gnss/measurements']:
+        for m in msg.measurements:
+            assert math.isnan(m.satellite_position_ecef_m[0]) and math.isnan(m.satellite_clock_bias_m)
+            assert m.pseudorange_m > 1.9e7 and math.isfinite(m.pseudorange_rate_mps) and m.cn0_dbhz > 0.0
+            n_sat += 1
+    assert counts['spectrum_reports'] == counts['spectrum_sent'] == 2 and counts['spectrum_before_time'] == 0
+    assert counts['satellites_without_ephemeris'] == n_sat and counts['epochs_sent'] == 14
+    assert counts['skipped_no_ephemeris'] == 0 and counts['publish_errors'] == 0

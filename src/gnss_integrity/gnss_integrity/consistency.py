@@ -328,6 +328,10 @@ def _scope(implicated: list[Sat], passed: bool, tested: list[Sat]) -> tuple[int,
     return SCOPE_SATELLITES, (), tuple(sorted(implicated))
 
 
+WARMUP_EVALUATIONS = 20
+"""``doppler_vs_pseudorange`` evaluations that only teach its noise scale (UNKNOWN) after a start."""
+
+
 class DopplerPseudorangeTest:
     """``doppler_vs_pseudorange``: each satellite's code change against its integrated Doppler (see module)."""
 
@@ -344,6 +348,10 @@ class DopplerPseudorangeTest:
         self.common_mode_m = math.nan  # the last pair's weighted mean (receiver clock change minus drift), m
         self.implied_displacement_m = np.full(3, math.nan)  # position push that explains a failure, ECEF m
         self._los: dict[Sat, np.ndarray] = {}
+        if not hasattr(self, "_clean_ratios"):
+            # the learned noise scale survives a reset: it describes the receiver, not the window
+            self._clean_ratios: deque[float] = deque(maxlen=600)
+            self.noise_scale = 1.0
 
     def _current(self, epoch: GnssEpoch, fix: MultiGnssFix) -> dict[Sat, tuple[float, float, float, float]]:
         """Satellite -> (pseudorange m, rate m/s, code noise variance m^2, rate variance) of the used rows."""
@@ -412,10 +420,22 @@ class DopplerPseudorangeTest:
         span = np.array([(ch.last_stamp_ns - ch.pairs[0][0]) / NS_PER_S for ch in chains])
         v = np.array([ch.sum_var + ch.pairs[0][3] + ch.end_code_var for ch in chains]) + (p.doppler_code_drift_mps
                                                                                          * span) ** 2
+        # A receiver noisier than the weight model (tracking loops, multipath) would alarm on clean
+        # data: the variances are scaled by the median ratio of passing statistics to the
+        # chi-square median over the last 600 evaluations, never below 1 (learned only from passing
+        # epochs, so an attack cannot raise it quickly).
+        v = v * self.noise_scale
         suspect = chi2_threshold(pfa, len(sats) - 1)
         alarm = chi2_threshold(p.alarm_false_alarm_probability, len(sats) - 1)
         first, excluded, passed = _exclude(e, v, 1, lambda dof: chi2_threshold(pfa, dof) if dof >= 1 else math.inf,
                                            p.raim_max_exclusions, p.doppler_min_satellites)
+        warming_up = len(self._clean_ratios) < WARMUP_EVALUATIONS
+        if first < suspect or warming_up:
+            self._clean_ratios.append(first * self.noise_scale / chi2_threshold(0.5, len(sats) - 1))
+            if len(self._clean_ratios) >= WARMUP_EVALUATIONS:
+                self.noise_scale = min(10.0, max(1.0, float(np.median(self._clean_ratios))))
+        if warming_up:  # the noise scale is not known yet: the first evaluations only teach it
+            return unknown(self.name, CATEGORY_CONSISTENCY, suspect, alarm, pfa)
         if first >= suspect and len(sats) >= 5:
             # a position-shaped divergence e_i = -u_i . delta + m: the receiver's whole position pushed
             h = np.hstack([-np.array([ch.los for ch in chains]), np.ones((len(sats), 1))])

@@ -126,7 +126,9 @@ class SpoofingState:
             state = STATE_NONE
         deciding = alarms + persistent if (alarms or persistent) else suspects
         self._episode(stamp_ns, state)
-        scope, constellations, satellites = SCOPE_NONE, (), ()
+        scope = SCOPE_NONE
+        constellations: tuple[int, ...] = ()
+        satellites: tuple[tuple[int, int], ...] = ()
         if state == STATE_DETECTED:
             scope, constellations, satellites = _scope(deciding)
         elif state == STATE_SUSPECTED:

@@ -5,6 +5,10 @@ import math
 
 import numpy as np
 import pytest
+
+from gnss_common.clock_model import TCXO, simulate_clock
+from gnss_common.constants import SPEED_OF_LIGHT_MPS
+from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic
 from gnss_integrity.clock_test import MILLISECOND_M, ClockTest, ClockTestParams
 from gnss_integrity.kinematics_test import AnchorRange, KinematicsTest, KinematicsTestParams
 from gnss_integrity.outcome import (
@@ -13,10 +17,6 @@ from gnss_integrity.outcome import (
     DECISION_SUSPECT,
     DECISION_UNKNOWN,
 )
-
-from gnss_common.clock_model import TCXO, simulate_clock
-from gnss_common.constants import SPEED_OF_LIGHT_MPS
-from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic
 
 S = 1_000_000_000
 T0 = 1_437_267_583 * S

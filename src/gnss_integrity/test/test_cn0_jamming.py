@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from gnss_common.jamming_weights import effective_cn0_dbhz
 from gnss_integrity.cn0_epoch import Cn0Epoch
 from gnss_integrity.cn0_jamming import (
     Cn0JammingDetector,
@@ -27,8 +29,6 @@ from gnss_integrity.outcome import (
     EVIDENCE_CN0_COMMON_DROP,
     EVIDENCE_CN0_ELEVATION,
 )
-
-from gnss_common.jamming_weights import effective_cn0_dbhz
 from rfi_sim.gnss_uwb import BroadcastGeometry, GnssUwbScenario, simulate
 
 NAV = Path(__file__).resolve().parents[2] / "gnss_common" / "test" / "data" / "arlm2000.15n"

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from gnss_integrity.cn0_epoch import BAND_NAMES, Cn0Epoch, signal_band
-from gnss_integrity.cn0_model import MODEL_BLOCKED, MODEL_EMPTY, MODEL_READY, Cn0ModelParams, Cn0Models
 
 from gnss_common.observations import BEIDOU, GALILEO, GLONASS, GPS
+from gnss_integrity.cn0_epoch import BAND_NAMES, Cn0Epoch, signal_band
+from gnss_integrity.cn0_model import MODEL_BLOCKED, MODEL_EMPTY, MODEL_READY, Cn0ModelParams, Cn0Models
 from rfi_sim.gnss_uwb import BroadcastGeometry, GnssUwbScenario, simulate
 
 NAV = Path(__file__).resolve().parents[2] / "gnss_common" / "test" / "data" / "arlm2000.15n"

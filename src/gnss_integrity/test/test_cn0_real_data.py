@@ -14,14 +14,14 @@ from functools import cache
 from pathlib import Path
 
 import pytest
+
+from gnss_common.measurements import build_epochs
+from gnss_common.rinex import read_rinex_nav, read_rinex_obs
 from gnss_integrity.cn0_epoch import Cn0Epoch
 from gnss_integrity.cn0_jamming import TEST_NAME, Cn0JammingDetector
 from gnss_integrity.cn0_model import Cn0Models
 from gnss_integrity.cn0_spoofing import TEST_NAMES, Cn0SpoofingTests
 from gnss_integrity.outcome import DECISION_ALARM, DECISION_PASS, DECISION_SUSPECT, DECISION_UNKNOWN
-
-from gnss_common.measurements import build_epochs
-from gnss_common.rinex import read_rinex_nav, read_rinex_obs
 
 DATA = Path(__file__).resolve().parents[2] / "gnss_common" / "test" / "data"
 STATIONS = {

@@ -10,6 +10,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from gnss_common.measurements import build_epochs
+from gnss_common.observations import GALILEO, GPS
+from gnss_common.rinex import read_rinex_nav, read_rinex_obs
 from gnss_integrity.cn0_epoch import Cn0Epoch
 from gnss_integrity.cn0_jamming import Cn0JammingDetector
 from gnss_integrity.cn0_model import Cn0Models
@@ -30,10 +34,6 @@ from gnss_integrity.outcome import (
     SCOPE_ALL,
     SCOPE_CONSTELLATIONS,
 )
-
-from gnss_common.measurements import build_epochs
-from gnss_common.observations import GALILEO, GPS
-from gnss_common.rinex import read_rinex_nav, read_rinex_obs
 from rfi_sim.gnss_uwb import BroadcastGeometry, GnssUwbScenario, simulate
 
 DATA = Path(__file__).resolve().parents[2] / "gnss_common" / "test" / "data"

@@ -8,6 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+
 from gnss_integrity.outcome import (
     CATEGORY_JAMMING,
     DECISION_ALARM,

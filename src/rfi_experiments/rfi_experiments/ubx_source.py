@@ -6,11 +6,15 @@ GPS LNAV / Galileo I/NAV ephemerides from RXM-SFRBX, epochs built by the same co
 declares the parameters, reads on a thread of its own (a blocking serial read must not stall the
 executor), publishes and reports /diagnostics.
 
-Outputs (relative names, so ``-r __ns:=/robot1`` moves them):
+Outputs (relative names, so ``-r __ns:=/robot1`` moves them), all reliable:
 ``gnss/measurements`` (rfi_msgs/GnssMeasurementArray, one per RXM-RAWX epoch with at least
-``min_satellites`` modelled satellites; epochs before that are counted as
-``epochs_waiting_for_ephemeris``, not published) and ``gnss/receiver_interference``
-(rfi_msgs/ReceiverInterference: MON-HW, MON-RF per RF block, SEC-SIG), both reliable; /diagnostics.
+``min_satellites`` satellites; fewer are counted as ``epochs_waiting_for_ephemeris``, not
+published; a satellite without a usable ephemeris, e.g. with RXM-SFRBX off, is published with NaN
+satellite states and its real pseudorange, rate and C/N0 under ``publish_without_ephemeris``,
+counted as ``satellites_without_ephemeris``), ``gnss/receiver_interference``
+(rfi_msgs/ReceiverInterference: MON-HW, MON-RF per RF block, SEC-SIG) and
+``gnss/receiver_spectrum`` (rfi_msgs/ReceiverSpectrum: MON-SPAN, one per RF block, stamped like
+the interference reports with the latest RAWX epoch); /diagnostics.
 
 Input (``input``): a serial device (``/dev/ttyACM0``, ``/dev/ttyUSB0``; ``baud_rate``), or a
 UBX log file. The receiver must output UBX-RXM-RAWX (and RXM-SFRBX unless ``nav_file`` gives the
@@ -41,8 +45,8 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 
-from rfi_experiments.ubx_decode import EpochOutput, UbxDecoder, UbxDecoderParams
-from rfi_msgs.msg import GnssMeasurementArray, ReceiverInterference
+from rfi_experiments.ubx_decode import EpochOutput, SpectrumReport, UbxDecoder, UbxDecoderParams
+from rfi_msgs.msg import GnssMeasurementArray, ReceiverInterference, ReceiverSpectrum
 from rfi_node_common.diagnostics import ERROR, OK, WARN, StampTimer, diagnostic_array
 from rfi_node_common.main import run_node
 from rfi_node_common.params import declare, parameter, validate_ranges
@@ -50,10 +54,12 @@ from rfi_node_common.qos import DATA_QOS, DATA_QOS_DEPTH, DIAGNOSTICS_QOS
 
 TOPICS = """topics:
   publishes  gnss/measurements (rfi_msgs/GnssMeasurementArray), gnss/receiver_interference
-             (rfi_msgs/ReceiverInterference), /diagnostics (diagnostic_msgs/DiagnosticArray)"""
+             (rfi_msgs/ReceiverInterference), gnss/receiver_spectrum (rfi_msgs/ReceiverSpectrum),
+             /diagnostics (diagnostic_msgs/DiagnosticArray)"""
 
 MEASUREMENTS_TOPIC = 'gnss/measurements'
 INTERFERENCE_TOPIC = 'gnss/receiver_interference'
+SPECTRUM_TOPIC = 'gnss/receiver_spectrum'
 READ_BYTES = 1 << 14
 """Bytes asked of one read."""
 SERIAL_TIMEOUT_S = 0.1
@@ -82,16 +88,20 @@ class UbxSourceParams:
     reference_position_ecef_m: str = parameter(
         '', 'Receiver ECEF position "X,Y,Z", m, for the ionosphere / troposphere models; empty: a coarse '
             'single-point fix per epoch (tens of metres suffice).')
-    min_satellites: int = parameter(4, 'Publish an epoch only with at least this many satellites modelled '
-                                       '(ephemeris present, healthy); fewer: counted, not published.',
-                                    minimum=1, maximum=64)
+    min_satellites: int = parameter(4, 'Publish an epoch only with at least this many satellites (modelled, and '
+                                       'with publish_without_ephemeris those without ephemeris); fewer: counted, '
+                                       'not published.', minimum=1, maximum=64)
+    publish_without_ephemeris: bool = parameter(
+        True, 'Publish satellites without a usable ephemeris (none yet, RXM-SFRBX off, stale) with NaN satellite '
+              'states and their real pseudorange, rate and C/N0 (for C/N0 jamming tests; a position filter '
+              'rejects them); false: skip them.')
     use_receiver_std: bool = parameter(True, 'Fill pseudorange_std_m / pseudorange_rate_std_mps from the '
                                              'receiver\'s prStdev / doStdev (false: NaN, the filter weights by C/N0).')
     pace: str = parameter('real_time', 'Files: real_time publishes at the pace of the RAWX epochs; max as fast '
                                        'as the subscribers take it. A serial port is paced by the receiver.',
                           choices=('real_time', 'max'))
-    frame_id: str = parameter('gnss', 'header.frame_id of gnss/receiver_interference (the receiver); the '
-                                      'measurements are in "earth".')
+    frame_id: str = parameter('gnss', 'header.frame_id of gnss/receiver_interference and gnss/receiver_spectrum '
+                                      '(the receiver); the measurements are in "earth".')
     reconnect_period_s: float = parameter(1.0, 'Serial: wait between attempts to reopen a lost port, s.',
                                           minimum=0.01, maximum=3600.0)
     max_reconnect_attempts: int = parameter(30, 'Serial: failed reopen attempts in a row before the node exits '
@@ -114,7 +124,7 @@ class UbxSourceParams:
 
     def decoder_params(self) -> UbxDecoderParams:
         return UbxDecoderParams(min_satellites=self.min_satellites, use_receiver_std=self.use_receiver_std,
-                                use_sfrbx=self.use_sfrbx)
+                                use_sfrbx=self.use_sfrbx, publish_without_ephemeris=self.publish_without_ephemeris)
 
 
 def parse_position(text: str) -> tuple[float, float, float] | None:
@@ -154,12 +164,13 @@ class UbxSourceNode(Node):
         self.is_file = is_regular_file(p.input)
         self.pub = self.create_publisher(GnssMeasurementArray, MEASUREMENTS_TOPIC, DATA_QOS)
         self.interference_pub = self.create_publisher(ReceiverInterference, INTERFERENCE_TOPIC, DATA_QOS)
+        self.spectrum_pub = self.create_publisher(ReceiverSpectrum, SPECTRUM_TOPIC, DATA_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
-        self.counts = {'epochs_sent': 0, 'interference_sent': 0, 'port_losses': 0, 'reconnects': 0,
-                       'read_errors': 0, 'publish_errors': 0}
+        self.counts = {'epochs_sent': 0, 'interference_sent': 0, 'spectrum_sent': 0, 'port_losses': 0,
+                       'reconnects': 0, 'read_errors': 0, 'publish_errors': 0}
         self.port_state = 'closed'
         self.exit_code = 0
-        self._unacked = {'epochs_sent': 0, 'interference_sent': 0}
+        self._unacked = {'epochs_sent': 0, 'interference_sent': 0, 'spectrum_sent': 0}
         self._timer = StampTimer(p.diagnostics_period_s)
         self._last_stamp_ns = 0
         self.stop = threading.Event()
@@ -299,13 +310,16 @@ class UbxSourceNode(Node):
 
     # ------------------------------------------------------------------------------------------- output
     def _publish(self, item: Any) -> None:
-        from rfi_experiments.ubx_messages import report_to_msg
+        from rfi_experiments.ubx_messages import report_to_msg, spectrum_to_msg
         from rfi_node_common.conversions import epoch_to_msg
 
         try:
             if isinstance(item, EpochOutput):
                 pub, msg, key = self.pub, epoch_to_msg(item.epoch), 'epochs_sent'
                 stamp = item.epoch.stamp_ns
+            elif isinstance(item, SpectrumReport):
+                pub, msg, key = self.spectrum_pub, spectrum_to_msg(item, self.params.frame_id), 'spectrum_sent'
+                stamp = item.stamp_ns
             else:
                 pub, msg, key = self.interference_pub, report_to_msg(item, self.params.frame_id), 'interference_sent'
                 stamp = item.stamp_ns
@@ -349,6 +363,7 @@ class UbxSourceNode(Node):
         v.update(self.counts)
         v['subscribers'] = self.pub.get_subscription_count()
         v['interference_subscribers'] = self.interference_pub.get_subscription_count()
+        v['spectrum_subscribers'] = self.spectrum_pub.get_subscription_count()
         return v
 
     def level(self) -> tuple[bytes, str]:
@@ -377,12 +392,13 @@ class UbxSourceNode(Node):
         from rfi_experiments.ubx_to_bag import summary_lines
 
         if publish:
-            for pub in (self.pub, self.interference_pub):  # the data out before the final report and the shutdown
+            for pub in (self.pub, self.interference_pub, self.spectrum_pub):  # the data out before the final report
                 self._wait_acked(pub, FINAL_ACK_TIMEOUT_S)
             self._publish_diagnostics(self._last_stamp_ns, final=True)
             self._wait_acked(self.diag_pub, FINAL_ACK_TIMEOUT_S)
         text = (f'end of input {self.params.input}: {self.counts["epochs_sent"]} epochs, '
-                f'{self.counts["interference_sent"]} interference reports published\n'
+                f'{self.counts["interference_sent"]} interference reports, {self.counts["spectrum_sent"]} spectra '
+                'published\n'
                 + '\n'.join(summary_lines(self.decoder)))
         if self.context.ok():
             self.get_logger().info(text)
@@ -421,9 +437,10 @@ def main(argv: Any = None) -> int:
 
     code = run_node(make, executable='ubx_source', params_cls=UbxSourceParams, topics=TOPICS,
                     summary='Publish a u-blox receiver\'s raw measurements (UBX-RXM-RAWX, with ephemerides from '
-                            'UBX-RXM-SFRBX or a RINEX nav file) as rfi_msgs/GnssMeasurementArray, and its '
+                            'UBX-RXM-SFRBX or a RINEX nav file) as rfi_msgs/GnssMeasurementArray, its '
                             'interference indicators (UBX-MON-HW / MON-RF / SEC-SIG) as '
-                            'rfi_msgs/ReceiverInterference; from a serial port or a UBX log file.',
+                            'rfi_msgs/ReceiverInterference and its spectrum (UBX-MON-SPAN) as '
+                            'rfi_msgs/ReceiverSpectrum; from a serial port or a UBX log file.',
                     argv=argv)
     if code == 0 and nodes and nodes[0].exit_code:
         return nodes[0].exit_code

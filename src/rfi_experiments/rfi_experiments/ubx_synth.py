@@ -4,7 +4,7 @@ Turns the measurements of a simulation (:mod:`rfi_sim.gnss_uwb`) into what a u-b
 would send for them, with pyubx2's own message generator (``UBXMessage(...).serialize()``):
 UBX-RXM-RAWX per epoch (GPS L1 C/A), UBX-RXM-SFRBX subframes 1-3 per satellite encoded from the
 ephemerides by :func:`gnss_common.lnav.encode_ephemeris_subframes`, a subframe 4 page 18 with the
-Klobuchar coefficients, and UBX-MON-HW. Used by tests and to feed ``ubx_source`` without a
+Klobuchar coefficients, UBX-MON-HW and UBX-MON-SPAN. Used by tests and to feed ``ubx_source`` without a
 receiver. Pure: never imports rclpy.
 
 What a receiver reports is quantised, and so is this stream: C/N0 to an integer dB-Hz
@@ -142,3 +142,16 @@ def mon_hw_frame(jamming_state: int, jam_indicator: int, agc_count: int, noise_p
 
     return UBXMessage("MON", "MON-HW", GET, noisePerMS=int(noise_per_ms), agcCnt=int(agc_count), aStatus=2,
                       aPower=1, jammingState=int(jamming_state), jamInd=int(jam_indicator)).serialize()
+
+
+def mon_span_frame(blocks: Sequence[tuple[Sequence[int], int, int, int, int]]) -> bytes:
+    """A UBX-MON-SPAN frame: per RF block (256 spectrum counts of 0.25 dB, span Hz, res Hz, center Hz,
+    pga dB)."""
+    from pyubx2 import GET, UBXMessage
+
+    fields: dict[str, object] = dict(version=0, numRfBlocks=len(blocks))
+    for i, (counts, span, res, center, pga) in enumerate(blocks, start=1):
+        s = f"_{i:02d}"
+        fields.update({"spectrum" + s: [int(c) for c in counts], "span" + s: int(span), "res" + s: int(res),
+                       "center" + s: int(center), "pga" + s: int(pga)})
+    return UBXMessage("MON", "MON-SPAN", GET, **fields).serialize()

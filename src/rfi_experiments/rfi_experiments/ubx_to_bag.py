@@ -5,9 +5,12 @@ Every UBX-RXM-RAWX epoch with at least ``--min-satellites`` modelled satellites 
 ``rinex_to_bag`` (:class:`gnss_common.measurements.GnssEpochBuilder`, via
 :class:`rfi_experiments.ubx_decode.UbxDecoder`); the receiver's interference indicators
 (UBX-MON-HW, UBX-MON-RF per RF block, UBX-SEC-SIG) go to ``/gnss/receiver_interference``
-(``rfi_msgs/ReceiverInterference``). Ephemerides come from the log's UBX-RXM-SFRBX (GPS LNAV,
-Galileo I/NAV) and/or ``--nav`` (RINEX); epochs before enough ephemerides exist are counted, not
-written.
+(``rfi_msgs/ReceiverInterference``), its spectrum (UBX-MON-SPAN, one message per RF block) to
+``/gnss/receiver_spectrum`` (``rfi_msgs/ReceiverSpectrum``). Ephemerides come from the log's
+UBX-RXM-SFRBX (GPS LNAV, Galileo I/NAV) and/or ``--nav`` (RINEX); a satellite without one is
+written with NaN satellite states (real pseudorange, rate and C/N0; counted as
+``satellites_without_ephemeris``) unless ``--skip-without-ephemeris``, so that a log without
+SFRBX still feeds the C/N0 jamming tests.
 
 Header stamps and bag log times are ROS time (UTC-based, ns) of the receive epoch; GPS week and
 time of week are in the message fields. Corrupted frames, unknown messages and everything
@@ -29,12 +32,13 @@ from gnss_common.rinex import RinexFormatError, read_rinex_nav
 from rfi_experiments import cli
 from rfi_experiments.bag_io import BagError, BagWriter
 from rfi_experiments.cli import error_reporter
-from rfi_experiments.ubx_decode import EpochOutput, InterferenceReport, UbxDecoder, UbxDecoderParams
+from rfi_experiments.ubx_decode import EpochOutput, InterferenceReport, SpectrumReport, UbxDecoder, UbxDecoderParams
 
 PROG = "ubx_to_bag"
 _fail = error_reporter(PROG)
 MEASUREMENTS_TOPIC = "/gnss/measurements"
 INTERFERENCE_TOPIC = "/gnss/receiver_interference"
+SPECTRUM_TOPIC = "/gnss/receiver_spectrum"
 EARTH_FRAME_ID = "earth"
 CHUNK_BYTES = 1 << 16
 
@@ -46,6 +50,7 @@ class UbxConversion:
     epochs: tuple[EpochOutput, ...]
     interference: tuple[InterferenceReport, ...]
     decoder: UbxDecoder
+    spectra: tuple[SpectrumReport, ...] = ()
 
 
 def read_chunks(path: str | Path, size: int = CHUNK_BYTES) -> Iterator[bytes]:
@@ -80,27 +85,36 @@ def convert_ubx(ubx_path: str | Path, decoder: UbxDecoder) -> UbxConversion:
     """Decode a whole UBX log with ``decoder``."""
     epochs: list[EpochOutput] = []
     reports: list[InterferenceReport] = []
+    spectra: list[SpectrumReport] = []
     for chunk in read_chunks(ubx_path):
         for item in decoder.feed(chunk):
-            (epochs if isinstance(item, EpochOutput) else reports).append(item)  # type: ignore[arg-type]
+            if isinstance(item, EpochOutput):
+                epochs.append(item)
+            elif isinstance(item, SpectrumReport):
+                spectra.append(item)
+            else:
+                reports.append(item)
     decoder.finish()
-    return UbxConversion(tuple(epochs), tuple(reports), decoder)
+    return UbxConversion(tuple(epochs), tuple(reports), decoder, tuple(spectra))
 
 
 def write_bag(conversion: UbxConversion, out: str | Path, *, overwrite: bool = False,
               receiver_frame_id: str = "gnss") -> dict[str, int]:
-    """Write epochs and interference reports, in stream order of their stamps; log time = stamp."""
-    from rfi_experiments.ubx_messages import report_to_msg
+    """Write epochs, interference reports and spectra in the order of their stamps (log time = stamp;
+    at one stamp the epoch first, as in the stream, then the reports that carry its time)."""
+    from rfi_experiments.ubx_messages import report_to_msg, spectrum_to_msg
     from rfi_node_common.conversions import epoch_to_msg
 
-    items: list[tuple[int, int, str, object]] = []
+    items: list[tuple[int, int, int, str, object]] = []
     for i, e in enumerate(conversion.epochs):
-        items.append((e.epoch.stamp_ns, 2 * i, MEASUREMENTS_TOPIC, epoch_to_msg(e.epoch, EARTH_FRAME_ID)))
+        items.append((e.epoch.stamp_ns, 0, i, MEASUREMENTS_TOPIC, epoch_to_msg(e.epoch, EARTH_FRAME_ID)))
     for i, r in enumerate(conversion.interference):
-        items.append((r.stamp_ns, 2 * i + 1, INTERFERENCE_TOPIC, report_to_msg(r, receiver_frame_id)))
-    items.sort(key=lambda t: (t[0], t[1]))
+        items.append((r.stamp_ns, 1, i, INTERFERENCE_TOPIC, report_to_msg(r, receiver_frame_id)))
+    for i, sp in enumerate(conversion.spectra):
+        items.append((sp.stamp_ns, 2, i, SPECTRUM_TOPIC, spectrum_to_msg(sp, receiver_frame_id)))
+    items.sort(key=lambda t: (t[0], t[1], t[2]))
     with BagWriter(out, overwrite=overwrite) as bag:
-        for stamp, _, topic, msg in items:
+        for stamp, _, _, topic, msg in items:
             bag.write(topic, msg, stamp)
         return dict(bag.counts)
 
@@ -138,9 +152,10 @@ def build_parser() -> argparse.ArgumentParser:
         prog=PROG,
         description=(
             "Convert a u-blox UBX log (UBX-RXM-RAWX measurements, UBX-RXM-SFRBX navigation data, "
-            "UBX-MON-HW / MON-RF / SEC-SIG interference indicators) into a bag: "
-            f"{MEASUREMENTS_TOPIC} (rfi_msgs/GnssMeasurementArray) and {INTERFERENCE_TOPIC} "
-            "(rfi_msgs/ReceiverInterference). Stamps are ROS time (UTC-based)."
+            "UBX-MON-HW / MON-RF / SEC-SIG interference indicators, UBX-MON-SPAN spectra) into a bag: "
+            f"{MEASUREMENTS_TOPIC} (rfi_msgs/GnssMeasurementArray), {INTERFERENCE_TOPIC} "
+            f"(rfi_msgs/ReceiverInterference) and {SPECTRUM_TOPIC} (rfi_msgs/ReceiverSpectrum). "
+            "Stamps are ROS time (UTC-based)."
         ),
     )
     parser.add_argument("ubx", help="UBX log file (binary, as the receiver sent it; NMEA mixed in is skipped)")
@@ -152,7 +167,10 @@ def build_parser() -> argparse.ArgumentParser:
                         help="receiver ECEF position, m, for the iono/tropo models (default: a coarse fix per epoch); "
                              "write --reference-position=X,Y,Z when X is negative")
     parser.add_argument("--min-satellites", type=int, default=4, metavar="N",
-                        help="write an epoch only with at least N modelled satellites (default 4)")
+                        help="write an epoch only with at least N satellites (default 4)")
+    parser.add_argument("--skip-without-ephemeris", action="store_true",
+                        help="skip satellites without a usable ephemeris (default: written with NaN satellite states "
+                             "and their real pseudorange, rate and C/N0, for the C/N0 jamming tests)")
     parser.add_argument("--no-receiver-std", action="store_true",
                         help="leave the std fields NaN (the filter weights by C/N0) instead of the receiver's "
                              "prStdev / doStdev")
@@ -169,12 +187,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     args, out = start
     try:
         params = UbxDecoderParams(min_satellites=args.min_satellites, use_sfrbx=not args.no_sfrbx,
-                                  use_receiver_std=not args.no_receiver_std)
+                                  use_receiver_std=not args.no_receiver_std,
+                                  publish_without_ephemeris=not args.skip_without_ephemeris)
         decoder = make_decoder(args.nav, args.reference_position, params)
         conversion = convert_ubx(args.ubx, decoder)
-        if not conversion.epochs and not conversion.interference:
-            return _fail(f"{args.ubx}: nothing to write (no RXM-RAWX epoch with ephemerides, no interference "
-                         f"report; {decoder.counts['frames']} valid UBX frames, "
+        if not conversion.epochs and not conversion.interference and not conversion.spectra:
+            return _fail(f"{args.ubx}: nothing to write (no RXM-RAWX epoch to write, no interference report or "
+                         f"spectrum; {decoder.counts['frames']} valid UBX frames, "
                          f"{decoder.counts['epochs_waiting_for_ephemeris']} epochs waiting for ephemeris)")
         counts = write_bag(conversion, out, overwrite=args.overwrite, receiver_frame_id=args.frame_id)
     except (RinexFormatError, BagError, ValueError, OSError) as err:

@@ -1,5 +1,6 @@
 """UBX decoding (rfi_experiments.ubx_decode): framing and bad input on pyubx2's real sample logs,
-field values checked against pyubx2's own parse / the samples' README, RAWX flags, SFRBX -> epochs."""
+field values checked against pyubx2's own parse / the samples' README, RAWX flags, SFRBX -> epochs,
+a real log without SFRBX -> measurements with NaN satellite states, the real MON-SPAN spectra."""
 
 from __future__ import annotations
 
@@ -10,20 +11,27 @@ import numpy as np
 import pytest
 from pyubx2 import GET, UBXMessage, UBXReader
 
+from gnss_common.constants import GPS_L1_FREQUENCY_HZ, SPEED_OF_LIGHT_MPS
+from gnss_common.glonass import glonass_g1_frequency_hz
+from gnss_common.observations import BEIDOU, GALILEO, GLONASS, GPS
 from rfi_experiments.ubx_decode import (
     JAMMING_CRITICAL,
     SOURCE_MON_HW,
     SOURCE_MON_RF,
     SOURCE_SEC_SIG,
+    EpochOutput,
     InterferenceReport,
+    SpectrumReport,
     UbxDecoder,
     UbxDecoderParams,
     UbxFramer,
     decode_stream,
+    header_stamp_ns,
     rawx_from_message,
     rawx_to_observations,
     ubx_checksum,
 )
+from rfi_experiments.ubx_synth import mon_span_frame
 
 DATA = Path(__file__).parent / "data" / "ubx"
 ALL = (DATA / "pygpsdata-ALL.log").read_bytes()
@@ -105,7 +113,8 @@ def test_unknown_and_unparsable_messages_are_counted():
     decode_stream([unknown + short_rawx + MON], dec)
     assert dec.counts["unknown_messages"] == 1
     assert dec.counts["unparsable"] == 1
-    assert dec.ignored["MON-VER"] == 1 and dec.ignored["MON-SPAN"] == 1
+    assert dec.ignored["MON-VER"] == 1 and "MON-SPAN" not in dec.ignored
+    assert dec.counts["spectrum_before_time"] == 1  # MON-SPAN before any RAWX: no time to stamp it with
 
 
 def _first_rawx():
@@ -167,13 +176,40 @@ def test_invalid_pseudorange_is_never_used():
     assert math.isnan(obs.observations["G05"]["C1C"])
 
 
-def test_multi_gnss_epochs_wait_for_ephemeris_and_are_counted():
-    dec = UbxDecoder()
+def test_without_publish_without_ephemeris_epochs_wait_for_ephemeris_and_are_counted():
+    dec = UbxDecoder(UbxDecoderParams(publish_without_ephemeris=False))
     out = decode_stream([RAWX], dec)
     assert out == []  # no ephemeris in the log: nothing published half-empty
     assert dec.counts["rawx_epochs"] == 14 and dec.counts["epochs_waiting_for_ephemeris"] == 14
     gps = sum(1 for m in rawx_from_message(_first_rawx()).measurements if m.gnss_id == 0)
     assert dec.skipped["no_ephemeris"] >= gps
+    assert dec.counts["satellites_without_ephemeris"] == 0
+
+
+def test_a_real_log_without_sfrbx_gives_measurements_with_nan_satellite_states():
+    # pygpsdata-RXMRAWX.log: 14 real RXM-RAWX epochs (GPS, Galileo, BeiDou, GLONASS), no RXM-SFRBX
+    dec = UbxDecoder()
+    out = [o for o in decode_stream([RAWX], dec) if isinstance(o, EpochOutput)]
+    assert len(out) == 14 and dec.counts["epochs_waiting_for_ephemeris"] == 0
+    assert dec.counts["satellites_without_ephemeris"] == sum(len(o.epoch.observations) for o in out)
+    assert dec.skipped["no_ephemeris"] == 0  # published, not skipped
+    first = out[0]
+    rawx = rawx_from_message(_first_rawx())
+    assert first.rawx == rawx and first.epoch.gps_time_of_week_s == 223793.0
+    by_sat = {(o.constellation, o.svid): o for o in first.epoch.observations}
+    assert {c for c, _ in by_sat} == {GPS, GALILEO, BEIDOU, GLONASS}
+    for o in first.epoch.observations:  # never a valid-looking state
+        assert np.isnan(o.satellite_position_ecef_m).all() and np.isnan(o.satellite_velocity_ecef_mps).all()
+        assert math.isnan(o.satellite_clock_bias_m) and math.isnan(o.satellite_clock_drift_mps)
+        assert math.isnan(o.ionosphere_delay_m) and math.isnan(o.troposphere_delay_m)
+        assert 1.0e7 < o.pseudorange_m < 4.8e7 and 10.0 < o.cn0_dbhz < 60.0
+    g11 = by_sat[(GPS, 11)]  # values as pyubx2 parses them (test_rawx_fields_match_pyubx2_parse_of_the_sample)
+    assert g11.pseudorange_m == 21431659.961167824 and g11.cn0_dbhz == 43.0
+    assert g11.pseudorange_rate_mps == pytest.approx(-366.0107421875 * SPEED_OF_LIGHT_MPS / GPS_L1_FREQUENCY_HZ)
+    assert g11.pseudorange_std_m == pytest.approx(0.16)  # the receiver's prStdev, as for modelled satellites
+    r17 = by_sat[(GLONASS, 17)]  # GLONASS: the carrier of the RAWX frequency channel (freqId 11: k = 4)
+    assert r17.carrier_frequency_hz == glonass_g1_frequency_hz(4) and r17.pseudorange_m == 21889633.295237724
+    assert by_sat[(BEIDOU, 11)].pseudorange_m == 23388266.420824006
 
 
 def _reports(data: bytes) -> list[InterferenceReport]:
@@ -217,3 +253,73 @@ def test_sec_sig(version):
 def test_decoder_params_are_checked():
     with pytest.raises(ValueError):
         UbxDecoderParams(min_satellites=0)
+
+
+SPECTRA_JSON = Path(__file__).resolve().parents[2] / "gnss_integrity" / "test" / "data" / "mon_span_pyubx2.json"
+
+
+def _spectra(data: bytes) -> tuple[list[SpectrumReport], UbxDecoder]:
+    dec = UbxDecoder()
+    out = decode_stream([frames_of(RAWX)[0] + data], dec)  # a receive time for the reports
+    return [o for o in out if isinstance(o, SpectrumReport)], dec
+
+
+def test_real_mon_span_decodes_as_pyubx2_parses_it():
+    for data in (MON, ALL):
+        (report,), dec = _spectra(data)
+        msg = next(m for m in (UBXReader.parse(f) for f in frames_of(data)) if m.identity == "MON-SPAN")
+        assert report.power_db == tuple(0.25 * c for c in msg.spectrum_01)  # 0.25 dB units -> dB
+        assert (report.center_frequency_hz, report.span_hz, report.resolution_hz, report.pga_gain_db) == (
+            msg.center_01, msg.span_01, msg.res_01, msg.pga_01) == (1583.4e6, 128e6, 0.5e6, 12.0)
+        assert report.rf_block_id == 0 and dec.counts["spectrum_reports"] == 1
+        assert (report.gps_week, report.gps_time_of_week_s) == (2327, 223793.0)
+        assert report.stamp_ns == header_stamp_ns(2327, 223793.0)  # stamped like the interference reports
+        # block 0 is the L1 band: 1519.4-1647.4 MHz around GPS L1 (1575.42 MHz, bin 111), whose bin
+        # lies in the front-end passband, 20 dB and more above the ends of the span
+        assert report.span_hz == 256 * report.resolution_hz
+        assert abs(report.center_frequency_hz - 1575.42e6) < 10e6
+        bin_l1 = round(127 + (1575.42e6 - report.center_frequency_hz) / report.resolution_hz)
+        x = np.array(report.power_db)
+        assert bin_l1 == 111 and x[bin_l1] > max(x[:10].max(), x[-10:].max()) + 20.0
+
+
+def test_the_receivers_centre_spur_sits_in_bin_127():
+    # u-blox: "a spur may be visible at the center frequency"; the interface description's
+    # f(i) = center + span (i - 127) / 256 puts the centre in bin 127, and there it is
+    from scipy.ndimage import median_filter
+
+    (report,), _ = _spectra(ALL)
+    x = np.array(report.power_db)
+    rise = x - median_filter(x, size=15, mode="nearest")
+    assert 60 + int(np.argmax(rise[60:200])) == 127 and rise[127] == 2.5
+
+
+def test_mon_span_blocks_and_bad_blocks():
+    l1 = (list(range(256)), 128_000_000, 500_000, 1_583_400_000, 12)
+    l2 = ([30] * 256, 128_000_000, 500_000, 1_227_600_000, 20)
+    zero_span = ([40] * 256, 0, 500_000, 1_583_400_000, 12)
+    truncated = bytearray(mon_span_frame([l1]))
+    truncated[7] = 2  # numRfBlocks 2 with one block of payload
+    body = bytes(truncated[2:-2])
+    truncated = b"\xb5\x62" + body + ubx_checksum(body)
+    dec = UbxDecoder()
+    out = decode_stream([frames_of(RAWX)[0] + mon_span_frame([l1, l2]) + mon_span_frame([zero_span]) + truncated], dec)
+    spectra = [o for o in out if isinstance(o, SpectrumReport)]
+    assert [(s.rf_block_id, s.center_frequency_hz, s.pga_gain_db) for s in spectra] == [
+        (0, 1583.4e6, 12.0), (1, 1227.6e6, 20.0)]
+    assert spectra[0].power_db[255] == 63.75 and spectra[1].power_db == (7.5,) * 256
+    assert dec.counts["spectrum_reports"] == 2 and dec.counts["unparsable"] == 2  # never published
+
+
+def test_the_spectra_copied_for_gnss_integrity_equal_the_decoded_ones():
+    import hashlib
+    import json
+
+    entries = json.loads(SPECTRA_JSON.read_text())["spectra"]
+    assert len(entries) == 2
+    for entry, data in zip(entries, (MON, ALL), strict=True):
+        (report,), _ = _spectra(data)
+        assert entry["source_sha256"] == hashlib.sha256(data).hexdigest()
+        assert tuple(0.25 * c for c in entry["counts"]) == report.power_db
+        assert (entry["center_hz"], entry["span_hz"], entry["res_hz"], entry["pga_db"]) == (
+            report.center_frequency_hz, report.span_hz, report.resolution_hz, report.pga_gain_db)

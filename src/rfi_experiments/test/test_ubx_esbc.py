@@ -63,12 +63,18 @@ def test_gps_and_galileo_from_sfrbx_equal_the_rinex_path(esbc):
     assert len(out) == N_EPOCHS
     builder = GnssEpochBuilder(list(nav.ephemerides) + list(nav.other_ephemerides), nav.header.iono_alpha,
                                nav.header.iono_beta, ref, MeasurementBuilderParams(constellations=("G", "E")))
-    n_gal_used = 0
+    n_gal_used = n_unmodelled = 0
     for got, rinex_epoch in zip(out, epochs, strict=True):
         want = builder.build(rinex_epoch).epoch
         assert (got.epoch.gps_week, got.epoch.gps_time_of_week_s) == (want.gps_week, want.gps_time_of_week_s)
         want_by_sat = {(o.constellation, o.svid): o for o in want.observations}
-        got_by_sat = {(o.constellation, o.svid): o for o in got.epoch.observations}
+        got_all = {(o.constellation, o.svid): o for o in got.epoch.observations}
+        got_by_sat = {k: o for k, o in got_all.items() if np.isfinite(o.satellite_position_ecef_m).all()}
+        for key, o in got_all.items():  # no ephemeris sent (BeiDou, satellites risen later): NaN states
+            if key not in got_by_sat:
+                assert np.isnan(o.satellite_position_ecef_m).all() and math.isnan(o.satellite_clock_bias_m)
+                assert math.isnan(o.ionosphere_delay_m) and math.isfinite(o.pseudorange_m)
+                n_unmodelled += 1
         assert set(got_by_sat) <= set(want_by_sat)
         assert len(got_by_sat) >= len(want_by_sat) - 2  # satellites risen after the first epoch
         for key, g in got_by_sat.items():
@@ -83,6 +89,7 @@ def test_gps_and_galileo_from_sfrbx_equal_the_rinex_path(esbc):
             assert abs(g.ionosphere_delay_m - w.ionosphere_delay_m) < 1e-3  # Klobuchar LSBs
             assert g.cn0_dbhz == round(w.cn0_dbhz) or math.isnan(w.cn0_dbhz)
     assert n_gal_used >= 6 * N_EPOCHS
+    assert n_unmodelled > 0 and decoder.counts["satellites_without_ephemeris"] == n_unmodelled
 
 
 def test_corrupted_galileo_pages_are_counted(esbc):

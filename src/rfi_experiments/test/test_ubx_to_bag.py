@@ -1,6 +1,8 @@
 """ubx_to_bag end to end on a UBX stream generated from the simulator: the measurements and the
 fused positions equal those of the same scenario taken the direct way (simulator -> fusion), within
-the tolerances stated here; and the tool's refusals of bad input."""
+the tolerances stated here (epochs before the ephemerides: NaN satellite states, rejected by the
+fusion); on the real pyubx2 logs (no RXM-SFRBX): measurements with NaN satellite states, the
+interference reports and the MON-SPAN spectra; and the tool's refusals of bad input."""
 
 from __future__ import annotations
 
@@ -25,7 +27,8 @@ from uwb_gnss_fusion.fusion_params import FusionParams
 
 NAV = Path(__file__).parents[1] / "data" / "arlm2000.15n"
 EPOCHS_BEFORE_EPHEMERIS = 3
-"""RAWX epochs sent before the first SFRBX subframes: withheld and counted."""
+"""RAWX epochs sent before the first SFRBX subframes: written with NaN satellite states."""
+REAL = Path(__file__).parent / "data" / "ubx"
 
 # Tolerances (UBX path - direct path), each with its cause:
 SAT_POSITION_TOL_M = 0.05
@@ -114,10 +117,23 @@ def test_ubx_to_bag_then_fusion_equals_the_direct_way(scenario, tmp_path, capsys
     arrays = [(t, m) for topic, t, m in msgs if topic == ubx_to_bag.MEASUREMENTS_TOPIC]
     reports = [m for topic, _, m in msgs if topic == ubx_to_bag.INTERFERENCE_TOPIC]
     n = len(run.gnss_epochs)
-    assert len(arrays) == n - EPOCHS_BEFORE_EPHEMERIS
+    assert len(arrays) == n
     assert len(reports) == n
     assert [r.jamming_state for r in reports].count(3) == 60 and reports[-1].agc_count == 600.0
     direct = {round(e.gps_time_of_week_s, 3): e for e in run.gnss_epochs}
+    before = [msg_to_epoch(m) for _, m in arrays[:EPOCHS_BEFORE_EPHEMERIS]]
+    arrays = arrays[EPOCHS_BEFORE_EPHEMERIS:]
+    n_nan = 0
+    for e in before:  # no ephemeris yet: the measurements with NaN satellite states
+        d = direct[round(e.gps_time_of_week_s, 3)]
+        assert [o.svid for o in e.observations] == [o.svid for o in d.observations]
+        for a, b in zip(e.observations, d.observations, strict=True):
+            assert a.pseudorange_m == b.pseudorange_m and abs(a.cn0_dbhz - b.cn0_dbhz) <= 0.5
+            assert abs(a.pseudorange_rate_mps - b.pseudorange_rate_mps) < RATE_TOL_MPS
+            assert np.isnan(a.satellite_position_ecef_m).all() and math.isnan(a.satellite_clock_bias_m)
+            assert math.isnan(a.ionosphere_delay_m) and math.isnan(a.troposphere_delay_m)
+            n_nan += 1
+    assert f"satellites_without_ephemeris   {n_nan}" in printed
     ubx_epochs = []
     for log_t, msg in arrays:
         e = msg_to_epoch(msg)
@@ -137,6 +153,9 @@ def test_ubx_to_bag_then_fusion_equals_the_direct_way(scenario, tmp_path, capsys
         ubx_epochs.append(e)
     direct_epochs = run.gnss_epochs[EPOCHS_BEFORE_EPHEMERIS:]
     via_ubx = _fuse(ubx_epochs)
+    with_nan = _fuse(before + ubx_epochs)  # the NaN states rejected, nothing else changes
+    assert sorted(with_nan) == sorted(via_ubx)
+    assert max(np.abs(with_nan[k] - via_ubx[k]).max() for k in via_ubx) == 0.0
     common = sorted(via_ubx)
     assert len(common) >= len(ubx_epochs) - 1
     equalised = _fuse(_equalise(direct_epochs, ubx_epochs))
@@ -155,7 +174,7 @@ def test_coarse_fix_reference_and_receiver_std(scenario, tmp_path):
     _, run, path = scenario
     msgs = _bag(tmp_path, path)
     arrays = [msg_to_epoch(m) for topic, _, m in msgs if topic == ubx_to_bag.MEASUREMENTS_TOPIC]
-    assert len(arrays) == len(run.gnss_epochs) - EPOCHS_BEFORE_EPHEMERIS
+    assert len(arrays) == len(run.gnss_epochs)
     obs = arrays[10].observations[0]
     assert obs.pseudorange_std_m in [0.01 * 2.0**k for k in range(16)]  # the receiver's prStdev
     assert obs.pseudorange_rate_std_mps > 0.0
@@ -176,8 +195,8 @@ def test_refusals(scenario, tmp_path, capsys):
     assert ubx_to_bag.main(["ubx_to_bag", str(tmp_path / "missing.ubx"), str(tmp_path / "o")]) == 2
     assert "missing.ubx" in capsys.readouterr().err
     rawx_only = tmp_path / "rawx.ubx"
-    rawx_only.write_bytes((Path(__file__).parent / "data" / "ubx" / "pygpsdata-RXMRAWX.log").read_bytes())
-    assert ubx_to_bag.main(["ubx_to_bag", str(rawx_only), str(tmp_path / "o")]) == 2
+    rawx_only.write_bytes((REAL / "pygpsdata-RXMRAWX.log").read_bytes())
+    assert ubx_to_bag.main(["ubx_to_bag", str(rawx_only), str(tmp_path / "o"), "--skip-without-ephemeris"]) == 2
     err = capsys.readouterr().err
     assert "nothing to write" in err and "14 epochs waiting for ephemeris" in err
     garbage = tmp_path / "garbage.ubx"
@@ -187,3 +206,39 @@ def test_refusals(scenario, tmp_path, capsys):
     (tmp_path / "exists").mkdir()
     assert ubx_to_bag.main(["ubx_to_bag", str(path), str(tmp_path / "exists")]) == 2
     assert ubx_to_bag.main(["ubx_to_bag", str(path), str(tmp_path / "o"), "--reference-position", "1,2"]) == 2
+
+
+def test_real_logs_without_sfrbx_give_nan_states_and_the_receiver_spectra(tmp_path, capsys):
+    # pyubx2's real captures, one after the other: 14 RXM-RAWX epochs (no navigation data), then the
+    # MON log and the ALL log (MON-HW, MON-RF, MON-SPAN; one GPS subframe 4 in ALL: no ephemeris)
+    log = tmp_path / "real.ubx"
+    log.write_bytes(b"".join((REAL / f"pygpsdata-{k}.log").read_bytes() for k in ("RXMRAWX", "MON", "ALL")))
+    msgs = _bag(tmp_path, log)
+    assert "satellites_without_ephemeris" in capsys.readouterr().out
+    arrays = [m for topic, _, m in msgs if topic == ubx_to_bag.MEASUREMENTS_TOPIC]
+    reports = [m for topic, _, m in msgs if topic == ubx_to_bag.INTERFERENCE_TOPIC]
+    spectra = [(t, m) for topic, t, m in msgs if topic == ubx_to_bag.SPECTRUM_TOPIC]
+    assert (len(arrays), len(reports), len(spectra)) == (14, 5, 2)
+    fusion = FusionFilter(FusionParams(use_uwb=False))
+    for msg in arrays:
+        epoch = msg_to_epoch(msg)
+        assert len(epoch.observations) >= 20
+        for o in epoch.observations:  # real pseudorange and C/N0, NaN satellite states
+            assert 1.9e7 < o.pseudorange_m < 4.8e7 and 0.0 < o.cn0_dbhz < 60.0  # BeiDou GEO: 41 000 km
+            assert np.isnan(o.satellite_position_ecef_m).all() and np.isnan(o.satellite_velocity_ecef_mps).all()
+            assert math.isnan(o.satellite_clock_bias_m) and math.isnan(o.troposphere_delay_m)
+        assert not fusion.process(epoch).initialized  # the fusion rejects every such satellite ...
+    rejected = sum(len(msg_to_epoch(m).observations) for m in arrays)
+    assert fusion.rejection_counts["nonfinite_pseudorange"] == rejected  # ... and counts it under this name
+    last = gps_to_ros_stamp_ns(2327, 223806.0)  # the latest RAWX epoch before the reports
+    for t, sp in spectra:
+        assert t == last and sp.header.frame_id == "gnss" and (sp.gps_week, sp.gps_time_of_week_s) == (2327, 223806.0)
+        assert (sp.rf_block_id, sp.center_frequency_hz, sp.span_hz, sp.resolution_hz, sp.pga_gain_db) == (
+            0, 1583.4e6, 128e6, 0.5e6, 12.0)
+        assert len(sp.power_db) == 256 and all(v % 0.25 == 0.0 for v in sp.power_db)
+    assert spectra[0][1].power_db[32] == 16.25 and spectra[1][1].power_db[127] == 35.0  # as pyubx2 parses them
+    out = tmp_path / "skip"
+    assert ubx_to_bag.main(["ubx_to_bag", str(log), str(out), "--skip-without-ephemeris"]) == 0
+    with BagReader(out) as reader:
+        topics = {m.topic for m in reader.messages()}
+    assert topics == {ubx_to_bag.INTERFERENCE_TOPIC, ubx_to_bag.SPECTRUM_TOPIC}

@@ -347,15 +347,27 @@ class FusionNode(Node):
             # with a value the core would apply although impossible are dropped here (message_checks).
             observations = []
             dropped: Counter[str] = Counter()
+            stateless = 0
             for m in msg.measurements:
                 obs = msg_to_observation(m)
+                if not any(math.isfinite(float(v)) for v in obs.satellite_position_ecef_m):
+                    # no ephemeris yet (a receiver stream without navigation data): expected, not a
+                    # degraded input; counted apart, never applied
+                    stateless += 1
+                    continue
                 reason = satellite_reason(obs)
                 if reason is None:
                     observations.append(obs)
                 else:
                     dropped[reason] += 1
+            self.counts['satellites_without_state'] += stateless
             epoch = GnssEpoch(stamp_ns=stamp_ns, gps_week=int(msg.gps_week),
                               gps_time_of_week_s=float(msg.gps_time_of_week_s), observations=tuple(observations))
+            if stateless and not observations and not dropped:
+                self._reject('gnss', 'no_satellite_states', f'GNSS epoch {stamp_ns} ns: no satellite has a state '
+                             '(no ephemeris): not applied')
+                self._report()
+                return
             if self._enqueue(_Item(stamp_ns, 'gnss', epoch, sum(dropped.values())), ('gnss', stamp_ns, '')) \
                     and dropped:
                 self.reasons.update(dropped)
