@@ -1,0 +1,283 @@
+"""The integrity monitor: every test on every GNSS epoch, one vendor-neutral report.
+
+Pure core (no rclpy): :class:`IntegrityMonitor` takes plain inputs (time from their stamps, never the
+wall clock) and returns an :class:`IntegrityReport` per GNSS epoch, field for field the
+rfi_msgs/GnssIntegrity message. Per epoch:
+
+1. the multi-constellation snapshot (``gnss_common.multi_gnss_fix``): position, one clock per
+   constellation, velocity and drift, residuals, elevations;
+2. jamming: the C/N0 drop against the clean model learned on the fly
+   (:mod:`.cn0_model`, :mod:`.cn0_jamming`), the receiver's AGC and flags (:mod:`.receiver_agc`),
+   its spectrum (:mod:`.receiver_spectrum`) and an SDR monitor's state; the J/S in the form of
+   Cao et al. eq. 4 from the SDR when fresh, else from C/N0;
+3. spoofing: C/N0 (:mod:`.cn0_spoofing`), clock (:mod:`.clock_test`), kinematics against UWB and
+   Doppler (:mod:`.kinematics_test`), consistency (:mod:`.consistency`), external evidence
+   (:mod:`.external_evidence`), combined by :mod:`.integrity_state`;
+4. the C/N0 model learns only from epochs that every other evidence calls clean.
+
+A missing input leaves its tests UNKNOWN: never NONE.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gnss_common.multi_gnss_fix import MultiGnssFix, MultiGnssFixParams, solve_multi_gnss
+from gnss_common.observations import GPS, GnssEpoch, UwbRangeMeasurement
+
+from .clock_test import ClockTest, ClockTestParams
+from .cn0_jamming import Cn0JammingDetector, Cn0JammingParams
+from .cn0_model import Cn0Epoch, Cn0ModelParams, Cn0Models
+from .cn0_spoofing import Cn0SpoofingParams, Cn0SpoofingTests
+from .consistency import ConsistencyParams, ConsistencyTests
+from .external_evidence import ExternalEvidence, ExternalEvidenceParams
+from .integrity_state import SpoofingState, StateParams
+from .kinematics_test import AnchorRange, KinematicsTest, KinematicsTestParams
+from .outcome import (
+    CATEGORY_CN0,
+    CATEGORY_JAMMING,
+    DECISION_ALARM,
+    DECISION_SUSPECT,
+    DECISION_UNKNOWN,
+    EVIDENCE_RECEIVER_AGC,
+    EVIDENCE_RECEIVER_FLAG,
+    EVIDENCE_RECEIVER_SPECTRUM,
+    EVIDENCE_SDR_MONITOR,
+    STATE_DETECTED,
+    STATE_NONE,
+    STATE_SUSPECTED,
+    STATE_UNKNOWN,
+    TestOutcome,
+)
+from .receiver_agc import ReceiverAgcMonitor, ReceiverAgcParams, ReceiverInterferenceReport
+from .receiver_spectrum import ReceiverSpectrumMonitor, SpectrumDetection, SpectrumInput, SpectrumParams
+
+NS_PER_S = 1_000_000_000
+JAMMER_NONE = 0
+JAMMER_UNKNOWN = 4
+
+
+@dataclass(frozen=True)
+class MonitorParams:
+    """Every part's parameters (each validated by its own dataclass).
+
+    Attributes:
+        sdr_max_age_s: an SDR /rfi/jammer_state older than this at the epoch is not used, s.
+        spectrum_max_age_s: a receiver spectrum analysis older than this at the epoch is not used, s.
+    """
+
+    fix: MultiGnssFixParams = field(default_factory=MultiGnssFixParams)
+    cn0_model: Cn0ModelParams = field(default_factory=Cn0ModelParams)
+    cn0_jamming: Cn0JammingParams = field(default_factory=Cn0JammingParams)
+    cn0_spoofing: Cn0SpoofingParams = field(default_factory=Cn0SpoofingParams)
+    receiver: ReceiverAgcParams = field(default_factory=ReceiverAgcParams)
+    spectrum: SpectrumParams = field(default_factory=SpectrumParams)
+    clock: ClockTestParams = field(default_factory=ClockTestParams)
+    kinematics: KinematicsTestParams = field(default_factory=KinematicsTestParams)
+    consistency: ConsistencyParams = field(default_factory=ConsistencyParams)
+    external: ExternalEvidenceParams = field(default_factory=ExternalEvidenceParams)
+    state: StateParams = field(default_factory=StateParams)
+    sdr_max_age_s: float = 2.0
+    spectrum_max_age_s: float = 5.0
+
+
+@dataclass(frozen=True)
+class IntegrityReport:
+    """One epoch's verdict: the fields of rfi_msgs/GnssIntegrity (see its comments)."""
+
+    stamp_ns: int
+    jamming_state: int
+    jammer_to_signal_db: float
+    jammer_to_signal_std_db: float
+    jamming_evidence: int
+    cn0_elevation_model_in_use: bool
+    cn0_drop_db: float
+    satellites_with_cn0: int
+    jammer_type: int
+    jammer_frequency_hz: float
+    jammer_bandwidth_hz: float
+    spoofing_state: int
+    spoofing_scope: int
+    affected_constellations: tuple[int, ...]
+    affected_satellites: tuple[tuple[int, int], ...]
+    first_alarm_ns: int
+    first_detection_ns: int
+    tests: tuple[TestOutcome, ...]
+    position_ecef_m: np.ndarray  # the snapshot (NaN: none); not in the message, for diagnostics
+
+
+def _jamming_state(outcomes: list[TestOutcome]) -> int:
+    decided = [o for o in outcomes if o.decision != DECISION_UNKNOWN]
+    if not decided:
+        return STATE_UNKNOWN
+    if any(o.decision == DECISION_ALARM for o in decided):
+        return STATE_DETECTED
+    if any(o.decision == DECISION_SUSPECT for o in decided):
+        return STATE_SUSPECTED
+    return STATE_NONE
+
+
+class IntegrityMonitor:
+    """Jamming and spoofing tests of one receiver (module docstring)."""
+
+    def __init__(self, params: MonitorParams | None = None) -> None:
+        self.params = params if params is not None else MonitorParams()
+        p = self.params
+        self.cn0_models = Cn0Models(p.cn0_model)
+        self.cn0_jamming = Cn0JammingDetector(p.cn0_jamming)
+        self.cn0_spoofing = Cn0SpoofingTests(p.cn0_spoofing)
+        self.receiver = ReceiverAgcMonitor(p.receiver)
+        self.spectrum = ReceiverSpectrumMonitor(p.spectrum)
+        self.clock = ClockTest(p.clock)
+        self.kinematics = KinematicsTest(p.kinematics)
+        self.consistency = ConsistencyTests(p.consistency)
+        self.external = ExternalEvidence(p.external)
+        self.state = SpoofingState(p.state)
+        self._last_position: np.ndarray | None = None
+        self._sdr: tuple[int, int, float, float] | None = None  # stamp, type, J/S, J/N
+        self._spectrum: tuple[int, SpectrumDetection] | None = None
+        self._cn0_clean = True  # the last epoch's C/N0 verdict: the AGC baseline's learning gate
+        self.counts: dict[str, int] = {"epochs": 0, "epochs_without_fix": 0, "uwb_ranges": 0,
+                                       "receiver_reports": 0, "sdr_states": 0, "spectra": 0}
+
+    # ------------------------------------------------------------------ side inputs
+    def add_uwb(self, meas: UwbRangeMeasurement) -> None:
+        """A UWB range whose anchor is in ECEF (``frame_id`` "earth"; the node converts map anchors)."""
+        self.counts["uwb_ranges"] += 1
+        self.kinematics.add_range(AnchorRange(meas.stamp_ns, meas.anchor_id,
+                                              np.asarray(meas.anchor_position_m, dtype=float),
+                                              float(meas.range_m), float(meas.range_std_m)))
+
+    def add_receiver_report(self, report: ReceiverInterferenceReport) -> None:
+        """The receiver's interference report (AGC, jam indicator, jamming and spoofing flags)."""
+        self.counts["receiver_reports"] += 1
+        self.receiver.update(report, other_clean=self._cn0_clean)
+        self.external.add_receiver_flag(report.stamp_ns, report.spoofing_state, report.spoofing_detection_enabled)
+
+    def add_sdr_state(self, stamp_ns: int, jammer_type: int, jammer_to_signal_db: float,
+                      jammer_to_noise_db: float) -> None:
+        """An SDR monitor's /rfi/jammer_state."""
+        self.counts["sdr_states"] += 1
+        self._sdr = (stamp_ns, int(jammer_type), float(jammer_to_signal_db), float(jammer_to_noise_db))
+        self.external.add_sdr_state(stamp_ns, int(jammer_type), float(jammer_to_noise_db))
+
+    def add_spectrum(self, stamp_ns: int, spectrum: SpectrumInput) -> SpectrumDetection:
+        """A receiver spectrum report (u-blox MON-SPAN, one RF block), analysed at once.
+
+        Raises:
+            ValueError: a spectrum whose bins or span do not fit (:meth:`ReceiverSpectrumMonitor.update`).
+        """
+        detection = self.spectrum.update(spectrum)
+        self.counts["spectra"] += 1
+        if self._spectrum is None or detection.state >= self._spectrum[1].state or spectrum.rf_block_id == 0:
+            self._spectrum = (stamp_ns, detection)
+        return detection
+
+    # ------------------------------------------------------------------ the epoch
+    def process_epoch(self, epoch: GnssEpoch) -> IntegrityReport:
+        """Every test on one GNSS epoch (in stamp order)."""
+        self.counts["epochs"] += 1
+        stamp = epoch.stamp_ns
+        fix = solve_multi_gnss(epoch, self.params.fix, initial_position_ecef_m=self._last_position)
+        if fix.valid:
+            self._last_position = fix.position_ecef_m.copy()
+        else:
+            self.counts["epochs_without_fix"] += 1
+        position = fix.position_ecef_m if fix.valid else np.full(3, math.nan)
+        # ---- C/N0: jamming first, then spoofing from the same references
+        cn0_epoch = Cn0Epoch.from_gnss_epoch(epoch, self._last_position)
+        ref = self.cn0_models.reference(cn0_epoch)
+        jam = self.cn0_jamming.evaluate(ref)
+        cn0_spoof = self.cn0_spoofing.evaluate(ref, jam)
+        receiver = self.receiver.judge(stamp)
+        # ---- spoofing tests
+        clock = self._clock(stamp, fix)
+        velocity = fix.velocity_ecef_mps if fix.valid and fix.velocity_valid else None
+        kin = self.kinematics.update(stamp, position, velocity)
+        if fix.valid:
+            cons = self.consistency.update(stamp, epoch, fix)
+        else:
+            a, b, c = self.consistency.update(stamp, epoch, fix)
+            cons = (_unknown_like(a), _unknown_like(b), _unknown_like(c))
+        ext = self.external.update(stamp, jam.common_drop_db)
+        spoof_tests = [*cn0_spoof.outcomes, *clock, *kin, *cons, *ext]
+        verdict = self.state.update(stamp, spoof_tests)
+        # ---- jamming verdict and J/S
+        jam_tests = [jam.outcome, receiver.agc, receiver.jam_flag]
+        spectrum = self._fresh_spectrum(stamp)
+        if spectrum is not None:
+            jam_tests.append(spectrum.outcome)
+        sdr = self._fresh_sdr(stamp)
+        jamming_state = _jamming_state(jam_tests)
+        evidence = jam.evidence
+        evidence |= EVIDENCE_RECEIVER_AGC if receiver.agc.decision >= DECISION_SUSPECT else 0
+        evidence |= EVIDENCE_RECEIVER_FLAG if receiver.jam_flag.decision >= DECISION_SUSPECT else 0
+        js, js_std = jam.jammer_to_signal_db, jam.jammer_to_signal_std_db
+        jammer_type, freq, bw = JAMMER_UNKNOWN if jamming_state >= STATE_SUSPECTED else JAMMER_NONE, math.nan, math.nan
+        if spectrum is not None and spectrum.outcome.decision >= DECISION_SUSPECT:
+            evidence |= EVIDENCE_RECEIVER_SPECTRUM
+            jammer_type = spectrum.jammer_type
+            freq, bw = spectrum.frequency_hz, spectrum.bandwidth_hz
+        if sdr is not None:
+            _, sdr_type, sdr_js, _ = sdr
+            if sdr_type != JAMMER_NONE and math.isfinite(sdr_js):
+                jamming_state = STATE_DETECTED
+                evidence |= EVIDENCE_SDR_MONITOR
+                js, js_std, jammer_type = sdr_js, math.nan, sdr_type
+            elif jamming_state == STATE_UNKNOWN:
+                jamming_state = STATE_NONE  # the SDR tested the band and found nothing
+        self._learn(ref, jam, cn0_spoof, receiver, spoof_tests)
+        return IntegrityReport(
+            stamp, jamming_state, js, js_std, evidence, ref.elevation_model_in_use, jam.common_drop_db,
+            jam.satellites_used, jammer_type, freq, bw, verdict.state, verdict.scope, verdict.constellations,
+            verdict.satellites, verdict.first_alarm_ns, verdict.first_detection_ns,
+            tuple([*jam_tests, *spoof_tests]), position)
+
+    def _clock(self, stamp: int, fix: MultiGnssFix) -> tuple[TestOutcome, TestOutcome]:
+        if not (fix.valid and fix.velocity_valid and fix.clock_constellations):
+            return self.clock.update(stamp, math.nan, math.nan, math.nan, math.nan, 0)
+        ref = GPS if GPS in fix.clock_constellations else fix.clock_constellations[0]
+        k = fix.clock_constellations.index(ref)
+        bias_std = math.sqrt(max(float(fix.covariance[3 + k, 3 + k]), 0.0))
+        drift_std = math.sqrt(max(float(fix.velocity_covariance[3, 3]), 0.0))
+        return self.clock.update(stamp, float(fix.clock_biases_m[k]), bias_std, float(fix.clock_drift_mps),
+                                 drift_std, ref)
+
+    def _learn(self, ref, jam, cn0_spoof, receiver, spoof_tests: list[TestOutcome]) -> None:
+        """The C/N0 model learns only from an epoch every other evidence calls clean.
+
+        The C/N0 spoofing tests gate through ``cn0_spoof.epoch_clean``, which lets a C/N0 rise
+        alone stop blocking after ``too_high_learning_block_s`` (a model learned under partial
+        blockage must be able to rise in open sky, or it would alarm for ever); the other
+        categories gate directly, and an SDR that sees a jammer blocks learning.
+        """
+        others = all(o.decision < DECISION_SUSPECT for o in spoof_tests if o.category != CATEGORY_CN0)
+        clean = (jam.epoch_clean and cn0_spoof.epoch_clean and receiver.looks_clean and others
+                 and self._fresh_sdr_type_clean(ref.epoch.stamp_ns))
+        self._cn0_clean = bool(jam.epoch_clean) and self.cn0_models.ceiling_passed is not False
+        self.cn0_models.learn(ref, clean)
+
+    def _fresh_sdr(self, stamp: int) -> tuple[int, int, float, float] | None:
+        if self._sdr is None or abs(stamp - self._sdr[0]) > self.params.sdr_max_age_s * NS_PER_S:
+            return None
+        return self._sdr
+
+    def _fresh_sdr_type_clean(self, stamp: int) -> bool:
+        sdr = self._fresh_sdr(stamp)
+        return sdr is None or sdr[1] == JAMMER_NONE
+
+    def _fresh_spectrum(self, stamp: int) -> SpectrumDetection | None:
+        if self._spectrum is None or abs(stamp - self._spectrum[0]) > self.params.spectrum_max_age_s * NS_PER_S:
+            return None
+        return self._spectrum[1]
+
+
+def _unknown_like(o: TestOutcome) -> TestOutcome:
+    return TestOutcome(o.name, o.category, DECISION_UNKNOWN, math.nan, o.suspect_threshold, o.alarm_threshold,
+                       o.false_alarm_probability, o.unit)
+
+
+__all__ = ["CATEGORY_JAMMING", "IntegrityMonitor", "IntegrityReport", "MonitorParams"]
