@@ -17,6 +17,7 @@ EXECUTABLES = [
     ('rfi_monitor', 'rfi_monitor_node'),
     ('uwb_gnss_fusion', 'fusion_node'),
     ('imm_carrier', 'imm_carrier_node'),
+    ('gnss_integrity', 'gnss_integrity_node'),
     ('rfi_experiments', 'play'),
     ('rfi_experiments', 'record'),
     ('rfi_experiments', 'run'),
@@ -28,7 +29,7 @@ EXECUTABLES = [
     ('rfi_experiments', 'ubx_source'),
     ('rfi_experiments', 'ubx_to_bag'),
 ]
-NODES = EXECUTABLES[:3]
+NODES = EXECUTABLES[:4]
 
 
 def test_every_console_script_is_listed():
@@ -140,7 +141,9 @@ def test_node_accepts_the_qos_override_of_its_inputs():
     ('uwb_gnss_fusion', 'fusion_node', ('gnss/measurements', 'uwb/ranges', 'rfi/jammer_state', 'fusion/odometry',
                                         'fusion/fix', 'fusion/status')),
     ('imm_carrier', 'imm_carrier_node', ('gnss/correlators', 'carrier/estimates')),
-], ids=['rfi_monitor_node', 'fusion_node', 'imm_carrier_node'])
+    ('gnss_integrity', 'gnss_integrity_node', ('gnss/measurements', 'uwb/ranges', 'gnss/receiver_interference',
+                                               'gnss/receiver_spectrum', 'rfi/jammer_state', 'gnss/integrity')),
+], ids=['rfi_monitor_node', 'fusion_node', 'imm_carrier_node', 'gnss_integrity_node'])
 def test_node_topics_follow_its_namespace(package, name, topics):
     """Issue 11, item 1: with -r __ns:=/robot1 every data topic moves under /robot1 (two receivers or two robots
     no longer collide); /diagnostics stays at the root, where diagnostic aggregators listen."""

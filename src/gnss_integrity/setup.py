@@ -20,5 +20,9 @@ setup(
     description='GNSS jamming and spoofing detection (integrity monitor).',
     license='Apache-2.0',
     tests_require=['pytest'],
-    # the node (gnss_integrity_node) and its console script come with the monitor (issue 25)
+    entry_points={
+        'console_scripts': [
+            'gnss_integrity_node = gnss_integrity.gnss_integrity_node:main',
+        ],
+    },
 )

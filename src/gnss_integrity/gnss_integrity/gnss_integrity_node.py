@@ -1,0 +1,339 @@
+"""ROS node of the integrity monitor: GNSS, UWB, receiver and SDR evidence -> /gnss/integrity.
+
+Thin: it declares the parameters, converts each message into the core's plain types
+(:mod:`gnss_integrity.integrity_messages`), hands them to one
+:class:`gnss_integrity.monitor.IntegrityMonitor`, and publishes one rfi_msgs/GnssIntegrity per GNSS
+epoch, stamped with the epoch's stamp (so the fusion orders it with its inputs). Every input is
+optional; a test whose input is missing says UNKNOWN.
+
+Inputs (each through :func:`rfi_node_common.inputs.subscribe_input`: best effort by default, losses
+and handler errors counted per topic):
+
+* ``gnss/measurements`` (GnssMeasurementArray): the epochs judged. Rejected, counted by reason:
+  ``malformed`` (bytes rclpy cannot read), ``gnss_frame_id`` (not ``earth_frame_id``), and the stamp
+  reasons of :class:`rfi_node_common.input_checks.StampGate` (not positive, not increasing, a jump
+  beyond ``max_stamp_jump_s``; a jump confirmed ``stamp_jump_confirmations`` times restarts the
+  monitor, ``restarts``).
+* ``uwb/ranges`` (UwbRange) with anchors in ``earth_frame_id`` (ECEF): the kinematic tests. A range
+  in another frame is rejected (``uwb_frame_unsupported``: the monitor needs ECEF anchors), as is a
+  non-finite or non-positive range (``uwb_invalid``).
+* ``gnss/receiver_interference`` (ReceiverInterference): the receiver's AGC, jam indicator,
+  jamming and spoofing flags.
+* ``gnss/receiver_spectrum`` (ReceiverSpectrum): a spectrum that does not fit (bins, span) is
+  rejected as ``spectrum_invalid``.
+* ``rfi/jammer_state`` (JammerState): an SDR monitor's verdict.
+
+A core exception on one message is counted (``core_exceptions``), logged, and the message dropped:
+no message kills the node and nothing is published from a failed evaluation. /diagnostics every
+``diagnostics_period_s`` of accepted GNSS stamp time: ERROR if the accounting does not add up or the
+core raised since the last report; WARN while spoofing or jamming is DETECTED (with the deciding
+tests) or inputs are degraded (over ``diagnostics_window_s`` more than ``warn_rejected_fraction``
+rejected or ``warn_lost_fraction`` lost); OK otherwise; STALE after ``input_timeout_s`` of silence.
+
+The C/N0 model can be loaded at start from ``cn0_model_file`` (a JSON written by
+:meth:`gnss_integrity.cn0_model.Cn0Models.save`; a file that does not exist is reported and the
+model is learned from scratch) and is saved there at shutdown when ``save_cn0_model`` is true.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections import Counter
+from dataclasses import dataclass, replace
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.node import Node
+from rclpy.serialization import deserialize_message
+
+from gnss_integrity.clock_test import ClockTestParams
+from gnss_integrity.cn0_model import Cn0Models
+from gnss_integrity.integrity_messages import receiver_report, report_to_msg, spectrum_input
+from gnss_integrity.integrity_state import StateParams
+from gnss_integrity.kinematics_test import KinematicsTestParams
+from gnss_integrity.monitor import IntegrityMonitor, MonitorParams
+from gnss_integrity.outcome import STATE_DETECTED
+from rfi_msgs.msg import (
+    GnssIntegrity,
+    GnssMeasurementArray,
+    JammerState,
+    ReceiverInterference,
+    ReceiverSpectrum,
+    UwbRange,
+)
+from rfi_node_common.conversions import msg_to_epoch, msg_to_uwb
+from rfi_node_common.diagnostics import (
+    ERROR,
+    OK,
+    STALE,
+    WARN,
+    CountWindow,
+    StampTimer,
+    degraded_inputs,
+    diagnostic_array,
+    diagnostics_window_parameter,
+    hardware_id_parameter,
+    input_timeout_parameter,
+    max_stamp_jump_parameter,
+    stamp_jump_confirmations_parameter,
+    warn_lost_fraction_parameter,
+    warn_rejected_fraction_parameter,
+)
+from rfi_node_common.input_checks import StampGate
+from rfi_node_common.inputs import InputHealth, StaleInputWatch, subscribe_input
+from rfi_node_common.main import run_node
+from rfi_node_common.params import declare, parameter, validate_ranges
+from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS
+from rfi_node_common.stamps import stamp_to_ns
+
+TOPICS = """topics:
+  subscribes gnss/measurements (rfi_msgs/GnssMeasurementArray), uwb/ranges (rfi_msgs/UwbRange, anchors in ECEF),
+             gnss/receiver_interference (rfi_msgs/ReceiverInterference), gnss/receiver_spectrum
+             (rfi_msgs/ReceiverSpectrum), rfi/jammer_state (rfi_msgs/JammerState); every input optional
+  publishes  gnss/integrity (rfi_msgs/GnssIntegrity, one per GNSS epoch), /diagnostics"""
+
+KINDS = ('gnss', 'uwb', 'receiver', 'spectrum', 'sdr')
+"""Input kinds, as used in the counter names (``<kind>_received``, ``_rejected``, ``_processed``)."""
+OSCILLATORS = ('tcxo', 'ocxo', 'ocxo_brown_hwang', 'compensated_crystal_brown_hwang', 'rubidium')
+
+
+@dataclass(frozen=True)
+class IntegrityNodeParams:
+    """The node's parameters (config/gnss_integrity.yaml documents each)."""
+
+    earth_frame_id: str = parameter('earth', 'frame_id of ECEF GNSS epochs and UWB anchors.')
+    oscillator: str = parameter(
+        'tcxo', 'Receiver oscillator whose h-coefficients bound the clock tests (gnss_common.clock_model presets).',
+        choices=OSCILLATORS)
+    gnss_error_std_m: float = parameter(
+        2.0, 'Horizontal 1-sigma of the clean snapshot position error the kinematic tests allow, m.',
+        minimum=0.1, maximum=100.0)
+    uwb_std_m: float = parameter(
+        0.1, 'UWB range 1-sigma when a range carries none, m.', minimum=0.001, maximum=10.0)
+    detection_persistence_s: float = parameter(
+        10.0, 'A test SUSPECT this long without a break makes the state DETECTED, s.', minimum=0.1, maximum=3600.0)
+    clean_period_s: float = parameter(
+        30.0, 'NONE for this long ends an alarm episode (first_alarm_stamp reset), s.', minimum=0.1, maximum=3600.0)
+    cn0_model_file: str = parameter(
+        '', 'JSON file of a learned clean C/N0 model to load at start (empty: learn from scratch).')
+    save_cn0_model: bool = parameter(False, 'Save the learned C/N0 model to cn0_model_file at shutdown.')
+    max_stamp_jump_s: float = max_stamp_jump_parameter(120.0)
+    stamp_jump_confirmations: int = stamp_jump_confirmations_parameter(5)
+    input_timeout_s: float = input_timeout_parameter()
+    diagnostics_period_s: float = parameter(
+        1.0, 'Period of /diagnostics in GNSS stamp time, s.', minimum=0.01, maximum=3600.0)
+    warning_throttle_s: float = parameter(
+        5.0, 'Shortest interval between two warnings about rejected input, s (wall time; logging only).',
+        minimum=0.0, maximum=3600.0)
+    hardware_id: str = hardware_id_parameter('gnss_receiver')
+    diagnostics_window_s: float = diagnostics_window_parameter()
+    warn_rejected_fraction: float = warn_rejected_fraction_parameter()
+    warn_lost_fraction: float = warn_lost_fraction_parameter()
+
+    def __post_init__(self) -> None:
+        validate_ranges(self)
+        if not self.earth_frame_id:
+            raise ValueError('parameter earth_frame_id must be a non-empty string')
+        if self.save_cn0_model and not self.cn0_model_file:
+            raise ValueError('parameter save_cn0_model needs cn0_model_file')
+
+    def monitor_params(self) -> MonitorParams:
+        """The core's parameters."""
+        base = MonitorParams()
+        return replace(base, clock=ClockTestParams(oscillator=self.oscillator),
+                       kinematics=replace(KinematicsTestParams(), error_std_m=self.gnss_error_std_m,
+                                          uwb_std_m=self.uwb_std_m),
+                       state=StateParams(persistence_s=self.detection_persistence_s,
+                                         clean_period_s=self.clean_period_s))
+
+
+class GnssIntegrityNode(Node):
+    """Thin node around :class:`IntegrityMonitor` (module docstring)."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('gnss_integrity', **kwargs)
+        self.params = declare(self, IntegrityNodeParams)
+        self.monitor = IntegrityMonitor(self.params.monitor_params())
+        self.counts: Counter[str] = Counter({f'{k}_{what}': 0 for k in KINDS
+                                             for what in ('received', 'rejected', 'processed')})
+        self.counts.update({'core_exceptions': 0, 'restarts': 0, 'published': 0})
+        self.reasons: Counter[str] = Counter()
+        self._load_model()
+        self.gate = StampGate(self.params.max_stamp_jump_s, self.params.stamp_jump_confirmations)
+        self._window = CountWindow(self.params.diagnostics_window_s)
+        self._diag_timer = StampTimer(self.params.diagnostics_period_s)
+        self._faults_at_report = 0
+        self._last: GnssIntegrity | None = None
+        self._report_due_ns: int | None = None  # a /diagnostics report due at this GNSS stamp
+        self.pub = self.create_publisher(GnssIntegrity, 'gnss/integrity', DATA_QOS)
+        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self.health = InputHealth()
+        throttle = self.params.warning_throttle_s
+        for cls, topic, kind in ((GnssMeasurementArray, 'gnss/measurements', 'gnss'), (UwbRange, 'uwb/ranges', 'uwb'),
+                                 (ReceiverInterference, 'gnss/receiver_interference', 'receiver'),
+                                 (ReceiverSpectrum, 'gnss/receiver_spectrum', 'spectrum'),
+                                 (JammerState, 'rfi/jammer_state', 'sdr')):
+            subscribe_input(self, cls, topic, self._handler(cls, kind), self.health, raw=True,
+                            warning_throttle_s=throttle)
+        self.stale_watch = StaleInputWatch(self, self.health, self.params.input_timeout_s, self._publish_stale)
+
+    # ------------------------------------------------------------------ inputs
+    def _handler(self, cls: Any, kind: str):
+        handle = getattr(self, f'on_{kind}')
+
+        def callback(raw: bytes) -> None:
+            self.counts[f'{kind}_received'] += 1
+            try:
+                msg = deserialize_message(raw, cls)
+            except Exception:  # rclpy raises RMWError (and may raise others) on malformed bytes
+                self._reject(kind, 'malformed', f'{cls.__name__} bytes that cannot be read')
+                return
+            try:
+                reason = handle(msg)
+            except Exception as err:  # a core bug: counted and logged, the node goes on
+                self.counts['core_exceptions'] += 1
+                self.counts[f'{kind}_rejected'] += 1
+                self.reasons['core_exception'] += 1
+                self.get_logger().error(f'integrity core raised on a {kind} message: {type(err).__name__}: {err}',
+                                        throttle_duration_sec=self.params.warning_throttle_s)
+                return
+            if reason is None:
+                self.counts[f'{kind}_processed'] += 1
+            else:
+                self._reject(kind, reason, f'{cls.__name__} rejected')
+            due, self._report_due_ns = self._report_due_ns, None
+            if due is not None:  # after the counting: the report's accounting includes this message
+                self.diag_pub.publish(self.diagnostics(due))
+        return callback
+
+    def _reject(self, kind: str, reason: str, text: str) -> None:
+        self.counts[f'{kind}_rejected'] += 1
+        self.reasons[reason] += 1
+        self.get_logger().warn(f'{text} ({reason})', throttle_duration_sec=self.params.warning_throttle_s)
+
+    def on_gnss(self, msg: GnssMeasurementArray) -> str | None:
+        if msg.header.frame_id != self.params.earth_frame_id:
+            return 'gnss_frame_id'
+        try:
+            epoch = msg_to_epoch(msg, expected_frame_id=None)
+        except ValueError:
+            return 'gnss_malformed'
+        decision = self.gate.admit(epoch.stamp_ns)
+        if not decision.accepted:
+            return str(decision.reason)
+        if decision.restart:
+            self.counts['restarts'] += 1
+            self.get_logger().warn(f'GNSS stamps jumped to {epoch.stamp_ns} ns: integrity monitor restarted')
+            self.monitor = IntegrityMonitor(self.params.monitor_params())
+        report = self.monitor.process_epoch(epoch)
+        out = report_to_msg(report, msg.header.frame_id)
+        self.pub.publish(out)
+        self.counts['published'] += 1
+        self._last = out
+        if self._diag_timer.due(epoch.stamp_ns):
+            self._report_due_ns = epoch.stamp_ns
+        return None
+
+    def on_uwb(self, msg: UwbRange) -> str | None:
+        if msg.header.frame_id != self.params.earth_frame_id:
+            return 'uwb_frame_unsupported'
+        meas = msg_to_uwb(msg)
+        if not (math.isfinite(meas.range_m) and meas.range_m > 0.0) or not all(
+                math.isfinite(float(v)) for v in meas.anchor_position_m):
+            return 'uwb_invalid'
+        self.monitor.add_uwb(meas)
+        return None
+
+    def on_receiver(self, msg: ReceiverInterference) -> str | None:
+        self.monitor.add_receiver_report(receiver_report(msg))
+        return None
+
+    def on_spectrum(self, msg: ReceiverSpectrum) -> str | None:
+        try:
+            self.monitor.add_spectrum(stamp_to_ns(msg.header.stamp), spectrum_input(msg))
+        except ValueError:
+            return 'spectrum_invalid'
+        return None
+
+    def on_sdr(self, msg: JammerState) -> str | None:
+        if msg.type > JammerState.UNKNOWN:
+            return 'jammer_state_unknown_type'
+        self.monitor.add_sdr_state(stamp_to_ns(msg.header.stamp), int(msg.type), float(msg.jammer_to_signal_db),
+                                   float(msg.jammer_to_noise_db))
+        return None
+
+    # ------------------------------------------------------------------ model file
+    def _load_model(self) -> None:
+        path = self.params.cn0_model_file
+        if not path:
+            return
+        if not os.path.exists(path):
+            self.get_logger().warn(f'cn0_model_file {path!r} does not exist: the C/N0 model is learned from scratch')
+            return
+        try:
+            self.monitor.cn0_models = Cn0Models.load(path, self.monitor.params.cn0_model)
+            self.get_logger().info(f'C/N0 model loaded from {path!r}')
+        except (OSError, ValueError) as err:
+            self.get_logger().error(f'cn0_model_file {path!r} not loaded ({err}): learned from scratch')
+
+    def destroy_node(self) -> None:
+        if self.params.save_cn0_model:
+            try:
+                self.monitor.cn0_models.save(self.params.cn0_model_file)
+            except OSError as err:
+                self.get_logger().error(f'C/N0 model not saved to {self.params.cn0_model_file!r}: {err}')
+        super().destroy_node()
+
+    # ------------------------------------------------------------------ diagnostics
+    def accounting(self) -> dict[str, object]:
+        """Counters of the node and the monitor; ``accounting_ok``: every input message adds up
+        (received == rejected + processed, per kind)."""
+        values: dict[str, object] = dict(sorted(self.counts.items()))
+        values.update({f'rejected.{k}': v for k, v in sorted(self.reasons.items())})
+        values.update({f'monitor.{k}': v for k, v in self.monitor.counts.items()})
+        values.update({f'clock.{k}': v for k, v in self.monitor.clock.counts.items()})
+        values['accounting_ok'] = all(self.counts[f'{k}_received'] == self.counts[f'{k}_rejected']
+                                      + self.counts[f'{k}_processed'] for k in KINDS)
+        values.update(self.health.values())
+        return values
+
+    def diagnostics(self, stamp_ns: int) -> DiagnosticArray:
+        """The /diagnostics message at an accepted GNSS stamp (levels in the module docstring)."""
+        p = self.params
+        values = self.accounting()
+        faults = self.counts['core_exceptions'] + self.health.callback_errors_total()
+        new_faults, self._faults_at_report = faults - self._faults_at_report, faults
+        received = sum(self.counts[f'{k}_received'] for k in KINDS)
+        w = self._window.update(stamp_ns, {'received': received, 'lost': self.health.lost_total(),
+                                           'rejected': sum(self.counts[f'{k}_rejected'] for k in KINDS)})
+        last = self._last
+        if last is not None:
+            values['spoofing_state'] = int(last.spoofing_state)
+            values['jamming_state'] = int(last.jamming_state)
+            values['jammer_to_signal_db'] = float(last.jammer_to_signal_db)
+        if not values['accounting_ok']:
+            level, text = ERROR, 'input accounting does not add up'
+        elif new_faults:
+            level, text = ERROR, f'{new_faults} core or handler exceptions since the last report'
+        else:
+            alarms = []
+            if last is not None and last.spoofing_state == STATE_DETECTED:
+                names = sorted({t.name for t in last.tests if t.decision >= 2 and t.category != 1})
+                alarms.append(f'spoofing DETECTED ({", ".join(names)})')
+            if last is not None and last.jamming_state == STATE_DETECTED:
+                alarms.append(f'jamming DETECTED (J/S {last.jammer_to_signal_db:.1f} dB)')
+            alarms += degraded_inputs([('inputs rejected', w['rejected'], w['received'])], p.warn_rejected_fraction)
+            alarms += degraded_inputs([('messages lost', w['lost'], w['received'] + w['lost'])], p.warn_lost_fraction)
+            level, text = (WARN, '; '.join(alarms)) if alarms else (OK, 'monitoring')
+        return diagnostic_array(stamp_ns, 'gnss_integrity', p.hardware_id, level, text, values)
+
+    def _publish_stale(self, silent_s: float) -> None:
+        self.diag_pub.publish(diagnostic_array(
+            self.get_clock().now().nanoseconds, 'gnss_integrity', self.params.hardware_id, STALE,
+            f'no input for {silent_s:.1f} s', self.accounting()))
+
+
+def main(argv=None) -> int:
+    return run_node(GnssIntegrityNode, executable='gnss_integrity_node', params_cls=IntegrityNodeParams,
+                    topics=TOPICS, summary='GNSS jamming and spoofing detection from any receiver.', argv=argv)

@@ -1,0 +1,179 @@
+"""In-process tests of GnssIntegrityNode: one Context per test, a SingleThreadedExecutor, bounded spins."""
+
+from __future__ import annotations
+
+import math
+from functools import cache
+from pathlib import Path
+
+import pytest
+import rclpy
+import yaml
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.context import Context
+from rclpy.parameter import Parameter
+
+from gnss_integrity import outcome
+from gnss_integrity.gnss_integrity_node import GnssIntegrityNode, IntegrityNodeParams
+from rfi_msgs.msg import (
+    GnssIntegrity,
+    GnssMeasurementArray,
+    IntegrityTest,
+    JammerState,
+    ReceiverInterference,
+    ReceiverSpectrum,
+    UwbRange,
+)
+from rfi_node_common import testing
+from rfi_node_common.conversions import epoch_to_msg, uwb_to_msg
+from rfi_node_common.qos import DATA_QOS
+from rfi_node_common.testing import NodeRig
+from rfi_sim.gnss_uwb import BroadcastGeometry, GnssUwbScenario, simulate
+from rfi_sim.spoofing import apply_attack
+from rfi_sim.spoofing_attack import SpoofingAttack
+
+CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'gnss_integrity.yaml'
+NAV = Path(__file__).resolve().parents[2] / 'rfi_experiments' / 'data' / 'arlm2000.15n'
+TOPICS = {'/gnss/measurements': GnssMeasurementArray, '/uwb/ranges': UwbRange,
+          '/gnss/receiver_interference': ReceiverInterference, '/gnss/receiver_spectrum': ReceiverSpectrum,
+          '/rfi/jammer_state': JammerState}
+
+
+class Rig(NodeRig):
+    def __init__(self, params: dict | None = None, args: list[str] | None = None) -> None:
+        params = dict(params or {})
+        if args is None:
+            params.setdefault('input_timeout_s', 0.0)  # no wall-clock STALE report in the middle of a test
+        for topic in TOPICS:
+            params.setdefault(f'qos_overrides.{topic}.subscription.reliability', 'reliable')
+        super().__init__(lambda context, overrides: GnssIntegrityNode(context=context, parameter_overrides=overrides),
+                         inputs={t: (c, DATA_QOS) for t, c in TOPICS.items()},
+                         outputs={'/gnss/integrity': GnssIntegrity, '/diagnostics': DiagnosticArray},
+                         params=params, args=args, name='gnss_integrity_test_io', spin_deadline_s=60.0)
+        self.sent = 0
+
+    def send(self, topic: str, msg) -> None:
+        self.pubs[topic].publish(msg)
+        self.sent += 1
+        self.settle_until(lambda: sum(self.node.counts[f'{k}_received'] for k in
+                                      ('gnss', 'uwb', 'receiver', 'spectrum', 'sdr')) == self.sent)
+
+    def last_values(self) -> dict[str, str]:
+        return {kv.key: kv.value for kv in self.out['/diagnostics'][-1].status[0].values}
+
+
+@pytest.fixture
+def rig_factory():
+    with testing.rig_factory(Rig) as make:
+        yield make
+
+
+@cache
+def _run():
+    geo = BroadcastGeometry(NAV)
+    return simulate(GnssUwbScenario(duration_s=40.0, seed=5, uwb_rate_hz=5.0), geo, geo.iono_alpha, geo.iono_beta)
+
+
+def _feed(rig: Rig, epochs, run) -> None:
+    items = sorted([(e.stamp_ns, 0, e) for e in epochs] + [(u.stamp_ns, 1, u) for u in run.uwb_ranges],
+                   key=lambda t: t[:2])
+    for _, kind, m in items:
+        if kind:
+            rig.send('/uwb/ranges', uwb_to_msg(m))
+        else:
+            rig.send('/gnss/measurements', epoch_to_msg(m))
+
+
+def test_core_constants_equal_the_messages():
+    for name in ('CATEGORY_JAMMING', 'CATEGORY_CN0', 'CATEGORY_CLOCK', 'CATEGORY_KINEMATICS', 'CATEGORY_CONSISTENCY',
+                 'CATEGORY_EXTERNAL', 'DECISION_UNKNOWN', 'DECISION_PASS', 'DECISION_SUSPECT', 'DECISION_ALARM'):
+        assert getattr(outcome, name) == getattr(IntegrityTest, name), name
+    for name in ('STATE_UNKNOWN', 'STATE_NONE', 'STATE_SUSPECTED', 'STATE_DETECTED', 'SCOPE_NONE', 'SCOPE_SATELLITES',
+                 'SCOPE_CONSTELLATIONS', 'SCOPE_ALL', 'EVIDENCE_CN0_ELEVATION', 'EVIDENCE_CN0_COMMON_DROP',
+                 'EVIDENCE_RECEIVER_AGC', 'EVIDENCE_RECEIVER_FLAG', 'EVIDENCE_RECEIVER_SPECTRUM',
+                 'EVIDENCE_SDR_MONITOR'):
+        assert getattr(outcome, name) == getattr(GnssIntegrity, name), name
+
+
+@pytest.mark.slow
+def test_one_report_per_epoch_and_a_push_detected(rig_factory):
+    run = _run()
+    attack = SpoofingAttack(kind='position_push', start_s=20.0, push_velocity_enu_mps=(1.0, 0.0, 0.0))
+    epochs, _ = apply_attack(run.gnss_epochs, attack, run.truth.receiver_ecef_m, seed=1)
+    rig = rig_factory()
+    _feed(rig, epochs, run)
+    reports = rig.out['/gnss/integrity']
+    assert len(reports) == len(epochs) and rig.node.counts['published'] == len(epochs)
+    t0 = epochs[0].stamp_ns
+    stamps = [(r.header.stamp.sec * 10**9 + r.header.stamp.nanosec - t0) / 1e9 for r in reports]
+    before = [r for r, t in zip(reports, stamps, strict=True) if t < 20.0]
+    after = [r for r, t in zip(reports, stamps, strict=True) if t >= 30.0]
+    assert all(r.spoofing_state in (GnssIntegrity.STATE_NONE, GnssIntegrity.STATE_UNKNOWN) for r in before)
+    assert all(r.spoofing_state == GnssIntegrity.STATE_DETECTED for r in after)
+    assert after[-1].first_detection_stamp.sec > 0 and after[-1].spoofing_scope == GnssIntegrity.SCOPE_ALL
+    assert {t.name for t in after[-1].tests} >= {'uwb_displacement', 'clock_step', 'cn0_too_high'}
+    diag = rig.out['/diagnostics'][-1].status[0]
+    assert diag.level == DiagnosticStatus.WARN, diag.message
+    assert diag.level == DiagnosticStatus.WARN and 'spoofing DETECTED' in diag.message
+    assert rig.last_values()['accounting_ok'] == 'True'
+
+
+def test_bad_inputs_are_counted_and_never_kill_the_node(rig_factory):
+    run = _run()
+    rig = rig_factory()
+    good = epoch_to_msg(run.gnss_epochs[0])
+    rig.send('/gnss/measurements', good)
+    rig.send('/gnss/measurements', good)  # the same stamp again: not increasing
+    wrong = epoch_to_msg(run.gnss_epochs[1])
+    wrong.header.frame_id = 'map'
+    rig.send('/gnss/measurements', wrong)
+    uwb = uwb_to_msg(run.uwb_ranges[0])
+    uwb.header.frame_id = 'map'
+    rig.send('/uwb/ranges', uwb)
+    uwb = uwb_to_msg(run.uwb_ranges[1])
+    uwb.range_m = math.nan
+    rig.send('/uwb/ranges', uwb)
+    spectrum = ReceiverSpectrum(center_frequency_hz=1.5834e9, span_hz=1.28e8, resolution_hz=5e5,
+                                power_db=[30.0] * 100)  # 100 bins, not 256
+    rig.send('/gnss/receiver_spectrum', spectrum)
+    rig.send('/rfi/jammer_state', JammerState(type=9))
+    c = rig.node.counts
+    assert c['gnss_processed'] == 1 and c['gnss_rejected'] == 2
+    assert rig.node.reasons['stamp_not_increasing'] == 1 and rig.node.reasons['gnss_frame_id'] == 1
+    assert rig.node.reasons['uwb_frame_unsupported'] == 1 and rig.node.reasons['uwb_invalid'] == 1
+    assert rig.node.reasons['spectrum_invalid'] == 1 and rig.node.reasons['jammer_state_unknown_type'] == 1
+    assert rig.node.accounting()['accounting_ok'] and c['core_exceptions'] == 0
+    assert len(rig.out['/gnss/integrity']) == 1
+
+
+def test_config_file_values_equal_the_dataclass_defaults(rig_factory):
+    fields = IntegrityNodeParams.__dataclass_fields__
+    data = yaml.safe_load(CONFIG.read_text())['gnss_integrity']['ros__parameters']
+    assert set(data) == set(fields)
+    rig = rig_factory(args=['gnss_integrity_node', '--ros-args', '--params-file', str(CONFIG)])
+    assert rig.node.params == IntegrityNodeParams()
+
+
+@pytest.mark.parametrize('params, words', [
+    ({'oscillator': 'quartz'}, 'oscillator'),
+    ({'save_cn0_model': True}, 'cn0_model_file'),
+    ({'gnss_error_std_m': 0.0}, 'gnss_error_std_m'),
+])
+def test_invalid_parameters_give_one_line_errors(params, words):
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        with pytest.raises(ValueError) as err:
+            GnssIntegrityNode(context=context, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
+        assert words in str(err.value) and '\n' not in str(err.value)
+    finally:
+        rclpy.shutdown(context=context)
+
+
+def test_cn0_model_file_round_trip(rig_factory, tmp_path):
+    path = tmp_path / 'cn0.json'
+    rig = rig_factory({'cn0_model_file': str(path), 'save_cn0_model': True})
+    for e in _run().gnss_epochs[:60]:
+        rig.send('/gnss/measurements', epoch_to_msg(e))
+    rig.node.destroy_node()
+    assert path.exists() and 'version' in path.read_text()
