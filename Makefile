@@ -1,5 +1,6 @@
 # The two commands of the README:
-#   make demo   set up (first time), then replay the default jamming experiment through the suite
+#   make demo   set up (first time), then replay the default jamming experiment through the suite,
+#               and the spoofing experiment (report in $(OUT)/spoofed)
 #   make test   set up (first time), then run every test (unit, node, bag replay, linters)
 # Set-up needs only Python 3.10-3.12, cmake and a C compiler: no ROS install.
 SHELL := /bin/bash
@@ -8,6 +9,7 @@ VENV ?= .venv
 BAG ?= bags/default
 PARAMS ?= $(BAG).params.yaml
 OUT ?= report
+ATTACK_BAG ?= bags/spoofed
 PYTEST_ARGS ?=
 
 # A shell with the venv (the ROS 2 prefix) and the workspace sourced; DDS stays on this host.
@@ -25,7 +27,9 @@ test: setup
 	@$(RUN) python -m pytest $(PYTEST_ARGS)
 
 demo: setup
-	@$(RUN) tools/ros2_run rfi_experiments run $(BAG) --out $(OUT) $$([ -f $(PARAMS) ] && echo --params-file $(PARAMS))
+	@$(RUN) tools/ros2_run rfi_experiments run $(BAG) --out $(OUT) $$([ -f $(PARAMS) ] && echo --params-file $(PARAMS)) \
+	  && { [ -z "$(ATTACK_BAG)" ] || { echo; echo "== the spoofing experiment: $(ATTACK_BAG) =="; \
+	       tools/ros2_run rfi_experiments run $(ATTACK_BAG) --out $(OUT)/spoofed; }; }
 
 lint: setup
 	@$(RUN) ruff check src test tools benchmarks && mypy

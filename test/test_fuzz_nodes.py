@@ -1,4 +1,4 @@
-"""Fuzzing the three nodes, each as its own process, with hostile input (issue 12).
+"""Fuzzing the nodes, each as its own process, with hostile input (issue 12).
 
 For each node: valid messages of bags/default keep it running while at least ``FUZZ_COUNT``
 hostile messages per input topic (:mod:`fuzz_inputs`: random bytes, truncated and overwritten
@@ -57,6 +57,8 @@ NODES = {
     'imm_carrier_node': ('imm_carrier', ['/gnss/correlators'], ['/carrier/estimates'], 4.0),
     'fusion_node': ('uwb_gnss_fusion', ['/gnss/measurements', '/uwb/ranges', '/rfi/jammer_state'],
                     ['/fusion/odometry', '/fusion/fix', '/fusion/status'], 6.0),
+    'gnss_integrity_node': ('gnss_integrity', ['/gnss/measurements', '/uwb/ranges', '/rfi/jammer_state'],
+                            ['/gnss/integrity'], 6.0),
 }
 """executable -> (package, input topics, output topics, seconds of bags/default used as valid input)."""
 
@@ -115,6 +117,17 @@ def invalid_outputs(topic: str, msg) -> list[str]:
         cov = np.asarray(msg.pose.covariance).reshape(6, 6)
         if not np.isfinite(cov).all() or (np.diag(cov)[:3] <= 0).any():
             bad.append('odometry covariance not finite or not positive')
+    elif topic == '/gnss/integrity':
+        if not (msg.spoofing_state in (0, 1, 2, 3) and msg.jamming_state in (0, 1, 2, 3)
+                and msg.spoofing_scope in (0, 1, 2, 3)):
+            bad.append(f'states {msg.spoofing_state}, {msg.jamming_state}, scope {msg.spoofing_scope}')
+        if len(msg.affected_svids) != len(msg.affected_satellite_constellations):
+            bad.append('affected satellites malformed')
+        if math.isinf(msg.jammer_to_signal_db):
+            bad.append(f'J/S {msg.jammer_to_signal_db}')
+        for test in msg.tests:
+            if test.decision not in (0, 1, 2, 3) or (test.decision != 0 and math.isnan(test.statistic)):
+                bad.append(f'test {test.name}: decision {test.decision} on statistic {test.statistic}')
     elif topic == '/fusion/fix':
         if not (_finite(msg.latitude, msg.longitude, msg.altitude) and abs(msg.latitude) <= 90):
             bad.append('non-finite fix')
@@ -171,7 +184,7 @@ class NodeProcess:
 
     def _mine(self, status: DiagnosticStatus) -> bool:
         return {'rfi_monitor_node': 'rfi_monitor', 'imm_carrier_node': 'imm_carrier',
-                'fusion_node': 'uwb_gnss_fusion'}[self.name] in status.name
+                'fusion_node': 'uwb_gnss_fusion', 'gnss_integrity_node': 'gnss_integrity'}[self.name] in status.name
 
     def publishers(self, qos=PLAYER_QOS) -> dict:
         pubs = {t: self.node.create_publisher(message_class(_TYPES[t]), t, qos) for t in self.inputs}
@@ -240,7 +253,8 @@ class NodeProcess:
 
 ANSWERS = {'rfi_monitor_node': ('/rfi/if_samples', '/rfi/jammer_state'),
            'imm_carrier_node': ('/gnss/correlators', '/carrier/estimates'),
-           'fusion_node': ('/gnss/measurements', '/fusion/status')}
+           'fusion_node': ('/gnss/measurements', '/fusion/status'),
+           'gnss_integrity_node': ('/gnss/measurements', '/gnss/integrity')}
 """node -> (input, output): every valid input message on it after the fuzz gets an output with its stamp."""
 
 
@@ -253,7 +267,7 @@ _TYPES = {
     '/gnss/measurements': 'rfi_msgs/msg/GnssMeasurementArray', '/uwb/ranges': 'rfi_msgs/msg/UwbRange',
     '/rfi/jammer_state': 'rfi_msgs/msg/JammerState', '/carrier/estimates': 'rfi_msgs/msg/CarrierPhaseArray',
     '/fusion/odometry': 'nav_msgs/msg/Odometry', '/fusion/fix': 'sensor_msgs/msg/NavSatFix',
-    '/fusion/status': 'rfi_msgs/msg/FusionStatus',
+    '/fusion/status': 'rfi_msgs/msg/FusionStatus', '/gnss/integrity': 'rfi_msgs/msg/GnssIntegrity',
 }
 
 

@@ -32,9 +32,12 @@ from test_run_processes import ARRIVAL_TIMED, BAG, PARAMS, WINDOW, outputs, with
 NODES_ADDRESS = '10.200.0.1/24'
 REPLAY_ADDRESS = '10.200.0.2/24'
 INPUTS = {'rfi_monitor': ('/rfi/if_samples',),
-          'uwb_gnss_fusion': ('/gnss/measurements', '/uwb/ranges', '/rfi/jammer_state'),
+          'gnss_integrity': ('/gnss/measurements', '/uwb/ranges', '/gnss/receiver_interference',
+                             '/gnss/receiver_spectrum', '/rfi/jammer_state'),
+          'uwb_gnss_fusion': ('/gnss/measurements', '/uwb/ranges', '/rfi/jammer_state', '/gnss/integrity'),
           'imm_carrier': ('/gnss/correlators',)}
 EXECUTABLES = {'rfi_monitor': ('rfi_monitor', 'rfi_monitor_node'),
+               'gnss_integrity': ('gnss_integrity', 'gnss_integrity_node'),
                'uwb_gnss_fusion': ('uwb_gnss_fusion', 'fusion_node'),
                'imm_carrier': ('imm_carrier', 'imm_carrier_node')}
 RUN_TIMEOUT_S = 150.0
@@ -200,7 +203,8 @@ def test_no_message_lost_and_everything_crossed_the_link(runs):
     rows = {line.split()[0]: line.split()[2:] for line in play.splitlines() if line.startswith('/')}
     assert set(rows) == {'/gnss/correlators', '/gnss/measurements', '/rfi/if_samples', '/uwb/ranges'}
     for topic, (published, subscribers, to_nobody) in rows.items():
-        assert int(published) > 0 and (subscribers, to_nobody) == ('1', '0'), (topic, play)
+        expected_subscribers = '2' if topic in ('/gnss/measurements', '/uwb/ranges') else '1'  # + gnss_integrity
+        assert int(published) > 0 and (subscribers, to_nobody) == (expected_subscribers, '0'), (topic, play)
     assert 'not acknowledged' not in replay.stderr and 'warning' not in replay.stdout
     got = outputs(tmp / 'replay' / 'outputs')
     for name in EXECUTABLES:  # no node counted an input message lost

@@ -191,7 +191,7 @@ def test_every_input_played_and_counted_by_its_node(runs):
         before = sum(1 for t in stamps[topic] if t < stamp)
         up_to = sum(1 for t in stamps[topic] if t <= stamp)
         assert 0 < before <= int(values[RECEIVED_KEY[topic]]) <= up_to, (topic, values)
-    assert 'rfi_monitor 0, uwb_gnss_fusion 0, imm_carrier 0, play 0' in replay
+    assert 'rfi_monitor 0, gnss_integrity 0, uwb_gnss_fusion 0, imm_carrier 0, play 0' in replay
 
 
 def test_replay_through_processes_is_reliable_end_to_end_and_loses_nothing(runs):
@@ -200,7 +200,8 @@ def test_replay_through_processes_is_reliable_end_to_end_and_loses_nothing(runs)
     (done, processes), _ = runs
     logs = processes / 'logs'
     for name, topics in (('rfi_monitor', ['/rfi/if_samples']), ('imm_carrier', ['/gnss/correlators']),
-                         ('uwb_gnss_fusion', ['/gnss/measurements', '/uwb/ranges', '/rfi/jammer_state'])):
+                         ('uwb_gnss_fusion', ['/gnss/measurements', '/uwb/ranges', '/rfi/jammer_state']),
+                         ('gnss_integrity', ['/gnss/measurements', '/uwb/ranges', '/rfi/jammer_state'])):
         command = (logs / f'{name}.log').read_text().splitlines()[0]
         for topic in topics:
             assert f'-p qos_overrides.{topic}.subscription.reliability:=reliable' in command, (name, command)
@@ -213,7 +214,8 @@ def test_replay_through_processes_is_reliable_end_to_end_and_loses_nothing(runs)
                                                                          stop_ns=start + 3_000_000_000)]
                   for t in INPUTS}
     for topic, stamps in inputs.items():
-        assert rows[topic] == [str(len(stamps)), '1', '0'], play_log  # published, subscribers, to nobody
+        subscribers = '2' if topic in ('/gnss/measurements', '/uwb/ranges') else '1'  # + gnss_integrity
+        assert rows[topic] == [str(len(stamps)), subscribers, '0'], play_log  # published, subscribers, to nobody
     got = outputs(processes / 'outputs')
     # the first IF block and the first correlator array are answered
     for inp, out in (('/rfi/if_samples', '/rfi/jammer_state'), ('/gnss/correlators', '/carrier/estimates')):
@@ -283,7 +285,7 @@ def test_ctrl_c_stops_every_process(tmp_path):
     try:
         deadline = time.monotonic() + 60.0
         # the three nodes are up and play is running
-        while not {'rfi_monitor_node', 'fusion_node', 'imm_carrier_node', 'play'} <= names(kids):
+        while not {'rfi_monitor_node', 'gnss_integrity_node', 'fusion_node', 'imm_carrier_node', 'play'} <= names(kids):
             assert proc.poll() is None, proc.communicate()[1]
             assert time.monotonic() < deadline, f'run did not start the nodes and play within 60 s: {kids}'
             time.sleep(0.1)

@@ -20,6 +20,8 @@ import pytest
 from test_run_processes import ARRIVAL_TIMED, BAG, PARAMS, WINDOW, outputs, without_idle_flushes
 
 SUITES = ('/suite_a', '/suite_b')
+SUBSCRIBERS = {'/gnss/measurements': 2, '/uwb/ranges': 2}
+"""Subscribers of a suite's input topics other than one: gnss_integrity and uwb_gnss_fusion."""
 
 
 def start(out: Path, *extra: str) -> subprocess.Popen:
@@ -97,7 +99,7 @@ def test_each_suite_gives_what_one_suite_alone_gives(runs, namespace):
 def test_each_suite_lives_in_its_namespace_and_sees_only_itself(runs, namespace):
     tmp, _ = runs
     logs = tmp / namespace.strip('/') / 'logs'
-    for name in ('rfi_monitor', 'uwb_gnss_fusion', 'imm_carrier'):
+    for name in ('rfi_monitor', 'gnss_integrity', 'uwb_gnss_fusion', 'imm_carrier'):
         log = (logs / f'{name}.log').read_text()
         assert f'-r __ns:={namespace} -r /diagnostics:={namespace}/diagnostics' in log.splitlines()[0]
         assert f'[{namespace.strip("/")}.{name}]' in log  # the node's logger name: namespace.node
@@ -106,11 +108,11 @@ def test_each_suite_lives_in_its_namespace_and_sees_only_itself(runs, namespace)
     rows = {line.split()[0]: line.split()[2:] for line in play.splitlines() if line.startswith('/')}
     assert set(rows) == {'/gnss/correlators', '/gnss/measurements', '/rfi/if_samples', '/uwb/ranges'}
     for topic, (published, subscribers, to_nobody) in rows.items():
-        # one subscriber per topic (its own suite's node, not the other suite's) and nothing lost
-        assert (subscribers, to_nobody) == ('1', '0'), (topic, play)
+        # its own suite's nodes only (GNSS and UWB go to gnss_integrity and the fusion), nothing lost
+        assert (subscribers, to_nobody) == (str(SUBSCRIBERS.get(topic, 1)), '0'), (topic, play)
         assert int(published) > 0
     replay = (tmp / namespace.strip('/') / 'replay.md').read_text()
-    assert 'rfi_monitor 0, uwb_gnss_fusion 0, imm_carrier 0, play 0' in replay
+    assert 'rfi_monitor 0, gnss_integrity 0, uwb_gnss_fusion 0, imm_carrier 0, play 0' in replay
 
 
 def test_run_refuses_what_it_cannot_honour(tmp_path):
@@ -140,8 +142,8 @@ def test_external_nodes_with_best_effort_inputs_are_refused(tmp_path):
     nodes = [subprocess.Popen([executable(package, name), '--ros-args', '-r', f'__ns:={namespace}',
                                '-r', f'/diagnostics:={namespace}/diagnostics'],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-             for package, name in (('rfi_monitor', 'rfi_monitor_node'), ('uwb_gnss_fusion', 'fusion_node'),
-                                   ('imm_carrier', 'imm_carrier_node'))]
+             for package, name in (('rfi_monitor', 'rfi_monitor_node'), ('gnss_integrity', 'gnss_integrity_node'),
+                                   ('uwb_gnss_fusion', 'fusion_node'), ('imm_carrier', 'imm_carrier_node'))]
     try:
         done = subprocess.run(
             [sys.executable, '-m', 'rfi_experiments.run', str(BAG), '--out', str(tmp_path / 'r'), '--transport',

@@ -21,7 +21,7 @@ A missing input leaves its tests UNKNOWN: never NONE.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -46,6 +46,7 @@ from .outcome import (
     EVIDENCE_RECEIVER_FLAG,
     EVIDENCE_RECEIVER_SPECTRUM,
     EVIDENCE_SDR_MONITOR,
+    SCOPE_SATELLITES,
     STATE_DETECTED,
     STATE_NONE,
     STATE_SUSPECTED,
@@ -141,7 +142,8 @@ class IntegrityMonitor:
         self._spectrum: tuple[int, SpectrumDetection] | None = None
         self._cn0_clean = True  # the last epoch's C/N0 verdict: the AGC baseline's learning gate
         self.counts: dict[str, int] = {"epochs": 0, "epochs_without_fix": 0, "uwb_ranges": 0,
-                                       "receiver_reports": 0, "sdr_states": 0, "spectra": 0}
+                                       "receiver_reports": 0, "sdr_states": 0, "spectra": 0,
+                                       "epochs_degraded_by_jamming": 0, "epochs_with_exclusions": 0}
 
     # ------------------------------------------------------------------ side inputs
     def add_uwb(self, meas: UwbRangeMeasurement) -> None:
@@ -193,19 +195,65 @@ class IntegrityMonitor:
         jam = self.cn0_jamming.evaluate(ref)
         cn0_spoof = self.cn0_spoofing.evaluate(ref, jam)
         receiver = self.receiver.judge(stamp)
-        # ---- spoofing tests
-        clock = self._clock(stamp, fix)
-        velocity = fix.velocity_ecef_mps if fix.valid and fix.velocity_valid else None
-        kin = self.kinematics.update(stamp, position, velocity)
-        if fix.valid:
-            cons = self.consistency.update(stamp, epoch, fix)
-        else:
-            a, b, c = self.consistency.update(stamp, epoch, fix)
-            cons = (_unknown_like(a), _unknown_like(b), _unknown_like(c))
+        jam_tests, jamming = self._jamming(stamp, jam, receiver)
+        # ---- spoofing tests; those of measurement quality only where no jammer degrades it
+        degraded = not jam.epoch_clean or jamming[0] >= STATE_SUSPECTED
+        quality = self._quality_tests(stamp, epoch, fix, position, degraded)
         ext = self.external.update(stamp, jam.common_drop_db)
-        spoof_tests = [*cn0_spoof.outcomes, *clock, *kin, *cons, *ext]
+        spoof_tests = [*cn0_spoof.outcomes, *quality, *ext]
         verdict = self.state.update(stamp, spoof_tests)
-        # ---- jamming verdict and J/S
+        self._learn(ref, jam, cn0_spoof, receiver, spoof_tests)
+        jamming_state, js, js_std, evidence, jammer_type, freq, bw = jamming
+        return IntegrityReport(
+            stamp, jamming_state, js, js_std, evidence, ref.elevation_model_in_use, jam.common_drop_db,
+            jam.satellites_used, jammer_type, freq, bw, verdict.state, verdict.scope, verdict.constellations,
+            verdict.satellites, verdict.first_alarm_ns, verdict.first_detection_ns,
+            tuple([*jam_tests, *spoof_tests]), position)
+
+    def _quality_tests(self, stamp: int, epoch: GnssEpoch, fix: MultiGnssFix, position: np.ndarray,
+                       degraded: bool) -> list[TestOutcome]:
+        """Clock, kinematics and consistency: what a spoofer changes in the measurements.
+
+        A jammer degrades the same measurements (tracking jitter, outlier bursts, lost lock), which
+        these tests cannot tell from an attack: while this epoch's C/N0 drop is above its suspect
+        threshold, or any jamming evidence says SUSPECTED or worse, they are UNKNOWN and their
+        histories restart (so that no window mixes jammed and clean epochs). A spoofer that keeps a
+        jammer on is then seen only by the C/N0-independent evidence (the receiver's flag): a blind
+        spot (docs/gnss_integrity/README.md). A test that implicates single satellites
+        (``SCOPE_SATELLITES``: RAIM, per-satellite code against Doppler) never exceeds SUSPECT: one
+        epoch's failure of a few satellites is a fault (multipath, an outlier burst) as often as an
+        attack; held for ``persistence_s`` it makes a detection. The clock and kinematic tests use
+        the fix without the satellites ``raim_subset`` names.
+        """
+        cons = self.consistency.update(stamp, epoch, fix)
+        clean_fix = self._without_faults(epoch, fix, cons[2])
+        if clean_fix.valid:
+            position = clean_fix.position_ecef_m
+        clock = self._clock(stamp, clean_fix)
+        velocity = clean_fix.velocity_ecef_mps if clean_fix.valid and clean_fix.velocity_valid else None
+        kin = self.kinematics.update(stamp, position, velocity)
+        outs = [*clock, *kin, *cons]
+        if degraded or not fix.valid:
+            if degraded:
+                self.counts["epochs_degraded_by_jamming"] += 1
+                self.clock.reset()
+                self.kinematics.reset()
+                self.consistency.reset()
+            return [_unknown_like(o) for o in outs]
+        return [_capped(o) if o.scope == SCOPE_SATELLITES else o for o in outs]
+
+    def _without_faults(self, epoch: GnssEpoch, fix: MultiGnssFix, raim: TestOutcome) -> MultiGnssFix:
+        """The fix without the satellites ``raim_subset`` names (fault detection and exclusion), for
+        the clock and kinematic tests: a satellite's outlier must not read as a clock step or a jump."""
+        if not fix.valid or not raim.satellites:
+            return fix
+        bad = set(raim.satellites)
+        use = np.array([(o.constellation, o.svid) not in bad for o in epoch.observations], dtype=bool)
+        self.counts["epochs_with_exclusions"] += 1
+        return solve_multi_gnss(epoch, self.params.fix, use=use, initial_position_ecef_m=fix.position_ecef_m)
+
+    def _jamming(self, stamp: int, jam, receiver) -> tuple[list[TestOutcome], tuple]:
+        """The jamming tests and (state, J/S, its std, evidence bits, jammer type, frequency, bandwidth)."""
         jam_tests = [jam.outcome, receiver.agc, receiver.jam_flag]
         spectrum = self._fresh_spectrum(stamp)
         if spectrum is not None:
@@ -229,12 +277,7 @@ class IntegrityMonitor:
                 js, js_std, jammer_type = sdr_js, math.nan, sdr_type
             elif jamming_state == STATE_UNKNOWN:
                 jamming_state = STATE_NONE  # the SDR tested the band and found nothing
-        self._learn(ref, jam, cn0_spoof, receiver, spoof_tests)
-        return IntegrityReport(
-            stamp, jamming_state, js, js_std, evidence, ref.elevation_model_in_use, jam.common_drop_db,
-            jam.satellites_used, jammer_type, freq, bw, verdict.state, verdict.scope, verdict.constellations,
-            verdict.satellites, verdict.first_alarm_ns, verdict.first_detection_ns,
-            tuple([*jam_tests, *spoof_tests]), position)
+        return jam_tests, (jamming_state, js, js_std, evidence, jammer_type, freq, bw)
 
     def _clock(self, stamp: int, fix: MultiGnssFix) -> tuple[TestOutcome, TestOutcome]:
         if not (fix.valid and fix.velocity_valid and fix.clock_constellations):
@@ -273,6 +316,11 @@ class IntegrityMonitor:
         if self._spectrum is None or abs(stamp - self._spectrum[0]) > self.params.spectrum_max_age_s * NS_PER_S:
             return None
         return self._spectrum[1]
+
+
+def _capped(o: TestOutcome) -> TestOutcome:
+    """The outcome with an ALARM lowered to SUSPECT (the statistic and thresholds kept)."""
+    return replace(o, decision=DECISION_SUSPECT) if o.decision == DECISION_ALARM else o
 
 
 def _unknown_like(o: TestOutcome) -> TestOutcome:

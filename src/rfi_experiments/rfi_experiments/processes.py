@@ -45,13 +45,16 @@ them), all else equal. Faster still, messages can reach the fusion after its 0.1
 window and be rejected."""
 
 NODE_EXECUTABLES = (('rfi_monitor', 'rfi_monitor', 'rfi_monitor_node'),
+                    ('gnss_integrity', 'gnss_integrity', 'gnss_integrity_node'),
                     ('uwb_gnss_fusion', 'uwb_gnss_fusion', 'fusion_node'),
                     ('imm_carrier', 'imm_carrier', 'imm_carrier_node'))
-"""(node name, package, executable) of the three nodes."""
+"""(node name, package, executable) of the suite's nodes."""
 
 NODE_ENDPOINTS = {
     'rfi_monitor': (('/rfi/if_samples',), ('/rfi/jammer_state', '/diagnostics')),
-    'uwb_gnss_fusion': (('/gnss/measurements', '/uwb/ranges', '/rfi/jammer_state'),
+    'gnss_integrity': (('/gnss/measurements', '/uwb/ranges', '/gnss/receiver_interference', '/gnss/receiver_spectrum',
+                        '/rfi/jammer_state'), ('/gnss/integrity', '/diagnostics')),
+    'uwb_gnss_fusion': (('/gnss/measurements', '/uwb/ranges', '/rfi/jammer_state', '/gnss/integrity'),
                         ('/fusion/odometry', '/fusion/local_odometry', '/fusion/fix', '/fusion/datum',
                          '/fusion/status', '/diagnostics')),
     'imm_carrier': (('/gnss/correlators',), ('/carrier/estimates', '/diagnostics')),
@@ -60,6 +63,7 @@ NODE_ENDPOINTS = {
 
 OUTPUT_TYPES = {
     '/rfi/jammer_state': 'rfi_msgs/msg/JammerState',
+    '/gnss/integrity': 'rfi_msgs/msg/GnssIntegrity',
     '/fusion/odometry': 'nav_msgs/msg/Odometry',
     '/fusion/local_odometry': 'nav_msgs/msg/Odometry',
     '/fusion/fix': 'sensor_msgs/msg/NavSatFix',
@@ -68,9 +72,10 @@ OUTPUT_TYPES = {
     '/carrier/estimates': 'rfi_msgs/msg/CarrierPhaseArray',
     '/diagnostics': 'diagnostic_msgs/msg/DiagnosticArray',
 }
-"""Every topic the three nodes publish, and its type: what ``processes`` records."""
+"""Every topic the nodes publish, and its type: what ``processes`` records."""
 
 ANSWERED_BY_STAMP = (('rfi_monitor', ('/rfi/if_samples',), '/rfi/jammer_state'),
+                     ('gnss_integrity', ('/gnss/measurements',), '/gnss/integrity'),
                      ('uwb_gnss_fusion', ('/gnss/measurements', '/uwb/ranges'), '/fusion/status'),
                      ('imm_carrier', ('/gnss/correlators',), '/carrier/estimates'))
 """(node, inputs, output): the node publishes the output with the header stamp of each input it

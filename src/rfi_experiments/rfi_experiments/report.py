@@ -10,6 +10,8 @@ what it needs:
 - positioning: /fusion/odometry (GNSS+UWB) against /truth/position, beside two baselines that the
   report computes itself from the same /gnss/measurements with the package cores (single-point
   positioning and the GNSS-only filter, Cao et al.'s SPP and "GNSS Filter"); errors per J/S phase;
+- integrity: /gnss/integrity against /truth/integrity (time to detect a spoofer, false alarms) and
+  the fusion's error over the attack (:mod:`rfi_experiments.report_integrity`);
 - carrier: /carrier/estimates (IMM and PLL) against /truth/carrier: residual phase error and
   cycle slips (half-cycle for both) per satellite.
 
@@ -33,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from rfi_experiments.bag_io import BagReader
+from rfi_experiments.report_integrity import integrity_section
 from rfi_sim.evaluation import ecef_errors_enu, empirical_cdf, error_3d_m, error_stats, horizontal_error_m
 
 NS = 1e-9
@@ -450,6 +453,8 @@ def write_report(bag: str | os.PathLike[str], outputs: Mapping[str, list[Any]], 
         body += _jammer_section(truth['/truth/jammer'], list(outputs['/rfi/jammer_state']), out, summary)
     if outputs.get('/fusion/odometry') or truth.get('/gnss/measurements'):
         body += _fusion_section(truth, list(outputs.get('/fusion/odometry', [])), out, summary)
+    if truth.get('/truth/integrity') and outputs.get('/gnss/integrity'):
+        body += integrity_section(truth, outputs, out, summary, _plt())
     if truth.get('/truth/carrier') and outputs.get('/carrier/estimates'):
         body += _carrier_section(truth['/truth/carrier'], list(outputs['/carrier/estimates']), out, summary)
     lines += ['## Headline figures', '', summary.table(), ''] + body

@@ -1,6 +1,6 @@
 """``ros2 run rfi_experiments run BAG --out DIR``: replay a jamming experiment through the suite.
 
-The three nodes (rfi_monitor, uwb_gnss_fusion, imm_carrier with ``method: both``) are wired by
+The four nodes (rfi_monitor, gnss_integrity, uwb_gnss_fusion, imm_carrier with ``method: both``) are wired by
 their topics exactly as on a robot, in one of three ways (``--transport``):
 
 - ``direct`` (default) and ``dds``: the nodes run in this process and the bag's messages are fed
@@ -57,7 +57,7 @@ from rfi_experiments.processes import (
 
 fail = error_reporter('run')
 
-REPORT_TOPICS = ('/rfi/jammer_state', '/fusion/odometry', '/carrier/estimates')
+REPORT_TOPICS = ('/rfi/jammer_state', '/gnss/integrity', '/fusion/odometry', '/fusion/status', '/carrier/estimates')
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -285,7 +285,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     window_text = '' if window is None else (
         f' (window {window[0]:g}-{"end" if math.isinf(window[1]) else f"{window[1]:g}"} s of the bag)')
     replay_line = (f'{sum(result.inputs.values())} input messages{window_text} replayed through rfi_monitor, '
-                   f'uwb_gnss_fusion and imm_carrier ({how}): {result.bag_duration_s:.1f} s of data in '
+                   f'gnss_integrity, uwb_gnss_fusion and imm_carrier ({how}): {result.bag_duration_s:.1f} s of data in '
                    f'{result.wall_time_s:.1f} s, {result.real_time_factor:.1f}x real time.')
     lines = [f'# Replay of {args.bag}', '', replay_line, '']
     if notes:
@@ -326,7 +326,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def run_in_process(args: argparse.Namespace, argv: Sequence[str], inputs: list[str],
                    topics: dict[str, tuple[str, int]], params: dict[str, dict[str, object]],
                    window: tuple[float, float] | None) -> Any:
-    """The three nodes in this process, fed by ReplayHarness (``direct`` or ``dds``).
+    """The four nodes in this process, fed by ReplayHarness (``direct`` or ``dds``).
 
     Raises:
         ValueError: a node rejected its parameters (the message names the node).
@@ -334,6 +334,7 @@ def run_in_process(args: argparse.Namespace, argv: Sequence[str], inputs: list[s
     """
     import rclpy
 
+    from gnss_integrity.gnss_integrity_node import GnssIntegrityNode
     from imm_carrier.imm_carrier_node import ImmCarrierNode
     from rfi_experiments.replay import ReplayHarness
     from rfi_monitor.rfi_monitor_node import RfiMonitorNode
@@ -343,8 +344,8 @@ def run_in_process(args: argparse.Namespace, argv: Sequence[str], inputs: list[s
     rclpy.init(args=list(argv), context=context)
     nodes = []
     try:
-        for name, cls in (('rfi_monitor', RfiMonitorNode), ('uwb_gnss_fusion', FusionNode),
-                          ('imm_carrier', ImmCarrierNode)):
+        for name, cls in (('rfi_monitor', RfiMonitorNode), ('gnss_integrity', GnssIntegrityNode),
+                          ('uwb_gnss_fusion', FusionNode), ('imm_carrier', ImmCarrierNode)):
             # reliable inputs (dds: over the middleware), unless a parameters file says otherwise
             reliable = reliable_input_arguments(NODE_ENDPOINTS[name][0])[1::2]
             defaults = {k: v for k, _, v in (a.partition(':=') for a in reliable) if k not in params.get('**', {})}
