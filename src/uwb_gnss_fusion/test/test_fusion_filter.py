@@ -635,3 +635,29 @@ def test_vectorised_satellite_checks_equal_the_per_observation_loop():
     counts, count = _counter()
     assert len(validate_satellites(bad, FusionParams(), count)) == len(base) - 1
     assert counts == {"malformed_observation": 1}
+
+
+def test_reanchor_on_uwb_drops_a_dragged_state():
+    """GNSS found spoofed (issue 25): the state a spoofer dragged is replaced by UWB multilateration."""
+    f = FusionFilter(FusionParams())
+    t = 1_437_263_983 * NS
+    assert not f.reanchor_on_uwb(t)  # nothing to re-anchor before a start
+    for k in range(20):
+        f.process_gnss(_epoch(t + k * NS // 5))
+        for j in range(3):
+            f.process_uwb(_uwb(t + k * NS // 5 + (j + 1) * NS // 20, j))
+    assert f.initialized
+    dragged = RX + R_ENU.T @ np.array([30.0, 0.0, 0.0])  # what a spoofer's re-initialisation could leave
+    f.initialize(t + 4 * NS, dragged, velocity_mps=R_ENU.T @ np.array([1.0, 0.0, 0.0]))
+    assert f.reanchor_on_uwb(t + 4 * NS)
+    out = None
+    for k in range(20, 40):  # UWB only afterwards (GNSS excluded)
+        for j in range(3):
+            out = f.process_uwb(_uwb(t + k * NS // 5 + (j + 1) * NS // 20, j))
+    assert out is not None and np.linalg.norm((out.position_m - RX) @ R_ENU.T[:, :2]) < 0.3
+    assert f.rejection_counts.get('reanchor_on_uwb') == 1
+    g = FusionFilter(FusionParams(use_uwb=False))
+    g.process_gnss(_epoch(t))
+    g.process_gnss(_epoch(t + NS))
+    if g.initialized:
+        assert not g.reanchor_on_uwb(t + NS) and g.rejection_counts.get('reanchor_without_uwb') == 1

@@ -404,6 +404,28 @@ class FusionFilter:
             return
         self._reference = (int(stamp_ns), pos.copy(), float(position_std_m), float(clock_bias_m))
 
+    def reanchor_on_uwb(self, stamp_ns: int) -> bool:
+        """GNSS was found spoofed (gnss_integrity): drop what it put into the state and start again from
+        the UWB ranges alone, before the caller excludes GNSS.
+
+        A spoofer drags the state before it is detected (and may have re-initialised it from its own
+        fix); with GNSS excluded the filter would coast on that state's velocity while its small
+        covariance gates the anchors' ranges. So the state is re-initialised from UWB multilateration
+        (the current position as the starting guess, which keeps the side of a coplanar set's mirror),
+        with zero velocity and the clock unknown, as after a UWB start. Returns False (state unchanged,
+        counted ``reanchor_without_uwb``) when the ranges of the last ``uwb_init_window_s`` do not
+        multilaterate (fewer than three anchors): the filter then coasts on its motion model.
+        """
+        if not self._initialized:
+            return False
+        pos = self._multilaterate(stamp_ns, self._frame, self._nominal[0:3])
+        if pos is None:
+            self._count("reanchor_without_uwb")
+            return False
+        self.initialize(max(stamp_ns, self._t_ns), pos, frame_id=self._frame, position_std_m=1.0)
+        self._count("reanchor_on_uwb")
+        return True
+
     def set_jammer_to_signal(self, stamp_ns: int, jammer_to_signal_db: float) -> None:
         """Record the J/S reported by the RFI monitor (rfi_msgs/JammerState.jammer_to_signal_db).
 

@@ -608,6 +608,7 @@ class FusionNode(Node):
         change = self.exclusion.update(verdict)
         if change == 'excluded':
             self.spp_cache.clear()  # the SPP reference must not bring the spoofed position back
+            self.filter.reanchor_on_uwb(verdict.stamp_ns)  # drop the state the spoofer dragged
             self.get_logger().warn(f'spoofing detected at {verdict.stamp_ns} ns: excluding '
                                    f'{self.exclusion.describe()} from the fusion (gnss_integrity)')
         elif change == 'readmitted':
