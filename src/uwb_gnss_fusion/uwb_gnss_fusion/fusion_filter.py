@@ -419,6 +419,8 @@ class FusionFilter:
         if not self._initialized:
             return False
         pos = self._multilaterate(stamp_ns, self._frame, self._nominal[0:3])
+        if pos is None:  # the guess is far off (dragged): the multi-start of a UWB start
+            pos = self._multilaterate(stamp_ns, self._frame)
         if pos is None:
             self._count("reanchor_without_uwb")
             return False
@@ -1315,6 +1317,18 @@ class FusionFilter:
         GNSS rule alone on a state still within bounds (``divergence_fix_confirm_s`` applies)."""
         self._reinits += 1
         frame = self._frame
+        if self._initialized and self.params.use_uwb:
+            # Three or more anchors heard: their multilateration (from the state, so on its side of a
+            # coplanar set's mirror) is the position, the clock is kept. A GNSS fix would bring back
+            # whatever made the filter diverge (a spoofer's position: issue 25; a jammed epoch).
+            pos = self._multilaterate(stamp_ns, frame, self._nominal[0:3])
+            if pos is not None:
+                clock_ok = self._clock_initialized
+                self.initialize(max(stamp_ns, self._t_ns), pos, frame_id=frame, position_std_m=1.0,
+                                clock_bias_m=float(self._nominal[6]) if clock_ok else math.nan,
+                                clock_drift_mps=float(self._nominal[7]) if clock_ok else math.nan)
+                self._count("reinit_from_uwb")
+                return self._output(True)
         if self._reference_provider is not None and frame == FRAME_EARTH:
             supplied = self._reference_provider(stamp_ns)
             if supplied is not None:
