@@ -55,6 +55,8 @@ from .outcome import (
 MILLISECOND_M = SPEED_OF_LIGHT_MPS * 1e-3
 """A receiver clock step of 1 ms as a pseudorange (clock bias) step, m."""
 NS_PER_S = 1_000_000_000
+MAX_NOISE_SCALE = 4.0
+"""Largest learned NIS scale: a slow push just below the threshold must not teach the scale away."""
 
 
 @dataclass(frozen=True)
@@ -275,7 +277,7 @@ class ClockTest:
     def _learn(self, nis: float) -> None:
         self._clean_nis.append(nis)
         if len(self._clean_nis) >= 20:
-            self._scale = max(1.0, float(np.median(self._clean_nis)) / self._median_chi2_2)
+            self._scale = min(MAX_NOISE_SCALE, max(1.0, float(np.median(self._clean_nis)) / self._median_chi2_2))
 
     @property
     def noise_scale(self) -> float:

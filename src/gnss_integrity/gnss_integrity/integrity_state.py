@@ -92,7 +92,7 @@ class SpoofingState:
     params: StateParams = field(default_factory=StateParams)
 
     def __post_init__(self) -> None:
-        self._suspect_since: dict[str, int] = {}
+        self._suspect_since: dict[tuple, int] = {}  # (test, satellites it names) -> first SUSPECT stamp
         self._first_alarm_ns = 0
         self._first_detection_ns = 0
         self._clean_since: int | None = None
@@ -107,14 +107,17 @@ class SpoofingState:
         outs = list(outcomes)
         decided = [o for o in outs if o.decision != DECISION_UNKNOWN]
         suspects = [o for o in decided if o.decision >= DECISION_SUSPECT]
-        for o in suspects:
-            self._suspect_since.setdefault(o.name, stamp_ns)
-        for name in list(self._suspect_since):
-            if name not in {o.name for o in suspects}:
-                del self._suspect_since[name]
+        # persistence is per test and per set of satellites it names: outlier bursts that move from
+        # satellite to satellite (a weak jammer, multipath) are faults, not one held finding
+        keys = {(o.name, o.satellites) for o in suspects}
+        for key in keys:
+            self._suspect_since.setdefault(key, stamp_ns)
+        for key in list(self._suspect_since):
+            if key not in keys:
+                del self._suspect_since[key]
         alarms = [o for o in suspects if o.decision == DECISION_ALARM]
         persistent = [o for o in suspects
-                      if stamp_ns - self._suspect_since[o.name] >= p.persistence_s * NS_PER_S]
+                      if stamp_ns - self._suspect_since[(o.name, o.satellites)] >= p.persistence_s * NS_PER_S]
         categories = {o.category for o in suspects}
         if not decided:
             state = STATE_UNKNOWN

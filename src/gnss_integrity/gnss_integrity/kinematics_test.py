@@ -49,6 +49,10 @@ from .outcome import (
 )
 
 NS_PER_S = 1_000_000_000
+MAX_NOISE_SCALE = 4.0
+"""Largest learned noise scale (a receiver twice as noisy as the prior): without a bound, a drag just
+below the threshold raised the scale with the statistic (0.3 m/s with one anchor: scale 114, never
+detected, 49.5 m off; benchmarks/integrity_detection.py)."""
 
 
 @dataclass(frozen=True)
@@ -217,7 +221,7 @@ class LaggedDisplacement:
         if out.decision == DECISION_PASS:
             self._clean.append(stat * self._scale / self._median[k])
             if len(self._clean) >= 30:
-                self._scale = max(1.0, float(np.median(self._clean)))
+                self._scale = min(MAX_NOISE_SCALE, max(1.0, float(np.median(self._clean))))
         return out
 
     def _unknown(self) -> TestOutcome:
