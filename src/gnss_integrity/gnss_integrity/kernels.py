@@ -6,8 +6,6 @@ almost all numpy call overhead (docs/gnss_integrity/speed.md). What is here does
 
 * :class:`RunningMedian`: the median of the last ``maxlen`` values, equal to ``np.median`` of them
   (a sorted list kept beside the FIFO instead of sorting 600 values every epoch);
-* :func:`multilaterate`: the Gauss-Newton tag position of :mod:`.kinematics_test`, compiled, with
-  the same LAPACK least-squares step (``np.linalg.lstsq``, rcond 1e-9);
 * :func:`chi2_form`: ``d^T (U diag(a) U^T + diag(o))^-1 d``, compiled (LAPACK ``gesv``, as ``np.linalg.solve``);
   :func:`lagged_chi2`: it for every lag of :class:`.kinematics_test.LaggedDisplacement`;
   :func:`quad_solve`: ``v^T A^-1 v``;
@@ -34,7 +32,7 @@ from collections import deque
 import numpy as np
 from numba import njit
 
-from gnss_common import multi_gnss_rows
+from gnss_common import multi_gnss_rows, multilateration
 
 
 class RunningMedian:
@@ -78,54 +76,6 @@ class RunningMedian:
         if n % 2:
             return s[n // 2]
         return (s[n // 2 - 1] + s[n // 2]) / 2.0
-
-
-@njit(cache=True)
-def multilaterate(anchors: np.ndarray, ranges: np.ndarray, start: np.ndarray, iterations: int
-                  ) -> tuple[np.ndarray, bool]:
-    """Tag position from ranges to anchors by Gauss-Newton from ``start`` (ECEF, m).
-
-    Args:
-        anchors: anchor positions, m, (k, 3), k >= 3. ranges: measured ranges, m, (k,).
-        start: first iterate, m, (3,). iterations: at most this many steps (stop when |step| < 0.1 mm).
-
-    Returns:
-        ``(position (3,), ok)``; ok False when an anchor coincides with an iterate, a step is not
-        finite, or the solution fits the ranges worse than 1 m RMS.
-    """
-    k = anchors.shape[0]
-    x = start.copy()
-    h = np.empty((k, 3))
-    r = np.empty(k)
-    for _ in range(iterations):
-        for j in range(k):
-            d2 = 0.0
-            for i in range(3):
-                h[j, i] = x[i] - anchors[j, i]
-                d2 += h[j, i] * h[j, i]
-            dist = math.sqrt(d2)
-            if not dist > 0.0:
-                return x, False
-            for i in range(3):
-                h[j, i] = h[j, i] / dist
-            r[j] = ranges[j] - dist
-        for j in range(k):
-            if not (math.isfinite(r[j]) and math.isfinite(h[j, 0]) and math.isfinite(h[j, 1])
-                    and math.isfinite(h[j, 2])):
-                return x, False  # numpy's SVD does not converge on these: no solution
-        step = np.linalg.lstsq(h, r, 1e-9)[0]
-        x = x + step
-        if math.sqrt(np.dot(step, step)) < 1e-4:
-            break
-    sq = 0.0
-    for j in range(k):
-        d2 = 0.0
-        for i in range(3):
-            d2 += (x[i] - anchors[j, i]) ** 2
-        fit = ranges[j] - math.sqrt(d2)
-        sq += fit * fit
-    ok = math.isfinite(x[0]) and math.isfinite(x[1]) and math.isfinite(x[2]) and math.sqrt(sq / k) <= 1.0
-    return x, ok
 
 
 @njit(cache=True)
@@ -425,10 +375,9 @@ def doppler_add_pairs(slots: np.ndarray, e: np.ndarray, pair_var: np.ndarray, st
 
 def warm_up() -> None:
     """Compile (or load from numba's cache) every kernel of this module and of
-    ``gnss_common.multi_gnss_rows`` (the fix's) on throwaway inputs."""
+    ``gnss_common.multi_gnss_rows`` (the fix's) and ``gnss_common.multilateration`` on throwaway inputs."""
     multi_gnss_rows.warm_up()
-    anchors = np.array([[10.0, 0.0, 0.0], [0.0, 10.0, 0.0], [0.0, 0.0, 10.0]])
-    multilaterate(anchors, np.full(3, 10.0), np.ones(3), 8)
+    multilateration.warm_up()
     chi2_form(np.eye(3), np.ones(3), np.ones(3), np.ones(3))
     lagged_chi2(np.eye(3), np.ones((2, 3)), np.ones((2, 3)), np.ones(2), np.ones(2), np.ones(2), np.ones(3),
                 np.ones(3), 0.0)

@@ -37,8 +37,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic_scalar
+from gnss_common.multilateration import multilaterate
 
-from .kernels import RunningMedian, chi2_form, lagged_chi2, multilaterate
+from .kernels import RunningMedian, chi2_form, lagged_chi2
 from .outcome import (
     CATEGORY_KINEMATICS,
     DECISION_PASS,
@@ -251,16 +252,6 @@ class LaggedDisplacement:
         return unknown(self.name, CATEGORY_KINEMATICS, false_alarm_probability=self.p.false_alarm_probability)
 
 
-def _multilaterate(anchors: np.ndarray, ranges: np.ndarray, start: np.ndarray, iterations: int = 8
-                   ) -> np.ndarray | None:
-    """Tag position from three or more ranges by Gauss-Newton from ``start`` (ECEF, m); None when
-    the geometry is singular or the solution does not fit the ranges within 1 m RMS
-    (:func:`.kernels.multilaterate`, compiled)."""
-    x, ok = multilaterate(np.ascontiguousarray(anchors, dtype=float), np.ascontiguousarray(ranges, dtype=float),
-                          np.asarray(start, dtype=float).reshape(3).copy(), iterations)
-    return x if ok else None
-
-
 class _LocalFrame:
     """ECEF -> ENU rotation at the first position seen (directions only; recomputed beyond 10 km)."""
 
@@ -353,7 +344,7 @@ class KinematicsTest:
                         + (p.tag_speed_allowance_mps * abs(stamp_ns - r.stamp_ns) / NS_PER_S) ** 2 for r in heard])
         anchors = np.array([r.anchor_ecef_m for r in heard])
         ranges = np.array([r.range_m for r in heard])
-        tag = _multilaterate(anchors, ranges, pos) if len(heard) >= 3 else None
+        tag = multilaterate(anchors, ranges, pos, max_iterations=8, step_tol_m=1e-4) if len(heard) >= 3 else None
         if tag is not None:
             delta = rot @ (pos - tag)
             comps = {"e": (float(delta[0]), 0.0), "n": (float(delta[1]), 0.0)}

@@ -151,6 +151,7 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import NavSatFix
 
+from gnss_common import multilateration
 from gnss_common.jamming_weights import effective_cn0_dbhz
 from gnss_common.observations import GnssEpoch, UwbRangeMeasurement
 from gnss_common.spp import SinglePointPositioner
@@ -274,6 +275,7 @@ class FusionNode(Node):
         ckf_kernels.warm_up()
         fusion_output.warm_up()
         local_frame.warm_up()
+        multilateration.warm_up()
         # created after the compilation, so that its silence clock starts when the node can listen
         self.health = InputHealth()
         throttle = self.params.warning_throttle_s
