@@ -16,6 +16,16 @@ from functools import lru_cache
 
 from scipy.special import chdtri, ndtri
 
+# rfi_msgs/GnssIntegrity STATE_* and SCOPE_*: shared with the fusion, so defined in gnss_common
+from gnss_common.integrity_codes import SCOPE_ALL as SCOPE_ALL
+from gnss_common.integrity_codes import SCOPE_CONSTELLATIONS as SCOPE_CONSTELLATIONS
+from gnss_common.integrity_codes import SCOPE_NONE as SCOPE_NONE
+from gnss_common.integrity_codes import SCOPE_SATELLITES as SCOPE_SATELLITES
+from gnss_common.integrity_codes import STATE_DETECTED as STATE_DETECTED
+from gnss_common.integrity_codes import STATE_NONE as STATE_NONE
+from gnss_common.integrity_codes import STATE_SUSPECTED as STATE_SUSPECTED
+from gnss_common.integrity_codes import STATE_UNKNOWN as STATE_UNKNOWN
+
 # rfi_msgs/IntegrityTest CATEGORY_*
 CATEGORY_JAMMING = 1
 CATEGORY_CN0 = 2
@@ -29,18 +39,6 @@ DECISION_UNKNOWN = 0
 DECISION_PASS = 1
 DECISION_SUSPECT = 2
 DECISION_ALARM = 3
-
-# rfi_msgs/GnssIntegrity STATE_*
-STATE_UNKNOWN = 0
-STATE_NONE = 1
-STATE_SUSPECTED = 2
-STATE_DETECTED = 3
-
-# rfi_msgs/GnssIntegrity SCOPE_*
-SCOPE_NONE = 0
-SCOPE_SATELLITES = 1
-SCOPE_CONSTELLATIONS = 2
-SCOPE_ALL = 3
 
 # rfi_msgs/GnssIntegrity EVIDENCE_* (jamming_evidence bits)
 EVIDENCE_CN0_ELEVATION = 1
