@@ -14,7 +14,7 @@ A clock bias per constellation (receiver clock, system time offset, hardware del
 every signal comes from one oscillator, whose frequency error df / f shifts every rate ``-lambda D``
 by ``c df / f`` whatever the carrier; system time offsets drift by < 1e-13 (< 1 mm/s). On ESBC00DNK
 the per-constellation mean rate residual against the common drift is < 1 mm/s (``test_real_common_drift``).
-Weights: RTKLIB ``varerr`` as in ``gnss_common.spp`` (:func:`code_variance_m2`), SISRE per constellation.
+Weights: RTKLIB ``varerr`` of ``gnss_common.spp`` (``code_variance_m2``), SISRE per constellation.
 
 Notes
 -----
@@ -34,10 +34,7 @@ import numpy as np
 
 from gnss_common.constants import WGS84_ECCENTRICITY_SQUARED, WGS84_SEMI_MAJOR_AXIS_M
 from gnss_common.coordinates import ecef_to_geodetic_scalar
-from gnss_common.multi_gnss_rows import (  # the weight model lives there, re-exported here
-    cn0_factor,
-    code_noise_variance_m2,  # noqa: F401
-    code_variance_m2,  # noqa: F401
+from gnss_common.multi_gnss_rows import (
     design,
     enu_rotation,
     normal_rows,
@@ -50,7 +47,7 @@ from gnss_common.multi_gnss_rows import (  # the weight model lives there, re-ex
     screened,
 )
 from gnss_common.observations import BEIDOU, GALILEO, GLONASS, GPS, QZSS, GnssEpoch
-from gnss_common.spp import SppParams
+from gnss_common.spp import SppParams, cn0_factor
 
 STATUS_OK = "ok"
 STATUS_TOO_FEW = "too_few_satellites"

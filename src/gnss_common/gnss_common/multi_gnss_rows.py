@@ -1,8 +1,6 @@
 """Per-satellite row arithmetic of the multi-constellation snapshot (:mod:`gnss_common.multi_gnss_fix`).
 
-Pure core (no rclpy, no state). The weight model (RTKLIB ``varerr`` with the C/N0 factor:
-:func:`code_variance_m2`, :func:`code_noise_variance_m2`, :func:`cn0_factor`; re-exported by
-``multi_gnss_fix``), and compiled kernels for the element-wise work of one fix: screening, Sagnac
+Pure core (no rclpy, no state). Compiled kernels for the element-wise work of one fix: screening, Sagnac
 rotation, variances, the rows of the normal equations, residuals and rate variances. A 20 Hz
 multi-GNSS stream made that work, tens of numpy calls on 40-element arrays per Gauss-Newton
 iteration, the larger part of the fix's cost (docs/gnss_integrity/speed.md).
@@ -23,40 +21,6 @@ import numpy as np
 from numba import njit
 
 from gnss_common.constants import EARTH_ROTATION_RATE_RADPS, SPEED_OF_LIGHT_MPS
-from gnss_common.spp import SppParams
-
-
-def code_variance_m2(params: SppParams, sin_el: np.ndarray, cn0_dbhz: np.ndarray | None, iono_m: np.ndarray,
-                     sigma_broadcast_m: np.ndarray | float, k_cn0: np.ndarray | None = None) -> np.ndarray:
-    """Pseudorange error variance of the RTKLIB ``varerr`` model with the C/N0 factor, m^2, (n,).
-
-    ``[a^2 + b^2 / sin^2 el] k_cn0 + (f_I I)^2 + (s_T / (sin el + 0.1))^2 + s_eph^2`` with the fields of
-    ``params``, sin el floored at 0.05, the modelled ionospheric delay ``iono_m`` (m) and the SISRE
-    ``sigma_broadcast_m`` (m, scalar or (n,)); the formula of ``gnss_common.spp`` (Takasu, RTKLIB 2.4.2
-    manual, E.6; ``k_cn0 = max(1, 10^((cn0_ref - cn0) / 10))``, Hartinger & Brunner 1999; ``k_cn0`` when
-    already computed, :func:`cn0_factor` of ``cn0_dbhz``).
-    """
-    s_el = np.maximum(sin_el, 0.05)
-    return (code_noise_variance_m2(params, sin_el, cn0_dbhz, k_cn0) + (params.iono_error_fraction * iono_m) ** 2
-            + (params.sigma_tropo_zenith_m / (s_el + 0.1)) ** 2 + np.asarray(sigma_broadcast_m, dtype=float) ** 2)
-
-
-def code_noise_variance_m2(params: SppParams, sin_el: np.ndarray, cn0_dbhz: np.ndarray | None,
-                           k_cn0: np.ndarray | None = None) -> np.ndarray:
-    """The white (code noise, fast multipath) term ``[a^2 + b^2 / sin^2 el] k_cn0`` of
-    :func:`code_variance_m2`, m^2, (n,) (``k_cn0``: :func:`cn0_factor` of ``cn0_dbhz`` if already computed)."""
-    k = cn0_factor(params, np.asarray(cn0_dbhz, dtype=float)) if k_cn0 is None else k_cn0
-    return (params.sigma_code_a_m**2 + (params.sigma_code_b_m / np.maximum(sin_el, 0.05)) ** 2) * k
-
-
-def cn0_factor(params: SppParams, cn0_dbhz: np.ndarray) -> np.ndarray:
-    """C/N0 variance factor ``max(1, 10^((cn0_ref - cn0) / 10))`` (1 where C/N0 is NaN or unused), (n,)."""
-    cn0 = np.asarray(cn0_dbhz, dtype=float)
-    if not params.use_cn0_weighting:
-        return np.ones(cn0.shape)
-    with np.errstate(invalid="ignore"):
-        f = np.maximum(1.0, 10.0 ** ((params.cn0_reference_dbhz - cn0) / 10.0))
-    return np.where(np.isfinite(f), f, 1.0)
 
 
 @njit(cache=True)
@@ -160,7 +124,7 @@ def rotate_z(vec: np.ndarray, c: np.ndarray, s: np.ndarray, pos: np.ndarray) -> 
 @njit(cache=True)
 def row_variances(sin_el: np.ndarray, k_cn0: np.ndarray, iono: np.ndarray, sisre: np.ndarray, stated2: np.ndarray,
                   a2: float, b: float, f_iono: float, s_tropo: float, white_only: bool) -> np.ndarray:
-    """:func:`code_variance_m2` (``white_only``: :func:`code_noise_variance_m2`) of every row, a stated
+    """:func:`gnss_common.spp.code_variance_m2` (``white_only``: ``code_noise_variance_m2``) of every row, a stated
     variance (``stated2`` not NaN) overriding; ``a2`` is ``sigma_code_a_m**2``."""
     out = np.empty(sin_el.size)
     for i in range(sin_el.size):

@@ -8,7 +8,7 @@ import pytest
 
 from gnss_common import multi_gnss_rows as rows
 from gnss_common.coordinates import ecef_to_enu_rotation
-from gnss_common.spp import SppParams
+from gnss_common.spp import SppParams, cn0_factor, code_noise_variance_m2, code_variance_m2
 
 RNG_SEED = 20261207
 
@@ -63,15 +63,15 @@ def test_row_variances_equal_the_weight_model(rng):
     sisre = rng.uniform(0.3, 3, n)
     stated = np.full(n, np.nan)
     stated[5:8] = [1.5, 2.0, 0.7]
-    k = rows.cn0_factor(params, cn0)
+    k = cn0_factor(params, cn0)
     got = rows.row_variances(sin_el, k, iono, sisre, stated**2, params.sigma_code_a_m**2, params.sigma_code_b_m,
                              params.iono_error_fraction, params.sigma_tropo_zenith_m, False)
-    want = rows.code_variance_m2(params, sin_el, cn0, iono, sisre)
+    want = code_variance_m2(params, sin_el, cn0, iono, sisre)
     want[5:8] = stated[5:8] ** 2
     np.testing.assert_allclose(got, want, rtol=1e-14)
     white = rows.row_variances(sin_el, k, iono, sisre, np.full(n, np.nan), params.sigma_code_a_m**2,
                                params.sigma_code_b_m, params.iono_error_fraction, params.sigma_tropo_zenith_m, True)
-    np.testing.assert_allclose(white, rows.code_noise_variance_m2(params, sin_el, cn0), rtol=1e-14)
+    np.testing.assert_allclose(white, code_noise_variance_m2(params, sin_el, cn0), rtol=1e-14)
 
 
 def test_design_normal_rows_and_residuals(rng):
