@@ -12,7 +12,11 @@ Time. All time is message time (``header.stamp``, integer ns); no estimate depen
 a bag replayed at any speed gives identical outputs. Inputs pass through a re-ordering buffer
 (:class:`uwb_gnss_fusion.fusion_filter.ReorderBuffer`): a message is processed once a message
 stamped the window later has arrived, so measurements that arrive up to that much out of order are
-applied in stamp order (the outputs lag by the window). Later arrivals are rejected and counted
+applied in stamp order (the outputs lag by the window). At equal stamps a /gnss/integrity verdict or a
+/rfi/jammer_state goes before the measurements: gnss_integrity's verdict of an epoch carries the epoch's
+stamp and is computed from it, so it arrives after it, and within the window it still decides whether
+that epoch is fused (bags/spoofed: the epoch of the first detection is excluded, not fused and then
+excluded). Later arrivals are rejected and counted
 (``late_beyond_reorder_window``). Stamps pass :class:`rfi_node_common.input_checks.StampGate`
 first: a stamp more than ``max_stamp_jump_s`` away from the latest accepted one is rejected
 (``stamp_far_future`` / ``stamp_far_past``) unless ``stamp_jump_confirmations`` messages in a row
@@ -456,7 +460,8 @@ class FusionNode(Node):
             return False
         if decision.restart:
             self._restart(stamp_ns, previous_ns)
-        if not self._buffer.push(item):
+        # a verdict or a J/S of an instant applies to the measurements of that instant
+        if not self._buffer.push(item, context=item.kind in ('integrity', 'jammer')):
             self._late(item)
             return False
         if key is not None:
