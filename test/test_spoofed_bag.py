@@ -2,10 +2,9 @@
 
 From 60 s a spoofer takes over GPS with +3 dB and drags the position 1 m/s east with consistent
 Doppler; three UWB anchors stay authentic. Checked: no spoofing detected before the attack, a
-detection within the issue's 10 s, the fusion excluding GNSS from then on and saying so, and the
-fused position re-anchored on the UWB ranges while the spoofer goes on dragging (SPP ends 120 m
-off). The seconds before the detection (the fusion follows the spoofer for about 2 s) are reported by
-the demo and docs/gnss_integrity/fusion_spoofing.md.
+detection within the issue's 10 s, the fusion excluding GNSS from then on and saying so, the fused
+error within the issue's goal over the attack (max <= 1 m, RMS against the clean one), and the fused
+position re-anchored on the UWB ranges while the spoofer goes on dragging (SPP ends 120 m off).
 """
 
 from __future__ import annotations
@@ -80,10 +79,17 @@ def test_the_fusion_excludes_gnss_and_returns_to_the_anchors(replayed):
     rel = t - t0
     clean = h[(rel >= 10.0) & (rel < ATTACK_S)]
     assert np.sqrt(np.mean(clean**2)) < 0.1
-    # from the exclusion on (re-anchored on UWB): UWB alone on three nearly coplanar anchors, about
-    # 0.12 m; the spoofer is 2-120 m away
+    # the issue's goal with three anchors: max error <= 1 m over the attack (uwb_range_rate detects
+    # the push 0.4 s in, before the filter has followed it far: 0.36 m measured), and the horizontal
+    # RMS at most 2x the clean one (1.9x measured: 0.027 against 0.014 m). Bounds with a margin for
+    # other CPUs' rounding: the max at 1 m, the RMS at 3x
+    attack = h[rel >= ATTACK_S]
+    assert attack.size and attack.max() <= 1.0
+    assert np.sqrt(np.mean(attack**2)) <= 3.0 * np.sqrt(np.mean(clean**2))
+    # from the exclusion on, UWB alone on three nearly coplanar anchors, held on the side of their
+    # plane that GNSS gave (the mirror is 1.3 m up, 0.12 m horizontal); the spoofer is 2-120 m away
     excluded = h[rel >= ATTACK_S + 5.0]
-    assert excluded.size and np.sqrt(np.mean(excluded**2)) < 0.2 and excluded.max() < 0.5
+    assert excluded.size and np.sqrt(np.mean(excluded**2)) < 0.05 and excluded.max() < 0.2
 
 
 def test_report_scores_the_attack_and_not_a_jamming_goal(replayed, tmp_path):

@@ -55,6 +55,7 @@ from gnss_integrity.integrity_state import StateParams
 from gnss_integrity.kinematics_test import KinematicsTestParams
 from gnss_integrity.monitor import IntegrityMonitor, MonitorParams
 from gnss_integrity.outcome import STATE_DETECTED
+from gnss_integrity.uwb_range_rate import UwbRangeRateParams
 from rfi_msgs.msg import (
     GnssIntegrity,
     GnssMeasurementArray,
@@ -145,6 +146,7 @@ class IntegrityNodeParams:
         return replace(base, clock=ClockTestParams(oscillator=self.oscillator),
                        kinematics=replace(KinematicsTestParams(), error_std_m=self.gnss_error_std_m,
                                           uwb_std_m=self.uwb_std_m),
+                       range_rate=replace(UwbRangeRateParams(), uwb_std_m=self.uwb_std_m),
                        state=StateParams(persistence_s=self.detection_persistence_s,
                                          clean_period_s=self.clean_period_s))
 

@@ -11,7 +11,8 @@ rfi_msgs/GnssIntegrity message. Per epoch:
    its spectrum (:mod:`.receiver_spectrum`) and an SDR monitor's state; the J/S in the form of
    Cao et al. eq. 4 from the SDR when fresh, else from C/N0;
 3. spoofing: C/N0 (:mod:`.cn0_spoofing`), clock (:mod:`.clock_test`), kinematics against UWB and
-   Doppler (:mod:`.kinematics_test`), consistency (:mod:`.consistency`), external evidence
+   Doppler (:mod:`.kinematics_test`), the Doppler velocity against the UWB ranges' rates
+   (:mod:`.uwb_range_rate`), consistency (:mod:`.consistency`), external evidence
    (:mod:`.external_evidence`), combined by :mod:`.integrity_state`;
 4. the C/N0 model learns only from epochs that every other evidence calls clean.
 
@@ -55,6 +56,7 @@ from .outcome import (
 )
 from .receiver_agc import ReceiverAgcMonitor, ReceiverAgcParams, ReceiverInterferenceReport
 from .receiver_spectrum import ReceiverSpectrumMonitor, SpectrumDetection, SpectrumInput, SpectrumParams
+from .uwb_range_rate import UwbRangeRateParams, UwbRangeRateTest
 
 NS_PER_S = 1_000_000_000
 JAMMER_NONE = 0
@@ -78,6 +80,7 @@ class MonitorParams:
     spectrum: SpectrumParams = field(default_factory=SpectrumParams)
     clock: ClockTestParams = field(default_factory=ClockTestParams)
     kinematics: KinematicsTestParams = field(default_factory=KinematicsTestParams)
+    range_rate: UwbRangeRateParams = field(default_factory=UwbRangeRateParams)
     consistency: ConsistencyParams = field(default_factory=ConsistencyParams)
     external: ExternalEvidenceParams = field(default_factory=ExternalEvidenceParams)
     state: StateParams = field(default_factory=StateParams)
@@ -134,6 +137,7 @@ class IntegrityMonitor:
         self.spectrum = ReceiverSpectrumMonitor(p.spectrum)
         self.clock = ClockTest(p.clock)
         self.kinematics = KinematicsTest(p.kinematics)
+        self.range_rate = UwbRangeRateTest(p.range_rate)
         self.consistency = ConsistencyTests(p.consistency)
         self.external = ExternalEvidence(p.external)
         self.state = SpoofingState(p.state)
@@ -149,9 +153,10 @@ class IntegrityMonitor:
     def add_uwb(self, meas: UwbRangeMeasurement) -> None:
         """A UWB range whose anchor is in ECEF (``frame_id`` "earth"; the node converts map anchors)."""
         self.counts["uwb_ranges"] += 1
-        self.kinematics.add_range(AnchorRange(meas.stamp_ns, meas.anchor_id,
-                                              np.asarray(meas.anchor_position_m, dtype=float),
-                                              float(meas.range_m), float(meas.range_std_m)))
+        rng = AnchorRange(meas.stamp_ns, meas.anchor_id, np.asarray(meas.anchor_position_m, dtype=float),
+                          float(meas.range_m), float(meas.range_std_m))
+        self.kinematics.add_range(rng)
+        self.range_rate.add_range(rng)
 
     def add_receiver_report(self, report: ReceiverInterferenceReport) -> None:
         """The receiver's interference report (AGC, jam indicator, jamming and spoofing flags)."""
@@ -232,12 +237,15 @@ class IntegrityMonitor:
         clock = self._clock(stamp, clean_fix)
         velocity = clean_fix.velocity_ecef_mps if clean_fix.valid and clean_fix.velocity_valid else None
         kin = self.kinematics.update(stamp, position, velocity)
-        outs = [*clock, *kin, *cons]
+        rate = self.range_rate.update(stamp, position, velocity,
+                                      clean_fix.velocity_covariance[:3, :3] if velocity is not None else None)
+        outs = [*clock, *kin, rate, *cons]
         if degraded or not fix.valid:
             if degraded:
                 self.counts["epochs_degraded_by_jamming"] += 1
                 self.clock.reset()
                 self.kinematics.reset()
+                self.range_rate.reset()
                 self.consistency.reset()
             return [_unknown_like(o) for o in outs]
         return [_capped(o) if o.scope == SCOPE_SATELLITES else o for o in outs]

@@ -428,6 +428,25 @@ class FusionFilter:
         self._count("reanchor_on_uwb")
         return True
 
+    def side_of_anchor_plane(self, stamp_ns: int, min_distance_m: float = 0.1) -> int:
+        """The side of the anchors' plane the state's tag is on: +1 above, -1 below (the local vertical,
+        as ``uwb_tag_side_of_anchor_plane``), 0 when not initialised, fewer than three anchors were heard
+        within ``uwb_init_window_s``, they span no plane, or the tag is within ``min_distance_m`` of it.
+        While GNSS holds the state, this is the side GNSS chose; the caller may keep it for a period
+        without GNSS (:meth:`reanchor_on_uwb`), when three anchors alone cannot tell the mirror apart."""
+        if not self._initialized:
+            return 0
+        win = self.params.uwb_init_window_s * _NS
+        anchors = [a for (t, a, _, f) in self._recent_uwb.values() if f == self._frame and stamp_ns - t <= win]
+        plane = anchor_plane(np.array(anchors)) if len(anchors) >= 3 else None
+        if plane is None:
+            return 0
+        tag = self._nominal[0:3] + self._lever
+        up = tag / max(float(np.linalg.norm(tag)), 1.0) if self._frame == FRAME_EARTH else np.array([0.0, 0.0, 1.0])
+        n_up = plane[1] if float(plane[1] @ up) >= 0.0 else -plane[1]
+        distance = float((tag - plane[0]) @ n_up)
+        return 0 if abs(distance) < min_distance_m else (1 if distance > 0.0 else -1)
+
     def set_jammer_to_signal(self, stamp_ns: int, jammer_to_signal_db: float) -> None:
         """Record the J/S reported by the RFI monitor (rfi_msgs/JammerState.jammer_to_signal_db).
 

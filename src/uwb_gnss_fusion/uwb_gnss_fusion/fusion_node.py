@@ -245,8 +245,9 @@ class FusionNode(Node):
         self._last_js_db = math.nan
         self.spp = SinglePointPositioner()
         self.spp_cache = SppReferenceCache(self.spp, self.params.reference_max_age_s, self._count_spp)
-        self.filter = self._new_filter()
         self.exclusion = GnssExclusion(self.params.integrity_readmit_clean_s, self.params.act_on_integrity)
+        self._held_side = 0  # the side of three anchors' plane kept while all GNSS is excluded
+        self.filter = self._new_filter()
         self._sdr_js_ns: int | None = None  # stamp of the last SDR J/S processed (it takes precedence)
         self._excluded_now = 0  # satellites excluded from the epoch being published
         self.counts: Counter[str] = Counter({f'{k}_{what}': 0 for k in KINDS
@@ -615,10 +616,14 @@ class FusionNode(Node):
         change = self.exclusion.update(verdict)
         if change == 'excluded':
             self.spp_cache.clear()  # the SPP reference must not bring the spoofed position back
+            # the side of three anchors' plane GNSS held the tag on, kept while GNSS is out
+            self._held_side = self.filter.side_of_anchor_plane(verdict.stamp_ns)
             self.filter.reanchor_on_uwb(verdict.stamp_ns)  # drop the state the spoofer dragged
+            self.filter.params = self._filter_params()
             self.get_logger().warn(f'spoofing detected at {verdict.stamp_ns} ns: excluding '
                                    f'{self.exclusion.describe()} from the fusion (gnss_integrity)')
         elif change == 'readmitted':
+            self.filter.params = self._filter_params()
             self.get_logger().warn(f'GNSS readmitted at {verdict.stamp_ns} ns after '
                                    f'{self.params.integrity_readmit_clean_s:g} s without spoofing')
         if not self.params.act_on_integrity:
@@ -639,7 +644,7 @@ class FusionNode(Node):
 
     def _apply_parameters(self, old: FusionNodeParams, new: FusionNodeParams) -> None:
         self.params = new
-        self.filter.params = new.fusion_params()
+        self.filter.params = self._filter_params()
         self._count_window.window_ns = int(round(new.diagnostics_window_s * 1e9))
         self.counts['parameter_changes'] += 1
         self.get_logger().info('parameters changed: ' + ', '.join(
@@ -648,7 +653,20 @@ class FusionNode(Node):
     def _new_filter(self) -> FusionFilter:
         use_spp = self.params.use_spp_reference and self.params.use_gnss
         provider = self.spp_cache.reference if use_spp else None
-        return FusionFilter(self.params.fusion_params(), reference_provider=provider)
+        return FusionFilter(self._filter_params(), reference_provider=provider)
+
+    def _filter_params(self):
+        """The core's parameters: the node's, except while every GNSS satellite is excluded for spoofing.
+        Then the filter runs as without GNSS (``use_gnss`` false: the rules of UWB alone, e.g. the side
+        of three coplanar anchors' plane checked on every range), on the side of their plane GNSS held
+        the tag on at the exclusion (unless ``uwb_tag_side_of_anchor_plane`` is set): three anchors
+        alone cannot tell the tag from its mirror, and the state drifted there in 1-2 s on bags/spoofed
+        (1.3 m up, 0.12 m horizontal)."""
+        base = self.params.fusion_params()
+        if not self.exclusion.all_gnss():
+            return base
+        side = base.uwb_tag_side_of_anchor_plane or self._held_side
+        return dataclasses.replace(base, use_gnss=False, uwb_tag_side_of_anchor_plane=side)
 
     def _count_spp(self, valid: bool) -> None:
         self.counts['spp_valid' if valid else 'spp_invalid'] += 1

@@ -91,6 +91,10 @@ class GnssExclusion:
         """Whether some GNSS is excluded now."""
         return self.scope != SCOPE_NONE
 
+    def all_gnss(self) -> bool:
+        """Every satellite is excluded (``SCOPE_ALL``)."""
+        return self.scope == SCOPE_ALL
+
     def describe(self) -> str:
         """What is excluded, in words (for the status and the log)."""
         if self.scope == SCOPE_ALL:
