@@ -15,10 +15,11 @@ signal of each system makes its measurement and in which order the attributes ar
 
 Priority (why this order)
 -------------------------
-1. The code the suite's correlator models (:mod:`rfi_sim.correlators`, :mod:`imm_carrier`: an
-   open BPSK-type code on L1): GPS and QZSS C/A (``C``), GLONASS C/A (``C``), BeiDou B1I open
-   service (``I``). For Galileo E1 (CBOC, no C/A) the pilot ``C``, which is what most receivers
-   track and write (PolaRx5, GR50, F9P; the suite's default before every attribute was read).
+1. The kind of signal the suite's correlator models (:mod:`rfi_sim.correlators`,
+   :mod:`imm_carrier`: a BPSK code on L1 carrying 50 bit/s navigation data, i.e. GPS C/A): GPS and
+   QZSS C/A (``C``), GLONASS C/A (``C``), BeiDou B1I open service (``I``). For Galileo E1 (CBOC,
+   no C/A) the pilot ``C``, which is what most receivers track and write (PolaRx5, GR50, F9P;
+   the suite's default before every attribute was read).
    Files that carry these codes are converted exactly as before.
 2. The same signal tracked on data and pilot together (``X``), then pilot alone, then data alone
    (pilot tracking is a pure PLL without data-bit ambiguity, so it holds lock longer under
@@ -33,6 +34,10 @@ Inter-signal code biases between these attributes are decimetres to about a metr
 P1-C1), below the single-point noise the suite works with; the code used is reported (per
 constellation in :mod:`rfi_experiments.rinex_to_bag`'s summary and bag metadata) so that a
 change of code is visible.
+
+The choice is made per satellite and epoch (a satellite whose ``C1C`` range is missing in one epoch
+is measured on its next attribute in that epoch only); only the band of the measured signal is
+chosen from, since the suite builds one measurement per satellite.
 
 The pseudorange, carrier phase, Doppler and C/N0 of a satellite come from one tracking attribute:
 :func:`select_signal` takes the first attribute (in priority order) whose pseudorange is finite
