@@ -8,8 +8,9 @@ Pipeline: gnss_common.rinex (decompression, RINEX 3 mixed) -> gnss_common.measur
 orbits: GPS / Galileo / BeiDou Keplerian, GLONASS integrated; Klobuchar scaled to each carrier;
 Saastamoinen) -> per epoch and per system a plain unweighted least-squares fix from that system's
 satellites alone (own receiver clock, 10 deg mask at the truth, >= 5 satellites), with
-gnss_common.positioning.least_squares_position. GPS L1 C/A, Galileo E1 (C1C), BeiDou B1I (C2I),
-GLONASS G1 C/A (C1C).
+gnss_common.positioning.least_squares_position. GPS L1, Galileo E1, BeiDou B1I, GLONASS G1, each
+on the tracking attribute gnss_common.observation_codes picks per satellite (ESBC: C1C, C1C, C2I,
+C1C; GLONASS C1P where a satellite has no C1C range); the doc counts the codes used.
 
 Data: the one-hour cut in src/gnss_common/test/data (always), and the whole day from the
 project's data collection when given: ``--day OBS.crx.gz NAV.rnx.gz``.
@@ -30,7 +31,7 @@ from gnss_common.ephemeris import earth_rotation_correction
 from gnss_common.measurements import GnssEpochBuilder
 from gnss_common.observations import BEIDOU, GALILEO, GLONASS, GPS, QZSS
 from gnss_common.positioning import CONVERGED, least_squares_position
-from gnss_common.rinex import read_rinex_nav, read_rinex_obs
+from gnss_common.rinex import SYSTEM_NAMES, read_rinex_nav, read_rinex_obs
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "src" / "gnss_common" / "test" / "data"
@@ -63,7 +64,9 @@ def fix(observations: list, truth: np.ndarray) -> np.ndarray | None:
     return sol.x[:3].copy() if sol.status == CONVERGED else None
 
 
-def evaluate(obs_path: Path, nav_path: Path) -> tuple[list[str], int, dict[str, dict[str, int]], tuple[int, int]]:
+def evaluate(
+    obs_path: Path, nav_path: Path
+) -> tuple[list[str], int, dict[str, dict[str, int]], tuple[int, int], dict[str, dict[str, int]]]:
     obs = read_rinex_obs(obs_path)
     nav = read_rinex_nav(nav_path)
     truth = np.asarray(obs.header.approx_position_ecef_m)
@@ -72,11 +75,15 @@ def evaluate(obs_path: Path, nav_path: Path) -> tuple[list[str], int, dict[str, 
     builder = GnssEpochBuilder.from_rinex(obs, nav)
     enu: dict[int, list[np.ndarray]] = {c: [] for c, _ in SYSTEMS}
     skipped: dict[str, dict[str, int]] = {}
+    codes: dict[str, dict[str, int]] = {}
     qzss_total = qzss_max = 0
     for epoch in obs.epochs:
         r = builder.build(epoch)
         n_qzss = sum(1 for o in r.epoch.observations if o.constellation == QZSS)
         qzss_total, qzss_max = qzss_total + n_qzss, max(qzss_max, n_qzss)
+        for sat, used in r.signal_codes.items():
+            dst = codes.setdefault(SYSTEM_NAMES[sat[0]], {})
+            dst[used] = dst.get(used, 0) + 1
         for name, reasons in r.skipped_by_constellation.items():
             dst = skipped.setdefault(name, {})
             for reason, n in reasons.items():
@@ -95,7 +102,7 @@ def evaluate(obs_path: Path, nav_path: Path) -> tuple[list[str], int, dict[str, 
             f"{np.sqrt(np.mean(e[:, 2]**2)):.2f} | {np.sqrt(np.mean(d3**2)):.2f} | {np.median(d3):.2f} | "
             f"{np.percentile(d3, 95):.2f} | {d3.max():.2f} |"
         )
-    return rows, len(obs.epochs), skipped, (qzss_total, qzss_max)
+    return rows, len(obs.epochs), skipped, (qzss_total, qzss_max), codes
 
 
 def main() -> None:
@@ -119,13 +126,17 @@ def main() -> None:
     if args.day:
         sections.append(("whole day (2020-06-25, 2,880 epochs)", tuple(args.day)))
     for title, (obs_path, nav_path) in sections:
-        rows, n, skipped, (qzss_total, qzss_max) = evaluate(obs_path, nav_path)
+        rows, n, skipped, (qzss_total, qzss_max), codes = evaluate(obs_path, nav_path)
         text += [f"## {title}", "", head, *rows, "",
                  f"QZSS L1 C/A: {qzss_total} measurements built, at most {qzss_max} satellites in one epoch "
                  "(too few for a fix from QZSS alone).", "",
                  "Satellite measurements skipped, by constellation:", ""]
         for name, reasons in sorted(skipped.items()):
             text.append(f"- {name}: " + ", ".join(f"{r} {c}" for r, c in sorted(reasons.items())))
+        text += ["", "Observation codes the measurements were built from (pseudorange, Doppler and C/N0 of one",
+                 "tracking attribute, by the priority of gnss_common.observation_codes; before the mask):", ""]
+        for name, used in sorted(codes.items()):
+            text.append(f"- {name}: " + ", ".join(f"{c} {k}" for c, k in sorted(used.items(), key=lambda kv: -kv[1])))
         text.append("")
         print("\n".join(text[-len(rows) - 4:]))
     OUT.parent.mkdir(parents=True, exist_ok=True)

@@ -2,11 +2,14 @@
 
 For every satellite of an epoch whose system has a broadcast orbit model here (GPS, Galileo,
 BeiDou, QZSS: Keplerian, :mod:`gnss_common.ephemeris`; GLONASS: integrated,
-:mod:`gnss_common.glonass`), on one signal per system (:data:`DEFAULT_SIGNALS`: GPS/QZSS L1 C/A,
-Galileo E1, BeiDou B1I, GLONASS G1 C/A): the code pseudorange (GPS: ``C1C`` / ``C1``), the
-pseudorange rate from the Doppler of the same signal with the sign of
+:mod:`gnss_common.glonass`), on one signal per system
+(:data:`gnss_common.observation_codes.DEFAULT_SIGNALS`: GPS L1, QZSS L1, Galileo E1, BeiDou B1I,
+GLONASS G1), on one tracking attribute picked per satellite and epoch by the priority there (GPS:
+``C1C`` first, then ``C1X``, ..., ``C1W``; RINEX 2 ``C1``): the code pseudorange, the
+pseudorange rate from the Doppler of the same attribute with the sign of
 rfi_msgs/GnssMeasurement.msg (``-wavelength * doppler_hz``, positive when the range grows, the
-wavelength that of the signal's carrier, per channel for GLONASS), C/N0 (NaN when absent), the
+wavelength that of the signal's carrier, per channel for GLONASS), C/N0 of the same attribute
+(NaN when absent; never another attribute's), the
 satellite state at transmit time from the broadcast ephemeris, and Klobuchar / Saastamoinen
 delays (the Klobuchar L1 delay scaled to the signal's carrier) evaluated at a receiver reference
 position:
@@ -15,7 +18,9 @@ the header APPROX POSITION when present, else a coarse per-epoch single-point fi
 
 Satellites that cannot be modelled are skipped and counted by reason in the result, in total and
 per constellation (SBAS and NavIC, and systems left out of ``constellations``:
-``unsupported_constellation``).
+``unsupported_constellation``; no pseudorange on any attribute of the signal's band:
+``missing_pseudorange``). The code used for each built satellite is in
+:attr:`EpochBuildResult.signal_codes`.
 
 Notes
 -----
@@ -32,12 +37,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gnss_common.constants import (
-    BEIDOU_B1I_FREQUENCY_HZ,
-    GALILEO_E1_FREQUENCY_HZ,
-    GPS_L1_FREQUENCY_HZ,
-    SPEED_OF_LIGHT_MPS,
-)
+from gnss_common.constants import SPEED_OF_LIGHT_MPS
 from gnss_common.coordinates import azimuth_elevation, ecef_to_geodetic
 from gnss_common.corrections import ionosphere_frequency_scale, klobuchar_delay_m, troposphere_delay_m
 from gnss_common.ephemeris import (
@@ -56,6 +56,7 @@ from gnss_common.glonass import (
     pack_glonass,
 )
 from gnss_common.gps_time import gps_to_ros_stamp_ns
+from gnss_common.observation_codes import DEFAULT_SIGNALS, SignalPreference, select_signal
 from gnss_common.observations import BEIDOU, GALILEO, GLONASS, GPS, QZSS, SBAS, GnssEpoch, SatelliteObservation
 from gnss_common.positioning import CONVERGED, least_squares_position
 from gnss_common.rinex import SYSTEM_NAMES, RinexNav, RinexObs, RinexObsEpoch
@@ -78,41 +79,10 @@ SUPPORTED_SYSTEMS = ("G", "E", "C", "R", "J")
 
 
 @dataclass(frozen=True)
-class SignalCodes:
-    """Which RINEX observables make one system's measurement, and its carrier.
-
-    Attributes:
-        pseudorange_codes: code observables tried in order, m.
-        doppler_codes: Doppler observables of the same signal tried in order, Hz.
-        cn0_codes: signal-strength observables tried in order, dB-Hz.
-        carrier_frequency_hz: the signal's carrier, Hz; NaN for GLONASS FDMA (per channel k).
-    """
-
-    pseudorange_codes: tuple[str, ...]
-    doppler_codes: tuple[str, ...]
-    cn0_codes: tuple[str, ...]
-    carrier_frequency_hz: float
-
-
-DEFAULT_SIGNALS = {
-    "E": SignalCodes(("C1C", "C1X", "C1"), ("D1C", "D1X", "D1"), ("S1C", "S1X", "S1"), GALILEO_E1_FREQUENCY_HZ),
-    # B1I: C2I in RINEX 3.02+, C1I in 3.01 files.
-    "C": SignalCodes(("C2I", "C1I"), ("D2I", "D1I"), ("S2I", "S1I"), BEIDOU_B1I_FREQUENCY_HZ),
-    "R": SignalCodes(("C1C", "C1"), ("D1C", "D1"), ("S1C", "S1"), math.nan),
-    "J": SignalCodes(("C1C", "C1"), ("D1C", "D1"), ("S1C", "S1"), GPS_L1_FREQUENCY_HZ),
-}
-"""Signals used per non-GPS system (GPS: :class:`MeasurementBuilderParams` ``*_codes``): Galileo E1
-(OS SIS ICD), BeiDou B1I (its broadcast clock is corrected with TGD1), GLONASS G1 C/A, QZSS L1 C/A."""
-
-
-@dataclass(frozen=True)
 class MeasurementBuilderParams:
     """Parameters of :class:`GnssEpochBuilder`.
 
     Attributes:
-        pseudorange_codes: observable codes tried in order for the L1 C/A pseudorange.
-        doppler_codes: codes tried in order for the L1 Doppler, Hz.
-        cn0_codes: codes tried in order for the L1 C/N0, dB-Hz.
         min_pseudorange_m: smallest plausible pseudorange, m (GPS ranges are 20000-26000 km plus
             the receiver clock offset).
         max_pseudorange_m: largest plausible pseudorange, m.
@@ -126,12 +96,10 @@ class MeasurementBuilderParams:
         apply_troposphere: compute the Saastamoinen delay (else 0).
         constellations: RINEX system letters to build (of :data:`SUPPORTED_SYSTEMS`); satellites
             of other systems are skipped as ``unsupported_constellation``.
-        signals: the signal of each non-GPS system (:data:`DEFAULT_SIGNALS`).
+        signals: the signal of each system and its tracking attributes in priority order
+            (:data:`gnss_common.observation_codes.DEFAULT_SIGNALS`).
     """
 
-    pseudorange_codes: tuple[str, ...] = ("C1C", "C1")
-    doppler_codes: tuple[str, ...] = ("D1C", "D1")
-    cn0_codes: tuple[str, ...] = ("S1C", "S1")
     min_pseudorange_m: float = 1.0e7
     max_pseudorange_m: float = 4.0e7
     max_pseudorange_high_orbit_m: float = 4.8e7
@@ -140,17 +108,15 @@ class MeasurementBuilderParams:
     apply_ionosphere: bool = True
     apply_troposphere: bool = True
     constellations: tuple[str, ...] = SUPPORTED_SYSTEMS
-    signals: dict[str, SignalCodes] = field(default_factory=lambda: dict(DEFAULT_SIGNALS), hash=False)
+    signals: dict[str, SignalPreference] = field(default_factory=lambda: dict(DEFAULT_SIGNALS), hash=False)
 
     def __post_init__(self) -> None:
-        if not self.pseudorange_codes:
-            raise ValueError("pseudorange_codes must name at least one observable")
         unknown = [c for c in self.constellations if c not in SUPPORTED_SYSTEMS]
         if unknown:
             raise ValueError(f"constellations must be among {SUPPORTED_SYSTEMS}, got {unknown}")
         if not (math.isfinite(self.max_glonass_age_s) and self.max_glonass_age_s > 0.0):
             raise ValueError(f"max_glonass_age_s must be finite and > 0, got {self.max_glonass_age_s}")
-        missing = [c for c in self.constellations if c != "G" and c not in self.signals]
+        missing = [c for c in self.constellations if c not in self.signals]
         if missing:
             raise ValueError(f"no signal given for constellation(s) {missing}")
         if not (
@@ -186,6 +152,9 @@ class EpochBuildResult:
         extra: other counts (``ionosphere_unavailable``).
         skipped_by_constellation: constellation name (:data:`gnss_common.rinex.SYSTEM_NAMES`,
             e.g. ``"galileo"``) -> reason -> satellites skipped in this epoch (only nonzero entries).
+        signal_codes: satellite id (``"C05"``) -> pseudorange observable its measurement was made
+            from (``"C2X"``, ``"C1"``; Doppler, C/N0 of the same attribute), for every satellite
+            of ``epoch``.
     """
 
     epoch: GnssEpoch
@@ -195,14 +164,7 @@ class EpochBuildResult:
     reference_source: str
     extra: dict[str, float] = field(default_factory=dict)
     skipped_by_constellation: dict[str, dict[str, int]] = field(default_factory=dict)
-
-
-def _first_finite(values: dict[str, float], codes: Sequence[str]) -> float:
-    for code in codes:
-        v = values.get(code, math.nan)
-        if math.isfinite(v):
-            return v
-    return math.nan
+    signal_codes: dict[str, str] = field(default_factory=dict)
 
 
 def coarse_position_fix(
@@ -261,6 +223,7 @@ class GnssEpochBuilder:
         iono_beta: np.ndarray | None,
         reference_position_ecef_m: np.ndarray | None = None,
         params: MeasurementBuilderParams | None = None,
+        rinex_version: float | None = None,
     ) -> None:
         """Args:
         ephemerides: broadcast records of any systems (Keplerian :class:`GpsEphemeris` of GPS,
@@ -271,8 +234,11 @@ class GnssEpochBuilder:
         reference_position_ecef_m: receiver position for the delays, m, (3,); None for a
             per-epoch coarse fix.
         params: builder parameters (defaults if None).
+        rinex_version: version of the observation files the epochs come from (BeiDou band
+            numbers changed in 3.02); None for 3.02 or later.
         """
         self.params = params if params is not None else MeasurementBuilderParams()
+        self.rinex_version = rinex_version
         kepler = [e for e in ephemerides if isinstance(e, GpsEphemeris)]
         glonass = [e for e in ephemerides if isinstance(e, GlonassEphemeris)]
         self._store = EphemerisStore(kepler, self.params.max_ephemeris_age_s)
@@ -303,14 +269,15 @@ class GnssEpochBuilder:
     def from_rinex(
         cls, obs: RinexObs, nav: RinexNav, params: MeasurementBuilderParams | None = None
     ) -> GnssEpochBuilder:
-        """Builder using the nav file's records of every system, its Klobuchar parameters and the
-        obs header APPROX POSITION."""
+        """Builder using the nav file's records of every system, its Klobuchar parameters, the
+        obs header APPROX POSITION and the obs file's RINEX version."""
         return cls(
             (*nav.keplerian_ephemerides, *nav.glonass_ephemerides),
             nav.header.iono_alpha,
             nav.header.iono_beta,
             obs.header.approx_position_ecef_m,
             params,
+            obs.header.version,
         )
 
     def build(self, obs_epoch: RinexObsEpoch) -> EpochBuildResult:
@@ -337,7 +304,6 @@ class GnssEpochBuilder:
             counts = by_system.setdefault(name, {})
             counts[reason] = counts.get(reason, 0) + 1
 
-        gps_codes = SignalCodes(p.pseudorange_codes, p.doppler_codes, p.cn0_codes, GPS_L1_FREQUENCY_HZ)
         systems: list[str] = []
         prns: list[int] = []
         ephs: list[GpsEphemeris | GlonassEphemeris] = []
@@ -345,17 +311,19 @@ class GnssEpochBuilder:
         dops: list[float] = []
         cn0s: list[float] = []
         freqs: list[float] = []
+        codes_used: dict[str, str] = {}
         for sat_id in sorted(obs_epoch.observations):
             values = obs_epoch.observations[sat_id]
             sys_char = sat_id[0]
             if sys_char not in p.constellations:
                 skip(sat_id, "unsupported_constellation")
                 continue
-            codes = gps_codes if sys_char == "G" else p.signals[sys_char]
-            pr = _first_finite(values, codes.pseudorange_codes)
-            if not math.isfinite(pr):
+            signal = p.signals[sys_char]
+            selected = select_signal(values, signal, self.rinex_version)
+            if selected is None:
                 skip(sat_id, "missing_pseudorange")
                 continue
+            pr = selected.pseudorange_m
             max_pr = p.max_pseudorange_high_orbit_m if sys_char in ("C", "J") else p.max_pseudorange_m
             if not p.min_pseudorange_m <= pr <= max_pr:
                 skip(sat_id, "pseudorange_out_of_range")
@@ -367,16 +335,17 @@ class GnssEpochBuilder:
                 freq = glonass_g1_frequency_hz(eph.frequency_channel) if eph is not None else math.nan
             else:
                 eph, reason = self._store.select(prn, week, tow, sys_char)
-                freq = codes.carrier_frequency_hz
+                freq = signal.carrier_frequency_hz
             if eph is None:
                 skip(sat_id, reason)
                 continue
-            cn0 = _first_finite(values, codes.cn0_codes)
+            cn0 = selected.cn0_dbhz
+            codes_used[sat_id] = selected.pseudorange_observable
             systems.append(sys_char)
             prns.append(prn)
             ephs.append(eph)
             prs.append(pr)
-            dops.append(_first_finite(values, codes.doppler_codes))
+            dops.append(selected.doppler_hz)
             cn0s.append(cn0 if 0.0 < cn0 < 100.0 else math.nan)
             freqs.append(freq)
 
@@ -387,7 +356,7 @@ class GnssEpochBuilder:
             epoch = GnssEpoch(
                 stamp_ns=gps_to_ros_stamp_ns(week, tow), gps_week=week, gps_time_of_week_s=tow, observations=()
             )
-            return EpochBuildResult(epoch, skipped, tuple(skipped_sats), ref, source, extra, by_system)
+            return EpochBuildResult(epoch, skipped, tuple(skipped_sats), ref, source, extra, by_system, codes_used)
 
         pr_arr = np.asarray(prs)
         n = len(ephs)
@@ -451,7 +420,7 @@ class GnssEpochBuilder:
             observations=observations,
         )
         return EpochBuildResult(
-            epoch, skipped, tuple(skipped_sats), np.array(ref, dtype=float), source, extra, by_system
+            epoch, skipped, tuple(skipped_sats), np.array(ref, dtype=float), source, extra, by_system, codes_used
         )
 
 

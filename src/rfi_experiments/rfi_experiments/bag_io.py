@@ -171,6 +171,17 @@ class BagWriter:
         self._writer.write(self._connection(topic, msgtype), int(stamp_ns), raw)
         self.counts[topic] += 1
 
+    def set_custom_data(self, key: str, value: str) -> None:
+        """Store ``key: value`` in the bag's ``metadata.yaml`` ``custom_data`` (rosbag2 metadata
+        version 6 and later; ``ros2 bag info`` and :attr:`BagReader.custom_data` show it).
+
+        Raises:
+            BagError: key or value is not a string.
+        """
+        if not isinstance(key, str) or not isinstance(value, str):
+            raise BagError(f'custom data must be str: str, got {type(key).__name__}: {type(value).__name__}')
+        self._writer.set_custom_data(key, value)
+
 
 class BagReader:
     """Read an mcap (or sqlite3) bag written by rosbag2 or by :class:`BagWriter`.
@@ -202,6 +213,11 @@ class BagReader:
     def topics(self) -> dict[str, tuple[str, int]]:
         """Topic name -> (message type, message count)."""
         return {name: (info.msgtype or '', info.msgcount) for name, info in self._reader.topics.items()}
+
+    @property
+    def custom_data(self) -> dict[str, str]:
+        """The ``custom_data`` of the bag's metadata (empty when it has none)."""
+        return dict(self._reader.storage.metadata.custom or {})
 
     @property
     def duration_ns(self) -> int:

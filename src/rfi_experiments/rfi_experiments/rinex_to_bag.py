@@ -4,10 +4,16 @@ Each observation epoch of the RINEX 2/3/4 file (plain or compressed: ``.gz``, ``
 ``.crx`` / ``.crx.gz`` as stations publish them) becomes one ``rfi_msgs/GnssMeasurementArray`` on
 ``/gnss/measurements``, built by :class:`gnss_common.measurements.GnssEpochBuilder` for every
 constellation whose satellite state can be computed from the navigation file(s) given (one mixed
-file or one per system): GPS and QZSS L1 C/A, Galileo E1, BeiDou B1I, GLONASS G1 (integrated
+file or one per system): GPS and QZSS L1, Galileo E1, BeiDou B1I, GLONASS G1 (integrated
 orbits): pseudorange, Doppler rate (with the signal's wavelength), C/N0, carrier frequency,
 satellite state at transmission, broadcast clock, Klobuchar (scaled to the carrier) and
-Saastamoinen delays. ``--constellations`` restricts the set. SBAS and NavIC satellites are skipped
+Saastamoinen delays. Every tracking attribute of the signal's band is read (RINEX 3.05 / 4.00
+tables: e.g. B1I as ``C2I``, ``C2X`` or ``C2Q``; Galileo E1 as ``C1C``, ``C1X``, ``C1B``, ...); one
+is picked per satellite and epoch by the priority of
+:data:`gnss_common.observation_codes.DEFAULT_SIGNALS`, and pseudorange, Doppler and C/N0 all
+come from it. The codes used are counted per constellation, printed in the summary and stored in
+the bag's metadata (``custom_data``: :data:`CODES_METADATA_KEY`, :data:`PRIORITY_METADATA_KEY`,
+JSON). ``--constellations`` restricts the set. SBAS and NavIC satellites are skipped
 (no orbit model here) and counted, as every skipped satellite is, per constellation and reason.
 When the observation header has an APPROX POSITION XYZ, the same point is
 written on ``/truth/position`` (``geometry_msgs/PointStamped``, frame "earth") at every epoch: it
@@ -33,6 +39,7 @@ satellite position, Hofmann-Wellenhof et al. 2008, eq. 10.41-10.43).
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
 from collections.abc import Sequence
@@ -64,6 +71,12 @@ MEASUREMENTS_TOPIC = "/gnss/measurements"
 TRUTH_TOPIC = "/truth/position"
 EARTH_FRAME_ID = "earth"
 BELOW_MASK = "below_elevation_mask"
+CODES_METADATA_KEY = "gnss_observation_codes"
+"""Bag ``custom_data`` key: JSON ``{constellation: {pseudorange observable: measurements}}``, e.g.
+``{"beidou": {"C2X": 20099}}`` (Doppler and C/N0 of each measurement are of the same attribute)."""
+PRIORITY_METADATA_KEY = "gnss_observation_code_priority"
+"""Bag ``custom_data`` key: JSON ``{constellation: [pseudorange observables in the order tried]}``
+for the file's RINEX version (:data:`gnss_common.observation_codes.DEFAULT_SIGNALS`)."""
 
 
 @dataclass(frozen=True)
@@ -81,6 +94,11 @@ class RinexConversion:
             measurements skipped over the file (nonzero entries only).
         nav_records: system letter -> navigation records used; ``nav_skipped``: system letter ->
             reason -> navigation records not used (e.g. SBAS, Galileo F/NAV).
+        codes_by_constellation: constellation name -> pseudorange observable (``"C2X"``,
+            ``"C1C"``, RINEX 2 ``"C1"``) -> measurements written from it (pseudorange, Doppler and
+            C/N0 of one tracking attribute).
+        code_priority: constellation name -> pseudorange observables in the order they were tried
+            (for the file's RINEX version), for the constellations converted.
     """
 
     epochs: tuple[GnssEpoch, ...]
@@ -90,6 +108,8 @@ class RinexConversion:
     skipped_by_constellation: dict[str, dict[str, int]] = field(default_factory=dict)
     nav_records: dict[str, int] = field(default_factory=dict)
     nav_skipped: dict[str, dict[str, int]] = field(default_factory=dict)
+    codes_by_constellation: dict[str, dict[str, int]] = field(default_factory=dict)
+    code_priority: dict[str, tuple[str, ...]] = field(default_factory=dict)
 
     @property
     def measurement_count(self) -> int:
@@ -173,6 +193,8 @@ def convert_rinex(
     skipped = dict.fromkeys((*SKIP_REASONS, BELOW_MASK), 0)
     by_system: dict[str, dict[str, int]] = {}
     names = {code: SYSTEM_NAMES[letter] for letter, code in CONSTELLATION_CODES.items()}
+    letters = {code: letter for letter, code in CONSTELLATION_CODES.items()}
+    codes: dict[str, dict[str, int]] = {}
     epochs = []
     without_ref = 0
     for rinex_epoch in obs.epochs:
@@ -192,6 +214,10 @@ def convert_rinex(
                     dst = by_system.setdefault(names.get(o.constellation, str(o.constellation)), {})
                     dst[BELOW_MASK] = dst.get(BELOW_MASK, 0) + 1
         without_ref += 0 if applied else 1
+        for o in epoch.observations:
+            used = result.signal_codes[f"{letters[o.constellation]}{o.svid:02d}"]
+            dst = codes.setdefault(names[o.constellation], {})
+            dst[used] = dst.get(used, 0) + 1
         epochs.append(epoch)
     truth = obs.header.approx_position_ecef_m
     return RinexConversion(
@@ -202,11 +228,18 @@ def convert_rinex(
         skipped_by_constellation=by_system,
         nav_records=nav.record_counts(),
         nav_skipped={k: dict(v) for k, v in nav.skipped_reasons.items()},
+        codes_by_constellation=codes,
+        code_priority={
+            SYSTEM_NAMES[letter]: params.signals[letter].pseudorange_observables(obs.header.version)
+            for letter in params.constellations
+        },
     )
 
 
 def write_bag(conversion: RinexConversion, out: str | Path, *, overwrite: bool = False) -> dict[str, int]:
-    """Write the converted epochs (and truth) to a bag; log time = header stamp.
+    """Write the converted epochs (and truth) to a bag; log time = header stamp. The observation
+    codes used and their priority go into the metadata's ``custom_data`` (JSON under
+    :data:`CODES_METADATA_KEY` and :data:`PRIORITY_METADATA_KEY`).
 
     Args:
         conversion: output of :func:`convert_rinex`.
@@ -220,6 +253,9 @@ def write_bag(conversion: RinexConversion, out: str | Path, *, overwrite: bool =
         BagError: the output exists (without ``overwrite``) or cannot be written.
     """
     with BagWriter(out, overwrite=overwrite) as bag:
+        bag.set_custom_data(CODES_METADATA_KEY, json.dumps(conversion.codes_by_constellation, sort_keys=True))
+        bag.set_custom_data(PRIORITY_METADATA_KEY, json.dumps(
+            {k: list(v) for k, v in conversion.code_priority.items()}, sort_keys=True))
         for epoch in conversion.epochs:
             bag.write(MEASUREMENTS_TOPIC, epoch_to_msg(epoch, EARTH_FRAME_ID), epoch.stamp_ns)
             if conversion.truth_position_ecef_m is not None:
@@ -293,6 +329,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     print("  measurements by constellation:")
     for name, n in sorted(conversion.measurements_by_constellation().items()):
         print(f"    {name:<26} {n}")
+    print("  observation codes used (pseudorange, Doppler, C/N0 of one tracking attribute):")
+    for name, used in sorted(conversion.codes_by_constellation.items()):
+        text = ", ".join(f"{c} {n}" for c, n in sorted(used.items(), key=lambda kv: (-kv[1], kv[0])))
+        print(f"    {name:<10} {text}")
     print("  navigation records used by system:  " + (
         ", ".join(f"{SYSTEM_NAMES.get(k, k)} {n}" for k, n in sorted(conversion.nav_records.items())) or "none"))
     for letter, reasons in sorted(conversion.nav_skipped.items()):

@@ -8,15 +8,15 @@ imports rclpy.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from gnss_common.constants import GPS_L1_FREQUENCY_HZ, SPEED_OF_LIGHT_MPS
+from gnss_common.constants import SPEED_OF_LIGHT_MPS
 from gnss_common.glonass import glonass_g1_frequency_hz
-from gnss_common.measurements import CONSTELLATION_CODES, MeasurementBuilderParams, SignalCodes
+from gnss_common.measurements import CONSTELLATION_CODES, MeasurementBuilderParams
+from gnss_common.observation_codes import select_signal
 from gnss_common.observations import SatelliteObservation
 from gnss_common.rinex import RinexObsEpoch
 
@@ -173,19 +173,21 @@ def rawx_to_observations(rawx: RawxEpoch) -> tuple[RinexObsEpoch, int]:
 def observation_without_ephemeris(sat: str, values: dict[str, float], rawx: RawxEpoch,
                                   params: MeasurementBuilderParams) -> SatelliteObservation:
     """The measurement of a satellite without a usable ephemeris, with NaN satellite states:
-    the observables the builder would take (same codes, same C/N0 bounds), the Doppler rate on
-    the signal's carrier (GLONASS: the channel of the RAWX freqId; NaN when unknown)."""
-    p = params
+    the observables the builder would take (same tracking attribute, picked by
+    :func:`gnss_common.observation_codes.select_signal`; same C/N0 bounds), the Doppler rate on
+    the signal's carrier (GLONASS: the channel of the RAWX freqId; NaN when unknown). All NaN when
+    no attribute of the signal's band has a pseudorange."""
     system = sat[0]
-    codes = (SignalCodes(p.pseudorange_codes, p.doppler_codes, p.cn0_codes, GPS_L1_FREQUENCY_HZ)
-             if system == "G" else p.signals[system])
-    pr = _first_finite(values, codes.pseudorange_codes)
-    cn0 = _first_finite(values, codes.cn0_codes)
-    freq = codes.carrier_frequency_hz
+    signal = params.signals[system]
+    selected = select_signal(values, signal)
+    pr = selected.pseudorange_m if selected is not None else math.nan
+    cn0 = selected.cn0_dbhz if selected is not None else math.nan
+    doppler = selected.doppler_hz if selected is not None else math.nan
+    freq = signal.carrier_frequency_hz
     if system == "R":
         freq = next((glonass_g1_frequency_hz(m.freq_id - 7) for m in rawx.measurements
                      if m.gnss_id == 6 and m.pseudorange_m == pr and 0 <= m.freq_id <= 13), math.nan)
-    rate = -(SPEED_OF_LIGHT_MPS / freq) * _first_finite(values, codes.doppler_codes)
+    rate = -(SPEED_OF_LIGHT_MPS / freq) * doppler
     nan3 = np.full(3, math.nan)
     return SatelliteObservation(
         constellation=CONSTELLATION_CODES[system], svid=int(sat[1:]), pseudorange_m=pr,
@@ -194,11 +196,3 @@ def observation_without_ephemeris(sat: str, values: dict[str, float], rawx: Rawx
         satellite_clock_drift_mps=math.nan, ionosphere_delay_m=math.nan, troposphere_delay_m=math.nan,
         carrier_frequency_hz=freq)
 
-
-def _first_finite(values: dict[str, float], codes: Sequence[str]) -> float:
-    """The first finite observable of ``codes`` in ``values`` (NaN if none)."""
-    for code in codes:
-        v = values.get(code, math.nan)
-        if math.isfinite(v):
-            return float(v)
-    return math.nan
