@@ -69,6 +69,10 @@ def test_the_fusion_excludes_gnss_and_returns_to_the_anchors(replayed):
     status = result.messages('/fusion/status')
     late = [s for s in status if _s(s.header) - t0 >= ATTACK_S + 10.0]
     assert late and all(s.gnss_excluded == 3 for s in late)
+    fusion = [{kv.key: kv.value for kv in st.values} for a in result.messages('/diagnostics') for st in a.status
+              if st.name == 'uwb_gnss_fusion']
+    assert fusion and fusion[-1]['gnss_excluded_for_spoofing'] != 'none'
+    assert fusion[-1]['anchor_plane_side_held'] in ('1', '-1')  # the side GNSS held, kept without it
     assert all(s.gnss_excluded == 0 for s in status if _s(s.header) - t0 < ATTACK_S)
     tt = np.array([_s(m.header) for m in truth])
     tp = np.array([[m.point.x, m.point.y, m.point.z] for m in truth])

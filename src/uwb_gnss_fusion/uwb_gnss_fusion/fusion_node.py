@@ -849,6 +849,8 @@ class FusionNode(Node):
         values['jammer_to_signal_db'] = self._last_js_db
         values['parameter_changes_refused'] = self.runtime.changes_refused
         values['gnss_excluded_for_spoofing'] = self.exclusion.describe()
+        # the side of the anchors' plane the filter holds while all GNSS is excluded (0: none held)
+        values['anchor_plane_side_held'] = self._held_side if self.exclusion.all_gnss() else 0
         values.update({f'integrity.{k}': v for k, v in self.exclusion.counts.items()})
         anchors = self.filter.uwb_anchors_heard(stamp_ns)
         mirror = anchors == 3 and self.filter.params.uwb_tag_side_of_anchor_plane == 0
