@@ -27,7 +27,9 @@ Pure (no rclpy). Per epoch, on the references of :meth:`gnss_integrity.cn0_model
   of the combined one and the spread (1.2533 x 1.4826 MAD / sqrt(n)), with ``jsr_std_floor_db`` in
   quadrature. Lost satellites bound J/S from below (``jsr_lower_bound_db``); the estimate is raised
   to that bound (the survivors of a strong jammer are those with C/N0 noise upwards) and is the bound
-  when no satellite survives. Reported only while the decision is SUSPECT or ALARM; otherwise NaN
+  when no satellite survives, then flagged as a lower bound (``jammer_to_signal_is_lower_bound``: at
+  J/S above about 30 dB a receiver with a 30 dB-Hz loss of lock tracks nothing, and C/N0 cannot say
+  by how much the jammer exceeds what lost them). Reported only while the decision is SUSPECT or ALARM; otherwise NaN
   with the upper bound ``jsr_upper_bound_db`` (the J/S that drops the median satellite by the suspect
   threshold).
 
@@ -211,6 +213,9 @@ class Cn0JammingResult:
             one input of the learning gate.
         model_state: ``cn0_model.MODEL_*``.
         drop_db: per input row, the drop d_i, dB (NaN: no reference).
+        jammer_to_signal_is_lower_bound: every satellite with a significant drop was lost, so
+            ``jammer_to_signal_db`` is the lost satellites' bound: the J/S is at least that, not
+            about that (C/N0 says nothing more once the receiver tracks nothing).
     """
 
     outcome: TestOutcome
@@ -227,6 +232,7 @@ class Cn0JammingResult:
     epoch_clean: bool
     model_state: int
     drop_db: np.ndarray
+    jammer_to_signal_is_lower_bound: bool = False
 
 
 class Cn0JammingDetector:
@@ -264,9 +270,9 @@ class Cn0JammingDetector:
         alarm = max(p.min_drop_alarm_db, self._z_alarm * std, sus)
         stat, sus_w, alarm_w = self._persist.update(ref.epoch.stamp_ns, common, sus, alarm)
         decision = decide(stat, sus_w, alarm_w)
-        js, js_std, js_lb, js_ub = math.nan, math.nan, math.nan, math.nan
+        js, js_std, js_lb, js_ub, bound_only = math.nan, math.nan, math.nan, math.nan, False
         if decision >= DECISION_SUSPECT:
-            js, js_std, js_lb = self._jsr(ref, use, drop, lost)
+            js, js_std, js_lb, bound_only = self._jsr(ref, use, drop, lost)
         elif math.isfinite(stat) and n_used:  # the J/S that drops the median satellite by the threshold
             med = fast_median(ref.expected_dbhz[use])
             js_ub = 10.0 * math.log10(p.quality_factor * p.chip_rate_hz * 10.0 ** (-med / 10.0)
@@ -277,11 +283,12 @@ class Cn0JammingDetector:
         outcome = TestOutcome(TEST_NAME, CATEGORY_JAMMING, decision, stat, sus_w, alarm_w,
                               p.false_alarm_probability, "dB")
         return Cn0JammingResult(outcome, ref.elevation_model_in_use, evidence, common, std, n_used, n_lost,
-                                js, js_std, js_lb, js_ub, common < sus, ref.model_state, drop)
+                                js, js_std, js_lb, js_ub, common < sus, ref.model_state, drop, bound_only)
 
     def _jsr(self, ref: Cn0Reference, use: np.ndarray, drop: np.ndarray,
-             lost: np.ndarray) -> tuple[float, float, float]:
-        """J/S, its 1-sigma and the lost satellites' lower bound, dB (module docstring)."""
+             lost: np.ndarray) -> tuple[float, float, float, bool]:
+        """J/S, its 1-sigma and the lost satellites' lower bound, dB, and whether the J/S is that bound
+        alone (no satellite with a significant drop survived; module docstring)."""
         p = self.params
         std_i = ref.std_db
         cand = use & (drop >= np.maximum(p.jsr_min_drop_db, 2.0 * np.nan_to_num(std_i, nan=np.inf)))
@@ -296,11 +303,11 @@ class Cn0JammingDetector:
         ok = np.isfinite(js_i) & np.isfinite(s_i)
         js_i, s_i = js_i[ok], s_i[ok]
         if js_i.size == 0:  # every satellite with a significant drop lost: J/S is at least the bound
-            return js_lb, lb_std, js_lb
+            return js_lb, lb_std, js_lb, math.isfinite(js_lb)
         w = 1.0 / s_i**2
         js = weighted_median(js_i, w)
         spread = 1.4826 * float(np.median(np.abs(js_i - js))) * MEDIAN_EFFICIENCY / math.sqrt(js_i.size)
         std = math.hypot(max(math.sqrt(1.0 / float(w.sum())), spread), p.jsr_std_floor_db)
         if math.isfinite(js_lb) and js_lb > js:
             js = js_lb  # survivors of a strong jammer are those whose C/N0 noise was high: biased low
-        return js, std, js_lb
+        return js, std, js_lb, False

@@ -53,6 +53,7 @@ def report_to_msg(report: IntegrityReport, frame_id: str) -> GnssIntegrity:
     msg.jamming_state = int(report.jamming_state)
     msg.jammer_to_signal_db = float(report.jammer_to_signal_db)
     msg.jammer_to_signal_std_db = float(report.jammer_to_signal_std_db)
+    msg.jammer_to_signal_is_lower_bound = bool(report.jammer_to_signal_is_lower_bound)
     msg.jamming_evidence = int(report.jamming_evidence)
     msg.cn0_elevation_model_in_use = bool(report.cn0_elevation_model_in_use)
     msg.cn0_drop_db = float(report.cn0_drop_db)

@@ -96,6 +96,7 @@ class IntegrityReport:
     jamming_state: int
     jammer_to_signal_db: float
     jammer_to_signal_std_db: float
+    jammer_to_signal_is_lower_bound: bool
     jamming_evidence: int
     cn0_elevation_model_in_use: bool
     cn0_drop_db: float
@@ -208,9 +209,9 @@ class IntegrityMonitor:
         spoof_tests = [*cn0_spoof.outcomes, *quality, *ext]
         verdict = self.state.update(stamp, spoof_tests)
         self._learn(ref, jam, cn0_spoof, receiver, spoof_tests)
-        jamming_state, js, js_std, evidence, jammer_type, freq, bw = jamming
+        jamming_state, js, js_std, js_bound, evidence, jammer_type, freq, bw = jamming
         return IntegrityReport(
-            stamp, jamming_state, js, js_std, evidence, ref.elevation_model_in_use, jam.common_drop_db,
+            stamp, jamming_state, js, js_std, js_bound, evidence, ref.elevation_model_in_use, jam.common_drop_db,
             jam.satellites_used, jammer_type, freq, bw, verdict.state, verdict.scope, verdict.constellations,
             verdict.satellites, verdict.first_alarm_ns, verdict.first_detection_ns,
             tuple([*jam_tests, *spoof_tests]), position)
@@ -261,7 +262,8 @@ class IntegrityMonitor:
         return solve_multi_gnss(epoch, self.params.fix, use=use, initial_position_ecef_m=fix.position_ecef_m)
 
     def _jamming(self, stamp: int, jam, receiver) -> tuple[list[TestOutcome], tuple]:
-        """The jamming tests and (state, J/S, its std, evidence bits, jammer type, frequency, bandwidth)."""
+        """The jamming tests and (state, J/S, its std, whether it is a lower bound, evidence bits, jammer
+        type, frequency, bandwidth)."""
         jam_tests = [jam.outcome, receiver.agc, receiver.jam_flag]
         spectrum = self._fresh_spectrum(stamp)
         if spectrum is not None:
@@ -271,7 +273,7 @@ class IntegrityMonitor:
         evidence = jam.evidence
         evidence |= EVIDENCE_RECEIVER_AGC if receiver.agc.decision >= DECISION_SUSPECT else 0
         evidence |= EVIDENCE_RECEIVER_FLAG if receiver.jam_flag.decision >= DECISION_SUSPECT else 0
-        js, js_std = jam.jammer_to_signal_db, jam.jammer_to_signal_std_db
+        js, js_std, js_bound = jam.jammer_to_signal_db, jam.jammer_to_signal_std_db, jam.jammer_to_signal_is_lower_bound
         jammer_type, freq, bw = JAMMER_UNKNOWN if jamming_state >= STATE_SUSPECTED else JAMMER_NONE, math.nan, math.nan
         if spectrum is not None and spectrum.outcome.decision >= DECISION_SUSPECT:
             evidence |= EVIDENCE_RECEIVER_SPECTRUM
@@ -282,10 +284,10 @@ class IntegrityMonitor:
             if sdr_type != JAMMER_NONE and math.isfinite(sdr_js):
                 jamming_state = STATE_DETECTED
                 evidence |= EVIDENCE_SDR_MONITOR
-                js, js_std, jammer_type = sdr_js, math.nan, sdr_type
+                js, js_std, js_bound, jammer_type = sdr_js, math.nan, False, sdr_type
             elif jamming_state == STATE_UNKNOWN:
                 jamming_state = STATE_NONE  # the SDR tested the band and found nothing
-        return jam_tests, (jamming_state, js, js_std, evidence, jammer_type, freq, bw)
+        return jam_tests, (jamming_state, js, js_std, js_bound, evidence, jammer_type, freq, bw)
 
     def _clock(self, stamp: int, fix: MultiGnssFix) -> tuple[TestOutcome, TestOutcome]:
         if not (fix.valid and fix.velocity_valid and fix.clock_constellations):

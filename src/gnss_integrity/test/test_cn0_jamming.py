@@ -134,6 +134,8 @@ def test_every_satellite_lost_is_still_jamming():
     assert late.outcome.decision == DECISION_ALARM and late.satellites_used == 0 and late.satellites_lost >= 6
     # Every satellite below 30 dB-Hz: J/S at least the lost satellites' bound.
     assert late.jammer_to_signal_db == late.jsr_lower_bound_db and 25.0 < late.jammer_to_signal_db < 32.0
+    assert late.jammer_to_signal_is_lower_bound  # said so: not an estimate
+    assert not any(r.jammer_to_signal_is_lower_bound for r in res[:k0])
 
 
 def test_a_single_bad_epoch_is_not_reported():

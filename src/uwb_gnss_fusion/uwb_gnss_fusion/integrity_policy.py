@@ -175,7 +175,9 @@ class GnssExclusion:
 
 def integrity_jammer_to_signal(verdict: IntegrityVerdict) -> float | None:
     """The J/S the filter should use from a verdict: a finite J/S when jamming is DETECTED, NaN
-    ("no jammer") when NONE, None (leave the filter's J/S alone) otherwise."""
+    ("no jammer") when NONE, None (leave the filter's J/S alone) otherwise. A J/S the monitor flags as
+    a lower bound (``jammer_to_signal_is_lower_bound``: every dropped satellite lost) is used as it is:
+    the receiver then tracks nothing that eq. 4 could weight, and the bound is the least it is."""
     if verdict.jamming_state == STATE_DETECTED and math.isfinite(verdict.jammer_to_signal_db):
         return float(verdict.jammer_to_signal_db)
     if verdict.jamming_state == STATE_NONE:
