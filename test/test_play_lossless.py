@@ -60,7 +60,7 @@ def play_into(make_node, bag: Path, topics: list[str], duration_s: float | None 
     health = node.health
     window = [] if duration_s is None else ['--duration', str(duration_s)]
     player = subprocess.Popen([tool('play'), str(bag), '--max', '--no-progress', '--topics', *topics, *window,
-                               '--wait-subscribers', '120', '--expect-subscribers', '1'],
+                               '--wait-subscribers', '120', '--expect-subscribers', '1', '--ack-timeout', '300'],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         while player.poll() is None:
@@ -167,3 +167,29 @@ def test_a_best_effort_input_is_named_in_plays_summary_with_what_was_sent(conver
     assert f'qos_overrides.{topic}.subscription.reliability:=reliable' in player.stderr
     received, lost = counters[topic]
     assert received + lost <= expected[topic]
+
+
+def test_plays_summary_names_a_loss_that_a_subscriber_reports(capsys):
+    """play reads the nodes' /diagnostics: a node's counted loss is named in the summary (the larger of the gap
+    count and the middleware's, never their sum), and what it sent to whom is said per topic."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+    from rfi_experiments.play import Delivery, print_receipts, read_input_reports
+
+    topic = '/rfi/if_samples'
+    values = {f'input.{topic}.received': '27', f'input.{topic}.lost': '23', f'input.{topic}.middleware_lost': '23',
+              'input./other.received': '5'}
+    msg = DiagnosticArray(status=[DiagnosticStatus(name='rfi_monitor', values=[
+        KeyValue(key=k, value=v) for k, v in values.items()]), DiagnosticStatus(name='no_inputs')])
+    reports: dict = {}
+    read_input_reports(msg, [topic], reports)
+    assert reports == {('rfi_monitor', topic): (27, 23)}
+    delivery = {topic: Delivery(published=50, subscribers=1, best_effort={'/rfi_monitor'})}
+    print_receipts(delivery, reports, [])
+    out, err = capsys.readouterr()
+    assert f'{topic}: 50 sent; best-effort subscribers /rfi_monitor: not acknowledged' in out
+    assert f'{topic}: rfi_monitor reported (last /diagnostics) 27 received, 23 lost' in out
+    assert f'play: warning: {topic}: rfi_monitor reports 23 messages lost' in err
+    print_receipts({topic: Delivery(published=50, subscribers=1, reliable={'/rfi_monitor'})}, {}, [topic])
+    out, err = capsys.readouterr()
+    assert 'reliable subscribers /rfi_monitor: not every message acknowledged' in out and err == ''

@@ -151,8 +151,10 @@ class InputSubscription:
             return False
         qos = copy.copy(self.subscription.qos_profile)
         qos.reliability = ReliabilityPolicy.BEST_EFFORT
-        self._node.destroy_subscription(self.subscription)  # first: two readers would take one writer's samples twice
+        old = self.subscription
+        self._node.destroy_subscription(old)  # first: two readers would take one writer's samples twice
         self.subscription = self._create(qos, False)
+        self.subscription.callback = old.callback  # with whatever wraps it (a replay harness counts through it)
         self.switches += 1
         return True
 
@@ -175,7 +177,7 @@ def subscribe_input(node: Any, msg_type: Any, topic: str, callback: Callable[[An
         the :class:`InputSubscription` (the rclpy Subscription's attributes, and its reliability switches).
     """
     from rclpy.event_handler import SubscriptionEventCallbacks
-    from rclpy.qos import ReliabilityPolicy
+    from rclpy.qos import QoSPolicyKind, ReliabilityPolicy, qos_policy_name_from_kind
     from rclpy.qos_overriding_options import QosCallbackResult, QoSOverridingOptions
 
     topic = node.resolve_topic_name(topic)  # a relative name lands in the node's namespace (-r __ns:=...)
@@ -207,12 +209,14 @@ def subscribe_input(node: Any, msg_type: Any, topic: str, callback: Callable[[An
         health.matched(topic, event.current_count)
 
     def on_incompatible(event: Any) -> None:
-        if holder and holder[0].to_best_effort():
+        kind = getattr(event, 'last_policy_kind', None)
+        reliability = kind is None or int(kind) == int(QoSPolicyKind.RELIABILITY)
+        if reliability and holder and holder[0].to_best_effort():
             logger.info(f'{topic}: a best-effort publisher appeared: the input is now best effort '
                         '(losses are counted, not prevented)')
         else:
             logger.warn(f'{topic}: a publisher with incompatible QoS is not received '
-                        f'(last policy: {getattr(event, "last_policy_kind", "?")})',
+                        f'(last policy: {qos_policy_name_from_kind(kind) if kind is not None else "?"})',
                         throttle_duration_sec=warning_throttle_s)
 
     from rclpy.exceptions import InvalidParameterValueException
