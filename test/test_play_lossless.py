@@ -136,7 +136,7 @@ def assert_accounted(counters, expected, player, reliability):
         assert received + lost == n, (t, counters[t], n)   # nothing lost unseen, nothing counted twice
         if n <= DATA_QOS_DEPTH:
             assert lost == 0, (t, counters[t], n)
-        assert f'{t}: {n} sent; reliable subscribers' in player.stdout, player.stdout
+        assert f'delivery {t}: {n} sent; reliable subscribers' in player.stdout, player.stdout
         assert 'every message acknowledged' in player.stdout
     assert 'best-effort subscriber' not in player.stderr
 
@@ -163,7 +163,8 @@ def test_a_best_effort_input_is_named_in_plays_summary_with_what_was_sent(conver
         overrides=[Parameter(f'qos_overrides.{topic}.subscription.reliability', value='best_effort')])
     assert player.returncode == 0, player.stderr
     assert reliability[topic] == 'BEST_EFFORT'
-    assert f'{topic}: {expected[topic]} sent; best-effort subscribers /rfi_monitor: not acknowledged' in player.stdout
+    sent = f'delivery {topic}: {expected[topic]} sent; best-effort subscribers /rfi_monitor: not acknowledged'
+    assert sent in player.stdout, player.stdout
     assert f'qos_overrides.{topic}.subscription.reliability:=reliable' in player.stderr
     received, lost = counters[topic]
     assert received + lost <= expected[topic]
@@ -187,8 +188,8 @@ def test_plays_summary_names_a_loss_that_a_subscriber_reports(capsys):
     delivery = {topic: Delivery(published=50, subscribers=1, best_effort={'/rfi_monitor'})}
     print_receipts(delivery, reports, [])
     out, err = capsys.readouterr()
-    assert f'{topic}: 50 sent; best-effort subscribers /rfi_monitor: not acknowledged' in out
-    assert f'{topic}: rfi_monitor reported (last /diagnostics) 27 received, 23 lost' in out
+    assert f'delivery {topic}: 50 sent; best-effort subscribers /rfi_monitor: not acknowledged' in out
+    assert f'delivery {topic}: rfi_monitor reported (last /diagnostics) 27 received, 23 lost' in out
     assert f'play: warning: {topic}: rfi_monitor reports 23 messages lost' in err
     print_receipts({topic: Delivery(published=50, subscribers=1, reliable={'/rfi_monitor'})}, {}, [topic])
     out, err = capsys.readouterr()

@@ -453,14 +453,14 @@ def print_receipts(delivery: dict[str, Delivery], reports: InputReports, unacked
             acked = ('not every message acknowledged' if t in unacked else
                      'every message acknowledged (a subscriber that falls more than its queue depth behind drops '
                      f'the oldest and counts them: input.{t}.lost in its /diagnostics)')
-            print(f'{t}: {d.published} sent; reliable subscribers {", ".join(sorted(d.reliable))}: {acked}')
+            print(f'delivery {t}: {d.published} sent; reliable subscribers {", ".join(sorted(d.reliable))}: {acked}')
         if d.best_effort:
-            print(f'{t}: {d.published} sent; best-effort subscribers {", ".join(sorted(d.best_effort))}: '
+            print(f'delivery {t}: {d.published} sent; best-effort subscribers {", ".join(sorted(d.best_effort))}: '
                   'not acknowledged')
         for (name, topic), (received, lost) in sorted(reports.items()):
             if topic != t:
                 continue
-            print(f'{t}: {name} reported (last /diagnostics) {received} received, {lost} lost')
+            print(f'delivery {t}: {name} reported (last /diagnostics) {received} received, {lost} lost')
             if lost:
                 print(f'play: warning: {t}: {name} reports {lost} messages lost before reaching it '
                       f'(input.{t}.lost in its /diagnostics)', file=sys.stderr)
