@@ -460,7 +460,8 @@ def print_receipts(delivery: dict[str, Delivery], reports: InputReports, unacked
         for (name, topic), (received, lost) in sorted(reports.items()):
             if topic != t:
                 continue
-            print(f'delivery {t}: {name} reported (last /diagnostics) {received} received, {lost} lost')
+            print(f'delivery {t}: {name} reported (last /diagnostics) {received} received, {lost} lost '
+                  '(by its last report seen during the play; it may still be taking the rest)')
             if lost:
                 print(f'play: warning: {t}: {name} reports {lost} messages lost before reaching it '
                       f'(input.{t}.lost in its /diagnostics)', file=sys.stderr)
