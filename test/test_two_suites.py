@@ -134,16 +134,20 @@ def test_run_refuses_what_it_cannot_honour(tmp_path):
 
 def test_external_nodes_with_best_effort_inputs_are_refused(tmp_path):
     """`run --external-nodes` replays to nodes it did not start (another host): it refuses nodes whose
-    inputs are best effort (their default, for sensor drivers), where a dropped message would be lost
+    inputs are best effort (made so here by the parameter; by default they take the publishers'
+    reliability, reliable with no best-effort driver: issue 27), where a dropped message would be lost
     unseen, and names the parameter that makes each input reliable."""
     from test_executables import executable
 
+    from rfi_experiments.processes import NODE_ENDPOINTS, NODE_EXECUTABLES
+
     namespace = '/best_effort'
     nodes = [subprocess.Popen([executable(package, name), '--ros-args', '-r', f'__ns:={namespace}',
-                               '-r', f'/diagnostics:={namespace}/diagnostics'],
+                               '-r', f'/diagnostics:={namespace}/diagnostics',
+                               *[arg for topic in NODE_ENDPOINTS[node][0] for arg in (
+                                   '-p', f'qos_overrides.{namespace}{topic}.subscription.reliability:=best_effort')]],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-             for package, name in (('rfi_monitor', 'rfi_monitor_node'), ('gnss_integrity', 'gnss_integrity_node'),
-                                   ('uwb_gnss_fusion', 'fusion_node'), ('imm_carrier', 'imm_carrier_node'))]
+             for node, package, name in NODE_EXECUTABLES]
     try:
         done = subprocess.run(
             [sys.executable, '-m', 'rfi_experiments.run', str(BAG), '--out', str(tmp_path / 'r'), '--transport',

@@ -6,8 +6,8 @@ Thin: it declares the parameters, converts each message into the core's plain ty
 epoch, stamped with the epoch's stamp (so the fusion orders it with its inputs). Every input is
 optional; a test whose input is missing says UNKNOWN.
 
-Inputs (each through :func:`rfi_node_common.inputs.subscribe_input`: best effort by default, losses
-and handler errors counted per topic):
+Inputs (each through :func:`rfi_node_common.inputs.subscribe_input`: the publishers' reliability by
+default, best effort once a best-effort driver is there; losses and handler errors counted per topic):
 
 * ``gnss/measurements`` (GnssMeasurementArray): the epochs judged. Rejected, counted by reason:
   ``malformed`` (bytes rclpy cannot read), ``gnss_frame_id`` (not ``earth_frame_id``), and the stamp

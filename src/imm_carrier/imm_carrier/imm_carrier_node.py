@@ -9,8 +9,9 @@ drop after ``channel_timeout_s``, restart after a gap or a diverged estimate) an
 input checks (integration time within the receiver's range, finite and plausible I/Q, physical C/N0
 and predicted phase change) are in the core; the node only admits or rejects whole arrays, and counts.
 
-Input: subscribed with :func:`rfi_node_common.inputs.subscribe_input` (best effort by default, so a
-sensor driver's best-effort publisher and a reliable one are both accepted; ``qos_overrides.
+Input: subscribed with :func:`rfi_node_common.inputs.subscribe_input` (the publishers' reliability by
+default: reliable with play, best effort once a sensor driver's best-effort publisher is there, so both are
+accepted; ``qos_overrides.
 /gnss/correlators.subscription.*`` parameters change it). Arrivals, messages lost before reaching the
 node and handler errors are counted per topic (``input./gnss/correlators.received``, ``.lost``,
 ``.middleware_lost``, ``.callback_errors``).

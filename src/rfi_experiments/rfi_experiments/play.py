@@ -19,9 +19,14 @@ Nothing is lost by default:
 - The publishers are reliable and keep all samples, and at the end the player waits until every
   reliable subscriber has acknowledged every message (``--ack-timeout``).
 - The final table says, per topic, how many subscribers it had and how many messages went out
-  while none was matched ("to nobody": those are lost). A best-effort subscriber (a node's input
-  with the default sensor QoS) does not acknowledge: the player says so and how to make it reliable
-  (``--ros-args -p qos_overrides.<topic>.subscription.reliability:=reliable`` on that node).
+  while none was matched ("to nobody": those are lost). Then, per topic, how many messages were sent
+  and to whom: reliable subscribers (the nodes' inputs are, with the default best-available QoS,
+  while no best-effort driver publishes on the topic) acknowledged every one (into their queue: a node
+  that falls more than its queue depth behind drops the oldest, and counts them); a best-effort
+  subscriber does not acknowledge, so the player says so, how to make it reliable (``--ros-args -p
+  qos_overrides.<topic>.subscription.reliability:=reliable`` on that node), and what the node's last
+  ``/diagnostics`` report said it received and lost (``input.<topic>.received`` / ``lost``); a loss
+  that a subscriber reports is a warning that names it.
 
 With ``--sync IN:OUT`` the player waits after each message on IN until the node that answers it has
 published its stamped output on OUT (closed-loop pacing, used by ``run --transport processes`` so
@@ -159,6 +164,7 @@ class Delivery:
     to_nobody: int = 0  # published while no subscriber was matched: lost
     subscribers: int = 0  # most subscribers matched at once
     best_effort: set[str] = field(default_factory=set)  # nodes whose subscription is best effort
+    reliable: set[str] = field(default_factory=set)  # nodes whose subscription is reliable
 
 
 def subscriber_view(node: Any, publishers: dict[str, Any]) -> dict[str, tuple[int, int]]:
@@ -211,14 +217,41 @@ def wait_for_subscribers(node: Any, executor: Any, publishers: dict[str, Any], e
         executor.spin_once(timeout_sec=0.02)
 
 
-def best_effort_subscribers(node: Any, topic: str) -> set[str]:
-    """Nodes (namespace/name) with a best-effort subscription on ``topic``."""
+def subscribers_by_reliability(node: Any, topic: str) -> tuple[set[str], set[str]]:
+    """Nodes (namespace/name) with a reliable, and with a best-effort, subscription on ``topic``."""
     from rclpy.qos import ReliabilityPolicy
 
-    return {f'{i.node_namespace.rstrip("/")}/{i.node_name}' if i.node_name not in ('', '_NODE_NAME_UNKNOWN_')
-            else '(a node whose name is not discovered yet)'
-            for i in node.get_subscriptions_info_by_topic(topic)
-            if i.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT}
+    def name(i: Any) -> str:
+        return (f'{i.node_namespace.rstrip("/")}/{i.node_name}' if i.node_name not in ('', '_NODE_NAME_UNKNOWN_')
+                else '(a node whose name is not discovered yet)')
+
+    infos = [i for i in node.get_subscriptions_info_by_topic(topic) if name(i) != '/rfi_play']
+    return ({name(i) for i in infos if i.qos_profile.reliability == ReliabilityPolicy.RELIABLE},
+            {name(i) for i in infos if i.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT})
+
+
+def best_effort_subscribers(node: Any, topic: str) -> set[str]:
+    """Nodes (namespace/name) with a best-effort subscription on ``topic``."""
+    return subscribers_by_reliability(node, topic)[1]
+
+
+InputReports = dict[tuple[str, str], tuple[int, int]]
+"""(diagnostics status name, topic) -> (messages received, messages lost) of a node's input, from its last
+/diagnostics report (``input.<topic>.received``; lost: the larger of ``.lost`` and ``.middleware_lost``, which
+count the same losses: ``rfi_node_common.inputs``)."""
+
+
+def read_input_reports(msg: Any, topics: Sequence[str], reports: InputReports) -> None:
+    """Keep in ``reports`` the input counters of the played ``topics`` found in one /diagnostics message."""
+    for status in msg.status:
+        values = {kv.key: kv.value for kv in status.values}
+        for t in topics:
+            try:
+                received = int(values[f'input.{t}.received'])
+                lost = max(int(values.get(f'input.{t}.lost', 0)), int(values.get(f'input.{t}.middleware_lost', 0)))
+            except (KeyError, ValueError):
+                continue
+            reports[(status.name, t)] = (received, lost)
 
 
 LATE_REASON = 'late_beyond_reorder_window'
@@ -308,8 +341,12 @@ def main(argv: Sequence[str] | None = None, *, teardown: bool = True) -> int:
                     return fail(f'--sync: no publisher of {out} appeared (is the node answering {inp} up?)')
                 node.create_subscription(out_class, out, _answer_recorder(answered, out), RECORDER_QOS)
             _watch_fusion_status(node, fusion, RECORDER_QOS)
+            reports: InputReports = {}
+            watching = _watch_input_reports(node, topics, reports, RECORDER_QOS)
             for t, p in publishers.items():
-                delivery[t].best_effort |= best_effort_subscribers(node, p.topic_name)
+                reliable, best_effort = subscribers_by_reliability(node, p.topic_name)
+                delivery[t].reliable |= reliable
+                delivery[t].best_effort |= best_effort
             progress = None
             if not args.no_progress:
                 from tqdm import tqdm
@@ -341,8 +378,8 @@ def main(argv: Sequence[str] | None = None, *, teardown: bool = True) -> int:
                         executor.spin_once(timeout_sec=0.01)
                     if answered.get(out, -1) < stamp_ns:
                         unanswered[message.topic] += 1
-                elif fusion:
-                    executor.spin_once(timeout_sec=0)  # keep up with /fusion/status
+                elif fusion or watching:
+                    executor.spin_once(timeout_sec=0)  # keep up with /fusion/status and /diagnostics
                 if progress is not None:
                     progress.update(1)
             if progress is not None:
@@ -351,12 +388,15 @@ def main(argv: Sequence[str] | None = None, *, teardown: bool = True) -> int:
                        if p.get_subscription_count() > 0 and not p.wait_for_all_acked(
                            rclpy.duration.Duration(seconds=args.ack_timeout))]
             for t, p in publishers.items():
-                delivery[t].best_effort |= best_effort_subscribers(node, p.topic_name)
-            if fusion:  # the status of the last messages
+                reliable, best_effort = subscribers_by_reliability(node, p.topic_name)
+                delivery[t].reliable |= reliable
+                delivery[t].best_effort |= best_effort
+            if fusion or watching:  # the status of the last messages
                 end = time.monotonic() + 0.5
                 while time.monotonic() < end:
                     executor.spin_once(timeout_sec=0.05)
             print_summary(topics, available, delivery, sync, unanswered, args.sync_timeout, fusion)
+            print_receipts(delivery, reports, unacked)
             if unacked:
                 print(f'play: warning: not acknowledged by every subscriber within {args.ack_timeout} s: '
                       f'{", ".join(unacked)}', file=sys.stderr)
@@ -396,12 +436,46 @@ def print_summary(topics: Sequence[str], available: dict[str, tuple[str, int]], 
     for t, d in delivery.items():
         if d.best_effort:
             print(f'play: note: {t}: best-effort subscriber {", ".join(sorted(d.best_effort))}: delivery is not '
-                  'acknowledged, so a message it drops is lost without play knowing; to make it reliable, start it '
-                  f'with --ros-args -p qos_overrides.{t}.subscription.reliability:=reliable', file=sys.stderr)
+                  'acknowledged, so a message it drops after the last one it receives is lost without anyone '
+                  'counting it; to make it reliable, start it with '
+                  f'--ros-args -p qos_overrides.{t}.subscription.reliability:=reliable', file=sys.stderr)
     if fusion.get(LATE_REASON):
         print(f'play: warning: the fusion node rejected {fusion[LATE_REASON]} messages that reached it after its '
               're-ordering window (/fusion/status, cumulative since the node started): the nodes lagged behind '
               'the replay; play at a lower --rate, or raise the node\'s reorder_window_s', file=sys.stderr)
+
+
+def print_receipts(delivery: dict[str, Delivery], reports: InputReports, unacked: Sequence[str]) -> None:
+    """Per topic: how many messages were sent and to whom, acknowledged or not, and what the subscribers'
+    /diagnostics said they received and lost (a reported loss is a warning)."""
+    for t, d in delivery.items():
+        if d.reliable:
+            acked = ('not every message acknowledged' if t in unacked else
+                     'every message acknowledged (a subscriber that falls more than its queue depth behind drops '
+                     f'the oldest and counts them: input.{t}.lost in its /diagnostics)')
+            print(f'delivery {t}: {d.published} sent; reliable subscribers {", ".join(sorted(d.reliable))}: {acked}')
+        if d.best_effort:
+            print(f'delivery {t}: {d.published} sent; best-effort subscribers {", ".join(sorted(d.best_effort))}: '
+                  'not acknowledged')
+        for (name, topic), (received, lost) in sorted(reports.items()):
+            if topic != t:
+                continue
+            print(f'delivery {t}: {name} reported (last /diagnostics) {received} received, {lost} lost '
+                  '(by its last report seen during the play; it may still be taking the rest)')
+            if lost:
+                print(f'play: warning: {t}: {name} reports {lost} messages lost before reaching it '
+                      f'(input.{t}.lost in its /diagnostics)', file=sys.stderr)
+
+
+def _watch_input_reports(node: Any, topics: Sequence[str], reports: InputReports, qos: Any) -> bool:
+    """If someone publishes /diagnostics, keep the input counters of the played topics in ``reports``."""
+    topic = node.resolve_topic_name('/diagnostics')
+    if not node.get_publishers_info_by_topic(topic):
+        return False
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    node.create_subscription(DiagnosticArray, topic, lambda msg: read_input_reports(msg, topics, reports), qos)
+    return True
 
 
 def _watch_fusion_status(node: Any, fusion: dict[str, int], qos: Any) -> None:

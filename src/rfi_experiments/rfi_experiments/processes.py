@@ -90,8 +90,9 @@ middleware delivers the first messages only by retransmission, up to seconds lat
 
 RELIABLE_INPUTS = 'reliable'
 """What ``processes`` sets each node's input subscriptions to (``qos_overrides.<topic>.subscription.
-reliability``): the nodes' inputs are best effort by default (sensor drivers), which would let a
-replay lose messages silently; reliable, every message of play reaches the node or play waits."""
+reliability``): the nodes' inputs take their publishers' reliability by default, and become best effort
+if a best-effort driver publishes on the topic, which would let a replay lose messages silently; fixed
+reliable, every message of play reaches the node or play waits."""
 
 SYNCED = (('rfi_monitor', '/rfi/if_samples', '/rfi/jammer_state'),)
 """(node, input, output) that ``play`` paces on (``--sync``): after each IF block it waits for the

@@ -171,7 +171,8 @@ def write_outputs_bag(result: Any, path: str) -> None:
 def delivery_warnings(result: Any) -> list[str]:
     """What the nodes say they lost or rejected for coming too late, from their last /fusion/status and
     /diagnostics (empty: nothing): the fusion's rejections of messages that came after its re-ordering
-    window, and the input messages each node counted lost (publisher sequence gaps, middleware)."""
+    window, and the input messages each node counted lost (per node and topic the larger of the publisher
+    sequence gaps and the middleware's count, which see the same losses: ``rfi_node_common.inputs``)."""
     warnings = []
     diagnostics = diagnostics_summary(result.messages('/diagnostics')) if '/diagnostics' in result.outputs else {}
     fusion = diagnostics.get('uwb_gnss_fusion', {})
@@ -188,13 +189,16 @@ def delivery_warnings(result: Any) -> list[str]:
                         'outputs differ from a replay in one process')
     lost: dict[str, int] = {}
     for values in diagnostics.values():
+        node_lost: dict[str, int] = {}  # the gap count and the middleware's count see the same losses: the larger
         for key, value in values.items():
             if key.startswith('input.') and key.endswith(('.lost', '.middleware_lost')):
                 topic = key[len('input.'):].rsplit('.', 1)[0]
                 try:
-                    lost[topic] = lost.get(topic, 0) + int(value)
+                    node_lost[topic] = max(node_lost.get(topic, 0), int(value))
                 except ValueError:
                     continue
+        for topic, n in node_lost.items():
+            lost[topic] = lost.get(topic, 0) + n
     lost = {t: n for t, n in lost.items() if n}
     if lost:
         warnings.append('the nodes counted input messages lost before reaching them: '

@@ -721,9 +721,10 @@ def test_best_effort_publisher_reaches_the_node(probe_factory):
     fe = FrontEndConfig(noise_bandwidth_hz=NOISE_BW_HZ)
     msgs = _short_blocks(fe, CALIBRATION + 2, seed=15)
     p = probe_factory()
-    assert p.node.subscription.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
+    assert p.node.subscription.qos_profile.reliability == ReliabilityPolicy.RELIABLE  # the probe's is reliable
     sensor = p.probe.create_publisher(IfSamples, '/rfi/if_samples', qos_profile_sensor_data)
     p.spin_until(lambda: sensor.get_subscription_count() >= 1, 'best-effort discovery')
+    assert p.node.subscription.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT  # issue 27: best available
     p.pub = sensor
     states = p.send_all(msgs)
     assert [s.type for s in states] == [JammerState.NONE] * (CALIBRATION + 2)     # stft: no UNKNOWN

@@ -1,17 +1,24 @@
-"""Input subscriptions of the nodes: any publisher accepted, every loss counted, no callback fatal.
+"""Input subscriptions of the nodes: any publisher accepted, a replay received reliably, every loss counted once,
+no callback fatal.
 
 :func:`subscribe_input` creates a node's input subscription with :data:`rfi_node_common.qos.INPUT_QOS`
-(best effort: sensor drivers and reliable publishers alike are accepted, REP 2003) and rclpy's QoS
-overriding (``-p qos_overrides./rfi/if_samples.subscription.reliability:=reliable`` makes one input
-reliable). Around the node's callback it
+(best available: reliable while every publisher on the topic is reliable, so a ``play`` or another node
+loses nothing; best effort once a best-effort sensor driver is there, REP 2003, so it is still matched)
+and rclpy's QoS overriding (``-p qos_overrides./rfi/if_samples.subscription.reliability:=reliable`` or
+``best_effort`` fixes one input's reliability). Around the node's callback it
 
 * counts every message that reaches the subscription (``<topic>.received``);
 * counts the messages that never reached it, from gaps in the publishers' sequence numbers
-  (``<topic>.lost``, :class:`rfi_node_common.input_checks.SequenceLossCounter`) and from the
+  (``<topic>.lost``, :class:`rfi_node_common.input_checks.SequenceLossCounter`), and records the
   middleware's own lost-message event where it reports one (``<topic>.middleware_lost``), with one
-  throttled warning;
+  throttled warning. The two see the same losses (Fast DDS reports a sample lost when it sees the same
+  gap in the writer's sequence numbers), so the node's total (:meth:`InputHealth.lost_total`, the
+  ``lost`` of its diagnostics) takes per topic the larger of the two, never their sum;
 * catches any exception the callback lets out (a malformed payload that rclpy cannot deserialise, a
   bug): it is counted (``<topic>.callback_errors``), logged as an error and the node keeps running.
+
+A loss after the last received message shows no gap: a best-effort input cannot count it (``play``
+says so in its summary, with how many messages it sent); a reliable one does not lose it.
 
 :class:`InputHealth` holds these counters for all inputs of a node and the wall-clock (steady) time
 of the last activity; :class:`StaleInputWatch` publishes a STALE diagnostics status when no input
@@ -28,7 +35,7 @@ from collections.abc import Callable
 from typing import Any
 
 from rfi_node_common.input_checks import SequenceLossCounter
-from rfi_node_common.qos import INPUT_QOS
+from rfi_node_common.qos import INPUT_QOS, best_available_reliability
 
 STALE_REASON = 'no input'
 
@@ -91,8 +98,14 @@ class InputHealth:
         """Mark activity now (on arrival and when a callback ends, so a long first call is not silence)."""
         self.last_activity_s = self._clock()
 
+    def lost(self, topic: str) -> int:
+        """Messages of ``topic`` lost before the node: the larger of the sequence-gap count and the middleware's
+        count (they see the same losses; see the module docstring)."""
+        return max(self.counts[f'{topic}.lost'], self.counts[f'{topic}.middleware_lost'])
+
     def lost_total(self) -> int:
-        return sum(self.counts[f'{t}.lost'] + self.counts[f'{t}.middleware_lost'] for t in self.topics)
+        """Messages lost before the node, all inputs (:meth:`lost` summed over the topics)."""
+        return sum(self.lost(t) for t in self.topics)
 
     def callback_errors_total(self) -> int:
         return sum(self.counts[f'{t}.callback_errors'] for t in self.topics)
@@ -107,8 +120,47 @@ class InputHealth:
         return {f'input.{k}': v for k, v in sorted(self.counts.items())}
 
 
+class InputSubscription:
+    """The input subscription of one topic, made by :func:`subscribe_input`; attributes not defined here are those
+    of the current rclpy Subscription (``qos_profile``, ``topic_name``, ...).
+
+    With the default best-available reliability (:data:`rfi_node_common.qos.INPUT_QOS`) the subscription starts
+    with :func:`rfi_node_common.qos.best_available_reliability` of the publishers in the graph, and a reliable one
+    is made again best effort when the middleware reports a publisher with incompatible QoS (a best-effort sensor
+    driver that appeared later): ``switches`` counts these. With an overridden reliability nothing changes.
+    """
+
+    def __init__(self, node: Any, create: Callable[[Any, bool], Any], qos: Any) -> None:
+        self._node = node
+        self._create = create
+        self.adaptive = False
+        """Whether the reliability follows the publishers (not overridden by a parameter)."""
+        self.switches = 0
+        self.subscription = create(qos, True)
+
+    def __getattr__(self, name: str) -> Any:
+        if name == 'subscription':  # not yet made (__init__)
+            raise AttributeError(name)
+        return getattr(self.subscription, name)
+
+    def to_best_effort(self) -> bool:
+        """Make the subscription best effort (it was reliable and adaptive); returns whether it changed."""
+        from rclpy.qos import ReliabilityPolicy
+
+        if not self.adaptive or self.subscription.qos_profile.reliability != ReliabilityPolicy.RELIABLE:
+            return False
+        qos = copy.copy(self.subscription.qos_profile)
+        qos.reliability = ReliabilityPolicy.BEST_EFFORT
+        old = self.subscription
+        self._node.destroy_subscription(old)  # first: two readers would take one writer's samples twice
+        self.subscription = self._create(qos, False)
+        self.subscription.callback = old.callback  # with whatever wraps it (a replay harness counts through it)
+        self.switches += 1
+        return True
+
+
 def subscribe_input(node: Any, msg_type: Any, topic: str, callback: Callable[[Any], None], health: InputHealth,
-                    *, raw: bool = False, warning_throttle_s: float = 5.0) -> Any:
+                    *, raw: bool = False, warning_throttle_s: float = 5.0) -> InputSubscription:
     """Create the input subscription of ``node`` on ``topic`` (see the module docstring).
 
     Args:
@@ -122,14 +174,16 @@ def subscribe_input(node: Any, msg_type: Any, topic: str, callback: Callable[[An
         warning_throttle_s: shortest interval between two warnings of one kind, s (wall time; logging only).
 
     Returns:
-        the rclpy Subscription.
+        the :class:`InputSubscription` (the rclpy Subscription's attributes, and its reliability switches).
     """
     from rclpy.event_handler import SubscriptionEventCallbacks
-    from rclpy.qos_overriding_options import QoSOverridingOptions
+    from rclpy.qos import QoSPolicyKind, ReliabilityPolicy, qos_policy_name_from_kind
+    from rclpy.qos_overriding_options import QosCallbackResult, QoSOverridingOptions
 
     topic = node.resolve_topic_name(topic)  # a relative name lands in the node's namespace (-r __ns:=...)
     health.add_topic(topic)
     logger = node.get_logger()
+    holder: list[InputSubscription] = []
 
     def on_message(msg: Any, info: Any) -> None:
         health.last_received_ns = int(info.get('received_timestamp', 0) or 0) if info else 0
@@ -154,24 +208,54 @@ def subscribe_input(node: Any, msg_type: Any, topic: str, callback: Callable[[An
     def on_matched(event: Any) -> None:
         health.matched(topic, event.current_count)
 
+    def on_incompatible(event: Any) -> None:
+        kind = getattr(event, 'last_policy_kind', None)
+        reliability = kind is None or int(kind) == int(QoSPolicyKind.RELIABILITY)
+        if reliability and holder and holder[0].to_best_effort():
+            logger.info(f'{topic}: a best-effort publisher appeared: the input is now best effort '
+                        '(losses are counted, not prevented)')
+        else:
+            logger.warn(f'{topic}: a publisher with incompatible QoS is not received '
+                        f'(last policy: {qos_policy_name_from_kind(kind) if kind is not None else "?"})',
+                        throttle_duration_sec=warning_throttle_s)
+
     from rclpy.exceptions import InvalidParameterValueException
     from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
-    qos = copy.copy(INPUT_QOS)  # rclpy writes the overrides into the profile it is given
-    overriding: QoSOverridingOptions | None = QoSOverridingOptions.with_default_policies()
-    events = (SubscriptionEventCallbacks(message_lost=on_lost, matched=on_matched),
-              SubscriptionEventCallbacks(matched=on_matched), None)
-    for i, event_callbacks in enumerate(events):
-        try:
-            return node.create_subscription(msg_type, topic, on_message, qos, raw=raw,
-                                            qos_overriding_options=overriding, event_callbacks=event_callbacks)
-        except InvalidParameterValueException:
-            raise
-        except (_rclpy.UnsupportedEventTypeError, NotImplementedError):  # a middleware without these events
-            if i == len(events) - 1:
+    adaptive = [False]
+
+    def resolve(qos: Any) -> Any:
+        """Called by rclpy with the profile after the parameter overrides: best available -> the graph's."""
+        if qos.reliability == ReliabilityPolicy.BEST_AVAILABLE:
+            adaptive[0] = True
+            qos.reliability = best_available_reliability(
+                i.qos_profile.reliability for i in node.get_publishers_info_by_topic(topic))
+        return QosCallbackResult(successful=True)
+
+    overriding = [QoSOverridingOptions.with_default_policies(callback=resolve)]
+
+    def create(qos: Any, first: bool) -> Any:
+        events = (SubscriptionEventCallbacks(message_lost=on_lost, matched=on_matched,
+                                             incompatible_qos=on_incompatible),
+                  SubscriptionEventCallbacks(matched=on_matched, incompatible_qos=on_incompatible),
+                  SubscriptionEventCallbacks(incompatible_qos=on_incompatible), None)
+        for i, event_callbacks in enumerate(events):
+            try:
+                return node.create_subscription(msg_type, topic, on_message, qos, raw=raw,
+                                                qos_overriding_options=overriding[0] if first else None,
+                                                event_callbacks=event_callbacks)
+            except InvalidParameterValueException:
                 raise
-            overriding = None  # the overrides are declared and already applied to qos
-    raise AssertionError('unreachable')
+            except (_rclpy.UnsupportedEventTypeError, NotImplementedError):  # a middleware without these events
+                if i == len(events) - 1:
+                    raise
+                first = False  # the overrides are declared and already applied to qos
+        raise AssertionError('unreachable')
+
+    qos = copy.copy(INPUT_QOS)  # rclpy writes the overrides into the profile it is given
+    holder.append(InputSubscription(node, create, qos))
+    holder[0].adaptive = adaptive[0]  # known once rclpy has applied the overrides (resolve)
+    return holder[0]
 
 
 class StaleInputWatch:

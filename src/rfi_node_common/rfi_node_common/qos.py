@@ -1,14 +1,18 @@
 """Named QoS profiles of the suite (REP 2003 roles).
 
-Inputs of the nodes are best effort (:data:`INPUT_QOS`), which accepts both best-effort publishers
-(sensor drivers, ``SensorDataQoS``) and reliable ones (the suite's own nodes and ``play``); a
-reliable subscription would refuse the former. Every input subscription is created with rclpy's
-QoS overriding (``qos_overrides.<topic>.subscription.reliability`` and ``.depth`` parameters), so a
-replay that must lose nothing (``run --transport processes``) makes them reliable end to end, and
-the nodes count what is lost either way (:mod:`rfi_node_common.inputs`). Outputs are reliable
-(:data:`DATA_QOS`), which best-effort and reliable subscribers both accept; a player keeps all
-samples until they are acknowledged so that a slow reliable subscriber is not skipped.
+Inputs of the nodes take their publishers' reliability (:data:`INPUT_QOS`, Jazzy's best-available
+reliability, resolved by :func:`best_available_reliability` and kept up to date by
+:func:`rfi_node_common.inputs.subscribe_input`): reliable while every publisher on the topic is
+reliable (the suite's own nodes, ``play``, or no publisher yet), so a replay is received reliably
+and loses nothing, and best effort as soon as a best-effort publisher (a sensor driver with
+``SensorDataQoS``, REP 2003) is there, so a live driver is still matched. The ``qos_overrides.<topic>.
+subscription.reliability`` parameter (``reliable`` or ``best_effort``) fixes an input's reliability
+instead. The nodes count what is lost either way (:mod:`rfi_node_common.inputs`). Outputs are
+reliable (:data:`DATA_QOS`), which best-effort and reliable subscribers both accept; a player keeps
+all samples until they are acknowledged so that a slow reliable subscriber is not skipped.
 """
+
+from collections.abc import Iterable
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -26,11 +30,30 @@ DATA_QOS = QoSProfile(
 INPUT_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
     depth=DATA_QOS_DEPTH,
-    reliability=ReliabilityPolicy.BEST_EFFORT,
+    reliability=ReliabilityPolicy.BEST_AVAILABLE,
     durability=DurabilityPolicy.VOLATILE,
 )
-"""Input subscriptions of the nodes: best effort (accepts best-effort and reliable publishers, REP 2003),
-volatile, depth 1000; overridable per topic by the ``qos_overrides.<topic>.subscription.*`` parameters."""
+"""Input subscriptions of the nodes: the publishers' reliability (best available: see the module docstring and
+:func:`best_available_reliability`), volatile, depth 1000; overridable per topic by the
+``qos_overrides.<topic>.subscription.*`` parameters."""
+
+
+def best_available_reliability(publishers: Iterable[ReliabilityPolicy]) -> ReliabilityPolicy:
+    """The reliability a best-available subscription takes with these publishers on its topic.
+
+    Reliable if every publisher is reliable (also with none: a replay started later is then received
+    reliably), best effort as soon as one is not (a reliable subscription would refuse it). This is the
+    rule of rmw_dds_common's ``qos_profile_get_best_available_for_subscription`` (Jazzy), which the
+    middleware applies only once, when the subscription is created; the nodes apply it again when a
+    best-effort publisher appears later (:func:`rfi_node_common.inputs.subscribe_input`).
+
+    Args:
+        publishers: the reliability of each publisher on the topic (from the ROS graph).
+    """
+    if all(p == ReliabilityPolicy.RELIABLE for p in publishers):
+        return ReliabilityPolicy.RELIABLE
+    return ReliabilityPolicy.BEST_EFFORT
+
 
 DIAGNOSTICS_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,

@@ -48,8 +48,9 @@ is destroyed while its context can still publish. This changes only when buffere
 processed, never their order or the results; a message that arrives afterwards with a stamp older
 than the last one processed is rejected as late, as any late message.
 
-Input checks. Every input is subscribed by :func:`rfi_node_common.inputs.subscribe_input` (best
-effort: sensor drivers and reliable publishers alike; ``qos_overrides.<topic>.subscription.*``
+Input checks. Every input is subscribed by :func:`rfi_node_common.inputs.subscribe_input` (the
+publishers' reliability: reliable with play, best effort once a sensor driver is there, so both are
+accepted; ``qos_overrides.<topic>.subscription.*``
 parameters; arrivals and lost messages counted as ``input.<topic>.*``; a handler that raises is
 counted, not fatal). Before the buffer the node rejects and counts, besides the stamps above:
 
