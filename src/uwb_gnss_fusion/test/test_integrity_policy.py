@@ -81,7 +81,8 @@ def test_jamming_js_from_a_verdict():
 def _msg(**kw):
     base = dict(spoofing_state=STATE_DETECTED, spoofing_scope=SCOPE_SATELLITES, jamming_state=STATE_NONE,
                 affected_constellations=[], affected_satellite_constellations=[GPS, GPS], affected_svids=[3, 7],
-                jammer_to_signal_db=math.nan, header=SimpleNamespace(stamp=SimpleNamespace(sec=5, nanosec=7)))
+                jammer_to_signal_db=math.nan, header=SimpleNamespace(stamp=SimpleNamespace(sec=5, nanosec=7)),
+                first_alarm_stamp=SimpleNamespace(sec=4, nanosec=9))
     base.update(kw)
     return SimpleNamespace(**base)
 
@@ -89,6 +90,7 @@ def _msg(**kw):
 def test_verdict_of_a_message_and_its_rejections():
     verdict, reason = verdict_of(_msg())
     assert reason is None and verdict.stamp_ns == 5 * S + 7 and verdict.satellites == ((GPS, 3), (GPS, 7))
+    assert verdict.first_alarm_ns == 4 * S + 9
     assert verdict_of(_msg(spoofing_state=9)) == (None, "integrity_unknown_state")
     assert verdict_of(_msg(spoofing_scope=4)) == (None, "integrity_unknown_state")
     assert verdict_of(_msg(affected_svids=[3])) == (None, "integrity_malformed_satellites")

@@ -36,6 +36,7 @@ the satellite appears and removed (marginalised) when it has been unseen for a w
 from __future__ import annotations
 
 import collections
+import copy
 import math
 from collections.abc import Callable, Mapping
 
@@ -427,6 +428,22 @@ class FusionFilter:
         self.initialize(max(stamp_ns, self._t_ns), pos, frame_id=self._frame, position_std_m=1.0)
         self._count("reanchor_on_uwb")
         return True
+
+    _NOT_IN_SNAPSHOT = frozenset({"params", "_counts", "_counts_tuple", "_reinits", "_reference_provider",
+                                  "_clock_q", "_uwb_noise"})
+    """What :meth:`snapshot` leaves out: the parameters (the caller's, now), the cumulative counts (they
+    never go back), the caller's reference provider, and the per-anchor range noise (a property of the
+    hardware, learned across re-initialisations)."""
+
+    def snapshot(self) -> dict:
+        """A deep copy of the filter's state, for :meth:`restore` (``rollback.RollbackHistory``)."""
+        return copy.deepcopy({k: v for k, v in self.__dict__.items() if k not in self._NOT_IN_SNAPSHOT})
+
+    def restore(self, snapshot: dict) -> None:
+        """Go back to a :meth:`snapshot` (which stays usable): state, time, histories; the parameters, the
+        counts and the reference provider stay as they are now. Counted ``rolled_back``."""
+        self.__dict__.update(copy.deepcopy(snapshot))
+        self._count("rolled_back")
 
     def side_of_anchor_plane(self, stamp_ns: int, min_distance_m: float = 0.1) -> int:
         """The side of the anchors' plane the state's tag is on: +1 above, -1 below (the local vertical,

@@ -190,7 +190,7 @@ from uwb_gnss_fusion.fusion_filter import (
 from uwb_gnss_fusion.fusion_node_params import FusionNodeParams
 from uwb_gnss_fusion.fusion_output import all_finite
 from uwb_gnss_fusion.input_admission import DuplicateFilter, admit_jammer_state
-from uwb_gnss_fusion.integrity_policy import GnssExclusion, integrity_jammer_to_signal, verdict_of
+from uwb_gnss_fusion.integrity_policy import integrity_jammer_to_signal, verdict_of
 from uwb_gnss_fusion.local_frame import LocalFrame
 from uwb_gnss_fusion.message_checks import satellite_reason, uwb_range_reason
 from uwb_gnss_fusion.output_messages import (  # noqa: F401 (re-exported: the node's output contract)
@@ -203,6 +203,7 @@ from uwb_gnss_fusion.output_messages import (  # noqa: F401 (re-exported: the no
     status_msg,
 )
 from uwb_gnss_fusion.reorder_buffer import widened_window_ns
+from uwb_gnss_fusion.spoofing_response import SpoofingResponse
 from uwb_gnss_fusion.spp_reference import SppReferenceCache
 
 TOPICS = """topics:
@@ -246,8 +247,9 @@ class FusionNode(Node):
         self._last_js_db = math.nan
         self.spp = SinglePointPositioner()
         self.spp_cache = SppReferenceCache(self.spp, self.params.reference_max_age_s, self._count_spp)
-        self.exclusion = GnssExclusion(self.params.integrity_readmit_clean_s, self.params.act_on_integrity)
-        self._held_side = 0  # the side of three anchors' plane kept while all GNSS is excluded
+        self.response = SpoofingResponse(self.params.integrity_readmit_clean_s, self.params.act_on_integrity,
+                                         self.params.integrity_rollback_s)
+        self.exclusion = self.response.exclusion
         self.filter = self._new_filter()
         self._sdr_js_ns: int | None = None  # stamp of the last SDR J/S processed (it takes precedence)
         self._excluded_now = 0  # satellites excluded from the epoch being published
@@ -511,6 +513,7 @@ class FusionNode(Node):
         self._retired_filter_counts.update(self.filter.rejection_counts)
         self.filter = self._new_filter()
         self.spp_cache.clear()
+        self.response.reset()
         self._buffer = ReorderBuffer(self._buffer.window_ns)
         self._released_ns = None
         self._seen.clear()
@@ -593,6 +596,7 @@ class FusionNode(Node):
             else:
                 self._excluded_now = 0
                 out = self.filter.process_uwb(item.payload)
+            self.response.after_message(item.stamp_ns, self.filter, item.payload if item.kind == 'uwb' else None)
         except Exception as err:
             # The core validates its input and counts rejections; an exception here is a core bug.
             self.counts[f'{item.kind}_processed'] += 1
@@ -614,17 +618,15 @@ class FusionNode(Node):
 
     def _apply_integrity(self, verdict) -> None:
         """Exclusion and readmission of GNSS (logged), and the C/N0 J/S where no SDR J/S is fresh."""
-        change = self.exclusion.update(verdict)
-        if change == 'excluded':
+        done = self.response.apply(verdict, self.filter, self.params.fusion_params())
+        if done.change == 'excluded':
             self.spp_cache.clear()  # the SPP reference must not bring the spoofed position back
-            # the side of three anchors' plane GNSS held the tag on, kept while GNSS is out
-            self._held_side = self.filter.side_of_anchor_plane(verdict.stamp_ns)
-            self.filter.reanchor_on_uwb(verdict.stamp_ns)  # drop the state the spoofer dragged
-            self.filter.params = self._filter_params()
+            how = (f'went back to the filter of {done.rolled_back_to_ns} ns (before the first alarm) and applied '
+                   f'{done.ranges_replayed} UWB ranges again' if done.rolled_back_to_ns is not None else
+                   're-anchored on UWB' if done.reanchored else 'kept the state (fewer than three anchors)')
             self.get_logger().warn(f'spoofing detected at {verdict.stamp_ns} ns: excluding '
-                                   f'{self.exclusion.describe()} from the fusion (gnss_integrity)')
-        elif change == 'readmitted':
-            self.filter.params = self._filter_params()
+                                   f'{self.exclusion.describe()} from the fusion (gnss_integrity); {how}')
+        elif done.change == 'readmitted':
             self.get_logger().warn(f'GNSS readmitted at {verdict.stamp_ns} ns after '
                                    f'{self.params.integrity_readmit_clean_s:g} s without spoofing')
         if not self.params.act_on_integrity:
@@ -645,6 +647,8 @@ class FusionNode(Node):
 
     def _apply_parameters(self, old: FusionNodeParams, new: FusionNodeParams) -> None:
         self.params = new
+        if self.response.set_acting(new.act_on_integrity, self.filter, new.fusion_params()):
+            self.get_logger().warn('act_on_integrity switched off: the GNSS excluded for spoofing is readmitted')
         self.filter.params = self._filter_params()
         self._count_window.window_ns = int(round(new.diagnostics_window_s * 1e9))
         self.counts['parameter_changes'] += 1
@@ -657,17 +661,9 @@ class FusionNode(Node):
         return FusionFilter(self._filter_params(), reference_provider=provider)
 
     def _filter_params(self):
-        """The core's parameters: the node's, except while every GNSS satellite is excluded for spoofing.
-        Then the filter runs as without GNSS (``use_gnss`` false: the rules of UWB alone, e.g. the side
-        of three coplanar anchors' plane checked on every range), on the side of their plane GNSS held
-        the tag on at the exclusion (unless ``uwb_tag_side_of_anchor_plane`` is set): three anchors
-        alone cannot tell the tag from its mirror, and the state drifted there in 1-2 s on bags/spoofed
-        (1.3 m up, 0.12 m horizontal)."""
-        base = self.params.fusion_params()
-        if not self.exclusion.all_gnss():
-            return base
-        side = base.uwb_tag_side_of_anchor_plane or self._held_side
-        return dataclasses.replace(base, use_gnss=False, uwb_tag_side_of_anchor_plane=side)
+        """The core's parameters: the node's, as :class:`SpoofingResponse` changes them while all GNSS is
+        excluded for spoofing."""
+        return self.response.filter_params(self.params.fusion_params())
 
     def _count_spp(self, valid: bool) -> None:
         self.counts['spp_valid' if valid else 'spp_invalid'] += 1
@@ -851,8 +847,9 @@ class FusionNode(Node):
         values['parameter_changes_refused'] = self.runtime.changes_refused
         values['gnss_excluded_for_spoofing'] = self.exclusion.describe()
         # the side of the anchors' plane the filter holds while all GNSS is excluded (0: none held)
-        values['anchor_plane_side_held'] = self._held_side if self.exclusion.all_gnss() else 0
+        values['anchor_plane_side_held'] = self.response.held_side if self.exclusion.all_gnss() else 0
         values.update({f'integrity.{k}': v for k, v in self.exclusion.counts.items()})
+        values.update({f'integrity.{k}': v for k, v in self.response.counts.items()})
         anchors = self.filter.uwb_anchors_heard(stamp_ns)
         mirror = anchors == 3 and self.filter.params.uwb_tag_side_of_anchor_plane == 0
         values['uwb_anchors_heard'] = anchors

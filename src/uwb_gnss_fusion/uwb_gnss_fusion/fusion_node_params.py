@@ -131,6 +131,11 @@ class FusionNodeParams:
     integrity_readmit_clean_s: float = parameter(
         30.0, 'Spoofing NONE for this long without a break readmits the excluded GNSS (hysteresis), s.',
         minimum=0.0, maximum=3600.0)
+    integrity_rollback_s: float = parameter(
+        1.0, 'At an exclusion of all GNSS, go back to the filter of this long before the episode\'s first alarm '
+        'and apply the UWB ranges since then again, without GNSS (the state the spoofer dragged is dropped); '
+        '0: no roll-back, re-anchor on UWB only (also when the first alarm is older than the 60 s of history).',
+        minimum=0.0, maximum=30.0)
     use_spp_reference: bool = parameter(
         True, 'Re-initialise after a divergence from the newest valid single-point (SPP) fix of the last '
         'reference_max_age_s of GNSS epochs (solved on demand).')

@@ -53,6 +53,7 @@ class IntegrityVerdict:
         satellites: implicated ``(constellation, svid)``.
         jamming_state: ``STATE_*``.
         jammer_to_signal_db: J/S estimate, dB (NaN: none).
+        first_alarm_ns: stamp of the episode's first SUSPECTED or DETECTED epoch, ns (0: none).
     """
 
     stamp_ns: int
@@ -62,6 +63,7 @@ class IntegrityVerdict:
     satellites: tuple[tuple[int, int], ...] = ()
     jamming_state: int = STATE_UNKNOWN
     jammer_to_signal_db: float = math.nan
+    first_alarm_ns: int = 0
 
 
 @dataclass
@@ -105,6 +107,15 @@ class GnssExclusion:
         if self.satellites:
             parts.append("satellites " + ", ".join(f"{c}:{s}" for c, s in sorted(self.satellites)))
         return "; ".join(parts) if parts else "nothing"
+
+    def clear(self) -> bool:
+        """Readmit everything at once (acting switched off); returns whether something was excluded."""
+        was = self.active
+        self.scope = SCOPE_NONE
+        self.constellations.clear()
+        self.satellites.clear()
+        self._clean_since_ns = None
+        return was
 
     def update(self, verdict: IntegrityVerdict) -> str | None:
         """Apply one verdict; returns "excluded" or "readmitted" when the exclusion changed, else None."""
@@ -210,6 +221,8 @@ def verdict_of(msg) -> tuple[IntegrityVerdict | None, str | None]:
     stamp_ns = int(msg.header.stamp.sec) * NS_PER_S + int(msg.header.stamp.nanosec)
     satellites = tuple(zip((int(c) for c in msg.affected_satellite_constellations),
                            (int(s) for s in msg.affected_svids), strict=True))
+    first = msg.first_alarm_stamp
+    first_alarm_ns = max(0, int(first.sec) * NS_PER_S + int(first.nanosec))
     return IntegrityVerdict(stamp_ns, int(msg.spoofing_state), int(msg.spoofing_scope),
                             tuple(int(c) for c in msg.affected_constellations), satellites,
-                            int(msg.jamming_state), js), None
+                            int(msg.jamming_state), js, first_alarm_ns), None
