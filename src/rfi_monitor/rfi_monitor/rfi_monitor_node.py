@@ -96,41 +96,24 @@ reaching the node (one rejected block among many stays OK); else OK. ``hardware_
 the parameter (the front end), and it, the window, the thresholds and ``warning_throttle_s`` can be set
 while the node runs (rfi_node_common.params.RuntimeParameters; the core's parameters are read-only).
 
-Load shedding (issue 14 item 6): a front end delivers a continuous stream, and a node that takes longer per block
-than the block lasts falls behind until the middleware drops blocks it never sees. Instead the node spends at most
-``max_cpu_load`` of one core over the stream time the blocks cover, measured with the CPU time of its own thread
-in the callbacks, deserialising included (``time.thread_time``: resource accounting only, no estimate depends on
-it). A block that arrives while the node is over that budget gets the light analysis (estimator stft;
-``RfiMonitor.process(light=True)``: its Welch spectrum only, about a quarter of a quiet block's full analysis; its
-type and J/N checked against the last full analysis at most 10 ms of stamps before (50 ms after a NONE), whose
-sweep period, band, rate and shape it carries, a chirp's frequency NaN; a block that disagrees, a jammer appearing
-or leaving, is analysed in full): counted as ``blocks_light`` (within ``blocks_processed``) and
-``core.light_escalations``. On a live stream (below), a block that waited more than ``LIGHT_QUEUE_S`` (10 ms) in
-the input queue, or one stamped more than ``LIGHT_LAG_FRACTION`` of ``max_block_age_s`` behind the node clock,
-gets the light analysis too (the CPU budget does not see a machine that leaves the node less than a core); a
-replay never does (its blocks queue up by design). So a node that cannot analyse every block in full still answers
-every block, the detail of one block in a few. Only when it is over budget by more than ``light_analysis_debt_s``
-(the light analysis does not keep up either) does it shed whole blocks on purpose, judged on the stamp read from
-the raw bytes before they are deserialised (``peek_stamp_ns``; a shed block costs almost nothing): counted as
-``blocks_shed`` on /diagnostics, no JammerState, and the block after a shed one is a gap for the core (the "stft"
-estimator keeps no per-sample state, so its estimates stay valid). Which blocks are shed depends on the machine's
-speed, not on the replay rate (the budget is stream time). Snapshot front ends (1 ms per second) never shed. The
-debt is capped at SHED_CREDIT_CAP_S, and the compiled functions are compiled (or loaded) at start-up
-(:func:`warm_up`), so that a one-off cost does not shed seconds of stream. ``max_cpu_load`` 0 switches all of this
-off: every block is analysed in full, as by the core.
-``accounting_ok`` counts shed blocks: received == processed + shed + rejected.
-
-Live streams, latency: ``max_block_age_s`` (0.05 s by default; 0: off) also sheds, before deserialising, a block
-whose stamp is more than that many seconds behind the node's clock (counted in ``blocks_shed`` and in
-``blocks_shed_stale``), so that a node that was starved of CPU (another process, a slower computer) answers
-the newest blocks at once instead of working through a queue (the input keeps up to 1000 blocks, a second of
-1 ms blocks). For live front ends only, whose stamps are the clock's (if_source ``pace: real_time``, an SDR
-driver): the stream is taken as live when its first block (after the start, or after a stamp restart) is stamped
-within ``LIVE_STREAM_DETECT_S`` of the node clock (``live_stream`` on /diagnostics); a replay's stamps lie in the
-past and are never shed by age. The wall clock decides only which blocks are analysed, never what an analysed
-block gives. A shed block is a gap for the core;
-a gap shorter than ``monitor.FRAME_KEEP_GAP_S`` keeps the frame length and is charged to the integration's budget,
-so shedding makes the next blocks cheaper, not dearer.
+Load policy (issue 26 item 1; :mod:`rfi_monitor.load_policy`, pure and tested on its own, defines "live"): a
+replay (a bag, ``if_to_bag`` output, ``play --max``, ``--rate 10`` or ``--rate 1``: its stamps lie in the past, more
+than ``load_policy.LIVE_BOUND_S`` (1 s) from the receive clock when its first block arrives) gets the full analysis
+on every block, whatever it costs: nothing is shed, nothing is light, and its answers do not depend on the replay
+speed. Only a live stream (stamped with the clock: if_source ``pace: real_time``, an SDR driver) has the safety
+net: over its CPU budget (``max_cpu_load`` of one core over the stream time its blocks cover, measured with the CPU
+time of this thread in the callbacks, deserialising included; ``time.thread_time``, resource accounting only), or
+after ``LIGHT_QUEUE_S`` in the input queue, a block gets the light analysis (estimator stft;
+``RfiMonitor.process(light=True)``: its Welch spectrum, type and J/N checked against the last full analysis, whose
+sweep period, band and shape it carries, a chirp's frequency NaN; a block that disagrees is analysed in full,
+``core.light_escalations``), counted as ``blocks_light`` (within ``blocks_processed``); over budget by more than
+``light_analysis_debt_s`` it is shed whole, judged on the stamp read from the raw bytes before they are deserialised
+(``peek_stamp_ns``), counted as ``blocks_shed`` (no JammerState; the block after it is a gap for the core). A live
+block stamped more than ``max_block_age_s`` behind the receive clock is shed too (``blocks_shed_stale``). The
+decisions are counted as ``load.full``, ``load.light``, ``load.shed``, ``load.shed_stale`` and ``load.not_live``
+(blocks of a replay) on /diagnostics, with ``live_stream``. The compiled functions are compiled (or loaded) at
+start-up (:func:`warm_up`), so that a one-off cost does not shed seconds of a live stream. ``accounting_ok`` counts
+shed blocks: received == processed + shed + rejected.
 
 Second core: ``analysis_worker`` (off by default) runs each block's ridge analysis in a child process
 (:mod:`rfi_monitor.analysis_worker`) while the node does the rest; the estimates are the same (tested byte for byte
@@ -159,6 +142,14 @@ from rclpy.serialization import deserialize_message
 from rfi_monitor.analysis_worker import AnalysisWorker
 from rfi_monitor.classifier import ClassifierParams
 from rfi_monitor.integration import IntegrationParams
+from rfi_monitor.load_policy import (
+    FULL,
+    LIGHT,
+    SHED,
+    SHED_CREDIT_CAP_S,
+    LoadPolicy,
+    LoadPolicyParams,
+)
 from rfi_monitor.monitor import NON_FINITE, JammerEstimate, RfiMonitor, RfiMonitorParams
 from rfi_monitor.params import ESTIMATORS
 from rfi_monitor.ridge import RidgeParams
@@ -210,26 +201,6 @@ SCALE_MAX = 1.0e3
 """Largest volts (or full-scale units) per count accepted (module docstring)."""
 CENTER_FREQUENCY_MAX_HZ = 1.0e11
 """Highest RF reference frequency accepted, Hz (GNSS bands are 1.1-2.5 GHz; 100 GHz leaves room for any band)."""
-FULL, LIGHT, SHED = 'full', 'light', 'shed'
-"""What the load decision gives a block (RfiMonitorNode._load_mode): the full analysis, the light one, none."""
-LIGHT_QUEUE_S = 0.01
-"""On a live stream (``max_block_age_s``), a block that waited longer than this in the input queue (from its reception
-by the middleware, rmw's ``received_timestamp``, to its callback), s, gets the light analysis even when the CPU budget
-allows the full one (``max_cpu_load`` > 0): the budget counts this thread's CPU time in the callbacks, not what the
-machine leaves it (the source and other processes on the same cores, the middleware's threads), so the queue is what
-shows that the node does not get the core it is budgeted. Never on a replay: a replay sent faster than the node
-analyses (a burst of blocks, a bag played at 10x) queues up by design, and its blocks are analysed as the machine's
-speed allows (the CPU budget), not as the replay rate would have it."""
-LIGHT_LAG_FRACTION = 0.2
-"""... and so does, on a live stream, a block stamped more than this share of ``max_block_age_s`` behind the node
-clock (the same for a middleware that does not report reception times)."""
-SHED_CREDIT_CAP_S = 0.1
-"""Load shedding: CPU credit saved while idle is capped at this much stream time (times max_cpu_load), s: a burst
-of slow blocks after a quiet spell is absorbed, a lasting overload is not."""
-LIVE_STREAM_DETECT_S = 1.0
-"""A stream is live (``max_block_age_s`` applies) when its first block, after the node starts or after a stamp
-restart, is stamped within this many seconds of the node clock, either side; a replay's stamps lie further in the
-past, s."""
 MAX_SAMPLE_INDEX = 2 ** 53
 """first_sample_index + samples may not exceed this: the core's sample positions are float64, exact to 2^53."""
 
@@ -295,8 +266,9 @@ class MonitorNodeParams:
         True, 'Count samples at full scale (two\'s-complement front ends, bits_per_sample >= 4): the block is '
         'analysed, its clipped fraction reported and its J/N flagged as a lower bound.')
     max_cpu_load: float = parameter(
-        0.9, 'Share of one core the analysis may use, over the stream time the blocks cover (a continuous stream: '
-        'the block durations; snapshots: the time between them). Beyond it blocks get the light analysis '
+        0.9, 'Live streams only (a replay is analysed in full, always): share of one core the analysis may use, over '
+        'the stream time the blocks cover (a continuous stream: the block durations; snapshots: the time between '
+        'them). Beyond it blocks get the light analysis '
         '(light_analysis_debt_s) and, beyond that, are shed whole on purpose (blocks_shed on /diagnostics, no '
         'JammerState for them) until it fits again; 0: never shed.',
         minimum=0.0, maximum=1000.0)
@@ -310,8 +282,9 @@ class MonitorNodeParams:
         0.05, 'Live streams only: a block stamped more than this many seconds behind the node clock is shed before '
         'it is deserialised (blocks_shed and blocks_shed_stale), so the answers stay within this latency when the '
         'node is short of CPU. A stream is live when its first block (after the start or a stamp restart) is '
-        'stamped within 1 s of the node clock (live_stream on /diagnostics); a replay, whose stamps lie in the '
-        'past, is never shed by age. 0: off.', minimum=0.0, maximum=3600.0)
+        'stamped within 1 s of the receive clock (live_stream on /diagnostics; rfi_monitor.load_policy); a replay, '
+        'whose stamps lie in the past, is never shed nor given the light analysis. 0: off.',
+        minimum=0.0, maximum=3600.0)
     analysis_worker: bool = parameter(
         False, 'Run the ridge analysis of each block (estimator stft) in a child process on another core while this '
         'one does the rest of the block (rfi_monitor.analysis_worker): about half the CPU time per block in this '
@@ -801,9 +774,7 @@ class RfiMonitorNode(Node):
         self._core_counters: dict[str, int] = {}
         self._last_type: int | None = None
         self._last_clipped_fraction = 0.0
-        self._cpu_debt_s = 0.0
-        self._last_block_stamp_ns: int | None = None
-        self._live: bool | None = None          # max_block_age_s: decided on the first block of a time line
+        self.load = LoadPolicy(self._load_params(self.params))
         self._errors_at_last_report = 0
         self._handler_errors_at_last_report = 0
         self._diag_timer = StampTimer(self.params.diagnostics_period_s)
@@ -854,7 +825,7 @@ class RfiMonitorNode(Node):
                 return
             self._handle(msg, load_mode=mode)
         finally:
-            self._cpu_debt_s += time.thread_time() - cpu0
+            self.load.spend(time.thread_time() - cpu0)
 
     def on_block(self, msg: IfSamples) -> None:
         """Account for one block: processed (one JammerState), shed or rejected under a named reason; never
@@ -863,7 +834,7 @@ class RfiMonitorNode(Node):
         try:
             self._handle(msg, load_mode=None)
         finally:
-            self._cpu_debt_s += time.thread_time() - cpu0
+            self.load.spend(time.thread_time() - cpu0)
 
     def _handle(self, msg: IfSamples, load_mode: str | None) -> None:
         """on_block's work; ``load_mode``: FULL or LIGHT when the load decision (:meth:`_load_mode`) was made on the
@@ -891,44 +862,22 @@ class RfiMonitorNode(Node):
         if stamp_ns is not None and self._diag_timer.due(stamp_ns):
             self._publish(lambda: self.diagnostics(stamp_ns))
 
+    @staticmethod
+    def _load_params(params: MonitorNodeParams) -> LoadPolicyParams:
+        return LoadPolicyParams(max_cpu_load=params.max_cpu_load, light_analysis_debt_s=params.light_analysis_debt_s,
+                                max_block_age_s=params.max_block_age_s, light_allowed=params.estimator == 'stft')
+
     def _load_mode(self, stamp_ns: int, msg: IfSamples | None) -> str:
-        """FULL, LIGHT or SHED for this block (module docstring, "Load shedding"): every block earns ``max_cpu_load``
-        times the stream time it covers (its duration, or the time since the last block when longer; only the
-        latter for a block judged on its raw bytes, ``msg`` None), each callback spends the CPU time it takes
-        (deserialising included); a block arriving while the balance is in debt gets the light analysis while the
-        debt is at most ``light_analysis_debt_s`` (estimator stft), else it is shed. The credit saved is capped at
-        SHED_CREDIT_CAP_S times max_cpu_load (a burst allowance)."""
-        load = self.params.max_cpu_load
+        """FULL, LIGHT or SHED for this block: :class:`rfi_monitor.load_policy.LoadPolicy` (a replay: FULL, always),
+        given the block's duration (``msg`` None: a block judged on its raw bytes), its reception time (the system
+        clock when the middleware does not report it) and its time in the input queue."""
         covered_s = 0.0
         if msg is not None and msg.sample_format in SAMPLE_WIDTH_BYTES and msg.sample_rate_hz > 0:
             n = len(msg.samples) // SAMPLE_WIDTH_BYTES[msg.sample_format] // (2 if msg.is_complex else 1)
             covered_s = n / msg.sample_rate_hz
-        if self._last_block_stamp_ns is not None and stamp_ns > self._last_block_stamp_ns:
-            covered_s = max(covered_s, (stamp_ns - self._last_block_stamp_ns) / NS_PER_S)
-        if self._last_block_stamp_ns is None or stamp_ns > self._last_block_stamp_ns:
-            self._last_block_stamp_ns = stamp_ns
-        age = self.params.max_block_age_s
-        behind_ns = 0
-        if age > 0:
-            behind_ns = self.get_clock().now().nanoseconds - stamp_ns
-            if self._live is None:
-                self._live = abs(behind_ns) <= LIVE_STREAM_DETECT_S * NS_PER_S
-            if self._live and behind_ns > age * NS_PER_S:
-                self.counts['blocks_shed_stale'] += 1
-                return SHED
-        if not load > 0:
-            return FULL
-        light = self.params.light_analysis_debt_s > 0 and self.params.estimator == 'stft'
-        queued = self.health.queued_s() if light and self._live else None
-        lagging = light and bool(self._live) and ((queued is not None and queued > LIGHT_QUEUE_S)
-                                                  or behind_ns > LIGHT_LAG_FRACTION * age * NS_PER_S)
-        # the debt is capped too: a one-off cost (a garbage collection, a page fault storm) sheds at most
-        # SHED_CREDIT_CAP_S of stream; a lasting overload adds its cost again with every analysed block
-        self._cpu_debt_s = min(max(self._cpu_debt_s - load * covered_s, -load * SHED_CREDIT_CAP_S),
-                               SHED_CREDIT_CAP_S)
-        if not self._cpu_debt_s > 0.0:
-            return LIGHT if lagging else FULL
-        return LIGHT if light and self._cpu_debt_s <= self.params.light_analysis_debt_s else SHED
+        received_ns = self.health.last_received_ns
+        return self.load.decide(stamp_ns, received_ns if received_ns > 0 else time.time_ns(), covered_s,
+                                self.health.queued_s())
 
     def _admit_stamp(self, msg: IfSamples) -> tuple[str | None, int | None]:
         """(rejection reason or None, the stamp in ns if the StampGate accepted it)."""
@@ -940,7 +889,7 @@ class RfiMonitorNode(Node):
             return decision.reason, None
         if decision.restart:
             self.counts['stamp_restarts'] += 1
-            self._live = None
+            self.load.restart()
             self.get_logger().warn(f'IF block stamps jumped to {stamp_ns} ns (confirmed by '
                                    f'{self.params.stamp_jump_confirmations} blocks): new time line')
         return None, stamp_ns
@@ -1010,7 +959,10 @@ class RfiMonitorNode(Node):
         values['calibrated'] = self.monitor.calibrated
         values['last_type'] = 'none yet' if self._last_type is None else TYPE_NAMES.get(self._last_type, '?')
         values['last_clipped_fraction'] = self._last_clipped_fraction
-        values['live_stream'] = 'unknown' if self._live is None else self._live
+        values['live_stream'] = 'unknown' if self.load.live is None else self.load.live
+        values['blocks_shed_stale'] = self.load.counts['shed_stale']
+        for key in ('full', 'light', 'shed', 'shed_stale', 'not_live'):
+            values[f'load.{key}'] = self.load.counts[key]
         values.update(self.health.values())
         received = self.counts['blocks_received']
         values['accounting_ok'] = (self.health.counts[f'{self.subscription.topic_name}.received'] == received
