@@ -66,6 +66,9 @@ Block checks, in this order (``rejected_<reason>``), with the physical ranges th
   ``max_block_samples``: bounds memory and the time one callback takes);
 * ``bad_first_sample_index``: ``first_sample_index + samples`` beyond 2^53 (the core keeps
   absolute sample positions in float64, exact only up to 2^53: 7.5 years at 38.192 MS/s);
+* ``values_exceed_bits``: a stored value outside what ``bits_per_sample`` can hold (:func:`count_range`: two's
+  complement for 4-16 bits, odd levels up to +-(2**bits - 1) for 1-3 bits), e.g. an INT16 block declaring 8 bits
+  with values to +-32767 (issue 27 item 3): malformed, not analysed as a clipped block;
 * ``blank_block``: every sample equal (real), or every I and every Q equal (complex): a block
   with no variation (all zero, a stuck ADC) carries no information about a jammer;
 * from the core (``JammerEstimate.rejection``): ``non_finite`` (more than ``max_invalid_fraction``
@@ -702,6 +705,26 @@ def is_blank(counts: np.ndarray, is_complex: bool) -> bool:
     return bool(i.min() == i.max() and q.min() == q.max())
 
 
+def count_range(bits: int) -> tuple[int, int]:
+    """(lowest, highest) count a front end of ``bits`` bits per real value can deliver: two's complement
+    ``[-2**(bits-1), 2**(bits-1) - 1]`` for bits >= 4; odd sign/magnitude levels ``+-(2**bits - 1)`` for 1-3 bits
+    (MAX2769-type: 2 bits are +-1, +-3), which also holds a 1-3 bit two's-complement front end's values."""
+    if bits < 4:
+        return -(2 ** bits - 1), 2 ** bits - 1
+    return -(2 ** (bits - 1)), 2 ** (bits - 1) - 1
+
+
+def exceeds_bits(counts: np.ndarray, bits: int) -> bool:
+    """True if a stored value lies outside :func:`count_range` of the declared ``bits_per_sample`` (issue 27 item
+    3: a 16-bit container declaring 8 bits with values to +-32767 is malformed, not a clipped block). Values
+    that fill their container (8 bits in INT8, 16 in INT16) cannot exceed it."""
+    lo, hi = count_range(bits)
+    info = np.iinfo(counts.dtype)
+    if lo <= info.min and hi >= info.max:
+        return False
+    return bool(counts.min() < lo or counts.max() > hi)
+
+
 def decode_samples(msg: IfSamples) -> np.ndarray:
     """The block's values in volts: float64, shape (n,) real or (2n,) interleaved I, Q.
 
@@ -898,6 +921,8 @@ class RfiMonitorNode(Node):
         """Run the core on a well-formed block (``light``: the light analysis will do) and publish its estimate;
         return a rejection reason."""
         counts = decode_counts(msg)
+        if exceeds_bits(counts, int(msg.bits_per_sample)):
+            return 'values_exceed_bits'
         if is_blank(counts, bool(msg.is_complex)):
             return 'blank_block'
         try:

@@ -657,6 +657,18 @@ def _variants(good: IfSamples, n_max: int) -> list[tuple[str, IfSamples]]:
             for f in (fs / 2, -fs / 2, math.nan)]
     out += [('bad_center_frequency', _copy(good, center_frequency_hz=f)) for f in (1e300, 1.1e11, -1.0, math.nan,
                                                                                   -math.inf)]
+    # issue 27 item 3: values beyond the declared bits (16-bit container, 8 bits declared, values to +-32767; a
+    # 4-bit front end's block with a 5-bit value; a 2-bit odd-level block with a 5)
+    wide = counts.astype('<i2') * 258
+    assert np.abs(wide).max() > 127
+    four = np.clip(counts, -8, 7).astype('<i1')
+    four[17] = 8
+    two = np.where(counts >= 0, 3, -3).astype('<i1')
+    two[5] = 5
+    out += [('values_exceed_bits', _copy(good, sample_format=IfSamples.INT16, bits_per_sample=8,
+                                         samples=wide.tobytes())),
+            ('values_exceed_bits', _copy(good, bits_per_sample=4, samples=four.tobytes())),
+            ('values_exceed_bits', _copy(good, bits_per_sample=2, samples=two.tobytes()))]
     out += [('long_block', _copy(good, samples=np.resize(counts, n_max + 1).tobytes())),
             ('odd_length_iq', _copy(good, is_complex=True, intermediate_frequency_hz=0.0,
                                     samples=counts[:-1].tobytes())),
@@ -681,11 +693,15 @@ def test_blank_and_physically_impossible_blocks_are_rejected_by_name(probe_facto
     expected: Counter = Counter()
     for k, (reason, msg) in enumerate(_variants(good, n_max)):
         msg.header.stamp = ns_to_stamp(stamp_to_ns(good.header.stamp) + (k + 1) * 1_000_000)
+        saturated = p.node.monitor._block_counters['saturated_samples']
         assert p.send(msg) is None, reason
+        if reason == 'values_exceed_bits':              # rejected before the core: not counted as clipped samples
+            assert p.node.monitor._block_counters['saturated_samples'] == saturated
         expected[reason] += 1
         assert p.node.counts[f'rejected_{reason}'] == expected[reason] + (reason == 'blank_block'), (reason, k)
         assert p.diagnostics[-1].status[0].level == b'\x01'
     assert p.node.counts['rejected_core_error'] == 0
+    assert expected['values_exceed_bits'] == 3
     for m in msgs[CALIBRATION + 1:]:
         m.header.stamp = ns_to_stamp(stamp_to_ns(m.header.stamp) + 100_000_000)
     states = p.send_all(msgs[CALIBRATION + 1:])
@@ -720,6 +736,23 @@ def test_a_raising_core_node_or_handler_is_counted_and_reported_as_error(probe_f
     assert p.send(msgs[4]) is not None and p.diagnostics[-1].status[0].level == b'\x02'
     assert p.send(msgs[5]) is not None and p.diagnostics[-1].status[0].level == b'\x00'
     assert p.values()['accounting_ok'] == 'True'
+
+
+def test_values_beyond_the_declared_bits_are_detected_at_the_edges():
+    """Issue 27 item 3: count_range / exceeds_bits at the edge of every quantisation."""
+    from rfi_monitor.rfi_monitor_node import count_range, exceeds_bits
+    assert count_range(8) == (-128, 127) and count_range(12) == (-2048, 2047) and count_range(16) == (-32768, 32767)
+    assert count_range(1) == (-1, 1) and count_range(2) == (-3, 3) and count_range(3) == (-7, 7)
+    for bits in range(1, 17):
+        lo, hi = count_range(bits)
+        dtype = '<i1' if bits <= 8 else '<i2'
+        assert not exceeds_bits(np.array([lo, hi], dtype=dtype), bits), bits
+        if hi < np.iinfo(dtype).max:
+            assert exceeds_bits(np.array([0, hi + 1], dtype=dtype), bits), bits
+        if lo > np.iinfo(dtype).min:
+            assert exceeds_bits(np.array([lo - 1, 0], dtype=dtype), bits), bits
+        assert not exceeds_bits(np.array([lo, hi], dtype='<i2'), bits), bits
+    assert exceeds_bits(np.array([0, 32767], dtype='<i2'), 8)
 
 
 def test_check_block_accepts_the_edges_of_every_physical_range():
