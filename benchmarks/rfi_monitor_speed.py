@@ -232,11 +232,11 @@ settings (``NodeLikeMonitor``, as rfi_monitor_node feeds the core), 1 ms blocks 
 consecutive stamps; prints the CPU time of each block."""
 
 
-def _export_baseline(tmp: Path) -> Path | None:
-    """src/rfi_monitor of BASELINE_COMMIT exported under tmp (None if git or the commit is not there)."""
+def _export_baseline(tmp: Path, commit: str = BASELINE_COMMIT) -> Path | None:
+    """src/rfi_monitor of ``commit`` exported under tmp (None if git or the commit is not there)."""
     root = Path(__file__).resolve().parent.parent
     try:
-        arc = subprocess.run(["git", "archive", BASELINE_COMMIT, "src/rfi_monitor"], cwd=root, capture_output=True,
+        arc = subprocess.run(["git", "archive", commit, "src/rfi_monitor"], cwd=root, capture_output=True,
                              timeout=60, check=True).stdout
         subprocess.run(["tar", "-x", "-C", str(tmp)], input=arc, check=True, timeout=60)
     except (OSError, subprocess.SubprocessError):
@@ -281,11 +281,132 @@ def live_stream_rows() -> list[tuple[str, float]]:
     return rows
 
 
+STAGES_BASELINE = "93ea8b7"
+"""The rfi_monitor before the speed work of issue 26 item 2 (its items 1 and issue 27 item 3 in, no speed change)."""
+STAGE_CASES = tuple(f"{fe}:{phase}" for fe in ("real38", "cplx10", "real24")
+                    for phase in ("acquisition", "tracking", "switch"))
+"""Front end : phase of the stage table (rfi_monitor_stages.py)."""
+STAGE_FRONT_ENDS = {"real38": "38.192 MS/s 8-bit real", "cplx10": "10 MS/s 8-bit complex",
+                    "real24": "24 MS/s 8-bit real"}
+STAGE_BLOCKS = 200
+"""1 ms blocks per stream of the stage table (the first WARM_BLOCKS not counted; the switch-on at block 100)."""
+STAGE_RUNS = 2
+"""Runs of every (case, version) child, alternated; the table gives the median of their means."""
+STAGES_BEGIN, STAGES_END = "<!-- stages:begin -->", "<!-- stages:end -->"
+
+
+def _stage_run(pkg_dir: Path, case: str) -> dict:
+    """One stream of rfi_monitor_stages.py with the rfi_monitor package found in pkg_dir."""
+    root = Path(__file__).resolve().parent.parent
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(pkg_dir), str(root / "src" / "rfi_sim"),
+                                         str(root / "src" / "rfi_node_common"), str(root / "src" / "gnss_common"),
+                                         env.get("PYTHONPATH", "")])
+    out = subprocess.run([sys.executable, str(Path(__file__).resolve().parent / "rfi_monitor_stages.py"), case,
+                          str(STAGE_BLOCKS)], env=env, capture_output=True, text=True, timeout=1200,
+                         check=True).stdout
+    d = json.loads(out.strip().splitlines()[-1])
+    t = np.asarray(d["t"][WARM_BLOCKS:])
+    stages: dict[str, float] = {}
+    for row in d["stages"][WARM_BLOCKS:]:
+        for k, v in row.items():
+            stages[k] = stages.get(k, 0.0) + v
+    stages = {k: v / t.size for k, v in stages.items()}
+    stages["other"] = float(t.mean()) - sum(stages.values())
+    return {"mean": float(t.mean()), "p99": float(np.percentile(t, 99)), "stft": float(np.median(d["stft"])),
+            "block_s": d["n"] / {"real38": 38.192e6, "cplx10": 10e6, "real24": 24e6}[case.split(":")[0]],
+            "stages": stages}
+
+
+def stage_measurements() -> dict[tuple[str, str], list[dict]]:
+    """(case, version) -> the runs of STAGE_RUNS, the versions ("before", "now") alternated per case."""
+    res: dict[tuple[str, str], list[dict]] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        base = _export_baseline(Path(tmp), STAGES_BASELINE)
+        now = Path(__file__).resolve().parent.parent / "src" / "rfi_monitor"
+        versions = ([("before", base)] if base is not None else []) + [("now", now)]
+        for _ in range(STAGE_RUNS):
+            for case in STAGE_CASES:
+                for name, pkg in versions:
+                    res.setdefault((case, name), []).append(_stage_run(pkg, case))
+    return res
+
+
+def stage_section(res: dict[tuple[str, str], list[dict]]) -> str:
+    """The stage tables of speed.md (issue 26 item 2)."""
+    def med(case: str, ver: str, key: str) -> float:
+        return float(np.median([r[key] for r in res[(case, ver)]]))
+
+    def stage(case: str, ver: str, name: str) -> float:
+        return float(np.median([r["stages"].get(name, 0.0) for r in res[(case, ver)]]))
+
+    versions = [v for v in ("before", "now") if (STAGE_CASES[0], v) in res]
+    lines = [STAGES_BEGIN, "## Full analysis per block, by stage, against a bare STFT (issue 26 item 2)", "",
+             f"`benchmarks/rfi_monitor_speed.py` (children `benchmarks/rfi_monitor_stages.py`): the monitor fed as the "
+             f"node feeds it (shipped settings, compiled functions warmed up as the node does), {STAGE_BLOCKS} blocks of "
+             f"1 ms with consecutive stamps (a replay: every block analysed in full), blocks {WARM_BLOCKS}.."
+             f"{STAGE_BLOCKS - 1} counted; acquisition = noise only, tracking = the paper's saw-tooth chirp at J/N 21 dB "
+             "from the first block, switch = noise, the chirp switched on at block 100. CPU time of the thread, one "
+             "core (the process pinned), 'before' = the rfi_monitor of "
+             f"{STAGES_BASELINE} (before this speed work), 'now' = this tree, alternated, {STAGE_RUNS} runs, medians. "
+             "Bare STFT = a Hann-windowed 256-point STFT of the same block with numpy (|X|^2, non-overlapping frames), "
+             "timed in the same process between the blocks: the ratio to it is the figure that holds on a shared "
+             "machine. Real-time factor = block duration / mean CPU time per block (goal: >= 3, p99 <= 5 ms).", "",
+             "| front end | phase | version | mean ms per block | p99 ms | bare STFT ms | mean / bare STFT | "
+             "real-time factor |", "|---|---|---|---|---|---|---|---|"]
+    for case in STAGE_CASES:
+        fe, phase = case.split(":")
+        for ver in versions:
+            mean, p99, stft = med(case, ver, "mean"), med(case, ver, "p99"), med(case, ver, "stft")
+            block_s = res[(case, ver)][0]["block_s"]
+            lines.append(f"| {STAGE_FRONT_ENDS[fe]} | {phase} | {ver} | {mean * 1e3:.3f} | {p99 * 1e3:.2f} | "
+                         f"{stft * 1e3:.3f} | {mean / stft:.1f} | {block_s / mean:.2f} |")
+    names: list[str] = []
+    for runs in res.values():
+        for r in runs:
+            names += [k for k in r["stages"] if k not in names]
+    names = sorted(set(names), key=lambda k: (k == "other", -stage(STAGE_CASES[0], versions[-1], k)))
+    for fe in STAGE_FRONT_ENDS:
+        cases = [c for c in STAGE_CASES if c.startswith(fe + ":")]
+        cols = [(c, v) for c in cases for v in versions]
+        lines += ["", f"Stages, {STAGE_FRONT_ENDS[fe]}: ms per block (share of the block's time; in units of the bare "
+                  "STFT in brackets)", "",
+                  "| stage | " + " | ".join(f"{c.split(':')[1]} {v}" for c, v in cols) + " |",
+                  "|---|" + "---|" * len(cols)]
+        for name in names:
+            cells = []
+            for c, v in cols:
+                x, tot, stft = stage(c, v, name), med(c, v, "mean"), med(c, v, "stft")
+                cells.append(f"{x * 1e3:.3f} ({100 * x / tot:.0f} %) [{x / stft:.2f}]")
+            lines.append(f"| {name} | " + " | ".join(cells) + " |")
+        lines.append("| total | " + " | ".join(f"{med(c, v, 'mean') * 1e3:.3f} [{med(c, v, 'mean') / med(c, v, 'stft'):.1f}]"
+                                                 for c, v in cols) + " |")
+    return "\n".join(lines + ["", STAGES_END])
+
+
+def write_stage_section(text: str) -> None:
+    """Put the stage section at the top of speed.md (after its title), replacing an older one."""
+    path = OUT / "speed.md"
+    doc = path.read_text() if path.exists() else "# RFI monitor throughput\n"
+    if STAGES_BEGIN in doc and STAGES_END in doc:
+        a, b = doc.index(STAGES_BEGIN), doc.index(STAGES_END) + len(STAGES_END)
+        doc = doc[:a] + text + doc[b:]
+    else:
+        head, _, rest = doc.partition("\n")
+        doc = head + "\n\n" + text + "\n" + rest
+    path.write_text(doc)
+
+
 def main() -> None:
     try:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     except (AttributeError, OSError):
         pass
+    section = stage_section(stage_measurements())
+    print(section)
+    if "--stages" in sys.argv[1:]:
+        write_stage_section(section)
+        return
     runs = [live_stream_rows() for _ in range(LIVE_RUNS)]
     rows = [(runs[0][i][0], float(np.median([r[i][1] for r in runs]))) for i in range(len(runs[0]))]
     ref_rate = math.nan
@@ -371,6 +492,7 @@ def main() -> None:
         + "\n" + SECOND_ROUND
         + "\n" + RIDGE_SPEEDUP
         + "\n" + NOT_KEPT)
+    write_stage_section(section)
 
 
 def real_time_verdict(rows: list[tuple[str, float]]) -> str:
