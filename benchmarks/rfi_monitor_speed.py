@@ -343,11 +343,11 @@ def stage_section(res: dict[tuple[str, str], list[dict]]) -> str:
     versions = [v for v in ("before", "now") if (STAGE_CASES[0], v) in res]
     lines = [STAGES_BEGIN, "## Full analysis per block, by stage, against a bare STFT (issue 26 item 2)", "",
              f"`benchmarks/rfi_monitor_speed.py` (children `benchmarks/rfi_monitor_stages.py`): the monitor fed as the "
-             f"node feeds it (shipped settings, compiled functions warmed up as the node does), {STAGE_BLOCKS} blocks of "
-             f"1 ms with consecutive stamps (a replay: every block analysed in full), blocks {WARM_BLOCKS}.."
-             f"{STAGE_BLOCKS - 1} counted; acquisition = noise only, tracking = the paper's saw-tooth chirp at J/N 21 dB "
-             "from the first block, switch = noise, the chirp switched on at block 100. CPU time of the thread, one "
-             "core (the process pinned), 'before' = the rfi_monitor of "
+             "node feeds it (shipped settings, compiled functions warmed up as the node does), "
+             f"{STAGE_BLOCKS} blocks of 1 ms with consecutive stamps (a replay: every block analysed in full), "
+             f"blocks {WARM_BLOCKS}..{STAGE_BLOCKS - 1} counted; acquisition = noise only, tracking = the paper's "
+             "saw-tooth chirp at J/N 21 dB from the first block, switch = noise, the chirp switched on at block 100. "
+             "CPU time of the thread, one core (the process pinned), 'before' = the rfi_monitor of "
              f"{STAGES_BASELINE} (before this speed work), 'now' = this tree, alternated, {STAGE_RUNS} runs, medians. "
              "Bare STFT = a Hann-windowed 256-point STFT of the same block with numpy (|X|^2, non-overlapping frames), "
              "timed in the same process between the blocks: the ratio to it is the figure that holds on a shared "
@@ -379,8 +379,8 @@ def stage_section(res: dict[tuple[str, str], list[dict]]) -> str:
                 x, tot, stft = stage(c, v, name), med(c, v, "mean"), med(c, v, "stft")
                 cells.append(f"{x * 1e3:.3f} ({100 * x / tot:.0f} %) [{x / stft:.2f}]")
             lines.append(f"| {name} | " + " | ".join(cells) + " |")
-        lines.append("| total | " + " | ".join(f"{med(c, v, 'mean') * 1e3:.3f} [{med(c, v, 'mean') / med(c, v, 'stft'):.1f}]"
-                                                 for c, v in cols) + " |")
+        totals = [f"{med(c, v, 'mean') * 1e3:.3f} [{med(c, v, 'mean') / med(c, v, 'stft'):.1f}]" for c, v in cols]
+        lines.append("| total | " + " | ".join(totals) + " |")
     return "\n".join(lines + ["", STAGES_END])
 
 
