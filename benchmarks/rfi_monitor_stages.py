@@ -125,10 +125,10 @@ def main() -> None:
     clock = StageClock()
     mon = NodeLikeMonitor(None)
     try:                                   # as the node does before it subscribes: compiled functions loaded
+        from rfi_monitor.warm_up import warm_up
+    except ImportError:                    # the package before issue 26 had it in the node module
         from rfi_monitor.rfi_monitor_node import warm_up
-        warm_up(mon.params)
-    except ImportError:
-        pass
+    warm_up(mon.params)
     install(clock)
     cplx = bool(fe.is_complex)
     w = np.hanning(256)
