@@ -655,8 +655,8 @@ def markdown(results: list[RowResult], sources: list[str], unknown: list[str], w
         "the scored blocks (median [min, max]); blocks are scored from the one after the switch-on block.",
         "\"freq\" counts the published CW/CHIRP frequencies inside the sampled band, NaN (not tracked), outside;",
         "for a chirp (issue 26 item 3) also: of the scored blocks whose jammer is inside the sampled band at the block",
-        "end (truth), how many published a frequency, the median absolute error, how many within 100 kHz, and the share",
-        "within the published 1-sigma std (about 68 % if the std is right).",
+        "end (truth), how many published a frequency, the median absolute error, how many within 100 kHz, and the",
+        "share within the published 1-sigma std (about 68 % if the std is right).",
         "",
         "| row | truth type | truth J/N dB | truth period | truth band | truth shape | reported type (blocks) "
         "| reported J/N dB | freq | reported period | reported shape | clip truth / reported | verdict |",
