@@ -85,7 +85,7 @@ which runs only while no single block shows a jammer), and includes the node's s
 where the node still sheds.
 
 Session 7: the age limit is on by default for live streams (a stream whose first block is stamped within
-LIVE_STREAM_DETECT_S = 1 s of the node clock; a replay's stamps lie in the past and are never shed by age), so
+load_policy.LIVE_BOUND_S = 1 s of the receive clock; since issue 26 a replay is never shed), so
 the first column is what a user gets without setting anything.
 
 analysis_worker (third column) runs the ridge analysis in a child process. On this 2-vCPU virtual machine it

@@ -500,6 +500,8 @@ def score(name: str, fe: FrontEndConfig, blocks: list[Block], ests: list, second
         res.cells["freq"] = f"{inside} in band, {n_nan} NaN, {outside} outside; median err {np.nanmedian(ferr):.0f} Hz"
     else:
         res.cells["freq"] = f"{inside} in band, {n_nan} NaN, {outside} outside" if pub else "-"
+    if want == CHIRP:
+        res.cells["freq"] += "; " + chirp_frequency_summary(blocks, ests, sc, nyq_lo, nyq_hi)
     # period
     if want == CHIRP:
         tp = float(np.nanmedian([blocks[k].truth_period_s for k in sc]))
@@ -536,6 +538,31 @@ def score(name: str, fe: FrontEndConfig, blocks: list[Block], ests: list, second
     res.cells["clip"] = truth_clip + (f" / {100 * np.nanmedian(rc):.1f} %" if np.isfinite(rc).any() else " / -")
     res.cells["truth type"] = TYPE_NAMES[want]
     return res
+
+
+CHIRP_FREQ_TOLERANCE_HZ = 100e3
+"""Issue 26 item 3: a chirp's published frequency within this of the truth at the block end, Hz."""
+
+
+def chirp_frequency_summary(blocks: list[Block], ests: list, scored: list[int], lo_hz: float, hi_hz: float) -> str:
+    """Issue 26 item 3, per stream: of the scored blocks whose jammer is inside the sampled band [lo_hz, hi_hz] at the
+    block end (truth), how many published a finite frequency, the median |error|, how many within
+    CHIRP_FREQ_TOLERANCE_HZ, and the share of |error| <= the published 1-sigma std (about 68 % if the std is right);
+    and how many of the blocks whose jammer is outside the band published one (should be none)."""
+    inb = [k for k in scored if math.isfinite(blocks[k].truth_freq_hz) and lo_hz <= blocks[k].truth_freq_hz <= hi_hz]
+    out = [k for k in scored if k not in inb and ests[k].valid and math.isfinite(ests[k].frequency_hz)]
+    pubd = [k for k in inb if ests[k].valid and math.isfinite(ests[k].frequency_hz)]
+    if not inb:
+        return f"in band at block end: 0 blocks; published while out of band {len(out)}"
+    if not pubd:
+        return f"in band at block end: 0 of {len(inb)} published; published while out of band {len(out)}"
+    err = np.array([ests[k].frequency_hz - blocks[k].truth_freq_hz for k in pubd])
+    std = np.array([ests[k].frequency_std_hz for k in pubd])
+    cover = float(np.mean(np.abs(err) <= std)) if np.isfinite(std).all() else math.nan
+    return (f"in band at block end: {len(pubd)} of {len(inb)} published, abs. error median "
+            f"{np.median(np.abs(err)) / 1e3:.0f} kHz, <= 100 kHz in "
+            f"{int(np.sum(np.abs(err) <= CHIRP_FREQ_TOLERANCE_HZ))}, within 1 sigma {100 * cover:.0f} %; "
+            f"published while out of band {len(out)}")
 
 
 def run_stream(fe: FrontEndConfig, blocks: list[Block], method: str | None = None) -> tuple[list, float]:
@@ -626,7 +653,10 @@ def markdown(results: list[RowResult], sources: list[str], unknown: list[str], w
         "clip = share of values at full scale (complex: and of I/Q pairs with I or Q there), truth / reported);",
         "reported = the monitor's `JammerState` fields over",
         "the scored blocks (median [min, max]); blocks are scored from the one after the switch-on block.",
-        "\"freq\" counts the published CW/CHIRP frequencies inside the sampled band, NaN (not tracked), outside.",
+        "\"freq\" counts the published CW/CHIRP frequencies inside the sampled band, NaN (not tracked), outside;",
+        "for a chirp (issue 26 item 3) also: of the scored blocks whose jammer is inside the sampled band at the block",
+        "end (truth), how many published a frequency, the median absolute error, how many within 100 kHz, and the",
+        "share within the published 1-sigma std (about 68 % if the std is right).",
         "",
         "| row | truth type | truth J/N dB | truth period | truth band | truth shape | reported type (blocks) "
         "| reported J/N dB | freq | reported period | reported shape | clip truth / reported | verdict |",

@@ -225,6 +225,45 @@ def _comb_z(r: np.ndarray, v: np.ndarray, idx: np.ndarray, mask: np.ndarray) -> 
     return out
 
 
+@njit(cache=True, nogil=True)
+def _comb_z_direct(r: np.ndarray, v: np.ndarray, P: np.ndarray, Kp: np.ndarray, lag_limit: int) -> np.ndarray:
+    """:func:`_comb_z` of the candidates P (frames) without their lag and mask arrays (issue 26 item 2: the fine
+    comb's 128 multiples of a few hundred candidates): lag rint(P k), k = 1..Kp (Kp from the caller, as
+    ``Integrator._comb_lags`` clips it), kept while <= lag_limit; the same sums in the same order."""
+    M = P.size
+    out = np.empty(M)
+    for i in range(M):
+        num = 0.0
+        den = 0.0
+        for k in range(1, Kp[i] + 1):
+            lag = np.int64(np.rint(P[i] * float(k)))
+            if lag <= lag_limit:
+                num += r[lag]
+                den += v[lag]
+        out[i] = num / math.sqrt(den) if den > 0 else -math.inf
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _separated(order: np.ndarray, periods: np.ndarray, count: int) -> np.ndarray:
+    """The first ``count`` indices of ``order`` whose periods lie more than 0.5 frames from every one taken before
+    (the fine comb's candidates, best first)."""
+    top = np.empty(count, dtype=np.int64)
+    n = 0
+    for i in order:
+        ok = True
+        for j in range(n):
+            if not abs(periods[i] - periods[top[j]]) > 0.5:
+                ok = False
+                break
+        if ok:
+            top[n] = i
+            n += 1
+            if n == count:
+                break
+    return top[:n]
+
+
 class _Sums:
     """Running sums of the statistics over the newest ``count`` blocks of the window (one per window length)."""
 
@@ -733,12 +772,7 @@ class Integrator:
             n_top = min(20 * FINE_CANDIDATES, zc.size)
             order = np.argpartition(zc, zc.size - n_top)[zc.size - n_top:]   # the n_top largest, then sorted
             order = order[np.argsort(zc[order], kind="stable")[::-1]]
-            top: list[int] = []
-            for i in order:
-                if all(abs(periods[i] - periods[j]) > 0.5 for j in top):
-                    top.append(int(i))
-                    if len(top) == FINE_CANDIDATES:
-                        break
+            top = _separated(order, periods, FINE_CANDIDATES).tolist()
             # around each: +-1.5 coarse steps. The coarse comb rounds k p to whole frames for k <= kc, so it is flat
             # over up to 1 / kc frames of p (two coarse steps) and the candidate taken from such a plateau may sit at
             # either end of it; a fine search of +-0.5 step missed the period when the true one lay at the plateau's
@@ -751,18 +785,18 @@ class Integrator:
                 k1 = max(2, min(kf, int(lag_limit // p0)))
                 cand.extend(np.arange(p0 - FINE_HALF_WIDTH / k0, p0 + FINE_HALF_WIDTH / k0 + 1e-12, 0.5 / k1).tolist())
             Pf = np.asarray([c for c in cand if lmin <= c <= lmax] or [float(periods[top[0]])])
-            _, idf, mf = self._comb_lags(Pf, lag_limit, kf)
-            zf = _comb_z(r, v, idf, mf)
+            zf = _comb_z_direct(r, v, Pf, np.clip((lag_limit // Pf).astype(np.int64), 2, kf), lag_limit)
             ck = (lmin, lmax, lag_limit, kf, alpha)
             if ck not in self._chirp_thr:
                 self._chirp_thr[ck] = -float(special.ndtri(alpha / self._fine_count(lmin, lmax, lag_limit, kf)))
             i = int(np.argmax(zf))
             chirp_z = float(zf[i])
+            _, idf, mf = self._comb_lags(Pf[i:i + 1], lag_limit, kf)     # the lags of the best candidate
             # the normal quantile, moved by the comb's skew (Cornish-Fisher): Z is a quadratic form of the amplitudes
             z0 = self._chirp_thr[ck]
-            gamma = _comb_skew(float(Pf[i]), int(mf[i].sum()), sums.copies, sums.copy_frames)
+            gamma = _comb_skew(float(Pf[i]), int(mf[0].sum()), sums.copies, sums.copy_frames)
             chirp_thr = z0 + gamma / 6.0 * (z0 * z0 - 1.0)
-            lags = idf[i][mf[i]]
+            lags = idf[0][mf[0]]
             scale = len(lags) * sums.spread_frames - sums.spread * float(lags.sum())
             strength = float(r[lags].sum()) / scale if scale > 0 else math.nan
             if chirp_z > chirp_thr and strength >= par.min_chirp_strength:

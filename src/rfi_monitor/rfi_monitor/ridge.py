@@ -283,24 +283,81 @@ def stft_power(x: np.ndarray, frame_length: int, cplx: bool) -> tuple[np.ndarray
 
     Returns:
         (S, freqs): S shape (frames, bins) float32; freqs shape (bins,), cycles/sample.
+
+    The framing, the float32 conversion and the window, and |X|^2 after the FFT are compiled passes
+    (``_frames_real``, ``_frames_complex``, ``_power_real``, ``_power_shifted``; issue 26 item 2): the same float32
+    arithmetic in the same order as the numpy expressions they replaced (astype, multiply, square, add; fftshift as
+    an index shift), without their temporaries.
     """
     L = int(frame_length)
     hop = L // 2
     nfr = (x.size - L) // hop + 1
-    fr = np.lib.stride_tricks.as_strided(x, shape=(nfr, L), strides=(x.strides[0] * hop, x.strides[0]))
-    fw = fr.astype(np.complex64 if cplx else np.float32)
-    fw *= _window(L)
+    w = _window(L)
     # scipy's pocketfft in single precision (numpy's float32 path is slower; see classifier.welch_psd)
     if cplx:
-        spec = np.fft.fftshift(sp_fft.fft(fw, axis=1, overwrite_x=True), axes=1)
+        xc = np.ascontiguousarray(x, dtype=np.complex128)
+        fw = np.empty((nfr, L), dtype=np.complex64)
+        _frames_complex(xc.view(np.float64), hop, w, fw)
+        spec = sp_fft.fft(fw, axis=1, overwrite_x=True)
         freqs = (np.arange(L) - L // 2) / L
-    else:
-        spec = sp_fft.rfft(fw, axis=1, overwrite_x=True)
-        freqs = np.arange(L // 2 + 1) / L
-    v = spec.view(np.float32) if spec.dtype == np.complex64 else spec.astype(np.complex64).view(np.float32)
-    np.square(v, out=v)
-    S = v[:, 0::2] + v[:, 1::2]
-    return S, freqs
+        return _power_shifted(spec, L // 2), freqs
+    xr = np.ascontiguousarray(x, dtype=np.float64)
+    fr32 = np.empty((nfr, L), dtype=np.float32)
+    _frames_real(xr, hop, w, fr32)
+    spec = sp_fft.rfft(fr32, axis=1, overwrite_x=True)
+    freqs = np.arange(L // 2 + 1) / L
+    return _power_real(spec), freqs
+
+
+@njit(cache=True, nogil=True)
+def _frames_real(x: np.ndarray, hop: int, w: np.ndarray, out: np.ndarray) -> None:
+    """out[t, j] = float32(x[t hop + j]) * w[j] (float32 arithmetic)."""
+    nfr, L = out.shape
+    for t in range(nfr):
+        o = t * hop
+        for j in range(L):
+            out[t, j] = np.float32(x[o + j]) * w[j]
+
+
+@njit(cache=True, nogil=True)
+def _frames_complex(xv: np.ndarray, hop: int, w: np.ndarray, out: np.ndarray) -> None:
+    """out[t, j] = complex64(x[t hop + j]) * w[j], x given as its float64 view (re, im pairs): each part rounded
+    to float32 and multiplied by the float32 window (what complex64 times a real float32 gives)."""
+    nfr, L = out.shape
+    for t in range(nfr):
+        o = 2 * t * hop
+        for j in range(L):
+            re = np.float32(xv[o + 2 * j]) * w[j]
+            im = np.float32(xv[o + 2 * j + 1]) * w[j]
+            out[t, j] = complex(re, im)
+
+
+@njit(cache=True, nogil=True)
+def _power_real(spec: np.ndarray) -> np.ndarray:
+    """|X|^2 in float32: re * re + im * im, each product rounded to float32 (as np.square then add)."""
+    nfr, nb = spec.shape
+    out = np.empty((nfr, nb), dtype=np.float32)
+    for t in range(nfr):
+        for b in range(nb):
+            v = spec[t, b]
+            re = np.float32(v.real)
+            im = np.float32(v.imag)
+            out[t, b] = np.float32(re * re) + np.float32(im * im)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _power_shifted(spec: np.ndarray, shift: int) -> np.ndarray:
+    """|X|^2 in float32 of a complex FFT in fftshift order: out[t, b] = |spec[t, (b + shift) mod L]|^2."""
+    nfr, L = spec.shape
+    out = np.empty((nfr, L), dtype=np.float32)
+    for t in range(nfr):
+        for b in range(L):
+            v = spec[t, (b + shift) % L]
+            re = np.float32(v.real)
+            im = np.float32(v.imag)
+            out[t, b] = np.float32(re * re) + np.float32(im * im)
+    return out
 
 
 def noise_levels(S: np.ndarray, smooth_bins: int, cplx: bool) -> np.ndarray:

@@ -315,11 +315,13 @@ def test_clipped_block_is_analysed(probe_factory):
 def test_load_shedding_counts_whole_blocks_and_keeps_accounting(probe_factory):
     """Issue 14 item 6: over its CPU budget the node sheds whole blocks on purpose, counted as blocks_shed; the
     blocks it analyses give valid states. With max_cpu_load 1e-4 a 1 ms block earns 0.1 us of CPU, far less than
-    any analysis costs, so after the first block every block of this short stream is shed."""
+    any analysis costs, so after the first block every block of this short stream is shed. A live stream (issue 26
+    item 1: a replay is never shed, test_a_replay_over_budget_is_analysed_in_full): stamped with the clock, the age
+    limit off so that only the budget sheds."""
     fe = FrontEndConfig(noise_bandwidth_hz=NOISE_BW_HZ)
     msgs, _ = stream(fe, (ChirpJammer(js_db=JS_DB),), 0, 6, seed=21)
-    p = probe_factory(max_cpu_load=1e-4, light_analysis_debt_s=0.0)     # no light analysis: shed at once
-    states = p.send_all(msgs)
+    p = probe_factory(max_cpu_load=1e-4, light_analysis_debt_s=0.0, max_block_age_s=0.0)   # no light: shed at once
+    states = p.send_all(live_stamps(msgs))
     assert states[0] is not None and states[0].type == JammerState.CHIRP
     assert all(s is None for s in states[1:])
     v = p.values()
@@ -331,11 +333,12 @@ def test_over_budget_blocks_get_the_light_analysis_before_any_is_shed(probe_fact
     """Session 11, issue 14 item 6: over its CPU budget by at most light_analysis_debt_s the node answers every block
     with the light analysis instead of shedding it: a chirp's type and J/N measured in the block, its sweep period
     carried from the last full analysis, its frequency NaN; counted as blocks_light within blocks_processed. With
-    max_cpu_load 1e-4 every block after the first is over budget, and the debt stays within the cap (0.1 s)."""
+    max_cpu_load 1e-4 every block after the first is over budget, and the debt stays within the cap (0.1 s). A live
+    stream, the age limit off."""
     fe = FrontEndConfig(noise_bandwidth_hz=NOISE_BW_HZ)
     msgs, _ = stream(fe, (ChirpJammer(js_db=JS_DB),), 0, 6, seed=21)
-    p = probe_factory(max_cpu_load=1e-4, light_analysis_debt_s=0.1)
-    states = p.send_all(msgs)
+    p = probe_factory(max_cpu_load=1e-4, light_analysis_debt_s=0.1, max_block_age_s=0.0)
+    states = p.send_all(live_stamps(msgs))
     assert all(s is not None for s in states)
     first = states[0]
     assert first.type == JammerState.CHIRP and math.isfinite(first.frequency_hz)
@@ -347,6 +350,30 @@ def test_over_budget_blocks_get_the_light_analysis_before_any_is_shed(probe_fact
         assert s.type == JammerState.CHIRP and s.sweep_period_s == first.sweep_period_s
         assert abs(s.jammer_to_noise_db - first.jammer_to_noise_db) < 1.0
     assert v['blocks_shed'] == '0' and v['blocks_processed'] == '6' and v['accounting_ok'] == 'True'
+    assert v['live_stream'] == 'True' and int(v['load.light']) == 5 and v['load.not_live'] == '0'
+
+
+def test_a_replay_over_budget_is_analysed_in_full(probe_factory):
+    """Issue 26 item 1: the same stream and budget as the two tests above, stamped as a replay (in the past): every
+    block gets the full analysis, none light, none shed, and the diagnostics count them as not live."""
+    fe = FrontEndConfig(noise_bandwidth_hz=NOISE_BW_HZ)
+    msgs, _ = stream(fe, (ChirpJammer(js_db=JS_DB),), 0, 6, seed=21)
+    p = probe_factory(max_cpu_load=1e-4, light_analysis_debt_s=0.1)
+    states = p.send_all(msgs)
+    assert all(s is not None and s.type == JammerState.CHIRP and math.isfinite(s.frequency_hz) for s in states)
+    v = p.values()
+    assert v['blocks_light'] == '0' and v['blocks_shed'] == '0' and v['blocks_processed'] == '6'
+    assert v['live_stream'] == 'False' and v['load.not_live'] == '6' and v['load.full'] == '6'
+
+
+def live_stamps(msgs: list[IfSamples]) -> list[IfSamples]:
+    """The messages restamped as a live front end stamps them: the first with the system clock now, the next 1 ms
+    apart."""
+    import time as _time
+    t0 = _time.time_ns()
+    for k, m in enumerate(msgs):
+        m.header.stamp = ns_to_stamp(t0 + k * 10**6)
+    return msgs
 
 
 def test_a_block_of_a_live_stream_that_waited_in_the_input_queue_gets_the_light_analysis(probe_factory):
@@ -356,7 +383,7 @@ def test_a_block_of_a_live_stream_that_waited_in_the_input_queue_gets_the_light_
     full, as by the core) or light_analysis_debt_s 0."""
     import time as _time
 
-    from rfi_monitor.rfi_monitor_node import FULL, LIGHT, LIGHT_QUEUE_S
+    from rfi_monitor.load_policy import FULL, LIGHT, LIGHT_QUEUE_S
     waited_ns = int(5 * LIGHT_QUEUE_S * 1e9)
     p = probe_factory(max_cpu_load=0.9)
     node = p.node
@@ -381,12 +408,12 @@ def test_a_block_of_a_live_stream_that_waited_in_the_input_queue_gets_the_light_
 
 def test_stale_blocks_of_a_live_stream_are_shed_and_a_replay_is_not(probe_factory):
     """max_block_age_s (live streams; 0.05 s by default): a stream whose first block is stamped within
-    LIVE_STREAM_DETECT_S of the node clock is live, and its blocks stamped more than the limit behind the clock are
+    LIVE_BOUND_S of the receive clock is live, and its blocks stamped more than the limit behind the clock are
     shed before they are deserialised, counted in blocks_shed and blocks_shed_stale; blocks stamped now are
     analysed. A stream stamped further in the past (a replay) is analysed whole, limit or not; 0: off."""
     import time as _time
 
-    from rfi_monitor.rfi_monitor_node import LIVE_STREAM_DETECT_S
+    from rfi_monitor.load_policy import LIVE_BOUND_S
     fe = FrontEndConfig(noise_bandwidth_hz=NOISE_BW_HZ)
     msgs, _ = stream(fe, (ChirpJammer(js_db=JS_DB),), 0, 6, seed=23)
 
@@ -403,7 +430,7 @@ def test_stale_blocks_of_a_live_stream_are_shed_and_a_replay_is_not(probe_factor
     assert v['live_stream'] == 'True'
     behind.close()
     replay = probe_factory()
-    assert all(s is not None for s in replay.send_all(stamped(_time.time_ns() - int(2 * LIVE_STREAM_DETECT_S * 1e9))))
+    assert all(s is not None for s in replay.send_all(stamped(_time.time_ns() - int(2 * LIVE_BOUND_S * 1e9))))
     assert replay.values()['live_stream'] == 'False' and replay.values()['blocks_shed_stale'] == '0'
     replay.close()
     off = probe_factory(max_block_age_s=0.0)
@@ -630,6 +657,18 @@ def _variants(good: IfSamples, n_max: int) -> list[tuple[str, IfSamples]]:
             for f in (fs / 2, -fs / 2, math.nan)]
     out += [('bad_center_frequency', _copy(good, center_frequency_hz=f)) for f in (1e300, 1.1e11, -1.0, math.nan,
                                                                                   -math.inf)]
+    # issue 27 item 3: values beyond the declared bits (16-bit container, 8 bits declared, values to +-32767; a
+    # 4-bit front end's block with a 5-bit value; a 2-bit odd-level block with a 5)
+    wide = counts.astype('<i2') * 258
+    assert np.abs(wide).max() > 127
+    four = np.clip(counts, -8, 7).astype('<i1')
+    four[17] = 8
+    two = np.where(counts >= 0, 3, -3).astype('<i1')
+    two[5] = 5
+    out += [('values_exceed_bits', _copy(good, sample_format=IfSamples.INT16, bits_per_sample=8,
+                                         samples=wide.tobytes())),
+            ('values_exceed_bits', _copy(good, bits_per_sample=4, samples=four.tobytes())),
+            ('values_exceed_bits', _copy(good, bits_per_sample=2, samples=two.tobytes()))]
     out += [('long_block', _copy(good, samples=np.resize(counts, n_max + 1).tobytes())),
             ('odd_length_iq', _copy(good, is_complex=True, intermediate_frequency_hz=0.0,
                                     samples=counts[:-1].tobytes())),
@@ -654,11 +693,15 @@ def test_blank_and_physically_impossible_blocks_are_rejected_by_name(probe_facto
     expected: Counter = Counter()
     for k, (reason, msg) in enumerate(_variants(good, n_max)):
         msg.header.stamp = ns_to_stamp(stamp_to_ns(good.header.stamp) + (k + 1) * 1_000_000)
+        saturated = p.node.monitor._block_counters['saturated_samples']
         assert p.send(msg) is None, reason
+        if reason == 'values_exceed_bits':              # rejected before the core: not counted as clipped samples
+            assert p.node.monitor._block_counters['saturated_samples'] == saturated
         expected[reason] += 1
         assert p.node.counts[f'rejected_{reason}'] == expected[reason] + (reason == 'blank_block'), (reason, k)
         assert p.diagnostics[-1].status[0].level == b'\x01'
     assert p.node.counts['rejected_core_error'] == 0
+    assert expected['values_exceed_bits'] == 3
     for m in msgs[CALIBRATION + 1:]:
         m.header.stamp = ns_to_stamp(stamp_to_ns(m.header.stamp) + 100_000_000)
     states = p.send_all(msgs[CALIBRATION + 1:])
@@ -693,6 +736,23 @@ def test_a_raising_core_node_or_handler_is_counted_and_reported_as_error(probe_f
     assert p.send(msgs[4]) is not None and p.diagnostics[-1].status[0].level == b'\x02'
     assert p.send(msgs[5]) is not None and p.diagnostics[-1].status[0].level == b'\x00'
     assert p.values()['accounting_ok'] == 'True'
+
+
+def test_values_beyond_the_declared_bits_are_detected_at_the_edges():
+    """Issue 27 item 3: count_range / exceeds_bits at the edge of every quantisation."""
+    from rfi_monitor.rfi_monitor_node import count_range, exceeds_bits
+    assert count_range(8) == (-128, 127) and count_range(12) == (-2048, 2047) and count_range(16) == (-32768, 32767)
+    assert count_range(1) == (-1, 1) and count_range(2) == (-3, 3) and count_range(3) == (-7, 7)
+    for bits in range(1, 17):
+        lo, hi = count_range(bits)
+        dtype = '<i1' if bits <= 8 else '<i2'
+        assert not exceeds_bits(np.array([lo, hi], dtype=dtype), bits), bits
+        if hi < np.iinfo(dtype).max:
+            assert exceeds_bits(np.array([0, hi + 1], dtype=dtype), bits), bits
+        if lo > np.iinfo(dtype).min:
+            assert exceeds_bits(np.array([lo - 1, 0], dtype=dtype), bits), bits
+        assert not exceeds_bits(np.array([lo, hi], dtype='<i2'), bits), bits
+    assert exceeds_bits(np.array([0, 32767], dtype='<i2'), 8)
 
 
 def test_check_block_accepts_the_edges_of_every_physical_range():
