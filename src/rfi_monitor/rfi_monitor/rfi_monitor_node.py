@@ -6,15 +6,15 @@ array (``np.frombuffer`` by ``sample_format``, little-endian, times ``scale``: v
 :class:`rfi_monitor.monitor.RfiMonitor` (Kang et al., eq. 8-27, plus the identification of
 docs/rfi_monitor/README.md) and publishes the returned estimate as a ``rfi_msgs/JammerState``.
 
-Input: ``/rfi/if_samples`` is subscribed with :func:`rfi_node_common.inputs.subscribe_input`: best
-effort (a sensor driver's best-effort publisher and a reliable one are both accepted; rclpy's
-``qos_overrides./rfi/if_samples.subscription.*`` parameters change it), every arrival and every
-message lost before the node saw it (publisher sequence gaps, the middleware's lost-message event)
-counted as ``input./rfi/if_samples.*``. The subscription is raw: bytes that rclpy cannot deserialise
-are counted as ``rejected_malformed_message`` (:meth:`RfiMonitorNode.on_raw_block`). Nothing raises
-out of :meth:`RfiMonitorNode.on_block`: every
-block that reaches it is either processed or rejected under a named reason; the subscription's own
-guard (``callback_errors``) is only the last net and makes the diagnostics ERROR.
+Input: ``/rfi/if_samples`` is subscribed with :func:`rfi_node_common.inputs.subscribe_input`: it takes
+its publishers' reliability (reliable with ``play`` or ``if_source``, best effort once a best-effort
+sensor driver appears; rclpy's ``qos_overrides./rfi/if_samples.subscription.reliability`` parameter
+fixes it), every arrival and every message lost before the node saw it (publisher sequence gaps, the
+middleware's lost-message event, counted once) counted as ``input./rfi/if_samples.*``. The
+subscription is raw: bytes that rclpy cannot deserialise are counted as
+``rejected_malformed_message`` (:meth:`RfiMonitorNode.on_raw_block`). Nothing raises out of
+:meth:`RfiMonitorNode.on_block`: every block that reaches it is either processed or rejected under
+a named reason; the subscription's own guard (``callback_errors``) is only the last net and makes the diagnostics ERROR.
 
 Output policy: :mod:`rfi_monitor.block_io` (one JammerState per analysed block, nothing for a rejected one).
 
