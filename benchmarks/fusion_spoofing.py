@@ -8,16 +8,18 @@ A closed loop in process, in stamp order, of what the nodes do (``fusion_node._p
   5 Hz from the ARL1 broadcast ephemeris, three UWB anchors at 20 Hz each, no jammer) with an attack
   injected into its GNSS epochs by ``rfi_sim.spoofing.apply_attack`` (+3 dB single-transmitter C/N0, the
   attack's defaults);
-* each GNSS epoch goes through ``GnssExclusion.filter_epoch``; what is left goes into the SPP reference
-  cache and ``FusionFilter.process_gnss`` (the filter built as the node builds it:
-  ``FusionNodeParams().fusion_params()``, the SPP reference solved on demand);
 * ``IntegrityMonitor.process_epoch`` judges the (unfiltered) epoch; its report becomes the
-  ``IntegrityVerdict`` the node's ``verdict_of`` would make of the published message and goes to
-  ``GnssExclusion.update`` (an exclusion clears the SPP cache and, where the installed core has it, calls
-  ``FusionFilter.reanchor_on_uwb``) and its J/S to the filter, as ``FusionNode._apply_integrity`` does.
-  Variant "after" is the node's order: the verdict of epoch k, stamped like epoch k, is enqueued after it
-  and processed after the fusion applied epoch k. Variant "before": the verdict of epoch k applies before
-  the fusion sees epoch k (a node that holds each epoch until its verdict arrives);
+  ``IntegrityVerdict`` the node's ``verdict_of`` would make of the published message. As the node's
+  re-ordering buffer releases it (a verdict before the measurements of the same stamp), the verdict of
+  epoch k is applied before epoch k, as ``FusionNode._apply_integrity`` applies it:
+  ``GnssExclusion.update``; at an exclusion the SPP cache is cleared, the side of three anchors' plane the
+  state holds the tag on is kept (``FusionFilter.side_of_anchor_plane``), the filter re-anchors on UWB
+  (``FusionFilter.reanchor_on_uwb``) and its parameters become ``FusionNode._filter_params``'s: while all
+  GNSS is excluded, ``use_gnss`` false and ``uwb_tag_side_of_anchor_plane`` the kept side (unless set);
+  at a readmission the node's parameters again; the report's C/N0 J/S goes to the filter;
+* each GNSS epoch then goes through ``GnssExclusion.filter_epoch``; what is left goes into the SPP
+  reference cache and ``FusionFilter.process_gnss`` (the filter built as the node builds it:
+  ``FusionNodeParams().fusion_params()``, the SPP reference solved on demand);
 * each UWB range goes to ``FusionFilter.process_uwb`` and ``IntegrityMonitor.add_uwb``.
 
 The monitor takes no input from the fusion, so its reports are computed once per attacked run and
@@ -32,17 +34,19 @@ DETECTED (and SUSPECTED) after the start; the error held when the exclusion bega
 excluded; readmissions; re-initialisations of the filter during the attack; DETECTED / SUSPECTED epochs
 before the attack (false alarms).
 
-What-if rows (push only) measure changes proposed in docs/gnss_integrity/fusion_spoofing.md: a static
-platform's motion model (a parameter, ``accel_psd_m2ps3``), and two emulated core changes
-(:class:`UwbFirstReinitFilter`; ``tell_filter``). They are measurements for a decision, not the shipped
-behaviour.
+What-if rows (push only) measure alternatives to the shipped behaviour: the verdict applied after the epoch
+of its stamp (the node before commit fe95fe1), a static platform's motion model (a parameter,
+``accel_psd_m2ps3``), and an emulated core change (P2 of docs/gnss_integrity/fusion_spoofing.md: roll the
+filter back to before the first alarm instead of re-anchoring). They are measurements for a decision, not
+the shipped behaviour.
 
 Usage:
     source .venv/bin/activate && source install/setup.bash
     python benchmarks/fusion_spoofing.py [--seeds 5] [--jobs 2]
 
 Writes the tables into docs/gnss_integrity/fusion_spoofing.md (between the ``results`` markers; the prose
-around them is by hand) and fusion_spoofing_*.png next to it; prints the tables. About 20 min on two cores.
+around them is by hand) and fusion_spoofing_*.png next to it; prints the tables. About 20 min on two cores
+(``--no-what-if``: about half).
 """
 
 from __future__ import annotations
@@ -64,7 +68,7 @@ from pathlib import Path
 import numpy as np
 
 from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic
-from gnss_common.integrity_codes import SCOPE_ALL, STATE_DETECTED, STATE_SUSPECTED
+from gnss_common.integrity_codes import STATE_DETECTED, STATE_SUSPECTED
 from gnss_common.observations import GnssEpoch, UwbRangeMeasurement
 from gnss_common.spp import SinglePointPositioner
 from gnss_integrity.monitor import IntegrityMonitor, IntegrityReport
@@ -73,6 +77,7 @@ from rfi_sim.spoofing import apply_attack
 from rfi_sim.spoofing_attack import SpoofingAttack
 from uwb_gnss_fusion.fusion_filter import FRAME_EARTH, FusionFilter, FusionOutput
 from uwb_gnss_fusion.fusion_node_params import FusionNodeParams
+from uwb_gnss_fusion.fusion_params import FusionParams
 from uwb_gnss_fusion.integrity_policy import (
     GnssExclusion,
     IntegrityVerdict,
@@ -112,25 +117,6 @@ CASES = {
 that a readmission can be seen. A one-constellation (Galileo-only) case is skipped: the simulator is GPS-only."""
 
 
-class UwbFirstReinitFilter(FusionFilter):
-    """Emulation of proposed core change P1 (the doc): on a divergence with three or more anchors heard within
-    ``uwb_init_window_s``, re-initialise the position from UWB multilateration seeded with the state (the
-    mirror on the state's side), keeping the clock states, instead of from the SPP reference or the GNSS
-    snapshot (which a spoofer controls). Uses private members of :class:`FusionFilter`: a what-if of this
-    benchmark only."""
-
-    def _declare_divergence(self, stamp_ns: int, gnss_only: bool = False) -> FusionOutput:
-        if self._initialized and self._frame == FRAME_EARTH and self.uwb_anchors_heard(stamp_ns) >= 3:
-            pos = self._multilaterate(stamp_ns, self._frame, self._nominal[0:3])
-            if pos is not None:
-                self._reinits += 1
-                self._count("divergence_reinit_from_uwb")
-                self.initialize(max(stamp_ns, self._t_ns), pos, clock_bias_m=float(self._nominal[6]),
-                                clock_drift_mps=float(self._nominal[7]), position_std_m=0.3)
-                return self._output(True)
-        return super()._declare_divergence(stamp_ns, gnss_only)
-
-
 @dataclasses.dataclass(frozen=True)
 class Config:
     """One fusion configuration.
@@ -138,11 +124,10 @@ class Config:
     Attributes:
         name: its label in the tables.
         node_params: :class:`FusionNodeParams` overrides (empty: the node's defaults).
-        filter_cls: the core class.
-        tell_filter: emulated change P3: while all GNSS is excluded the filter runs with ``use_gnss`` false
-            (its UWB-only rules), set back on readmission.
-        reanchor: at an exclusion, call ``FusionFilter.reanchor_on_uwb`` as the node does (when the installed
-            core has it; False: the node of commit ca56cfc, which did not).
+        verdict_after: apply the verdict of epoch k after the fusion applied epoch k (the node before commit
+            fe95fe1, whose re-ordering buffer released a verdict after the measurements of its stamp); False:
+            before it, as the node now does.
+        reanchor: at an exclusion, call ``FusionFilter.reanchor_on_uwb`` as the node does.
         rollback_s: emulated change P2 (None: off): when all GNSS becomes excluded, the filter goes back to its
             newest copy (kept every :data:`SNAPSHOT_PERIOD_S` while nothing is excluded) stamped at least this
             long before the episode's first alarm (``first_alarm_ns`` of the report), and the UWB ranges since
@@ -151,8 +136,7 @@ class Config:
 
     name: str
     node_params: tuple[tuple[str, object], ...] = ()
-    filter_cls: type[FusionFilter] = FusionFilter
-    tell_filter: bool = False
+    verdict_after: bool = False
     reanchor: bool = True
     rollback_s: float | None = None
 
@@ -163,19 +147,19 @@ SNAPSHOT_PERIOD_S = 1.0
 
 DEFAULTS = Config("node defaults")
 STATIC = (("accel_psd_m2ps3", 0.01),)
-P1 = Config("P1: re-init from UWB first (emulated)", filter_cls=UwbFirstReinitFilter)
+AFTER_CONFIG = Config("verdict after its epoch (node before fe95fe1)", verdict_after=True)
 STATIC_CONFIG = Config("static motion model (accel_psd 0.01)", node_params=STATIC)
 WHAT_IF = (
-    Config("no re-anchor at exclusion (node of ca56cfc)", reanchor=False),
-    P1,
+    AFTER_CONFIG,
     STATIC_CONFIG,
     Config("P2: roll back instead of re-anchor (emulated)", rollback_s=1.0, reanchor=False),
-    Config("P3: filter told GNSS is excluded (emulated)", tell_filter=True),
-    Config("P2 + P3 + static motion model", node_params=STATIC, rollback_s=1.0, reanchor=False, tell_filter=True),
-    Config("P2 + P3 + near-zero velocity (accel_psd 1e-4)", node_params=(("accel_psd_m2ps3", 1e-4),),
-           rollback_s=1.0, reanchor=False, tell_filter=True),
+    Config("P2 + static motion model", node_params=STATIC, rollback_s=1.0, reanchor=False),
+    Config("P2 + near-zero velocity (accel_psd 1e-4)", node_params=(("accel_psd_m2ps3", 1e-4),),
+           rollback_s=1.0, reanchor=False),
 )
-"""What-if configurations, run on the push (the doc says what each one stands for)."""
+"""What-if configurations, run on the push (the doc says what each one stands for). The core changes P1
+(re-initialise from UWB first at a divergence) and P3 (the filter told that all GNSS is excluded), and the
+verdict-first order (P4), emulated here before, are now the shipped behaviour (node defaults)."""
 
 
 def report_verdict(r: IntegrityReport) -> IntegrityVerdict:
@@ -229,13 +213,24 @@ class FusionRun:
 
 
 def run_fusion(items: list[tuple[int, int, object]], n_epochs: int, reports: Sequence[IntegrityReport] | None,
-               apply_before: bool = False, config: Config = DEFAULTS) -> FusionRun:
+               config: Config = DEFAULTS) -> FusionRun:
     """The fusion node's core over the stream (module docstring); ``reports`` None: no integrity input."""
     params = FusionNodeParams(**dict(config.node_params))
     spp_cache = SppReferenceCache(SinglePointPositioner(), params.reference_max_age_s)
-    provider = spp_cache.reference if params.use_spp_reference else None
-    box = {"filt": config.filter_cls(params.fusion_params(), reference_provider=provider)}
+    use_spp = params.use_spp_reference and params.use_gnss
+    provider = spp_cache.reference if use_spp else None
     exclusion = GnssExclusion(params.integrity_readmit_clean_s, reports is not None and params.act_on_integrity)
+    held_side = {"side": 0}  # FusionNode._held_side
+
+    def filter_params() -> FusionParams:
+        """FusionNode._filter_params: the node's, except while every GNSS satellite is excluded."""
+        base = params.fusion_params()
+        if not exclusion.all_gnss():
+            return base
+        side = base.uwb_tag_side_of_anchor_plane or held_side["side"]
+        return dataclasses.replace(base, use_gnss=False, uwb_tag_side_of_anchor_plane=side)
+
+    box = {"filt": FusionFilter(filter_params(), reference_provider=provider)}
     held = np.full((n_epochs, 3), np.nan)
     excluded = np.zeros(n_epochs, dtype=bool)
     reinit_at = np.zeros(n_epochs, dtype=int)
@@ -268,26 +263,27 @@ def run_fusion(items: list[tuple[int, int, object]], n_epochs: int, reports: Seq
             hold(filt.process_uwb(meas))
 
     def apply(k: int) -> None:
+        """FusionNode._apply_integrity (and, for P2, the rollback in place of the re-anchoring)."""
         assert reports is not None
         verdict = report_verdict(reports[k])
         change = exclusion.update(verdict)
         if change == "excluded":
-            spp_cache.clear()  # as _apply_integrity: the SPP reference must not bring the spoofed position back
+            spp_cache.clear()  # the SPP reference must not bring the spoofed position back
             if state["first"] is None:
                 state["first"] = k
-            if config.rollback_s is not None and exclusion.scope == SCOPE_ALL and reports[k].first_alarm_ns > 0:
+            if config.rollback_s is not None and exclusion.all_gnss() and reports[k].first_alarm_ns > 0:
                 roll_back(reports[k].first_alarm_ns)
-            if config.reanchor and hasattr(box["filt"], "reanchor_on_uwb"):
-                box["filt"].reanchor_on_uwb(verdict.stamp_ns)  # as the node: drop the state the spoofer dragged
+            held_side["side"] = box["filt"].side_of_anchor_plane(verdict.stamp_ns)
+            if config.reanchor:
+                box["filt"].reanchor_on_uwb(verdict.stamp_ns)  # drop the state the spoofer dragged
+            box["filt"].params = filter_params()
         elif change == "readmitted":
             readmit_ks.append(k)
-        filt = box["filt"]
-        if config.tell_filter and change is not None:
-            filt.params = dataclasses.replace(filt.params, use_gnss=exclusion.scope != SCOPE_ALL)
+            box["filt"].params = filter_params()
         if params.act_on_integrity:
             js = integrity_jammer_to_signal(verdict)
             if js is not None:  # no SDR monitor in this loop: the C/N0 J/S always applies
-                filt.set_jammer_to_signal(verdict.stamp_ns, js)
+                box["filt"].set_jammer_to_signal(verdict.stamp_ns, js)
 
     for kind, k, m in items:
         if kind:
@@ -295,15 +291,15 @@ def run_fusion(items: list[tuple[int, int, object]], n_epochs: int, reports: Seq
             if config.rollback_s is not None:
                 ranges.append(m)  # type: ignore[arg-type]
             continue
-        if reports is not None and apply_before:
-            apply(k)
+        if reports is not None and not config.verdict_after:
+            apply(k)  # the node: a verdict is released before the measurements of its stamp
         epoch, _ = exclusion.filter_epoch(m)  # type: ignore[arg-type]
         excluded[k] = epoch is None
         if epoch is not None:
-            if params.use_spp_reference and params.use_gnss:
+            if use_spp:
                 spp_cache.add(epoch)
             hold(box["filt"].process_gnss(epoch))
-        if reports is not None and not apply_before:
+        if reports is not None and config.verdict_after:
             apply(k)
         stamp = m.stamp_ns  # type: ignore[attr-defined]
         if config.rollback_s is not None and not exclusion.active and (
@@ -378,23 +374,19 @@ def one_seed(seed: int, cases: Sequence[str], anchor_cases: Sequence[int], what_
                 "t_s": t_s,
             }
             for config in configs:
-                key = (case.duration_s, anchors, config.node_params, config.filter_cls)
+                key = (case.duration_s, anchors, config.node_params)
                 if key not in clean_cache:
                     fr = run_fusion(clean_items, len(epochs), None, config=config)
                     clean_cache[key] = (horizontal_error(fr.held_ecef_m, truth), fr)
                 clean_err, clean_fr = clean_cache[key]
                 clean = span_stats(clean_err, span)
-                variants = ["clean", "no integrity", "integrity (after)", "integrity (before)"]
-                if config is not DEFAULTS:
-                    variants = ["clean", "integrity (after)"] + (["integrity (before)"] if config.filter_cls
-                                                                 is not FusionFilter else [])
+                variants = ["clean", "no integrity", "integrity"] if config is DEFAULTS else ["clean", "integrity"]
                 for variant in variants:
                     if variant == "clean":
                         fr, err = clean_fr, clean_err
                     else:
                         rep = None if variant == "no integrity" else reports
-                        fr = run_fusion(items, len(epochs), rep, apply_before=variant.endswith("(before)"),
-                                        config=config)
+                        fr = run_fusion(items, len(epochs), rep, config=config)
                         err = horizontal_error(fr.held_ecef_m, truth)
                     st = span_stats(err, span)
                     integ = variant.startswith("integrity")
@@ -475,18 +467,22 @@ def detection_table(rows: list[dict]) -> str:
 
 
 def goal_table(rows: list[dict]) -> str:
-    """Issue 25's goal on the push, seed by seed, for every configuration with the integrity monitor."""
-    head = ("| fusion | anchors | order | detected <= 10 s | RMS <= 2x clean | max <= 1 m | RMS / clean per seed "
-            "| max (m) per seed |")
-    lines = [head, "|" + "---|" * 8]
-    sel = [r for r in rows if r["case"] == PUSH and r["variant"].startswith("integrity")]
-    for (config, anchors, variant), rs in _groups(sel, ("config", "anchors", "variant")).items():
+    """Issue 25's goals on the push, seed by seed, for every configuration with the integrity monitor: with
+    >= 1 anchor detected within 10 s and RMS over the attack <= 2x the clean run's, with 3 anchors max <= 1 m;
+    GNSS alone (0 anchors) detected before the spoofed position is 50 m off."""
+    head = ("| fusion | anchors | detected <= 10 s | offset at detection <= 50 m | RMS <= 2x clean | max <= 1 m "
+            "| detected after (s) per seed | RMS / clean per seed | max (m) per seed |")
+    lines = [head, "|" + "---|" * 9]
+    sel = [r for r in rows if r["case"] == PUSH and r["variant"] == "integrity"]
+    for (config, anchors), rs in _groups(sel, ("config", "anchors")).items():
         n = len(rs)
         det = sum(r["detect_s"] <= 10.0 for r in rs)
+        off = sum(r["offset_at_detection_m"] <= 50.0 for r in rs)
         rms_ok = sum(r["rms"] <= 2.0 * r["clean_rms"] for r in rs)
         max_ok = sum(r["max"] <= 1.0 for r in rs)
-        lines.append(f"| {config} | {anchors} | {variant.split('(')[1].rstrip(')')} | {det}/{n} | {rms_ok}/{n} "
-                     f"| {max_ok}/{n} | {', '.join(_f(r['rms'] / r['clean_rms'], 1) for r in rs)} "
+        lines.append(f"| {config} | {anchors} | {det}/{n} | {off}/{n} | {rms_ok}/{n} | {max_ok}/{n} "
+                     f"| {', '.join(_f(r['detect_s'], 1) for r in rs)} "
+                     f"| {', '.join(_f(r['rms'] / r['clean_rms'], 1) for r in rs)} "
                      f"| {', '.join(_f(r['max']) for r in rs)} |")
     return "\n".join(lines)
 
@@ -546,11 +542,11 @@ def figures(rows: list[dict], out_dir: Path) -> list[Path]:
         fig, axes = plt.subplots(1, len(anchor_list), figsize=(5.5 * len(anchor_list), 4.2), sharey=True,
                                  squeeze=False)
         for ax, anchors in zip(axes[0], anchor_list, strict=True):
-            for variant, style in (("clean", "k-"), ("no integrity", "r-"), ("integrity (after)", "b-")):
+            for variant, style in (("clean", "k-"), ("no integrity", "r-"), ("integrity", "b-")):
                 r = pick(PUSH, anchors, DEFAULTS.name, variant, seeds[0])
                 if r is not None:
                     ax.semilogy(r["t_s"], np.maximum(r["err"], 1e-3), style, lw=1,
-                                label={"integrity (after)": "with gnss_integrity"}.get(variant, variant))
+                                label={"integrity": "with gnss_integrity"}.get(variant, variant))
             r = pick(PUSH, anchors, DEFAULTS.name, "clean", seeds[0])
             if r is not None and math.isfinite(r["detect_s"]):
                 ax.axvline(START_S + r["detect_s"], color="g", ls=":", lw=1, label="DETECTED")
@@ -569,15 +565,14 @@ def figures(rows: list[dict], out_dir: Path) -> list[Path]:
         written.append(path)
     # 2: 3 anchors, the first seconds of the push, node defaults vs the what-ifs (the seed with the worst max)
     cand = [r for r in rows if r["case"] == PUSH and r["anchors"] == 3 and r["config"] == DEFAULTS.name
-            and r["variant"] == "integrity (after)"]
+            and r["variant"] == "integrity"]
     if cand:
         seed = max(cand, key=lambda r: r["max"])["seed"]
         fig, ax = plt.subplots(figsize=(8, 4.2))
         for config, variant, style in ((DEFAULTS.name, "no integrity", "r-"),
-                                       (DEFAULTS.name, "integrity (after)", "b-"),
-                                       (DEFAULTS.name, "integrity (before)", "b--"),
-                                       (P1.name, "integrity (after)", "m-"),
-                                       (STATIC_CONFIG.name, "integrity (after)", "c-"),
+                                       (DEFAULTS.name, "integrity", "b-"),
+                                       (AFTER_CONFIG.name, "integrity", "m--"),
+                                       (STATIC_CONFIG.name, "integrity", "c-"),
                                        (DEFAULTS.name, "clean", "k-")):
             r = pick(PUSH, 3, config, variant, seed)
             if r is not None:
@@ -604,11 +599,11 @@ def figures(rows: list[dict], out_dir: Path) -> list[Path]:
         fig, axes = plt.subplots(len(end_anchors), 1, figsize=(9, 2.6 * len(end_anchors)), sharex=True,
                                  squeeze=False)
         for ax, anchors in zip(axes[:, 0], end_anchors, strict=True):
-            for variant, style in (("clean", "k-"), ("no integrity", "r-"), ("integrity (after)", "b-")):
+            for variant, style in (("clean", "k-"), ("no integrity", "r-"), ("integrity", "b-")):
                 r = pick(ENDING, anchors, DEFAULTS.name, variant, seeds[0])
                 if r is not None:
                     ax.semilogy(r["t_s"], np.maximum(r["err"], 1e-3), style, lw=1, label=variant)
-            r = pick(ENDING, anchors, DEFAULTS.name, "integrity (after)", seeds[0])
+            r = pick(ENDING, anchors, DEFAULTS.name, "integrity", seeds[0])
             if r is not None:
                 ax.fill_between(r["t_s"], 1e-3, 500, where=r["excluded"], color="orange", alpha=0.25,
                                 label="GNSS excluded")

@@ -300,12 +300,13 @@ def _replay_case(case: Case, group: Group, mon: IntegrityMonitor, inj: AttackInj
             "scales": (scales0, noise_scales(mon)), **det}
 
 
-def noise_scales(mon: IntegrityMonitor) -> tuple[float, float, float]:
-    """The noise scales the monitor learned from passing epochs: doppler_vs_pseudorange, uwb_displacement, clock
-    (NaN where the attribute is not there)."""
+def noise_scales(mon: IntegrityMonitor) -> tuple[float, float, float, float]:
+    """The noise scales the monitor learned from passing epochs: doppler_vs_pseudorange, uwb_displacement, clock,
+    uwb_range_rate (NaN where the attribute is not there)."""
     uwb = getattr(getattr(mon.kinematics, "_uwb", None), "_scale", math.nan)
+    rate = getattr(getattr(mon, "range_rate", None), "_scale", math.nan)
     return (float(getattr(mon.consistency.doppler, "noise_scale", math.nan)), float(uwb),
-            float(getattr(mon.clock, "noise_scale", math.nan)))
+            float(getattr(mon.clock, "noise_scale", math.nan)), float(rate))
 
 
 # ------------------------------------------------------------------------------------------------ summaries
@@ -492,7 +493,7 @@ def goals(agg: dict, powers: Sequence[str], push_strengths: Sequence[float]) -> 
 def scale_summary(agg: dict) -> str:
     """The largest learned scales at the end of a missed simulated run, against their values at the onset."""
     out = []
-    for i, name in ((0, "doppler_vs_pseudorange"), (1, "uwb_displacement")):
+    for i, name in ((0, "doppler_vs_pseudorange"), (1, "uwb_displacement"), (3, "uwb_range_rate")):
         best = None
         for k, a in agg.items():
             if k[1] not in ("static", "moving") or a["n_detected"] == a["n"]:
@@ -520,13 +521,14 @@ def blind_spots(agg: dict) -> list[str]:
         drag = f", drag {a['offset_end_m']:.0f} m at the end" if a["offset_end_m"] > 0 else ""
         sc = a["scales"]
         scales = " / ".join(f"{np.median([x[0][i] for x in sc]):.2f} -> {np.median([x[1][i] for x in sc]):.2f}"
-                            for i in range(3))
+                            for i in range(4))
         lines.append(f"| {k[1]} | {what} | {k[3]} | {k[4]} | {k[5]} | {a['n_detected']}/{a['n']} DETECTED within "
                      f"{a['window_s']:.0f} s{drag}{sus} | {scales} |")
     if not lines:
         return ["None: every configuration was DETECTED in every seed within its window."]
     return ["| receiver | attack | Doppler | power | anchors | outcome | learned noise scales, onset -> end "
-            "(doppler_vs_pseudorange / uwb_displacement / clock; median of seeds) |", "|---|---|---|---|---|---|---|",
+            "(doppler_vs_pseudorange / uwb_displacement / clock / uwb_range_rate; median of seeds) |",
+            "|---|---|---|---|---|---|---|",
             *lines]
 
 
@@ -782,11 +784,18 @@ def markdown(agg: dict, groups_info: list, quick: bool, wall_s: float, workers: 
         "  a few hundred metres by the end of a long window: more than a real UWB link holds).",
         "- One anchor is A1, at azimuth 20 deg from the tag: an east push is 70 deg off its line of sight, so to",
         "  first order only sin(20 deg) = 0.34 of the drag shows in its range (the rest enters through the",
-        "  second-order term |d_perp|^2 / 2r). A push along the anchor's line would be seen about three times sooner.",
-        "- Learned noise scales: `doppler_vs_pseudorange`, `uwb_displacement` and the clock tests divide their",
-        "  statistics by a scale learned from passing epochs (>= 1). A sub-threshold attack passes, so it can raise",
+        "  second-order term |d_perp|^2 / 2r), and 0.34 of the push velocity in its range rate (`uwb_range_rate`).",
+        "  A push along the anchor's line would be seen about three times sooner.",
+        "- Learned noise scales: `doppler_vs_pseudorange`, `uwb_displacement`, the clock tests and `uwb_range_rate`",
+        "  divide their statistics by a scale learned from passing epochs (>= 1; `uwb_range_rate` 0.25-4, the",
+        "  kinematic scales at most 4). A sub-threshold attack passes, so it can raise",
         "  the scale it is judged by; the blind-spot table gives each scale at the onset and at the end."
         + scale_summary(agg),
+        "- `uwb_range_rate` compares the GNSS Doppler velocity with the UWB ranges' rates, so it sees a careful",
+        "  (consistent-Doppler) push from its first second with anchors, in proportion to the push's component along",
+        "  the anchors' lines of sight; a simple (inconsistent-Doppler) spoofer leaves the Doppler velocity true, so",
+        "  this test cannot see it (`doppler_vs_pseudorange` and `motion_consistency` do). Its noise scale may fall",
+        "  to 0.25 on clean data and rise to 4: a push below its threshold can raise it (see the blind-spot table).",
         "- A takeover without drag changes only the C/N0 (pseudoranges and rates unchanged), so with matched",
         "  power and no advantage it is not an attack at all; it is run with +3 dB only.",
         "- Times are quantised by the epoch interval (0.2 s simulated, 30 s real).",

@@ -387,6 +387,9 @@ WHY_UNKNOWN = {
     "uwb_displacement": "no UWB without anchors; with anchors, epochs 30 s apart > `KinematicsTestParams.max_gap_s` "
                         "(10 s) restart its history every epoch",
     "motion_consistency": "as uwb_displacement (needs Doppler too)",
+    "uwb_range_rate": ("no UWB without anchors; with anchors, the days give one range per anchor per 30 s epoch, and "
+                       "its line fit needs `UwbRangeRateParams.min_ranges` (8) ranges of an anchor within `window_s` "
+                       "(1 s), with GNSS velocities at most `max_gap_s` (1 s) apart"),
     "uwb_level": "no UWB ranges (GNSS only)",
     "constellation_agreement": "one constellation (the GPS-only files)",
     "doppler_vs_pseudorange": "no Doppler (GEONET); elsewhere its first 20 evaluations only teach its noise scale",
@@ -439,7 +442,9 @@ def markdown(results: dict, info: dict, stations: Sequence[Station], configs: Se
         "What the days can and cannot show: every file is at 30 s. The clock tests and the lagged kinematic tests",
         "restart after any gap longer than their `max_gap_s` (10 s), so with the shipped defaults they are UNKNOWN",
         "on every day (not PASS: a missing or unusable input never counts as clean). Their false-alarm behaviour on",
-        "real errors is shown only by the third configuration, which is not the shipped one. GEONET has no C/N0 and",
+        "real errors is shown only by the third configuration, which is not the shipped one. `uwb_range_rate` needs",
+        "ranges over 1 s: UNKNOWN in every configuration here; its clean behaviour is shown only on the simulated",
+        "runs below. GEONET has no C/N0 and",
         "no Doppler: there only `raim_subset` decides (and `uwb_level` with anchors).",
         "",
         "## Days",
@@ -489,8 +494,8 @@ def markdown(results: dict, info: dict, stations: Sequence[Station], configs: Se
         sim_events = [(key, t.events) for key, t in sim_results.items() if t.events]
         if sim_events:
             lines += ["Epochs with a SUSPECT or ALARM test:", ""]
-            for (st, _), ev in sim_events:
-                lines += [f"- {st}: " + "; ".join(ev)]
+            for (sim_name, _), ev in sim_events:
+                lines += [f"- {sim_name}: " + "; ".join(ev)]
     lines += [
         "",
         "## Notes",

@@ -263,6 +263,7 @@ STAGES: tuple[tuple[str, Callable[[IntegrityMonitor], object], str], ...] = (
     ("receiver AGC judge", lambda m: m.receiver, "judge"),
     ("clock", lambda m: m.clock, "update"),
     ("kinematics", lambda m: m.kinematics, "update"),
+    ("UWB range rate", lambda m: getattr(m, "range_rate", None), "update"),
     ("consistency: agreement", lambda m: m.consistency.agreement, "update"),
     ("consistency: Doppler", lambda m: m.consistency.doppler, "update"),
     ("consistency: RAIM", lambda m: m.consistency.raim, "update"),
