@@ -39,10 +39,10 @@ a push slower than the velocity noise (about 0.1 m/s with the defaults).
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 from gnss_common.multilateration import multilaterate
 
@@ -121,6 +121,29 @@ class UwbRangeRateParams:
             raise ValueError("UwbRangeRateParams.scale_history must be >= 10")
 
 
+RING = 256
+"""Ranges kept per anchor (a ring; at 20 Hz, 12 s: far more than ``window_s`` + ``max_gap_s``)."""
+GNSS_RING = 128
+"""GNSS velocities kept (a ring; at 20 Hz, 6 s)."""
+
+
+class _AnchorRing:
+    """The newest :data:`RING` ranges of one anchor: stamps, ranges, 1-sigmas, and its position."""
+
+    def __init__(self) -> None:
+        self.t_ns = np.full(RING, np.iinfo(np.int64).min, dtype=np.int64)
+        self.r = np.zeros(RING)
+        self.s = np.zeros(RING)
+        self.anchor = np.zeros(3)
+        self.head = 0
+
+    def add(self, stamp_ns: int, range_m: float, std_m: float, anchor: np.ndarray) -> None:
+        i = self.head % RING
+        self.t_ns[i], self.r[i], self.s[i] = stamp_ns, range_m, std_m
+        self.anchor = anchor
+        self.head += 1
+
+
 @dataclass
 class UwbRangeRateTest:
     """``uwb_range_rate`` (module docstring): feed ranges with :meth:`add_range`, test each epoch with
@@ -131,8 +154,11 @@ class UwbRangeRateTest:
 
     def __post_init__(self) -> None:
         p = self.params
-        self._ranges: dict[str, deque[tuple[int, float, float, np.ndarray]]] = {}
-        self._gnss: deque[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = deque()  # stamp, pos, vel, cov
+        self._ranges: dict[str, _AnchorRing] = {}
+        self._g_t = np.zeros(GNSS_RING, dtype=np.int64)  # GNSS epochs, oldest first, _g_n of them
+        self._g_v = np.zeros((GNSS_RING, 3))
+        self._g_c = np.zeros((GNSS_RING, 3, 3))
+        self._g_n = 0
         self._keep_ns = int((p.window_s + p.max_gap_s) * NS)
         self._window_ns = int(p.window_s * NS)
         self._suspect = {k: chi2_threshold(p.false_alarm_probability, k) for k in range(1, 33)}
@@ -140,21 +166,42 @@ class UwbRangeRateTest:
         self._median = {k: chi2_threshold(0.5, k) for k in range(1, 33)}
         self._clean = RunningMedian(int(p.scale_history))
         self._scale = 1.0
+        self._floor = np.eye(3) * p.velocity_std_floor_mps**2
+        self._last_tag: tuple[int, np.ndarray] | None = None  # the last multilaterated tag (stamp, ECEF)
 
     def reset(self) -> None:
         """Forget the histories (after a restart of the input or a jammed epoch); the noise scale stays."""
         self._ranges.clear()
-        self._gnss.clear()
+        self._g_n = 0
+        self._last_tag = None
 
     def add_range(self, rng: AnchorRange) -> None:
         """One UWB range (anchor in ECEF)."""
         if not (math.isfinite(rng.range_m) and np.all(np.isfinite(rng.anchor_ecef_m))):
             return
-        q = self._ranges.setdefault(rng.anchor_id, deque())
+        ring = self._ranges.get(rng.anchor_id)
+        if ring is None:
+            ring = self._ranges[rng.anchor_id] = _AnchorRing()
         std = rng.range_std_m if math.isfinite(rng.range_std_m) and rng.range_std_m > 0 else self.params.uwb_std_m
-        q.append((int(rng.stamp_ns), float(rng.range_m), float(std), np.asarray(rng.anchor_ecef_m, dtype=float)))
-        while q and q[-1][0] - q[0][0] > self._keep_ns:
-            q.popleft()
+        ring.add(int(rng.stamp_ns), float(rng.range_m), float(std), np.asarray(rng.anchor_ecef_m, dtype=float))
+
+    def _add_gnss(self, stamp_ns: int, vel: np.ndarray, cov: np.ndarray) -> None:
+        """Append an epoch's velocity; restart on a stamp going back or a gap; drop what is too old."""
+        n = self._g_n
+        if n and (stamp_ns <= self._g_t[n - 1] or stamp_ns - self._g_t[n - 1] > self.params.max_gap_s * NS):
+            n = 0
+        if n == GNSS_RING:
+            self._g_t[:-1], self._g_v[:-1], self._g_c[:-1] = self._g_t[1:], self._g_v[1:], self._g_c[1:]
+            n -= 1
+        self._g_t[n], self._g_v[n], self._g_c[n] = stamp_ns, vel, cov
+        n += 1
+        first = int(np.searchsorted(self._g_t[:n], stamp_ns - self._keep_ns, side="left"))
+        if first:
+            self._g_t[:n - first] = self._g_t[first:n]
+            self._g_v[:n - first] = self._g_v[first:n]
+            self._g_c[:n - first] = self._g_c[first:n]
+            n -= first
+        self._g_n = n
 
     def update(self, stamp_ns: int, position_ecef_m: np.ndarray, velocity_ecef_mps: np.ndarray | None,
                velocity_covariance: np.ndarray | None) -> TestOutcome:
@@ -171,66 +218,49 @@ class UwbRangeRateTest:
         cov = np.zeros((3, 3)) if velocity_covariance is None else np.asarray(velocity_covariance, dtype=float)
         if cov.shape != (3, 3) or not np.all(np.isfinite(cov)):
             cov = np.zeros((3, 3))
-        if self._gnss and (stamp_ns <= self._gnss[-1][0] or stamp_ns - self._gnss[-1][0] > p.max_gap_s * NS):
-            self._gnss.clear()
-        self._gnss.append((int(stamp_ns), pos, vel, cov))
-        while self._gnss and stamp_ns - self._gnss[0][0] > self._keep_ns:
-            self._gnss.popleft()
+        self._add_gnss(int(stamp_ns), vel, cov)
+        n = self._g_n
         start_ns = stamp_ns - self._window_ns
-        if self._gnss[0][0] > start_ns + self._window_ns // 10:
+        if self._g_t[0] > start_ns + self._window_ns // 10:
             return self._unknown()  # the velocities do not cover the window yet
-        ts = np.array([(g[0] - stamp_ns) / NS for g in self._gnss])
-        vs = np.array([g[2] for g in self._gnss])
-        in_window = ts >= -p.window_s - 1e-9
-        s_v = np.mean([g[3] for g, w in zip(self._gnss, in_window, strict=True) if w], axis=0)
-        s_v = s_v + np.eye(3) * p.velocity_std_floor_mps**2
-        speed = float(np.linalg.norm(vs[in_window].mean(axis=0)))
-        fits = []  # per anchor: slope, its variance, the line's range now, the anchor
-        for q in self._ranges.values():
-            sel = [r for r in q if start_ns <= r[0] <= stamp_ns]
-            if len(sel) < p.min_ranges:
+        ts = (self._g_t[:n] - stamp_ns) / NS
+        vs = self._g_v[:n]
+        fits = []  # per anchor: slope, its variance, the line's range now, the anchor, tau_0, tau_1
+        for ring in self._ranges.values():
+            count, slope, slope_var, line0, tau0, tau1, rms, sig = line_fit(
+                ring.t_ns, ring.r, ring.s, int(start_ns), int(stamp_ns))
+            if count < p.min_ranges or tau1 - tau0 < 0.5 * p.window_s:
                 continue
-            tau = np.array([(r[0] - stamp_ns) / NS for r in sel])
-            if tau.max() - tau.min() < 0.5 * p.window_s:
-                continue
-            rng = np.array([r[1] for r in sel])
-            sig = float(np.sqrt(np.mean(np.array([r[2] for r in sel]) ** 2)))
-            tc = tau - tau.mean()
-            sxx = float(np.dot(tc, tc))
-            slope = float(np.dot(tc, rng - rng.mean()) / sxx)
-            fit = rng - rng.mean() - slope * tc
-            if math.sqrt(float(np.mean(fit**2))) > p.max_fit_rms_factor * sig:
+            if rms > p.max_fit_rms_factor * sig:
                 self.counts["anchors_unfit"] += 1
                 continue
-            fits.append((slope, sig**2 / sxx, float(rng.mean() - slope * tau.mean()), sel[-1][3],
-                         float(tau.min()), float(tau.max())))
+            fits.append((slope, slope_var, line0, ring.anchor, tau0, tau1))
         if not fits:
             return self._unknown()
         # where the tag was at each GNSS epoch: from the anchors when three or more are fitted (the
         # GNSS position's metres of error, and the spoofer's drag, would turn the lines of sight of a
         # moving tag), else from GNSS; back in time along the integrated Doppler velocity
         tag, pos_std = pos, p.position_std_m
+        anchors = np.array([f[3] for f in fits])
         if len(fits) >= 3:
-            solved = multilaterate(np.array([f[3] for f in fits]), np.array([f[2] for f in fits]), pos)
+            # from the last epoch's tag (a few iterations; the GNSS velocity is not trusted to move it),
+            # else the GNSS position
+            guess = pos
+            if self._last_tag is not None and 0 < stamp_ns - self._last_tag[0] <= self._window_ns:
+                guess = self._last_tag[1]
+            solved = multilaterate(anchors, np.array([f[2] for f in fits]), guess)
             if solved is not None:
                 tag, pos_std = solved, p.uwb_position_std_m
-        steps = (vs[1:] + vs[:-1]) / 2.0 * np.diff(ts)[:, None]
-        back = np.concatenate((np.cumsum(steps[::-1], axis=0)[::-1], np.zeros((1, 3))))
-        ps = tag - back  # (n, 3): the tag at each GNSS epoch
-        rows, d, own = [], [], []
-        for slope, slope_var, _, anchor, tau0, tau1 in fits:
-            los = ps - anchor
-            dist = np.linalg.norm(los, axis=1)
-            rate = np.einsum("ij,ij->i", los, vs) / dist  # u_j . v at each GNSS epoch
-            rows.append(los[-1] / dist[-1])
-            d.append(slope - _mean_of_piecewise_linear(ts, rate, tau0, tau1))
-            own.append(slope_var + p.model_std_mps**2 + (speed * pos_std / dist[-1]) ** 2)
-        if not rows:
-            return self._unknown()
-        k = min(len(rows), 32)
-        u = np.array(rows[:k])
-        c = u @ s_v @ u.T + np.diag(own[:k])
-        dv = np.array(d[:k])
+                self._last_tag = (int(stamp_ns), solved)
+        k = min(len(fits), 32)
+        predicted, u, dist, s_v, speed = predicted_rates(
+            ts, vs, self._g_c[:n], np.ascontiguousarray(tag), anchors[:k],
+            np.array([f[4] for f in fits[:k]]), np.array([f[5] for f in fits[:k]]), -p.window_s - 1e-9)
+        s_v += self._floor
+        dv = np.array([f[0] for f in fits[:k]]) - predicted
+        own = (np.array([f[1] for f in fits[:k]]) + p.model_std_mps**2 + (speed * pos_std / dist) ** 2)
+        c = u @ s_v @ u.T
+        c[np.diag_indices(k)] += own
         chi2 = float(dv @ np.linalg.solve(c, dv))
         self.counts["epochs_tested"] += 1
         stat = chi2 / self._scale
@@ -246,9 +276,142 @@ class UwbRangeRateTest:
         return unknown(NAME, CATEGORY_KINEMATICS, false_alarm_probability=self.params.false_alarm_probability)
 
 
+@njit(cache=True)
+def line_fit(t_ns: np.ndarray, r: np.ndarray, s: np.ndarray, start_ns: int, stamp_ns: int
+             ) -> tuple[int, float, float, float, float, float, float, float]:
+    """Least-squares line through the ranges stamped in [start_ns, stamp_ns] (any order).
+
+    Returns:
+        ``(count, slope m/s, its variance, the line at stamp_ns m, first and last tau s (relative to
+        stamp_ns), fit RMS m, RMS of the ranges' 1-sigmas m)``; NaN fields with fewer than 3 ranges.
+    """
+    n = 0
+    st = 0.0
+    sr = 0.0
+    ss = 0.0
+    t_min = math.inf
+    t_max = -math.inf
+    for i in range(t_ns.size):
+        if start_ns <= t_ns[i] <= stamp_ns:
+            tau = (t_ns[i] - stamp_ns) / 1e9
+            n += 1
+            st += tau
+            sr += r[i]
+            ss += s[i] * s[i]
+            t_min = min(t_min, tau)
+            t_max = max(t_max, tau)
+    if n < 3:
+        return n, math.nan, math.nan, math.nan, math.nan, math.nan, math.nan, math.nan
+    t_mean = st / n
+    r_mean = sr / n
+    sxx = 0.0
+    sxy = 0.0
+    for i in range(t_ns.size):
+        if start_ns <= t_ns[i] <= stamp_ns:
+            tc = (t_ns[i] - stamp_ns) / 1e9 - t_mean
+            sxx += tc * tc
+            sxy += tc * (r[i] - r_mean)
+    if not sxx > 0.0:
+        return n, math.nan, math.nan, math.nan, t_min, t_max, math.nan, math.nan
+    slope = sxy / sxx
+    sq = 0.0
+    for i in range(t_ns.size):
+        if start_ns <= t_ns[i] <= stamp_ns:
+            tc = (t_ns[i] - stamp_ns) / 1e9 - t_mean
+            e = r[i] - r_mean - slope * tc
+            sq += e * e
+    sig2 = ss / n
+    return n, slope, sig2 / sxx, r_mean - slope * t_mean, t_min, t_max, math.sqrt(sq / n), math.sqrt(sig2)
+
+
+@njit(cache=True)
+def predicted_rates(ts: np.ndarray, vs: np.ndarray, covs: np.ndarray, tag: np.ndarray, anchors: np.ndarray,
+                    tau0: np.ndarray, tau1: np.ndarray, window_start: float
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    """GNSS's mean range rate of each anchor over its ranges' span (module docstring).
+
+    Args:
+        ts: GNSS epochs, s relative to now (ascending, the last 0), (n,). vs: their velocities, (n, 3).
+        covs: their velocity covariances, (n, 3, 3). tag: the tag now, (3,). anchors: (k, 3).
+        tau0, tau1: each anchor's ranges' span, s relative to now, (k,). window_start: the window's
+        start, s relative to now (for the mean covariance and speed).
+
+    Returns:
+        ``(predicted mean rates (k,), unit lines of sight now (k, 3), distances now (k,), mean velocity
+        covariance over the window (3, 3), |mean velocity| over the window)``.
+    """
+    n = ts.size
+    k = anchors.shape[0]
+    # the tag at each epoch: back from now along the trapezoid-integrated velocity
+    ps = np.empty((n, 3))
+    for a in range(3):
+        ps[n - 1, a] = tag[a]
+    for i in range(n - 2, -1, -1):
+        dt = ts[i + 1] - ts[i]
+        for a in range(3):
+            ps[i, a] = ps[i + 1, a] - (vs[i + 1, a] + vs[i, a]) / 2.0 * dt
+    predicted = np.empty(k)
+    u = np.empty((k, 3))
+    dist = np.empty(k)
+    rate = np.empty(n)
+    for j in range(k):
+        for i in range(n):
+            d0 = ps[i, 0] - anchors[j, 0]
+            d1 = ps[i, 1] - anchors[j, 1]
+            d2 = ps[i, 2] - anchors[j, 2]
+            dd = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            rate[i] = (d0 * vs[i, 0] + d1 * vs[i, 1] + d2 * vs[i, 2]) / dd
+            if i == n - 1:
+                dist[j] = dd
+                u[j, 0], u[j, 1], u[j, 2] = d0 / dd, d1 / dd, d2 / dd
+        predicted[j] = _mean_of_piecewise_linear(ts, rate, tau0[j], tau1[j])
+    s_v = np.zeros((3, 3))
+    v_mean = np.zeros(3)
+    m = 0
+    for i in range(n):
+        if ts[i] >= window_start:
+            m += 1
+            for a in range(3):
+                v_mean[a] += vs[i, a]
+                for b in range(3):
+                    s_v[a, b] += covs[i, a, b]
+    s_v /= max(m, 1)
+    v_mean /= max(m, 1)
+    return predicted, u, dist, s_v, math.sqrt(v_mean[0] ** 2 + v_mean[1] ** 2 + v_mean[2] ** 2)
+
+
+@njit(cache=True)
+def _interp(x: float, t: np.ndarray, f: np.ndarray) -> float:
+    """``np.interp(x, t, f)`` of one point (t ascending; held beyond the ends)."""
+    n = t.size
+    if x <= t[0]:
+        return f[0]
+    if x >= t[n - 1]:
+        return f[n - 1]
+    i = np.searchsorted(t, x) - 1
+    w = (x - t[i]) / (t[i + 1] - t[i])
+    return f[i] + w * (f[i + 1] - f[i])
+
+
+@njit(cache=True)
 def _mean_of_piecewise_linear(t: np.ndarray, f: np.ndarray, t0: float, t1: float) -> float:
     """Mean over [t0, t1] of the function linear between the samples (t, f) (held beyond them)."""
-    inner = t[(t > t0) & (t < t1)]
-    x = np.concatenate(([t0], inner, [t1]))
-    y = np.interp(x, t, f)
-    return float(np.sum((y[1:] + y[:-1]) * np.diff(x)) / 2.0 / (t1 - t0))
+    total = 0.0
+    x_prev = t0
+    y_prev = _interp(t0, t, f)
+    for i in range(t.size):
+        if t0 < t[i] < t1:
+            total += (f[i] + y_prev) * (t[i] - x_prev)
+            x_prev, y_prev = t[i], f[i]
+    y1 = _interp(t1, t, f)
+    total += (y1 + y_prev) * (t1 - x_prev)
+    return total / 2.0 / (t1 - t0)
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) the kernels of this module on throwaway inputs."""
+    t = np.arange(10, dtype=np.int64) * 100_000_000
+    line_fit(t, np.ones(10), np.ones(10), 0, int(t[-1]))
+    ts = np.linspace(-1.0, 0.0, 6)
+    predicted_rates(ts, np.ones((6, 3)), np.zeros((6, 3, 3)), np.full(3, 5.0), np.zeros((2, 3)),
+                    np.full(2, -0.9), np.zeros(2), -1.0)
