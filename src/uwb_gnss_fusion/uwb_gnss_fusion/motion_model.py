@@ -1,0 +1,327 @@
+"""Which motion model the GNSS filter runs: a stationarity detector with hysteresis (beyond the paper).
+
+Pure core (no ROS, no clock: every decision is made on header-stamp times passed in).
+
+The constant-velocity model of Cao et al. (eq. 8-10) is driven by a white acceleration of PSD
+``accel_psd_m2ps3`` (0.1 m^2/s^3 by default, a slowly moving robot). On a static antenna that
+model forgets the past at every epoch (900 m^2 of position variance per 30 s step), so the filter
+gains little over single-point positioning. :class:`StationarityDetector` finds out from the data
+whether the receiver stands still and switches the filter between two models:
+
+* **moving**: the constant-velocity model with ``accel_psd_m2ps3``;
+* **static**: the same transition with ``static_accel_psd_m2ps3``, entered with a zero-velocity
+  pseudo-measurement ``v = 0`` of 1-sigma ``static_velocity_std_mps`` per axis
+  (:func:`zero_velocity_update`; a ZUPT). The position then averages the epochs since the antenna
+  was found static; the small acceleration noise lets the velocity (hence the position) wander by
+  ``sqrt(q t)``, i.e. a memory of some tens of minutes, the correlation time of the broadcast
+  models' residual errors (a memory of the whole static period averaged the errors of the first
+  epochs into the last ones: 0.47 m instead of 0.41 m horizontal RMS on GEONET 0759).
+
+Moving -> static (entry test, after every GNSS update in the moving model), two statistics:
+
+* the positions ``p_i`` (covariances ``C_i``) of the current run of epochs, against a common
+  position: ``D = sum_i (p_i - p_w)^T C_i^-1 (p_i - p_w)`` with ``p_w`` their weighted mean,
+  chi-square with ``3 (N - 1)`` degrees of freedom for a static receiver and independent
+  estimates (the moving model at 30 s forgets almost everything between epochs, so they nearly
+  are; at high rates they are correlated, which makes ``D`` smaller, but a displacement of a few
+  position sigmas over the run still shows). It sees motion without Doppler, where the moving
+  model's velocity is not observed (a velocity 1-sigma near 1 m/s at 30 s epochs);
+* where the velocity is observed (Doppler: ``sqrt(max eig P_v) <= STATIC_SPEED_STD_MAX_MPS``),
+  also ``s = v^T P_v^-1 v``, chi-square with 3 degrees of freedom for a static receiver.
+
+An epoch *passes* when ``D <= chi2_{3(N-1)}(1 - ENTRY_TEST_ALPHA)`` and, where it applies,
+``s <= chi2_3(1 - ENTRY_TEST_ALPHA)``; a failing epoch starts a new run from itself. The model
+becomes static when a run has lasted at least ``static_enter_s`` and :data:`ENTRY_MIN_EPOCHS`
+epochs.
+
+Static -> moving (exit test, at every GNSS epoch in the static model, on the *predicted*
+innovations before the update): the pseudorange innovations with every system's common mode (the
+receiver clock and inter-system biases) projected out, and likewise the pseudorange-rate
+innovations with the clock drift projected out, give
+``T = nu^T (W - W A (A^T W A)^-1 A^T W) nu`` with ``W = (L P L^T + R)^-1`` (``L`` the lines of
+sight, ``P`` the predicted position, resp. velocity, covariance, ``R`` the measurement variances,
+``A`` the system indicator columns): chi-square with ``n - k`` degrees of freedom when the receiver
+did not move. The most inconsistent single measurement is left out before the test when enough
+remain (:func:`motion_chi2`), so one outlier satellite (already handled by the filter's gate) does
+not end a static period. An epoch *fails* when ``T > chi2_dof(1 - EXIT_TEST_ALPHA)``. A failing
+epoch gets the moving model's process noise for its interval (the adaptive process noise: the
+covariance is opened by ``Q_moving(dt) - Q_static(dt)`` before the update, and no zero-velocity
+update follows), so a receiver that starts to move is followed from its first inconsistent
+epoch; :data:`EXIT_EPOCHS` consecutive failing epochs switch to the moving model. A UWB range
+ends a static period too (the detector watches GNSS epochs only; with ranges at 10-50 Hz the
+moving model costs little).
+
+False decisions, under the tests' own models (independent epochs):
+
+* static declared while moving: with Doppler, each epoch passes with the probability that a
+  non-central chi-square (3 dof, non-centrality ``u^2 / sigma_v^2`` for speed ``u`` along a
+  direction of velocity 1-sigma ``sigma_v``) stays below ``chi2_3(0.999)`` = 16.3: 0.13 for
+  ``u = 3 sigma_v``, 6e-4 for ``u = 5 sigma_v``. Without Doppler, three epochs 30 s apart along a
+  straight line at speed ``u`` with 1 m position sigmas give ``D`` non-central with
+  ``(30 u)^2 2 / 1 m^2``; 6 dof, ``chi2_6(0.999)`` = 22.5: ``u = 0.15 m/s`` passes with
+  probability 0.2, ``u = 0.25 m/s`` with 1e-3. A slow mover declared static is caught by the exit
+  test once its displacement shows in the pseudoranges.
+* moving declared while static: ``EXIT_TEST_ALPHA^EXIT_EPOCHS`` = 1e-6 per epoch; a single
+  failing epoch (probability 1e-3) costs one epoch of the moving model's process noise.
+
+Real pseudorange errors are not white (slowly varying residual ionosphere, troposphere, orbit and
+multipath), so the measured rates differ: benchmarks/fusion_real_gnss.py counts the decisions on
+real stations (``motion_static_entered``, ``motion_static_left``, ``motion_epoch_opened``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import chi2
+
+from .input_checks import PreparedEpoch
+from .measurement_models import pseudorange_model, pseudorange_rate_model
+
+ENTRY_TEST_ALPHA = 1.0e-3
+"""Per-epoch probability that the entry test fails on a static receiver (a run of passes restarts)."""
+ENTRY_MIN_EPOCHS = 3
+"""Consecutive passing GNSS epochs needed, besides ``static_enter_s``, to declare the receiver static."""
+STATIC_SPEED_STD_MAX_MPS = 0.2
+"""Largest velocity 1-sigma (any direction) with which the entry test may pass, m/s: below it a
+speed of 1 m/s is a 5-sigma departure, rejected with probability 1 - 6e-4 per epoch."""
+EXIT_TEST_ALPHA = 1.0e-3
+"""Per-epoch probability that the exit test fails on a static receiver (white errors)."""
+EXIT_EPOCHS = 2
+"""Consecutive failing GNSS epochs that switch a static model back to the moving one."""
+LEAVE_ONE_OUT_MIN_DOF = 3
+"""Degrees of freedom the exit statistic must keep after its most inconsistent measurement is left out."""
+
+_ENTRY_LIMIT = float(chi2.ppf(1.0 - ENTRY_TEST_ALPHA, 3))
+
+
+def entry_statistic(velocity_mps: np.ndarray, velocity_cov_m2ps2: np.ndarray) -> tuple[float, float]:
+    """The entry test's ``(s, sigma_max)``: ``s = v^T P_v^-1 v`` (chi-square, 3 dof, for a static
+    receiver) and the largest velocity 1-sigma ``sqrt(max eig P_v)``, m/s (``(inf, inf)`` when
+    ``P_v`` is singular or not finite)."""
+    v = np.asarray(velocity_mps, dtype=float)
+    c = np.asarray(velocity_cov_m2ps2, dtype=float)
+    try:
+        lam = np.linalg.eigvalsh(0.5 * (c + c.T))
+        if not (np.all(np.isfinite(lam)) and lam[0] > 0.0):
+            return math.inf, math.inf
+        return float(v @ np.linalg.solve(c, v)), math.sqrt(float(lam[-1]))
+    except np.linalg.LinAlgError:
+        return math.inf, math.inf
+
+
+def _projected_chi2(nu: np.ndarray, s: np.ndarray, groups: np.ndarray) -> tuple[float, int, np.ndarray]:
+    """``nu^T (W - W A (A^T W A)^-1 A^T W) nu`` with ``W = s^-1`` and ``A`` the indicator columns
+    of ``groups``; returns (chi2, dof, the whitened residual per measurement)."""
+    w = np.linalg.inv(s)
+    values = np.unique(groups)
+    a = (groups[:, None] == values[None, :]).astype(float)
+    wa = w @ a
+    m = w - wa @ np.linalg.solve(a.T @ wa, wa.T)
+    mnu = m @ nu
+    diag = np.maximum(np.diag(m), 1e-300)
+    return float(nu @ mnu), int(nu.size - values.size), mnu / np.sqrt(diag)
+
+
+def common_mode_free_chi2(
+    innovations: np.ndarray, lines_of_sight: np.ndarray, state_cov: np.ndarray, variances: np.ndarray,
+    groups: np.ndarray,
+) -> tuple[float, int]:
+    """Chi-square of innovations whose common mode per group is unknown (clock, inter-system bias),
+    leaving out the most inconsistent one when at least ``LEAVE_ONE_OUT_MIN_DOF`` degrees remain.
+
+    Args:
+        innovations: (k,) innovations at the predicted state (m or m/s).
+        lines_of_sight: (k, 3) unit lines of sight.
+        state_cov: (3, 3) predicted covariance of the state they see (position or velocity).
+        variances: (k,) measurement variances (plus any per-measurement state variance).
+        groups: (k,) integer group of each measurement (one unknown common mode per group).
+
+    Returns:
+        (chi2, degrees of freedom); (0.0, 0) when no degree of freedom is left.
+    """
+    nu = np.asarray(innovations, dtype=float)
+    g = np.asarray(groups)
+    keep = np.isfinite(nu)
+    nu, los, var, g = nu[keep], np.asarray(lines_of_sight)[keep], np.asarray(variances, float)[keep], g[keep]
+    if nu.size - np.unique(g).size <= 0:
+        return 0.0, 0
+    s = los @ state_cov @ los.T + np.diag(var)
+    try:
+        t, dof, std_res = _projected_chi2(nu, s, g)
+        if dof - 1 >= LEAVE_ONE_OUT_MIN_DOF:
+            worst = int(np.argmax(np.abs(std_res)))
+            rest = np.ones(nu.size, dtype=bool)
+            rest[worst] = False
+            if nu.size - 1 - np.unique(g[rest]).size >= LEAVE_ONE_OUT_MIN_DOF:
+                t, dof, _ = _projected_chi2(nu[rest], s[np.ix_(rest, rest)], g[rest])
+    except np.linalg.LinAlgError:
+        return 0.0, 0
+    return t, dof
+
+
+def static_exit_statistic(
+    prep: PreparedEpoch, nominal: np.ndarray, p: np.ndarray,
+    bias_column: np.ndarray | None, error_column: np.ndarray | None,
+) -> tuple[float, int]:
+    """The exit test's statistic on an epoch at the predicted state: the pseudorange innovations
+    (common mode per system removed) plus the pseudorange-rate innovations (clock drift removed),
+    each by :func:`common_mode_free_chi2`; returns (chi2, degrees of freedom).
+
+    Args:
+        prep: the epoch's satellites (rates NaN where not applied).
+        nominal: predicted nominal state, (n,).
+        p: predicted error covariance, (n, n).
+        bias_column / error_column: the inter-system bias and correlated-error columns of each
+            satellite (as :func:`.measurement_models.pseudorange_model`), or None.
+
+    Notes:
+        Cao et al., eq. 5 and 6 for the predicted measurements.
+    """
+    x = nominal[None, :]
+    d = prep.sat_pos - nominal[None, 0:3]
+    los = d / np.linalg.norm(d, axis=1)[:, None]
+    nu = prep.pr - pseudorange_model(prep.sat_pos, prep.sat_clk, prep.iono, prep.tropo, bias_column,
+                                     error_column)(x)[0]
+    var = prep.sigma_pr**2
+    if error_column is not None:
+        var = var + np.diag(p)[error_column]
+    groups = np.zeros(nu.size, dtype=np.int64) if bias_column is None else np.asarray(bias_column)
+    t, dof = common_mode_free_chi2(nu, los, p[0:3, 0:3], var, groups)
+    has_rate = np.isfinite(prep.rate)
+    if has_rate.sum() >= 2:
+        rate_hat = pseudorange_rate_model(prep.sat_pos, prep.sat_vel, prep.sat_drift)(x[:, 0:8])[0]
+        nu_r = np.where(has_rate, prep.rate - rate_hat, np.nan)
+        t_r, dof_r = common_mode_free_chi2(nu_r, los, p[3:6, 3:6], prep.sigma_rate**2,
+                                           np.zeros(nu.size, dtype=np.int64))
+        t, dof = t + t_r, dof + dof_r
+    return t, dof
+
+
+def zero_velocity_update(p: np.ndarray, velocity_mps: np.ndarray, std_mps: float) -> tuple[np.ndarray, np.ndarray]:
+    """A zero-velocity pseudo-measurement ``0 = v + w``, ``w ~ N(0, std^2 I3)``, on an error state
+    whose velocity block is columns 3:6.
+
+    Args:
+        p: error covariance, (n, n).
+        velocity_mps: the nominal velocity, (3,), m/s.
+        std_mps: 1-sigma of the pseudo-measurement per axis, m/s, > 0.
+
+    Returns:
+        (error-state correction dx (n,), updated covariance (n, n), Joseph form).
+
+    Notes:
+        A linear Kalman update (Brown & Hwang, 4th ed., eq. 4.2.8-4.2.11); the CKF of Cao et al.
+        (eq. 17-24) gives the same on a linear measurement.
+    """
+    n = p.shape[0]
+    h = np.zeros((3, n))
+    h[:, 3:6] = np.eye(3)
+    r = np.eye(3) * std_mps**2
+    s = p[3:6, 3:6] + r
+    k = np.linalg.solve(s, p[3:6, :]).T  # P H^T S^-1 (S symmetric)
+    dx = k @ (-np.asarray(velocity_mps, dtype=float))
+    ikh = np.eye(n) - k @ h
+    p_new = ikh @ p @ ikh.T + k @ r @ k.T
+    return dx, 0.5 * (p_new + p_new.T)
+
+
+@dataclass
+class MotionDecision:
+    """What the filter does at a GNSS epoch in the static model: ``open_covariance``: add the moving
+    model's process noise for this interval before the update (the epoch failed the exit test);
+    ``left_static``: the model is moving from this epoch on."""
+
+    open_covariance: bool
+    left_static: bool
+
+
+class StationarityDetector:
+    """The moving/static decision with hysteresis (module docstring).
+
+    Args:
+        enter_s: ``static_enter_s``, how long every GNSS epoch must pass the entry test, s (>= 0).
+
+    Example:
+        >>> d = StationarityDetector(enter_s=10.0)
+        >>> for k in range(4):
+        ...     _ = d.observe_moving(k * 5_000_000_000, np.zeros(3), np.eye(3), np.zeros(3), np.eye(3) * 0.01)
+        >>> d.static
+        True
+    """
+
+    def __init__(self, enter_s: float) -> None:
+        if not (math.isfinite(enter_s) and enter_s >= 0.0):
+            raise ValueError(f"enter_s must be finite and >= 0, got {enter_s!r}")
+        self._enter_ns = int(round(enter_s * 1e9))
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to the moving model, no evidence (a (re)initialisation, a time gap, a UWB range)."""
+        self.static = False
+        self._new_run()
+        self._fails = 0
+        self.last_statistic = math.nan
+        self.last_dof = 0
+
+    def _new_run(self) -> None:
+        self._run_since_ns: int | None = None
+        self._run_epochs = 0
+        self._origin = np.zeros(3)
+        self._sum_w = np.zeros((3, 3))
+        self._sum_wp = np.zeros(3)
+        self._sum_pwp = 0.0
+
+    def _add_to_run(self, stamp_ns: int, position_m: np.ndarray, position_cov_m2: np.ndarray) -> float:
+        """Add an epoch to the run; return the run's ``D`` (chi-square with 3 (N - 1) dof)."""
+        if self._run_since_ns is None:
+            self._run_since_ns = int(stamp_ns)
+            self._origin = np.asarray(position_m, dtype=float).copy()
+        d = np.asarray(position_m, dtype=float) - self._origin  # metres from the run's first epoch
+        w = np.linalg.inv(position_cov_m2)
+        self._sum_w += w
+        self._sum_wp += w @ d
+        self._sum_pwp += float(d @ w @ d)
+        self._run_epochs += 1
+        return max(self._sum_pwp - float(self._sum_wp @ np.linalg.solve(self._sum_w, self._sum_wp)), 0.0)
+
+    def observe_moving(self, stamp_ns: int, position_m: np.ndarray, position_cov_m2: np.ndarray,
+                       velocity_mps: np.ndarray, velocity_cov_m2ps2: np.ndarray) -> bool:
+        """Entry test after a GNSS update in the moving model (ECEF or any Cartesian frame, m, m/s, with
+        their (3, 3) covariances); True when the model becomes static."""
+        try:
+            dev = self._add_to_run(stamp_ns, position_m, position_cov_m2)
+        except np.linalg.LinAlgError:
+            self._new_run()
+            return False
+        dof = 3 * (self._run_epochs - 1)
+        ok = dof == 0 or dev <= float(chi2.ppf(1.0 - ENTRY_TEST_ALPHA, dof))
+        s, sigma = entry_statistic(velocity_mps, velocity_cov_m2ps2)
+        if sigma <= STATIC_SPEED_STD_MAX_MPS:
+            ok = ok and s <= _ENTRY_LIMIT
+        self.last_statistic, self.last_dof = dev, dof
+        if not ok:
+            self._new_run()
+            self._add_to_run(stamp_ns, position_m, position_cov_m2)
+            return False
+        assert self._run_since_ns is not None
+        if self._run_epochs >= ENTRY_MIN_EPOCHS and stamp_ns - self._run_since_ns >= self._enter_ns:
+            self.static = True
+            self._fails = 0
+            self._new_run()
+            return True
+        return False
+
+    def observe_static(self, statistic: float, dof: int) -> MotionDecision:
+        """Exit test on a GNSS epoch's predicted innovations in the static model."""
+        self.last_statistic, self.last_dof = statistic, dof
+        if dof <= 0 or statistic <= float(chi2.ppf(1.0 - EXIT_TEST_ALPHA, dof)):
+            self._fails = 0
+            return MotionDecision(False, False)
+        self._fails += 1
+        if self._fails >= EXIT_EPOCHS:
+            self.reset()
+            return MotionDecision(True, True)
+        return MotionDecision(True, False)
