@@ -64,6 +64,7 @@ from pathlib import Path
 import numpy as np
 
 from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic
+from gnss_common.integrity_codes import SCOPE_ALL, STATE_DETECTED, STATE_SUSPECTED
 from gnss_common.observations import GnssEpoch, UwbRangeMeasurement
 from gnss_common.spp import SinglePointPositioner
 from gnss_integrity.monitor import IntegrityMonitor, IntegrityReport
@@ -73,9 +74,6 @@ from rfi_sim.spoofing_attack import SpoofingAttack
 from uwb_gnss_fusion.fusion_filter import FRAME_EARTH, FusionFilter, FusionOutput
 from uwb_gnss_fusion.fusion_node_params import FusionNodeParams
 from uwb_gnss_fusion.integrity_policy import (
-    SCOPE_ALL,
-    STATE_DETECTED,
-    STATE_SUSPECTED,
     GnssExclusion,
     IntegrityVerdict,
     integrity_jammer_to_signal,

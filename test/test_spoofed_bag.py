@@ -20,6 +20,7 @@ from ros_fixtures import make_context
 from gnss_integrity.gnss_integrity_node import GnssIntegrityNode
 from rfi_experiments.bag_io import BagReader
 from rfi_experiments.replay import ReplayHarness
+from rfi_experiments.report import write_report
 from rfi_sim.evaluation import ecef_errors_enu, horizontal_error_m
 from uwb_gnss_fusion.fusion_node import FusionNode
 
@@ -83,3 +84,15 @@ def test_the_fusion_excludes_gnss_and_returns_to_the_anchors(replayed):
     # 0.12 m; the spoofer is 2-120 m away
     excluded = h[rel >= ATTACK_S + 5.0]
     assert excluded.size and np.sqrt(np.mean(excluded**2)) < 0.2 and excluded.max() < 0.5
+
+
+def test_report_scores_the_attack_and_not_a_jamming_goal(replayed, tmp_path):
+    """The demo's report of this bag: the integrity section's rows, and no row of the jamming
+    experiment's goal (the bag has no /truth/jammer, so there is no J/S phase to score)."""
+    result, _, _ = replayed
+    outputs = {t: result.messages(t) for t in ('/gnss/integrity', '/fusion/odometry', '/fusion/status')}
+    summary = write_report(BAG, outputs, tmp_path)
+    names = [row[0] for row in summary.rows]
+    assert not [n for n in names if 'dB' in n], names
+    assert 'GNSS+UWB horizontal RMS (no jammer truth in the bag)' in names
+    assert (tmp_path / 'integrity.png').is_file()

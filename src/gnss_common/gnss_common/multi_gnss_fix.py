@@ -14,7 +14,7 @@ A clock bias per constellation (receiver clock, system time offset, hardware del
 every signal comes from one oscillator, whose frequency error df / f shifts every rate ``-lambda D``
 by ``c df / f`` whatever the carrier; system time offsets drift by < 1e-13 (< 1 mm/s). On ESBC00DNK
 the per-constellation mean rate residual against the common drift is < 1 mm/s (``test_real_common_drift``).
-Weights: RTKLIB ``varerr`` as in ``gnss_common.spp`` (:func:`code_variance_m2`), SISRE per constellation.
+Weights: RTKLIB ``varerr`` of ``gnss_common.spp`` (``code_variance_m2``), SISRE per constellation.
 
 Notes
 -----
@@ -26,15 +26,28 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from itertools import chain
+from operator import attrgetter
 from typing import NamedTuple
 
 import numpy as np
 
 from gnss_common.constants import WGS84_ECCENTRICITY_SQUARED, WGS84_SEMI_MAJOR_AXIS_M
-from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic_scalar
-from gnss_common.earth_rotation import rotate_about_z, sagnac_rotate
+from gnss_common.coordinates import ecef_to_geodetic_scalar
+from gnss_common.multi_gnss_rows import (
+    design,
+    enu_rotation,
+    normal_rows,
+    rate_variances,
+    residuals,
+    rotate_z,
+    row_variances,
+    sagnac_rotate,
+    screen_flags,
+    screened,
+)
 from gnss_common.observations import BEIDOU, GALILEO, GLONASS, GPS, QZSS, GnssEpoch
-from gnss_common.spp import SppParams
+from gnss_common.spp import SppParams, cn0_factor
 
 STATUS_OK = "ok"
 STATUS_TOO_FEW = "too_few_satellites"
@@ -131,58 +144,26 @@ class MultiGnssFix:
         return math.nan
 
 
-def code_variance_m2(params: SppParams, sin_el: np.ndarray, cn0_dbhz: np.ndarray, iono_m: np.ndarray,
-                     sigma_broadcast_m: np.ndarray | float) -> np.ndarray:
-    """Pseudorange error variance of the RTKLIB ``varerr`` model with the C/N0 factor, m^2, (n,).
-
-    ``[a^2 + b^2 / sin^2 el] k_cn0 + (f_I I)^2 + (s_T / (sin el + 0.1))^2 + s_eph^2`` with the fields of
-    ``params``, sin el floored at 0.05, the modelled ionospheric delay ``iono_m`` (m) and the SISRE
-    ``sigma_broadcast_m`` (m, scalar or (n,)); the formula of ``gnss_common.spp`` (Takasu, RTKLIB 2.4.2
-    manual, E.6; ``k_cn0 = max(1, 10^((cn0_ref - cn0) / 10))``, Hartinger & Brunner 1999).
-    """
-    s_el = np.maximum(sin_el, 0.05)
-    return (code_noise_variance_m2(params, sin_el, cn0_dbhz) + (params.iono_error_fraction * iono_m) ** 2
-            + (params.sigma_tropo_zenith_m / (s_el + 0.1)) ** 2 + np.asarray(sigma_broadcast_m, dtype=float) ** 2)
-
-
-def code_noise_variance_m2(params: SppParams, sin_el: np.ndarray, cn0_dbhz: np.ndarray) -> np.ndarray:
-    """The white (code noise, fast multipath) term ``[a^2 + b^2 / sin^2 el] k_cn0`` of
-    :func:`code_variance_m2`, m^2, (n,)."""
-    return (params.sigma_code_a_m**2 + (params.sigma_code_b_m / np.maximum(sin_el, 0.05)) ** 2) * cn0_factor(
-        params, cn0_dbhz)
-
-
-def cn0_factor(params: SppParams, cn0_dbhz: np.ndarray) -> np.ndarray:
-    """C/N0 variance factor ``max(1, 10^((cn0_ref - cn0) / 10))`` (1 where C/N0 is NaN or unused), (n,)."""
-    cn0 = np.asarray(cn0_dbhz, dtype=float)
-    if not params.use_cn0_weighting:
-        return np.ones(cn0.shape)
-    with np.errstate(invalid="ignore"):
-        f = np.maximum(1.0, 10.0 ** ((params.cn0_reference_dbhz - cn0) / 10.0))
-    return np.where(np.isfinite(f), f, 1.0)
-
-
 def _invert(nmat: np.ndarray, max_variance: float = math.inf) -> np.ndarray | None:
     """Inverse of a normal matrix, or None when singular or with a variance <= 0 or above the bound."""
     try:
         cov = np.linalg.inv(nmat)
     except np.linalg.LinAlgError:
         return None
-    d = np.diag(cov)
-    return cov if np.all(np.isfinite(d)) and np.all(d > 0.0) and float(np.max(d)) < max_variance else None
+    return cov if all(0.0 < v < max_variance and math.isfinite(v) for v in cov.diagonal().tolist()) else None
 
 
 def _w_test(resid: np.ndarray, var: np.ndarray, h: np.ndarray, cov: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """Standardised residuals ``r_i / sqrt((R - H cov H^T)_ii)`` of ``rows`` (NaN elsewhere and without
-    redundancy), (n,)."""
+    """Standardised residuals ``r_i / sqrt((R - H cov H^T)_ii)`` of ``rows`` (else and without redundancy NaN)."""
     qr = var - np.sum((h @ cov) * h, axis=1)
     with np.errstate(invalid="ignore"):
         return np.where(rows & (qr > 1e-9 * var), resid / np.sqrt(np.maximum(qr, 1e-300)), math.nan)
 
 
 class _Rows(NamedTuple):
-    """Screened satellites, one row each, by (constellation, svid): ``y = P + c dt_s - I - T`` (m),
-    ``rate + c ddt_s`` (m/s, NaN if unusable), ``selected`` by the caller's mask and constellations."""
+    """Screened satellites, one row each, by (constellation, svid): ``y = P + c dt_s - I - T`` (m), ``rate +
+    c ddt_s`` (m/s, NaN if unusable), ``selected`` by the caller's mask and constellations; the weight model's
+    inputs once per epoch (``cn0_factor``; stated pseudorange std^2, NaN where none)."""
 
     sats: tuple[tuple[int, int], ...]
     system: np.ndarray
@@ -190,11 +171,17 @@ class _Rows(NamedTuple):
     sat_vel: np.ndarray
     y: np.ndarray
     rate: np.ndarray
-    cn0: np.ndarray
-    iono: np.ndarray
-    pr_std: np.ndarray
     rate_std: np.ndarray
     selected: np.ndarray
+    k_cn0: np.ndarray
+    iono: np.ndarray
+    sisre: np.ndarray
+    stated2: np.ndarray
+
+
+_FIELDS = attrgetter("pseudorange_m", "satellite_clock_bias_m", "ionosphere_delay_m", "troposphere_delay_m",
+                     "pseudorange_rate_mps", "satellite_clock_drift_mps", "cn0_dbhz", "pseudorange_std_m",
+                     "pseudorange_rate_std_mps")
 
 
 def _stack3(values: list, n: int) -> np.ndarray:
@@ -211,55 +198,36 @@ def _screen(epoch: GnssEpoch, params: MultiGnssFixParams, use: np.ndarray | None
             constellations: tuple[int, ...] | None,
             reject: dict[str, int], rejected: list[tuple[tuple[int, int], str]]) -> _Rows:
     """Screen the observations of an epoch into rows (counts every rejection), vectorised."""
-    obs = epoch.observations
-    n_obs = len(obs)
+    obs, n_obs = epoch.observations, len(epoch.observations)
     selected = np.ones(n_obs, dtype=bool) if use is None else np.asarray(use, dtype=bool).reshape(-1)
     if selected.shape != (n_obs,):
         raise ValueError(f"use must have one entry per observation ({n_obs}), got shape {selected.shape}")
     keys = [(int(o.constellation), int(o.svid)) for o in obs]
-    s = np.array([(o.pseudorange_m, o.satellite_clock_bias_m, o.ionosphere_delay_m, o.troposphere_delay_m,
-                   o.pseudorange_rate_mps, o.satellite_clock_drift_mps, o.cn0_dbhz, o.pseudorange_std_m,
-                   o.pseudorange_rate_std_mps) for o in obs], dtype=float).reshape(n_obs, 9)
+    s = np.fromiter(chain.from_iterable(map(_FIELDS, obs)), float, 9 * n_obs).reshape(n_obs, 9)
     pos = _stack3([o.satellite_position_ecef_m for o in obs], n_obs)
     vel = _stack3([o.satellite_velocity_ecef_mps for o in obs], n_obs)
     system = np.array([k[0] for k in keys], dtype=int)
     unique = np.ones(n_obs, dtype=bool) if len(set(keys)) == n_obs else np.array([keys.count(k) == 1 for k in keys])
-    supported = np.isin(system, params.constellations)
-    finite = np.all(np.isfinite(s[:, :4]), axis=1) & np.all(np.isfinite(pos), axis=1)
-    with np.errstate(invalid="ignore"):
-        r_sat = np.sqrt(np.sum(pos * pos, axis=1))
-        physical = ((s[:, 0] >= 1.0e7) & (s[:, 0] <= 5.0e7) & (r_sat >= 2.0e7) & (r_sat <= 5.0e7)
-                    & (np.abs(s[:, 1]) < 3.0e6) & (s[:, 2] >= 0.0) & (s[:, 2] <= 200.0) & (s[:, 3] >= 0.0)
-                    & (s[:, 3] <= 100.0))
-        rate_ok = (np.isfinite(s[:, 4]) & np.isfinite(s[:, 5]) & np.all(np.isfinite(vel), axis=1)
-                   & (np.abs(s[:, 4]) < 1.0e5))
+    supported = np.array([k[0] in params.constellations for k in keys], dtype=bool)
+    finite, physical, rate_ok = screen_flags(s, pos, vel)
     ok = supported & unique & finite & physical
-    for j in np.flatnonzero(~ok):
+    for j in np.flatnonzero(~ok).tolist():
         reason = ("unsupported_constellation" if not supported[j] else "duplicate_svid" if not unique[j]
-                  else "invalid_input" if not finite[j] else "non_physical" if not physical[j] else "")
-        if reason:
-            reject[reason] += 1
-            rejected.append((keys[j], reason))
+                  else "invalid_input" if not finite[j] else "non_physical")
+        reject[reason] += 1
+        rejected.append((keys[j], reason))
     if constellations is not None:
         selected = selected & np.isin(system, constellations)
-    idx = np.flatnonzero(ok)
-    idx = idx[np.lexsort((np.array([keys[j][1] for j in idx], dtype=int), system[idx]))] if idx.size else idx
-    for j in idx[~selected[idx]]:
+    idx = np.array(sorted(np.flatnonzero(ok).tolist(), key=keys.__getitem__), dtype=np.intp)
+    sel = selected[idx]
+    for j in idx[~sel].tolist():
         reject["not_selected"] += 1
         rejected.append((keys[j], "not_selected"))
-    sv = s[idx]
-    y = sv[:, 0] + sv[:, 1] - sv[:, 2] - sv[:, 3]
-    return _Rows(tuple(keys[j] for j in idx), system[idx], pos[idx], vel[idx], y,
-                 np.where(rate_ok[idx], sv[:, 4] + sv[:, 5], math.nan), sv[:, 6], sv[:, 2], sv[:, 7], sv[:, 8],
-                 selected[idx])
-
-
-def _enu_rotation(pos: np.ndarray) -> np.ndarray | None:
-    """ECEF->ENU rotation at a near-surface point (row 2: the local up), else None."""
-    if not (np.all(np.isfinite(pos)) and float(np.linalg.norm(pos)) > _NEAR_SURFACE_R_M):
-        return None
-    lat, lon, _ = ecef_to_geodetic_scalar(float(pos[0]), float(pos[1]), float(pos[2]))
-    return ecef_to_enu_rotation(lat, lon)
+    sv, wp, table = s[idx], params.weights, dict(params.sigma_broadcast_m)
+    sisre = np.array([table.get(c, wp.sigma_broadcast_m) for c in system[idx].tolist()], dtype=float)
+    y, rate, stated2 = screened(s, idx, rate_ok)
+    return _Rows(tuple([keys[j] for j in idx.tolist()]), system[idx], pos[idx], vel[idx], y, rate, sv[:, 8], sel,
+                 cn0_factor(wp, sv[:, 6]), sv[:, 2], sisre, stated2)
 
 
 class _Geometry(NamedTuple):
@@ -274,53 +242,49 @@ class _Geometry(NamedTuple):
 
 
 def _geometry(rows: _Rows, pos: np.ndarray) -> _Geometry:
-    """The geometry of every row seen from ``pos`` (ECEF m)."""
-    rs, c, s, _ = sagnac_rotate(rows.sat_pos, pos)
-    diff = rs - pos
+    """The geometry of every row seen from ``pos`` (ECEF m): ``gnss_common.earth_rotation.sagnac_rotate``
+    (one travel-time iteration) without its unused second travel time; the ENU rotation (row 2: the local
+    up) where ``pos`` is near the surface, else None."""
+    diff, c, s = sagnac_rotate(rows.sat_pos, pos)
     rng = np.sqrt(np.einsum("ij,ij->i", diff, diff))
     los = diff / rng[:, None]
-    rot = _enu_rotation(pos)
+    x, y, z = pos.tolist()
+    near = all(map(math.isfinite, (x, y, z))) and math.sqrt(x * x + y * y + z * z) > _NEAR_SURFACE_R_M
+    rot = enu_rotation(*ecef_to_geodetic_scalar(x, y, z)[:2]) if near else None
     sin_el = np.clip(los @ rot[2], -1.0, 1.0) if rot is not None else np.ones(rng.size)
     return _Geometry(rng, los, c, s, rot, sin_el)
 
 
-def _variance(rows: _Rows, geo: _Geometry, params: SppParams, sisre: np.ndarray) -> np.ndarray:
-    """Pseudorange variance of every row at a geometry (a finite stated std overrides), m^2, (n,)."""
-    var = code_variance_m2(params, geo.sin_el, rows.cn0, rows.iono, sisre)
-    given = np.isfinite(rows.pr_std) & (rows.pr_std > 0.0)
-    return np.where(given, rows.pr_std**2, var) if np.any(given) else var
+def _variance(geo: _Geometry, params: SppParams, rows: _Rows, white_only: bool = False) -> np.ndarray:
+    """Pseudorange variance (or its white part) of every row at a geometry, a stated std overriding, m^2."""
+    return row_variances(geo.sin_el, rows.k_cn0, rows.iono, rows.sisre, rows.stated2, params.sigma_code_a_m**2,
+                         params.sigma_code_b_m, params.iono_error_fraction, params.sigma_tropo_zenith_m, white_only)
 
 
-def _gauss_newton(rows: _Rows, idx: np.ndarray, cols: np.ndarray, x0: np.ndarray, geo: _Geometry,
-                  params: SppParams, sisre: np.ndarray
-                  ) -> tuple[str, np.ndarray, np.ndarray | None, int, _Geometry, np.ndarray]:
-    """Iterated WLS for ``[x, y, z, c dt_1 .. c dt_k]`` on rows ``idx`` (clock one-hot ``cols``) from
+def _gauss_newton(rows: _Rows, idx: np.ndarray, clock: np.ndarray, x0: np.ndarray, geo: _Geometry,
+                  params: SppParams) -> tuple[str, np.ndarray, np.ndarray | None, int, _Geometry, np.ndarray]:
+    """Iterated WLS for ``[x, y, z, c dt_1 .. c dt_k]`` on rows ``idx`` (clock ``clock`` of each row) from
     ``x0`` (geometry ``geo``): (status, x, covariance or None, iterations, geometry at x, row variances)."""
     x = x0.copy()
-    h = np.empty((idx.size, cols.shape[1] + 3))
-    h[:, 3:] = cols
     var = np.full(len(rows.sats), math.nan)
     for it in range(1, params.max_iterations + 1):
-        var = _variance(rows, geo, params, sisre)
-        w = 1.0 / var[idx]
-        h[:, :3] = -geo.los[idx]
-        r = rows.y[idx] - (geo.rng[idx] + cols @ x[3:])
+        var = _variance(geo, params, rows)
+        h, w, r = normal_rows(var, geo.los, geo.rng, rows.y, x, clock, idx)
         cov = _invert(h.T @ (h * w[:, None]), _MAX_VARIANCE_M2)
         if cov is None:
             return STATUS_SINGULAR, x, None, it, geo, var
         dx = cov @ (h.T @ (w * r))
         x = x + dx
         geo = _geometry(rows, x[:3])
-        if float(np.linalg.norm(dx)) < params.convergence_m:
+        if math.sqrt(float(dx @ dx)) < params.convergence_m:  # np.linalg.norm's arithmetic
             return (STATUS_OK if geo.rot is not None else STATUS_NOT_CONVERGED), x, cov, it, geo, var
     return STATUS_NOT_CONVERGED, x, cov, params.max_iterations, geo, var
 
 
 def _clock_columns(system: np.ndarray, idx: np.ndarray) -> tuple[tuple[int, ...], np.ndarray]:
     """Clocks of the constellations among rows ``idx`` and their one-hot columns, (idx.size, k)."""
-    clocks = tuple(int(c) for c in np.unique(system[idx]))
-    cols = (system[idx][:, None] == np.array(clocks, dtype=int)[None, :]).astype(float)
-    return clocks, cols
+    clocks = tuple(sorted(set(system[idx].tolist())))
+    return clocks, (system[idx][:, None] == np.array(clocks, dtype=int)[None, :]).astype(float)
 
 
 def solve_multi_gnss(epoch: GnssEpoch, params: MultiGnssFixParams | None = None, *,
@@ -354,7 +318,6 @@ def solve_multi_gnss(epoch: GnssEpoch, params: MultiGnssFixParams | None = None,
     counts = dict.fromkeys(REJECTION_REASONS, 0)
     rejected: list[tuple[tuple[int, int], str]] = []
     rows = _screen(epoch, p, use, constellations, counts, rejected)
-    sisre = np.array([dict(p.sigma_broadcast_m).get(int(c), wp.sigma_broadcast_m) for c in rows.system])
     x_start = np.zeros(3) if initial_position_ecef_m is None else np.asarray(initial_position_ecef_m, float).reshape(3)
     if not np.all(np.isfinite(x_start)):
         raise ValueError("initial_position_ecef_m must be finite")
@@ -362,9 +325,8 @@ def solve_multi_gnss(epoch: GnssEpoch, params: MultiGnssFixParams | None = None,
     sin_mask = math.sin(math.radians(wp.elevation_mask_deg))
     geo = _geometry(rows, x_start)
     below = active & (geo.sin_el < sin_mask) if geo.rot is not None else np.zeros(active.size, dtype=bool)
-    status, iterations, cov, x = STATUS_TOO_FEW, 0, None, np.zeros(3)
+    status, iterations, cov, x, var = STATUS_TOO_FEW, 0, None, np.zeros(3), np.full(active.size, math.nan)
     clocks: tuple[int, ...] = ()
-    var = np.full(active.size, math.nan)
     while True:  # the elevation mask only removes rows: re-solve from the last fix until none is below
         for i in np.flatnonzero(below):
             counts["below_elevation_mask"] += 1
@@ -372,64 +334,62 @@ def solve_multi_gnss(epoch: GnssEpoch, params: MultiGnssFixParams | None = None,
         active &= ~below
         idx = np.flatnonzero(active)
         clocks, cols = _clock_columns(rows.system, idx)
+        clock = np.array([clocks.index(c) if c in clocks else -1 for c in rows.system.tolist()], dtype=np.int64)
         if idx.size == 0 or idx.size < 3 + len(clocks):
             status = STATUS_TOO_FEW
             break
         x0 = np.concatenate([x_start, np.zeros(len(clocks))])
         if geo.rot is not None:  # start near the surface: each clock at its rows' mean offset
             x0[3:] = ((rows.y[idx] - geo.rng[idx]) @ cols) / np.sum(cols, axis=0)
-        status, x, cov, its, geo, var = _gauss_newton(rows, idx, cols, x0, geo, wp, sisre)
+        status, x, cov, its, geo, var = _gauss_newton(rows, idx, clock, x0, geo, wp)
         iterations += its
         below = active & (geo.sin_el < sin_mask)
         if status != STATUS_OK or not np.any(below):
             break
         x_start = x[:3].copy()
-    return _assemble(epoch.stamp_ns, status, rows, active, clocks, x, cov, geo, var, iterations, wp, counts,
+    return _assemble(epoch.stamp_ns, status, rows, active, clocks, clock, x, cov, geo, var, iterations, wp, counts,
                      rejected)
 
 
 def _velocity(rows: _Rows, geo: _Geometry, active: np.ndarray, wp: SppParams) -> dict:
     """Velocity and one clock drift from the rates of the active rows (Cao et al., eq. 6)."""
     n = len(rows.sats)
-    scales = np.sqrt(cn0_factor(wp, rows.cn0)) / np.maximum(geo.sin_el, 0.05)
-    var_v = np.where(np.isfinite(rows.rate_std) & (rows.rate_std > 0.0), rows.rate_std, wp.sigma_rate_mps * scales) ** 2
-    out: dict = {"velocity_valid": False, "velocity_ecef_mps": np.full(3, math.nan), "clock_drift_mps": math.nan,
-                 "velocity_covariance": np.full((4, 4), math.nan), "rate_used": np.zeros(n, dtype=bool),
-                 "rate_residuals_mps": np.full(n, math.nan), "rate_standardised_residuals": np.full(n, math.nan),
-                 "rate_sse": math.nan, "rate_dof": 0, "sigma_scales": scales, "rate_weights": 1.0 / var_v}
-    yv = rows.rate - np.einsum("ij,ij->i", rotate_about_z(rows.sat_vel, geo.cos_s, geo.sin_s), geo.los)
-    hv = np.hstack([-geo.los, np.ones((n, 1))])
-    used = active & np.isfinite(yv)
-    rv = np.flatnonzero(used)
-    wv = 1.0 / var_v[rv]
-    vcov = _invert(hv[rv].T @ (hv[rv] * wv[:, None])) if rv.size >= 4 else None
-    if vcov is not None:
-        xv = vcov @ (hv[rv].T @ (wv * yv[rv]))
-        res = yv - hv @ xv
-        out.update(velocity_valid=True, velocity_ecef_mps=xv[:3].copy(), clock_drift_mps=float(xv[3]),
-                   velocity_covariance=vcov, rate_used=used, rate_residuals_mps=res, rate_dof=rv.size - 4,
-                   rate_standardised_residuals=_w_test(res, var_v, hv, vcov, used),
-                   rate_sse=float(np.sum(wv * res[rv] ** 2)) if rv.size > 4 else math.nan)
-    return out
+    scales, var_v = rate_variances(rows.k_cn0, geo.sin_el, rows.rate_std, wp.sigma_rate_mps)
+    out: dict = {"sigma_scales": scales, "rate_weights": 1.0 / var_v}
+    yv = rows.rate - np.einsum("ij,ij->i", rotate_z(rows.sat_vel, geo.cos_s, geo.sin_s, np.zeros(3)), geo.los)
+    hv = design(geo.los, np.zeros(n, dtype=np.int64), 1)  # [-u_i, 1]
+    rv = np.flatnonzero(used := active & np.isfinite(yv))
+    wv, hr = 1.0 / var_v[rv], hv[rv]
+    vcov = _invert(hr.T @ (hr * wv[:, None])) if rv.size >= 4 else None
+    if vcov is None:
+        return out | {"velocity_valid": False, "velocity_ecef_mps": np.full(3, math.nan), "clock_drift_mps": math.nan,
+                      "velocity_covariance": np.full((4, 4), math.nan), "rate_used": np.zeros(n, dtype=bool),
+                      "rate_residuals_mps": np.full(n, math.nan), "rate_standardised_residuals": np.full(n, math.nan),
+                      "rate_sse": math.nan, "rate_dof": 0}
+    xv = vcov @ (hr.T @ (wv * yv[rv]))
+    res = yv - hv @ xv
+    return out | {"velocity_valid": True, "velocity_ecef_mps": xv[:3].copy(), "clock_drift_mps": float(xv[3]),
+                  "velocity_covariance": vcov, "rate_used": used, "rate_residuals_mps": res, "rate_dof": rv.size - 4,
+                  "rate_standardised_residuals": _w_test(res, var_v, hv, vcov, used),
+                  "rate_sse": float(np.sum(wv * res[rv] ** 2)) if rv.size > 4 else math.nan}
 
 
 def _assemble(stamp_ns: int, status: str, rows: _Rows, active: np.ndarray, clocks: tuple[int, ...],
-              x: np.ndarray, cov: np.ndarray | None, geo: _Geometry, var: np.ndarray, iterations: int,
-              wp: SppParams, counts: dict[str, int], rejected: list[tuple[tuple[int, int], str]]
+              clock: np.ndarray, x: np.ndarray, cov: np.ndarray | None, geo: _Geometry, var: np.ndarray,
+              iterations: int, wp: SppParams, counts: dict[str, int], rejected: list[tuple[tuple[int, int], str]]
               ) -> MultiGnssFix:
-    """Residuals, weights, w-tests, azimuth/elevation and the velocity at the final solution."""
+    """Residuals, weights, w-tests, azimuth/elevation and the velocity at the final solution (``clock``: each
+    row's index in ``clocks``, -1 without one)."""
     n, k = len(rows.sats), len(clocks)
-    match = rows.system[:, None] == np.array(clocks, dtype=int)[None, :]
-    h = np.hstack([-geo.los, match.astype(float)])
+    h = design(geo.los, clock, k)
     nan = np.full(n, math.nan)
     el, az, resid, wstd, w, noise, sse = nan, nan, nan, nan, nan, nan, math.nan
     rot = geo.rot if status in (STATUS_OK, STATUS_NOT_CONVERGED) and cov is not None and n else None
     dof = int(active.sum()) - 3 - k
     if rot is not None and cov is not None:
-        resid = np.where(np.any(match, axis=1), rows.y - geo.rng - match @ x[3:], math.nan)
+        resid = residuals(rows.y, geo.rng, x, clock)
         w = 1.0 / var
-        given = np.isfinite(rows.pr_std) & (rows.pr_std > 0.0)
-        noise = np.where(given, rows.pr_std**2, code_noise_variance_m2(wp, geo.sin_el, rows.cn0))
+        noise = _variance(geo, wp, rows, white_only=True)
         wstd = _w_test(resid, var, h, cov, active)
         sse = float(np.sum(w[active] * resid[active] ** 2)) if dof >= 1 else math.nan
         enu = geo.los @ rot.T
@@ -490,9 +450,9 @@ def subset_solution(fix: MultiGnssFix, rows: np.ndarray) -> SubsetSolution:
     gain = cov @ (h.T * w)
     dx = gain @ r
     post = r - h @ dx
-    base_clocks = np.array([fix.clock_bias_m(c) for c in clocks])
     dof = sel.size - 3 - k
-    noise_cov = (gain * fix.noise_variances_m2[sel]) @ gain.T
     wstd[sel] = _w_test(post, 1.0 / w, h, cov, np.ones(sel.size, dtype=bool))
-    return SubsetSolution(True, fix.position_ecef_m + dx[:3], clocks, base_clocks + dx[3:], cov, noise_cov, wstd,
+    return SubsetSolution(True, fix.position_ecef_m + dx[:3], clocks,
+                          np.array([fix.clock_bias_m(c) for c in clocks]) + dx[3:], cov,
+                          (gain * fix.noise_variances_m2[sel]) @ gain.T, wstd,
                           float(np.sum(w * post**2)) if dof >= 1 else math.nan, dof)

@@ -214,6 +214,39 @@ class SppResult:
     extra: dict[str, float] = field(default_factory=dict)
 
 
+def code_variance_m2(params: SppParams, sin_el: np.ndarray, cn0_dbhz: np.ndarray | None, iono_m: np.ndarray,
+                     sigma_broadcast_m: np.ndarray | float, k_cn0: np.ndarray | None = None) -> np.ndarray:
+    """Pseudorange error variance of the RTKLIB ``varerr`` model with the C/N0 factor, m^2, (n,).
+
+    ``[a^2 + b^2 / sin^2 el] k_cn0 + (f_I I)^2 + (s_T / (sin el + 0.1))^2 + s_eph^2`` with the fields of
+    ``params``, sin el floored at 0.05, the modelled ionospheric delay ``iono_m`` (m) and the SISRE
+    ``sigma_broadcast_m`` (m, scalar or (n,)); the weights of this module's fix and of ``multi_gnss_fix``
+    (Takasu, RTKLIB 2.4.2 manual, E.6; ``k_cn0 = max(1, 10^((cn0_ref - cn0) / 10))``, Hartinger &
+    Brunner 1999; ``k_cn0`` when already computed, :func:`cn0_factor` of ``cn0_dbhz``).
+    """
+    s_el = np.maximum(sin_el, 0.05)
+    return (code_noise_variance_m2(params, sin_el, cn0_dbhz, k_cn0) + (params.iono_error_fraction * iono_m) ** 2
+            + (params.sigma_tropo_zenith_m / (s_el + 0.1)) ** 2 + np.asarray(sigma_broadcast_m, dtype=float) ** 2)
+
+
+def code_noise_variance_m2(params: SppParams, sin_el: np.ndarray, cn0_dbhz: np.ndarray | None,
+                           k_cn0: np.ndarray | None = None) -> np.ndarray:
+    """The white (code noise, fast multipath) term ``[a^2 + b^2 / sin^2 el] k_cn0`` of
+    :func:`code_variance_m2`, m^2, (n,) (``k_cn0``: :func:`cn0_factor` of ``cn0_dbhz`` if already computed)."""
+    k = cn0_factor(params, np.asarray(cn0_dbhz, dtype=float)) if k_cn0 is None else k_cn0
+    return (params.sigma_code_a_m**2 + (params.sigma_code_b_m / np.maximum(sin_el, 0.05)) ** 2) * k
+
+
+def cn0_factor(params: SppParams, cn0_dbhz: np.ndarray) -> np.ndarray:
+    """C/N0 variance factor ``max(1, 10^((cn0_ref - cn0) / 10))`` (1 where C/N0 is NaN or unused), (n,)."""
+    cn0 = np.asarray(cn0_dbhz, dtype=float)
+    if not params.use_cn0_weighting:
+        return np.ones(cn0.shape)
+    with np.errstate(invalid="ignore"):
+        f = np.maximum(1.0, 10.0 ** ((params.cn0_reference_dbhz - cn0) / 10.0))
+    return np.where(np.isfinite(f), f, 1.0)
+
+
 def _geodetic_up_and_rotation(pos: np.ndarray) -> np.ndarray:
     """ECEF->ENU rotation at a near-surface ECEF point (row 2: the local up)."""
     lat, lon, _ = ecef_to_geodetic_scalar(float(pos[0]), float(pos[1]), float(pos[2]))
@@ -568,10 +601,7 @@ class SinglePointPositioner:
         if idx.size < 4:
             return _PositionFix(STATUS_TOO_FEW, np.zeros(n, dtype=bool), 0)
         sp, yc = sat_pos[idx], y_corr[idx]
-        cn0_factor = np.ones(idx.size)
-        if p.use_cn0_weighting:
-            ok = np.isfinite(cn0[idx])
-            cn0_factor[ok] = np.maximum(1.0, 10.0 ** ((p.cn0_reference_dbhz - cn0[idx][ok]) / 10.0))
+        k_cn0 = cn0_factor(p, cn0[idx])
         given = np.isfinite(pr_std[idx]) & (pr_std[idx] > 0)
         sin_el = np.ones(idx.size)
 
@@ -585,13 +615,7 @@ class SinglePointPositioner:
                 sin_el = np.clip(los @ _geodetic_up_and_rotation(x[:3])[2], -1.0, 1.0)
             else:
                 sin_el = np.ones(idx.size)
-            s_el = np.maximum(sin_el, 0.05)
-            var = (
-                (p.sigma_code_a_m**2 + (p.sigma_code_b_m / s_el) ** 2) * cn0_factor
-                + (p.iono_error_fraction * iono_m[idx]) ** 2
-                + (p.sigma_tropo_zenith_m / (s_el + 0.1)) ** 2
-                + p.sigma_broadcast_m**2
-            )
+            var = code_variance_m2(p, sin_el, None, iono_m[idx], p.sigma_broadcast_m, k_cn0)
             return rng + x[3], los, 1.0 / np.where(given, pr_std[idx] ** 2, var)
 
         start = np.zeros(4)
@@ -616,7 +640,7 @@ class SinglePointPositioner:
             sin_el = np.clip(los @ rot[2], -1.0, 1.0)
             el_all[idx] = np.arcsin(sin_el)
         los_all[idx] = los
-        scale_all[idx] = np.sqrt(cn0_factor) / np.maximum(sin_el, 0.05)
+        scale_all[idx] = np.sqrt(k_cn0) / np.maximum(sin_el, 0.05)
         below = np.zeros(n, dtype=bool)
         if rot is not None and converged:
             below[idx] = el_all[idx] < mask_rad

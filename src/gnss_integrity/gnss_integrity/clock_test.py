@@ -41,6 +41,7 @@ import numpy as np
 from gnss_common.clock_model import PRESETS, ClockHCoefficients, clock_process_noise_m, transition_matrix
 from gnss_common.constants import SPEED_OF_LIGHT_MPS
 
+from .kernels import RunningMedian, clock_kalman_step
 from .outcome import (
     CATEGORY_CLOCK,
     DECISION_SUSPECT,
@@ -156,16 +157,25 @@ class ClockTest:
         p = self.params
         self._filter: _Filter | None = None
         self._bins: deque[tuple[int, float, float, int]] = deque()  # (second, drift sum, var sum, n)
-        self._clean_nis: deque[float] = deque(maxlen=p.scale_history)
+        self._by_second: dict[int, tuple[int, float, float, int]] = {}  # the same bins by second
+        self._clean_nis = RunningMedian(p.scale_history)
         self._scale = 1.0
         self._step_thr = chi2_threshold(p.step_false_alarm_probability, 2)
         self._step_alarm = chi2_threshold(p.alarm_false_alarm_probability, 2)
         self._median_chi2_2 = chi2_threshold(0.5, 2)
+        n_lags = len(p.drift_lags_s)
+        self._rate_thr = (normal_threshold(p.rate_false_alarm_probability / n_lags, two_sided=True) ** 2,
+                          normal_threshold(p.alarm_false_alarm_probability / n_lags, two_sided=True) ** 2)
+        self._rate_q = p.process_noise_factor * SPEED_OF_LIGHT_MPS**2 * p.clock.s_g  # m^2/s^3
+        self._lags = [(lag, int(round(lag))) for lag in p.drift_lags_s]
+        self._max_lag = max(p.drift_lags_s)
+        self._models: dict[float, tuple[np.ndarray, np.ndarray]] = {}  # dt -> (F, f W(h, dt))
 
     def reset(self) -> None:
         """Forget the clock and the windows (the learned noise scale stays)."""
         self._filter = None
         self._bins.clear()
+        self._by_second.clear()
 
     # ------------------------------------------------------------------------------------------
     def update(self, stamp_ns: int, clock_bias_m: float, clock_bias_std_m: float, clock_drift_mps: float,
@@ -193,38 +203,27 @@ class ClockTest:
         if not (math.isfinite(clock_bias_m) and math.isfinite(clock_drift_mps)):
             self.counts["epochs_without_clock"] += 1
             return self._unknown()
-        r = np.diag([max(clock_bias_std_m, p.bias_floor_m) ** 2 if math.isfinite(clock_bias_std_m)
-                     else p.bias_floor_m**2 * 100.0,
-                     max(clock_drift_std_mps, p.drift_floor_mps) ** 2 if math.isfinite(clock_drift_std_mps)
-                     else p.drift_floor_mps**2 * 100.0])
-        z = np.array([clock_bias_m, clock_drift_mps])
+        r_bias = (max(clock_bias_std_m, p.bias_floor_m) ** 2 if math.isfinite(clock_bias_std_m)
+                  else p.bias_floor_m**2 * 100.0)
+        r_drift = (max(clock_drift_std_mps, p.drift_floor_mps) ** 2 if math.isfinite(clock_drift_std_mps)
+                   else p.drift_floor_mps**2 * 100.0)
+        r = np.array([[r_bias, 0.0], [0.0, r_drift]])
+        z = np.array([clock_bias_m, clock_drift_mps], dtype=float)
         f = self._filter
         if f is None or f.reference != reference or not (0 < stamp_ns - f.stamp_ns <= p.max_gap_s * NS_PER_S):
             if f is not None:
                 self.counts["restarts"] += 1
             self._start(stamp_ns, z, r, reference)
             return self._unknown()
-        dt = (stamp_ns - f.stamp_ns) / NS_PER_S
-        phi = transition_matrix(dt)
-        x = phi @ f.x
-        pp = phi @ f.p @ phi.T + p.process_noise_factor * clock_process_noise_m(p.clock, dt)
-        nu = z - x
-        steps = round(nu[0] / MILLISECOND_M)
-        if steps != 0 and abs(nu[0] - steps * MILLISECOND_M) < p.millisecond_tolerance_m:
-            # a receiver's own millisecond clock step: re-align, no alarm
+        phi, q = self._model((stamp_ns - f.stamp_ns) / NS_PER_S)
+        # predict, recognise a receiver's own millisecond clock step (re-align, no alarm), update
+        f.x, f.p, nis, steps = clock_kalman_step(f.x, f.p, phi, q, r, z, MILLISECOND_M, p.millisecond_tolerance_m)
+        if steps != 0:
             self.counts["receiver_millisecond_steps"] += 1
-            x[0] += steps * MILLISECOND_M
-            nu = z - x
-        s = pp + r
-        nis = float(nu @ np.linalg.solve(s, nu))
-        k = pp @ np.linalg.inv(s)
-        f.x = x + k @ nu
-        f.p = (np.eye(2) - k) @ pp
-        f.p = 0.5 * (f.p + f.p.T)
         f.stamp_ns = stamp_ns
         f.epochs += 1
         nis_scaled = nis / self._scale
-        self._add_drift(stamp_ns, clock_drift_mps, float(r[1, 1]))
+        self._add_drift(stamp_ns, clock_drift_mps, r_drift)
         if f.epochs < p.warmup_epochs:
             self._learn(nis)
             return self._unknown()
@@ -236,9 +235,22 @@ class ClockTest:
         return step, rate
 
     # ------------------------------------------------------------------------------------------
+    def _model(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Transition matrix and scaled process noise for a step of ``dt`` s (kept per step length: a
+        receiver's epochs repeat a few)."""
+        model = self._models.get(dt)
+        if model is None:
+            if len(self._models) > 64:
+                self._models.clear()
+            p = self.params
+            model = self._models[dt] = (np.ascontiguousarray(transition_matrix(dt), dtype=float),
+                                        p.process_noise_factor * clock_process_noise_m(p.clock, dt))
+        return model
+
     def _start(self, stamp_ns: int, z: np.ndarray, r: np.ndarray, reference: int) -> None:
         self._filter = _Filter(z.copy(), r.copy(), stamp_ns, reference)
         self._bins.clear()
+        self._by_second.clear()
 
     def _add_drift(self, stamp_ns: int, drift_mps: float, var_m2ps2: float) -> None:
         second = stamp_ns // NS_PER_S
@@ -247,23 +259,24 @@ class ClockTest:
             self._bins[-1] = (second, s + drift_mps, v + var_m2ps2, n + 1)
         else:
             self._bins.append((second, drift_mps, var_m2ps2, 1))
-        while self._bins and second - self._bins[0][0] > max(self.params.drift_lags_s) + 1:
-            self._bins.popleft()
+        self._by_second[second] = self._bins[-1]
+        while self._bins and second - self._bins[0][0] > self._max_lag + 1:
+            old = self._bins.popleft()
+            if self._by_second.get(old[0]) is old:
+                del self._by_second[old[0]]
 
     def _drift_change(self) -> TestOutcome:
         """``clock_rate``: the largest normalised drift change over the lags (module docstring)."""
         p = self.params
-        n_lags = len(p.drift_lags_s)
-        suspect = normal_threshold(p.rate_false_alarm_probability / n_lags, two_sided=True) ** 2
-        alarm = normal_threshold(p.alarm_false_alarm_probability / n_lags, two_sided=True) ** 2
+        suspect, alarm = self._rate_thr
         if not self._bins:
             return unknown("clock_rate", CATEGORY_CLOCK, suspect, alarm, p.rate_false_alarm_probability)
         second, s1, v1, n1 = self._bins[-1]
-        by_second = {b[0]: b for b in self._bins}
-        q = p.process_noise_factor * SPEED_OF_LIGHT_MPS**2 * p.clock.s_g  # m^2/s^3
+        by_second = self._by_second
+        q = self._rate_q
         best = math.nan
-        for lag in p.drift_lags_s:
-            old = by_second.get(second - int(round(lag)))
+        for lag, back in self._lags:
+            old = by_second.get(second - back)
             if old is None:
                 continue
             _, s0, v0, n0 = old
@@ -277,7 +290,7 @@ class ClockTest:
     def _learn(self, nis: float) -> None:
         self._clean_nis.append(nis)
         if len(self._clean_nis) >= 20:
-            self._scale = min(MAX_NOISE_SCALE, max(1.0, float(np.median(self._clean_nis)) / self._median_chi2_2))
+            self._scale = min(MAX_NOISE_SCALE, max(1.0, self._clean_nis.median() / self._median_chi2_2))
 
     @property
     def noise_scale(self) -> float:

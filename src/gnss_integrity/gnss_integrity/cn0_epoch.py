@@ -10,6 +10,7 @@ states and the receiver position, NaN when either is missing) or, in tests, from
 from __future__ import annotations
 
 from dataclasses import dataclass
+from operator import attrgetter
 
 import numpy as np
 
@@ -22,7 +23,7 @@ from gnss_common.constants import (
     GPS_L2_FREQUENCY_HZ,
     GPS_L5_FREQUENCY_HZ,
 )
-from gnss_common.coordinates import azimuth_elevation
+from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic_scalar
 from gnss_common.observations import BEIDOU, GLONASS, GnssEpoch
 
 BANDS = (
@@ -40,6 +41,7 @@ _BAND_CENTRES_HZ = np.array([b[1] for b in BANDS])
 _DEFAULT_BAND = np.zeros(N_CONSTELLATION_CODES, dtype=np.int64)  # NaN carrier: GPS L1 assumed (message)
 _DEFAULT_BAND[GLONASS] = 2
 _DEFAULT_BAND[BEIDOU] = 1  # B1I, the signal gnss_common.measurements builds
+_FIELDS = attrgetter("constellation", "svid", "cn0_dbhz", "carrier_frequency_hz")
 
 def signal_band(constellation: np.ndarray, carrier_frequency_hz: np.ndarray) -> np.ndarray:
     """Band index (into :data:`BAND_NAMES`) of each signal; a NaN carrier is the constellation's
@@ -89,16 +91,23 @@ class Cn0Epoch:
 
     @classmethod
     def from_gnss_epoch(cls, epoch: GnssEpoch, receiver_ecef_m: np.ndarray | None) -> Cn0Epoch:
-        """From a :class:`GnssEpoch`; elevations from ``receiver_ecef_m`` (None or NaN: unknown)."""
+        """From a :class:`GnssEpoch`; elevations from ``receiver_ecef_m`` (None or NaN: unknown), those of
+        ``coordinates.azimuth_elevation`` (line of sight rotated to ENU at the receiver)."""
         obs = epoch.observations
-        el = np.full(len(obs), np.nan)
-        if obs and receiver_ecef_m is not None and np.all(np.isfinite(receiver_ecef_m)):
+        n = len(obs)
+        el = np.full(n, np.nan)
+        rx = None if receiver_ecef_m is None else np.asarray(receiver_ecef_m, dtype=float).reshape(3)
+        if obs and rx is not None and np.all(np.isfinite(rx)):
             sats = np.array([o.satellite_position_ecef_m for o in obs], dtype=float).reshape(-1, 3)
             ok = np.all(np.isfinite(sats), axis=1)
             if ok.any():
-                el[ok] = np.atleast_1d(azimuth_elevation(np.asarray(receiver_ecef_m, float), sats[ok])[1])
-        return cls.from_arrays(epoch.stamp_ns, [o.constellation for o in obs], [o.svid for o in obs],
-                               [o.cn0_dbhz for o in obs], el, [o.carrier_frequency_hz for o in obs])
+                lat, lon, _ = ecef_to_geodetic_scalar(*rx.tolist())
+                enu = (sats[ok] - rx) @ ecef_to_enu_rotation(lat, lon).T
+                el[ok] = np.arctan2(enu[:, 2], np.hypot(enu[:, 0], enu[:, 1]))
+        fields = list(map(_FIELDS, obs))
+        return cls(int(epoch.stamp_ns), np.array([f[0] for f in fields], dtype=np.int64),
+                   np.array([f[1] for f in fields], dtype=np.int64), np.array([f[2] for f in fields], dtype=float),
+                   el, np.array([f[3] for f in fields], dtype=float))
 
 
 @dataclass(frozen=True)

@@ -58,6 +58,7 @@ from gnss_integrity.cn0_epoch import (
     Cn0Reference,
     signal_band,
 )
+from gnss_integrity.kernels import cn0_reference_rows
 
 MODEL_FORMAT = "gnss_integrity.cn0_model"
 MODEL_FORMAT_VERSION = 1
@@ -222,22 +223,13 @@ class Cn0Models:
         """The clean references of this epoch's satellites (no learning; new satellites get a slot)."""
         p = self.params
         slots = self._slots(epoch.constellation, epoch.svid, epoch.carrier_frequency_hz)
-        cn0, el = epoch.cn0_dbhz, epoch.elevation_rad
-        valid = (cn0 >= p.min_cn0_dbhz) & (cn0 <= p.max_cn0_dbhz)  # False for NaN
-        pos = np.where(el == el, np.minimum(np.maximum(el, 0.0), 0.5 * math.pi), 0.0) * (
-            180.0 / math.pi / p.bin_width_deg)
-        k0 = np.minimum(pos.astype(np.int64), p.n_nodes - 2)
-        frac = pos - k0
-        n0 = self._slot_base[slots] + k0
-        n1 = n0 + 1
         s = self._s
-        el_exp = _interp(self._n["pub_ready"], n0, n1, frac) + self._offsets(slots)
-        el_exp = np.where(valid & (el == el), el_exp, np.nan)
-        el_std = np.where(el_exp == el_exp, _interp(self._n["std_ready"], n0, n1, frac), np.nan)
         t = epoch.stamp_ns * 1e-9
-        lv_ok = valid & (t - s["lv_t"][slots] <= p.level_max_age_s)
-        lv_exp = np.where(lv_ok, s["lv_ready"][slots], np.nan)
-        lv_std = np.where(lv_exp == lv_exp, s["lv_std"][slots], np.nan)
+        # valid C/N0 (False for NaN), tent nodes, elevation model + offset, satellite level (compiled)
+        valid, n0, n1, frac, el_exp, el_std, lv_exp, lv_std = cn0_reference_rows(
+            epoch.cn0_dbhz, epoch.elevation_rad, slots, self._slot_base, self._n["pub_ready"], self._n["std_ready"],
+            s["off"], s["off_w"], s["lv_t"], s["lv_ready"], s["lv_std"], t, p.min_cn0_dbhz, p.max_cn0_dbhz,
+            180.0 / math.pi / p.bin_width_deg, p.n_nodes, p.offset_prior_samples, p.level_max_age_s)
         n_el = int(np.count_nonzero(el_exp == el_exp))
         n_lv = int(np.count_nonzero(lv_exp == lv_exp))
         use_el = n_el >= max(1, n_lv // 2)

@@ -47,6 +47,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
+from gnss_integrity import kernels
 from gnss_integrity.clock_test import ClockTestParams
 from gnss_integrity.cn0_model import Cn0Models
 from gnss_integrity.integrity_messages import receiver_report, report_to_msg, spectrum_input
@@ -168,6 +169,9 @@ class GnssIntegrityNode(Node):
         self._report_due_ns: int | None = None  # a /diagnostics report due at this GNSS stamp
         self.pub = self.create_publisher(GnssIntegrity, 'gnss/integrity', DATA_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        # compile (or load from numba's cache) before subscribing: the node appears when it can keep up
+        kernels.warm_up()
+        # created after the compilation, so that its silence clock starts when the node can listen
         self.health = InputHealth()
         throttle = self.params.warning_throttle_s
         for cls, topic, kind in ((GnssMeasurementArray, 'gnss/measurements', 'gnss'), (UwbRange, 'uwb/ranges', 'uwb'),

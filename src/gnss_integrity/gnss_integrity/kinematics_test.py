@@ -37,7 +37,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic_scalar
+from gnss_common.multilateration import multilaterate
 
+from .kernels import RunningMedian, chi2_form, lagged_chi2
 from .outcome import (
     CATEGORY_KINEMATICS,
     DECISION_PASS,
@@ -53,6 +55,10 @@ MAX_NOISE_SCALE = 4.0
 """Largest learned noise scale (a receiver twice as noisy as the prior): without a bound, a drag just
 below the threshold raised the scale with the statistic (0.3 m/s with one anchor: scale 114, never
 detected, 49.5 m off; benchmarks/integrity_detection.py)."""
+_EYE = np.eye(3)
+_EYE.flags.writeable = False
+_AXES = {"e": _EYE[0], "n": _EYE[1], "u": _EYE[2]}  # ENU components and their directions
+_HORIZONTAL = {"e": _EYE[0], "n": _EYE[1]}
 
 
 @dataclass(frozen=True)
@@ -143,17 +149,27 @@ class LaggedDisplacement:
         self.name = name
         self._bins: deque[tuple[int, dict[str, tuple[float, float, int]]]] = deque()
         # current bin: index -> {component: (sum, sum of variances, count)}
+        self._by_index: dict[int, dict[str, tuple[float, float, int]]] = {}  # the same bins by index
         self._n_lags = len(params.lags_s)
         self._suspect = {k: chi2_threshold(params.false_alarm_probability / self._n_lags, k) for k in range(1, 33)}
         self._alarm = {k: chi2_threshold(params.alarm_false_alarm_probability / self._n_lags, k) for k in range(1, 33)}
         self._median = {k: chi2_threshold(0.5, k) for k in range(1, 33)}
-        self._clean: deque[float] = deque(maxlen=params.scale_history)
+        self._clean = RunningMedian(params.scale_history)
         self._scale = 1.0
         self._last_ns: int | None = None
+        sh2 = params.error_std_m**2
+        self._cov_axes = np.array([sh2, sh2, (params.vertical_factor * params.error_std_m) ** 2])
+        self._white_axes = np.array([1.0, 1.0, params.vertical_factor**2]) * params.white_std_m**2
+        # per lag: (bins back, Gauss-Markov factor 2 (1 - exp(-L / tau)))
+        self._lags = [(lag, int(round(lag / params.bin_s)), 2.0 * (1.0 - math.exp(-lag / params.error_tau_s)))
+                      for lag in params.lags_s]
+        self._bin_ns = int(params.bin_s * NS_PER_S)
+        self._horizon = int(max(params.lags_s) / params.bin_s) + 2
 
     def reset(self) -> None:
         """Forget the history (the learned scale stays)."""
         self._bins.clear()
+        self._by_index.clear()
         self._last_ns = None
 
     def add(self, stamp_ns: int, components: dict[str, tuple[float, float]]) -> None:
@@ -163,16 +179,18 @@ class LaggedDisplacement:
         if self._last_ns is not None and not (0 < stamp_ns - self._last_ns <= p.max_gap_s * NS_PER_S):
             self.reset()
         self._last_ns = stamp_ns
-        index = int(stamp_ns // int(p.bin_s * NS_PER_S))
+        index = int(stamp_ns // self._bin_ns)
         if not self._bins or self._bins[-1][0] != index:
             self._bins.append((index, {}))
+            self._by_index[index] = self._bins[-1][1]
         cur = self._bins[-1][1]
         for key, (value, var) in components.items():
             s, v, n = cur.get(key, (0.0, 0.0, 0))
             cur[key] = (s + value, v + var, n + 1)
-        horizon = int(max(p.lags_s) / p.bin_s) + 2
-        while self._bins and index - self._bins[0][0] > horizon:
-            self._bins.popleft()
+        while self._bins and index - self._bins[0][0] > self._horizon:
+            old_index, old = self._bins.popleft()
+            if self._by_index.get(old_index) is old:
+                del self._by_index[old_index]
 
     def test(self, directions: dict[str, np.ndarray], lag_var_mps2: float = 0.0) -> TestOutcome:
         """The largest scaled chi-square over the lags, from the newest bin.
@@ -187,29 +205,35 @@ class LaggedDisplacement:
         if not self._bins:
             return self._unknown()
         now_index, now = self._bins[-1]
-        sh2 = p.error_std_m**2
-        cov_axes = np.array([sh2, sh2, (p.vertical_factor * p.error_std_m) ** 2])
-        white_axes = np.array([1.0, 1.0, p.vertical_factor**2]) * p.white_std_m**2
-        best_ratio, best = -math.inf, None
-        by_index = {idx: b for idx, b in self._bins}
-        for lag in p.lags_s:
-            old = by_index.get(now_index - int(round(lag / p.bin_s)))
+        lags = []  # per lag tested: (lag s, Gauss-Markov factor, components, displacement, own variance, n_eff)
+        for lag, back, g in self._lags:
+            old = self._by_index.get(now_index - back)
             if old is None:
                 continue
             keys = [k for k in now if k in old and k in directions]
             if not keys:
                 continue
-            d = np.array([now[k][0] / now[k][2] - old[k][0] / old[k][2] for k in keys])
-            own = np.array([now[k][1] / now[k][2] ** 2 + old[k][1] / old[k][2] ** 2 for k in keys])
             # the snapshot's white error is common to every component (one position): it enters
-            # through the directions, averaged over each bin's epochs
-            n_eff = 1.0 / (1.0 / min(now[k][2] for k in keys) + 1.0 / min(old[k][2] for k in keys))
-            u = np.array([directions[k] for k in keys])
-            g = 2.0 * (1.0 - math.exp(-lag / p.error_tau_s))
-            axes = g * cov_axes + (white_axes / n_eff + lag_var_mps2 * lag)
-            c = (u * axes) @ u.T + np.diag(own)
-            stat = float(d @ np.linalg.solve(c, d)) / self._scale
-            k = min(len(keys), 32)
+            # through the directions, averaged over each bin's epochs (n_eff)
+            lags.append((lag, g, keys, [now[k][0] / now[k][2] - old[k][0] / old[k][2] for k in keys],
+                         [now[k][1] / now[k][2] ** 2 + old[k][1] / old[k][2] ** 2 for k in keys],
+                         1.0 / (1.0 / min(now[k][2] for k in keys) + 1.0 / min(old[k][2] for k in keys))))
+        if not lags:
+            return self._unknown()
+        if all(t[2] == lags[0][2] for t in lags):  # the usual case: one compiled call for every lag
+            stats = lagged_chi2(np.array([directions[k] for k in lags[0][2]], dtype=float),
+                                np.array([t[3] for t in lags]), np.array([t[4] for t in lags]),
+                                np.array([t[1] for t in lags]), np.array([t[5] for t in lags]),
+                                np.array([t[0] for t in lags], dtype=float), self._cov_axes, self._white_axes,
+                                float(lag_var_mps2)).tolist()
+        else:
+            stats = [chi2_form(np.array([directions[k] for k in keys], dtype=float),
+                               g * self._cov_axes + (self._white_axes / n_eff + lag_var_mps2 * lag),
+                               np.array(own), np.array(d)) for lag, g, keys, d, own, n_eff in lags]
+        best_ratio, best = -math.inf, None
+        for t, chi2 in zip(lags, stats, strict=True):
+            stat = chi2 / self._scale
+            k = min(len(t[2]), 32)
             ratio = stat / self._suspect[k]
             if ratio > best_ratio:
                 best_ratio, best = ratio, (stat, self._suspect[k], self._alarm[k], k)
@@ -221,36 +245,11 @@ class LaggedDisplacement:
         if out.decision == DECISION_PASS:
             self._clean.append(stat * self._scale / self._median[k])
             if len(self._clean) >= 30:
-                self._scale = min(MAX_NOISE_SCALE, max(1.0, float(np.median(self._clean))))
+                self._scale = min(MAX_NOISE_SCALE, max(1.0, self._clean.median()))
         return out
 
     def _unknown(self) -> TestOutcome:
         return unknown(self.name, CATEGORY_KINEMATICS, false_alarm_probability=self.p.false_alarm_probability)
-
-
-def _multilaterate(anchors: np.ndarray, ranges: np.ndarray, start: np.ndarray, iterations: int = 8
-                   ) -> np.ndarray | None:
-    """Tag position from three or more ranges by Gauss-Newton from ``start`` (ECEF, m); None when
-    the geometry is singular or the solution does not fit the ranges within 1 m RMS."""
-    x = np.asarray(start, dtype=float).copy()
-    for _ in range(iterations):
-        diff = x - anchors
-        dist = np.linalg.norm(diff, axis=1)
-        if np.any(dist <= 0.0):
-            return None
-        h = diff / dist[:, None]
-        r = ranges - dist
-        try:
-            step = np.linalg.lstsq(h, r, rcond=1e-9)[0]
-        except np.linalg.LinAlgError:
-            return None
-        x = x + step
-        if float(np.linalg.norm(step)) < 1e-4:
-            break
-    fit = ranges - np.linalg.norm(x - anchors, axis=1)
-    if not np.all(np.isfinite(x)) or float(np.sqrt(np.mean(fit**2))) > 1.0:
-        return None
-    return x
 
 
 class _LocalFrame:
@@ -283,6 +282,8 @@ class KinematicsTest:
         self._integral: np.ndarray | None = None  # integral of the Doppler velocity, ENU m
         self._last: tuple[int, np.ndarray] | None = None
         q = self.params.false_alarm_probability
+        p = self.params
+        self._level_axes = np.array([1.0, 1.0, p.vertical_factor**2]) * (p.level_std_m**2 + p.white_std_m**2)
         self._level_suspect = {k: chi2_threshold(q, k) for k in range(1, 33)}
         self._level_alarm = {k: chi2_threshold(self.params.alarm_false_alarm_probability, k) for k in range(1, 33)}
 
@@ -343,13 +344,12 @@ class KinematicsTest:
                         + (p.tag_speed_allowance_mps * abs(stamp_ns - r.stamp_ns) / NS_PER_S) ** 2 for r in heard])
         anchors = np.array([r.anchor_ecef_m for r in heard])
         ranges = np.array([r.range_m for r in heard])
-        tag = _multilaterate(anchors, ranges, pos) if len(heard) >= 3 else None
+        tag = multilaterate(anchors, ranges, pos, max_iterations=8, step_tol_m=1e-4) if len(heard) >= 3 else None
         if tag is not None:
             delta = rot @ (pos - tag)
             comps = {"e": (float(delta[0]), 0.0), "n": (float(delta[1]), 0.0)}
-            eye = np.eye(3)
-            dirs = {"e": eye[0], "n": eye[1]}
-            e_level, u_level, var_level = delta[:2], eye[:2], np.zeros(2)
+            dirs = _HORIZONTAL
+            e_level, u_level, var_level = delta[:2], _EYE[:2].copy(), np.zeros(2)
         else:
             diff = pos - anchors
             dist = np.linalg.norm(diff, axis=1)
@@ -361,9 +361,8 @@ class KinematicsTest:
             dirs = {r.anchor_id: u_level[j] for j, r in enumerate(heard)}
         self._uwb.add(stamp_ns, comps)
         disp = self._uwb.test(dirs)
-        axes = np.array([1.0, 1.0, p.vertical_factor**2]) * (p.level_std_m**2 + p.white_std_m**2)
-        c = (u_level * axes) @ u_level.T + np.diag(var_level)
-        stat = float(e_level @ np.linalg.solve(c, e_level))
+        stat = chi2_form(np.ascontiguousarray(u_level, dtype=float), self._level_axes,
+                         np.asarray(var_level, dtype=float), np.asarray(e_level, dtype=float))
         k = min(len(e_level), 32)
         level = TestOutcome("uwb_level", CATEGORY_KINEMATICS,
                             decide(stat, self._level_suspect[k], self._level_alarm[k]), stat,
@@ -387,13 +386,11 @@ class KinematicsTest:
             self._integral = self._integral + 0.5 * (self._last[1] + v_enu) * dt
         self._last = (stamp_ns, v_enu)
         assert self._integral is not None
-        y = rot @ pos - self._integral
-        axes = ("e", "n", "u")
-        self._motion.add(stamp_ns, {a: (float(y[i]), 0.0) for i, a in enumerate(axes)})
-        eye = np.eye(3)
+        e, n, u = (rot @ pos - self._integral).tolist()
+        self._motion.add(stamp_ns, {"e": (e, 0.0), "n": (n, 0.0), "u": (u, 0.0)})
         # the Doppler velocity's error, white with a correlation time of about one bin, integrates
         # to a variance of sigma_v^2 * bin_s per second of lag
-        return self._motion.test({a: eye[i] for i, a in enumerate(axes)}, p.velocity_std_mps**2 * p.bin_s)
+        return self._motion.test(_AXES, p.velocity_std_mps**2 * p.bin_s)
 
     def _level_unknown(self) -> TestOutcome:
         return unknown("uwb_level", CATEGORY_KINEMATICS, false_alarm_probability=self.params.false_alarm_probability)

@@ -12,8 +12,19 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 from scipy.special import chdtri, ndtri
+
+# rfi_msgs/GnssIntegrity STATE_* and SCOPE_*: shared with the fusion, so defined in gnss_common
+from gnss_common.integrity_codes import SCOPE_ALL as SCOPE_ALL
+from gnss_common.integrity_codes import SCOPE_CONSTELLATIONS as SCOPE_CONSTELLATIONS
+from gnss_common.integrity_codes import SCOPE_NONE as SCOPE_NONE
+from gnss_common.integrity_codes import SCOPE_SATELLITES as SCOPE_SATELLITES
+from gnss_common.integrity_codes import STATE_DETECTED as STATE_DETECTED
+from gnss_common.integrity_codes import STATE_NONE as STATE_NONE
+from gnss_common.integrity_codes import STATE_SUSPECTED as STATE_SUSPECTED
+from gnss_common.integrity_codes import STATE_UNKNOWN as STATE_UNKNOWN
 
 # rfi_msgs/IntegrityTest CATEGORY_*
 CATEGORY_JAMMING = 1
@@ -28,18 +39,6 @@ DECISION_UNKNOWN = 0
 DECISION_PASS = 1
 DECISION_SUSPECT = 2
 DECISION_ALARM = 3
-
-# rfi_msgs/GnssIntegrity STATE_*
-STATE_UNKNOWN = 0
-STATE_NONE = 1
-STATE_SUSPECTED = 2
-STATE_DETECTED = 3
-
-# rfi_msgs/GnssIntegrity SCOPE_*
-SCOPE_NONE = 0
-SCOPE_SATELLITES = 1
-SCOPE_CONSTELLATIONS = 2
-SCOPE_ALL = 3
 
 # rfi_msgs/GnssIntegrity EVIDENCE_* (jamming_evidence bits)
 EVIDENCE_CN0_ELEVATION = 1
@@ -101,12 +100,16 @@ def unknown(name: str, category: int, suspect_threshold: float = math.nan, alarm
                        false_alarm_probability, unit)
 
 
+@lru_cache(maxsize=4096)
 def normal_threshold(false_alarm_probability: float, two_sided: bool = False) -> float:
-    """Threshold of a standard normal statistic (|z| if two-sided) exceeded with that probability."""
+    """Threshold of a standard normal statistic (|z| if two-sided) exceeded with that probability
+    (memoised: a scipy special function call costs about 10 us, and the tests ask for the same few)."""
     p = false_alarm_probability / (2.0 if two_sided else 1.0)
     return float(-ndtri(p))
 
 
+@lru_cache(maxsize=4096)
 def chi2_threshold(false_alarm_probability: float, dof: int) -> float:
-    """Threshold of a chi-square statistic with ``dof`` degrees of freedom exceeded with that probability."""
+    """Threshold of a chi-square statistic with ``dof`` degrees of freedom exceeded with that probability
+    (memoised as :func:`normal_threshold`)."""
     return float(chdtri(dof, false_alarm_probability))

@@ -26,7 +26,7 @@ from sensor_msgs.msg import NavSatFix
 
 from gnss_common.coordinates import ecef_to_enu, ecef_to_enu_rotation, ecef_to_geodetic, geodetic_to_ecef
 from gnss_common.observations import UwbRangeMeasurement
-from rfi_msgs.msg import FusionStatus, GnssMeasurementArray, JammerState, UwbRange
+from rfi_msgs.msg import FusionStatus, GnssIntegrity, GnssMeasurementArray, JammerState, UwbRange
 from rfi_node_common import testing
 from rfi_node_common.conversions import epoch_to_msg, msg_to_uwb, uwb_to_msg
 from rfi_node_common.qos import DATA_QOS
@@ -43,8 +43,9 @@ SPIN_DEADLINE_S = 10.0
 GOAL_HORIZONTAL_RMS_M = 0.2
 """Issue goal (Cao et al. scenario, 3 anchors): horizontal RMS below 0.2 m."""
 CONVERGED_S = 10.0
-TOPICS = {GnssMeasurementArray: '/gnss/measurements', UwbRange: '/uwb/ranges', JammerState: '/rfi/jammer_state'}
-KIND = {GnssMeasurementArray: 'gnss', UwbRange: 'uwb', JammerState: 'jammer'}
+TOPICS = {GnssMeasurementArray: '/gnss/measurements', UwbRange: '/uwb/ranges', JammerState: '/rfi/jammer_state',
+          GnssIntegrity: '/gnss/integrity'}
+KIND = {GnssMeasurementArray: 'gnss', UwbRange: 'uwb', JammerState: 'jammer', GnssIntegrity: 'integrity'}
 
 
 @pytest.fixture(scope='module')
@@ -342,6 +343,30 @@ def test_jammer_state_drives_the_weighting_j_s(rig_factory, clean_stream):
     inf.header.stamp = ns_to_stamp(t + 5)
     rig.send(inf)
     assert rig.node.reasons['jammer_state_nonphysical'] == 1 and rig.node.counts['jammer_processed'] == 2
+
+
+def test_a_verdict_applies_to_the_epoch_it_was_computed_from(rig_factory, clean_stream):
+    """gnss_integrity's verdict of epoch k has epoch k's stamp and arrives after it: within the
+    re-ordering window it is applied before the epoch, so a DETECTED epoch is never fused."""
+    _, inputs = clean_stream
+    rig = rig_factory()  # the shipped re-ordering window (0.1 s)
+    gnss = [i for i, (_, topic, _) in enumerate(inputs) if topic == '/gnss/measurements']
+    k = gnss[30]
+    for _, _, msg in inputs[:k + 1]:  # up to and including epoch k
+        rig.send(msg)
+    assert rig.node.counts['satellites_excluded_spoofing'] == 0
+    verdict = GnssIntegrity(spoofing_state=GnssIntegrity.STATE_DETECTED, spoofing_scope=GnssIntegrity.SCOPE_ALL,
+                            jamming_state=GnssIntegrity.STATE_NONE, jammer_to_signal_db=math.nan)
+    verdict.header.stamp = ns_to_stamp(inputs[k][0])
+    verdict.header.frame_id = 'earth'
+    rig.send(verdict)
+    for _, _, msg in inputs[k + 1:gnss[32] + 1]:
+        rig.send(msg)
+    assert rig.node.counts['integrity_processed'] == 1
+    # epoch k and the two after it: every satellite excluded, none fused
+    n_sats = sum(len(inputs[i][2].measurements) for i in gnss[30:32])
+    assert rig.node.counts['satellites_excluded_spoofing'] >= n_sats
+    assert rig.last_status().gnss_excluded == GnssIntegrity.SCOPE_ALL
 
 
 def test_uwb_only_in_map_frame(rig_factory):

@@ -5,9 +5,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from gnss_common.observations import GALILEO, GPS
-from gnss_common.synthetic_sky import synthetic_epoch
-from uwb_gnss_fusion.integrity_policy import (
+from gnss_common.integrity_codes import (
     SCOPE_ALL,
     SCOPE_CONSTELLATIONS,
     SCOPE_NONE,
@@ -16,6 +14,10 @@ from uwb_gnss_fusion.integrity_policy import (
     STATE_NONE,
     STATE_SUSPECTED,
     STATE_UNKNOWN,
+)
+from gnss_common.observations import GALILEO, GPS
+from gnss_common.synthetic_sky import synthetic_epoch
+from uwb_gnss_fusion.integrity_policy import (
     GnssExclusion,
     IntegrityVerdict,
     integrity_jammer_to_signal,

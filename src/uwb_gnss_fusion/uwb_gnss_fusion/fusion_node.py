@@ -12,7 +12,11 @@ Time. All time is message time (``header.stamp``, integer ns); no estimate depen
 a bag replayed at any speed gives identical outputs. Inputs pass through a re-ordering buffer
 (:class:`uwb_gnss_fusion.fusion_filter.ReorderBuffer`): a message is processed once a message
 stamped the window later has arrived, so measurements that arrive up to that much out of order are
-applied in stamp order (the outputs lag by the window). Later arrivals are rejected and counted
+applied in stamp order (the outputs lag by the window). At equal stamps a /gnss/integrity verdict or a
+/rfi/jammer_state goes before the measurements: gnss_integrity's verdict of an epoch carries the epoch's
+stamp and is computed from it, so it arrives after it, and within the window it still decides whether
+that epoch is fused (bags/spoofed: the epoch of the first detection is excluded, not fused and then
+excluded). Later arrivals are rejected and counted
 (``late_beyond_reorder_window``). Stamps pass :class:`rfi_node_common.input_checks.StampGate`
 first: a stamp more than ``max_stamp_jump_s`` away from the latest accepted one is rejected
 (``stamp_far_future`` / ``stamp_far_past``) unless ``stamp_jump_confirmations`` messages in a row
@@ -151,6 +155,7 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import NavSatFix
 
+from gnss_common import multilateration
 from gnss_common.jamming_weights import effective_cn0_dbhz
 from gnss_common.observations import GnssEpoch, UwbRangeMeasurement
 from gnss_common.spp import SinglePointPositioner
@@ -274,6 +279,7 @@ class FusionNode(Node):
         ckf_kernels.warm_up()
         fusion_output.warm_up()
         local_frame.warm_up()
+        multilateration.warm_up()
         # created after the compilation, so that its silence clock starts when the node can listen
         self.health = InputHealth()
         throttle = self.params.warning_throttle_s
@@ -454,7 +460,8 @@ class FusionNode(Node):
             return False
         if decision.restart:
             self._restart(stamp_ns, previous_ns)
-        if not self._buffer.push(item):
+        # a verdict or a J/S of an instant applies to the measurements of that instant
+        if not self._buffer.push(item, context=item.kind in ('integrity', 'jammer')):
             self._late(item)
             return False
         if key is not None:

@@ -20,6 +20,7 @@ from itertools import combinations
 import numpy as np
 from scipy.stats import chi2
 
+from gnss_common.multilateration import multilaterate as gnss_multilaterate
 from gnss_common.positioning import SINGULAR, least_squares_position, weighted_least_squares
 
 from .fusion_params import FRAME_EARTH, FusionParams
@@ -226,14 +227,9 @@ def multilaterate(
     lever_m: np.ndarray,
     guess: np.ndarray | None = None,
 ) -> np.ndarray | None:
-    """Gauss-Newton multilateration from the latest range of each anchor within the window.
-
-    Starts from ``guess`` (e.g. the diverged estimate, which keeps the solution on the right
-    side of a flat anchor cluster). Without a guess it is multi-start: the anchors' centroid
-    and the centroid moved by the mean range along +-x and +-y of the frame (the tag is usually
-    around the anchors, not at their centroid), keeping the solution with the smallest
-    residual. A single start from the centroid converged to a local minimum 12 m from the tag
-    on the Hanyang NLOS case (the first second of the run then dominated its RMS error).
+    """Multilateration from the latest range of each anchor within the window
+    (:func:`gnss_common.multilateration.multilaterate`: from ``guess``, e.g. the diverged estimate,
+    which keeps the solution on the right side of a flat anchor cluster; multi-start without one).
 
     Returns:
         The tag position minus the lever arm, m, (3,), or None (fewer than three anchors, or an
@@ -246,43 +242,6 @@ def multilaterate(
     ranged = [(a, r) for (t, a, r, f) in recent.values() if f == frame and stamp_ns - t <= win]
     if len(ranged) < 3:
         return None
-    anchors = np.array([a for a, _ in ranged])
-    ranges = np.array([r for _, r in ranged])
-    if guess is not None:
-        starts = [np.asarray(guess, float).copy()]
-    else:
-        c = anchors.mean(axis=0)
-        rm = float(np.mean(ranges))
-        starts = [c + np.array([0.1, 0.1, 0.0])] + [
-            c + rm * np.array(u) for u in ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0))
-        ]
-    best: tuple[float, np.ndarray] | None = None
-    for x0 in starts:
-        x = _gauss_newton_multilateration(x0, anchors, ranges, lever_m)
-        if x is None:
-            continue
-        res = ranges - np.linalg.norm(x + lever_m - anchors, axis=1)
-        rms = float(np.sqrt(np.mean(res**2)))
-        if math.isfinite(rms) and (best is None or rms < best[0] - 1e-9):
-            best = (rms, x)
-    if best is None or best[0] > 1.0:
-        return None
-    return best[1]
-
-
-def _gauss_newton_multilateration(
-    x0: np.ndarray, anchors: np.ndarray, ranges: np.ndarray, lever_m: np.ndarray
-) -> np.ndarray | None:
-    """Gauss-Newton on the ranges from ``x0`` (m, (3,)); None if it meets an anchor or NaN."""
-    x = x0.copy()
-    for _ in range(20):
-        d = x + lever_m - anchors
-        r = np.linalg.norm(d, axis=1)
-        if np.any(r < 1e-9):
-            return None
-        h = d / r[:, None]
-        dx, *_ = np.linalg.lstsq(h, ranges - r, rcond=None)
-        x = x + dx
-        if np.linalg.norm(dx) < 1e-6:
-            break
-    return x if np.isfinite(x).all() else None
+    # the state is the tag minus the lever arm: solve for it against the anchors moved by -lever
+    anchors = np.array([a for a, _ in ranged]) - lever_m
+    return gnss_multilaterate(anchors, np.array([r for _, r in ranged]), guess)

@@ -26,14 +26,20 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
+from gnss_common.integrity_codes import (
+    SCOPE_ALL,
+    SCOPE_CONSTELLATIONS,
+    SCOPE_NONE,
+    SCOPE_SATELLITES,
+    STATE_DETECTED,
+    STATE_NONE,
+    STATE_SUSPECTED,
+    STATE_UNKNOWN,
+)
 from gnss_common.observations import GnssEpoch
 
 NS_PER_S = 1_000_000_000
 
-STATE_UNKNOWN, STATE_NONE, STATE_SUSPECTED, STATE_DETECTED = 0, 1, 2, 3
-"""rfi_msgs/GnssIntegrity STATE_*."""
-SCOPE_NONE, SCOPE_SATELLITES, SCOPE_CONSTELLATIONS, SCOPE_ALL = 0, 1, 2, 3
-"""rfi_msgs/GnssIntegrity SCOPE_*."""
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,10 @@ class ReorderBuffer:
     """Re-orders time-stamped messages that arrive late by up to a fixed window.
 
     ``push`` stores a message; ``pop_ready(now_ns)`` returns, in stamp order, the messages with
-    ``stamp_ns <= now_ns - window_ns``. Messages older than the last released stamp are returned
+    ``stamp_ns <= now_ns - window_ns``. Messages with equal stamps leave in arrival order, except that
+    those pushed with ``context=True`` leave before the others: a verdict or a J/S that describes the
+    instant of a measurement applies to that measurement, even when it was computed from it and so
+    arrives after it. Messages older than the last released stamp are returned
     by ``push`` as late (the caller counts them) instead of being released out of order.
 
     Args:
@@ -28,17 +31,18 @@ class ReorderBuffer:
         if window_ns < 0:
             raise ValueError("window_ns must be >= 0")
         self.window_ns = int(window_ns)
-        self._heap: list[tuple[int, int, object]] = []
+        self._heap: list[tuple[int, int, int, object]] = []
         self._seq = 0
         self._released_ns: int | None = None
         self.late = 0
 
-    def push(self, msg) -> bool:
-        """Store ``msg`` (anything with an int ``stamp_ns``). Returns False if it is already too late."""
+    def push(self, msg, context: bool = False) -> bool:
+        """Store ``msg`` (anything with an int ``stamp_ns``); ``context``: it leaves before the messages
+        of the same stamp that are not. Returns False if it is already too late."""
         if self._released_ns is not None and msg.stamp_ns < self._released_ns:
             self.late += 1
             return False
-        heapq.heappush(self._heap, (int(msg.stamp_ns), self._seq, msg))
+        heapq.heappush(self._heap, (int(msg.stamp_ns), 0 if context else 1, self._seq, msg))
         self._seq += 1
         return True
 
@@ -47,7 +51,7 @@ class ReorderBuffer:
         out = []
         limit = now_ns - self.window_ns
         while self._heap and self._heap[0][0] <= limit:
-            stamp, _, msg = heapq.heappop(self._heap)
+            stamp, _, _, msg = heapq.heappop(self._heap)
             self._released_ns = stamp
             out.append(msg)
         return out
@@ -56,7 +60,7 @@ class ReorderBuffer:
         """All stored messages, oldest first."""
         out = []
         while self._heap:
-            stamp, _, msg = heapq.heappop(self._heap)
+            stamp, _, _, msg = heapq.heappop(self._heap)
             self._released_ns = stamp
             out.append(msg)
         return out
