@@ -223,7 +223,7 @@ def main() -> None:
         "moving model when the predicted pseudorange and rate innovations show a displacement in two\n"
         "epochs in a row; a single such epoch gets the moving model's process noise. The last column\n"
         "counts these decisions: on every station the antenna is found static at the fifth epoch (2 min)\n"
-        "and never left, i.e. no false exit in 3 x 115 static epochs. Simulated moving receivers keep\n"
+        "and never left, i.e. no false exit in 3 x 116 static epochs. Simulated moving receivers keep\n"
         "the moving model (docs/uwb_gnss_fusion/motion_model.md).\n\n"
         "GEONET stays short of 20 %: the errors there are slowly varying biases of the broadcast\n"
         "models (see the figure: 0.5-0.9 m east in the first 20 minutes, near 0 later), which an\n"

@@ -23,7 +23,8 @@ def _horizontal_rms(positions: np.ndarray, truth: np.ndarray) -> float:
 
 
 def _station(obs: str, nav: str, params: FusionParams) -> tuple[float, float, dict[str, int]]:
-    """(filter, SPP) horizontal RMS against the header position, and the filter's counts."""
+    """(filter, SPP) horizontal RMS against the header position, and the filter's counts; every output
+    after the detector's entry says the static model runs."""
     o = read_rinex_obs(DATA / obs)
     truth = np.asarray(o.header.approx_position_ecef_m, dtype=float)
     epochs = [r.epoch for r in build_epochs(o, read_rinex_nav(DATA / nav))]
@@ -32,6 +33,7 @@ def _station(obs: str, nav: str, params: FusionParams) -> tuple[float, float, di
     fused, snap = [], []
     for e in epochs:
         out = f.process_gnss(e)
+        assert out.motion_static == f.motion_static
         if out.initialized:
             fused.append(out.position_m)
         s = spp.process(e)

@@ -201,6 +201,7 @@ class FusionFilter:
         self._mirror_plane: tuple | None = None  # (n n^T in 6x6, c . n, normal, anchors with their off-plane distance)
         self._anchor_version = 0  # counts changes of the set of anchors heard: new, back after silence, moved
         self._motion = StationarityDetector(self.params.static_enter_s)
+        self._moving_pv_var = np.zeros(6)  # position/velocity variances when the static model was entered
         self._reset_state()
 
     # ------------------------------------------------------------------ state handling
@@ -575,6 +576,7 @@ class FusionFilter:
             jammer_to_signal_db=self._current_js_db(self._t_ns),
             rejection_counts=self._rejection_tuple(),
             reinitializations=self._reinits,
+            motion_static=self._motion.static,
         )
 
     # ------------------------------------------------------------------ GNSS
@@ -709,7 +711,8 @@ class FusionFilter:
                               dt_s: float) -> None:
         """Static model: the exit test on the predicted innovations (:mod:`.motion_model`). A failing
         epoch opens the covariance by the moving model's process noise minus the static one over
-        ``dt_s`` (adaptive process noise)."""
+        ``dt_s`` (adaptive process noise); leaving the static model raises the position and velocity
+        variances to the moving model's at entry and the velocity's to ``init_velocity_std_mps^2``."""
         if not self._motion.static:
             return
         stat, dof = static_exit_statistic(prep, self._nominal, self._ckf.p, cols, err_cols)
@@ -719,6 +722,11 @@ class FusionFilter:
             self._ckf.p[0:6, 0:6] += white_acceleration_noise(p.accel_psd_m2ps3 - p.static_accel_psd_m2ps3, dt_s)
             self._count("motion_epoch_opened")
         if decision.left_static:
+            # back to the moving model's uncertainty: the static average's covariance assumed white errors
+            # and no motion since the entry, both now doubtful
+            floor = self._moving_pv_var.copy()
+            floor[3:6] = np.maximum(floor[3:6], self.params.init_velocity_std_mps**2)
+            self._ckf.p[0:6, 0:6] += np.diag(np.maximum(floor - np.diag(self._ckf.p)[0:6], 0.0))
             self._count("motion_static_left")
 
     def _motion_after_update(self, stamp_ns: int) -> None:
@@ -732,6 +740,7 @@ class FusionFilter:
                                            self._nominal[3:6], self._ckf.p[3:6, 3:6]):
             return
         self._count("motion_static_entered")
+        self._moving_pv_var = np.diag(self._ckf.p)[0:6].copy()
         dx, self._ckf.p = zero_velocity_update(self._ckf.p, self._nominal[3:6], p.static_velocity_std_mps)
         self._nominal = self._nominal + dx
 
