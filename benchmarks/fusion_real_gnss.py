@@ -226,7 +226,7 @@ def main() -> None:
         "and never left, i.e. no false exit in 3 x 116 static epochs. Simulated moving receivers keep\n"
         "the moving model (docs/uwb_gnss_fusion/motion_model.md).\n\n"
         "GEONET stays short of 20 %: the errors there are slowly varying biases of the broadcast\n"
-        "models (see the figure: 0.5-0.9 m east in the first 20 minutes, near 0 later), which an\n"
+        "models (see the figure: 0.5-0.9 m horizontal in the first 20 minutes, near 0 later), which an\n"
         "average over the epochs reduces little; even the causal running mean of the SPP errors has the\n"
         "SPP's horizontal RMS (0.49 and 0.59 m). Averaging the whole static period instead of the\n"
         "model's tens of minutes carried the first epochs' errors into the later ones (0.47 m on 0759).\n\n"
