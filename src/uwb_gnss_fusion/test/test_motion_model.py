@@ -11,7 +11,7 @@ from gnss_common.rinex import read_rinex_nav, read_rinex_obs
 from gnss_common.spp import SinglePointPositioner
 from uwb_gnss_fusion.ckf import CubatureKalmanFilter
 from uwb_gnss_fusion.fusion_filter import FusionFilter, FusionParams
-from uwb_gnss_fusion.motion_model import StationarityDetector, common_mode_free_chi2, zero_velocity_update
+from uwb_gnss_fusion.motion_model import StationarityDetector, displacement_test, zero_velocity_update
 
 DATA = Path(__file__).resolve().parents[2] / "gnss_common" / "test" / "data"
 
@@ -73,17 +73,30 @@ def test_zero_velocity_update_equals_the_linear_kalman_update():
     np.testing.assert_allclose(p_new, kf.p, atol=1e-9)
 
 
-def test_common_mode_is_projected_out():
+def test_displacement_test_sees_a_displacement_not_a_common_mode_nor_one_outlier():
     rng = np.random.default_rng(4)
-    los = rng.normal(size=(8, 3))
+    los = rng.normal(size=(10, 3))
     los /= np.linalg.norm(los, axis=1)[:, None]
-    nu = rng.normal(size=8)
-    groups = np.array([0, 0, 0, 0, 0, 1, 1, 1])
-    base, dof = common_mode_free_chi2(nu, los, np.eye(3) * 1e-6, np.ones(8), groups)
-    shifted, _ = common_mode_free_chi2(nu + np.where(groups == 1, 50.0, -7.0), los, np.eye(3) * 1e-6,
-                                       np.ones(8), groups)
-    assert dof == 5  # 8 - 2 common modes - 1 left out
-    assert shifted == pytest.approx(base)
+    groups = np.array([0, 0, 0, 0, 0, 0, 1, 1, 1, 1])
+    noise = rng.normal(size=10)
+    cov = np.eye(3) * 1e-6
+    base = displacement_test(noise, los, cov, np.ones(10), groups)
+    # common modes (clock, inter-system bias) change nothing
+    shifted = displacement_test(noise + np.where(groups == 1, 50.0, -7.0), los, cov, np.ones(10), groups)
+    assert shifted[:3] == pytest.approx(base[:3])
+    assert base[2] == 10 - 2 - 3
+    # a 5 m displacement: significant (chi2_3(0.999) = 16.3), and it explains the innovations
+    # (chi2_5(0.999) = 20.5)
+    moved = displacement_test(noise - los @ np.array([5.0, 0.0, 0.0]), los, cov, np.ones(10), groups)
+    assert moved[0] > 16.3 and moved[1] < 20.5
+    assert abs(moved[3][0] - 5.0) < 1.5  # the receiver's displacement
+    # one 50-sigma outlier is left out
+    one = noise.copy()
+    one[3] += 50.0
+    assert displacement_test(one, los, cov, np.ones(10), groups)[0] < 20.0
+
+
+Z = np.zeros(3)
 
 
 def test_detector_hysteresis_entry_and_exit():
@@ -100,11 +113,13 @@ def test_detector_hysteresis_entry_and_exit():
                                 np.eye(3) * 0.0025) for k in range(4)]
     assert entered == [False, False, True, False] or entered[:3] == [False, False, True]
     assert d.static
-    # one failing epoch opens the covariance, a passing one clears it, two in a row leave
-    assert d.observe_static(1000.0, 6).open_covariance and d.static
-    assert not d.observe_static(3.0, 6).open_covariance
-    d.observe_static(1000.0, 6)
-    decision = d.observe_static(1000.0, 6)
+    # one failing epoch opens the covariance, a passing one clears it, two in a row leave; a displacement
+    # that leaves inconsistent residuals is a measurement fault, not motion
+    assert d.observe_static([(1000.0, 3.0, 6, Z)]).open_covariance and d.static
+    assert not d.observe_static([(3.0, 3.0, 6, Z)]).open_covariance
+    assert not d.observe_static([(1000.0, 1000.0, 6, Z)]).open_covariance  # noise, whatever its scale
+    d.observe_static([(1000.0, 3.0, 6, Z)])
+    decision = d.observe_static([(2.0, 3.0, 6, Z), (1000.0, 3.0, 6, Z)])  # the rates saw it
     assert decision.left_static and not d.static
 
 

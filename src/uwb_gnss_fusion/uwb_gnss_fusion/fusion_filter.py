@@ -712,11 +712,15 @@ class FusionFilter:
         """Static model: the exit test on the predicted innovations (:mod:`.motion_model`). A failing
         epoch opens the covariance by the moving model's process noise minus the static one over
         ``dt_s`` (adaptive process noise); leaving the static model raises the position and velocity
-        variances to the moving model's at entry and the velocity's to ``init_velocity_std_mps^2``."""
+        variances to the moving model's at entry."""
         if not self._motion.static:
             return
-        stat, dof = static_exit_statistic(prep, self._nominal, self._ckf.p, cols, err_cols)
-        decision = self._motion.observe_static(stat, dof)
+        # tested against the moving model's uncertainty at entry: the static average's own covariance
+        # shrinks like 1 / epochs (white errors), the solution's time-correlated errors do not
+        p_test = self._ckf.p.copy()
+        p_test[0:6, 0:6] += np.diag(np.maximum(self._moving_pv_var - np.diag(p_test)[0:6], 0.0))
+        parts = static_exit_statistic(prep, self._nominal, p_test, cols, err_cols)
+        decision = self._motion.observe_static(parts)
         if decision.open_covariance:
             p = self.params
             self._ckf.p[0:6, 0:6] += white_acceleration_noise(p.accel_psd_m2ps3 - p.static_accel_psd_m2ps3, dt_s)
@@ -724,9 +728,7 @@ class FusionFilter:
         if decision.left_static:
             # back to the moving model's uncertainty: the static average's covariance assumed white errors
             # and no motion since the entry, both now doubtful
-            floor = self._moving_pv_var.copy()
-            floor[3:6] = np.maximum(floor[3:6], self.params.init_velocity_std_mps**2)
-            self._ckf.p[0:6, 0:6] += np.diag(np.maximum(floor - np.diag(self._ckf.p)[0:6], 0.0))
+            self._ckf.p[0:6, 0:6] += np.diag(np.maximum(self._moving_pv_var - np.diag(self._ckf.p)[0:6], 0.0))
             self._count("motion_static_left")
 
     def _motion_after_update(self, stamp_ns: int) -> None:
