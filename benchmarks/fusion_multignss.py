@@ -32,6 +32,11 @@ filter's weights are right by construction: the table shows what the extra satel
 per-signal spectral separation give, not robustness to model errors (the GPS-only simulator
 rfi_sim.gnss_uwb, with outliers and correlated errors, is not multi-GNSS).
 
+Constellations added one at a time (issue 27 item 4: adding a system must never worsen horizontal or
+3D RMS), 10 deg mask: GPS, GPS + Galileo, GPS + Galileo + BeiDou, then every system, each with
+``multi_gnss=True`` on the epochs reduced to those systems; and the project's GPS single point
+solution (``gnss_common.spp.SinglePointPositioner``, default parameters) for reference.
+
 Data: the one-hour cut in src/gnss_common/test/data (always), and the whole day when given
 (``--day OBS.crx.gz NAV.rnx.gz``, from ../shared/data/multignss_esbc_2020/).
 Writes docs/uwb_gnss_fusion/fusion_multignss.md.
@@ -53,8 +58,9 @@ from gnss_common.constants import GPS_CA_CHIP_RATE_HZ
 from gnss_common.coordinates import azimuth_elevation, ecef_to_enu_rotation, ecef_to_geodetic
 from gnss_common.jamming_weights import dll_jitter_m, effective_cn0_dbhz, fll_jitter_mps
 from gnss_common.measurements import GnssEpochBuilder
-from gnss_common.observations import GnssEpoch
+from gnss_common.observations import BEIDOU, GALILEO, GPS, GnssEpoch
 from gnss_common.rinex import read_rinex_nav, read_rinex_obs
+from gnss_common.spp import SinglePointPositioner
 from uwb_gnss_fusion.fusion_filter import FusionFilter, FusionParams
 from uwb_gnss_fusion.gnss_update import signal_scales
 from uwb_gnss_fusion.input_checks import used_constellations
@@ -165,6 +171,59 @@ def run(epochs: list[GnssEpoch], mask_deg: float, multi: bool, js_db: float = ma
     }
 
 
+LADDER = (("GPS", (GPS,)), ("GPS + Galileo", (GPS, GALILEO)), ("GPS + Galileo + BeiDou", (GPS, GALILEO, BEIDOU)),
+          ("every system", None))
+
+
+def only(epochs: list[GnssEpoch], systems: tuple[int, ...] | None) -> list[GnssEpoch]:
+    """The epochs with the observations of ``systems`` alone (None: all)."""
+    if systems is None:
+        return epochs
+    return [replace(e, observations=tuple(o for o in e.observations if o.constellation in systems)) for e in epochs]
+
+
+def spp_rms(epochs: list[GnssEpoch]) -> tuple[float, float, int]:
+    """Horizontal and 3D RMS of the project's GPS SPP, m, and its number of fixes."""
+    lat, lon, _ = ecef_to_geodetic(TRUTH_ECEF_M)
+    rot = ecef_to_enu_rotation(lat, lon)
+    spp = SinglePointPositioner()
+    enu = []
+    for e in epochs:
+        r = spp.process(e)
+        if r.valid:
+            enu.append(rot @ (r.position_ecef_m - TRUTH_ECEF_M))
+    a = np.array(enu).reshape(-1, 3)
+    return (float(np.sqrt(np.mean(a[:, 0] ** 2 + a[:, 1] ** 2))), float(np.sqrt(np.mean((a**2).sum(axis=1)))),
+            len(a))
+
+
+def ladder(epochs: list[GnssEpoch]) -> list[str]:
+    """Systems added one at a time, 10 deg mask (module docstring)."""
+    n = len(epochs)
+    lines = ["Systems added one at a time, 10 deg mask (multi_gnss=True on the reduced epochs):", "",
+             "| systems | median satellites used | epochs with an estimate | horizontal RMS m | 3D RMS m | "
+             "static model entered / left |", "|---|---|---|---|---|---|"]
+    h, d, k = spp_rms(epochs)
+    lines.append(f"| our SPP (GPS, gnss_common.spp) | - | {k} / {n} | {h:.2f} | {d:.2f} | - |")
+    print(lines[-1], flush=True)
+    prev: tuple[float, float] | None = None
+    never_worse = True
+    for name, systems in LADDER:
+        r = run(only(epochs, systems), 10.0, True)
+        c = r["counts"]
+        assert isinstance(c, dict)
+        lines.append(f"| {name} | {r['sats']:.0f} | {r['estimates']} / {n} | {r['h_rms']:.2f} | {r['rms']:.2f} | "
+                     f"{c.get('motion_static_entered', 0)} / {c.get('motion_static_left', 0)} |")
+        print(lines[-1], flush=True)
+        cur = (float(r["h_rms"]), float(r["rms"]))  # type: ignore[arg-type]
+        if prev is not None and (round(cur[0], 2) > round(prev[0], 2) or round(cur[1], 2) > round(prev[1], 2)):
+            never_worse = False
+        prev = cur
+    verdict = "met" if never_worse else "NOT met"
+    lines += ["", f"Adding a system never worsens horizontal or 3D RMS (to the cm): **{verdict}**.", ""]
+    return lines
+
+
 def section(title: str, epochs: list[GnssEpoch]) -> list[str]:
     n = len(epochs)
     lines = [
@@ -211,7 +270,7 @@ def section(title: str, epochs: list[GnssEpoch]) -> list[str]:
                 f"{r['within']:.0f} / {n} ({100 * r['within'] / n:.0f} %) | {r['ms_per_epoch']:.2f} |"
             )
             print(lines[-1], flush=True)
-    return lines + [""]
+    return lines + [""] + ladder(epochs)
 
 
 def main() -> None:

@@ -53,7 +53,8 @@ def _params(**kw) -> FusionParams:
     base = dict(use_uwb=False, use_doppler=False, accel_psd_m2ps3=0.01, gate_probability=1.0,
                 common_mode_screen=False, max_update_iterations=0,
                 pseudorange_correlated_std_m=STD_M, pseudorange_correlated_tau_s=TAU_S,
-                divergence_fix_confirm_s=0.0)   # the state layout from the first epoch on
+                divergence_fix_confirm_s=0.0,   # the state layout from the first epoch on
+                motion_detection=False)   # the oracle is the constant-velocity model (no static model)
     base.update(kw)
     return FusionParams(**base)
 

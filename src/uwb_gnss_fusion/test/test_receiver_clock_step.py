@@ -71,9 +71,12 @@ def test_whole_millisecond_steps_are_repaired_exactly(esbc_epochs):
 
 
 def test_without_the_repair_a_millisecond_step_costs_the_position(esbc_epochs):
-    """What the option prevents: every pseudorange gated, divergence, metres of error."""
-    _, clean = _run(esbc_epochs)
-    f, stepped = _run(_stepped(esbc_epochs, {40: MS_OF_LIGHT_M}), receiver_clock_steps=False)
+    """What the option prevents: every pseudorange gated, divergence, metres of error. With the moving
+    model (motion_detection off): once the detector has found the antenna static, the static model holds
+    the position through the divergence and hides the cost (max error 2.9 m against 1.4 m, divergence still
+    declared)."""
+    _, clean = _run(esbc_epochs, motion_detection=False)
+    f, stepped = _run(_stepped(esbc_epochs, {40: MS_OF_LIGHT_M}), receiver_clock_steps=False, motion_detection=False)
     assert f.rejection_counts.get("divergence", 0) >= 1
     err_clean = np.linalg.norm(clean[40:60] - TRUTH, axis=1)
     err = np.linalg.norm(stepped[40:60] - TRUTH, axis=1)

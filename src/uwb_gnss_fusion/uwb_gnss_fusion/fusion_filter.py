@@ -29,6 +29,7 @@ the satellite appears and removed (marginalised) when it has been unseen for a w
 :mod:`.uwb_update`         UWB update (eq. 7, 13, 17-25)
 :mod:`.divergence`         divergence rules
 :mod:`.mirror_test`        the mirror ambiguity of coplanar anchors, resolved by GNSS
+:mod:`.motion_model`       static or moving: the stationarity detector and the zero-velocity update
 :mod:`.ckf`                the CKF, which owns the error covariance (eq. 14-24)
 =========================  ==================================================================
 """
@@ -84,6 +85,7 @@ from .mirror_test import (
     mirror_wrong_side_probability,
     reflect,
 )
+from .motion_model import StationarityDetector, static_exit_statistic, zero_velocity_update
 from .reorder_buffer import ReorderBuffer  # noqa: F401 (re-exported)
 from .uwb_update import RangeNoiseEstimate, apply_range
 
@@ -159,7 +161,7 @@ class FusionFilter:
         self._gate_3d = (
             math.inf if self.params.gate_probability >= 1.0 else float(chi2.ppf(self.params.gate_probability, 3))
         )
-        self._transition_cache: dict[tuple[int, bool, int, int], tuple[np.ndarray, np.ndarray]] = {}
+        self._transition_cache: dict[tuple[int, bool, int, int, bool], tuple[np.ndarray, np.ndarray]] = {}
         self._counts_tuple: tuple[tuple[str, int], ...] | None = None
         clock = self.params.clock
         self._clock_q = lambda dt_s: _clock_q(clock, dt_s)
@@ -199,6 +201,8 @@ class FusionFilter:
         self._mirror_valid_until_ns = -1
         self._mirror_plane: tuple | None = None  # (n n^T in 6x6, c . n, normal, anchors with their off-plane distance)
         self._anchor_version = 0  # counts changes of the set of anchors heard: new, back after silence, moved
+        self._motion = StationarityDetector(self.params.static_enter_s)
+        self._moving_pv_var = np.zeros(6)  # position/velocity variances when the static model was entered
         self._reset_state()
 
     # ------------------------------------------------------------------ state handling
@@ -218,6 +222,7 @@ class FusionFilter:
         self._anchor_gated_run: dict[str, int] = {}
         self._shared_bias_stamps: dict[str, collections.deque[int]] = {}
         self._reset_mirror()
+        self._motion.reset()
 
     def _reset_mirror(self, key: object = None) -> None:
         self._mirror.reset(key)
@@ -383,6 +388,7 @@ class FusionFilter:
         self._uwb_gated = GatedWindow(self.params.divergence_uwb_ranges)
         self._anchor_gated_run = {}
         self._reset_mirror()
+        self._motion.reset()
         return self._output(False)
 
     def _initial_drift(self, clock_drift_mps: float) -> tuple[float, float]:
@@ -514,14 +520,16 @@ class FusionFilter:
             return
         nb = len(self._bias_systems)
         ne = len(self._err_sats)
-        key = (dt_ns, self._frame == FRAME_EARTH, nb, ne)
+        static = self._motion.static
+        key = (dt_ns, self._frame == FRAME_EARTH, nb, ne, static)
         cached = self._transition_cache.get(key)
         if cached is None:
             dt = dt_ns / _NS
             tau = self.params.pseudorange_correlated_tau_s
             phi = constant_velocity_transition(dt, nb, ne, tau)
             q = np.zeros((STATE_DIM + nb + ne, STATE_DIM + nb + ne))
-            q[0:6, 0:6] = white_acceleration_noise(self.params.accel_psd_m2ps3, dt)
+            psd = self.params.static_accel_psd_m2ps3 if static else self.params.accel_psd_m2ps3
+            q[0:6, 0:6] = white_acceleration_noise(psd, dt)
             if key[1]:
                 q[6:8, 6:8] = self._clock_q(dt)
                 # inter-system biases: random walks
@@ -604,6 +612,7 @@ class FusionFilter:
             jammer_to_signal_db=self._current_js_db(self._t_ns),
             rejection_counts=self._rejection_tuple(),
             reinitializations=self._reinits,
+            motion_static=self._motion.static,
         )
 
     # ------------------------------------------------------------------ GNSS
@@ -671,6 +680,7 @@ class FusionFilter:
             self._update_bias_states(stamp, prep)
             self._last_gnss_stamp = stamp
             return self._output(False, sat_used=n, sat_rej=pre_rejected)
+        dt_s = (stamp - self._t_ns) / _NS
         self._predict_to(stamp)
         if not self._clock_initialized:
             # position known from UWB, clock not: set the clock from the pseudorange residuals.
@@ -683,6 +693,7 @@ class FusionFilter:
             self._clock_initialized = True
         cols = self._update_bias_states(stamp, prep)
         err_cols = self._update_error_states(stamp, prep)
+        self._motion_before_update(prep, cols, err_cols, dt_s)
         n_screened = 0
         find_step = self.params.receiver_clock_steps
         if self.params.common_mode_screen:
@@ -710,6 +721,7 @@ class FusionFilter:
         self._count("innovation_gate_pseudorange", gated_pr)
         self._count("innovation_gate_doppler", int(acc_rate.size - acc_rate.sum()))
         self._correct()
+        self._motion_after_update(stamp)
         if (self.params.uwb_mirror_test or self.params.uwb_tag_side_of_anchor_plane) and self.params.use_uwb:
             self._mirror_check(stamp, prep, acc_pr, cols)
         used = int(acc_pr.sum())
@@ -729,6 +741,51 @@ class FusionFilter:
                 return self._reset_clock_keep_position(stamp, prep)
             return self._declare_divergence(stamp, gnss_only=not self._position_lost())
         return self._output(False, sat_used=used, sat_rej=pre_rejected + n_screened + gated_pr, nis=nis)
+
+    # ------------------------------------------------------------------ motion model
+    def _motion_before_update(self, prep: PreparedEpoch, cols: np.ndarray | None, err_cols: np.ndarray | None,
+                              dt_s: float) -> None:
+        """Static model: the exit test on the predicted innovations (:mod:`.motion_model`). A failing
+        epoch opens the covariance by the moving model's process noise minus the static one over
+        ``dt_s`` (adaptive process noise); leaving the static model raises the position and velocity
+        variances to the moving model's at entry."""
+        if not self._motion.static:
+            return
+        # tested against the moving model's uncertainty at entry: the static average's own covariance
+        # shrinks like 1 / epochs (white errors), the solution's time-correlated errors do not
+        p_test = self._ckf.p.copy()
+        p_test[0:6, 0:6] += np.diag(np.maximum(self._moving_pv_var - np.diag(p_test)[0:6], 0.0))
+        parts = static_exit_statistic(prep, self._nominal, p_test, cols, err_cols)
+        decision = self._motion.observe_static(parts)
+        if decision.open_covariance:
+            p = self.params
+            self._ckf.p[0:6, 0:6] += white_acceleration_noise(p.accel_psd_m2ps3 - p.static_accel_psd_m2ps3, dt_s)
+            self._count("motion_epoch_opened")
+        if decision.left_static:
+            # back to the moving model's uncertainty: the static average's covariance assumed white errors
+            # and no motion since the entry, both now doubtful
+            self._ckf.p[0:6, 0:6] += np.diag(np.maximum(self._moving_pv_var - np.diag(self._ckf.p)[0:6], 0.0))
+            self._count("motion_static_left")
+
+    def _motion_after_update(self, stamp_ns: int) -> None:
+        """Moving model: the entry test on the updated state; on entry, a zero-velocity update."""
+        p = self.params
+        if not p.motion_detection or self._frame != FRAME_EARTH or self._motion.static:
+            return
+        if self._last_uwb_stamp is not None and stamp_ns - self._last_uwb_stamp <= p.uwb_init_window_s * _NS:
+            return  # GNSS epochs alone: ranges at 10-50 Hz follow the motion (.motion_model)
+        if not self._motion.observe_moving(stamp_ns, self._nominal[0:3], self._ckf.p[0:3, 0:3],
+                                           self._nominal[3:6], self._ckf.p[3:6, 3:6]):
+            return
+        self._count("motion_static_entered")
+        self._moving_pv_var = np.diag(self._ckf.p)[0:6].copy()
+        dx, self._ckf.p = zero_velocity_update(self._ckf.p, self._nominal[3:6], p.static_velocity_std_mps)
+        self._nominal = self._nominal + dx
+
+    @property
+    def motion_static(self) -> bool:
+        """True while the static model runs (:mod:`.motion_model`)."""
+        return self._motion.static
 
     def _apply_clock_step(self, step: tuple[float, bool, float]) -> None:
         """``receiver_clock_steps``: move the clock bias by a step of the receiver clock
@@ -1153,6 +1210,9 @@ class FusionFilter:
         if self._initialized and meas.frame_id != self._frame:
             self._count("uwb_frame_mismatch")
             return self._output(False, uwb_rej=1)
+        if self._motion.static:  # the detector watches GNSS epochs alone (.motion_model)
+            self._motion.reset()
+            self._count("motion_static_left_uwb")
         prev = self._recent_uwb.get(meas.anchor_id)
         if (prev is None or stamp - prev[0] > p.uwb_init_window_s * _NS or prev[3] != meas.frame_id
                 or prev[1][0] != anchor[0] or prev[1][1] != anchor[1] or prev[1][2] != anchor[2]):

@@ -51,10 +51,10 @@ class FusionNodeParams:
     ``heading_source``, ``heading_min_speed_mps``, ``hardware_id``, the diagnostics thresholds,
     ``warning_throttle_s``). Read-only, and why:
 
-    * ``gate_probability``, ``accel_psd_m2ps3``, ``clock_h0_s``, ``clock_h_minus2_hz``, ``uwb_lever_arm_m``,
-      ``divergence_uwb_ranges``: the core derives its gate, its process-noise cache, its lever arm and the
-      size of its divergence window from them when it is built; it has no call to change them in flight,
-      so a change would be silently ignored (or, for the window, resize state).
+    * ``gate_probability``, ``accel_psd_m2ps3``, ``motion_detection``, ``static_*``, ``clock_h0_s``,
+      ``clock_h_minus2_hz``, ``uwb_lever_arm_m``, ``divergence_uwb_ranges``: the core derives its gate, its
+      process-noise cache, its lever arm and the size of its divergence window from them when it is built; it has
+      no call to change them in flight, so a change would be silently ignored (or, for the window, resize state).
     * ``use_gnss``, ``use_uwb``, ``use_doppler``, ``use_spp_reference``, ``min_satellites_init``, ``init_*``,
       ``max_prediction_s``, ``uwb_init_window_s``, ``uwb_latency_s``, ``reference_max_age_s``: the filter's
       configuration and its (re)initialisation; the SPP reference cache is sized by ``reference_max_age_s``.
@@ -151,6 +151,18 @@ class FusionNodeParams:
     accel_psd_m2ps3: float = parameter(
         _FP.accel_psd_m2ps3, 'White-acceleration PSD per axis of the constant-velocity model, m^2/s^3.',
         minimum=1e-9, maximum=1e4)
+    motion_detection: bool = parameter(
+        _FP.motion_detection, 'Find out from the GNSS epochs whether the receiver is static and then run the static '
+        'model (uwb_gnss_fusion.motion_model; not while UWB ranges arrive). False: always the moving model.')
+    static_enter_s: float = parameter(
+        _FP.static_enter_s, 'How long every GNSS epoch must show a velocity consistent with zero before the receiver '
+        'is declared static, s.', minimum=0.0, maximum=3600.0)
+    static_accel_psd_m2ps3: float = parameter(
+        _FP.static_accel_psd_m2ps3, 'White-acceleration PSD per axis of the static model, m^2/s^3.',
+        minimum=1e-15, maximum=1e4)
+    static_velocity_std_mps: float = parameter(
+        _FP.static_velocity_std_mps, '1-sigma per axis of the zero-velocity update applied when the receiver is '
+        'declared static, m/s.', minimum=1e-6, maximum=10.0)
     clock_h0_s: float = parameter(
         _FP.clock_h0_s, 'Receiver clock white-FM coefficient h0, s.', minimum=1e-30, maximum=1e-12)
     clock_h_minus2_hz: float = parameter(

@@ -38,6 +38,8 @@ class FusionOutput:
         jammer_to_signal_db: J/S used for weighting, dB (NaN: none).
         rejection_counts: cumulative ``((reason, count), ...)`` sorted by reason.
         reinitializations: times the filter reinitialised since start.
+        motion_static: the static model runs (:mod:`.motion_model`: the stationarity detector found the
+            receiver static); False: the moving (constant-velocity) model.
     """
 
     stamp_ns: int
@@ -58,6 +60,7 @@ class FusionOutput:
     jammer_to_signal_db: float
     rejection_counts: tuple[tuple[str, int], ...]
     reinitializations: int
+    motion_static: bool = False
 
     def is_finite(self) -> bool:
         """Position, velocity and their covariance all finite (compiled test, :func:`all_finite`)."""

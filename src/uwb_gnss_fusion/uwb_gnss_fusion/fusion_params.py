@@ -64,7 +64,16 @@ class FusionParams:
         use_gnss: apply GNSS pseudoranges (False: UWB-only filter).
         use_doppler: apply pseudorange rates as well as pseudoranges.
         use_uwb: apply UWB ranges (False: the GNSS-only baseline filter).
-        accel_psd_m2ps3: white-acceleration PSD per axis, m^2/s^3 (constant-velocity model).
+        accel_psd_m2ps3: white-acceleration PSD per axis, m^2/s^3 (constant-velocity model; the
+            moving model of :mod:`.motion_model`).
+        motion_detection: let :class:`.motion_model.StationarityDetector` switch between the moving
+            model and a static one (GNSS epochs in the earth frame, no UWB range in the last
+            ``uwb_init_window_s``); False: always the moving model.
+        static_enter_s: how long every GNSS epoch must pass the detector's entry test (velocity
+            consistent with zero) before the receiver is declared static, s (>= 0).
+        static_accel_psd_m2ps3: white-acceleration PSD of the static model, m^2/s^3 (> 0).
+        static_velocity_std_mps: 1-sigma per axis of the zero-velocity pseudo-measurement applied
+            at every GNSS epoch of the static model, m/s (> 0).
         clock_h0_s: receiver clock h_0, s (default: compensated crystal of Brown & Hwang, as
             ``gnss_common.clock_model.COMPENSATED_CRYSTAL_BROWN_HWANG``).
         clock_h_minus2_hz: receiver clock h_-2, 1/s. The clock-state process noise is
@@ -236,6 +245,11 @@ class FusionParams:
     use_doppler: bool = True
     use_uwb: bool = True
     accel_psd_m2ps3: float = 0.1
+    # the static model and its detector (.motion_model, issue 27 item 4)
+    motion_detection: bool = True
+    static_enter_s: float = 10.0
+    static_accel_psd_m2ps3: float = 1.0e-8
+    static_velocity_std_mps: float = 1.0e-3
     clock_h0_s: float = 2.0e-19
     clock_h_minus2_hz: float = 2.0e-20
     uwb_range_std_m: float = 0.1
@@ -299,6 +313,8 @@ class FusionParams:
     def __post_init__(self) -> None:
         pos = {
             "accel_psd_m2ps3": self.accel_psd_m2ps3,
+            "static_accel_psd_m2ps3": self.static_accel_psd_m2ps3,
+            "static_velocity_std_mps": self.static_velocity_std_mps,
             "clock_h0_s": self.clock_h0_s,
             "uwb_range_std_m": self.uwb_range_std_m,
             "uwb_max_range_m": self.uwb_max_range_m,
@@ -325,6 +341,8 @@ class FusionParams:
         for name, value in pos.items():
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
                 raise ValueError(f"FusionParams.{name} must be a finite number > 0, got {value!r}")
+        if not (math.isfinite(self.static_enter_s) and self.static_enter_s >= 0.0):
+            raise ValueError(f"FusionParams.static_enter_s must be >= 0, got {self.static_enter_s!r}")
         if not (math.isfinite(self.clock_h_minus2_hz) and self.clock_h_minus2_hz >= 0.0):
             raise ValueError(f"FusionParams.clock_h_minus2_hz must be >= 0, got {self.clock_h_minus2_hz!r}")
         if not (math.isfinite(self.pseudorange_correlated_std_m) and self.pseudorange_correlated_std_m >= 0.0):
