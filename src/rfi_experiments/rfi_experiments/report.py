@@ -179,7 +179,10 @@ def _jammer_section(truth: list[Any], estimates: list[Any], out: Path, summary: 
     axes[1].set_ylabel('sweep period, us')
     axes[1].legend(fontsize=7)
     axes[2].plot(t, js_true, 'k.', label='truth')
-    axes[2].plot(t, js_est, 'o', ms=4, label='estimated')
+    # a block reported NONE has no J/S (rfi_monitor publishes NaN there): only the blocks with a reported jammer are
+    # drawn, so that no value of a jammer-free block is read as a measured J/S (issue 27 item 5)
+    reported = np.array([b != 'NONE' for b in types_est])
+    axes[2].plot(t[reported], js_est[reported], 'o', ms=4, label='estimated (blocks with a reported jammer)')
     axes[2].set_ylabel('J/S, dB')
     axes[2].set_xlabel('time, s')
     axes[2].legend(fontsize=7)
@@ -187,6 +190,9 @@ def _jammer_section(truth: list[Any], estimates: list[Any], out: Path, summary: 
     fig.tight_layout()
     fig.savefig(out / 'jammer.png', dpi=110)
     plt.close(fig)
+    lines += ['', 'Figure: the frequency at each block end, the sweep period and the J/S, reported against the truth. '
+              'A period is drawn only where the monitor published one (a period it cannot tell from a multiple of a '
+              'shorter one is NaN); J/S only for blocks with a reported jammer (a NONE block carries no J/S).']
     return lines + ['', '![jammer](jammer.png)', '']
 
 

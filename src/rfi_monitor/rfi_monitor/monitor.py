@@ -43,7 +43,10 @@ J/N of a NONE block: the measured J/N (power or spectral, whichever is larger), 
 block's power resolution ``10 log10(sqrt(2 / n))`` dB (real; ``sqrt(1 / n)`` complex, n samples in the
 Welch frames: the 1-sigma relative error of the block power). A measurement below it, including no
 excess at all (minus infinity), is reported as that resolution: "J/N below x dB". A published NONE
-therefore always carries a finite J/N and J/S.
+therefore always carries a finite J/N (an upper bound of what a jammer could have), and a NaN J/S: with no jammer
+there is no jammer-to-signal ratio to report (issue 27 item 5: the -2 dB that ``J/N + N - S`` gives at the
+resolution was plotted as a measured J/S through the jammer-free blocks). ``jammer_to_signal_db`` is the one place
+J/S is computed.
 
 Time: ``stamp_ns`` (int, ns) is passed in and copied to the result; no clock is read.
 
@@ -369,6 +372,28 @@ class _Ahead:
     collected: bool = False
 
 
+
+def jammer_to_signal_db(jtype: int, jn_db: float, fs: float, cplx: bool, params: RfiMonitorParams) -> float:
+    """J/S of a block from its J/N and the nominal powers: ``J/S = J/N + N - S`` (dB), N the nominal noise density
+    ``noise_density_dbm_per_mhz`` over ``noise_bandwidth_hz`` (0: the sampled band, fs real / 2 or fs complex), S
+    ``signal_power_dbm`` (Kang et al. give J/S against S = -130 dBm and N = -114 dBm/MHz, Sec. 4).
+
+    NaN when the type is NONE (no jammer: no J/S, module docstring; consumers read type NONE as "no jammer") or the
+    J/N is not finite.
+
+    Args:
+        jtype: the block's type (NONE, CW, CHIRP, WIDEBAND, UNKNOWN).
+        jn_db: its J/N, dB.
+        fs: sample rate, Hz; cplx: complex samples.
+        params: the monitor's parameters (nominal powers, noise bandwidth).
+    """
+    if jtype == NONE or not math.isfinite(jn_db):
+        return math.nan
+    p = params
+    bw_noise = p.noise_bandwidth_hz if p.noise_bandwidth_hz > 0 else (fs if cplx else fs / 2)
+    n_dbm = p.noise_density_dbm_per_mhz + 10 * math.log10(bw_noise / 1e6)
+    return jn_db + n_dbm - p.signal_power_dbm
+
 class RfiMonitor:
     """Jammer identification and tracking over a stream of IF blocks.
 
@@ -392,7 +417,8 @@ class RfiMonitor:
                                 "calibrations_discarded": 0, "clipped_blocks": 0, "frequency_not_tracked": 0,
                                 "tracker_resets_invalid": 0, "integrated_reports": 0,
                                 "integration_window_blocks": 0, "integration_blocks_thinned": 0,
-                                "integration_switch_offs": 0,
+                                "integration_switch_offs": 0, "integration_submultiple_periods": 0,
+                                "integration_ambiguous_periods": 0,
                                 "worker_blocks": 0, "worker_failures": 0, "block_periods_from_integration": 0,
                                 "block_periods_unconfirmed": 0, "jn_from_envelope": 0,
                                 "spectral_step_reports": 0, "light_blocks": 0, "light_escalations": 0}
@@ -483,6 +509,10 @@ class RfiMonitor:
         d["spectral_step_not_flat"] = self._step.not_flat
         d["spectral_step_relearned"] = self._step.relearned
         return MappingProxyType(d)
+
+    def _js_db(self, jtype: int, jn_db: float, fs: float, cplx: bool) -> float:
+        """J/S of a block: :func:`jammer_to_signal_db` with this monitor's nominal powers."""
+        return jammer_to_signal_db(jtype, jn_db, fs, cplx, self.params)
 
     def _to_rel_hz(self, f_dig: float, fs: float, fif: float, cplx: bool) -> float:
         if not cplx and fif < 0:
@@ -814,9 +844,7 @@ class RfiMonitor:
         if jtype == NONE:
             # at least the block power's resolution (module docstring): a NONE never carries a NaN J/N
             jn = max(jn, 5.0 * math.log10((1.0 if cplx else 2.0) / (feat.frames * cp.nfft)))
-        bw_noise = p.noise_bandwidth_hz if p.noise_bandwidth_hz > 0 else (fs if cplx else fs / 2)
-        n_dbm = p.noise_density_dbm_per_mhz + 10 * math.log10(bw_noise / 1e6)
-        js = jn + n_dbm - p.signal_power_dbm if math.isfinite(jn) else nan
+        js = self._js_db(jtype, jn, fs, cplx)
         freq = fstd = rate = per = f0 = bw = nan
         if jtype in (CW, CHIRP):
             freq = self._to_rel_hz(float(st.fst[FilterFloat.F]), fs, fif, cplx)
@@ -963,9 +991,7 @@ class RfiMonitor:
             jn = last.jammer_to_noise_db + delta
             if jtype == CHIRP:
                 freq = fstd = math.nan
-        bw_noise = p.noise_bandwidth_hz if p.noise_bandwidth_hz > 0 else (fs if cplx else fs / 2)
-        n_dbm = p.noise_density_dbm_per_mhz + 10 * math.log10(bw_noise / 1e6)
-        js = jn + n_dbm - p.signal_power_dbm
+        js = self._js_db(jtype, jn, fs, cplx)
         lower = (clipped > p.clip_lower_bound_fraction or coarse) and jtype != NONE
         self._block_counters["light_blocks"] += 1
         return dataclasses.replace(
@@ -1127,6 +1153,8 @@ class RfiMonitor:
             self._block_counters["integration_window_blocks"] = d.blocks
             self._block_counters["integration_blocks_thinned"] = self._integrator.thinned
             self._block_counters["integration_switch_offs"] = self._integrator.switch_offs
+            self._block_counters["integration_submultiple_periods"] = self._integrator.submultiples
+            self._block_counters["integration_ambiguous_periods"] = self._integrator.ambiguous_periods
             if d.type == CHIRP and jtype in (NONE, WIDEBAND):
                 # a periodic sweep in the window: no noise jammer makes one (the per-bin mean is removed, its
                 # frames are independent), so a block reported WIDEBAND from its broad excess is a sweep seen
@@ -1179,11 +1207,9 @@ class RfiMonitor:
             if clipped <= p.clip_lower_bound_fraction and not rr.periodic and jn_in < cp.detect_jn_db:
                 self._learn(power, norm)
                 self._step.learn()
-        bw_noise = p.noise_bandwidth_hz if p.noise_bandwidth_hz > 0 else (fs if cplx else fs / 2)
-        n_dbm = p.noise_density_dbm_per_mhz + 10 * math.log10(bw_noise / 1e6)
         if not math.isfinite(jn):
             jn = nan
-        js = jn + n_dbm - p.signal_power_dbm if math.isfinite(jn) else nan
+        js = self._js_db(jtype, jn, fs, cplx)
         freq = fstd = rate = per = f0 = bw = inb = nan
         shape = rg.SHAPE_UNKNOWN
         inverted = (not cplx) and fif < 0
@@ -1262,8 +1288,6 @@ class RfiMonitor:
         flagged as a lower bound; the other fields NaN."""
         p = self.params
         nan = math.nan
-        bw_noise = p.noise_bandwidth_hz if p.noise_bandwidth_hz > 0 else (fs if cplx else fs / 2)
-        n_dbm = p.noise_density_dbm_per_mhz + 10 * math.log10(bw_noise / 1e6)
         freq = fstd = rate = per = inb = nan
         shape = rg.SHAPE_UNKNOWN
         if d.type == CW:
@@ -1272,6 +1296,10 @@ class RfiMonitor:
             freq = self._to_rel_hz(d.cw_frequency, fs, fif, cplx)
             fstd = fs / self._integrator.params.nfft / math.sqrt(12.0)
             rate = 0.0
+        elif not math.isfinite(d.period_samples):
+            # a sweep whose period the window's comb cannot tell from a multiple of a shorter one
+            # (integration.resolve_submultiple): CHIRP without a period, shape or in-band fraction
+            conf = logistic(d.chirp_z - d.chirp_threshold, 1.0)
         else:
             conf = logistic(d.chirp_z - d.chirp_threshold, 1.0)
             per = d.period_samples / fs
@@ -1281,7 +1309,7 @@ class RfiMonitor:
                 shape = rg.SAWTOOTH_DOWN if shape == rg.SAWTOOTH_UP else rg.SAWTOOTH_UP
             if shape == rg.SHAPE_UNKNOWN:
                 inb = nan
-        js = jn + n_dbm - p.signal_power_dbm
+        js = self._js_db(d.type, jn, fs, cplx)
         self._tracking = False
         self._chirp = False
         return JammerEstimate(stamp_ns, int(d.type), float(conf), float(jn), float(js), freq, fstd, rate, per, nan,

@@ -14,7 +14,14 @@ import pytest
 from scipy import stats
 
 from rfi_monitor.classifier import CHIRP, CW, NONE
-from rfi_monitor.integration import IntegrationParams, Integrator, _comb_skew, frame_length, spectral_autocorrelation
+from rfi_monitor.integration import (
+    IntegrationParams,
+    Integrator,
+    _comb_skew,
+    frame_length,
+    resolve_submultiple,
+    spectral_autocorrelation,
+)
 from rfi_monitor.monitor import RfiMonitor, RfiMonitorParams
 from rfi_sim.if_signal import ChirpJammer, FrontEndConfig, IfSimulator, js_for_jn_db
 from rfi_sim.jammer_waveforms import SweepJammer
@@ -61,6 +68,57 @@ def test_demo_chirp_snapshots_once_a_second():
     assert types.count(CHIRP) >= 5, types
     periods = [e.sweep_period_s for e in ests if e.type == CHIRP]
     assert abs(float(np.median(periods)) / jam.sweep_period_s - 1.0) < 0.01
+
+
+def test_demo_chirp_snapshots_never_publish_a_multiple_of_the_period():
+    """Issue 27 item 5: the demo's chirp at J/S +6 dB (J/N -13 dB), 60 single 1 ms snapshots, each alone in its window:
+    the comb's best candidate was 2 or 3 times the period in 4 of the 60 (9 of 60 with seed 4; the demo's bag: 3 of its
+    20 blocks at 10.2 us instead of 5.1 us). Every CHIRP decision now carries the period within 1 % or NaN, and
+    NaN (ambiguous) in at most 3 of them (measured: none)."""
+    fe = FrontEndConfig(noise_bandwidth_hz=2e6)
+    jam = ChirpJammer(js_db=6.0)
+    sim = IfSimulator(fe, (jam,), seed=1)
+    integ = Integrator(IntegrationParams())
+    ratios = []
+    for k in range(60):
+        d = integ.add(sim.generate(38192).values(), False, fe.sample_rate_hz, (k + 1) * 1_000_000_000)
+        assert d.blocks == 1
+        if d.type == CHIRP:
+            ratios.append(d.period_samples / (jam.sweep_period_s * fe.sample_rate_hz))
+    assert len(ratios) >= 55
+    wrong = [q for q in ratios if math.isfinite(q) and abs(q - 1.0) >= 0.01]
+    assert not wrong, wrong
+    assert sum(1 for q in ratios if not math.isfinite(q)) <= 3
+    assert integ.submultiples >= 1          # the test did step in (4 multiples without it)
+
+
+@pytest.mark.parametrize("shape,fs,cplx,period_s,jn_db", [
+    ("saw_up", 38.192e6, False, 5.102e-6, -13.0),   # the demo's chirp
+    ("triangle", 4e6, True, 20e-6, -8.0),           # up and down alike: the comb sees some of it at half the period
+    ("hooked_saw", 16.368e6, False, 12e-6, -10.0),
+])
+def test_resolve_submultiple_finds_the_period_from_its_multiples(shape, fs, cplx, period_s, jn_db):
+    """Oracle on one block's sums: handed the true period T, 2 T or 3 T (what the comb's search can end on), the
+    sub-multiple test returns T within 0.3 % (from 2 T and 3 T: one division, m = 2 or 3), and from T it keeps T (no
+    halving, not even of a triangle, whose rising and falling halves meet in the same bins half a period apart)."""
+    fe = FrontEndConfig(sample_rate_hz=fs, intermediate_frequency_hz=0.0 if cplx else fs / 4, is_complex=cplx, bits=8,
+                        gain_mode="fixed", filter_low_hz=-0.45 * fs if cplx else -0.2 * fs,
+                        filter_high_hz=0.45 * fs if cplx else 0.2 * fs)
+    band = 0.75 * (fe.filter_high_hz - fe.filter_low_hz) / 2
+    jam = SweepJammer(shape, -band, band, period_s, js_db=js_for_jn_db(fe, jn_db))
+    n = int(round(fs * 1e-3))
+    integ = Integrator(IntegrationParams())
+    d = integ.add(IfSimulator(fe, (jam,), satellites=(), seed=3).generate(n).values(), cplx, fs, 0)
+    assert d.type == CHIRP and abs(d.period_samples / (period_s * fs) - 1.0) < 0.01, d
+    sums = integ._last_sums
+    hop = frame_length(fs, IntegrationParams()) // 2
+    T = period_s * fs / hop
+    lag_limit = sums.r.size - 1
+    for m in (1, 2, 3):
+        p, div, strength = resolve_submultiple(sums.r, sums.v, sums.spread, sums.spread_frames, m * T, 4, lag_limit,
+                                               IntegrationParams().max_multiples)
+        assert div == m and abs(p / T - 1.0) < 0.003, (shape, m, p / T, div)
+        assert strength > 0
 
 
 def test_weak_chirp_at_the_paper_front_end_continuous_stream():

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from rfi_monitor.classifier import CHIRP, CW, NONE, UNKNOWN, WIDEBAND
-from rfi_monitor.monitor import RfiMonitor, RfiMonitorParams
+from rfi_monitor.monitor import RfiMonitor, RfiMonitorParams, jammer_to_signal_db
 from rfi_sim.if_signal import ChirpJammer, CwJammer, FrontEndConfig, IfSimulator, NoiseJammer
 
 DATA = Path(__file__).parent / "data"
@@ -364,7 +364,8 @@ def test_block_far_off_the_noise_floor_is_rejected_then_relearned():
 
 def test_none_always_carries_a_finite_jn():
     """A clean block whose power is below the floor and that has no occupied bin used to give NONE with
-    J/N = NaN (10 log10 of a negative excess); J/N is now at least the block power's resolution."""
+    J/N = NaN (10 log10 of a negative excess); J/N is now at least the block power's resolution. Its J/S is NaN
+    (issue 27 item 5: no jammer, no J/S)."""
     for fe in (FrontEndConfig(), FrontEndConfig(sample_rate_hz=16.368e6, intermediate_frequency_hz=0.0,
                                                 is_complex=True)):
         n = 16384
@@ -374,8 +375,30 @@ def test_none_always_carries_a_finite_jn():
         assert len(none) == 40
         floor_db = 5 * math.log10((1.0 if fe.is_complex else 2.0) / n)
         assert all(math.isfinite(e.jammer_to_noise_db) and e.jammer_to_noise_db >= floor_db - 1e-9 for e in none)
-        assert all(math.isfinite(e.jammer_to_signal_db) for e in none)
+        assert all(math.isnan(e.jammer_to_signal_db) for e in none)
         assert sum(e.jammer_to_noise_db == pytest.approx(floor_db) for e in none) >= 5   # the censored ones
+
+
+@pytest.mark.parametrize("cplx", [False, True])
+def test_none_carries_no_jammer_to_signal(cplx):
+    """Issue 27 item 5: a block reported NONE published J/S = J/N + N - S of its J/N resolution (about -2 dB in the
+    demo), which the report plotted as a measured J/S. Default ("stft") estimator, full and light analyses, and the
+    J/S function itself: NaN for NONE; a jammer's J/S is J/N + N - S."""
+    fe = (FrontEndConfig(sample_rate_hz=16.368e6, intermediate_frequency_hz=0.0, is_complex=True) if cplx
+          else FrontEndConfig())
+    n = 16384
+    params = RfiMonitorParams(noise_bandwidth_hz=2e6)
+    mon = RfiMonitor(params)
+    x = IfSimulator(fe, (), seed=23).generate(30 * n).values()
+    ests = [mon.process(x[k * n:(k + 1) * n], fe.sample_rate_hz, fe.intermediate_frequency_hz, k * n,
+                        k * 1_000_000, is_complex=cplx, light=k >= 20) for k in range(30)]
+    none = [e for e in ests if e.type == NONE]
+    assert len(none) >= 20 and any(e.light for e in none) and any(not e.light for e in none)
+    assert all(math.isfinite(e.jammer_to_noise_db) and math.isnan(e.jammer_to_signal_db) for e in none)
+    # N = -114 dBm/MHz over 2 MHz = -110.99 dBm, S = -130 dBm: J/S = J/N + 19.01 dB for a jammer, NaN without one
+    assert jammer_to_signal_db(CW, 3.0, fe.sample_rate_hz, cplx, params) == pytest.approx(3.0 + 19.0103, abs=1e-3)
+    assert math.isnan(jammer_to_signal_db(NONE, 3.0, fe.sample_rate_hz, cplx, params))
+    assert math.isnan(jammer_to_signal_db(CHIRP, math.nan, fe.sample_rate_hz, cplx, params))
 
 
 def test_calibration_that_saw_no_noise_is_discarded():

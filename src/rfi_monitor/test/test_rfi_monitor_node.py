@@ -706,7 +706,8 @@ def test_blank_and_physically_impossible_blocks_are_rejected_by_name(probe_facto
         m.header.stamp = ns_to_stamp(stamp_to_ns(m.header.stamp) + 100_000_000)
     states = p.send_all(msgs[CALIBRATION + 1:])
     assert all(s is not None and s.type == JammerState.NONE for s in states)
-    assert all(math.isfinite(s.jammer_to_noise_db) and math.isfinite(s.jammer_to_signal_db) for s in states)
+    # a NONE carries its J/N bound and no J/S (issue 27 item 5: NaN, not the -2 dB of the J/N bound)
+    assert all(math.isfinite(s.jammer_to_noise_db) and math.isnan(s.jammer_to_signal_db) for s in states)
     v = p.values()
     assert v['accounting_ok'] == 'True' and 'rejected_core_error' not in v
 
@@ -930,7 +931,8 @@ def test_fuzz_if_samples_in_process():
     cannot deserialise are what the middleware drops: they skip a publisher sequence number (a loss).
 
     Asserts: nothing raises out of the callback (and its guard never fires), no core_error, every block accounted
-    for, every published JammerState has a finite confidence in [0, 1], a finite J/N unless UNKNOWN, and no blank
+    for, every published JammerState has a finite confidence in [0, 1], a finite J/N unless UNKNOWN (a J/S exactly
+    when it reports a jammer), and no blank
     block gives a state; the node still analyses the valid stream at the end."""
     from rfi_monitor.rfi_monitor_node import SAMPLE_DTYPES, is_blank, rejected_total
     rng = np.random.default_rng(FUZZ_SEED)
@@ -964,7 +966,9 @@ def test_fuzz_if_samples_in_process():
                 assert math.isfinite(s.confidence) and 0.0 <= s.confidence <= 1.0, s
                 assert s.type in TYPE_CODES
                 if s.type != JammerState.UNKNOWN:
-                    assert math.isfinite(s.jammer_to_noise_db) and math.isfinite(s.jammer_to_signal_db), s
+                    assert math.isfinite(s.jammer_to_noise_db), s
+                    # J/S: a jammer's is finite; a NONE carries none (NaN, issue 27 item 5)
+                    assert math.isnan(s.jammer_to_signal_db) == (s.type == JammerState.NONE), s
                 assert s.header.stamp == msg.header.stamp
                 dtype = SAMPLE_DTYPES[msg.sample_format]
                 assert not is_blank(np.frombuffer(msg.samples, dtype=dtype), bool(msg.is_complex))
