@@ -11,12 +11,11 @@ A closed loop in process, in stamp order, of what the nodes do (``fusion_node._p
 * ``IntegrityMonitor.process_epoch`` judges the (unfiltered) epoch; its report becomes the
   ``IntegrityVerdict`` the node's ``verdict_of`` would make of the published message. As the node's
   re-ordering buffer releases it (a verdict before the measurements of the same stamp), the verdict of
-  epoch k is applied before epoch k, as ``FusionNode._apply_integrity`` applies it:
-  ``GnssExclusion.update``; at an exclusion the SPP cache is cleared, the side of three anchors' plane the
-  state holds the tag on is kept (``FusionFilter.side_of_anchor_plane``), the filter re-anchors on UWB
-  (``FusionFilter.reanchor_on_uwb``) and its parameters become ``FusionNode._filter_params``'s: while all
-  GNSS is excluded, ``use_gnss`` false and ``uwb_tag_side_of_anchor_plane`` the kept side (unless set);
-  at a readmission the node's parameters again; the report's C/N0 J/S goes to the filter;
+  epoch k is applied before epoch k, as ``FusionNode._apply_integrity`` applies it: with the node's own
+  ``uwb_gnss_fusion.spoofing_response.SpoofingResponse`` (exclusion; at an exclusion of all GNSS the
+  roll-back to before the first alarm, else the re-anchor on UWB; ``use_gnss`` false on the held side of
+  the anchors' plane while all GNSS is out; the node's parameters at a readmission); the SPP cache is
+  cleared at an exclusion; the report's C/N0 J/S goes to the filter;
 * each GNSS epoch then goes through ``GnssExclusion.filter_epoch``; what is left goes into the SPP
   reference cache and ``FusionFilter.process_gnss`` (the filter built as the node builds it:
   ``FusionNodeParams().fusion_params()``, the SPP reference solved on demand);
@@ -35,9 +34,9 @@ excluded; readmissions; re-initialisations of the filter during the attack; DETE
 before the attack (false alarms).
 
 What-if rows (push only) measure alternatives to the shipped behaviour: the verdict applied after the epoch
-of its stamp (the node before commit fe95fe1), a static platform's motion model (a parameter,
-``accel_psd_m2ps3``), and an emulated core change (P2 of docs/gnss_integrity/fusion_spoofing.md: roll the
-filter back to before the first alarm instead of re-anchoring). They are measurements for a decision, not
+of its stamp (the node before commit fe95fe1), a static platform's motion model and a near-zero velocity
+(the parameter ``accel_psd_m2ps3``), and the re-anchor without the roll-back (``integrity_rollback_s`` 0).
+They are measurements for a decision, not
 the shipped behaviour.
 
 Usage:
@@ -52,7 +51,6 @@ around them is by hand) and fusion_spoofing_*.png next to it; prints the tables.
 from __future__ import annotations
 
 import argparse
-import copy
 import dataclasses
 import math
 import os
@@ -60,7 +58,6 @@ import pickle
 import platform
 import subprocess
 import time
-from collections import deque
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -69,7 +66,7 @@ import numpy as np
 
 from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic
 from gnss_common.integrity_codes import STATE_DETECTED, STATE_SUSPECTED
-from gnss_common.observations import GnssEpoch, UwbRangeMeasurement
+from gnss_common.observations import GnssEpoch
 from gnss_common.spp import SinglePointPositioner
 from gnss_integrity.monitor import IntegrityMonitor, IntegrityReport
 from rfi_sim.gnss_uwb import BroadcastGeometry, GnssUwbRun, GnssUwbScenario, simulate
@@ -77,12 +74,11 @@ from rfi_sim.spoofing import apply_attack
 from rfi_sim.spoofing_attack import SpoofingAttack
 from uwb_gnss_fusion.fusion_filter import FRAME_EARTH, FusionFilter, FusionOutput
 from uwb_gnss_fusion.fusion_node_params import FusionNodeParams
-from uwb_gnss_fusion.fusion_params import FusionParams
 from uwb_gnss_fusion.integrity_policy import (
-    GnssExclusion,
     IntegrityVerdict,
     integrity_jammer_to_signal,
 )
+from uwb_gnss_fusion.spoofing_response import SpoofingResponse
 from uwb_gnss_fusion.spp_reference import SppReferenceCache
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -127,39 +123,29 @@ class Config:
         verdict_after: apply the verdict of epoch k after the fusion applied epoch k (the node before commit
             fe95fe1, whose re-ordering buffer released a verdict after the measurements of its stamp); False:
             before it, as the node now does.
-        reanchor: at an exclusion, call ``FusionFilter.reanchor_on_uwb`` as the node does.
-        rollback_s: emulated change P2 (None: off): when all GNSS becomes excluded, the filter goes back to its
-            newest copy (kept every :data:`SNAPSHOT_PERIOD_S` while nothing is excluded) stamped at least this
-            long before the episode's first alarm (``first_alarm_ns`` of the report), and the UWB ranges since
-            that copy are applied again, s.
     """
 
     name: str
     node_params: tuple[tuple[str, object], ...] = ()
     verdict_after: bool = False
-    reanchor: bool = True
-    rollback_s: float | None = None
-
-
-SNAPSHOT_PERIOD_S = 1.0
-"""Period of the filter copies of the rollback emulation (P2), s (stamp time; 60 s of them are kept)."""
 
 
 DEFAULTS = Config("node defaults")
 STATIC = (("accel_psd_m2ps3", 0.01),)
 AFTER_CONFIG = Config("verdict after its epoch (node before fe95fe1)", verdict_after=True)
 STATIC_CONFIG = Config("static motion model (accel_psd 0.01)", node_params=STATIC)
+NO_ROLLBACK = Config("re-anchor only, no roll-back (integrity_rollback_s 0, the node before e41252d)",
+                     node_params=(("integrity_rollback_s", 0.0),))
 WHAT_IF = (
     AFTER_CONFIG,
     STATIC_CONFIG,
-    Config("P2: roll back instead of re-anchor (emulated)", rollback_s=1.0, reanchor=False),
-    Config("P2 + static motion model", node_params=STATIC, rollback_s=1.0, reanchor=False),
-    Config("P2 + near-zero velocity (accel_psd 1e-4)", node_params=(("accel_psd_m2ps3", 1e-4),),
-           rollback_s=1.0, reanchor=False),
+    NO_ROLLBACK,
+    Config("near-zero velocity (accel_psd 1e-4)", node_params=(("accel_psd_m2ps3", 1e-4),)),
 )
 """What-if configurations, run on the push (the doc says what each one stands for). The core changes P1
-(re-initialise from UWB first at a divergence) and P3 (the filter told that all GNSS is excluded), and the
-verdict-first order (P4), emulated here before, are now the shipped behaviour (node defaults)."""
+(re-initialise from UWB first at a divergence), P2 (the roll-back to before the first alarm), P3 (the
+filter told that all GNSS is excluded) and the verdict-first order (P4), emulated here before, are now the
+shipped behaviour (node defaults: ``uwb_gnss_fusion.spoofing_response``)."""
 
 
 def report_verdict(r: IntegrityReport) -> IntegrityVerdict:
@@ -167,7 +153,7 @@ def report_verdict(r: IntegrityReport) -> IntegrityVerdict:
     return IntegrityVerdict(r.stamp_ns, int(r.spoofing_state), int(r.spoofing_scope),
                             tuple(int(c) for c in r.affected_constellations),
                             tuple((int(c), int(s)) for c, s in r.affected_satellites),
-                            int(r.jamming_state), float(r.jammer_to_signal_db))
+                            int(r.jamming_state), float(r.jammer_to_signal_db), int(r.first_alarm_ns))
 
 
 def run_scenario(seed: int, duration_s: float) -> GnssUwbRun:
@@ -214,31 +200,21 @@ class FusionRun:
 
 def run_fusion(items: list[tuple[int, int, object]], n_epochs: int, reports: Sequence[IntegrityReport] | None,
                config: Config = DEFAULTS) -> FusionRun:
-    """The fusion node's core over the stream (module docstring); ``reports`` None: no integrity input."""
+    """The fusion node's core over the stream (module docstring); ``reports`` None: no integrity input.
+    What the node does with a verdict is :class:`SpoofingResponse`, the node's own implementation."""
     params = FusionNodeParams(**dict(config.node_params))
     spp_cache = SppReferenceCache(SinglePointPositioner(), params.reference_max_age_s)
     use_spp = params.use_spp_reference and params.use_gnss
     provider = spp_cache.reference if use_spp else None
-    exclusion = GnssExclusion(params.integrity_readmit_clean_s, reports is not None and params.act_on_integrity)
-    held_side = {"side": 0}  # FusionNode._held_side
-
-    def filter_params() -> FusionParams:
-        """FusionNode._filter_params: the node's, except while every GNSS satellite is excluded."""
-        base = params.fusion_params()
-        if not exclusion.all_gnss():
-            return base
-        side = base.uwb_tag_side_of_anchor_plane or held_side["side"]
-        return dataclasses.replace(base, use_gnss=False, uwb_tag_side_of_anchor_plane=side)
-
-    box = {"filt": FusionFilter(filter_params(), reference_provider=provider)}
+    response = SpoofingResponse(params.integrity_readmit_clean_s, reports is not None and params.act_on_integrity,
+                                params.integrity_rollback_s)
+    exclusion = response.exclusion
+    filt = FusionFilter(response.filter_params(params.fusion_params()), reference_provider=provider)
     held = np.full((n_epochs, 3), np.nan)
     excluded = np.zeros(n_epochs, dtype=bool)
     reinit_at = np.zeros(n_epochs, dtype=int)
     state: dict[str, object] = {"pos": None, "reinits": 0, "first": None}
     readmit_ks: list[int] = []
-    snapshots: deque[tuple[int, FusionFilter, int]] = deque()  # (stamp, filter copy, ranges logged before it)
-    ranges: list[UwbRangeMeasurement] = []  # the ranges since the oldest copy (rollback emulation, P2)
-    dropped = 0  # ranges forgotten from the front of ``ranges``
 
     def hold(out: FusionOutput) -> None:
         state["reinits"] = out.reinitializations
@@ -247,49 +223,26 @@ def run_fusion(items: list[tuple[int, int, object]], n_epochs: int, reports: Seq
         elif not out.initialized:
             state["pos"] = None
 
-    def roll_back(first_alarm_ns: int) -> None:
-        """P2: back to the newest copy at least ``rollback_s`` before the first alarm, ranges applied again."""
-        assert config.rollback_s is not None
-        target = first_alarm_ns - round(config.rollback_s * NS)
-        older = [snap for snap in snapshots if snap[0] <= target]
-        if not older:
-            return
-        _, copied, logged = older[-1]
-        filt = copy.deepcopy(copied)
-        filt._reference_provider = provider  # the copy was made without it (what-if only: a private member)
-        filt._reinits = box["filt"]._reinits  # keep counting re-initialisations across the switch
-        box["filt"] = filt
-        for meas in ranges[logged - dropped:]:
-            hold(filt.process_uwb(meas))
-
     def apply(k: int) -> None:
-        """FusionNode._apply_integrity (and, for P2, the rollback in place of the re-anchoring)."""
+        """FusionNode._apply_integrity."""
         assert reports is not None
         verdict = report_verdict(reports[k])
-        change = exclusion.update(verdict)
-        if change == "excluded":
+        done = response.apply(verdict, filt, params.fusion_params())
+        if done.change == "excluded":
             spp_cache.clear()  # the SPP reference must not bring the spoofed position back
             if state["first"] is None:
                 state["first"] = k
-            if config.rollback_s is not None and exclusion.all_gnss() and reports[k].first_alarm_ns > 0:
-                roll_back(reports[k].first_alarm_ns)
-            held_side["side"] = box["filt"].side_of_anchor_plane(verdict.stamp_ns)
-            if config.reanchor:
-                box["filt"].reanchor_on_uwb(verdict.stamp_ns)  # drop the state the spoofer dragged
-            box["filt"].params = filter_params()
-        elif change == "readmitted":
+        elif done.change == "readmitted":
             readmit_ks.append(k)
-            box["filt"].params = filter_params()
         if params.act_on_integrity:
             js = integrity_jammer_to_signal(verdict)
             if js is not None:  # no SDR monitor in this loop: the C/N0 J/S always applies
-                box["filt"].set_jammer_to_signal(verdict.stamp_ns, js)
+                filt.set_jammer_to_signal(verdict.stamp_ns, js)
 
     for kind, k, m in items:
         if kind:
-            hold(box["filt"].process_uwb(m))  # type: ignore[arg-type]
-            if config.rollback_s is not None:
-                ranges.append(m)  # type: ignore[arg-type]
+            hold(filt.process_uwb(m))  # type: ignore[arg-type]
+            response.after_message(m.stamp_ns, filt, m)  # type: ignore[attr-defined]
             continue
         if reports is not None and not config.verdict_after:
             apply(k)  # the node: a verdict is released before the measurements of its stamp
@@ -298,26 +251,15 @@ def run_fusion(items: list[tuple[int, int, object]], n_epochs: int, reports: Seq
         if epoch is not None:
             if use_spp:
                 spp_cache.add(epoch)
-            hold(box["filt"].process_gnss(epoch))
+            hold(filt.process_gnss(epoch))
+        response.after_message(m.stamp_ns, filt)  # type: ignore[attr-defined]
         if reports is not None and config.verdict_after:
             apply(k)
-        stamp = m.stamp_ns  # type: ignore[attr-defined]
-        if config.rollback_s is not None and not exclusion.active and (
-                not snapshots or stamp - snapshots[-1][0] >= SNAPSHOT_PERIOD_S * NS):
-            filt = box["filt"]
-            filt._reference_provider = None  # not copied: the node's SPP cache stays one object
-            snapshots.append((stamp, copy.deepcopy(filt), dropped + len(ranges)))
-            filt._reference_provider = provider
-            while snapshots and stamp - snapshots[0][0] > 60 * NS:
-                snapshots.popleft()
-            keep_from = snapshots[0][2] - dropped
-            del ranges[:keep_from]
-            dropped += keep_from
         if state["pos"] is not None:
             held[k] = state["pos"]
         reinit_at[k] = state["reinits"]
     first = state["first"]
-    return FusionRun(held, excluded, reinit_at, dict(box["filt"].rejection_counts), dict(exclusion.counts),
+    return FusionRun(held, excluded, reinit_at, dict(filt.rejection_counts), dict(exclusion.counts),
                      first if isinstance(first, int) else None, readmit_ks)
 
 
