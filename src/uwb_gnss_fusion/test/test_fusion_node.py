@@ -187,6 +187,7 @@ def test_converges_on_simulated_gnss_uwb(rig_factory, clean_stream):
     values = diag_values(rig)
     assert values['accounting_ok'] == 'True'
     assert int(values['gnss_processed']) <= n_gnss and int(values['uwb_processed']) <= n_uwb
+    assert values['motion_static'] == 'False'  # UWB ranges keep the moving model (motion_model)
     assert rig.out['/diagnostics'][-1].status[0].level == DiagnosticStatus.OK
     assert_no_nan_published(rig)
 

@@ -848,6 +848,8 @@ class FusionNode(Node):
         values['gnss_excluded_for_spoofing'] = self.exclusion.describe()
         # the side of the anchors' plane the filter holds while all GNSS is excluded (0: none held)
         values['anchor_plane_side_held'] = self.response.held_side if self.exclusion.all_gnss() else 0
+        # the motion model the filter found (motion_detection): the static one, or the moving one
+        values['motion_static'] = self.filter.motion_static
         values.update({f'integrity.{k}': v for k, v in self.exclusion.counts.items()})
         values.update({f'integrity.{k}': v for k, v in self.response.counts.items()})
         anchors = self.filter.uwb_anchors_heard(stamp_ns)
