@@ -381,29 +381,16 @@ def predicted_rates(ts: np.ndarray, vs: np.ndarray, covs: np.ndarray, tag: np.nd
 
 
 @njit(cache=True)
-def _interp(x: float, t: np.ndarray, f: np.ndarray) -> float:
-    """``np.interp(x, t, f)`` of one point (t ascending; held beyond the ends)."""
-    n = t.size
-    if x <= t[0]:
-        return f[0]
-    if x >= t[n - 1]:
-        return f[n - 1]
-    i = np.searchsorted(t, x) - 1
-    w = (x - t[i]) / (t[i + 1] - t[i])
-    return f[i] + w * (f[i + 1] - f[i])
-
-
-@njit(cache=True)
 def _mean_of_piecewise_linear(t: np.ndarray, f: np.ndarray, t0: float, t1: float) -> float:
     """Mean over [t0, t1] of the function linear between the samples (t, f) (held beyond them)."""
     total = 0.0
     x_prev = t0
-    y_prev = _interp(t0, t, f)
+    y_prev = np.interp(t0, t, f)
     for i in range(t.size):
         if t0 < t[i] < t1:
             total += (f[i] + y_prev) * (t[i] - x_prev)
             x_prev, y_prev = t[i], f[i]
-    y1 = _interp(t1, t, f)
+    y1 = np.interp(t1, t, f)
     total += (y1 + y_prev) * (t1 - x_prev)
     return total / 2.0 / (t1 - t0)
 
