@@ -123,7 +123,7 @@ THIRD_ROUND = """Third round of speed work on issue 14 item 6 (session 6; kept):
   whole block only when that part shows anything, so a quiet 38.192 MS/s block is analysed as a 16.4 MS/s front
   end's is (0.97 -> 0.83 ms per quiet block; slower front ends' blocks are unchanged).
 * A block whose ridge locks on a multiple of the period the evidence over blocks found reports that period
-  (``monitor.SUBHARMONIC_TOLERANCE``; accuracy, not speed: stft_shapes.md).
+  (``sweep_consistency.SUBHARMONIC_TOLERANCE``; accuracy, not speed: stft_shapes.md).
 * ``warm_up`` also runs saw-tooth blocks: on a fresh install the first chirp of a live stream compiled the tracking
   path's functions (seconds), and the node lost a second of blocks there.
 * Built, tested and off by default: ``analysis_worker`` (the ridge analysis in a child process). On this 2-vCPU

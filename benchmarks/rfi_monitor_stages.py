@@ -38,17 +38,21 @@ FRONT_ENDS = {
 STAGES = (
     ("decode", None, None),                                        # counts * scale (the node's decode)
     ("bad samples", "rfi_monitor.monitor", "_count_bad_samples"),
-    ("welch + features", "rfi_monitor.monitor", "welch_psd"),
-    ("welch + features", "rfi_monitor.monitor", "features_from_psd"),
-    ("welch + features", "rfi_monitor.monitor", "smooth_template"),
+    ("welch + features", "rfi_monitor.classifier", "welch_psd"),
+    ("welch + features", "rfi_monitor.classifier", "features_from_psd"),
+    ("welch + features", "rfi_monitor.classifier", "smooth_template"),
     ("frame length choice", "rfi_monitor.ridge", "choose_frame_length"),
     ("ridge analysis", "rfi_monitor.ridge", "analyse"),
     ("integration", "rfi_monitor.integration", "Integrator.add"),
     ("spectral step", "rfi_monitor.spectral_step", "SpectralStep.test"),
-    ("envelope J/N", "rfi_monitor.monitor", "constant_envelope_jn_db"),
+    ("envelope J/N", "rfi_monitor.constant_envelope", "constant_envelope_jn_db"),
     ("folded shape", "rfi_monitor.ridge", "folded_shape"),
 )
 """(stage, module, attribute) wrapped; an attribute missing in a version is skipped."""
+CALLERS = ("rfi_monitor.monitor", "rfi_monitor.stft_estimator", "rfi_monitor.light_analysis",
+           "rfi_monitor.kalman_estimator")
+"""The monitor's modules that may have imported a stage's function by name (each version has some of them): wrapped
+there too (not the stages' own modules: the integration's Welch PSD is the integration's time)."""
 
 
 class StageClock:
@@ -88,10 +92,14 @@ def install(clock: StageClock) -> list[str]:
             continue
         setattr(owner, name, clock.wrap(stage, fn))
         found.append(stage)
-        if module != "rfi_monitor.monitor" and owner is mod:
-            mon = importlib.import_module("rfi_monitor.monitor")   # also where the monitor imported it by name
-            if getattr(mon, name, None) is fn:
-                setattr(mon, name, getattr(owner, name))
+        if owner is mod:
+            for caller in CALLERS:                # also where the monitor's modules imported it by name
+                try:
+                    cm = importlib.import_module(caller)
+                except ImportError:
+                    continue
+                if cm is not mod and getattr(cm, name, None) is fn:
+                    setattr(cm, name, getattr(owner, name))
     return found
 
 

@@ -61,7 +61,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rfi_monitor.monitor import JammerEstimate
+from rfi_monitor.estimate import JammerEstimate
 from rfi_msgs.msg import IfSamples, JammerState
 from rfi_node_common.stamps import NS_PER_S
 

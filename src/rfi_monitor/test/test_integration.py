@@ -256,8 +256,9 @@ def test_weak_chirp_period_is_not_doubled():
 def test_a_block_just_above_the_detection_level_publishes_a_confirmed_period(fs, period_s):
     """Saw-tooths at J/N -5 dB (just above the detection level; I/Q): single blocks' own periods were 1.2-1.3 % off
     (20 MS/s, 5 us) or doubled (4 MS/s, 33.3 us) in isolated blocks and published. Now such a block's period is
-    published only when the evidence over blocks or a recent block agrees (monitor.PERIOD_CONFIRM_MARGIN_DB): every
-    published period within 1 %, and most blocks still publish one."""
+    published only when the evidence over blocks or a recent block agrees
+    (sweep_consistency.PERIOD_CONFIRM_MARGIN_DB): every published period within 1 %, and most blocks still publish
+    one."""
     fe = FrontEndConfig(sample_rate_hz=fs, intermediate_frequency_hz=0.0, is_complex=True, bits=8,
                         gain_mode="fixed", filter_low_hz=-0.45 * fs, filter_high_hz=0.45 * fs)
     jam = SweepJammer("saw_up", -0.375 * fs, 0.375 * fs, period_s, on_time_s=0.02, js_db=js_for_jn_db(fe, -5.0))

@@ -10,13 +10,8 @@ import numpy as np
 import pytest
 
 from rfi_monitor.classifier import CHIRP, CW, NONE
-from rfi_monitor.monitor import (
-    LIGHT_JN_TOLERANCE_DB,
-    LIGHT_MAX_AGE_QUIET_S,
-    LIGHT_MAX_AGE_S,
-    RfiMonitor,
-    RfiMonitorParams,
-)
+from rfi_monitor.light_analysis import LIGHT_JN_TOLERANCE_DB, LIGHT_MAX_AGE_QUIET_S, LIGHT_MAX_AGE_S
+from rfi_monitor.monitor import RfiMonitor, RfiMonitorParams
 
 FS = 16.368e6
 FIF = 4.092e6

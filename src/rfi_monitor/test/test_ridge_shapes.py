@@ -404,7 +404,7 @@ def test_monitor_tests_a_tracked_hook_once_per_recheck_interval(monkeypatch):
     HOOK_RECHECK_S of stamps (it costs as much as the rest of a tracking block); the blocks in between report the
     tested verdict for a saw-tooth of the same period: row S's hooked saw-tooth is HOOKED in every block, a plain
     saw-tooth never."""
-    from rfi_monitor import monitor as mon_module
+    from rfi_monitor import sweep_consistency as mon_module
     from rfi_monitor.monitor import RfiMonitor, RfiMonitorParams
 
     calls = []

@@ -60,7 +60,7 @@ def test_windowed_running_power_follows_the_exponential_average():
     pw = x[1] ** 2                                     # the stream starts from the first power
     for m in range(2, 4096):
         pw += lam * (x[m] ** 2 - pw)
-    assert math.isclose(float(mon._state.mst[MonitorFloat.POW]), pw, rel_tol=1e-9)
+    assert math.isclose(float(mon.estimator._state.mst[MonitorFloat.POW]), pw, rel_tol=1e-9)
 
 
 def test_tracker_state_fields_are_the_kernel_arguments():

@@ -197,7 +197,7 @@ def test_documented_noise_floor_sees_a_wideband_jammer_from_the_start():
 def test_kalman_run_away_track_is_never_published(monkeypatch):
     """Issue 14 item 4 in the paper's per-sample mode: a filter frequency outside the sampled band (the issue's
     5.1e10 Hz) is not published: CHIRP with frequency NaN, the tracker restarted and the reset counted."""
-    import rfi_monitor.monitor as mm
+    import rfi_monitor.kalman_estimator as mm
     from rfi_monitor.tracking_filters import FilterFloat
     from rfi_sim.if_signal import ChirpJammer, FrontEndConfig, IfSimulator
     fe = FrontEndConfig(noise_density_dbm_per_mhz=-124.0)      # J/N 21.2 dB with J/S 40 dB
@@ -223,7 +223,7 @@ def test_kalman_run_away_track_is_never_published(monkeypatch):
     e = mon.process(x[3 * 38192:], fs, fif, 3 * 38192, 0)
     assert e.valid and e.type == CHIRP and math.isnan(e.frequency_hz) and math.isnan(e.frequency_std_hz)
     assert e.counters["tracker_resets_invalid"] == 1 and e.counters["frequency_not_tracked"] == 1
-    assert mon._state.fst[FilterFloat.F] != 1.3e3      # restarted
+    assert mon.estimator._state.fst[FilterFloat.F] != 1.3e3      # restarted
 
 
 def test_short_gaps_keep_the_frame_length_long_gaps_choose_again(monkeypatch):
@@ -295,7 +295,7 @@ def test_a_block_locked_on_a_multiple_of_the_integrated_period_reports_the_perio
     the 128-sample frame): the evidence over blocks finds 5.1 us, then one block's own ridge locked on 11 periods
     (56.1 us, a 14 MHz band: published as valid before). The block now reports the window's period, no sweep
     law fitted on the multiple."""
-    from rfi_monitor.monitor import _multiple
+    from rfi_monitor.sweep_consistency import multiple as _multiple
     name, fs, cplx, fif, shape, lo, hi, period, _jn, ratio, _want = next(c for c in CASES if "38.192" in c[0])
     x, _ = jammed(int(5e-3 * fs), fs, cplx, shape, lo, hi, period, -5.0, seed=11, fif=fif, rate_ratio=ratio)
     ests = run(x, fs, cplx, fif)
@@ -313,7 +313,7 @@ def test_a_weak_block_publishes_a_period_only_when_the_evidence_over_blocks_agre
     (twice the period) and 4 % off, published as valid. Such a block's period, and the sweep law fitted on it, is
     now published only when the evidence over blocks found the same period; else NaN, counted as
     block_periods_unconfirmed. The blocks stay CHIRP; every period published is within 1 %."""
-    from rfi_monitor.monitor import _agrees
+    from rfi_monitor.sweep_consistency import agrees as _agrees
     name, fs, cplx, fif, shape, lo, hi, period, _jn, ratio, _want = next(c for c in CASES if case in c[0])
     unconfirmed = 0
     for seed in (11, 12, 13):
