@@ -208,7 +208,7 @@ from uwb_gnss_fusion.spp_reference import SppReferenceCache
 
 TOPICS = """topics:
   subscribes /gnss/measurements (rfi_msgs/GnssMeasurementArray), /uwb/ranges (rfi_msgs/UwbRange),
-             /rfi/jammer_state (rfi_msgs/JammerState)
+             /rfi/jammer_state (rfi_msgs/JammerState), /gnss/integrity (rfi_msgs/GnssIntegrity)
   publishes  /fusion/odometry (nav_msgs/Odometry, ECEF), /fusion/local_odometry (nav_msgs/Odometry, map ->
              base_link), /fusion/fix (sensor_msgs/NavSatFix), /fusion/datum (sensor_msgs/NavSatFix, latched: the
              origin of map), /fusion/status (rfi_msgs/FusionStatus), /diagnostics (diagnostic_msgs/DiagnosticArray)"""
