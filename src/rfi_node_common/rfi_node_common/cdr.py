@@ -227,16 +227,28 @@ class CdrLayout:
         if not (ints.flags.writeable and floats.flags.writeable):  # the one walk types its streams writable
             ints, floats = ints.copy(), floats.copy()
         chars = np.frombuffer(text, dtype=np.uint8)
-        size = head.size + 16 * (ints.size + floats.size) + chars.size + 64
-        while True:
-            out = np.zeros(size, dtype=np.uint8)
-            end = encode_program(self.program, start, head, ints, floats, chars, out)
-            if end != _FULL:
-                break
-            size *= 2
-        if end < 0:
+        raw = encode_bytes(self.program, start, head, ints, floats, chars,
+                           head.size + 16 * (ints.size + floats.size) + chars.size + 64)
+        if raw is None:
             raise ValueError(f"value streams do not fit the layout of {self.name}")
-        return out[:end].tobytes()
+        return raw
+
+
+def encode_bytes(program: np.ndarray, start: int, head: np.ndarray, ints: np.ndarray, floats: np.ndarray,
+                 text: np.ndarray, size: int) -> bytes | None:
+    """:func:`encode_program` into a zeroed buffer of ``size`` bytes, doubled until the message fits.
+
+    Returns:
+        The serialised bytes, or None if the streams do not fit the program (too short, a negative
+        count, a string outside ``text``, a bound exceeded).
+    """
+    while True:
+        out = np.zeros(size, dtype=np.uint8)
+        end = encode_program(program, start, head, ints, floats, text, out)
+        if end != _FULL:
+            break
+        size *= 2
+    return None if end < 0 else out[:end].tobytes()
 
 
 class DecodedCdr(NamedTuple):
