@@ -412,7 +412,7 @@ def tables(results, spd, hy):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration-s", type=float, default=360.0)
-    ap.add_argument("--hanyang", type=Path, default=Path("/work/shared/data/uwb_outdoor_hanyang"))
+    ap.add_argument("--hanyang", type=Path, default=ROOT.parent / "shared" / "data" / "uwb_outdoor_hanyang")
     args = ap.parse_args()
     spd = speed(args.duration_s)
     print(f"speed: {spd}", flush=True)

@@ -155,7 +155,7 @@ def confusion(n_per_class: int = 50) -> np.ndarray:
 
 
 def real_captures() -> list[str]:
-    data = Path("/work/shared/data")
+    data = Path(__file__).resolve().parents[2] / "shared" / "data"  # the data collection beside the checkout
     rows = []
     cases = [("pocketsdr 4 MHz IQ (2-bit)", data / "iq_clean_pocketsdr/L1_20211202_084700_4MHz_IQ.bin", np.int8,
               4e6, 0.0, True),

@@ -44,8 +44,8 @@ Run (about a minute; ``--rows`` picks rows by substring, ``--blocks`` sets the s
     PYTHONPATH=src/rfi_sim:src/rfi_monitor:src/rfi_node_common:src/gnss_common \\
         python benchmarks/rfi_monitor_real_jammers.py [--out docs/rfi_monitor/real_jammers.md]
 
-The monitor measured is whichever ``rfi_monitor`` the path resolves (its file and the git commit are
-printed in the output).
+The monitor measured is whichever ``rfi_monitor`` the path resolves (its folder, without the machine's
+prefix, and the git commit are printed in the output).
 """
 
 from __future__ import annotations
@@ -63,6 +63,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from doc_paths import portable_path
 
 from rfi_sim.if_signal import (
     CHIRP,
@@ -631,7 +632,7 @@ def cpu_model() -> str:
 def markdown(results: list[RowResult], sources: list[str], unknown: list[str], wall_s: float,
              monitor_from: str = "") -> str:
     import rfi_monitor
-    mod = Path(rfi_monitor.__file__).resolve().parent
+    mod = portable_path(Path(rfi_monitor.__file__).resolve().parent)
     n_met = sum(verdict(r) == "**met**" for r in results)
     lines = [
         "# rfi_monitor on issue 14's jammers (simulated, and real clean captures with jammers added)",

@@ -52,6 +52,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from doc_paths import portable_path  # noqa: E402  (the docs' path rule, next door)
 from rfi_monitor_real_jammers import (  # noqa: E402  (the benchmark next door: one copy of these)
     BLOCK_S,
     Capture,
@@ -354,7 +355,7 @@ def figure(curves: list[Curve], path: Path) -> None:
 def markdown(curves: list[Curve], goal_lines: list[str], caps: Sequence[Capture], fig_name: str,
              wall_s: float, trials: int, monitor_from: str = "") -> str:
     import rfi_monitor
-    mod = Path(rfi_monitor.__file__).resolve().parent
+    mod = portable_path(Path(rfi_monitor.__file__).resolve().parent)
     lines = [
         "# rfi_monitor sensitivity: detection probability against J/N, false alarms on real clean captures",
         "",

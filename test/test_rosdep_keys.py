@@ -1,11 +1,11 @@
 """Every dependency in src/*/package.xml is a key that rosdep resolves on Ubuntu 24.04 / ROS 2 Jazzy
-(issue 11, item 5), so `rosdep install --from-paths src --ignore-src -y` works as the README says.
+(issue 11, item 5), so `rosdep install --from-paths src --ignore-src -y` works as docs/guide/setup.md says.
 
 rosdep cannot run here (no apt ROS), so the keys it resolves are written down below, each with
 where it is defined: ros/rosdistro's rosdep/python.yaml (with the pull request that added or fixed
 the rule where it is recent), the packages released in ros/rosdistro's jazzy/distribution.yaml
 (ros-jazzy-<name> debs), or this project's rosdep/rfi.yaml for PyPI-only packages that rosdistro
-has no key for (the README registers it as a rosdep source). A new dependency needs its key's
+has no key for (docs/guide/setup.md registers it as a rosdep source). A new dependency needs its key's
 source added here: look the key up in rosdistro, never guess it (`rosbags`, the key we had, is
 not one: rosdistro names it python3-rosbags-pip).
 """
@@ -110,8 +110,8 @@ def test_the_project_rules_are_only_for_what_rosdistro_lacks():
     assert set(rules) <= set(used), 'a rule in rosdep/rfi.yaml that no package.xml uses'
 
 
-def test_every_pip_key_is_in_requirements_and_in_the_readme_pip_line():
-    """`make setup` (requirements.txt) and the README's pip line for an existing ROS install install
+def test_every_pip_key_is_in_requirements_and_in_the_setup_guide_pip_line():
+    """`make setup` (requirements.txt) and the setup guide's pip line for an existing ROS install install
     exactly the PyPI packages behind the pip keys, so rosdep finds them installed and never runs pip
     itself (system-wide, which PEP 668 refuses on Ubuntu 24.04)."""
     rules = project_rules()
@@ -120,8 +120,8 @@ def test_every_pip_key_is_in_requirements_and_in_the_readme_pip_line():
                     for line in (ROOT / 'requirements.txt').read_text().splitlines()
                     if line.strip() and not line.startswith('#')}
     assert wanted <= requirements, wanted - requirements
-    readme = (ROOT / 'README.md').read_text()
-    section = readme.split('## On an existing ROS 2 Jazzy install', 1)[1].split('\n## ', 1)[0]
+    guide = (ROOT / 'docs' / 'guide' / 'setup.md').read_text()
+    section = guide.split('## On an existing ROS 2 Jazzy install', 1)[1].split('\n## ', 1)[0]
     lines = [line for line in section.splitlines() if line.startswith('python -m pip install ')]
     assert len(lines) == 1, lines
     words = shlex.split(lines[0].split(' #', 1)[0])[4:]  # after `python -m pip install`

@@ -163,8 +163,18 @@ def _geodetic_kernel(x: float, y: float, z: float) -> tuple[float, float, float]
 
 
 @njit(cache=True)
-def _enu_rotation_kernel(lat_rad: float, lon_rad: float) -> np.ndarray:
-    """:func:`ecef_to_enu_rotation`, compiled (Hofmann-Wellenhof et al. 2008, eq. 10.41)."""
+def ecef_to_enu_rotation_scalar(lat_rad: float, lon_rad: float) -> np.ndarray:
+    """:func:`ecef_to_enu_rotation`, compiled (Hofmann-Wellenhof et al. 2008, eq. 10.41): the fast path
+    for one point, also from other compiled code of this module (the multi-GNSS fix calls it per fix).
+
+    Args:
+        lat_rad: geodetic latitude of the ENU origin, rad.
+        lon_rad: longitude of the ENU origin, rad.
+
+    Returns:
+        R, shape (3, 3); rows are the east, north and up unit vectors in ECEF (``math.sin`` / ``cos``,
+        which may differ from numpy's in the last place).
+    """
     sl, cl = math.sin(lat_rad), math.cos(lat_rad)
     so, co = math.sin(lon_rad), math.cos(lon_rad)
     r = np.empty((3, 3))
@@ -176,8 +186,8 @@ def _enu_rotation_kernel(lat_rad: float, lon_rad: float) -> np.ndarray:
 
 @njit(cache=True)
 def _rotate_covariance_kernel(cov: np.ndarray, lat_rad: float, lon_rad: float) -> np.ndarray:
-    """``R cov R^T`` for the 3x3 leading block of ``cov`` (R of :func:`_enu_rotation_kernel`), compiled."""
-    r = _enu_rotation_kernel(lat_rad, lon_rad)
+    """``R cov R^T`` for the 3x3 leading block of ``cov`` (R of :func:`ecef_to_enu_rotation_scalar`), compiled."""
+    r = ecef_to_enu_rotation_scalar(lat_rad, lon_rad)
     rc = np.zeros((3, 3))
     for i in range(3):
         for j in range(3):

@@ -5,7 +5,9 @@ the receiver sits in the ECEF frame of reception, which has turned by ``omega_e 
 z axis meanwhile (tau the signal travel time). Two forms are used:
 
 * :func:`sagnac_rotate`: the exact rotation ``R3(omega_e tau) p_s``, with tau from the range and
-  optionally iterated (SPP, the measurement builder, the simulators);
+  optionally iterated (SPP, the measurement builder, the simulators); its angle is
+  :func:`flight_rotation`, which a light-time iteration of its own (a satellite that moves during
+  the flight, ``rfi_sim.gnss_uwb``) calls directly;
 * :func:`sagnac_range_correction_m` and :func:`sagnac_range_rate_correction_mps`: its first-order
   expansion in ``omega_e tau`` added to the straight-line range (and its time derivative), which
   broadcasts over batches of receiver states (the filter's measurement models evaluate it on all
@@ -46,6 +48,25 @@ def rotate_about_z(vectors: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray) ->
     return out
 
 
+def flight_rotation(travel_time_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The Earth's rotation during a signal's flight: cos and sin of ``omega_e tau``.
+
+    Args:
+        travel_time_s: signal travel times tau, s, any shape.
+
+    Returns:
+        ``(cos, sin)`` of the angle ``omega_e tau``, rad, each of the shape of ``travel_time_s``:
+        the arguments of :func:`rotate_about_z` that take a transmit-time ECEF vector into the
+        receive-time frame.
+
+    Notes
+    -----
+    ``R3(omega_e tau)`` of IS-GPS-200, 20.3.3.4.3.3.2; Cao et al., eq. 5.
+    """
+    ang = EARTH_ROTATION_RATE_RADPS * travel_time_s
+    return np.cos(ang), np.sin(ang)
+
+
 def sagnac_rotate(
     satellite_ecef_m: np.ndarray, receiver_ecef_m: np.ndarray, iterations: int = 1
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -74,8 +95,7 @@ def sagnac_rotate(
     c = np.ones(sat.shape[0])
     s = np.zeros(sat.shape[0])
     for _ in range(max(1, iterations)):
-        ang = EARTH_ROTATION_RATE_RADPS * tau
-        c, s = np.cos(ang), np.sin(ang)
+        c, s = flight_rotation(tau)
         rotated = rotate_about_z(sat, c, s)
         tau = np.sqrt(np.sum((rotated - rx) ** 2, axis=1)) / SPEED_OF_LIGHT_MPS
     return rotated, c, s, tau

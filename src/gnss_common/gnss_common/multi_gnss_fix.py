@@ -33,10 +33,9 @@ from typing import NamedTuple
 import numpy as np
 
 from gnss_common.constants import WGS84_ECCENTRICITY_SQUARED, WGS84_SEMI_MAJOR_AXIS_M
-from gnss_common.coordinates import ecef_to_geodetic_scalar
+from gnss_common.coordinates import ecef_to_enu_rotation_scalar, ecef_to_geodetic_scalar
 from gnss_common.multi_gnss_rows import (
     design,
-    enu_rotation,
     normal_rows,
     rate_variances,
     residuals,
@@ -250,7 +249,7 @@ def _geometry(rows: _Rows, pos: np.ndarray) -> _Geometry:
     los = diff / rng[:, None]
     x, y, z = pos.tolist()
     near = all(map(math.isfinite, (x, y, z))) and math.sqrt(x * x + y * y + z * z) > _NEAR_SURFACE_R_M
-    rot = enu_rotation(*ecef_to_geodetic_scalar(x, y, z)[:2]) if near else None
+    rot = ecef_to_enu_rotation_scalar(*ecef_to_geodetic_scalar(x, y, z)[:2]) if near else None
     sin_el = np.clip(los @ rot[2], -1.0, 1.0) if rot is not None else np.ones(rng.size)
     return _Geometry(rng, los, c, s, rot, sin_el)
 

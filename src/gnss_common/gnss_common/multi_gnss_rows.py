@@ -21,6 +21,7 @@ import numpy as np
 from numba import njit
 
 from gnss_common.constants import EARTH_ROTATION_RATE_RADPS, SPEED_OF_LIGHT_MPS
+from gnss_common.coordinates import ecef_to_enu_rotation_scalar
 
 
 @njit(cache=True)
@@ -68,18 +69,6 @@ def sagnac_rotate(sat: np.ndarray, pos: np.ndarray) -> tuple[np.ndarray, np.ndar
         c[i] = math.cos(ang)
         s[i] = math.sin(ang)
     return rotate_z(sat, c, s, pos), c, s
-
-
-@njit(cache=True)
-def enu_rotation(lat_rad: float, lon_rad: float) -> np.ndarray:
-    """``coordinates.ecef_to_enu_rotation`` (rows east, north, up), compiled."""
-    sl, cl = math.sin(lat_rad), math.cos(lat_rad)
-    so, co = math.sin(lon_rad), math.cos(lon_rad)
-    r = np.empty((3, 3))
-    r[0, 0], r[0, 1], r[0, 2] = -so, co, 0.0
-    r[1, 0], r[1, 1], r[1, 2] = -sl * co, -sl * so, cl
-    r[2, 0], r[2, 1], r[2, 2] = cl * co, cl * so, sl
-    return r
 
 
 @njit(cache=True)
@@ -185,7 +174,7 @@ def warm_up() -> None:
     screen_flags(s, v3, v3)
     screened(np.ones((2, 9)), np.arange(2), np.ones(2, dtype=np.bool_))
     sagnac_rotate(v3, np.zeros(3))
-    enu_rotation(0.5, 0.5)
+    ecef_to_enu_rotation_scalar(0.5, 0.5)  # coordinates' kernel, which the fix calls
     design(v3, np.zeros(2, dtype=np.int64), 1)
     row_variances(v1, v1, v1, v1, np.full(2, math.nan), 0.09, 0.3, 0.5, 0.3, False)
     clock = np.zeros(2, dtype=np.int64)

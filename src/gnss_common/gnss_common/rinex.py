@@ -231,6 +231,18 @@ def _label(line: str) -> str:
     return line[60:80].strip()
 
 
+def _header_records(lines: list[str]) -> tuple[int | None, Iterator[tuple[int, str, str]]]:
+    """The header of a RINEX file, after its first line: ``(end, records)``.
+
+    ``end`` is the index of the first line after ``END OF HEADER`` (None if the file has none, which
+    the caller reports after reading the records); ``records`` yields ``(line number, label, line)``
+    for each header line before it (every line after the first if there is no ``END OF HEADER``).
+    """
+    end = next((idx + 1 for idx in range(1, len(lines)) if _label(lines[idx]) == "END OF HEADER"), None)
+    stop = len(lines) if end is None else end - 1
+    return end, ((idx + 1, _label(lines[idx]), lines[idx]) for idx in range(1, stop))
+
+
 def _float_field(text: str, path: str | Path, line_no: int, what: str, blank: float = math.nan) -> float:
     s = text.strip()
     if not s:
@@ -349,14 +361,8 @@ def _parse_obs_header(lines: list[str], path: str | Path) -> tuple[RinexObsHeade
     v3_current: str | None = None
     v3_count = 0
     glo_channels: dict[int, int] = {}
-    end = None
-    for idx in range(1, len(lines)):
-        line = lines[idx]
-        line_no = idx + 1
-        label = _label(line)
-        if label == "END OF HEADER":
-            end = idx + 1
-            break
+    end, records = _header_records(lines)
+    for line_no, label, line in records:
         if label == "MARKER NAME":
             marker = line[0:60].strip()
         elif label == "APPROX POSITION XYZ":
@@ -618,14 +624,8 @@ def read_rinex_nav(path: str | Path) -> RinexNav:
     alpha = np.full(4, math.nan)
     beta = np.full(4, math.nan)
     leap: int | None = None
-    end = None
-    for idx in range(1, len(lines)):
-        line = lines[idx]
-        line_no = idx + 1
-        label = _label(line)
-        if label == "END OF HEADER":
-            end = idx + 1
-            break
+    end, records = _header_records(lines)
+    for line_no, label, line in records:
         if label == "ION ALPHA":
             alpha = np.array(
                 [_float_field(line[2 + 12 * k : 14 + 12 * k], path, line_no, "ION ALPHA") for k in range(4)]

@@ -8,6 +8,7 @@ import numpy as np
 
 from gnss_common.constants import EARTH_ROTATION_RATE_RADPS, SPEED_OF_LIGHT_MPS
 from gnss_common.earth_rotation import (
+    flight_rotation,
     rotate_about_z,
     sagnac_range_correction_m,
     sagnac_range_rate_correction_mps,
@@ -35,6 +36,20 @@ def test_rotation_equals_the_closed_form_rotation_by_omega_tau():
             assert abs(c[i] - math.cos(EARTH_ROTATION_RATE_RADPS * t)) < 1e-15
             assert abs(s[i] - math.sin(EARTH_ROTATION_RATE_RADPS * t)) < 1e-15
             assert abs(tau[i] - np.linalg.norm(rotated[i] - RX) / SPEED_OF_LIGHT_MPS) < 1e-15
+
+
+def test_flight_rotation_is_the_angle_of_omega_tau_on_any_shape():
+    """The angle a light-time iteration of its own (rfi_sim's moving satellites) takes from here: R3 of
+    omega_e tau, over a 75 ms flight about 5.5e-6 rad."""
+    tau = np.array([[0.067, 0.075], [0.086, 0.0]])
+    c, s = flight_rotation(tau)
+    assert c.shape == s.shape == tau.shape
+    for t, ci, si in zip(tau.ravel(), c.ravel(), s.ravel(), strict=True):
+        assert abs(ci - math.cos(EARTH_ROTATION_RATE_RADPS * t)) < 1e-16
+        assert abs(si - math.sin(EARTH_ROTATION_RATE_RADPS * t)) < 1e-16
+    assert abs(s[0, 1] - 5.469e-6) < 1e-9
+    np.testing.assert_allclose(rotate_about_z(SATS[:1], *flight_rotation(np.array([0.075]))),
+                               (_r3(EARTH_ROTATION_RATE_RADPS * 0.075) @ SATS[0])[None, :], rtol=0.0, atol=1e-7)
 
 
 def test_rotation_keeps_norm_and_z_and_converges():

@@ -24,7 +24,7 @@ from numba import njit
 from imm_carrier.measurement_model import METHOD_IMM
 from imm_carrier.tracker import BATCH_COLUMNS
 from rfi_msgs.msg import CarrierPhaseArray, CorrelatorArray
-from rfi_node_common.cdr import CDR_LE, ENCODE_BUFFER_FULL, encode_program, layout
+from rfi_node_common.cdr import CDR_LE, encode_bytes, layout
 
 __all__ = ["CDR_LE", "DecodedCorrelatorArray", "ESTIMATE_SOURCES", "decode_correlator_array",
            "encode_carrier_phase_array"]
@@ -249,13 +249,7 @@ def encode_carrier_phase_array(header: bytes, tables: list[tuple[np.ndarray, int
     # keep a stale copy of it after that package changes (numba checks only the caller's own file).
     ints, floats = _streams(np.ascontiguousarray(pairs[0][0], dtype=np.float64), int(pairs[0][1]),
                             np.ascontiguousarray(pairs[1][0], dtype=np.float64), int(pairs[1][1]), _SLOTS)
-    size = head.size + 8 + 128 * n
-    while True:
-        out = np.zeros(size, dtype=np.uint8)
-        end = encode_program(_OUT.program, _ESTIMATES_START, head, ints, floats, _NO_TEXT, out)
-        if end != ENCODE_BUFFER_FULL:
-            break
-        size *= 2
-    if end < 0:
+    raw = encode_bytes(_OUT.program, _ESTIMATES_START, head, ints, floats, _NO_TEXT, head.size + 8 + 128 * n)
+    if raw is None:
         raise ValueError("tables do not fit rfi_msgs/CarrierPhaseArray")
-    return out[:end].tobytes()
+    return raw

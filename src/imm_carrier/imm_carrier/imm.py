@@ -25,7 +25,7 @@ from gnss_common.clock_model import (
 )
 from gnss_common.constants import GPS_L1_FREQUENCY_HZ
 from imm_carrier.layout import IMM_OUT_LEN, IMM_STATE_LEN, ImmOut, ImmState
-from imm_carrier.measurement_model import CN0_MAX_DBHZ, CN0_MIN_DBHZ, IQ_SCALINGS
+from imm_carrier.measurement_model import IQ_SCALINGS, check_step_inputs, correlator_batch
 
 TWO_PI = 2.0 * math.pi
 
@@ -452,12 +452,7 @@ class ImmCarrierFilter:
     ) -> None:
         if not self._initialized:
             raise ValueError("filter not initialised: call initialize() or initialize_from_correlator()")
-        if not (math.isfinite(integration_time_s) and integration_time_s > 0.0):
-            raise ValueError(f"integration_time_s must be finite and > 0, got {integration_time_s!r}")
-        if not (math.isfinite(cn0_dbhz) and CN0_MIN_DBHZ <= cn0_dbhz <= CN0_MAX_DBHZ):
-            raise ValueError(f"cn0_dbhz must be in [{CN0_MIN_DBHZ}, {CN0_MAX_DBHZ}], got {cn0_dbhz!r}")
-        if not math.isfinite(predicted_phase_change_rad):
-            raise ValueError("predicted_phase_change_rad must be finite")
+        check_step_inputs(cn0_dbhz, integration_time_s, predicted_phase_change_rad)
 
     def update(
         self,
@@ -567,41 +562,20 @@ class ImmCarrierFilter:
         """
         if not self._initialized:
             raise ValueError("filter not initialised: call initialize() or initialize_from_correlator()")
-        zi = np.asarray(in_phase, dtype=float)
-        if zi.ndim != 1 or zi.size == 0:
-            raise ValueError("in_phase must be a non-empty 1-D array")
+        batch = correlator_batch(in_phase, quadrature, cn0_dbhz, integration_time_s, predicted_phase_change_rad)
+        zi, zq, cn0 = batch.in_phase, batch.quadrature, batch.cn0_dbhz
+        t, dphi = batch.integration_time_s, batch.predicted_phase_change_rad
         n = zi.size
-
-        def as_n(name: str, v: np.ndarray | float) -> np.ndarray:
-            a = np.broadcast_to(np.asarray(v, dtype=float), (n,)) if np.ndim(v) == 0 else np.asarray(v, float)
-            if a.shape != (n,):
-                raise ValueError(f"{name} must be a scalar or have shape ({n},), got {a.shape}")
-            return np.ascontiguousarray(a)
-
-        zq = as_n("quadrature", quadrature)
-        cn0 = as_n("cn0_dbhz", cn0_dbhz)
-        t = as_n("integration_time_s", integration_time_s)
-        dphi = as_n("predicted_phase_change_rad", predicted_phase_change_rad)
-        pch = as_n(
+        pch = batch.per_sample(
             "bit_transition_probability",
             self.params.bit_transition_probability
             if bit_transition_probability is None
             else bit_transition_probability,
         )
-        prior = as_n("bit_prior_plus", bit_prior_plus)
+        prior = batch.per_sample("bit_prior_plus", bit_prior_plus)
         if np.any(~((pch >= 0) & (pch <= 1))):
             raise ValueError("bit_transition_probability must be in [0, 1]")
-        ok_t = np.isfinite(t) & (t > 0)
-        ok_cn0 = np.isfinite(cn0) & (cn0 >= CN0_MIN_DBHZ) & (cn0 <= CN0_MAX_DBHZ)
-        ok_dphi = np.isfinite(dphi)
-        accepted = ok_t & ok_cn0 & ok_dphi
-        coast = accepted & ~(np.isfinite(zi) & np.isfinite(zq))
-        counters = {
-            "rejected_integration_time": int(np.sum(~ok_t)),
-            "rejected_cn0": int(np.sum(ok_t & ~ok_cn0)),
-            "rejected_predicted_phase": int(np.sum(ok_t & ok_cn0 & ~ok_dphi)),
-            "coasted_nonfinite_iq": int(np.sum(coast)),
-        }
+        accepted, counters = batch.accepted, batch.counters
         idx = np.flatnonzero(accepted)
         raw = np.full((n, IMM_OUT_LEN), np.nan)
         if idx.size:

@@ -151,3 +151,97 @@ class CarrierPhaseEstimate:
     mode_probabilities: tuple[float, ...]
     locked: bool
     cycle_slips: int
+
+
+def check_step_inputs(cn0_dbhz: float, integration_time_s: float, predicted_phase_change_rad: float) -> None:
+    """Refuse a scalar tracker step's invalid T, C/N0 or phase change (the tracker counts these before).
+
+    Args:
+        cn0_dbhz: C/N0, dB-Hz, in [CN0_MIN_DBHZ, CN0_MAX_DBHZ].
+        integration_time_s: coherent integration time T, s, finite and > 0.
+        predicted_phase_change_rad: satellite-motion phase change over the interval, rad, finite.
+
+    Raises:
+        ValueError: naming the first invalid input, in the order T, C/N0, phase change.
+    """
+    if not (math.isfinite(integration_time_s) and integration_time_s > 0.0):
+        raise ValueError(f"integration_time_s must be finite and > 0, got {integration_time_s!r}")
+    if not (math.isfinite(cn0_dbhz) and CN0_MIN_DBHZ <= cn0_dbhz <= CN0_MAX_DBHZ):
+        raise ValueError(f"cn0_dbhz must be in [{CN0_MIN_DBHZ}, {CN0_MAX_DBHZ}], got {cn0_dbhz!r}")
+    if not math.isfinite(predicted_phase_change_rad):
+        raise ValueError("predicted_phase_change_rad must be finite")
+
+
+@dataclass(frozen=True)
+class CorrelatorBatch:
+    """One channel's correlators as a tracker's ``process_batch`` takes them: per-sample arrays and
+    which samples are accepted.
+
+    Attributes:
+        in_phase, quadrature: prompt I, Q, shape (n,) (NaN: the tracker coasts).
+        cn0_dbhz, integration_time_s, predicted_phase_change_rad: shape (n,), dB-Hz, s, rad.
+        accepted: shape (n,), bool: T finite and > 0, C/N0 in range and a finite phase change.
+        counters: rejected_integration_time, rejected_cn0, rejected_predicted_phase (each sample
+            counted once, under its first invalid input) and coasted_nonfinite_iq (accepted, NaN I/Q).
+    """
+
+    in_phase: np.ndarray
+    quadrature: np.ndarray
+    cn0_dbhz: np.ndarray
+    integration_time_s: np.ndarray
+    predicted_phase_change_rad: np.ndarray
+    accepted: np.ndarray
+    counters: dict[str, int]
+
+    def per_sample(self, name: str, value: np.ndarray | float) -> np.ndarray:
+        """``value`` as a contiguous float array of shape (n,): a scalar is repeated.
+
+        Raises:
+            ValueError: an array of another shape.
+        """
+        n = self.in_phase.size
+        a = np.broadcast_to(np.asarray(value, dtype=float), (n,)) if np.ndim(value) == 0 \
+            else np.asarray(value, float)
+        if a.shape != (n,):
+            raise ValueError(f"{name} must be a scalar or have shape ({n},), got {a.shape}")
+        return np.ascontiguousarray(a)
+
+
+def correlator_batch(
+    in_phase: np.ndarray,
+    quadrature: np.ndarray | float,
+    cn0_dbhz: np.ndarray | float,
+    integration_time_s: np.ndarray | float,
+    predicted_phase_change_rad: np.ndarray | float,
+) -> CorrelatorBatch:
+    """Check and shape the inputs of a tracker's ``process_batch`` (IMM and PLL alike).
+
+    Args:
+        in_phase: prompt I, shape (n,), n >= 1.
+        quadrature, cn0_dbhz, integration_time_s, predicted_phase_change_rad: shape (n,) or scalar.
+
+    Returns:
+        :class:`CorrelatorBatch`.
+
+    Raises:
+        ValueError: ``in_phase`` not a non-empty 1-D array, or another input of the wrong shape.
+    """
+    zi = np.asarray(in_phase, dtype=float)
+    if zi.ndim != 1 or zi.size == 0:
+        raise ValueError("in_phase must be a non-empty 1-D array")
+    shape = CorrelatorBatch(zi, zi, zi, zi, zi, zi, {})
+    zq = shape.per_sample("quadrature", quadrature)
+    cn0 = shape.per_sample("cn0_dbhz", cn0_dbhz)
+    t = shape.per_sample("integration_time_s", integration_time_s)
+    dphi = shape.per_sample("predicted_phase_change_rad", predicted_phase_change_rad)
+    ok_t = np.isfinite(t) & (t > 0)
+    ok_cn0 = np.isfinite(cn0) & (cn0 >= CN0_MIN_DBHZ) & (cn0 <= CN0_MAX_DBHZ)
+    ok_dphi = np.isfinite(dphi)
+    accepted = ok_t & ok_cn0 & ok_dphi
+    counters = {
+        "rejected_integration_time": int(np.sum(~ok_t)),
+        "rejected_cn0": int(np.sum(ok_t & ~ok_cn0)),
+        "rejected_predicted_phase": int(np.sum(ok_t & ok_cn0 & ~ok_dphi)),
+        "coasted_nonfinite_iq": int(np.sum(accepted & ~(np.isfinite(zi) & np.isfinite(zq)))),
+    }
+    return CorrelatorBatch(zi, zq, cn0, t, dphi, accepted, counters)

@@ -14,7 +14,7 @@ import numpy as np
 from numba import njit
 
 from imm_carrier.layout import PLL_OUT_LEN, PLL_STATE_LEN, PllOut, PllState
-from imm_carrier.measurement_model import CN0_MAX_DBHZ, CN0_MIN_DBHZ, IQ_SCALINGS
+from imm_carrier.measurement_model import IQ_SCALINGS, check_step_inputs, correlator_batch
 
 TWO_PI = 2.0 * math.pi
 
@@ -272,31 +272,11 @@ class CostasPll:
         """
         if not self._initialized:
             raise ValueError("PLL not initialised")
-        zi = np.asarray(in_phase, dtype=float)
-        if zi.ndim != 1 or zi.size == 0:
-            raise ValueError("in_phase must be a non-empty 1-D array")
+        batch = correlator_batch(in_phase, quadrature, cn0_dbhz, integration_time_s, predicted_phase_change_rad)
+        zi, zq, cn0 = batch.in_phase, batch.quadrature, batch.cn0_dbhz
+        t, dphi = batch.integration_time_s, batch.predicted_phase_change_rad
         n = zi.size
-
-        def as_n(name: str, v: np.ndarray | float) -> np.ndarray:
-            a = np.full(n, float(v)) if np.ndim(v) == 0 else np.asarray(v, dtype=float)
-            if a.shape != (n,):
-                raise ValueError(f"{name} must be a scalar or have shape ({n},)")
-            return np.ascontiguousarray(a)
-
-        zq = as_n("quadrature", quadrature)
-        cn0 = as_n("cn0_dbhz", cn0_dbhz)
-        t = as_n("integration_time_s", integration_time_s)
-        dphi = as_n("predicted_phase_change_rad", predicted_phase_change_rad)
-        ok_t = np.isfinite(t) & (t > 0)
-        ok_cn0 = np.isfinite(cn0) & (cn0 >= CN0_MIN_DBHZ) & (cn0 <= CN0_MAX_DBHZ)
-        ok_d = np.isfinite(dphi)
-        accepted = ok_t & ok_cn0 & ok_d
-        counters = {
-            "rejected_integration_time": int(np.sum(~ok_t)),
-            "rejected_cn0": int(np.sum(ok_t & ~ok_cn0)),
-            "rejected_predicted_phase": int(np.sum(ok_t & ok_cn0 & ~ok_d)),
-            "coasted_nonfinite_iq": int(np.sum(accepted & ~(np.isfinite(zi) & np.isfinite(zq)))),
-        }
+        accepted, counters = batch.accepted, batch.counters
         idx = np.flatnonzero(accepted)
         raw = np.full((n, PLL_OUT_LEN), np.nan)
         if idx.size:
@@ -342,12 +322,7 @@ class CostasPll:
             ValueError: not initialised, or invalid T, C/N0 or phase change (the tracker counts these
             before calling).
         """
-        if not (math.isfinite(integration_time_s) and integration_time_s > 0):
-            raise ValueError(f"integration_time_s must be finite and > 0, got {integration_time_s!r}")
-        if not (math.isfinite(cn0_dbhz) and CN0_MIN_DBHZ <= cn0_dbhz <= CN0_MAX_DBHZ):
-            raise ValueError(f"cn0_dbhz must be in [{CN0_MIN_DBHZ}, {CN0_MAX_DBHZ}], got {cn0_dbhz!r}")
-        if not math.isfinite(predicted_phase_change_rad):
-            raise ValueError("predicted_phase_change_rad must be finite")
+        check_step_inputs(cn0_dbhz, integration_time_s, predicted_phase_change_rad)
         if not self._initialized:
             raise ValueError("PLL not initialised")
         p = self.params

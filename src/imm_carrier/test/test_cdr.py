@@ -160,7 +160,7 @@ def test_decoder_never_fails_or_reads_out_of_bounds_on_hostile_bytes(monkeypatch
     the same fields."""
     from rfi_node_common import cdr as codec
 
-    twin = {name: getattr(codec, name).py_func for name in ('decode_program', '_read_uint', '_align')}
+    twin = {name: getattr(codec, name).py_func for name in codec.CODEC_KERNELS}
     rng = np.random.default_rng(12)
     accepted = 0
     for raw in _hostile_payloads(rng, 3000):

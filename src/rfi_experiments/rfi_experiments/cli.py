@@ -81,6 +81,38 @@ def converter_start(parser: argparse.ArgumentParser, argv: Sequence[str] | None,
     return report(refusal) if refusal else (args, out)
 
 
+def run_converter(parser: argparse.ArgumentParser, argv: Sequence[str] | None, report: Callable[[str], int],
+                  errors: tuple[type[BaseException], ...], convert: Callable[[argparse.Namespace, Path], Any],
+                  summary: Callable[[argparse.Namespace, Any], Sequence[str]]) -> int:
+    """A converter's ``main``: :func:`converter_start`, then ``convert(args, out)``, then the summary.
+
+    Args:
+        parser, argv, report: as :func:`converter_start` (``report`` prints a one-line error and returns
+            the exit code).
+        errors: the exceptions that mean a refused input: ``report(str(err))``'s code is returned.
+        convert: writes the bag; returns what the summary needs, or an int: the exit code to return
+            (an input with nothing to write, say), without a summary.
+        summary: the lines printed after ``<prog>: wrote <out>``.
+
+    Returns:
+        0, or the exit code of argparse, ``report`` or ``convert``.
+    """
+    start = converter_start(parser, argv, report)
+    if isinstance(start, int):  # --help (0), a usage error (2, argparse printed it) or an existing output
+        return start
+    args, out = start
+    try:
+        result = convert(args, out)
+    except errors as err:
+        return report(str(err))
+    if isinstance(result, int):
+        return result
+    print(f"{parser.prog}: wrote {out}")
+    for line in summary(args, result):
+        print(line)
+    return 0
+
+
 TEARDOWN_TIMEOUT_S = 10.0
 """Longest wait for a tool's node and ROS to shut down once its work is done; then the process exits anyway."""
 

@@ -77,7 +77,7 @@ from rfi_experiments.if_formats import (
     parse_start_time,
 )
 from rfi_msgs.msg import IfSamples
-from rfi_node_common.diagnostics import ERROR, OK, WARN, StampTimer, diagnostic_array
+from rfi_node_common.diagnostics import StampTimer, counted_level, publish_status
 from rfi_node_common.main import run_node
 from rfi_node_common.params import declare, parameter, validate_ranges
 from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS
@@ -375,23 +375,14 @@ class IfSourceNode(Node):
 
     def level(self) -> tuple[bytes, str]:
         v = self.values()
-        if v['read_errors']:
-            return ERROR, 'the input failed'
-        warn = [k for k in ('gaps', 'trailing_bytes', 'rounded_values', 'clipped_values', 'non_finite_values',
-                            'pipe_full_reads', 'unacknowledged_waits') if v.get(k)]
-        if warn:
-            return WARN, 'counted: ' + ', '.join(f'{k} {v[k]}' for k in warn)
-        return OK, 'publishing'
+        return counted_level(v, ('gaps', 'trailing_bytes', 'rounded_values', 'clipped_values', 'non_finite_values',
+                                 'pipe_full_reads', 'unacknowledged_waits'),
+                             'the input failed' if v['read_errors'] else None)
 
     def _publish_diagnostics(self, stamp_ns: int, final: bool) -> None:
         level, text = self.level()
-        if final:
-            text = 'end of input; ' + text
-        try:
-            self.diag_pub.publish(diagnostic_array(max(1, stamp_ns), 'if_source', self.params.hardware_id, level, text,
-                                                   self.values()))
-        except Exception as err:  # noqa: BLE001 - a report must never end the reader
-            self.get_logger().error(f'/diagnostics not published: {type(err).__name__}: {err}')
+        publish_status(self, self.diag_pub, stamp_ns, 'if_source', self.params.hardware_id, level, text,
+                       self.values(), final)
 
     def _report_end(self) -> None:
         v = self.values()

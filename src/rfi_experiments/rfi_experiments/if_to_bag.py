@@ -120,31 +120,30 @@ def _stream_blocks(stream: object, asm: BlockAssembler):  # type: ignore[no-unty
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Console entry point (``argv`` a full argument vector, as ``sys.argv``). Returns 0, or 2 on bad input."""
-    start = cli.converter_start(build_parser(), argv, _fail)
-    if isinstance(start, int):
-        return start
-    args, out = start
-    try:
-        fmt = IfFormat(**{name: getattr(args, name) for name in FORMAT_FIELDS})
-        start_ns = parse_start_time(args.start_time)
-        asm = convert(args.input, out, fmt, args.block_duration_s, start_ns, frame_id=args.frame_id,
-                      overwrite=args.overwrite, max_duration_s=args.max_duration_s)
-    except (FormatError, BagError, OSError) as err:
-        return _fail(str(err))
+    return cli.run_converter(build_parser(), argv, _fail, (FormatError, BagError, OSError), _convert, _summary)
+
+
+def _convert(args: argparse.Namespace, out: Path) -> tuple[IfFormat, BlockAssembler]:
+    fmt = IfFormat(**{name: getattr(args, name) for name in FORMAT_FIELDS})
+    start_ns = parse_start_time(args.start_time)
+    return fmt, convert(args.input, out, fmt, args.block_duration_s, start_ns, frame_id=args.frame_id,
+                        overwrite=args.overwrite, max_duration_s=args.max_duration_s)
+
+
+def _summary(args: argparse.Namespace, result: tuple[IfFormat, BlockAssembler]) -> list[str]:
+    fmt, asm = result
     c = asm.counters
     block_samples = fmt.block_samples(args.block_duration_s)
-    print(f'{PROG}: wrote {out}')
-    print(f'  {IF_TOPIC}  {c["blocks"]} blocks of {block_samples} samples '
-          f'({block_samples / fmt.sampling_frequency_hz:g} s), {c["samples"]} samples, {c["bytes_in"]} bytes read')
+    lines = [f'  {IF_TOPIC}  {c["blocks"]} blocks of {block_samples} samples '
+             f'({block_samples / fmt.sampling_frequency_hz:g} s), {c["samples"]} samples, {c["bytes_in"]} bytes read']
     for key, text in (('final_partial_block_samples', 'samples after the last whole block, not written'),
                       ('trailing_bytes', 'trailing bytes (the input ended inside an item), ignored'),
                       ('rounded_values', 'float values rounded to whole counts'),
                       ('clipped_values', 'float values clipped to +-32767 counts'),
                       ('non_finite_values', 'non-finite float values written as 0')):
         if c[key]:
-            print(f'  warning: {c[key]} {text}')
-    return 0
-
+            lines.append(f'  warning: {c[key]} {text}')
+    return lines
 
 if __name__ == '__main__':
     sys.exit(main())

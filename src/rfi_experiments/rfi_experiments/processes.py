@@ -15,8 +15,8 @@ With a namespace (``run --namespace /robot1``) the whole suite lives under it: e
 suite's reports apart), ``play`` publishes into it (``-r /rfi/if_samples:=/robot1/rfi/if_samples``
 and so on) and the recorder subscribes there (:func:`suite_topic`): two suites side by side in one
 domain do not see each other. With external nodes (``run --external-nodes``) the nodes are not
-started here but expected in the graph (started on another host, say: see the README's deployment
-section) with reliable inputs; ``play`` and the recorder run here as usual.
+started here but expected in the graph (started on another host, say: see
+docs/guide/deployment.md) with reliable inputs; ``play`` and the recorder run here as usual.
 """
 
 from __future__ import annotations

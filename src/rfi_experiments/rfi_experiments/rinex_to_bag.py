@@ -306,51 +306,50 @@ def _constellations(text: str) -> tuple[str, ...]:
 def main(argv: Sequence[str] | None = None) -> int:
     """Console entry point. ``argv`` is a full argument vector (``argv[0]`` is the program name),
     as ``sys.argv``, like the suite's other tools. Returns 0, or 2 on any input error."""
-    start = cli.converter_start(build_parser(), argv, _fail)
-    if isinstance(start, int):  # --help (0), a usage error (2, argparse printed it) or an existing output
-        return start
-    args, out = start
-    try:
-        conversion = convert_rinex(args.obs, args.nav, args.elevation_mask_deg, args.constellations)
-        counts = write_bag(conversion, out, overwrite=args.overwrite)
-    except (RinexFormatError, BagError, ValueError, OSError) as err:
-        return _fail(str(err))
-    print(f"{PROG}: wrote {out}")
-    print(f"  epochs        {len(conversion.epochs)}")
-    print(f"  measurements  {conversion.measurement_count}")
+    return cli.run_converter(build_parser(), argv, _fail, (RinexFormatError, BagError, ValueError, OSError),
+                             _convert, _summary)
+
+
+def _convert(args: argparse.Namespace, out: Path) -> tuple[RinexConversion, dict[str, int]]:
+    conversion = convert_rinex(args.obs, args.nav, args.elevation_mask_deg, args.constellations)
+    return conversion, write_bag(conversion, out, overwrite=args.overwrite)
+
+
+def _summary(args: argparse.Namespace, result: tuple[RinexConversion, dict[str, int]]) -> list[str]:
+    conversion, counts = result
+    lines = [f"  epochs        {len(conversion.epochs)}", f"  measurements  {conversion.measurement_count}"]
     empty = sum(1 for e in conversion.epochs if not e.observations)
     if empty:
-        print(f"  epochs without measurements  {empty}")
+        lines.append(f"  epochs without measurements  {empty}")
     has_truth = conversion.truth_position_ecef_m is not None
     truth = "header APPROX POSITION" if has_truth else "none (no APPROX POSITION)"
-    print(f"  truth         {truth}")
+    lines.append(f"  truth         {truth}")
     for topic, n in sorted(counts.items()):
-        print(f"  {topic}  {n}")
-    print("  measurements by constellation:")
+        lines.append(f"  {topic}  {n}")
+    lines.append("  measurements by constellation:")
     for name, n in sorted(conversion.measurements_by_constellation().items()):
-        print(f"    {name:<26} {n}")
-    print("  observation codes used (pseudorange, Doppler, C/N0 of one tracking attribute):")
+        lines.append(f"    {name:<26} {n}")
+    lines.append("  observation codes used (pseudorange, Doppler, C/N0 of one tracking attribute):")
     for name, used in sorted(conversion.codes_by_constellation.items()):
         text = ", ".join(f"{c} {n}" for c, n in sorted(used.items(), key=lambda kv: (-kv[1], kv[0])))
-        print(f"    {name:<10} {text}")
-    print("  navigation records used by system:  " + (
+        lines.append(f"    {name:<10} {text}")
+    lines.append("  navigation records used by system:  " + (
         ", ".join(f"{SYSTEM_NAMES.get(k, k)} {n}" for k, n in sorted(conversion.nav_records.items())) or "none"))
     for letter, reasons in sorted(conversion.nav_skipped.items()):
         text = ", ".join(f"{r} {n}" for r, n in sorted(reasons.items()))
-        print(f"  navigation records not used, {SYSTEM_NAMES.get(letter, letter)}: {text}")
-    print("  skipped satellites by reason:")
+        lines.append(f"  navigation records not used, {SYSTEM_NAMES.get(letter, letter)}: {text}")
+    lines.append("  skipped satellites by reason:")
     for reason, n in conversion.skipped.items():
-        print(f"    {reason:<26} {n}")
+        lines.append(f"    {reason:<26} {n}")
     if conversion.skipped_by_constellation:
-        print("  skipped satellites by constellation and reason:")
+        lines.append("  skipped satellites by constellation and reason:")
         for name, reasons in sorted(conversion.skipped_by_constellation.items()):
             text = ", ".join(f"{r} {n}" for r, n in sorted(reasons.items()))
-            print(f"    {name:<10} {text}")
+            lines.append(f"    {name:<10} {text}")
     if conversion.epochs_without_reference:
         n_unmasked = conversion.epochs_without_reference
-        print(f"  epochs without reference position (mask not applied): {n_unmasked}")
-    return 0
-
+        lines.append(f"  epochs without reference position (mask not applied): {n_unmasked}")
+    return lines
 
 if __name__ == "__main__":
     sys.exit(main())

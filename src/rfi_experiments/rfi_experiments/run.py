@@ -100,8 +100,9 @@ def build_parser() -> argparse.ArgumentParser:
                              'side by side in one ROS domain without seeing each other (default: /, the root)')
     parser.add_argument('--external-nodes', action='store_true',
                         help='processes: start no node; replay to and record from rfi_monitor, uwb_gnss_fusion and '
-                             'imm_carrier already running in --namespace (e.g. on another host, see the README), '
-                             'their inputs reliable (-p qos_overrides.<topic>.subscription.reliability:=reliable)')
+                             'imm_carrier already running in --namespace (e.g. on another host, see '
+                             'docs/guide/deployment.md), their inputs reliable '
+                             '(-p qos_overrides.<topic>.subscription.reliability:=reliable)')
     parser.add_argument('--no-report', action='store_true',
                         help='write only replay.md (counts, diagnostics) and --record-outputs, no figures or scores '
                              '(index.md, summary.json): about 10 s less per run')

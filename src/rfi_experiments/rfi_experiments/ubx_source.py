@@ -47,7 +47,7 @@ from rclpy.node import Node
 
 from rfi_experiments.ubx_decode import EpochOutput, SpectrumReport, UbxDecoder, UbxDecoderParams
 from rfi_msgs.msg import GnssMeasurementArray, ReceiverInterference, ReceiverSpectrum
-from rfi_node_common.diagnostics import ERROR, OK, WARN, StampTimer, diagnostic_array
+from rfi_node_common.diagnostics import StampTimer, counted_level, publish_status
 from rfi_node_common.main import run_node
 from rfi_node_common.params import declare, parameter, validate_ranges
 from rfi_node_common.qos import DATA_QOS, DATA_QOS_DEPTH, DIAGNOSTICS_QOS
@@ -368,23 +368,15 @@ class UbxSourceNode(Node):
 
     def level(self) -> tuple[bytes, str]:
         v = self.values()
-        if self.port_state == 'lost' or v['read_errors']:
-            return ERROR, f'input {self.params.input} lost'
-        warn = [k for k in ('bad_checksum', 'bad_length', 'truncated', 'unparsable', 'epochs_waiting_for_ephemeris',
-                            'port_losses', 'publish_errors') if v.get(k)]
-        if warn:
-            return WARN, 'counted: ' + ', '.join(f'{k} {v[k]}' for k in warn)
-        return OK, 'publishing'
+        lost = self.port_state == 'lost' or v['read_errors']
+        return counted_level(v, ('bad_checksum', 'bad_length', 'truncated', 'unparsable',
+                                 'epochs_waiting_for_ephemeris', 'port_losses', 'publish_errors'),
+                             f'input {self.params.input} lost' if lost else None)
 
     def _publish_diagnostics(self, stamp_ns: int, final: bool) -> None:
         level, text = self.level()
-        if final:
-            text = 'end of input; ' + text
-        try:
-            self.diag_pub.publish(diagnostic_array(max(1, stamp_ns), 'ubx_source', self.params.hardware_id, level, text,
-                                                   self.values()))
-        except Exception as err:  # noqa: BLE001 - a report must never end the reader
-            self.get_logger().error(f'/diagnostics not published: {type(err).__name__}: {err}')
+        publish_status(self, self.diag_pub, stamp_ns, 'ubx_source', self.params.hardware_id, level, text,
+                       self.values(), final)
 
     def _report_end(self, publish: bool) -> None:
         """Log the counters; with ``publish`` (not shutting down) also the final /diagnostics, after the

@@ -181,29 +181,26 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Console entry point (``argv`` as ``sys.argv``). Returns 0, or 2 on any input error."""
-    start = cli.converter_start(build_parser(), argv, _fail)
-    if isinstance(start, int):
-        return start
-    args, out = start
-    try:
-        params = UbxDecoderParams(min_satellites=args.min_satellites, use_sfrbx=not args.no_sfrbx,
-                                  use_receiver_std=not args.no_receiver_std,
-                                  publish_without_ephemeris=not args.skip_without_ephemeris)
-        decoder = make_decoder(args.nav, args.reference_position, params)
-        conversion = convert_ubx(args.ubx, decoder)
-        if not conversion.epochs and not conversion.interference and not conversion.spectra:
-            return _fail(f"{args.ubx}: nothing to write (no RXM-RAWX epoch to write, no interference report or "
-                         f"spectrum; {decoder.counts['frames']} valid UBX frames, "
-                         f"{decoder.counts['epochs_waiting_for_ephemeris']} epochs waiting for ephemeris)")
-        counts = write_bag(conversion, out, overwrite=args.overwrite, receiver_frame_id=args.frame_id)
-    except (RinexFormatError, BagError, ValueError, OSError) as err:
-        return _fail(str(err))
-    print(f"{PROG}: wrote {out}")
-    for topic, n in sorted(counts.items()):
-        print(f"  {topic}  {n}")
-    print("\n".join(summary_lines(decoder)))
-    return 0
+    return cli.run_converter(build_parser(), argv, _fail, (RinexFormatError, BagError, ValueError, OSError),
+                             _convert, _summary)
 
+
+def _convert(args: argparse.Namespace, out: Path) -> tuple[UbxDecoder, dict[str, int]] | int:
+    params = UbxDecoderParams(min_satellites=args.min_satellites, use_sfrbx=not args.no_sfrbx,
+                              use_receiver_std=not args.no_receiver_std,
+                              publish_without_ephemeris=not args.skip_without_ephemeris)
+    decoder = make_decoder(args.nav, args.reference_position, params)
+    conversion = convert_ubx(args.ubx, decoder)
+    if not conversion.epochs and not conversion.interference and not conversion.spectra:
+        return _fail(f"{args.ubx}: nothing to write (no RXM-RAWX epoch to write, no interference report or "
+                     f"spectrum; {decoder.counts['frames']} valid UBX frames, "
+                     f"{decoder.counts['epochs_waiting_for_ephemeris']} epochs waiting for ephemeris)")
+    return decoder, write_bag(conversion, out, overwrite=args.overwrite, receiver_frame_id=args.frame_id)
+
+
+def _summary(args: argparse.Namespace, result: tuple[UbxDecoder, dict[str, int]]) -> list[str]:
+    decoder, counts = result
+    return [f"  {topic}  {n}" for topic, n in sorted(counts.items())] + ["\n".join(summary_lines(decoder))]
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -512,30 +512,28 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Console entry point. ``argv`` is a full argument vector (``argv[0]`` is the program name),
     as ``sys.argv``, like the suite's other tools. Returns 0, or 2 on any input error."""
-    start = cli.converter_start(build_parser(), argv, _fail)
-    if isinstance(start, int):  # --help (0), a usage error (2, argparse printed it) or an existing output
-        return start
-    args, out = start
-    try:
-        case = read_case(args.case_dir)
-        report = check_time_bases(case)
-        counts = write_case_bag(case, out, overwrite=args.overwrite, range_std_m=args.range_std_m)
-    except (DatasetFormatError, BagError, ValueError, OSError) as err:
-        return _fail(str(err))
-    print(f"{PROG}: wrote {out}")
-    for topic, n in sorted(counts.items()):
-        print(f"  {topic}  {n}")
+    return cli.run_converter(build_parser(), argv, _fail, (DatasetFormatError, BagError, ValueError, OSError),
+                             _convert, _summary)
+
+
+def _convert(args: argparse.Namespace, out: Path) -> tuple[HanyangCase, TimeBaseReport, dict[str, int]]:
+    case = read_case(args.case_dir)
+    report = check_time_bases(case)
+    return case, report, write_case_bag(case, out, overwrite=args.overwrite, range_std_m=args.range_std_m)
+
+
+def _summary(args: argparse.Namespace, result: tuple[HanyangCase, TimeBaseReport, dict[str, int]]) -> list[str]:
+    case, report, counts = result
+    lines = [f"  {topic}  {n}" for topic, n in sorted(counts.items())]
     for name, table in case.uwb.items():
         rejected = ", ".join(f"{k} {v}" for k, v in table.rejected.items())
-        print(f"  {name}: {table.stamp_ns.size} ranges (rejected: {rejected})")
+        lines.append(f"  {name}: {table.stamp_ns.size} ranges (rejected: {rejected})")
     missing = [t for t in (LS_TOPIC, ESKF_TOPIC) if t not in case.references]
     if missing:
-        print(f"  reference solutions not found: {', '.join(missing)}")
-    print("  time bases:")
-    for line in report.lines():
-        print(f"    {line}")
-    return 0
-
+        lines.append(f"  reference solutions not found: {', '.join(missing)}")
+    lines.append("  time bases:")
+    lines += [f"    {line}" for line in report.lines()]
+    return lines
 
 if __name__ == "__main__":
     sys.exit(main())

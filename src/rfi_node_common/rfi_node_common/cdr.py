@@ -9,7 +9,8 @@ module instead of hand-counting offsets. Nothing here is written per message typ
   rosidl class (nested messages, strings, fixed arrays, bounded and unbounded sequences) once, and
   compiles the walk into a small program (:class:`CdrLayout`). Changing a ``.msg`` file and
   rebuilding ``rfi_msgs`` changes the program; no offset is written anywhere.
-* Two compiled interpreters run any program: :func:`decode_program` turns CDR bytes into two flat value
+* One compiled walk runs any program in either direction (:func:`_walk`: alignment, runs, nesting and
+  every bounds check written once): :func:`decode_program` turns CDR bytes into two flat value
   streams in wire order (``ints``: every integer, bool, sequence count and string position;
   ``floats``: every float32/float64), and :func:`encode_program` writes the bytes back from such streams.
   Adapters in the node packages give those streams names (:meth:`CdrLayout.position`,
@@ -223,17 +224,31 @@ class CdrLayout:
         head = np.frombuffer(prefix or ENCAPSULATION, dtype=np.uint8)
         ints = np.ascontiguousarray(ints, dtype=np.int64)
         floats = np.ascontiguousarray(floats, dtype=np.float64)
+        if not (ints.flags.writeable and floats.flags.writeable):  # the one walk types its streams writable
+            ints, floats = ints.copy(), floats.copy()
         chars = np.frombuffer(text, dtype=np.uint8)
-        size = head.size + 16 * (ints.size + floats.size) + chars.size + 64
-        while True:
-            out = np.zeros(size, dtype=np.uint8)
-            end = encode_program(self.program, start, head, ints, floats, chars, out)
-            if end != _FULL:
-                break
-            size *= 2
-        if end < 0:
+        raw = encode_bytes(self.program, start, head, ints, floats, chars,
+                           head.size + 16 * (ints.size + floats.size) + chars.size + 64)
+        if raw is None:
             raise ValueError(f"value streams do not fit the layout of {self.name}")
-        return out[:end].tobytes()
+        return raw
+
+
+def encode_bytes(program: np.ndarray, start: int, head: np.ndarray, ints: np.ndarray, floats: np.ndarray,
+                 text: np.ndarray, size: int) -> bytes | None:
+    """:func:`encode_program` into a zeroed buffer of ``size`` bytes, doubled until the message fits.
+
+    Returns:
+        The serialised bytes, or None if the streams do not fit the program (too short, a negative
+        count, a string outside ``text``, a bound exceeded).
+    """
+    while True:
+        out = np.zeros(size, dtype=np.uint8)
+        end = encode_program(program, start, head, ints, floats, text, out)
+        if end != _FULL:
+            break
+        size *= 2
+    return None if end < 0 else out[:end].tobytes()
 
 
 class DecodedCdr(NamedTuple):
@@ -411,7 +426,171 @@ def _read_uint(buf, o, size):
 
 
 @njit(cache=True)
-def decode_program(program, buf, ints, floats, marks, counts, strict_strings):  # noqa: C901 - one dispatch loop
+def _write_uint(out, o, size, v):
+    for m in range(size):
+        out[o + m] = (v >> (8 * m)) & 0xFF
+
+
+@njit(cache=True, inline="always")
+def _walk(write, program, pc, src, dst, o, ints, floats, text, marks, strict_strings):  # noqa: C901 - one dispatch
+    """The one walk of a layout program, for both directions: from row ``pc`` and byte offset ``o``, read
+    the bytes ``src`` into the streams (``write`` False), or write the streams into the bytes ``dst``
+    (``write`` True). Alignment, runs, nesting and every bounds and stream check are written once here;
+    only the leaves that move a value differ by direction. The other byte array is not touched (two
+    arrays, not one: the bytes read are often read-only).
+
+    Returns (end offset, ints used, floats used), the offset negative on failure: -1 for bytes that are
+    malformed (reading) or streams that do not fit the program (writing), -2 for a ``dst`` too small
+    (writing; reading, bytes too short are malformed). Every access to the bytes is bounds-checked first.
+    """
+    n = dst.shape[0] if write else src.shape[0]
+    short = _FULL if write else _ERR
+    ni = 0
+    nf = 0
+    left = np.zeros(_MAX_DEPTH, dtype=np.int64)
+    depth = 0
+    tmp8 = np.empty(1, dtype=np.float64)
+    b8 = tmp8.view(np.uint8)
+    tmp4 = np.empty(1, dtype=np.float32)
+    b4 = tmp4.view(np.uint8)
+    n_ops = program.shape[0]
+    while pc < n_ops:
+        op = program[pc, 0]
+        if op == OP_PRIM:
+            size = program[pc, 1]
+            kind = program[pc, 2]
+            count = program[pc, 3]
+            o = _align(o, size)
+            if o + size * count > n:
+                return short, ni, nf
+            if kind == KIND_FLOAT:
+                if nf + count > floats.shape[0]:
+                    return _ERR, ni, nf
+                if write:
+                    for _ in range(count):
+                        if size == 8:
+                            tmp8[0] = floats[nf]
+                            for m in range(8):
+                                dst[o + m] = b8[m]
+                        else:
+                            tmp4[0] = floats[nf]
+                            for m in range(4):
+                                dst[o + m] = b4[m]
+                        nf += 1
+                        o += size
+                else:
+                    for _ in range(count):
+                        if size == 8:
+                            for m in range(8):
+                                b8[m] = src[o + m]
+                            floats[nf] = tmp8[0]
+                        else:
+                            for m in range(4):
+                                b4[m] = src[o + m]
+                            floats[nf] = tmp4[0]
+                        nf += 1
+                        o += size
+            else:
+                if ni + count > ints.shape[0]:
+                    return _ERR, ni, nf
+                if write:
+                    for _ in range(count):
+                        v = ints[ni]
+                        _write_uint(dst, o, size, (1 if v != 0 else 0) if kind == KIND_BOOL else v)
+                        ni += 1
+                        o += size
+                else:
+                    for _ in range(count):
+                        v = _read_uint(src, o, size)
+                        if kind == KIND_SIGNED and size < 8 and v >= np.int64(1) << (8 * size - 1):
+                            v -= np.int64(1) << (8 * size)
+                        elif kind == KIND_BOOL and v > 1:
+                            return _ERR, ni, nf
+                        ints[ni] = v
+                        ni += 1
+                        o += size
+        elif op == OP_STRING:  # [start, length without NUL] <-> uint32 length with NUL, bytes, NUL
+            bound = program[pc, 1]
+            if write:
+                if ni + 2 > ints.shape[0]:
+                    return _ERR, ni, nf
+                first = ints[ni]
+                length = ints[ni + 1]
+                if first < 0 or length < 0 or first + length > text.shape[0] or (bound > 0 and length > bound):
+                    return _ERR, ni, nf
+                o = _align(o, 4)
+                if o + 5 + length > n:
+                    return _FULL, ni, nf
+                _write_uint(dst, o, 4, length + 1)
+                for m in range(length):
+                    dst[o + 4 + m] = text[first + m]
+                dst[o + 4 + length] = 0
+            else:
+                o = _align(o, 4)
+                if o + 4 > n:
+                    return _ERR, ni, nf
+                length = _read_uint(src, o, 4) - 1
+                if length < 0 or length + 1 > n - o - 4 or src[o + 4 + length] != 0 or (bound > 0 and length > bound):
+                    return _ERR, ni, nf
+                if strict_strings:
+                    for m in range(length):
+                        if src[o + 4 + m] == 0:
+                            return _ERR, ni, nf
+                if ni + 2 > ints.shape[0]:
+                    return _ERR, ni, nf
+                ints[ni] = o + 4
+                ints[ni + 1] = length
+            ni += 2
+            o += 5 + length
+        elif op == OP_SEQUENCE or op == OP_ARRAY:
+            if op == OP_SEQUENCE:  # uint32 count <-> ints
+                bound = program[pc, 2]
+                if write:
+                    if ni >= ints.shape[0]:
+                        return _ERR, ni, nf
+                    count = ints[ni]
+                    if count < 0 or count >= 2**32 or (bound > 0 and count > bound):
+                        return _ERR, ni, nf
+                    o = _align(o, 4)
+                    if o + 4 > n:
+                        return _FULL, ni, nf
+                    _write_uint(dst, o, 4, count)
+                else:
+                    o = _align(o, 4)
+                    if o + 4 > n:
+                        return _ERR, ni, nf
+                    count = _read_uint(src, o, 4)
+                    if (bound > 0 and count > bound) or ni >= ints.shape[0]:
+                        return _ERR, ni, nf
+                    ints[ni] = count
+                ni += 1
+                o += 4
+                if count == 0:
+                    pc = program[pc, 1] + 1
+                    continue
+                if count > n - o:  # reading: every element takes at least one byte
+                    if not write:
+                        return _ERR, ni, nf
+            else:
+                count = program[pc, 2]
+            if depth >= _MAX_DEPTH:
+                return _ERR, ni, nf
+            left[depth] = count
+            depth += 1
+        elif op == OP_END:
+            left[depth - 1] -= 1
+            if left[depth - 1] > 0:
+                pc = program[pc, 1] + 1
+                continue
+            depth -= 1
+        elif op == OP_MARK and not write:
+            marks[program[pc, 1]] = o - 4
+        pc += 1
+    return o, ni, nf
+
+
+@njit(cache=True)
+def decode_program(program, buf, ints, floats, marks, counts, strict_strings):
     """Run a layout program over CDR bytes ``buf`` (encapsulation included): fill the streams.
 
     Writes counts = [entries in ints, entries in floats] and marks (payload offsets where the top-level
@@ -420,121 +599,21 @@ def decode_program(program, buf, ints, floats, marks, counts, strict_strings):  
     is not 0 or 1, a count exceeds its bound or the bytes left, or the streams would overflow. Every
     read is bounds-checked first: any byte string gives 0 or -1, never a read outside buf.
     """
-    n = buf.shape[0]
-    o = 4
-    ni = 0
-    nf = 0
-    left = np.zeros(_MAX_DEPTH, dtype=np.int64)
-    depth = 0
-    tmp8 = np.empty(1, dtype=np.float64)
-    b8 = tmp8.view(np.uint8)
-    tmp4 = np.empty(1, dtype=np.float32)
-    b4 = tmp4.view(np.uint8)
-    pc = 0
-    n_ops = program.shape[0]
-    while pc < n_ops:
-        op = program[pc, 0]
-        if op == OP_PRIM:
-            size = program[pc, 1]
-            kind = program[pc, 2]
-            count = program[pc, 3]
-            o = _align(o, size)
-            if o + size * count > n:
-                return _ERR
-            if kind == KIND_FLOAT:
-                if nf + count > floats.shape[0]:
-                    return _ERR
-                if size == 8:
-                    for _ in range(count):
-                        for m in range(8):
-                            b8[m] = buf[o + m]
-                        floats[nf] = tmp8[0]
-                        nf += 1
-                        o += 8
-                else:
-                    for _ in range(count):
-                        for m in range(4):
-                            b4[m] = buf[o + m]
-                        floats[nf] = tmp4[0]
-                        nf += 1
-                        o += 4
-            else:
-                if ni + count > ints.shape[0]:
-                    return _ERR
-                for _ in range(count):
-                    v = _read_uint(buf, o, size)
-                    if kind == KIND_SIGNED and size < 8 and v >= np.int64(1) << (8 * size - 1):
-                        v -= np.int64(1) << (8 * size)
-                    elif kind == KIND_BOOL and v > 1:
-                        return _ERR
-                    ints[ni] = v
-                    ni += 1
-                    o += size
-        elif op == OP_STRING:
-            o = _align(o, 4)
-            if o + 4 > n:
-                return _ERR
-            length = _read_uint(buf, o, 4)
-            o += 4
-            if length < 1 or length > n - o or buf[o + length - 1] != 0:
-                return _ERR
-            if program[pc, 1] > 0 and length - 1 > program[pc, 1]:
-                return _ERR
-            if strict_strings:
-                for m in range(length - 1):
-                    if buf[o + m] == 0:
-                        return _ERR
-            if ni + 2 > ints.shape[0]:
-                return _ERR
-            ints[ni] = o
-            ints[ni + 1] = length - 1
-            ni += 2
-            o += length
-        elif op == OP_SEQUENCE or op == OP_ARRAY:
-            if op == OP_SEQUENCE:
-                o = _align(o, 4)
-                if o + 4 > n:
-                    return _ERR
-                count = _read_uint(buf, o, 4)
-                o += 4
-                if program[pc, 2] > 0 and count > program[pc, 2]:
-                    return _ERR
-                if ni >= ints.shape[0]:
-                    return _ERR
-                ints[ni] = count
-                ni += 1
-                if count == 0:
-                    pc = program[pc, 1] + 1
-                    continue
-                if count > n - o:  # every element takes at least one byte
-                    return _ERR
-            else:
-                count = program[pc, 2]
-            if depth >= _MAX_DEPTH:
-                return _ERR
-            left[depth] = count
-            depth += 1
-        elif op == OP_END:
-            left[depth - 1] -= 1
-            if left[depth - 1] > 0:
-                pc = program[pc, 1] + 1
-                continue
-            depth -= 1
-        elif op == OP_MARK:
-            marks[program[pc, 1]] = o - 4
-        pc += 1
+    end, ni, nf = _walk(False, program, 0, buf, marks.view(np.uint8)[:0], 4, ints, floats, buf[:0], marks,
+                        strict_strings)
+    if end < 0:
+        return _ERR
     counts[0] = ni
     counts[1] = nf
     return 0
 
 
 @njit(cache=True)
-def encode_program(program, start, head, ints, floats, text, out):  # noqa: C901 - one dispatch loop
+def encode_program(program, start, head, ints, floats, text, out):
     """Write ``head`` (encapsulation + any verbatim prefix) then run the program from row ``start`` over
     the streams into ``out`` (zeroed). Returns the end offset, -2 if ``out`` is too small, -1 if the
     streams do not fit the program (too short, negative count, string outside text, bound exceeded)."""
-    n = out.shape[0]
-    if head.shape[0] > n:
+    if head.shape[0] > out.shape[0]:
         return _FULL
     for m in range(head.shape[0]):
         out[m] = head[m]
@@ -542,102 +621,10 @@ def encode_program(program, start, head, ints, floats, text, out):  # noqa: C901
     out[1] = 1
     out[2] = 0
     out[3] = 0
-    o = head.shape[0]
-    ni = 0
-    nf = 0
-    left = np.zeros(_MAX_DEPTH, dtype=np.int64)
-    depth = 0
-    tmp8 = np.empty(1, dtype=np.float64)
-    b8 = tmp8.view(np.uint8)
-    tmp4 = np.empty(1, dtype=np.float32)
-    b4 = tmp4.view(np.uint8)
-    pc = start
-    n_ops = program.shape[0]
-    while pc < n_ops:
-        op = program[pc, 0]
-        if op == OP_PRIM:
-            size = program[pc, 1]
-            kind = program[pc, 2]
-            count = program[pc, 3]
-            o = _align(o, size)
-            if o + size * count > n:
-                return _FULL
-            if kind == KIND_FLOAT:
-                if nf + count > floats.shape[0]:
-                    return _ERR
-                if size == 8:
-                    for _ in range(count):
-                        tmp8[0] = floats[nf]
-                        for m in range(8):
-                            out[o + m] = b8[m]
-                        nf += 1
-                        o += 8
-                else:
-                    for _ in range(count):
-                        tmp4[0] = floats[nf]
-                        for m in range(4):
-                            out[o + m] = b4[m]
-                        nf += 1
-                        o += 4
-            else:
-                if ni + count > ints.shape[0]:
-                    return _ERR
-                for _ in range(count):
-                    v = ints[ni]
-                    if kind == KIND_BOOL:
-                        v = 1 if v != 0 else 0
-                    for m in range(size):
-                        out[o + m] = (v >> (8 * m)) & 0xFF
-                    ni += 1
-                    o += size
-        elif op == OP_STRING:
-            if ni + 2 > ints.shape[0]:
-                return _ERR
-            first = ints[ni]
-            length = ints[ni + 1]
-            ni += 2
-            if first < 0 or length < 0 or first + length > text.shape[0]:
-                return _ERR
-            if program[pc, 1] > 0 and length > program[pc, 1]:
-                return _ERR
-            o = _align(o, 4)
-            if o + 5 + length > n:
-                return _FULL
-            for m in range(4):
-                out[o + m] = ((length + 1) >> (8 * m)) & 0xFF
-            o += 4
-            for m in range(length):
-                out[o + m] = text[first + m]
-            out[o + length] = 0
-            o += length + 1
-        elif op == OP_SEQUENCE or op == OP_ARRAY:
-            if op == OP_SEQUENCE:
-                if ni >= ints.shape[0]:
-                    return _ERR
-                count = ints[ni]
-                ni += 1
-                if count < 0 or count >= 2**32 or (program[pc, 2] > 0 and count > program[pc, 2]):
-                    return _ERR
-                o = _align(o, 4)
-                if o + 4 > n:
-                    return _FULL
-                for m in range(4):
-                    out[o + m] = (count >> (8 * m)) & 0xFF
-                o += 4
-                if count == 0:
-                    pc = program[pc, 1] + 1
-                    continue
-            else:
-                count = program[pc, 2]
-            if depth >= _MAX_DEPTH:
-                return _ERR
-            left[depth] = count
-            depth += 1
-        elif op == OP_END:
-            left[depth - 1] -= 1
-            if left[depth - 1] > 0:
-                pc = program[pc, 1] + 1
-                continue
-            depth -= 1
-        pc += 1
-    return o
+    end, _, _ = _walk(True, program, start, head, out, head.shape[0], ints, floats, text, ints[:0], False)
+    return end
+
+
+CODEC_KERNELS = ("_align", "_read_uint", "_write_uint", "_walk", "decode_program", "encode_program")
+"""The compiled functions of the codec, by name: a test swaps each for its ``py_func`` (numpy indexing
+raises on any access out of bounds) to check that the compiled ones never read outside the bytes."""

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
@@ -43,6 +44,42 @@ def diagnostic_array(stamp_ns: int, name: str, hardware_id: str, level: bytes, m
     status.values = [KeyValue(key=str(k), value=str(v)) for k, v in values.items()]
     array.status = [status]
     return array
+
+
+def counted_level(values: Mapping[str, object], warn_keys: Sequence[str], error: str | None = None
+                  ) -> tuple[bytes, str]:
+    """The level of a source node (a reader that publishes what it reads) from its counters.
+
+    Args:
+        values: the node's counters.
+        warn_keys: the counters that make a WARN when above zero, in the order the message names them.
+        error: the reason of an ERROR (the input failed), or None.
+
+    Returns:
+        ``(ERROR, error)``; else ``(WARN, 'counted: gaps 2, ...')`` naming each warn counter above zero;
+        else ``(OK, 'publishing')``.
+    """
+    if error:
+        return ERROR, error
+    warn = [k for k in warn_keys if values.get(k)]
+    if warn:
+        return WARN, 'counted: ' + ', '.join(f'{k} {values[k]}' for k in warn)
+    return OK, 'publishing'
+
+
+def publish_status(node: Any, publisher: Any, stamp_ns: int, name: str, hardware_id: str, level: bytes, text: str,
+                   values: Mapping[str, object], final: bool) -> None:
+    """Publish a source node's status; the final one's text starts with 'end of input; '.
+
+    A failure to publish is logged on the node, never raised: a report must never end the reader.
+    The stamp is at least 1 ns (a status before the first input is stamped 1 ns, not 0).
+    """
+    if final:
+        text = 'end of input; ' + text
+    try:
+        publisher.publish(diagnostic_array(max(1, stamp_ns), name, hardware_id, level, text, values))
+    except Exception as err:  # noqa: BLE001 - a report must never end the reader
+        node.get_logger().error(f'/diagnostics not published: {type(err).__name__}: {err}')
 
 
 class StampTimer:

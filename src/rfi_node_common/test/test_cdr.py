@@ -212,17 +212,18 @@ def test_decoder_on_hostile_bytes(cls, monkeypatch):
     layout = cdr.layout(cls)
     rng = np.random.default_rng(99)
     valid = serialize_message(cls(**mb.probe_values(cls, rng, max_sequence=3)))
-    monkeypatch.setattr(cdr, "_read_uint", cdr._read_uint.py_func)
-    monkeypatch.setattr(cdr, "_align", cdr._align.py_func)
+    payloads = list(_hostile(valid, rng, 1500))
+    decoded = [layout.decode(raw) for raw in payloads]  # compiled
+    with monkeypatch.context() as m:
+        for name in cdr.CODEC_KERNELS:  # the uncompiled twin: every compiled function of the codec
+            m.setattr(cdr, name, getattr(cdr, name).py_func)
+        for raw, d in zip(payloads, decoded, strict=True):
+            twin = layout.decode(raw)  # IndexError here = an out-of-bounds read
+            assert (twin is None) == (d is None)
+            if d is not None:
+                assert twin is not None and all(a.tobytes() == b.tobytes() for a, b in zip(twin, d, strict=True))
     accepted = 0
-    for raw in _hostile(valid, rng, 1500):
-        d = layout.decode(raw)
-        if len(raw) >= 4 and raw[:2] == cdr.CDR_LE:
-            buf = np.frombuffer(raw, dtype=np.uint8)
-            ints, floats = np.empty(len(raw) + 8, np.int64), np.empty(len(raw) // 4 + 1)
-            marks, counts = np.zeros(len(layout.fields), np.int64), np.zeros(2, np.int64)
-            status = cdr.decode_program.py_func(layout.program, buf, ints, floats, marks, counts, True)
-            assert (status < 0) == (d is None)
+    for raw, d in zip(payloads, decoded, strict=True):
         if d is None:
             continue
         accepted += 1

@@ -23,12 +23,15 @@ from rclpy.qos import (
 )
 
 from rfi_node_common.diagnostics import (
+    ERROR,
     OK,
     WARN,
     CountWindow,
+    counted_level,
     degraded_inputs,
     diagnostic_array,
     fraction,
+    publish_status,
 )
 from rfi_node_common.qos import DIAGNOSTICS_QOS, LATCHED_QOS
 
@@ -138,3 +141,41 @@ def test_latched_qos_reaches_late_transient_local_and_volatile_subscribers():
     assert qos_check_compatible(resolved(LATCHED_QOS), late)[0] == QoSCompatibility.OK
     assert qos_check_compatible(resolved(LATCHED_QOS), BEST_EFFORT_MONITOR)[0] == QoSCompatibility.OK
     assert LATCHED_QOS.durability == DurabilityPolicy.TRANSIENT_LOCAL and LATCHED_QOS.depth == 1
+
+
+def test_counted_level_of_a_source_node():
+    values = {'gaps': 2, 'trailing_bytes': 0, 'clipped_values': 5, 'read_errors': 0}
+    assert counted_level(values, ('gaps', 'trailing_bytes', 'clipped_values')) == \
+        (WARN, 'counted: gaps 2, clipped_values 5')
+    assert counted_level({'gaps': 0}, ('gaps', 'not_counted_yet')) == (OK, 'publishing')
+    assert counted_level(values, ('gaps',), 'the input failed') == (ERROR, 'the input failed')
+
+
+def test_publish_status_never_raises_and_marks_the_last_report():
+    class Pub:
+        def __init__(self, fail):
+            self.fail, self.sent = fail, []
+
+        def publish(self, msg):
+            if self.fail:
+                raise RuntimeError('context shut down')
+            self.sent.append(msg)
+
+    class Node:
+        def __init__(self):
+            self.errors = []
+
+        def get_logger(self):
+            return self
+
+        def error(self, text):
+            self.errors.append(text)
+
+    node, ok, broken = Node(), Pub(False), Pub(True)
+    publish_status(node, ok, 0, 'if_source', 'rf_front_end', WARN, 'counted: gaps 2', {'gaps': 2}, final=True)
+    status = ok.sent[0].status[0]
+    assert (status.name, status.hardware_id, status.level, status.message) == \
+        ('if_source', 'rf_front_end', WARN, 'end of input; counted: gaps 2')
+    assert ok.sent[0].header.stamp.nanosec == 1  # never stamped 0
+    publish_status(node, broken, 5, 'if_source', 'rf_front_end', OK, 'publishing', {}, final=False)
+    assert node.errors == ['/diagnostics not published: RuntimeError: context shut down']

@@ -21,9 +21,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gnss_common.clock_model import ClockHCoefficients, simulate_clock
-from gnss_common.constants import EARTH_ROTATION_RATE_RADPS, SPEED_OF_LIGHT_MPS
+from gnss_common.constants import SPEED_OF_LIGHT_MPS
 from gnss_common.coordinates import azimuth_elevation, ecef_to_enu_rotation, ecef_to_geodetic
-from gnss_common.earth_rotation import rotate_about_z
+from gnss_common.earth_rotation import flight_rotation, rotate_about_z
 from gnss_common.gps_time import gps_ns_to_ros_stamp_ns, gps_to_gps_ns, gps_to_ros_stamp_ns
 from gnss_common.jamming_weights import TrackingLoopParams, measurement_sigmas
 from gnss_common.observations import GPS, GnssEpoch, SatelliteObservation, UwbRangeMeasurement
@@ -276,12 +276,10 @@ def _epoch_sky(sc: GnssUwbScenario, geometry: GeometrySource, week: int, tow: fl
     tau = np.full(snap.prn.size, 0.075)
     for _ in range(3):
         p_tx = snap.position_ecef_m + snap.velocity_ecef_mps * (0.075 - tau)[:, None]
-        ang = EARTH_ROTATION_RATE_RADPS * tau
-        p_rot = rotate_about_z(p_tx, np.cos(ang), np.sin(ang))
+        p_rot = rotate_about_z(p_tx, *flight_rotation(tau))
         tau = np.linalg.norm(p_rot - rx, axis=1) / SPEED_OF_LIGHT_MPS
     p_tx = snap.position_ecef_m + snap.velocity_ecef_mps * (0.075 - tau)[:, None]
-    ang = EARTH_ROTATION_RATE_RADPS * tau
-    cos_a, sin_a = np.cos(ang), np.sin(ang)
+    cos_a, sin_a = flight_rotation(tau)
     p_rot = rotate_about_z(p_tx, cos_a, sin_a)
     v_rot = rotate_about_z(snap.velocity_ecef_mps, cos_a, sin_a)
     geom = np.linalg.norm(p_rot - rx, axis=1)
