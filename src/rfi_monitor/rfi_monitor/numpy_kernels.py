@@ -7,17 +7,19 @@ quantile and the median of a sorted vector, np.polyfit and np.polyval.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numba import njit
 
 
 @njit(cache=True)
-def pairwise_sum(a: np.ndarray, zero: float) -> float:
+def pairwise_sum(a: np.ndarray, zero: Any) -> Any:
     """Sum of a contiguous float32 or float64 vector in its own precision and in numpy's pairwise order (numpy's
     ``add.reduce`` over a contiguous axis: 8 partial sums, combined in pairs, the rest in order; halves above 128), so
     that a compiled sum equals the numpy expression it replaced to the bit. zero: 0 of a's type (``np.float32(0.0)``
-    or ``0.0``), the start of the short sums (one kernel for both precisions, compiled once for each)."""
+    or ``0.0``), the start of the short sums (one kernel for both precisions, compiled once for each); the sum has
+    a's type."""
     n = a.size
     if n < 8:
         res = zero

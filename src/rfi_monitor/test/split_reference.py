@@ -9,7 +9,8 @@ package it imports with that file and prints, per stream, how many values are bi
 Streams: 160 consecutive 1 ms blocks (stamps 1 ms apart) of three front ends (``FRONT_ENDS``: 38.192 MS/s real IF
 9.548 MHz, 10 MS/s complex, 24 MS/s real IF 6 MHz; 8-bit, noise counted over 2 MHz) in four scenarios: noise only,
 the paper's saw-tooth chirp (1e12 Hz/s) at J/S 40 dB (J/N 21 dB) from the first block, the same switched on after 80
-blocks, and a weak one (J/S 6 dB, J/N -13 dB, found only by the evidence over blocks and the folded shape) from the first block.
+blocks, and a weak one (J/S 6 dB, J/N -13 dB: found only by the evidence over blocks, its shape by the folded
+spectrum) from the first block.
 Per block: every field of ``ridge.analyse(x, cplx, fs, RidgeParams())`` (the frame length chosen) and every field of
 the ``JammerEstimate`` of ``RfiMonitor.process`` (default parameters, the 8-bit full scale as the node passes it),
 its counters included.

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from rfi_monitor import frame_length, ridge_periodicity
 from rfi_monitor import monitor as monitor_module
 from rfi_monitor import ridge as new
 
@@ -125,14 +126,15 @@ def test_frame_length_on_noise():
             for L in par.frame_lengths:
                 S, _ = new.stft_power(w, L, cplx)
                 mu, sd = new.null_peak_excess(L, cplx, 8192, par.noise_smooth_bins)
-                z.append((new._peak_excess(S, new.noise_levels(S, par.noise_smooth_bins, cplx), cplx) - mu) / sd)
+                lvl = new.noise_levels(S, par.noise_smooth_bins, cplx)
+                z.append((frame_length._peak_excess(S, lvl, cplx) - mu) / sd)
             assert max(z) < new.SELECT_Z, (cplx, bw, z)
             assert new.choose_frame_length(w, cplx, par) == max(par.frame_lengths), (cplx, bw, z)
 
 
 def test_frame_length_null_is_deterministic():
     a = new.null_peak_excess(32, False, 4096, 5)
-    new._NULL_EXCESS.clear()
+    frame_length._NULL_EXCESS.clear()
     assert new.null_peak_excess(32, False, 4096, 5) == a
     assert 0.0 < a[1] < 1.0
 
@@ -162,7 +164,7 @@ def test_analyse_same_as_reference(name, x, fs, cplx):
         lvl = old.noise_levels(S, par.noise_smooth_bins, cplx)
         np.testing.assert_allclose(new.noise_levels(S, par.noise_smooth_bins, cplx), lvl, rtol=REL, atol=0)
         # the frame-length score (choose_frame_length)
-        assert _close(new._peak_excess(S, lvl, cplx), old._peak_excess(S, lvl, cplx)), (name, L)
+        assert _close(frame_length._peak_excess(S, lvl, cplx), old._peak_excess(S, lvl, cplx)), (name, L)
 
 
 def test_noise_levels_same_as_reference_on_random_spectra():
@@ -250,7 +252,7 @@ def test_periodicity_same_as_reference_on_random_phasors():
                                                                        + 1j * rng.standard_normal(T))
         lmin, lmax = int(par.min_period_frames), int(rng.integers(5, max(6, T // 4 + 1)))
         a = old._periodicity(u, lmin, lmax, old.RidgeParams())
-        b = new._periodicity(u, lmin, lmax, par)
+        b = ridge_periodicity._periodicity(u, lmin, lmax, par)
         assert _close(a[0], b[0]) and _close(a[1], b[1]), (trial, a, b)
         n_periodic += math.isfinite(a[0])
     assert 50 < n_periodic < 300          # both outcomes exercised
