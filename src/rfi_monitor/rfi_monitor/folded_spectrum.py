@@ -13,7 +13,7 @@ gets its shape so (real_jammers.md).
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 from numba import njit
@@ -30,8 +30,14 @@ from rfi_monitor.sweep_shape import (
     _shape,
 )
 
-if TYPE_CHECKING:
-    from rfi_monitor.ridge import RidgeParams
+
+class FoldParams(Protocol):
+    """What ``folded_shape`` needs of ``rfi_monitor.ridge.RidgeParams`` (its attributes' meaning there)."""
+
+    @property
+    def frame_lengths(self) -> tuple[int, ...]: ...
+    @property
+    def hook_rate_ratio(self) -> float: ...
 
 
 FOLD_HOPS = 8
@@ -110,7 +116,7 @@ def _fold_kernel(S: np.ndarray, kb: np.ndarray, K: int, freqs: np.ndarray, thr: 
     return prof, se, present, nmin
 
 
-def folded_shape(x: np.ndarray, cplx: bool, period_samples: float, par: RidgeParams
+def folded_shape(x: np.ndarray, cplx: bool, period_samples: float, par: FoldParams
                  ) -> tuple[int, float, float, float]:
     """Sweep shape of a periodic jammer of known period too weak for the per-frame ridge (for a chirp found by the
     evidence over blocks, whose comb gives the period): (shape, in-band fraction, low, high), frequencies in

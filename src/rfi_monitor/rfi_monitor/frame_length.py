@@ -13,15 +13,25 @@ the best, and the longest of all when no score stands ``SELECT_Z`` standard devi
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 from numba import njit
 
 from rfi_monitor.stft import _f32, noise_levels, stft_power
 
-if TYPE_CHECKING:
-    from rfi_monitor.ridge import RidgeParams
+
+class FrameLengthParams(Protocol):
+    """What the choice needs of ``rfi_monitor.ridge.RidgeParams`` (its attributes' meaning there)."""
+
+    @property
+    def frame_lengths(self) -> tuple[int, ...]: ...
+    @property
+    def select_samples(self) -> int: ...
+    @property
+    def min_frame_length(self) -> int: ...
+    @property
+    def noise_smooth_bins(self) -> int: ...
 
 
 MIN_SELECT_EXCESS = 2.0
@@ -91,7 +101,7 @@ def _row_max_excess(S: np.ndarray, div: np.ndarray, b0: int, b1: int) -> np.ndar
     return out
 
 
-def choose_frame_length(x: np.ndarray, cplx: bool, par: RidgeParams) -> int:
+def choose_frame_length(x: np.ndarray, cplx: bool, par: FrameLengthParams) -> int:
     """The frame length of the block (module docstring)."""
     n = x.size if par.select_samples <= 0 else min(x.size, int(par.select_samples))
     xs = x[:n]

@@ -61,7 +61,7 @@ from rfi_monitor.chirp_comb import (
 )
 from rfi_monitor.classifier import welch_psd
 from rfi_monitor.cw_statistic import CwStatistic
-from rfi_monitor.spectral_autocorrelation import frame_length, spectral_autocorrelation
+from rfi_monitor.spectral_autocorrelation import spectral_autocorrelation
 
 __all__ = [
     "CHIRP", "CW", "NONE", "IntegratedDecision", "IntegrationParams", "Integrator", "_comb_skew", "comb_strength",
@@ -238,6 +238,13 @@ class _BlockStats:
         self.stamp_ns, self.n = stamp_ns, n
         self.psd_sum, self.psd_frames, self.power = psd_sum, psd_frames, power
         self.r, self.var, self.frames, self.copies, self.spread = r, var, frames, copies, spread
+
+
+def frame_length(fs: float, par: IntegrationParams) -> int:
+    """Frame length of the chirp statistic at sample rate fs (``rfi_monitor.spectral_autocorrelation`` module
+    docstring)."""
+    L = 2 ** int(round(math.log2(max(fs * par.frame_length_s, 1.0))))
+    return int(min(max(L, 8), 128))
 
 
 class Integrator:

@@ -248,7 +248,8 @@ def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length
     # the ridge's strongest bins and the sums of the spectral phasor (its periodicity below) in one pass
     rd = frame_ridges(S, freqs, lvl, cplx, par.presence_nats)
     lmax = int(min(par.max_period_s * fs / hop, nfr // 4))
-    per_fr, strength = _periodicity(rd.phasor.astype(np.complex128), int(par.min_period_frames), lmax, par)
+    per_fr, strength = _periodicity(rd.phasor.astype(np.complex128), int(par.min_period_frames), lmax,
+                                    par.min_strength, par.detect_sigma)
     periodic = math.isfinite(per_fr)
     if periodic:
         sw = _periodic_sweep(x, cplx, S, freqs, lvl, noise, rd, per_fr, L, par, fine_hook)
@@ -368,9 +369,7 @@ def _block_end_frequency(n: int, sw: _Sweep, rd: FrameRidges, periodic: bool, pe
     if law is not None and inband_k is not None:
         # saw-tooth: the sweep law fitted away from the flyback (where frames straddle it) gives the
         # swept band's ends, the mean rate and the frequency at the block end
-        rl = read_law(law, inband_k, per_fr, L, t_end)
-        sw.low, sw.high, sw.start, sw.rate = rl.low, rl.high, rl.start, rl.rate
-        freq, fstd = rl.frequency, rl.frequency_std
+        sw.low, sw.high, sw.start, sw.rate, freq, fstd = read_law(law, inband_k, per_fr, L, t_end)
     elif periodic and prof_k is not None and inband_k is not None:
         freq = _profile_frequency(prof_k, inband_k, t_end / per_fr, sw.high - sw.low)
     elif present[-1]:

@@ -12,18 +12,15 @@ one peak is divided by the number of periods).
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
 
 from rfi_monitor.numpy_kernels import first_argmax, pairwise_sum
 
-if TYPE_CHECKING:
-    from rfi_monitor.ridge import RidgeParams
 
-
-def _periodicity(u: np.ndarray, lmin: int, lmax: int, par: RidgeParams) -> tuple[float, float]:
+def _periodicity(u: np.ndarray, lmin: int, lmax: int, min_strength: float, detect_sigma: float
+                 ) -> tuple[float, float]:
     """(period in frames, strength) of the phasor sequence u, or (nan, 0) (module docstring)."""
     T = u.size
     if lmax <= lmin + 2 or T < 4 * lmin:
@@ -35,7 +32,7 @@ def _periodicity(u: np.ndarray, lmin: int, lmax: int, par: RidgeParams) -> tuple
     if not R[0] > 0:
         return math.nan, 0.0
     per, strength = _period_from_autocorrelation(np.ascontiguousarray(R), int(lmin), int(lmax),
-                                                 float(par.min_strength), float(par.detect_sigma))
+                                                 float(min_strength), float(detect_sigma))
     return per, strength
 
 

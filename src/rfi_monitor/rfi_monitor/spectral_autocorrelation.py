@@ -12,14 +12,11 @@ between bins, the overlap of neighbouring frames and a jammer's own variance are
 noise removed (E has zero mean over the block, so each product has the mean ``-sum_b (C_0 + 2 C_1)(b, b) / T``).
 
 The frame length of the chirp statistic is fixed per stream (``frame_length_s`` of the sample rate, a power of two in
-8..128; ``frame_length``): the sweep must move by less than about one bin per frame (a sweep of k cycles/sample^2
-moves k L^2 bins per frame: 0.7 at the paper's 1e12 Hz/s, 38.192 MS/s, L = 32).
+8..128; ``rfi_monitor.integration.frame_length``): the sweep must move by less than about one bin per frame (a sweep
+of k cycles/sample^2 moves k L^2 bins per frame: 0.7 at the paper's 1e12 Hz/s, 38.192 MS/s, L = 32).
 """
 
 from __future__ import annotations
-
-import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
@@ -27,15 +24,6 @@ from scipy import fft as sp_fft
 
 from rfi_monitor.classifier import frame_power
 from rfi_monitor.stft import stft_power
-
-if TYPE_CHECKING:
-    from rfi_monitor.integration import IntegrationParams
-
-
-def frame_length(fs: float, par: IntegrationParams) -> int:
-    """Frame length of the chirp statistic at sample rate fs (module docstring)."""
-    L = 2 ** int(round(math.log2(max(fs * par.frame_length_s, 1.0))))
-    return int(min(max(L, 8), 128))
 
 
 def spectral_autocorrelation(x: np.ndarray, cplx: bool, L: int, max_lag: int

@@ -139,13 +139,22 @@ def noise_levels(S: np.ndarray, smooth_bins: int, cplx: bool) -> np.ndarray:
 
     S: float32 (frames, bins), as from stft_power (other dtypes are converted). One compiled pass
     (``_noise_levels_kernel``); the same arithmetic as the numpy version it replaced (float32 quantile,
-    medians and threshold, float64 masked means; test_ridge_speed_equivalence.py)."""
+    medians and threshold, float64 masked means); its properties: test_ridge_stages.py."""
     S = np.ascontiguousarray(S, dtype=np.float32)
     nfr, B = S.shape
     k = max(0, min(nfr - 1, int(_Q_LOW * nfr)))
     q = np.partition(np.ascontiguousarray(S.T), k, axis=1)[:, k]
     w = min(int(smooth_bins), B - (1 - B % 2))
     return _noise_levels_kernel(S, q, w, bool(cplx), bool(cplx), (B // 3) | 1)
+
+
+@njit(cache=True, inline="always")
+def _neighbour(q: int, n: int, wrap: bool) -> int:
+    """Index q of a 1-D array of n values wrapped around (scipy.ndimage's mode "wrap") or held at its ends
+    ("nearest")."""
+    if wrap:
+        return q % n
+    return min(max(q, 0), n - 1)
 
 
 @njit(cache=True)
@@ -157,11 +166,7 @@ def _median_filter_1d(a: np.ndarray, w: int, wrap: bool) -> np.ndarray:
     buf = np.empty(w, dtype=a.dtype)
     for i in range(n):
         for j in range(w):
-            q = i + j - h
-            if wrap:
-                q %= n
-            else:
-                q = min(max(q, 0), n - 1)
+            q = _neighbour(i + j - h, n, wrap)
             buf[j] = a[q]
         buf.sort()
         out[i] = buf[h]
@@ -177,11 +182,7 @@ def _min_max_filter_1d(a: np.ndarray, w: int, wrap: bool, take_max: bool) -> np.
     for i in range(n):
         v = a[i]
         for j in range(w):
-            q = i + j - h
-            if wrap:
-                q %= n
-            else:
-                q = min(max(q, 0), n - 1)
+            q = _neighbour(i + j - h, n, wrap)
             if take_max:
                 if a[q] > v:
                     v = a[q]

@@ -11,7 +11,6 @@ fit's residual.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -80,25 +79,13 @@ def _sawtooth_law_kernel(prof: np.ndarray, inband: np.ndarray, period_samples: f
     return True, phi_j, coef, rms
 
 
-@dataclass(frozen=True)
-class LawReading:
-    """What a saw-tooth's sweep law gives (``read_law``): swept band (low, high), the frequency at the sweep start,
-    the mean rate (cycles/sample^2), the frequency at the block's last sample (NaN when the jammer is out of band
-    there) and its 1-sigma, cycles/sample."""
-
-    low: float
-    high: float
-    start: float
-    rate: float
-    frequency: float
-    frequency_std: float
-
-
 def read_law(law: tuple[float, np.ndarray, float], inband: np.ndarray, period_frames: float, L: int, t_end: float
-             ) -> LawReading:
-    """The swept band's ends, the mean rate and the frequency at the block end from a saw-tooth's law (``_sawtooth_law``
-    of the fine profile whose in-band bins are inband), fitted away from the flyback (where frames straddle it).
-    period_frames: the period in frames of L samples at hop L / 2; t_end: the block's last sample in frame units."""
+             ) -> tuple[float, float, float, float, float, float]:
+    """What a saw-tooth's law (``_sawtooth_law`` of the fine profile whose in-band bins are inband, fitted away from
+    the flyback, where frames straddle it) gives: (low, high: the swept band; the frequency at the sweep start; the
+    mean rate, cycles/sample^2; the frequency at the block's last sample, NaN when the jammer is out of band there; its
+    1-sigma), cycles/sample. period_frames: the period in frames of L samples at hop L / 2; t_end: the block's last
+    sample in frame units."""
     phi_j, coef, rms = law
     hop = L // 2
     # the block-end error measured on the paper front end (12 blocks, J/N 21 dB) had an RMS of about
@@ -111,4 +98,4 @@ def read_law(law: tuple[float, np.ndarray, float], inband: np.ndarray, period_fr
     freq = math.nan
     if inband[min(int(ph_end * inband.size), inband.size - 1)]:
         freq = polyval(coef, e_end)
-    return LawReading(min(f0, f1), max(f0, f1), f0, rate, freq, fstd)
+    return min(f0, f1), max(f0, f1), f0, rate, freq, fstd

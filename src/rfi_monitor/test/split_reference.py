@@ -44,14 +44,11 @@ def stream(front_end: str, scenario: str, n_blocks: int = N_BLOCKS):
     from rfi_sim.if_signal import ChirpJammer, FrontEndConfig, IfSimulator
     fe = FrontEndConfig(noise_bandwidth_hz=2e6, bits=BITS, **FRONT_ENDS[front_end])
     n = int(round(fe.sample_rate_hz * 1e-3))
-    clean = IfSimulator(fe, (), seed=3)
-    jammed = IfSimulator(fe, (ChirpJammer(js_db=6.0 if scenario == "weak" else 40.0),), seed=4)
-    out = []
-    for k in range(n_blocks):
-        sim = clean if scenario == "noise" or (scenario == "switch" and k < n_blocks // 2) else jammed
-        blk = sim.generate(n)
-        out.append((blk.counts.copy(), float(blk.scale)))
-    return fe, n, out
+    sims = {False: IfSimulator(fe, (), seed=3),
+            True: IfSimulator(fe, (ChirpJammer(js_db=6.0 if scenario == "weak" else 40.0),), seed=4)}
+    first_jammed = {"noise": n_blocks, "switch": n_blocks // 2}.get(scenario, 0)
+    blocks = [sims[k >= first_jammed].generate(n) for k in range(n_blocks)]
+    return fe, n, [(blk.counts.copy(), float(blk.scale)) for blk in blocks]
 
 
 def _row(obj) -> dict[str, float | str]:

@@ -15,9 +15,9 @@ from scipy import stats
 
 from rfi_monitor.chirp_comb import _comb_skew, resolve_submultiple
 from rfi_monitor.classifier import CHIRP, CW, NONE
-from rfi_monitor.integration import IntegrationParams, Integrator
+from rfi_monitor.integration import IntegrationParams, Integrator, frame_length
 from rfi_monitor.monitor import RfiMonitor, RfiMonitorParams
-from rfi_monitor.spectral_autocorrelation import frame_length, spectral_autocorrelation
+from rfi_monitor.spectral_autocorrelation import spectral_autocorrelation
 from rfi_sim.if_signal import ChirpJammer, FrontEndConfig, IfSimulator, js_for_jn_db
 from rfi_sim.jammer_waveforms import SweepJammer
 

@@ -14,8 +14,8 @@ import math
 import numpy as np
 import pytest
 
-from rfi_monitor import folded_spectrum, sweep_shape
 from rfi_monitor import ridge as rg
+from rfi_monitor import sweep_shape
 from rfi_sim.jammer_waveforms import SweepJammer, sweep_law
 
 
@@ -237,53 +237,6 @@ def test_weak_sweeps_right_or_unknown():
                     assert r.shape in (want_of[shape], rg.SHAPE_UNKNOWN), (fe, shape, jn, seed, rg.SHAPE_NAMES[r.shape])
                     right[jn] += r.shape == want_of[shape]
     assert periodic[-5.0] >= 24 and right[-5.0] >= 0.7 * periodic[-5.0], (periodic, right)
-
-
-def test_compiled_fold_and_shape_same_as_numpy_reference():
-    """ridge.py's compiled _fold_shape / _shape / _return_bins give what the numpy versions in ridge_reference.py give
-    (random sweeps and noise, real and complex, frame lengths 8-64; random profiles with gaps and standard errors)."""
-    import importlib.util
-    import sys
-    from pathlib import Path
-    spec = importlib.util.spec_from_file_location("rfi_monitor_ridge_reference_shapes",
-                                                  Path(__file__).parent / "ridge_reference.py")
-    ref = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = ref
-    spec.loader.exec_module(ref)
-    rng = np.random.default_rng(3)
-    labelled = 0
-    for t in range(120):
-        cplx = bool(t % 2)
-        L = int(rng.choice([8, 16, 32, 64]))
-        n = int(rng.integers(2000, 20000))
-        per = float(rng.uniform(4.5, 40))
-        tt = np.arange(n)
-        ph = np.cumsum(0.4 * (((tt / (per * L / 2)) % 1.0) - 0.5)) * 2 * np.pi
-        amp = 2.0 if t % 3 else 0.0
-        x = (rng.standard_normal(n) + 1j * rng.standard_normal(n) + amp * np.exp(1j * ph) if cplx
-             else rng.standard_normal(n) + amp * np.cos(ph + 0.3 * tt))
-        S, fr = rg.stft_power(x, L, cplx)
-        a, b = folded_spectrum._fold_shape(S, fr, per, L, cplx, 2.0), ref._fold_shape(S, fr, per, L, cplx, 2.0)
-        if b[0] == rg.SHAPE_UNKNOWN and a[0] != rg.SHAPE_UNKNOWN and math.isnan(a[1]):
-            continue     # the reference has no line search (_line_shape, newer): it found a law the profile did not
-        assert a[0] == b[0] and np.allclose(a[1:], b[1:], rtol=1e-9, equal_nan=True), (t, a, b)
-        labelled += a[0] != rg.SHAPE_UNKNOWN
-    assert labelled > 40
-    for t in range(3000):
-        K = int(rng.integers(4, 33))
-        ph = (np.arange(K) + 0.5) / K
-        u = rng.uniform(0.3, 0.95)
-        prof = [rng.uniform(-0.5, 0.5, K), np.where(ph < u, ph, rng.uniform(-0.3, 0.3, K)),
-                np.where(ph < u, ph / u, (1 - ph) / (1 - u))][t % 3] + rng.normal(0, 0.02, K)
-        inband = rng.uniform(size=K) < rng.uniform(0.4, 1.0)
-        prof[~inband & (rng.uniform(size=K) < 0.5)] = np.nan
-        inband &= np.isfinite(prof)
-        se = np.where(rng.uniform(size=K) < 0.1, np.inf, rng.uniform(0.001, 0.02, K))
-        for s in (se, None):
-            a, b = sweep_shape._shape(prof, inband, 2.0, s), ref._shape(prof, inband, 2.0, s)
-            assert a[0] == b[0] and np.allclose(a[1:], b[1:], rtol=0, atol=0, equal_nan=True), (t, a, b)
-        for up in (True, False):
-            assert tuple(sweep_shape._return_bins(prof, inband, up)) == tuple(ref._return_bins(prof, inband, up))
 
 
 # ----- fine_profile: the sample-resolution profile of lag products (a hook shorter than a frame) -----
