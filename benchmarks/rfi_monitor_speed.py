@@ -157,7 +157,8 @@ install (cached after that: 0.35 s; the node's warm_up does it before it subscri
 same precision and order, so the results are the same to the bit on this machine
 (src/rfi_monitor/test/test_ridge_speed_equivalence.py: the shape cases of test_stft_estimator.py and
 the real clean captures, ridge and whole monitor, against the frozen pre-speed-up ridge_reference.py;
-stated tolerances 1e-6 relative, 1e-6 dB, integers and types exactly; bit-identical here). Tried and not kept: the
+stated tolerances 1e-6 relative, 1e-6 dB, integers and types exactly; bit-identical here; issue 28 replaced
+that test and its frozen copy by test_ridge_stages.py and test_split_equivalence.py). Tried and not kept: the
 autocorrelation FFT with scipy.fft instead of numpy.fft (the same bits, 3-5 us per block); the noise
 level's quantile in the compiled pass (numba's np.partition and a hand-written quickselect were 4-7x
 slower than numpy's introselect).

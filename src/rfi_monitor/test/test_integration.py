@@ -13,16 +13,11 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from rfi_monitor.chirp_comb import _comb_skew, resolve_submultiple
 from rfi_monitor.classifier import CHIRP, CW, NONE
-from rfi_monitor.integration import (
-    IntegrationParams,
-    Integrator,
-    _comb_skew,
-    frame_length,
-    resolve_submultiple,
-    spectral_autocorrelation,
-)
+from rfi_monitor.integration import IntegrationParams, Integrator, frame_length
 from rfi_monitor.monitor import RfiMonitor, RfiMonitorParams
+from rfi_monitor.spectral_autocorrelation import spectral_autocorrelation
 from rfi_sim.if_signal import ChirpJammer, FrontEndConfig, IfSimulator, js_for_jn_db
 from rfi_sim.jammer_waveforms import SweepJammer
 

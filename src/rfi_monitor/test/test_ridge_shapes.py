@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from rfi_monitor import ridge as rg
+from rfi_monitor import sweep_shape
 from rfi_sim.jammer_waveforms import SweepJammer, sweep_law
 
 
@@ -129,11 +130,11 @@ def test_scatter_profile_is_unknown():
         present = rng.uniform(size=nfr) < rng.uniform(0.05, 1.0)
         per = float(rng.uniform(4.0, 60.0))
         K = 32 if per > 16 else max(4, int(per))
-        prof, share, se = rg._profile(f, present, per, K, None, 1.0 / L)
+        prof, share, se = sweep_shape._profile(f, present, per, K, None, 1.0 / L)
         if not np.any(share > 0):
             continue
         inband = (share >= 0.5 * float(np.max(share))) & np.isfinite(prof)
-        shapes.append(rg._shape(prof, inband, 2.0, se)[0])
+        shapes.append(sweep_shape._shape(prof, inband, 2.0, se)[0])
     assert len(shapes) > 250
     assert shapes.count(rg.SHAPE_UNKNOWN) == len(shapes), {rg.SHAPE_NAMES[s]: shapes.count(s) for s in set(shapes)}
 
@@ -157,19 +158,19 @@ def test_narrow_sawtooth_is_a_sweep_and_pulsed_tone_is_not():
 
 
 def test_sign_tail():
-    assert rg._sign_tail(3, 3) == pytest.approx(1 / 8)
-    assert rg._sign_tail(15, 15) == pytest.approx(2.0 ** -15)
-    assert rg._sign_tail(6, 7) == pytest.approx(8 / 128)
-    assert rg._sign_tail(0, 5) == 1.0 and rg._sign_tail(1, 0) == 1.0
+    assert sweep_shape._sign_tail(3, 3) == pytest.approx(1 / 8)
+    assert sweep_shape._sign_tail(15, 15) == pytest.approx(2.0 ** -15)
+    assert sweep_shape._sign_tail(6, 7) == pytest.approx(8 / 128)
+    assert sweep_shape._sign_tail(0, 5) == 1.0 and sweep_shape._sign_tail(1, 0) == 1.0
 
 
 def test_return_bins():
     up = np.array([0.0, 0.1, 0.2, 0.3, 0.4, -0.4, -0.3, -0.2, -0.1])          # instantaneous flyback
     hook = np.array([0.0, 0.1, 0.2, 0.3, 0.4, 0.15, -0.15, -0.45, -0.35, -0.2, -0.1])   # swept, overshooting
     ok_u, ok_h = np.ones(up.size, bool), np.ones(hook.size, bool)
-    assert rg._return_bins(up, ok_u, True) == (0, 1)
-    assert rg._return_bins(hook, ok_h, True) == (2, 3)
-    assert rg._return_bins(-hook, ok_h, False) == (2, 3)
+    assert sweep_shape._return_bins(up, ok_u, True) == (0, 1)
+    assert sweep_shape._return_bins(hook, ok_h, True) == (2, 3)
+    assert sweep_shape._return_bins(-hook, ok_h, False) == (2, 3)
 
 
 # ----- folded_shape: a sweep of known period (from the evidence over blocks) below the per-frame ridge -----
@@ -236,53 +237,6 @@ def test_weak_sweeps_right_or_unknown():
                     assert r.shape in (want_of[shape], rg.SHAPE_UNKNOWN), (fe, shape, jn, seed, rg.SHAPE_NAMES[r.shape])
                     right[jn] += r.shape == want_of[shape]
     assert periodic[-5.0] >= 24 and right[-5.0] >= 0.7 * periodic[-5.0], (periodic, right)
-
-
-def test_compiled_fold_and_shape_same_as_numpy_reference():
-    """ridge.py's compiled _fold_shape / _shape / _return_bins give what the numpy versions in ridge_reference.py give
-    (random sweeps and noise, real and complex, frame lengths 8-64; random profiles with gaps and standard errors)."""
-    import importlib.util
-    import sys
-    from pathlib import Path
-    spec = importlib.util.spec_from_file_location("rfi_monitor_ridge_reference_shapes",
-                                                  Path(__file__).parent / "ridge_reference.py")
-    ref = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = ref
-    spec.loader.exec_module(ref)
-    rng = np.random.default_rng(3)
-    labelled = 0
-    for t in range(120):
-        cplx = bool(t % 2)
-        L = int(rng.choice([8, 16, 32, 64]))
-        n = int(rng.integers(2000, 20000))
-        per = float(rng.uniform(4.5, 40))
-        tt = np.arange(n)
-        ph = np.cumsum(0.4 * (((tt / (per * L / 2)) % 1.0) - 0.5)) * 2 * np.pi
-        amp = 2.0 if t % 3 else 0.0
-        x = (rng.standard_normal(n) + 1j * rng.standard_normal(n) + amp * np.exp(1j * ph) if cplx
-             else rng.standard_normal(n) + amp * np.cos(ph + 0.3 * tt))
-        S, fr = rg.stft_power(x, L, cplx)
-        a, b = rg._fold_shape(S, fr, per, L, cplx, 2.0), ref._fold_shape(S, fr, per, L, cplx, 2.0)
-        if b[0] == rg.SHAPE_UNKNOWN and a[0] != rg.SHAPE_UNKNOWN and math.isnan(a[1]):
-            continue     # the reference has no line search (_line_shape, newer): it found a law the profile did not
-        assert a[0] == b[0] and np.allclose(a[1:], b[1:], rtol=1e-9, equal_nan=True), (t, a, b)
-        labelled += a[0] != rg.SHAPE_UNKNOWN
-    assert labelled > 40
-    for t in range(3000):
-        K = int(rng.integers(4, 33))
-        ph = (np.arange(K) + 0.5) / K
-        u = rng.uniform(0.3, 0.95)
-        prof = [rng.uniform(-0.5, 0.5, K), np.where(ph < u, ph, rng.uniform(-0.3, 0.3, K)),
-                np.where(ph < u, ph / u, (1 - ph) / (1 - u))][t % 3] + rng.normal(0, 0.02, K)
-        inband = rng.uniform(size=K) < rng.uniform(0.4, 1.0)
-        prof[~inband & (rng.uniform(size=K) < 0.5)] = np.nan
-        inband &= np.isfinite(prof)
-        se = np.where(rng.uniform(size=K) < 0.1, np.inf, rng.uniform(0.001, 0.02, K))
-        for s in (se, None):
-            a, b = rg._shape(prof, inband, 2.0, s), ref._shape(prof, inband, 2.0, s)
-            assert a[0] == b[0] and np.allclose(a[1:], b[1:], rtol=0, atol=0, equal_nan=True), (t, a, b)
-        for up in (True, False):
-            assert tuple(rg._return_bins(prof, inband, up)) == tuple(ref._return_bins(prof, inband, up))
 
 
 # ----- fine_profile: the sample-resolution profile of lag products (a hook shorter than a frame) -----
@@ -404,16 +358,17 @@ def test_monitor_tests_a_tracked_hook_once_per_recheck_interval(monkeypatch):
     HOOK_RECHECK_S of stamps (it costs as much as the rest of a tracking block); the blocks in between report the
     tested verdict for a saw-tooth of the same period: row S's hooked saw-tooth is HOOKED in every block, a plain
     saw-tooth never."""
+    from rfi_monitor import fine_hook
     from rfi_monitor import sweep_consistency as mon_module
     from rfi_monitor.monitor import RfiMonitor, RfiMonitorParams
 
     calls = []
-    real_fine = rg.fine_profile
+    real_fine = fine_hook.fine_profile
 
     def counted(*args, **kwargs):
         calls.append(1)
         return real_fine(*args, **kwargs)
-    monkeypatch.setattr(rg, "fine_profile", counted)
+    monkeypatch.setattr(fine_hook, "fine_profile", counted)     # where fine_hook_shape looks it up
     fs, n = 10e6, 10_000
     for shape, want in (("hooked_saw", rg.HOOKED_SAWTOOTH), ("saw_up", rg.SAWTOOTH_UP)):
         jam = SweepJammer(shape, -3.5e6, 4e6, 12e-6, hook_fraction=0.15, hook_overshoot_hz=0.8e6)
