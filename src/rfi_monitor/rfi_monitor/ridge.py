@@ -219,8 +219,10 @@ class _Sweep:
     """the label of the spectrum folded on the period (``folded_spectrum``), used when the profile shows none"""
     hook_checked: bool = False
     prof: np.ndarray | None = None
-    """the fine folded profile (periodic) and its in-band bins: the block-end frequency is read from them"""
+    """the fine folded profile (periodic), its in-band bins and standard errors: the block-end frequency is read from
+    them"""
     inband: np.ndarray | None = None
+    se: np.ndarray | None = None
 
 
 def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length: int = 0,
@@ -278,7 +280,7 @@ def _periodic_sweep(x: np.ndarray, cplx: bool, S: np.ndarray, freqs: np.ndarray,
     # +0.5 in one phase bin's median)
     fuse = present & (rd.bin > 0) & (rd.bin < B - 1) if cplx else present
     pp = phase_profiles(f, present, fuse, per_fr, int(par.phase_bins), binw)
-    sw = _Sweep(in_band_fraction=pp.in_band_fraction, prof=pp.prof, inband=pp.inband)
+    sw = _Sweep(in_band_fraction=pp.in_band_fraction, prof=pp.prof, inband=pp.inband, se=pp.se)
     shape, low, high, start, step, p_dir = _shape(pp.prof_s, pp.inband_s, par.hook_rate_ratio, pp.se_s)
     if shape in (SAWTOOTH_UP, SAWTOOTH_DOWN) and pp.prof.size > pp.shape_bins and \
             _return_bins(pp.prof, pp.inband, shape == SAWTOOTH_UP)[0] >= MIN_RETURN_BINS:
@@ -370,8 +372,12 @@ def _block_end_frequency(n: int, sw: _Sweep, rd: FrameRidges, periodic: bool, pe
         # saw-tooth: the sweep law fitted away from the flyback (where frames straddle it) gives the
         # swept band's ends, the mean rate and the frequency at the block end
         sw.low, sw.high, sw.start, sw.rate, freq, fstd = read_law(law, inband_k, per_fr, L, t_end)
-    elif periodic and prof_k is not None and inband_k is not None:
-        freq = _profile_frequency(prof_k, inband_k, t_end / per_fr, sw.high - sw.low)
+    elif periodic and prof_k is not None and inband_k is not None and sw.se is not None:
+        freq, se_end = _profile_frequency(prof_k, inband_k, sw.se, t_end / per_fr, sw.high - sw.low)
+        if math.isfinite(se_end):
+            # read from one or two profile bins (medians of their frames): their standard error, not the frames'
+            # scatter around the profile (issue 26 item 3; docs/rfi_monitor/real_jammers.md gives the coverage)
+            fstd = se_end
     elif present[-1]:
         freq = float(f[-1]) + (float(sw.rate) * (t_end - (nfr - 1)) * hop if math.isfinite(sw.rate) else 0.0)
     if math.isfinite(freq) and not (float(freqs[0]) - 0.5 / L <= freq <= float(freqs[-1]) + 0.5 / L):
@@ -379,17 +385,21 @@ def _block_end_frequency(n: int, sw: _Sweep, rd: FrameRidges, periodic: bool, pe
     return freq, fstd
 
 
-def _profile_frequency(prof: np.ndarray, inband: np.ndarray, periods: float, span: float) -> float:
-    """The folded profile read at a phase (``periods``: the time in periods; its fraction is the phase): linearly
-    between the two nearest bins when both are in band and not across a flyback (a step of half the swept span),
-    else the nearer bin when in band, else NaN."""
+def _profile_frequency(prof: np.ndarray, inband: np.ndarray, se: np.ndarray, periods: float, span: float
+                       ) -> tuple[float, float]:
+    """The folded profile read at a phase (``periods``: the time in periods; its fraction is the phase), and its
+    standard error: linearly between the two nearest bins when both are in band and not across a flyback (a step of
+    half the swept span; the bins' medians are independent: ``sqrt((1 - a)^2 se0^2 + a^2 se1^2)``), else the nearer
+    bin when in band, else (NaN, NaN)."""
     K = prof.size
     pos = np.mod(periods, 1.0) * K - 0.5
     k0 = int(math.floor(pos)) % K
     k1 = (k0 + 1) % K
     a = pos - math.floor(pos)
     if inband[k0] and inband[k1] and abs(prof[k1] - prof[k0]) < 0.5 * span:
-        return float((1 - a) * prof[k0] + a * prof[k1])
-    if inband[k0 if a < 0.5 else k1]:
-        return float(prof[k0 if a < 0.5 else k1])
-    return math.nan
+        return (float((1 - a) * prof[k0] + a * prof[k1]),
+                math.sqrt(((1 - a) * float(se[k0])) ** 2 + (a * float(se[k1])) ** 2))
+    k = k0 if a < 0.5 else k1
+    if inband[k]:
+        return float(prof[k]), float(se[k])
+    return math.nan, math.nan

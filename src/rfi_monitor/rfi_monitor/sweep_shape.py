@@ -347,6 +347,7 @@ class PhaseProfiles:
     Attributes:
         prof, inband: the fine profile (K bins: ``phase_bins``, or one per frame of a period of nearly whole frames)
             and its in-band bins; shape (K,). The block-end frequency and the sweep law are read from it.
+        se: the standard error of each of its bins (a median's, ``_profile``), shape (K,).
         prof_s, inband_s, se_s: the profile the shape is read from (Ks bins, at most ``SHAPE_BINS``; the fine one
             when the sweep is in band for less than 0.6 of the period), its in-band bins and standard errors.
         shape_bins: Ks.
@@ -355,6 +356,7 @@ class PhaseProfiles:
 
     prof: np.ndarray
     inband: np.ndarray
+    se: np.ndarray
     prof_s: np.ndarray
     inband_s: np.ndarray
     se_s: np.ndarray
@@ -384,4 +386,4 @@ def phase_profiles(f: np.ndarray, present: np.ndarray, fuse: np.ndarray, period_
     if inb < 0.6 and Ks < K:
         # in band only part of the period: the finer profile has more bins in each in-band run
         Ks, prof_s, inband_s, se_s = K, prof, inband, se
-    return PhaseProfiles(prof, inband, prof_s, inband_s, se_s, Ks, inb)
+    return PhaseProfiles(prof, inband, se, prof_s, inband_s, se_s, Ks, inb)

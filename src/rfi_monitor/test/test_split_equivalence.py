@@ -7,6 +7,11 @@ evidence over blocks finds) against those of commit 6657d8c, the last before the
 (``python split_reference.py --check``); here within 1e-9 relative (issue 28's criterion), so that a CPU or numpy that
 rounds differently in the last bit does not fail it, while any change of a decision (type, shape, flags, counters)
 does.
+
+Changed on purpose since: the 1-sigma of a chirp's block-end frequency (issue 26 item 3: the fitted law's or the
+profile bins' standard error instead of the residual scatter), ``ridge.frequency_std`` and
+``estimate.frequency_std_hz``; those two fields are left out of the comparison (``CHANGED_ON_PURPOSE``), every other
+one still equals 6657d8c's.
 """
 
 import importlib.util
@@ -21,6 +26,10 @@ _spec = importlib.util.spec_from_file_location("rfi_monitor_split_reference",
 ref = importlib.util.module_from_spec(_spec)
 sys.modules[_spec.name] = ref
 _spec.loader.exec_module(ref)
+
+
+CHANGED_ON_PURPOSE = ("ridge.frequency_std", "estimate.frequency_std_hz")
+"""Fields whose values changed on purpose after the split (module docstring)."""
 
 
 @pytest.fixture(scope="module")
@@ -38,6 +47,9 @@ def test_outputs_equal_those_before_the_split(stored, front_end):
             new[f"{front_end}:{sc}:{key}"] = v
     want = {k: v for k, v in stored.items() if k.startswith(f"{front_end}:")}
     assert len(want) == len(new) == 300
+    assert sum(k.endswith(CHANGED_ON_PURPOSE) for k in want) == 8
+    want = {k: v for k, v in want.items() if not k.endswith(CHANGED_ON_PURPOSE)}
+    new = {k: v for k, v in new.items() if not k.endswith(CHANGED_ON_PURPOSE)}
     bad = ref.compare(want, new, rel=1e-9)
     assert not bad, bad[:10]
 
