@@ -373,11 +373,10 @@ def _block_end_frequency(n: int, sw: _Sweep, rd: FrameRidges, periodic: bool, pe
         # swept band's ends, the mean rate and the frequency at the block end
         sw.low, sw.high, sw.start, sw.rate, freq, fstd = read_law(law, inband_k, per_fr, L, t_end)
     elif periodic and prof_k is not None and inband_k is not None and sw.se is not None:
-        freq, se_end = _profile_frequency(prof_k, inband_k, sw.se, t_end / per_fr, sw.high - sw.low)
-        if math.isfinite(se_end):
-            # read from one or two profile bins (medians of their frames): their standard error, not the frames'
-            # scatter around the profile (issue 26 item 3; docs/rfi_monitor/real_jammers.md gives the coverage)
-            fstd = se_end
+        # read from one or two profile bins; the 1-sigma stays the frames' scatter around the profile (the sweep at
+        # the block end deviates from a bin's median as its frames do; the bins' standard errors alone, tried for
+        # issue 26 item 3, covered 0-65 % of the errors where the sweep is not smooth)
+        freq = _profile_frequency(prof_k, inband_k, sw.se, t_end / per_fr, sw.high - sw.low)[0]
     elif present[-1]:
         freq = float(f[-1]) + (float(sw.rate) * (t_end - (nfr - 1)) * hop if math.isfinite(sw.rate) else 0.0)
     if math.isfinite(freq) and not (float(freqs[0]) - 0.5 / L <= freq <= float(freqs[-1]) + 0.5 / L):

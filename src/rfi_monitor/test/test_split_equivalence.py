@@ -8,8 +8,8 @@ evidence over blocks finds) against those of commit 6657d8c, the last before the
 rounds differently in the last bit does not fail it, while any change of a decision (type, shape, flags, counters)
 does.
 
-Changed on purpose since: the 1-sigma of a chirp's block-end frequency (issue 26 item 3: the fitted law's or the
-profile bins' standard error instead of the residual scatter), ``ridge.frequency_std`` and
+Changed on purpose since: the 1-sigma of a saw-tooth's block-end frequency (issue 26 item 3: the law's prediction
+interval, ``sweep_law.prediction_std``, instead of twice the residual RMS), ``ridge.frequency_std`` and
 ``estimate.frequency_std_hz``; those two fields are left out of the comparison (``CHANGED_ON_PURPOSE``), every other
 one still equals 6657d8c's.
 """
