@@ -5,6 +5,8 @@
 default 1: on a 2-core machine the "other core" is busy), runs ``python -m pytest`` ``--runs`` times with
 whatever pytest arguments follow ``--`` (every test by default), and prints one line per run (outcome, time,
 the ids of the failing tests) and a tally: runs passed, and each failing test with the runs it failed in.
+``{run}`` in a pytest argument is replaced by the run's number (``--basetemp=/tmp/loaded/run{run}`` keeps each
+run's temporary files apart).
 The hogs run at the tests' own priority and are stopped (by their process ids) when the runs end, also on
 Ctrl-C. Each run's JUnit XML and output go to ``--out`` (default ``log/test_loaded``).
 
@@ -89,7 +91,8 @@ def main(argv: list[str] | None = None) -> int:
             junit = args.out / f'run{run}.xml'
             junit.unlink(missing_ok=True)
             t0 = time.monotonic()
-            done = subprocess.run([sys.executable, '-m', 'pytest', f'--junitxml={junit}', *pytest_args],
+            done = subprocess.run([sys.executable, '-m', 'pytest', f'--junitxml={junit}',
+                                   *(a.replace('{run}', str(run)) for a in pytest_args)],
                                   stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
             (args.out / f'run{run}.log').write_text(done.stdout)
             ids = failing_ids(junit)
