@@ -249,9 +249,13 @@ def test_every_input_played_and_counted_by_its_node(runs):
     played = [line.split()[1:] for line in (processes / 'logs' / 'play.log').read_text().splitlines()
               if line.startswith('total ')]
     assert played == [[str(sum(len(v) for v in stamps.values())), '0']]  # published, to nobody
-    # play paced itself on the monitor: every IF block was answered by a jammer state
-    assert (f'sync /rfi/if_samples -> /rfi/jammer_state: {len(stamps["/rfi/if_samples"])} answered, 0 not within'
-            in (processes / 'logs' / 'play.log').read_text())
+    # play paced itself on the monitor and on gnss_integrity: every IF block was answered by a jammer state, every
+    # GNSS epoch by a verdict (processes.SYNCED)
+    play_log = (processes / 'logs' / 'play.log').read_text()
+    assert f'sync /rfi/if_samples -> /rfi/jammer_state: {len(stamps["/rfi/if_samples"])} answered, 0 not within' \
+        in play_log
+    assert (f'sync /gnss/measurements -> /gnss/integrity: {len(stamps["/gnss/measurements"])} answered, '
+            '0 not within') in play_log
     # each node's last report counts every input stamped before it (an input with that very stamp
     # may come just after the one that triggered the report) and its accounting adds up
     last: dict[str, tuple[int, dict[str, str]]] = {}
