@@ -2,6 +2,7 @@
 #   make demo   set up (first time), then replay the default jamming experiment through the suite,
 #               and the spoofing experiment (report in $(OUT)/spoofed)
 #   make test   set up (first time), then run every test (unit, node, bag replay, linters)
+# make test-loaded RUNS=10 HOGS=1: make test RUNS times beside HOGS busy loops, with a tally (docs/testing.md)
 # Set-up needs only Python 3.10-3.12, cmake and a C compiler: no ROS install.
 SHELL := /bin/bash
 PYTHON ?= python3
@@ -11,12 +12,14 @@ PARAMS ?= $(BAG).params.yaml
 OUT ?= report
 ATTACK_BAG ?= bags/spoofed
 PYTEST_ARGS ?=
+RUNS ?= 10
+HOGS ?= 1
 
 # A shell with the venv (the ROS 2 prefix) and the workspace sourced; DDS stays on this host.
 RUN = set -eo pipefail; source $(VENV)/bin/activate; source install/setup.bash; \
       export ROS_AUTOMATIC_DISCOVERY_RANGE=$${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST};
 
-.PHONY: all setup build test demo lint clean distclean constraints
+.PHONY: all setup build test test-loaded demo lint clean distclean constraints
 
 all: test
 
@@ -25,6 +28,9 @@ setup build:
 
 test: setup
 	@$(RUN) python -m pytest $(PYTEST_ARGS)
+
+test-loaded: setup
+	@$(RUN) python tools/test_loaded.py --runs $(RUNS) --hogs $(HOGS) -- $(PYTEST_ARGS)
 
 demo: setup
 	@$(RUN) tools/ros2_run rfi_experiments run $(BAG) --out $(OUT) $$([ -f $(PARAMS) ] && echo --params-file $(PARAMS)) \

@@ -94,10 +94,15 @@ reliability``): the nodes' inputs take their publishers' reliability by default,
 if a best-effort driver publishes on the topic, which would let a replay lose messages silently; fixed
 reliable, every message of play reaches the node or play waits."""
 
-SYNCED = (('rfi_monitor', '/rfi/if_samples', '/rfi/jammer_state'),)
+SYNCED = (('rfi_monitor', '/rfi/if_samples', '/rfi/jammer_state'),
+          ('gnss_integrity', '/gnss/measurements', '/gnss/integrity'))
 """(node, input, output) that ``play`` paces on (``--sync``): after each IF block it waits for the
-monitor's jammer state, so the fusion gets it before the GNSS and UWB messages that follow the
-block in the bag, as in a replay in one process, however long the monitor takes for a block."""
+monitor's jammer state, and after each GNSS epoch for gnss_integrity's verdict of it, so the fusion
+gets them before the messages that follow in the bag, as in a replay in one process, however long
+the node takes. Without the second, a verdict that gnss_integrity (starved of CPU on a loaded
+machine) published more than the fusion's re-ordering window after play's next messages was
+rejected as late (``late_beyond_reorder_window``): seen in 1 of 3 runs of test_two_suites beside a
+busy loop; a DETECTED verdict lost that way would leave spoofed GNSS in the fusion."""
 
 
 def suite_topic(namespace: str, topic: str) -> str:
@@ -315,7 +320,7 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
     """Replay ``inputs`` of the bag through the node executables as separate processes fed by ``play``.
 
     ``play`` plays the first ``--warmup`` seconds at ``--warmup-rate`` and the rest at ``--rate``,
-    and after each IF block waits for the monitor's jammer state (``--sync``). Without the slow
+    and after each IF block and GNSS epoch waits for the answer (``--sync``, :data:`SYNCED`). Without the slow
     start, the nodes' first-call costs (numba compilation or cache loading, imports) pile up a
     backlog at a real-time pace; the fusion node's executor then takes GNSS, UWB and jammer
     messages out of arrival order and rejects those later than its re-ordering window. Neither

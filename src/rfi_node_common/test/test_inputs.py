@@ -168,4 +168,6 @@ def test_queued_s_is_the_time_a_message_waited_since_the_middleware_received_it(
     time.sleep(0.05)                                # the message waits in the subscription's queue
     spin_until(executor, lambda: len(seen) == 2)
     assert seen[0] is not None and seen[1] is not None   # this middleware reports reception times
-    assert 0.0 <= seen[0] < seen[1] and seen[1] >= 0.05
+    # the second waited at least the sleep; the first as long as the spin took to take it (on a loaded machine that
+    # can be longer than the second's wait: the two are not compared)
+    assert seen[0] >= 0.0 and seen[1] >= 0.05
