@@ -19,8 +19,9 @@ from __future__ import annotations
 
 import collections
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -28,6 +29,7 @@ from gnss_common.observations import GPS
 
 from .ckf import CubatureKalmanFilter
 from .divergence import GatedWindow
+from .fusion_output import FusionOutput
 from .fusion_params import (
     CORRELATED_ERROR_MAX_GAP_TAU,
     FRAME_EARTH,
@@ -351,3 +353,38 @@ def check_stamp_type(stamp_ns: object) -> int:
     if isinstance(stamp_ns, bool) or not isinstance(stamp_ns, (int, np.integer)):
         raise TypeError(f"stamp_ns must be an integer number of ns, got {type(stamp_ns).__name__}")
     return int(stamp_ns)
+
+
+class FilterFacade(Protocol):
+    """What the modules of one message and of the filter's life (:mod:`.gnss_epoch`, :mod:`.uwb_update`,
+    :mod:`.lifecycle`, :mod:`.mirror_handling`) use of :class:`.fusion_filter.FusionFilter`, which
+    implements it: they take the filter as this protocol and never import the facade (which imports them)."""
+
+    params: FusionParams
+    state: FilterState
+    reference_provider: Callable[[int], tuple[int, np.ndarray, float, float] | None] | None
+    gate: float
+    gate_3d: float
+    lever: np.ndarray
+    lever_floats: tuple[float, ...]
+    anchor_registry: Mapping[str, np.ndarray]
+    clock_q: Callable[[float], np.ndarray]
+    uwb_noise: dict[str, Any]
+    reinits: int
+
+    def count(self, reason: str, n: int = 1) -> None: ...
+
+    def output(self, diverged: bool, sat_used: int = 0, sat_rej: int = 0, uwb_used: int = 0, uwb_rej: int = 0,
+               nis: float = math.nan) -> FusionOutput: ...
+
+    def admit_stamp(self, stamp_ns: int) -> bool: ...
+
+    def current_js_db(self, stamp_ns: int) -> float: ...
+
+    def initialize(self, stamp_ns: int, position_m: np.ndarray, *, frame_id: str = FRAME_EARTH,
+                   velocity_mps: np.ndarray | None = None, clock_bias_m: float = math.nan,
+                   clock_drift_mps: float = math.nan, position_std_m: float | None = None,
+                   position_clock_covariance_m2: np.ndarray | None = None) -> FusionOutput: ...
+
+    def supply_reference_solution(self, stamp_ns: int, position_m: np.ndarray, position_std_m: float,
+                                  clock_bias_m: float = math.nan) -> None: ...

@@ -21,10 +21,6 @@ maths of other modules and comes back:
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from .fusion_filter import FusionFilter
 
 import numpy as np
 
@@ -34,7 +30,7 @@ from . import initialisation as init
 from .ckf import CholeskyError
 from .clock_steps import apply_clock_step, receiver_clock_step
 from .divergence import clock_reset_variances, gnss_epoch_inconsistent
-from .filter_state import check_stamp_type
+from .filter_state import FilterFacade, check_stamp_type
 from .fusion_output import FusionOutput
 from .fusion_params import FRAME_EARTH
 from .gnss_update import prepare_epoch, screen_common_mode, update_gnss
@@ -55,7 +51,7 @@ from .motion_model import static_exit_statistic, zero_velocity_update
 _NS = 1_000_000_000
 
 
-def process_gnss(f: FusionFilter, epoch: GnssEpoch) -> FusionOutput:
+def process_gnss(f: FilterFacade, epoch: GnssEpoch) -> FusionOutput:
     """Predict to the epoch's stamp and apply its pseudoranges (and pseudorange rates).
 
     Args:
@@ -154,7 +150,7 @@ def process_gnss(f: FusionFilter, epoch: GnssEpoch) -> FusionOutput:
     return f.output(False, sat_used=used, sat_rej=pre_rejected + n_screened + gated_pr, nis=nis)
 
 
-def start_from_fix(f: FusionFilter, stamp: int, prep: PreparedEpoch, n_obs: int, pre_rejected: int) -> FusionOutput:
+def start_from_fix(f: FilterFacade, stamp: int, prep: PreparedEpoch, n_obs: int, pre_rejected: int) -> FusionOutput:
     """No state yet: start the filter from a snapshot fix of the epoch (Cao et al., eq. 5-6 by least
     squares, :func:`.lifecycle.snapshot_fix`), unless it fails the gate against a recent UWB range or,
     with ``divergence_fix_confirm_s``, waits for a second fix to confirm it (:func:`.lifecycle.fix_confirmed`).
@@ -181,7 +177,7 @@ def start_from_fix(f: FusionFilter, stamp: int, prep: PreparedEpoch, n_obs: int,
     return f.output(False, sat_used=prep.pr.size, sat_rej=pre_rejected)
 
 
-def initialise_clock(f: FusionFilter, prep: PreparedEpoch) -> None:
+def initialise_clock(f: FilterFacade, prep: PreparedEpoch) -> None:
     """The position is known from UWB, the clock is not: the clock bias from the pseudorange residuals
     (eq. 5 with the position fixed, :meth:`.filter_state.FilterState.clock_from_residuals`), the drift
     remembered from a previous state (or zero), and their variances reset."""
@@ -195,7 +191,7 @@ def initialise_clock(f: FusionFilter, prep: PreparedEpoch) -> None:
     s.clock_initialized = True
 
 
-def motion_before_update(f: FusionFilter, prep: PreparedEpoch, cols: np.ndarray | None, err_cols: np.ndarray | None,
+def motion_before_update(f: FilterFacade, prep: PreparedEpoch, cols: np.ndarray | None, err_cols: np.ndarray | None,
                          dt_s: float) -> None:
     """Static model: the exit test on the predicted innovations (:mod:`.motion_model`). A failing
     epoch opens the covariance by the moving model's process noise minus the static one over
@@ -221,7 +217,7 @@ def motion_before_update(f: FusionFilter, prep: PreparedEpoch, cols: np.ndarray 
         f.count("motion_static_left")
 
 
-def motion_after_update(f: FusionFilter, stamp_ns: int) -> None:
+def motion_after_update(f: FilterFacade, stamp_ns: int) -> None:
     """Moving model: the entry test on the updated state; on entry, a zero-velocity update."""
     s = f.state
     p = f.params

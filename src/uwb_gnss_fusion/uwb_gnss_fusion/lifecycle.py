@@ -19,10 +19,6 @@ multilateration, eq. 7) and :mod:`.divergence` (the rules).
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from .fusion_filter import FusionFilter
 
 import numpy as np
 from scipy.stats import chi2
@@ -31,6 +27,7 @@ from gnss_common.observations import GPS
 
 from . import initialisation as init
 from .divergence import clock_reset_variances, position_lost
+from .filter_state import FilterFacade
 from .fusion_output import FusionOutput
 from .fusion_params import FRAME_EARTH, UWB_FIX_CONSISTENT_SIGMA
 from .gnss_update import clock_offset_from_residuals
@@ -50,7 +47,7 @@ FIX_CONFIRM_UNKNOWN_SPEED_MPS = 30.0
 pseudorange rates): a road vehicle's, m/s."""
 
 
-def snapshot_fix(f: FusionFilter, prep: PreparedEpoch) -> tuple[tuple | None, int]:
+def snapshot_fix(f: FilterFacade, prep: PreparedEpoch) -> tuple[tuple | None, int]:
     """A snapshot fix (:func:`.initialisation.snapshot_fix`) on one system's satellites: GPS
     when it has ``min_satellites_init``, else the system with the most satellites (one
     receiver clock); returns ``(fix or None, its system)``."""
@@ -63,7 +60,7 @@ def snapshot_fix(f: FusionFilter, prep: PreparedEpoch) -> tuple[tuple | None, in
     return init.snapshot_fix(prep.subset(system == best), f.params.min_satellites_init), best
 
 
-def fix_confirmed(f: FusionFilter, stamp_ns: int, fix: tuple) -> bool:
+def fix_confirmed(f: FilterFacade, stamp_ns: int, fix: tuple) -> bool:
     """``divergence_fix_confirm_s``: whether the held fix agrees with ``fix`` within 3 combined standard
     deviations (chi-square, 3 dof, of the position difference).
 
@@ -108,19 +105,19 @@ def fix_confirmed(f: FusionFilter, stamp_ns: int, fix: tuple) -> bool:
     return False
 
 
-def fix_agrees_with_uwb(f: FusionFilter, stamp_ns: int, position_m: np.ndarray, position_std_m: float) -> bool:
+def fix_agrees_with_uwb(f: FilterFacade, stamp_ns: int, position_m: np.ndarray, position_std_m: float) -> bool:
     s = f.state
     return init.fix_agrees_with_uwb(
         s.recent_uwb, stamp_ns, position_m, position_std_m, f.lever, f.gate, f.params
     )
 
 
-def multilaterate(f: FusionFilter, stamp_ns: int, frame: str, guess: np.ndarray | None = None) -> np.ndarray | None:
+def multilaterate(f: FilterFacade, stamp_ns: int, frame: str, guess: np.ndarray | None = None) -> np.ndarray | None:
     s = f.state
     return init.multilaterate(s.recent_uwb, stamp_ns, frame, f.params.uwb_init_window_s, f.lever, guess)
 
 
-def init_from_uwb(f: FusionFilter, stamp_ns: int, frame: str) -> bool:
+def init_from_uwb(f: FilterFacade, stamp_ns: int, frame: str) -> bool:
     """Initialise by multilateration once :func:`.initialisation.uwb_init_ready`."""
     s = f.state
     if s.uwb_wait_since_ns is None:
@@ -136,12 +133,12 @@ def init_from_uwb(f: FusionFilter, stamp_ns: int, frame: str) -> bool:
     return True
 
 
-def state_lost(f: FusionFilter) -> bool:
+def state_lost(f: FilterFacade) -> bool:
     s = f.state
     return position_lost(s.ckf.p, s.nominal, f.params.max_position_std_m)
 
 
-def uwb_agrees(f: FusionFilter, stamp_ns: int) -> bool:
+def uwb_agrees(f: FilterFacade, stamp_ns: int) -> bool:
     """True if the UWB ranges still agree with the state (GNSS-declared divergence is then a
     GNSS fault, not a lost state): a range was accepted within ``uwb_init_window_s`` and fewer
     than ``divergence_uwb_gated_fraction`` of the (at least half-full) range window were gated."""
@@ -155,7 +152,7 @@ def uwb_agrees(f: FusionFilter, stamp_ns: int) -> bool:
     )
 
 
-def reset_clock_keep_position(f: FusionFilter, stamp_ns: int, prep: PreparedEpoch) -> FusionOutput:
+def reset_clock_keep_position(f: FilterFacade, stamp_ns: int, prep: PreparedEpoch) -> FusionOutput:
     """GNSS-declared divergence while UWB agrees with the state: keep position and velocity,
     re-solve the clock bias from the median pseudorange residual and reset the clock
     covariance (as when the clock is first initialised after a UWB start)."""
@@ -171,7 +168,7 @@ def reset_clock_keep_position(f: FusionFilter, stamp_ns: int, prep: PreparedEpoc
     return f.output(True)
 
 
-def declare_divergence(f: FusionFilter, stamp_ns: int, gnss_only: bool = False) -> FusionOutput:
+def declare_divergence(f: FilterFacade, stamp_ns: int, gnss_only: bool = False) -> FusionOutput:
     """Reinitialise from (a) the caller's reference solution, (b) a snapshot LS fix of the last
     GNSS epoch, (c) UWB multilateration; else reset to uninitialised. ``gnss_only``: declared by the
     GNSS rule alone on a state still within bounds (``divergence_fix_confirm_s`` applies)."""
@@ -241,7 +238,7 @@ def declare_divergence(f: FusionFilter, stamp_ns: int, gnss_only: bool = False) 
     return f.output(True)
 
 
-def consistent_uwb_fix(f: FusionFilter, stamp_ns: int, frame: str, range_std_m: float) -> np.ndarray | None:
+def consistent_uwb_fix(f: FilterFacade, stamp_ns: int, frame: str, range_std_m: float) -> np.ndarray | None:
     """A multi-start multilateration on the latest range of at least four anchors (three, on
     the installer's side of their plane, with ``uwb_tag_side_of_anchor_plane``) within
     ``uwb_init_window_s`` whose residuals are all within ``UWB_FIX_CONSISTENT_SIGMA`` range
@@ -284,7 +281,7 @@ def consistent_uwb_fix(f: FusionFilter, stamp_ns: int, frame: str, range_std_m: 
     return pos if far else None
 
 
-def reanchor_on_uwb(f: FusionFilter, stamp_ns: int) -> bool:
+def reanchor_on_uwb(f: FilterFacade, stamp_ns: int) -> bool:
     """GNSS was found spoofed (gnss_integrity): drop what it put into the state and start again from
     the UWB ranges alone, before the caller excludes GNSS.
 

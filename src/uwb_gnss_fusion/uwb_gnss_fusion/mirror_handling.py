@@ -17,14 +17,11 @@ filter's state (:class:`.filter_state.FilterState`):
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from .fusion_filter import FusionFilter
 
 import numpy as np
 
 from .ckf import CubatureKalmanFilter
+from .filter_state import FilterFacade
 from .fusion_params import FRAME_EARTH
 from .input_checks import PreparedEpoch
 from .measurement_models import pseudorange_model
@@ -41,7 +38,7 @@ from .mirror_test import (
 _NS = 1_000_000_000
 
 
-def mirror_check(f: FusionFilter, stamp_ns: int, prep: PreparedEpoch, accepted: np.ndarray,
+def mirror_check(f: FilterFacade, stamp_ns: int, prep: PreparedEpoch, accepted: np.ndarray,
                  bias_column: np.ndarray | None) -> None:
     """Add the epoch to the mirror test (:mod:`.mirror_test`) and jump to the mirror when the
     GNSS evidence says so (beyond the paper).
@@ -92,7 +89,7 @@ def mirror_check(f: FusionFilter, stamp_ns: int, prep: PreparedEpoch, accepted: 
     f.count("uwb_mirror_switch")
 
 
-def mirror_covariance(f: FusionFilter) -> tuple[float, np.ndarray] | None:
+def mirror_covariance(f: FilterFacade) -> tuple[float, np.ndarray] | None:
     """``uwb_mirror_covariance``: the covariance the mirror ambiguity adds to the published position,
     ``p d^2 n n^T`` (``d`` the distance from the tag to its mirror across the anchors' plane, ``n`` the
     plane's normal, ``p`` :func:`.mirror_test.mirror_wrong_side_probability`), as ``(p d^2, n n^T
@@ -153,7 +150,7 @@ def mirror_covariance(f: FusionFilter) -> tuple[float, np.ndarray] | None:
     return prob * d * d, nn6
 
 
-def on_wrong_side(f: FusionFilter, tag: np.ndarray, plane: tuple[np.ndarray, np.ndarray]) -> bool:
+def on_wrong_side(f: FilterFacade, tag: np.ndarray, plane: tuple[np.ndarray, np.ndarray]) -> bool:
     """True if ``tag`` lies on the other side of the anchors' ``plane`` (centroid, unit normal)
     than ``uwb_tag_side_of_anchor_plane`` says (a prior, not a test). "Up" is the local vertical:
     in the earth frame the radial direction, in the map frame (local ENU) +z."""
@@ -167,7 +164,7 @@ def on_wrong_side(f: FusionFilter, tag: np.ndarray, plane: tuple[np.ndarray, np.
     return float((tag - centroid) @ n_up) * int(f.params.uwb_tag_side_of_anchor_plane) < 0.0
 
 
-def side_prior_uwb(f: FusionFilter, stamp_ns: int) -> None:
+def side_prior_uwb(f: FilterFacade, stamp_ns: int) -> None:
     """The installer's side of the anchors' plane without GNSS (UWB alone, or the map frame),
     checked after an accepted range at most once per ``uwb_init_window_s``: with GNSS the check
     runs at every GNSS epoch (:func:`mirror_check`); without it the side the UWB
@@ -192,7 +189,7 @@ def side_prior_uwb(f: FusionFilter, stamp_ns: int) -> None:
         f.count("uwb_side_prior_flip")
 
 
-def jump_to_mirror(f: FusionFilter, tag_m: np.ndarray, normal: np.ndarray) -> None:
+def jump_to_mirror(f: FilterFacade, tag_m: np.ndarray, normal: np.ndarray) -> None:
     """Move the state to the mirror image ``tag_m`` of the tag across the anchors' plane (unit
     ``normal``): position and velocity reflected, the error covariance by the same linear map
     (``P <- T P T^T``, exact)."""
@@ -206,7 +203,7 @@ def jump_to_mirror(f: FusionFilter, tag_m: np.ndarray, normal: np.ndarray) -> No
     s.ckf = CubatureKalmanFilter(np.zeros(s.nominal.size), t @ s.ckf.p @ t.T)
 
 
-def side_of_anchor_plane(f: FusionFilter, stamp_ns: int, min_distance_m: float = 0.1) -> int:
+def side_of_anchor_plane(f: FilterFacade, stamp_ns: int, min_distance_m: float = 0.1) -> int:
     """The side of the anchors' plane the state's tag is on: +1 above, -1 below (the local vertical,
     as ``uwb_tag_side_of_anchor_plane``), 0 when not initialised, fewer than three anchors were heard
     within ``uwb_init_window_s``, they span no plane, or the tag is within ``min_distance_m`` of it.

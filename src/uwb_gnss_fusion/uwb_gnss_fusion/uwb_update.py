@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import collections
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -38,16 +37,13 @@ from .ckf_kernels import (  # noqa: F401 (the statuses re-exported)
     STATUS_GATED,
     range_curvature_variance,
 )
-from .filter_state import check_stamp_type
+from .filter_state import FilterFacade, check_stamp_type
 from .fusion_output import FusionOutput
 from .fusion_params import FRAME_EARTH, UWB_NOISE_PRIOR_WEIGHT, FusionParams
 from .input_checks import validate_uwb_range
 from .lifecycle import consistent_uwb_fix, declare_divergence, init_from_uwb, state_lost
 from .measurement_models import uwb_range_model
 from .mirror_handling import side_prior_uwb
-
-if TYPE_CHECKING:
-    from .fusion_filter import FusionFilter
 
 _NS = 1_000_000_000
 UWB_FIX_MIN_ANCHORS = 3
@@ -201,7 +197,7 @@ class RangeNoiseEstimate:
         self.alpha += (sample - self.alpha) * (w / total)
 
 
-def process_uwb(f: FusionFilter, meas: UwbRangeMeasurement) -> FusionOutput:
+def process_uwb(f: FilterFacade, meas: UwbRangeMeasurement) -> FusionOutput:
     """Predict to the range's stamp and apply it.
 
     Args:
@@ -306,7 +302,7 @@ def process_uwb(f: FusionFilter, meas: UwbRangeMeasurement) -> FusionOutput:
     return f.output(False, uwb_rej=1)
 
 
-def range_iterations(f: FusionFilter, heard: int) -> int:
+def range_iterations(f: FilterFacade, heard: int) -> int:
     """Refinement steps allowed for a range (``uwb_iterate_min_anchors``): none while GNSS is used and fewer
     anchors than that were heard within ``uwb_init_window_s`` (``heard``, -1: not counted), else
     ``max_update_iterations``."""
@@ -317,7 +313,7 @@ def range_iterations(f: FusionFilter, heard: int) -> int:
     return p.max_update_iterations if heard >= k else 0
 
 
-def anchors_heard(f: FusionFilter, stamp_ns: int) -> int:
+def anchors_heard(f: FilterFacade, stamp_ns: int) -> int:
     """Anchors of the filter's frame with a range within ``uwb_init_window_s`` before ``stamp_ns``, when GNSS
     is used in the earth frame and a rule needs the count (``uwb_iterate_min_anchors``,
     ``uwb_range_bias_std_m``); else -1."""
@@ -335,7 +331,7 @@ def anchors_heard(f: FusionFilter, stamp_ns: int) -> int:
     return n
 
 
-def uwb_anchors_heard(f: FusionFilter, stamp_ns: int) -> int:
+def uwb_anchors_heard(f: FilterFacade, stamp_ns: int) -> int:
     """Anchors (of the filter's frame, when it has one) with a range within ``uwb_init_window_s`` before
     ``stamp_ns``: for diagnostics (three anchors leave a mirror solution across their plane that the ranges cannot
     rule out, ``uwb_tag_side_of_anchor_plane``)."""
@@ -345,7 +341,7 @@ def uwb_anchors_heard(f: FusionFilter, stamp_ns: int) -> int:
     return sum(1 for t, _, _, fr in s.recent_uwb.values() if t >= oldest and (frame is None or fr == frame))
 
 
-def range_std_with_shared_bias(f: FusionFilter, stamp_ns: int, anchor_id: str, std_m: float, heard: int) -> float:
+def range_std_with_shared_bias(f: FilterFacade, stamp_ns: int, anchor_id: str, std_m: float, heard: int) -> float:
     """The 1-sigma a range is applied with under the shared-bias rule (``uwb_range_bias_std_m``).
 
     While GNSS is used and fewer than :data:`UWB_FIX_MIN_ANCHORS` anchors were heard within
