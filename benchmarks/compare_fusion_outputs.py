@@ -53,6 +53,12 @@ BAGS = {
                     ('/rfi/jammer_state:=/truth/jammer_state',), 'bags/arl1_jammed.params.yaml'),
 }
 
+EXERCISED = ('jammer_processed', 'integrity_processed', 'satellites_excluded_spoofing', 'filter.rolled_back',
+             'filter.reanchor_on_uwb', 'filter.divergence', 'filter.reinit_from_uwb', 'filter.innovation_gate_uwb',
+             'filter.innovation_gate_pseudorange', 'filter.common_mode_pseudorange', 'filter.motion_static_entered',
+             'filter.receiver_clock_step_ms', 'filter.uwb_side_prior_flip', 'filter.uwb_mirror_switch')
+"""Counters printed for each bag: which paths of the filter and the node the replay went through."""
+
 
 def flatten(msg, prefix: str = '') -> list[tuple[str, object]]:
     """Every leaf field of a ROS message as (path, value), arrays element by element."""
@@ -191,6 +197,8 @@ def main(argv: list[str] | None = None) -> int:
                 summary = ', '.join(f'{t} {n}' for t, n in counts.items())
                 verdict = 'EQUAL' if not problems else 'DIFFERENT'
                 print(f'{bag}: {verdict}; messages: {summary}; largest relative difference {worst:.3g}')
+                exercised = {k: v for k, v in new['accounting'][0] if k in EXERCISED and v}
+                print(f'    paths exercised (this tree): {exercised}')
                 for line in problems:
                     print('   ', line)
                 failed = failed or bool(problems)
