@@ -29,8 +29,8 @@ import numpy as np
 from gnss_common.measurements import GnssEpochBuilder
 from gnss_common.observations import GnssEpoch
 from gnss_common.rinex import read_rinex_nav, read_rinex_obs
+from uwb_gnss_fusion.clock_steps import MS_OF_LIGHT_M
 from uwb_gnss_fusion.fusion_filter import FusionFilter, FusionParams
-from uwb_gnss_fusion.gnss_update import MS_OF_LIGHT_M
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "src" / "gnss_common" / "test" / "data"

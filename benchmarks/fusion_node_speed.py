@@ -54,6 +54,7 @@ import rclpy
 from rclpy.context import Context
 
 import rfi_experiments.replay as replay_module
+import uwb_gnss_fusion.fusion_filter as fusion_filter_module
 from gnss_common.coordinates import ecef_to_geodetic, rotate_covariance_ecef_to_enu
 from rfi_experiments.replay import ReplayHarness
 from uwb_gnss_fusion.fusion_filter import FRAME_EARTH
@@ -132,6 +133,7 @@ def replay(bag: Path = BAG, instrument: bool = False, keep_outputs: bool = True)
         else:
             gc_s[0] += time.perf_counter() - gc_s[1]
     deserialize = replay_module.deserialize_message
+    core_functions = (fusion_filter_module.process_gnss, fusion_filter_module.process_uwb)
     if instrument:
         replay_module.deserialize_message = timer.wrap(deserialize, 'deserialize_s')
         # every input subscription is raw (CDR bytes, decoded by the node): time the node's raw handlers
@@ -143,22 +145,16 @@ def replay(bag: Path = BAG, instrument: bool = False, keep_outputs: bool = True)
                 sub.callback = node.on_gnss_raw
             elif sub.topic_name == '/uwb/ranges':
                 sub.callback = node.on_uwb_raw
-        node.spp.process = timer.wrap(node.spp.process, 'spp_s')  # type: ignore[method-assign]
+        node.core.spp.process = timer.wrap(node.core.spp.process, 'spp_s')  # type: ignore[method-assign]
         publish = timer.wrap(node._publish, 'publish_s')
 
         def capture(out, stamp_ns):
             info['outs'].append(out)
             publish(out, stamp_ns)
         node._publish = capture  # type: ignore[method-assign]
-        new_filter = node._new_filter
-
-        def timed_filter():
-            f = new_filter()
-            f.process_gnss = timer.wrap(f.process_gnss, 'core_gnss_s')  # type: ignore[method-assign]
-            f.process_uwb = timer.wrap(f.process_uwb, 'core_uwb_s')  # type: ignore[method-assign]
-            return f
-        node._new_filter = timed_filter  # type: ignore[method-assign]
-        node.filter = timed_filter()
+        # FusionFilter.process_gnss / process_uwb call these module functions (its attributes are slots)
+        fusion_filter_module.process_gnss = timer.wrap(fusion_filter_module.process_gnss, 'core_gnss_s')
+        fusion_filter_module.process_uwb = timer.wrap(fusion_filter_module.process_uwb, 'core_uwb_s')
     try:
         harness = ReplayHarness([node], context=ctx, transport='direct', **({} if keep_outputs else {'collect': {}}))
         published = {pub.topic_name: 0 for pub in node.publishers if pub.topic_name != '/parameter_events'}
@@ -186,6 +182,7 @@ def replay(bag: Path = BAG, instrument: bool = False, keep_outputs: bool = True)
         if gc_timer in gc.callbacks:
             gc.callbacks.remove(gc_timer)
         replay_module.deserialize_message = deserialize
+        fusion_filter_module.process_gnss, fusion_filter_module.process_uwb = core_functions
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
     return info

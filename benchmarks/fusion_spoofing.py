@@ -1,7 +1,7 @@
 """Benchmark: the GNSS/UWB fusion under spoofing, with and without the integrity monitor acting on it
 (issue 25, item 4 and its goals).
 
-A closed loop in process, in stamp order, of what the nodes do (``fusion_node._process`` /
+A closed loop in process, in stamp order, of what the nodes do (``fusion_core.FusionCore.process`` /
 ``_apply_integrity`` and the gnss_integrity core):
 
 * the simulated default-like scenario (``rfi_sim.gnss_uwb.simulate``: static receiver at ARL1, GPS L1 at
@@ -11,7 +11,7 @@ A closed loop in process, in stamp order, of what the nodes do (``fusion_node._p
 * ``IntegrityMonitor.process_epoch`` judges the (unfiltered) epoch; its report becomes the
   ``IntegrityVerdict`` the node's ``verdict_of`` would make of the published message. As the node's
   re-ordering buffer releases it (a verdict before the measurements of the same stamp), the verdict of
-  epoch k is applied before epoch k, as ``FusionNode._apply_integrity`` applies it: with the node's own
+  epoch k is applied before epoch k, as ``FusionCore._apply_integrity`` applies it: with the node's own
   ``uwb_gnss_fusion.spoofing_response.SpoofingResponse`` (exclusion; at an exclusion of all GNSS the
   roll-back to before the first alarm, else the re-anchor on UWB; ``use_gnss`` false on the held side of
   the anchors' plane while all GNSS is out; the node's parameters at a readmission); the SPP cache is
@@ -224,7 +224,7 @@ def run_fusion(items: list[tuple[int, int, object]], n_epochs: int, reports: Seq
             state["pos"] = None
 
     def apply(k: int) -> None:
-        """FusionNode._apply_integrity."""
+        """FusionCore._apply_integrity."""
         assert reports is not None
         verdict = report_verdict(reports[k])
         done = response.apply(verdict, filt, params.fusion_params())

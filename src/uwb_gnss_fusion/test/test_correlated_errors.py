@@ -88,7 +88,7 @@ def test_oracle_equals_kalman_filter_with_the_augmented_model():
     x[0:3] = x0
     x[6] = CLOCK_M + 5.0
     cov = np.zeros((n, n))
-    cov[:STATE_DIM, :STATE_DIM] = f._ckf.p  # the same prior (init_*_std of the parameters)
+    cov[:STATE_DIM, :STATE_DIM] = f.state.ckf.p  # the same prior (init_*_std of the parameters)
     cov[STATE_DIM:, STATE_DIM:] = np.eye(len(SKY)) * STD_M**2
     phi = np.eye(n)
     phi[0, 3] = phi[1, 4] = phi[2, 5] = phi[6, 7] = 1.0

@@ -339,24 +339,24 @@ def test_published_covariance_covers_the_mirror_of_three_anchors() -> None:
     f, out = _uwb_only_from(mirror, anchors[:3])
     side = float((out.position_m - c) @ n)
     assert side > 0.0                                           # on the mirror's side (the truth is the origin)
-    own = f._ckf.p[0:3, 0:3]
+    own = f.state.ckf.p[0:3, 0:3]
     pub = out.covariance_pv[0:3, 0:3]
     # the filter's own covariance plus p d^2 n n^T (rank one, along the normal), p = 0.5 without GNSS
     np.testing.assert_allclose(pub - own, 0.5 * (2.0 * side) ** 2 * np.outer(n, n), rtol=1e-9, atol=1e-12)
     pub = float(n @ pub @ n)
     err_n = abs(float(out.position_m @ n))
     assert err_n < 2.0 * math.sqrt(pub)
-    np.testing.assert_array_equal(out.covariance_pv[3:6, 3:6], f._ckf.p[3:6, 3:6])  # velocity untouched
+    np.testing.assert_array_equal(out.covariance_pv[3:6, 3:6], f.state.ckf.p[3:6, 3:6])  # velocity untouched
     for params in ({"uwb_mirror_covariance": False}, {"uwb_tag_side_of_anchor_plane": 1}):
         g, o = _uwb_only_from(mirror, anchors[:3], **params)
-        np.testing.assert_array_equal(o.covariance_pv, g._ckf.p[0:6, 0:6])
+        np.testing.assert_array_equal(o.covariance_pv, g.state.ckf.p[0:6, 0:6])
     g, o = _uwb_only_from(np.zeros(3), anchors)                 # four anchors, not coplanar
-    np.testing.assert_array_equal(o.covariance_pv, g._ckf.p[0:6, 0:6])
+    np.testing.assert_array_equal(o.covariance_pv, g.state.ckf.p[0:6, 0:6])
     # four anchors in one plane: as ambiguous as three (the fourth moved into the plane of A1-A3)
     coplanar = anchors.copy()
     coplanar[3] -= ((coplanar[3] - c) @ n) * n
     g, o = _uwb_only_from(mirror, coplanar)
     side4 = float((o.position_m - c) @ n)
-    np.testing.assert_allclose(o.covariance_pv[0:3, 0:3] - g._ckf.p[0:3, 0:3],
+    np.testing.assert_allclose(o.covariance_pv[0:3, 0:3] - g.state.ckf.p[0:3, 0:3],
                                0.5 * (2.0 * side4) ** 2 * np.outer(n, n), rtol=1e-9, atol=1e-12)
     assert is_range_ambiguous(o.position_m, reflect(o.position_m, c, n), coplanar, 0.1)

@@ -11,7 +11,12 @@ import pytest
 from gnss_common.observations import UwbRangeMeasurement
 from uwb_gnss_fusion.ckf_kernels import range_curvature_variance
 from uwb_gnss_fusion.fusion_filter import FusionFilter, FusionParams
-from uwb_gnss_fusion.uwb_update import RangeNoiseEstimate, range_curvature_variance_reference
+from uwb_gnss_fusion.uwb_update import (
+    RangeNoiseEstimate,
+    anchors_heard,
+    range_curvature_variance_reference,
+    range_std_with_shared_bias,
+)
 
 _ANCHORS = np.array([[12.0, 0.0, 1.5], [-6.0, 10.0, -0.5], [-5.0, -11.0, 0.8], [2.0, 12.0, 2.5]])
 
@@ -125,7 +130,7 @@ def test_adaptive_noise_makes_the_uwb_filter_consistent() -> None:
     assert ratio_off < 0.6
     assert 0.6 < ratio_on < 1.6
     assert f_on.rejection_counts["uwb_noise_estimates"] == 4
-    for est in f_on._uwb_noise.values():
+    for est in f_on.uwb_noise.values():
         assert est.std_m(0.1) == pytest.approx(0.03, rel=0.15)
 
 
@@ -138,11 +143,11 @@ def test_curvature_term_enters_the_innovation_variance() -> None:
     for f in (f_on, f_off):
         f.initialize(0, np.array([0.3, -0.4, 0.1]), frame_id="map", position_std_m=2.0)
     m = meas[0]
-    expected = range_curvature_variance(f_on._ckf.p, f_on._nominal, m.anchor_position_m, np.zeros(3), 0.0)
+    expected = range_curvature_variance(f_on.state.ckf.p, f_on.state.nominal, m.anchor_position_m, np.zeros(3), 0.0)
     assert expected > 1e-3  # (2 m)^2 across a 12 m line of sight: about (0.33 m)^2 per axis pair
     f_on.process(m)
     f_off.process(m)
-    assert f_on._uwb_scratch[1] - f_off._uwb_scratch[1] == pytest.approx(expected, rel=1e-9)
+    assert f_on.state.uwb_scratch[1] - f_off.state.uwb_scratch[1] == pytest.approx(expected, rel=1e-9)
 
 
 def test_parameters_are_checked() -> None:
@@ -172,7 +177,7 @@ def test_ranges_are_not_iterated_with_fewer_anchors_than_uwb_iterate_min_anchors
             tag = base if use_gnss else np.zeros(3)
             f.process(UwbRangeMeasurement(1_000_000 * (i + 1), f"A{i + 1}", a_set[i], frame,
                                           float(np.linalg.norm(tag - a_set[i]))))
-        return float(f._uwb_scratch[4])                      # refinement steps of the last range
+        return float(f.state.uwb_scratch[4])                      # refinement steps of the last range
 
     assert first_range_iterations(1, 0) > 0                  # 2 m off across the line of sight: refined
     assert first_range_iterations(1, 3) == 0
@@ -201,8 +206,8 @@ def test_ranges_of_one_anchor_share_a_bias_while_fewer_than_three_anchors_are_he
             stamp = dt_ns * (k + 1)
             for i in range(n_anchors):
                 a = tag + _ANCHORS[i]
-                f._recent_uwb[f"A{i + 1}"] = (stamp, a, 12.0, frame)
-            out.append(f._range_std_with_shared_bias(stamp, "A1", std, f._anchors_heard(stamp)))
+                f.state.recent_uwb[f"A{i + 1}"] = (stamp, a, 12.0, frame)
+            out.append(range_std_with_shared_bias(f, stamp, "A1", std, anchors_heard(f, stamp)))
         return out
 
     one = applied(1)

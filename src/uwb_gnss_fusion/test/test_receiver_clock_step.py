@@ -1,4 +1,4 @@
-"""Receiver clock steps (``receiver_clock_steps``, :func:`uwb_gnss_fusion.gnss_update.receiver_clock_step`).
+"""Receiver clock steps (``receiver_clock_steps``, :func:`uwb_gnss_fusion.clock_steps.receiver_clock_step`).
 
 Receivers that let their clock drift step it by whole milliseconds: every pseudorange of the
 epoch jumps by 299,792.458 m at once. Checked on the real ESBC00DNK multi-GNSS hour (the
@@ -18,8 +18,8 @@ import pytest
 from gnss_common.constants import SPEED_OF_LIGHT_MPS
 from gnss_common.coordinates import azimuth_elevation
 from gnss_common.observations import GnssEpoch
+from uwb_gnss_fusion.clock_steps import MS_OF_LIGHT_M
 from uwb_gnss_fusion.fusion_filter import FusionFilter, FusionParams
-from uwb_gnss_fusion.gnss_update import MS_OF_LIGHT_M
 
 DATA = Path(__file__).resolve().parents[2] / "gnss_common" / "test" / "data"
 TRUTH = np.array([3582105.2910, 532589.7313, 5232754.8054])

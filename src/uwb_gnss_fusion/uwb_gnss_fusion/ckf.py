@@ -10,13 +10,21 @@ default update is exactly Cao et al. eq. 17-24):
   (a UWB range depends on the position): the cubature points that do not move those components all
   map to the same measurement, so only ``2 m + 1`` model evaluations and an ``m x m`` Cholesky
   factor are needed. The result equals the full 2n-point update to rounding.
-* ``huber_k`` / ``huber_k_positive``: Huber M-estimation in innovation form (noise inflation of
-  measurements whose normalised innovation exceeds the threshold), optionally skewed (a smaller
+* gating (``gate_nis``): each measurement's innovation is tested under the prior (its marginal is
+  independent of the other measurements); the update then uses the accepted subset.
+* ``huber_k`` / ``huber_k_positive``: Huber M-estimation in innovation form (Karlgaard & Schaub 2007,
+  Huber-based divided difference filtering; one reweighting step: ``R_ii <- R_ii |e_i| / k`` for
+  measurements whose normalised innovation ``e_i`` exceeds the threshold), optionally skewed (a smaller
   threshold for positive innovations, e.g. for non-line-of-sight UWB ranges, which are only ever
   too long).
-* ``max_iterations``: Gauss-Newton refinement of the posterior mean (iterated update) when the
-  measurement is strongly nonlinear over the prior spread, which removes the pull of repeated
-  range-only updates towards the anchor.
+* ``max_iterations``: iterated update, a Gauss-Newton minimisation of the MAP cost
+  ``|x - x_prior|^2_P^-1 + |z - h(x)|^2_R^-1`` started at the cubature posterior mean (the iterated EKF
+  of Bell & Cathey 1993, with the Jacobian taken by central differences along the prior's Cholesky
+  columns, i.e. cubature points with a small spread); the covariance is that of the last
+  linearisation. It is used only when the statistical-linearisation error ``Omega`` is significant:
+  then the cubature mean of a range exceeds the range of the mean (convexity), and repeated range-only
+  updates drag the state towards the anchor; the MAP point stays on the range sphere. For nearly
+  linear measurements (pseudoranges) nothing changes.
 """
 
 from __future__ import annotations
@@ -325,22 +333,7 @@ class CubatureKalmanFilter:
             ``x += K (z - z_hat)``, ``P -= K P_zz K^T``. With the lower Cholesky factor S,
             ``P_xz = S G`` with ``G = (1/2n) sum_i xi_i (Z_i - z_hat)^T`` (used below).
 
-            Beyond the paper:
-
-            * Gating: each measurement's innovation is tested under the prior (its marginal is
-              independent of the other measurements); the update then uses the accepted subset.
-            * Huber weighting in innovation form (Karlgaard & Schaub 2007, Huber-based divided
-              difference filtering; one reweighting step): ``R_ii <- R_ii |e_i| / k``, with a
-              separate threshold for positive innovations (skewed, NLOS-aware).
-            * Iterated update: a Gauss-Newton minimisation of the MAP cost
-              ``|x - x_prior|^2_P^-1 + |z - h(x)|^2_R^-1`` started at the cubature posterior mean
-              (the iterated EKF of Bell & Cathey 1993, with the Jacobian taken by central
-              differences along the prior's Cholesky columns, i.e. cubature points with a small
-              spread); the covariance is that of the last linearisation. It is used
-              only when the statistical-linearisation error ``Omega`` is significant: then the
-              cubature mean of a range exceeds the range of the mean (convexity), and repeated
-              updates drag the state towards the anchor; the MAP point stays on the range
-              sphere. For nearly linear measurements (pseudoranges) nothing changes.
+            Beyond the paper (module docstring): gating, Huber weighting, iterated update.
         """
         z = np.asarray(z, dtype=float)
         r = np.asarray(r, dtype=float)
@@ -355,51 +348,14 @@ class CubatureKalmanFilter:
         p0 = self.p
         lcols = leading_sqrt_columns(p0, m)  # (n, m)
         c = math.sqrt(n)
-        npts = 2 * m + (1 if m < n else 0)
-        pts = np.empty((npts, n))
-        step = c * lcols.T
-        pts[:m] = x0 + step
-        pts[m : 2 * m] = x0 - step
-        if m < n:
-            pts[2 * m] = x0
-        zs = hx(pts)
+        zs = hx(_active_cubature_points(x0, lcols, c))
         inv2n = 1.0 / (2 * n)
         if k == 1:
-            z1 = zs[:, 0]
-            zp1 = z1[:m]
-            zm1 = z1[m : 2 * m]
-            n_c = 2 * (n - m)
-            zc1 = float(z1[2 * m]) if m < n else 0.0
-            zh = (float(zp1.sum()) + float(zm1.sum()) + n_c * zc1) * inv2n
-            d1 = z1[: 2 * m] - zh
-            var_z = (float(d1 @ d1) + n_c * (zc1 - zh) ** 2) * inv2n
-            return self._update_scalar(
-                float(z[0]),
-                float(r[0, 0]),
-                hx,
-                gate_nis,
-                lcols,
-                (c * inv2n) * (zp1 - zm1),
-                zh,
-                var_z,
-                huber_k,
-                huber_k_positive,
-                max_iterations,
-                nonlinearity_threshold,
-            )
-        zp = zs[:m]
-        zm = zs[m : 2 * m]
-        if m < n:
-            zc = zs[2 * m]
-            z_hat = (zp.sum(axis=0) + zm.sum(axis=0) + (2 * (n - m)) * zc) * inv2n
-            dz = zs - z_hat
-            dc = dz[2 * m]
-            cov_z = (dz[: 2 * m].T @ dz[: 2 * m] + (2 * (n - m)) * np.outer(dc, dc)) * inv2n
-        else:
-            z_hat = (zp.sum(axis=0) + zm.sum(axis=0)) * inv2n
-            dz = zs - z_hat
-            cov_z = (dz.T @ dz) * inv2n
-        g = (c * inv2n) * (zp - zm)  # (m, k): S^-1 P_xz on the active columns
+            zh, var_z, g1 = _scalar_moments(zs[:, 0], m, n, c)
+            return self._update_scalar(float(z[0]), float(r[0, 0]), hx, gate_nis, lcols, g1, zh, var_z, huber_k,
+                                       huber_k_positive, max_iterations, nonlinearity_threshold)
+        z_hat, cov_z = _measurement_moments(zs, m, n)
+        g = (c * inv2n) * (zs[:m] - zs[m : 2 * m])  # (m, k): S^-1 P_xz on the active columns
         nu = z - z_hat
         pzz = cov_z + r
         var = np.diag(pzz).copy()
@@ -410,20 +366,13 @@ class CubatureKalmanFilter:
             return UpdateResult(x0.copy(), p0.copy(), accepted, nu, var, math.nan, scale, 0, 0.0)
         idx = None if n_acc == k else np.flatnonzero(accepted)
         if idx is not None:
-            pzz = pzz[np.ix_(idx, idx)]
-            r_a = r[np.ix_(idx, idx)]
-            cov_a = cov_z[np.ix_(idx, idx)]
-            g_a = g[:, idx]
-            nu_a = nu[idx]
-            var_a = var[idx]
+            sub = np.ix_(idx, idx)
+            pzz, r_a, cov_a, g_a, nu_a, var_a = pzz[sub], r[sub], cov_z[sub], g[:, idx], nu[idx], var[idx]
         else:
             r_a, cov_a, g_a, nu_a, var_a = r, cov_z, g, nu, var
         robust = math.isfinite(huber_k) or (huber_k_positive is not None and math.isfinite(huber_k_positive))
         if robust:
-            e = nu_a / np.sqrt(var_a)
-            k_pos = huber_k if huber_k_positive is None else huber_k_positive
-            thr = np.where(e > 0.0, k_pos, huber_k)
-            s_a = np.where(np.abs(e) > thr, np.abs(e) / thr, 1.0)
+            s_a = _huber_scales(nu_a, var_a, huber_k, huber_k_positive)
             if np.any(s_a > 1.0):
                 d = np.sqrt(s_a)
                 r_a = r_a * np.outer(d, d)
@@ -563,3 +512,57 @@ class CubatureKalmanFilter:
             if moved < 1e-4:
                 break
         return b, iters, hl
+
+
+def _measurement_moments(zs: np.ndarray, m: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and covariance (without noise) of the measurements ``zs`` of the ``2 m`` cubature points of
+    the leading ``m`` components and, when ``m < n``, the centre point standing for the other ``2 (n -
+    m)`` (Cao et al., eq. 19-20; weights ``1 / 2n``)."""
+    inv2n = 1.0 / (2 * n)
+    zp = zs[:m]
+    zm = zs[m : 2 * m]
+    if m < n:
+        zc = zs[2 * m]
+        z_hat = (zp.sum(axis=0) + zm.sum(axis=0) + (2 * (n - m)) * zc) * inv2n
+        dz = zs - z_hat
+        dc = dz[2 * m]
+        return z_hat, (dz[: 2 * m].T @ dz[: 2 * m] + (2 * (n - m)) * np.outer(dc, dc)) * inv2n
+    z_hat = (zp.sum(axis=0) + zm.sum(axis=0)) * inv2n
+    dz = zs - z_hat
+    return z_hat, (dz.T @ dz) * inv2n
+
+
+def _huber_scales(nu: np.ndarray, var: np.ndarray, huber_k: float, huber_k_positive: float | None) -> np.ndarray:
+    """Huber noise factors ``|e| / k`` of the normalised innovations ``e = nu / sqrt(var)`` beyond the
+    threshold (``huber_k_positive`` for positive ones, None: ``huber_k``), 1 elsewhere (module docstring)."""
+    e = nu / np.sqrt(var)
+    k_pos = huber_k if huber_k_positive is None else huber_k_positive
+    thr = np.where(e > 0.0, k_pos, huber_k)
+    return np.where(np.abs(e) > thr, np.abs(e) / thr, 1.0)
+
+
+def _active_cubature_points(x0: np.ndarray, lcols: np.ndarray, c: float) -> np.ndarray:
+    """The cubature points ``x0 +- c L_j`` along the ``m`` columns ``lcols`` (n, m) of the prior's square
+    root, and ``x0`` itself standing for the other ``2 (n - m)`` when ``m < n`` (Cao et al., eq. 17-18)."""
+    n, m = lcols.shape
+    pts = np.empty((2 * m + (1 if m < n else 0), n))
+    step = c * lcols.T
+    pts[:m] = x0 + step
+    pts[m : 2 * m] = x0 - step
+    if m < n:
+        pts[2 * m] = x0
+    return pts
+
+
+def _scalar_moments(z1: np.ndarray, m: int, n: int, c: float) -> tuple[float, float, np.ndarray]:
+    """:func:`_measurement_moments` of one measurement in Python floats, and ``G`` (``S^-1 P_xz`` on the
+    active columns, (m,)): ``(z_hat, var(Z), G)``."""
+    inv2n = 1.0 / (2 * n)
+    zp1 = z1[:m]
+    zm1 = z1[m : 2 * m]
+    n_c = 2 * (n - m)
+    zc1 = float(z1[2 * m]) if m < n else 0.0
+    zh = (float(zp1.sum()) + float(zm1.sum()) + n_c * zc1) * inv2n
+    d1 = z1[: 2 * m] - zh
+    var_z = (float(d1 @ d1) + n_c * (zc1 - zh) ** 2) * inv2n
+    return zh, var_z, (c * inv2n) * (zp1 - zm1)

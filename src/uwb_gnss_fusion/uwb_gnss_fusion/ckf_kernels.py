@@ -191,6 +191,94 @@ def range_curvature_variance(p, nominal, anchor, lever, lat):  # pragma: no cove
 
 
 @njit(cache=True)
+def _range_moments(low, m, n, a0, lat, pt, g):  # pragma: no cover - compiled
+    """The ranges of the cubature points ``+- sqrt(n) L_j`` about the zero error state and of the centre
+    point (Cao et al., eq. 17-19; ``low`` the first ``m`` columns ``L`` of chol(P)): returns their mean and
+    variance ``(z_hat, var(Z))`` (eq. 20-21 without R); ``g`` (m,) receives ``S^-1 P_xz`` on the active
+    columns. ``pt`` (n,) is scratch, zero on return."""
+    c = math.sqrt(n)
+    inv2n = 1.0 / (2 * n)
+    zp = np.empty(m)
+    zm = np.empty(m)
+    for j in range(m):
+        for i in range(n):
+            pt[i] = c * low[i, j]
+        zp[j] = _range(pt, m, a0, lat)
+        for i in range(n):
+            pt[i] = -c * low[i, j]
+        zm[j] = _range(pt, m, a0, lat)
+    n_c = 2 * (n - m)
+    for i in range(n):
+        pt[i] = 0.0
+    zc = _range(pt, m, a0, lat) if m < n else 0.0
+    zh = (zp.sum() + zm.sum() + n_c * zc) * inv2n
+    var_z = n_c * (zc - zh) ** 2
+    dsum = 0.0
+    for j in range(m):
+        dsum += (zp[j] - zh) * (zp[j] - zh)
+    for j in range(m):
+        dsum += (zm[j] - zh) * (zm[j] - zh)
+    var_z = (dsum + var_z) * inv2n
+    for j in range(m):
+        g[j] = (c * inv2n) * (zp[j] - zm[j])
+    return zh, var_z
+
+
+@njit(cache=True)
+def _gauss_newton_range(b, low, m, n, a0, lat, z, r, max_iterations, pt, lvec):  # pragma: no cover - compiled
+    """Iterated (Gauss-Newton) refinement of the MAP point of one range, as ``.ckf._gauss_newton``: ``b``
+    (m,), the whitened correction, is refined in place; after at least one step ``lvec`` (n,) receives
+    ``L h`` of the last linearisation. ``pt`` (n,) is scratch. Returns (steps taken, the innovation
+    variance of the last linearisation; NaN when no step was taken)."""
+    r_chol = math.sqrt(r)
+    xc = np.empty(n)
+    hl = np.empty(m)
+    hl_n = np.empty(m)
+    b_new = np.empty(m)
+    res, cost = _gn_evaluate(b, low, m, n, a0, lat, z, r_chol, xc, pt, hl)
+    iters = 0
+    for _ in range(max_iterations):
+        hh = 0.0
+        hb = 0.0
+        for j in range(m):
+            hh += hl[j] * hl[j]
+            hb += hl[j] * b[j]
+        f = (res + hb) / (hh + r)
+        for j in range(m):
+            b_new[j] = hl[j] * f
+        res_n, cost_n = _gn_evaluate(b_new, low, m, n, a0, lat, z, r_chol, xc, pt, hl_n)
+        halvings = 0
+        while not cost_n <= cost and halvings < 4:
+            for j in range(m):
+                b_new[j] = 0.5 * (b[j] + b_new[j])
+            res_n, cost_n = _gn_evaluate(b_new, low, m, n, a0, lat, z, r_chol, xc, pt, hl_n)
+            halvings += 1
+        if not cost_n <= cost:
+            break
+        iters += 1
+        moved = 0.0
+        for j in range(m):
+            moved = max(moved, abs(b_new[j] - b[j]))
+            b[j] = b_new[j]
+            hl[j] = hl_n[j]
+        res = res_n
+        cost = cost_n
+        if moved < 1e-4:
+            break
+    if iters:
+        hh = 0.0
+        for j in range(m):
+            hh += hl[j] * hl[j]
+        for i in range(n):
+            s = 0.0
+            for j in range(m):
+                s += low[i, j] * hl[j]
+            lvec[i] = s
+        return iters, hh + r
+    return iters, math.nan
+
+
+@njit(cache=True)
 def range_update_inplace(
     nominal, p, anchor, lever, lat, m, z, r, gate_nis, huber_k, huber_k_positive, max_iterations, threshold, out
 ):  # pragma: no cover - compiled
@@ -233,34 +321,10 @@ def range_update_inplace(
     for i in range(3):
         rel = anchor[i] - nominal[i] + lat * nominal[i + 3] if lat > 0.0 else anchor[i] - nominal[i]
         a0[i] = rel - lever[i]
-    # Cubature points about the zero error state (eq. 17-18), ranges (eq. 19).
-    c = math.sqrt(n)
-    inv2n = 1.0 / (2 * n)
+    # Cubature points about the zero error state (eq. 17-18), ranges (eq. 19-21).
     pt = np.zeros(n)
-    zp = np.empty(m)
-    zm = np.empty(m)
-    for j in range(m):
-        for i in range(n):
-            pt[i] = c * low[i, j]
-        zp[j] = _range(pt, m, a0, lat)
-        for i in range(n):
-            pt[i] = -c * low[i, j]
-        zm[j] = _range(pt, m, a0, lat)
-    n_c = 2 * (n - m)
-    for i in range(n):
-        pt[i] = 0.0
-    zc = _range(pt, m, a0, lat) if m < n else 0.0
-    zh = (zp.sum() + zm.sum() + n_c * zc) * inv2n
-    var_z = n_c * (zc - zh) ** 2
-    dsum = 0.0
-    for j in range(m):
-        dsum += (zp[j] - zh) * (zp[j] - zh)
-    for j in range(m):
-        dsum += (zm[j] - zh) * (zm[j] - zh)
-    var_z = (dsum + var_z) * inv2n
     g = np.empty(m)
-    for j in range(m):
-        g[j] = (c * inv2n) * (zp[j] - zm[j])
+    zh, var_z = _range_moments(low, m, n, a0, lat, pt, g)
     # Gate (beyond the paper) on the prior innovation.
     nu = z - zh
     s11 = var_z + r
@@ -298,52 +362,9 @@ def range_update_inplace(
     nonlin = (var_z - gg) / r
     out[5] = nonlin
     if max_iterations > 0 and nonlin > threshold:
-        # Iterated (Gauss-Newton) refinement of the MAP point, as .ckf._gauss_newton.
-        r_chol = math.sqrt(r)
-        xc = np.empty(n)
-        hl = np.empty(m)
-        hl_n = np.empty(m)
-        b_new = np.empty(m)
-        res, cost = _gn_evaluate(b, low, m, n, a0, lat, z, r_chol, xc, pt, hl)
-        iters = 0
-        for _ in range(max_iterations):
-            hh = 0.0
-            hb = 0.0
-            for j in range(m):
-                hh += hl[j] * hl[j]
-                hb += hl[j] * b[j]
-            f = (res + hb) / (hh + r)
-            for j in range(m):
-                b_new[j] = hl[j] * f
-            res_n, cost_n = _gn_evaluate(b_new, low, m, n, a0, lat, z, r_chol, xc, pt, hl_n)
-            halvings = 0
-            while not cost_n <= cost and halvings < 4:
-                for j in range(m):
-                    b_new[j] = 0.5 * (b[j] + b_new[j])
-                res_n, cost_n = _gn_evaluate(b_new, low, m, n, a0, lat, z, r_chol, xc, pt, hl_n)
-                halvings += 1
-            if not cost_n <= cost:
-                break
-            iters += 1
-            moved = 0.0
-            for j in range(m):
-                moved = max(moved, abs(b_new[j] - b[j]))
-                b[j] = b_new[j]
-                hl[j] = hl_n[j]
-            res = res_n
-            cost = cost_n
-            if moved < 1e-4:
-                break
+        iters, denom_gn = _gauss_newton_range(b, low, m, n, a0, lat, z, r, max_iterations, pt, lvec)
         if iters:
-            hh = 0.0
-            for j in range(m):
-                hh += hl[j] * hl[j]
-            for i in range(n):
-                s = 0.0
-                for j in range(m):
-                    s += low[i, j] * hl[j]
-                lvec[i] = s
-            denom = hh + r
+            denom = denom_gn
         out[4] = iters
     inv = 1.0 / denom
     for i in range(n):

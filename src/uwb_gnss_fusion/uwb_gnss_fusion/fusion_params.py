@@ -132,7 +132,7 @@ class FusionParams:
             cannot explain (at least five satellites and more than half agreeing) for a step of the
             receiver clock and move the clock bias by it before the screen and the update, instead
             of rejecting every pseudorange and rebuilding the position
-            (:func:`.gnss_update.receiver_clock_step`; beyond the paper). Whole milliseconds (the
+            (:func:`.clock_steps.receiver_clock_step`; beyond the paper). Whole milliseconds (the
             usual adjustment of receivers whose clock drifts) are counted as
             ``receiver_clock_step_ms``, other steps as ``receiver_clock_step``.
         multi_gnss: use Galileo, BeiDou, GLONASS and QZSS satellites as well as GPS, each system

@@ -140,3 +140,23 @@ def satellite_reason(obs: SatelliteObservation) -> str | None:
             float(obs.troposphere_delay_m), ATMOSPHERE_DELAY_MAX_M):
         return 'nonphysical_atmospheric_delay'
     return None
+
+
+def checked_satellites(observations: list[SatelliteObservation]
+                       ) -> tuple[list[SatelliteObservation], dict[str, int], int]:
+    """An epoch's satellites sorted out: those to apply, those dropped per reason (:func:`satellite_reason`),
+    and how many have no state (no satellite position: no ephemeris yet, a receiver stream without
+    navigation data; expected, not a degraded input, counted apart and never applied)."""
+    kept = []
+    dropped: dict[str, int] = {}
+    stateless = 0
+    for obs in observations:
+        if not any(math.isfinite(float(v)) for v in obs.satellite_position_ecef_m):
+            stateless += 1
+            continue
+        reason = satellite_reason(obs)
+        if reason is None:
+            kept.append(obs)
+        else:
+            dropped[reason] = dropped.get(reason, 0) + 1
+    return kept, dropped, stateless

@@ -1,7 +1,7 @@
 """Output messages of fusion_node built from a :class:`FusionOutput` (no rclpy import).
 
 ``status_msg``, ``odometry_msg`` and ``fix_msg`` turn one core output into rfi_msgs/FusionStatus,
-nav_msgs/Odometry and sensor_msgs/NavSatFix (contents: see :mod:`uwb_gnss_fusion.fusion_node`);
+nav_msgs/Odometry and sensor_msgs/NavSatFix;
 ``local_odometry_msg`` turns a :class:`uwb_gnss_fusion.local_frame.LocalSolution` into the local-frame
 nav_msgs/Odometry and ``datum_msg`` the local frame's origin into a NavSatFix.
 They run for every input (up to 20 Hz UWB + 5 Hz GNSS), so their cost matters in a replay.
@@ -16,6 +16,41 @@ which builds the whole tree in one call and fills each field once. It is used on
 with the public constructors (checked once per class, see
 :func:`rfi_node_common.message_builder.builders_agree`); otherwise the public constructors are used
 (:data:`FAST_CONSTRUCTION` says which). This module only says which value goes into which field.
+
+The node's outputs:
+
+* /fusion/status (rfi_msgs/FusionStatus): one per processed GNSS epoch or UWB range, every
+  field filled; ``header.stamp`` is the stamp of the measurement processed; ``rejection_reasons``
+  / ``rejection_counts`` are the cumulative counts of the node (:mod:`.fusion_node`,
+  :mod:`.input_admission`, :mod:`.message_checks`) and of the core
+  (``fusion_filter`` reasons such as ``innovation_gate_pseudorange``, ``duplicate_svid``,
+  ``negative_range``), sorted by reason.
+* /fusion/odometry (nav_msgs/Odometry), only while the filter is initialised and its state is
+  finite: ``header.frame_id`` ``earth_frame_id`` (ECEF) or ``map_frame_id`` (the anchors' local
+  frame, UWB-only mode), ``child_frame_id`` the parameter; the estimated point is the GNSS antenna
+  (the UWB tag is offset by ``uwb_lever_arm_m``). Orientation is not estimated: the quaternion is
+  the identity and its covariance diagonal is :data:`ORIENTATION_UNKNOWN_VARIANCE_RAD2` (the
+  ``robot_localization`` convention for an unobserved quantity: a large variance, no
+  correlations). The twist holds the velocity with the axes of ``header.frame_id`` (with the
+  identity orientation those are also the child frame's), angular velocity 0 with variance
+  :data:`ORIENTATION_UNKNOWN_VARIANCE_RAD2`. Pose and twist covariances hold the filter's
+  position and velocity blocks (the position-velocity correlation has no place in Odometry).
+* /fusion/fix (sensor_msgs/NavSatFix), only in the earth frame and only while initialised with
+  a finite state: WGS 84 latitude/longitude/ellipsoidal altitude of the antenna, ENU position
+  covariance (row-major E, N, U), ``COVARIANCE_TYPE_KNOWN``, ``STATUS_FIX``, service GPS,
+  ``header.frame_id`` = ``child_frame_id``. Nothing is published before the first
+  initialisation or after a reset to uninitialised: a consumer must not read a NaN position as
+  a fix, and ``STATUS_NO_FIX`` with NaN fields would be exactly that for a careless one. The loss
+  is visible on /fusion/status (``initialized`` false) and /diagnostics (WARN).
+* /diagnostics: every ``diagnostics_period_s`` of stamp time (timed by accepted stamps only), the
+  counters and a level (:mod:`.fusion_diagnostics`); ``hardware_id`` is the parameter (the receiver and
+  UWB tag). When no input has arrived for ``input_timeout_s`` of wall time, a STALE status ("no input for
+  N s", with the counters) is published instead, stamped with the node clock's now: the only use of the
+  wall clock besides ``idle_flush_s``.
+* /fusion/local_odometry (nav_msgs/Odometry): every published solution again, in the local ENU
+  frame ``map_frame_id`` at ``base_frame_id`` (robot_localization's EKF input; origin, lever arm
+  and the attitude assumption: :mod:`uwb_gnss_fusion.local_frame`, :meth:`.fusion_node.FusionNode._publish_local`).
+* /fusion/datum (sensor_msgs/NavSatFix, latched): the WGS 84 origin of ``map_frame_id``, once.
 """
 
 from __future__ import annotations
