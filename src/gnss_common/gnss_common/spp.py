@@ -29,6 +29,7 @@ sec. 11.5; Brown 1992 "A baseline GPS RAIM scheme").
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -349,79 +350,9 @@ class SinglePointPositioner:
             counts[reason] += 1
             rejected.append((int(svid), reason))
 
-        # ---- screen inputs ------------------------------------------------------------------
-        obs = list(epoch.observations)
-        svid_count: dict[int, int] = {}
-        for o in obs:
-            if o.constellation == GPS:
-                svid_count[o.svid] = svid_count.get(o.svid, 0) + 1
-        rows = []
-        missing_corrections = 0
-        for o in obs:
-            if o.constellation != GPS:
-                reject(o.svid, "unsupported_constellation")
-                continue
-            if svid_count[o.svid] > 1:
-                reject(o.svid, "duplicate_svid")
-                continue
-            sat = np.asarray(o.satellite_position_ecef_m, dtype=float).reshape(-1)
-            vel = np.asarray(o.satellite_velocity_ecef_mps, dtype=float).reshape(-1)
-            if sat.shape != (3,) or vel.shape != (3,):
-                reject(o.svid, "invalid_input")
-                continue
-            core = (o.pseudorange_m, o.satellite_clock_bias_m, sat[0], sat[1], sat[2])
-            if not all(math.isfinite(v) for v in core):
-                reject(o.svid, "invalid_input")
-                continue
-            r_sat = math.sqrt(sat[0] ** 2 + sat[1] ** 2 + sat[2] ** 2)
-            if not (
-                1.0e7 <= o.pseudorange_m <= 4.0e7
-                and 2.0e7 <= r_sat <= 5.0e7
-                and abs(o.satellite_clock_bias_m) < 3.0e5
-            ):
-                reject(o.svid, "non_physical")
-                continue
-            iono = o.ionosphere_delay_m
-            tropo = o.troposphere_delay_m
-            if not (math.isfinite(iono) and math.isfinite(tropo)):
-                missing_corrections += 1
-                iono = iono if math.isfinite(iono) else 0.0
-                tropo = tropo if math.isfinite(tropo) else 0.0
-            if iono < 0.0 or tropo < 0.0 or iono > 200.0 or tropo > 100.0:
-                reject(o.svid, "non_physical")
-                continue
-            rate_ok = (
-                math.isfinite(o.pseudorange_rate_mps)
-                and math.isfinite(o.satellite_clock_drift_mps)
-                and bool(np.all(np.isfinite(vel)))
-                and abs(o.pseudorange_rate_mps) < 1.0e5
-            )
-            rows.append(
-                (
-                    o.svid,
-                    sat,
-                    vel,
-                    o.pseudorange_m + o.satellite_clock_bias_m - iono - tropo,
-                    (o.pseudorange_rate_mps + o.satellite_clock_drift_mps) if rate_ok else math.nan,
-                    o.cn0_dbhz if math.isfinite(o.cn0_dbhz) else math.nan,
-                    iono,
-                    o.pseudorange_std_m,
-                    o.pseudorange_rate_std_mps,
-                )
-            )
-        rows.sort(key=lambda r: r[0])
-        extra = {"missing_corrections": float(missing_corrections)}
-
-        n = len(rows)
-        svids = np.array([r[0] for r in rows], dtype=int)
-        sat_pos = np.array([r[1] for r in rows], dtype=float).reshape(n, 3)
-        sat_vel = np.array([r[2] for r in rows], dtype=float).reshape(n, 3)
-        y_corr = np.array([r[3] for r in rows], dtype=float)
-        rate_corr = np.array([r[4] for r in rows], dtype=float)
-        cn0 = np.array([r[5] for r in rows], dtype=float)
-        iono_m = np.array([r[6] for r in rows], dtype=float)
-        pr_std = np.array([r[7] for r in rows], dtype=float)
-        rate_std = np.array([r[8] for r in rows], dtype=float)
+        m = _screen(epoch, reject)
+        extra = {"missing_corrections": float(m.missing_corrections)}
+        svids, sat_pos, sat_vel, rate_corr, rate_std = m.svids, m.sat_pos, m.sat_vel, m.rate_corr, m.rate_std
 
         if initial_position_ecef_m is not None:
             x0 = np.asarray(initial_position_ecef_m, dtype=float).reshape(3)
@@ -432,6 +363,67 @@ class SinglePointPositioner:
         else:
             x0 = np.zeros(3)
 
+        sol, status, active, exclusions = self._solve_with_fde(m, x0, reject)
+        used = np.flatnonzero(active)
+        self.totals["epochs"] += 1
+        for reason, count in counts.items():
+            self.totals[reason] += count
+        if status in (STATUS_TOO_FEW, STATUS_SINGULAR):
+            return _no_solution(epoch.stamp_ns, status, svids[used], tuple(rejected), counts, sol.iterations, extra)
+
+        x = sol.x
+        valid = status == STATUS_OK
+        if valid and exclusions > 0:
+            status = STATUS_OK_WITH_EXCLUSIONS
+        if valid:
+            self._last_position = x[:3].copy()
+            self.totals["valid_epochs"] += 1
+        dof = used.size - 4
+        rot = sol.enu_rotation
+        cov = sol.covariance
+        cov_enu = rot @ cov[:3, :3] @ rot.T if rot is not None else np.full((3, 3), math.nan)
+        dop = _dop(sol.h, rot)
+
+        # ---- velocity and clock drift (eq. 6) -----------------------------------------------
+        vel_valid = False
+        v = np.full(3, math.nan)
+        drift = math.nan
+        vcov = np.full((4, 4), math.nan)
+        if valid:
+            solved = _velocity(sol, used, x[:3], sat_pos, sat_vel, rate_corr, rate_std, p.sigma_rate_mps)
+            if solved is not None:
+                v, drift, vcov = solved
+                vel_valid = True
+
+        return SppResult(
+            stamp_ns=epoch.stamp_ns,
+            valid=valid,
+            status=status,
+            position_ecef_m=x[:3].copy(),
+            clock_bias_m=float(x[3]),
+            velocity_valid=vel_valid,
+            velocity_ecef_mps=np.asarray(v, dtype=float),
+            clock_drift_mps=drift,
+            covariance=cov,
+            covariance_enu_m2=cov_enu,
+            velocity_covariance=vcov,
+            dop=dop,
+            used_svids=tuple(int(s) for s in svids[used]),
+            rejected=tuple(rejected),
+            rejection_counts=counts,
+            residuals_m=sol.residuals_m,
+            elevations_rad=sol.el_all[used],
+            iterations=sol.iterations,
+            test_statistic=float(sol.sse) if dof > 0 else math.nan,
+            test_threshold=self._threshold(dof) if dof > 0 else math.nan,
+            extra=extra,
+        )
+
+    def _solve_with_fde(self, m: _Screened, x0: np.ndarray, reject: Callable[[int, str], None]):
+        """The position solution with the elevation mask and fault detection and exclusion (module docstring):
+        (the last solution, its status, the satellites used, the number excluded as outliers)."""
+        p = self.params
+        n, svids, sat_pos = m.n, m.svids, m.sat_pos
         active = np.ones(n, dtype=bool)
         exclusions = 0
         mask_rad = math.radians(p.elevation_mask_deg)
@@ -445,7 +437,7 @@ class SinglePointPositioner:
                 reject(int(svids[i]), "below_elevation_mask")
             active &= ~below0
         while True:
-            sol = self._solve_position(sat_pos, y_corr, cn0, iono_m, pr_std, active, x0, mask_rad)
+            sol = self._solve_position(sat_pos, m.y_corr, m.cn0, m.iono_m, m.pr_std, active, x0, mask_rad)
             status = sol.status
             below = sol.below_mask
             if np.any(below):
@@ -475,106 +467,7 @@ class SinglePointPositioner:
             exclusions += 1
             x0 = sol.x[:3]
 
-        used = np.flatnonzero(active)
-        self.totals["epochs"] += 1
-        for reason, count in counts.items():
-            self.totals[reason] += count
-        nan3 = np.full(3, math.nan)
-        nan4 = np.full((4, 4), math.nan)
-        if status in (STATUS_TOO_FEW, STATUS_SINGULAR):
-            return SppResult(
-                epoch.stamp_ns,
-                False,
-                status,
-                nan3,
-                math.nan,
-                False,
-                nan3.copy(),
-                math.nan,
-                nan4,
-                np.full((3, 3), math.nan),
-                nan4.copy(),
-                _NAN_DOP,
-                tuple(int(s) for s in svids[used]),
-                tuple(rejected),
-                counts,
-                np.full(used.size, math.nan),
-                np.full(used.size, math.nan),
-                sol.iterations,
-                math.nan,
-                math.nan,
-                extra,
-            )
-
-        x = sol.x
-        valid = status == STATUS_OK
-        if valid and exclusions > 0:
-            status = STATUS_OK_WITH_EXCLUSIONS
-        if valid:
-            self._last_position = x[:3].copy()
-            self.totals["valid_epochs"] += 1
-        dof = used.size - 4
-        rot = sol.enu_rotation
-        cov = sol.covariance
-        cov_enu = rot @ cov[:3, :3] @ rot.T if rot is not None else np.full((3, 3), math.nan)
-        dop = _NAN_DOP
-        if rot is not None:
-            g = sol.h.copy()
-            g[:, :3] = g[:, :3] @ rot.T
-            try:
-                q = np.linalg.inv(g.T @ g)
-                dop = Dop(
-                    float(np.sqrt(np.trace(q))),
-                    float(np.sqrt(q[0, 0] + q[1, 1] + q[2, 2])),
-                    float(np.sqrt(q[0, 0] + q[1, 1])),
-                    float(np.sqrt(q[2, 2])),
-                    float(np.sqrt(q[3, 3])),
-                )
-            except np.linalg.LinAlgError:
-                dop = _NAN_DOP
-
-        # ---- velocity and clock drift (eq. 6) -----------------------------------------------
-        vel_valid = False
-        v = np.full(3, math.nan)
-        drift = math.nan
-        vcov = np.full((4, 4), math.nan)
-        if valid:
-            rv = used[np.isfinite(rate_corr[used])]
-            if rv.size >= 4:
-                los = sol.los_all[rv]
-                _, c, s, _ = sagnac_rotate(sat_pos[rv], x[:3])
-                vs = rotate_about_z(sat_vel[rv], c, s)
-                yv = rate_corr[rv] - np.sum(vs * los, axis=1)
-                hv = np.hstack([-los, np.ones((rv.size, 1))])
-                sig_v = p.sigma_rate_mps * sol.scale_all[rv]
-                sig_v = np.where(np.isfinite(rate_std[rv]) & (rate_std[rv] > 0), rate_std[rv], sig_v)
-                solved = weighted_least_squares(hv, yv, 1.0 / sig_v**2)
-                if solved is not None and np.all(np.isfinite(solved[0])):
-                    v, drift, vel_valid, vcov = solved[0][:3], float(solved[0][3]), True, solved[1]
-
-        return SppResult(
-            stamp_ns=epoch.stamp_ns,
-            valid=valid,
-            status=status,
-            position_ecef_m=x[:3].copy(),
-            clock_bias_m=float(x[3]),
-            velocity_valid=vel_valid,
-            velocity_ecef_mps=np.asarray(v, dtype=float),
-            clock_drift_mps=drift,
-            covariance=cov,
-            covariance_enu_m2=cov_enu,
-            velocity_covariance=vcov,
-            dop=dop,
-            used_svids=tuple(int(s) for s in svids[used]),
-            rejected=tuple(rejected),
-            rejection_counts=counts,
-            residuals_m=sol.residuals_m,
-            elevations_rad=sol.el_all[used],
-            iterations=sol.iterations,
-            test_statistic=float(sol.sse) if dof > 0 else math.nan,
-            test_threshold=self._threshold(dof) if dof > 0 else math.nan,
-            extra=extra,
-        )
+        return sol, status, active, exclusions
 
     # ------------------------------------------------------------------------------------------
     def _solve_position(
@@ -662,3 +555,152 @@ class SinglePointPositioner:
             los_all=los_all,
             scale_all=scale_all,
         )
+
+
+@dataclass(frozen=True)
+class _Screened:
+    """The measurements of an epoch that passed the input checks (``_screen``), by increasing svid: corrected
+    pseudoranges ``y_corr`` (clock, ionosphere and troposphere removed), corrected rates (NaN where unusable)."""
+
+    n: int
+    svids: np.ndarray
+    sat_pos: np.ndarray
+    sat_vel: np.ndarray
+    y_corr: np.ndarray
+    rate_corr: np.ndarray
+    cn0: np.ndarray
+    iono_m: np.ndarray
+    pr_std: np.ndarray
+    rate_std: np.ndarray
+    missing_corrections: int
+
+
+def _screen(epoch: GnssEpoch, reject: Callable[[int, str], None]) -> _Screened:
+    """The input checks of ``SinglePointPositioner.process`` (module docstring: rejection reasons): each rejected
+    measurement handed to reject(svid, reason); the others corrected and sorted by svid."""
+    obs = list(epoch.observations)
+    svid_count: dict[int, int] = {}
+    for o in obs:
+        if o.constellation == GPS:
+            svid_count[o.svid] = svid_count.get(o.svid, 0) + 1
+    rows = []
+    missing_corrections = 0
+    for o in obs:
+        if o.constellation != GPS:
+            reject(o.svid, "unsupported_constellation")
+            continue
+        if svid_count[o.svid] > 1:
+            reject(o.svid, "duplicate_svid")
+            continue
+        sat = np.asarray(o.satellite_position_ecef_m, dtype=float).reshape(-1)
+        vel = np.asarray(o.satellite_velocity_ecef_mps, dtype=float).reshape(-1)
+        if sat.shape != (3,) or vel.shape != (3,):
+            reject(o.svid, "invalid_input")
+            continue
+        core = (o.pseudorange_m, o.satellite_clock_bias_m, sat[0], sat[1], sat[2])
+        if not all(math.isfinite(v) for v in core):
+            reject(o.svid, "invalid_input")
+            continue
+        r_sat = math.sqrt(sat[0] ** 2 + sat[1] ** 2 + sat[2] ** 2)
+        if not (
+            1.0e7 <= o.pseudorange_m <= 4.0e7
+            and 2.0e7 <= r_sat <= 5.0e7
+            and abs(o.satellite_clock_bias_m) < 3.0e5
+        ):
+            reject(o.svid, "non_physical")
+            continue
+        iono = o.ionosphere_delay_m
+        tropo = o.troposphere_delay_m
+        if not (math.isfinite(iono) and math.isfinite(tropo)):
+            missing_corrections += 1
+            iono = iono if math.isfinite(iono) else 0.0
+            tropo = tropo if math.isfinite(tropo) else 0.0
+        if iono < 0.0 or tropo < 0.0 or iono > 200.0 or tropo > 100.0:
+            reject(o.svid, "non_physical")
+            continue
+        rate_ok = (
+            math.isfinite(o.pseudorange_rate_mps)
+            and math.isfinite(o.satellite_clock_drift_mps)
+            and bool(np.all(np.isfinite(vel)))
+            and abs(o.pseudorange_rate_mps) < 1.0e5
+        )
+        rows.append(
+            (
+                o.svid,
+                sat,
+                vel,
+                o.pseudorange_m + o.satellite_clock_bias_m - iono - tropo,
+                (o.pseudorange_rate_mps + o.satellite_clock_drift_mps) if rate_ok else math.nan,
+                o.cn0_dbhz if math.isfinite(o.cn0_dbhz) else math.nan,
+                iono,
+                o.pseudorange_std_m,
+                o.pseudorange_rate_std_mps,
+            )
+        )
+    rows.sort(key=lambda r: r[0])
+    n = len(rows)
+    return _Screened(
+        n,
+        np.array([r[0] for r in rows], dtype=int),
+        np.array([r[1] for r in rows], dtype=float).reshape(n, 3),
+        np.array([r[2] for r in rows], dtype=float).reshape(n, 3),
+        np.array([r[3] for r in rows], dtype=float),
+        np.array([r[4] for r in rows], dtype=float),
+        np.array([r[5] for r in rows], dtype=float),
+        np.array([r[6] for r in rows], dtype=float),
+        np.array([r[7] for r in rows], dtype=float),
+        np.array([r[8] for r in rows], dtype=float),
+        missing_corrections,
+    )
+
+
+def _dop(h: np.ndarray, rot: np.ndarray | None) -> Dop:
+    """Dilutions of precision of the position solution's geometry h (ECEF columns) in local ENU (rot); NaN when
+    there is no rotation or the geometry is singular."""
+    if rot is None:
+        return _NAN_DOP
+    g = h.copy()
+    g[:, :3] = g[:, :3] @ rot.T
+    try:
+        q = np.linalg.inv(g.T @ g)
+    except np.linalg.LinAlgError:
+        return _NAN_DOP
+    return Dop(
+        float(np.sqrt(np.trace(q))),
+        float(np.sqrt(q[0, 0] + q[1, 1] + q[2, 2])),
+        float(np.sqrt(q[0, 0] + q[1, 1])),
+        float(np.sqrt(q[2, 2])),
+        float(np.sqrt(q[3, 3])),
+    )
+
+
+def _velocity(sol, used: np.ndarray, position: np.ndarray, sat_pos: np.ndarray, sat_vel: np.ndarray,
+              rate_corr: np.ndarray, rate_std: np.ndarray, sigma_rate_mps: float
+              ) -> tuple[np.ndarray, float, np.ndarray] | None:
+    """Velocity and clock drift (Cao et al., eq. 6) from the used satellites with a rate, by weighted least squares
+    on the position solution's lines of sight: (velocity, drift, covariance), or None (fewer than 4, or not finite)."""
+    rv = used[np.isfinite(rate_corr[used])]
+    if rv.size < 4:
+        return None
+    los = sol.los_all[rv]
+    _, c, s, _ = sagnac_rotate(sat_pos[rv], position)
+    vs = rotate_about_z(sat_vel[rv], c, s)
+    yv = rate_corr[rv] - np.sum(vs * los, axis=1)
+    hv = np.hstack([-los, np.ones((rv.size, 1))])
+    sig_v = sigma_rate_mps * sol.scale_all[rv]
+    sig_v = np.where(np.isfinite(rate_std[rv]) & (rate_std[rv] > 0), rate_std[rv], sig_v)
+    solved = weighted_least_squares(hv, yv, 1.0 / sig_v**2)
+    if solved is None or not np.all(np.isfinite(solved[0])):
+        return None
+    return solved[0][:3], float(solved[0][3]), solved[1]
+
+
+def _no_solution(stamp_ns: int, status: str, used_svids: np.ndarray, rejected: tuple, counts: dict[str, int],
+                 iterations: int, extra: dict[str, float]) -> SppResult:
+    """The result of an epoch with too few satellites or a singular geometry: invalid, NaN estimates."""
+    nan3 = np.full(3, math.nan)
+    nan4 = np.full((4, 4), math.nan)
+    k = used_svids.size
+    return SppResult(stamp_ns, False, status, nan3, math.nan, False, nan3.copy(), math.nan, nan4,
+                     np.full((3, 3), math.nan), nan4.copy(), _NAN_DOP, tuple(int(s) for s in used_svids), rejected,
+                     counts, np.full(k, math.nan), np.full(k, math.nan), iterations, math.nan, math.nan, extra)
