@@ -50,241 +50,29 @@ from gnss_common.constants import (
     GPS_NAV_BIT_RATE_HZ,
 )
 from rfi_sim.gps_ca import G2_DELAY_CHIPS, ca_code
+from rfi_sim.if_scene import (
+    CHIRP,
+    CW,
+    NONE,
+    PAPER_CHIRP_F0_DIGITAL,
+    PAPER_IF_HZ,
+    PAPER_SAMPLE_RATE_HZ,
+    PAPER_SWEEP_RATE_HZ_PER_S,
+    WIDEBAND,
+    ChirpJammer,
+    CwJammer,
+    FrontEndConfig,
+    GpsSatellite,
+    Jammer,
+    NoiseJammer,
+    db_to_linear,
+)
 from rfi_sim.jammer_waveforms import SweepJammer, SweepLaw, sweep_cycles, sweep_law
 
-PAPER_SAMPLE_RATE_HZ = 38.192e6
-"""Kang et al. front-end sample rate, Hz (Sec. 2.1)."""
-PAPER_IF_HZ = 9.548e6
-"""Kang et al. intermediate frequency, Hz (Sec. 2.1)."""
-PAPER_CHIRP_F0_DIGITAL = 0.1832
-"""Kang et al. chirp initial frequency, cycles/sample (Sec. 2.1)."""
-PAPER_SWEEP_RATE_HZ_PER_S = 1e12
-"""Kang et al. (after Mitch et al. 2011) chirp sweep rate, Hz/s."""
-
-NONE, CW, CHIRP, WIDEBAND = 0, 1, 2, 3
-"""Jammer type codes, identical to rfi_msgs/JammerState."""
-
-
-def _db_to_lin(db: float) -> float:
-    return 10.0 ** (db / 10.0)
-
-
-@dataclass(frozen=True)
-class FrontEndConfig:
-    """Front-end and link-budget parameters.
-
-    Attributes:
-        sample_rate_hz: sample rate, Hz (complex: I/Q pairs per second), > 0.
-        intermediate_frequency_hz: IF, Hz; 0 for complex baseband; < 0 for spectral inversion.
-        is_complex: True for I/Q samples.
-        bits: quantisation per real value, 1..16. 1-3 bits: sign/magnitude odd levels
-            (+-1, +-3, ..., as MAX2769-type front ends); 4-16 bits: two's complement.
-        clip_sigma: AGC full-scale half-range in units of the total input RMS (per real value).
-            None: 2.0 for bits <= 3 (2-bit threshold at 1 sigma), 4.0 otherwise.
-        noise_density_dbm_per_mhz: thermal noise density, dBm/MHz (Kang et al.: -114).
-        noise_bandwidth_hz: bandwidth over which the noise power is counted, Hz; None: the whole
-            sampled band (fs/2 real, fs complex).
-        signal_power_dbm: received power of each GPS signal, dBm (Kang et al.: -130).
-        filter_low_hz, filter_high_hz: pass band of the front end's band-limiting (anti-alias) filter,
-            Hz relative to the RF centre; None (default): no filter. Both or neither. The filter is
-            a Butterworth magnitude ``1 / sqrt(1 + ((f - f_c) / (B / 2))^(2 * filter_order))``
-            applied quasi-statically to the tone jammers (CW, chirp, sweep: amplitude times the gain
-            at the instantaneous frequency; exact for CW, a good approximation while the sweep
-            crosses the filter's edge in many of its impulse-response lengths, i.e. rate << B^2 /
-            filter_order). Thermal noise, GPS and noise jammers are not filtered (the noise is
-            taken as white over the sampled band, as after the ADC's own noise).
-        filter_order: order of that filter, >= 1.
-        gain_mode: how the analog gain in front of the quantiser is set.
-            "ideal" (default): fixed by the configured powers, jammers included (an AGC settled on
-            the total power before the stream starts; the earlier behaviour, unchanged).
-            "fixed": fixed by the thermal noise and GPS powers only (no AGC): a strong jammer clips.
-            "agc": starts as "fixed" plus ``agc_initial_gain_db`` and settles on the total power
-            measured at the quantiser input: every ``agc_update_samples`` samples the gain in dB
-            moves by ``(update duration / agc_time_constant_s)`` times the error between the target
-            power (the one "fixed" is set for) and the measured power (both in dB).
-            In "fixed" and "agc" the block's ``scale`` is the volts per count at the nominal gain
-            (the "fixed" one), so counts * scale is the input divided by the AGC gain, as a front
-            end that does not report its AGC delivers it; ``IfTruth.agc_gain_db`` holds the gain.
-        agc_time_constant_s: AGC time constant, s, > 0.
-        agc_update_samples: AGC update interval, samples (complex: I/Q pairs), >= 1; updates fall on
-            absolute sample indices (multiples of it), so the stream is split-invariant.
-        agc_initial_gain_db: AGC gain at sample 0 relative to the nominal gain, dB.
-    """
-
-    sample_rate_hz: float = PAPER_SAMPLE_RATE_HZ
-    intermediate_frequency_hz: float = PAPER_IF_HZ
-    is_complex: bool = False
-    bits: int = 8
-    clip_sigma: float | None = None
-    noise_density_dbm_per_mhz: float = -114.0
-    noise_bandwidth_hz: float | None = None
-    signal_power_dbm: float = -130.0
-    filter_low_hz: float | None = None
-    filter_high_hz: float | None = None
-    filter_order: int = 8
-    gain_mode: str = "ideal"
-    agc_time_constant_s: float = 100e-6
-    agc_update_samples: int = 64
-    agc_initial_gain_db: float = 0.0
-
-    def __post_init__(self) -> None:
-        if not (math.isfinite(self.sample_rate_hz) and self.sample_rate_hz > 0):
-            raise ValueError(f"sample_rate_hz must be finite and > 0, got {self.sample_rate_hz}")
-        if not math.isfinite(self.intermediate_frequency_hz):
-            raise ValueError("intermediate_frequency_hz must be finite")
-        nyq = self.sample_rate_hz if self.is_complex else self.sample_rate_hz / 2
-        if abs(self.intermediate_frequency_hz) >= nyq:
-            raise ValueError(f"|IF| must be below {nyq} Hz, got {self.intermediate_frequency_hz}")
-        if not 1 <= int(self.bits) <= 16:
-            raise ValueError(f"bits must be in 1..16, got {self.bits}")
-        if self.clip_sigma is not None and not self.clip_sigma > 0:
-            raise ValueError("clip_sigma must be > 0")
-        if self.noise_bandwidth_hz is not None and not self.noise_bandwidth_hz > 0:
-            raise ValueError("noise_bandwidth_hz must be > 0")
-        if (self.filter_low_hz is None) != (self.filter_high_hz is None):
-            raise ValueError("filter_low_hz and filter_high_hz must be given together")
-        if self.filter_low_hz is not None and self.filter_high_hz is not None:
-            if not (math.isfinite(self.filter_low_hz) and math.isfinite(self.filter_high_hz)
-                    and self.filter_high_hz > self.filter_low_hz):
-                raise ValueError("filter band must be finite with filter_high_hz > filter_low_hz")
-        if not int(self.filter_order) >= 1:
-            raise ValueError("filter_order must be >= 1")
-        if self.gain_mode not in ("ideal", "fixed", "agc"):
-            raise ValueError(f"gain_mode must be ideal, fixed or agc, got {self.gain_mode!r}")
-        if not (math.isfinite(self.agc_time_constant_s) and self.agc_time_constant_s > 0):
-            raise ValueError("agc_time_constant_s must be finite and > 0")
-        if not int(self.agc_update_samples) >= 1:
-            raise ValueError("agc_update_samples must be >= 1")
-        if not math.isfinite(self.agc_initial_gain_db):
-            raise ValueError("agc_initial_gain_db must be finite")
-
-    def filter_gain(self, f_rel_hz: np.ndarray | float) -> np.ndarray:
-        """Amplitude gain of the band-limiting filter at RF offsets ``f_rel_hz`` (Hz); 1 without one."""
-        f = np.asarray(f_rel_hz, dtype=np.float64)
-        if self.filter_low_hz is None or self.filter_high_hz is None:
-            return np.ones_like(f)
-        fc = 0.5 * (self.filter_low_hz + self.filter_high_hz)
-        half = 0.5 * (self.filter_high_hz - self.filter_low_hz)
-        return np.asarray(1.0 / np.sqrt(1.0 + np.abs((f - fc) / half) ** (2 * int(self.filter_order))))
-
-    def in_sampled_band(self, f_rel_hz: np.ndarray | float) -> np.ndarray:
-        """True where an RF offset (Hz) falls inside the sampled band without aliasing."""
-        d = np.asarray(self.digital_frequency(f_rel_hz), dtype=np.float64)
-        if self.is_complex:
-            return np.asarray((d >= -0.5) & (d < 0.5))
-        return np.asarray((d > 0.0) & (d < 0.5))
-
-    @property
-    def band_hz(self) -> float:
-        """Sampled (Nyquist) bandwidth, Hz."""
-        return self.sample_rate_hz if self.is_complex else self.sample_rate_hz / 2
-
-    @property
-    def noise_power_mw(self) -> float:
-        """Thermal noise power N, mW."""
-        bw = self.band_hz if self.noise_bandwidth_hz is None else self.noise_bandwidth_hz
-        return _db_to_lin(self.noise_density_dbm_per_mhz) * bw / 1e6
-
-    @property
-    def signal_power_mw(self) -> float:
-        """Nominal GPS signal power S, mW."""
-        return _db_to_lin(self.signal_power_dbm)
-
-    def digital_frequency(self, f_rel_hz: np.ndarray | float) -> np.ndarray | float:
-        """Digital frequency, cycles/sample, of an RF offset (see module docstring)."""
-        fif = self.intermediate_frequency_hz
-        if not self.is_complex and fif < 0:
-            return (-fif - np.asarray(f_rel_hz)) / self.sample_rate_hz
-        return (fif + np.asarray(f_rel_hz)) / self.sample_rate_hz
-
-
-@dataclass(frozen=True)
-class CwJammer:
-    """Single-tone continuous wave jammer (Kang et al., eq. 6).
-
-    Attributes:
-        frequency_hz: tone frequency relative to the RF centre, Hz (paper: 0, i.e. at the IF).
-        js_db: jammer-to-signal ratio, dB.
-        phase_rad: initial phase, rad.
-        on_time_s: switch-on time, s since sample 0 of the stream; 0: on from the first sample.
-    """
-
-    frequency_hz: float = 0.0
-    js_db: float = 30.0
-    phase_rad: float = 0.0
-    on_time_s: float = 0.0
-
-
-@dataclass(frozen=True)
-class ChirpJammer:
-    """Saw-tooth chirp jammer (Kang et al., eq. 2-5) with continuous phase across sweeps.
-
-    The instantaneous frequency is ``start_frequency_hz + sweep_rate * tau`` with
-    ``tau = (t + time_offset_s) mod sweep_period_s``.
-
-    Attributes:
-        start_frequency_hz: frequency at each sweep start, relative to the RF centre, Hz.
-            Default: digital 0.1832 at the paper's fs and IF.
-        sweep_rate_hz_per_s: sweep rate, Hz/s (may be negative for a down-chirp).
-        sweep_period_s: sweep period, s. Default: the symmetric sweep 0.1832..0.3168.
-        js_db: jammer-to-signal ratio, dB.
-        phase_rad: initial phase, rad.
-        time_offset_s: position inside the sweep at sample 0, s.
-        on_time_s: switch-on time, s since sample 0 of the stream; 0: on from the first sample.
-            The sweep runs from sample 0 either way (switching on does not restart it).
-    """
-
-    start_frequency_hz: float = PAPER_CHIRP_F0_DIGITAL * PAPER_SAMPLE_RATE_HZ - PAPER_IF_HZ
-    sweep_rate_hz_per_s: float = PAPER_SWEEP_RATE_HZ_PER_S
-    sweep_period_s: float = 2 * (PAPER_IF_HZ - PAPER_CHIRP_F0_DIGITAL * PAPER_SAMPLE_RATE_HZ) / 1e12
-    js_db: float = 30.0
-    phase_rad: float = 0.0
-    time_offset_s: float = 0.0
-    on_time_s: float = 0.0
-
-    @property
-    def bandwidth_hz(self) -> float:
-        """Swept bandwidth, Hz."""
-        return abs(self.sweep_rate_hz_per_s) * self.sweep_period_s
-
-
-@dataclass(frozen=True)
-class NoiseJammer:
-    """Band-limited Gaussian noise jammer (flat spectrum, FIR-shaped).
-
-    Attributes:
-        center_frequency_hz: centre relative to the RF centre, Hz.
-        bandwidth_hz: two-sided bandwidth, Hz.
-        js_db: jammer-to-signal ratio, dB.
-        on_time_s: switch-on time, s since sample 0 of the stream; 0: on from the first sample.
-    """
-
-    center_frequency_hz: float = 0.0
-    bandwidth_hz: float = 2.0e6
-    js_db: float = 30.0
-    on_time_s: float = 0.0
-
-
-Jammer = CwJammer | ChirpJammer | NoiseJammer | SweepJammer
-
-
-@dataclass(frozen=True)
-class GpsSatellite:
-    """One GPS L1 C/A signal.
-
-    Attributes:
-        prn: 1..37.
-        doppler_hz: carrier Doppler, Hz (the code rate is scaled by 1 + doppler/L1).
-        code_phase_chips: code phase at sample 0, chips, [0, 1023).
-        carrier_phase_rad: carrier phase at sample 0, rad.
-        power_dbm: received power, dBm; None: the front end's ``signal_power_dbm``.
-    """
-
-    prn: int = 1
-    doppler_hz: float = 0.0
-    code_phase_chips: float = 0.0
-    carrier_phase_rad: float = 0.0
-    power_dbm: float | None = None
+__all__ = ["CHIRP", "CW", "ChirpJammer", "CwJammer", "FrontEndConfig", "GpsSatellite", "IfBlock", "IfSimulator",
+           "IfTruth", "Jammer", "NONE", "NoiseJammer", "PAPER_CHIRP_F0_DIGITAL", "PAPER_IF_HZ", "PAPER_SAMPLE_RATE_HZ",
+           "PAPER_SWEEP_RATE_HZ_PER_S", "SweepJammer", "WIDEBAND", "js_for_jn_db", "simulate"]
+"""The simulator's public names (the front end and emitters are defined in if_scene)."""
 
 
 @dataclass(frozen=True)
@@ -442,11 +230,11 @@ class IfSimulator:
 
     # ---- powers --------------------------------------------------------------------------
     def _sat_power(self, s: GpsSatellite) -> float:
-        return _db_to_lin(s.power_dbm) if s.power_dbm is not None else self.front_end.signal_power_mw
+        return db_to_linear(s.power_dbm) if s.power_dbm is not None else self.front_end.signal_power_mw
 
     def jammer_power_mw(self, j: Jammer) -> float:
         """Jammer power J = S * 10^(J/S / 10), mW."""
-        return self.front_end.signal_power_mw * _db_to_lin(j.js_db)
+        return self.front_end.signal_power_mw * db_to_linear(j.js_db)
 
     def jn_db(self, j: Jammer) -> float:
         """J/N of a jammer, dB."""
@@ -595,67 +383,25 @@ class IfSimulator:
         n_idx = np.arange(self._next_index, self._next_index + n_samples, dtype=np.int64)
         t = n_idx / fs
         self._next_index += n_samples
-        if add_to is not None:
-            x = np.asarray(add_to)
-            if x.shape != (n_samples,):
-                raise ValueError("add_to must have shape (n_samples,)")
-            x = x.astype(np.complex128 if fe.is_complex else np.float64)
-        else:
-            x = self._gps(n_idx, t)
-            sig = math.sqrt(fe.noise_power_mw)
-            if fe.is_complex:
-                g = self._rng_noise.standard_normal(2 * n_samples)
-                x = x + sig / math.sqrt(2.0) * (g[0::2] + 1j * g[1::2])
-            else:
-                x = x + sig * self._rng_noise.standard_normal(n_samples)
+        x = self._signal_and_noise(n_idx, t, add_to)
         nj = len(self.jammers)
         f_true = np.full((nj, n_samples), np.nan)
         starts: list[np.ndarray] = []
         periods = np.full(nj, np.nan)
         shapes: list[str] = []
         band = np.full((nj, 2), np.nan)
-        p_block = np.zeros(nj)        # mean jammer power over the block before the AGC, mW
         p_in_band = np.zeros(nj)      # mean power over its in-band samples, mW
         in_band_frac = np.zeros(nj)
         active = np.zeros(nj, dtype=bool)
         jam_power_t: list[np.ndarray] = []  # per-sample power of each jammer (for the AGC share)
         for i, j in enumerate(self.jammers):
-            amp = math.sqrt(self.jammer_power_mw(j))
             on = t >= j.on_time_s
-            all_on = bool(on.all())
-            if isinstance(j, NoiseJammer):
-                y = self._noise_jammer(i, j, t)
-                f_rel = None
-                shapes.append("noise")
-                band[i] = (j.center_frequency_hz - j.bandwidth_hz / 2, j.center_frequency_hz + j.bandwidth_hz / 2)
-                starts.append(np.zeros(0, dtype=np.int64))
-                gain = np.ones(n_samples)
-            else:
-                if isinstance(j, CwJammer):
-                    phase = 2 * np.pi * self._signed(j.frequency_hz) * t + j.phase_rad
-                    f_rel = np.full(n_samples, j.frequency_hz)
-                    shapes.append("cw")
-                    band[i] = (j.frequency_hz, j.frequency_hz)
-                    starts.append(np.zeros(0, dtype=np.int64))
-                elif isinstance(j, ChirpJammer):
-                    phase, f_rel, st = self._chirp(j, t, n_idx)
-                    starts.append(st)
-                    periods[i] = j.sweep_period_s
-                    shapes.append("saw_up" if j.sweep_rate_hz_per_s >= 0 else "saw_down")
-                    f_end = j.start_frequency_hz + j.sweep_rate_hz_per_s * j.sweep_period_s
-                    band[i] = (min(j.start_frequency_hz, f_end), max(j.start_frequency_hz, f_end))
-                else:
-                    phase, f_rel, st = self._sweep(i, j, t, n_idx)
-                    starts.append(st)
-                    periods[i] = j.sweep_period_s
-                    shapes.append(j.shape)
-                    band[i] = j.swept_band_hz
-                y = self._phase_to_signal(amp, phase)
+            y, f_rel, gain, st, periods[i], shape, band[i] = self._jammer_samples(i, j, t, n_idx)
+            starts.append(st)
+            shapes.append(shape)
+            if f_rel is not None:
                 f_true[i] = f_rel
-                gain = fe.filter_gain(f_rel)
-                if fe.filter_low_hz is not None:
-                    y = y * gain
-            if not all_on:
+            if not bool(on.all()):
                 y = y * on
             x = x + y
             inb = on & (gain >= 1 / math.sqrt(2.0))
@@ -665,17 +411,10 @@ class IfSimulator:
             jam_power_t.append(pw)
             active[i] = bool(on.any())
             if n_samples:
-                p_block[i] = float(np.mean(pw))
                 in_band_frac[i] = float(np.mean(inb))
                 p_in_band[i] = float(np.mean(pw[inb])) if inb.any() else 0.0
         x, g_amp = self._apply_gain(x)
-        dtype = np.int8 if fe.bits <= 8 else np.int16
-        if fe.is_complex:
-            c = np.empty(2 * n_samples, dtype=dtype)
-            c[0::2] = _quantise(x.real, fe.bits, self.step)
-            c[1::2] = _quantise(x.imag, fe.bits, self.step)
-        else:
-            c = _quantise(x, fe.bits, self.step).astype(dtype)
+        c, clipped = self._quantised(x)
         jn = np.array([self.jn_db(j) for j in self.jammers])
         live = [i for i in range(nj) if active[i]]
         if live:
@@ -684,12 +423,6 @@ class IfSimulator:
                 else CHIRP
         else:
             jtype = NONE
-        if fe.bits <= 3:
-            top = 2 ** fe.bits - 1
-            lo_code, hi_code = -top, top
-        else:
-            lo_code, hi_code = -(2 ** (fe.bits - 1)), 2 ** (fe.bits - 1) - 1
-        clipped = float(np.mean((c == lo_code) | (c == hi_code))) if c.size else 0.0
         n0 = fe.noise_power_mw
         with np.errstate(divide="ignore"):
             g2 = g_amp ** 2
@@ -707,6 +440,74 @@ class IfSimulator:
         return IfBlock(counts=c, scale=self.scale, first_sample_index=first, sample_rate_hz=fs,
                        intermediate_frequency_hz=fe.intermediate_frequency_hz,
                        is_complex=fe.is_complex, bits=fe.bits, truth=truth)
+
+    def _signal_and_noise(self, n_idx: np.ndarray, t: np.ndarray, add_to: np.ndarray | None) -> np.ndarray:
+        """The GPS signals and thermal noise of the samples n_idx (times t), or the recording add_to (volts)."""
+        fe = self.front_end
+        n_samples = n_idx.size
+        if add_to is not None:
+            x = np.asarray(add_to)
+            if x.shape != (n_samples,):
+                raise ValueError("add_to must have shape (n_samples,)")
+            return x.astype(np.complex128 if fe.is_complex else np.float64)
+        x = self._gps(n_idx, t)
+        sig = math.sqrt(fe.noise_power_mw)
+        if fe.is_complex:
+            g = self._rng_noise.standard_normal(2 * n_samples)
+            return x + sig / math.sqrt(2.0) * (g[0::2] + 1j * g[1::2])
+        return x + sig * self._rng_noise.standard_normal(n_samples)
+
+    def _jammer_samples(self, i: int, j: Jammer, t: np.ndarray, n_idx: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray, float, str,
+                                   tuple[float, float]]:
+        """Jammer i's samples before its switch-on is applied: (samples through the front end's filter, frequency
+        relative to the RF centre per sample (None: a noise jammer), filter gain per sample, sweep start indices,
+        sweep period (NaN: none), shape name, swept band (low, high), Hz)."""
+        fe = self.front_end
+        n_samples = t.size
+        none = np.zeros(0, dtype=np.int64)
+        if isinstance(j, NoiseJammer):
+            lo_hi = (j.center_frequency_hz - j.bandwidth_hz / 2, j.center_frequency_hz + j.bandwidth_hz / 2)
+            return self._noise_jammer(i, j, t), None, np.ones(n_samples), none, math.nan, "noise", lo_hi
+        amp = math.sqrt(self.jammer_power_mw(j))
+        period = math.nan
+        if isinstance(j, CwJammer):
+            phase = 2 * np.pi * self._signed(j.frequency_hz) * t + j.phase_rad
+            f_rel = np.full(n_samples, j.frequency_hz)
+            shape, lo_hi, st = "cw", (j.frequency_hz, j.frequency_hz), none
+        elif isinstance(j, ChirpJammer):
+            phase, f_rel, st = self._chirp(j, t, n_idx)
+            period = j.sweep_period_s
+            shape = "saw_up" if j.sweep_rate_hz_per_s >= 0 else "saw_down"
+            f_end = j.start_frequency_hz + j.sweep_rate_hz_per_s * j.sweep_period_s
+            lo_hi = (min(j.start_frequency_hz, f_end), max(j.start_frequency_hz, f_end))
+        else:
+            phase, f_rel, st = self._sweep(i, j, t, n_idx)
+            period, shape, lo_hi = j.sweep_period_s, j.shape, j.swept_band_hz
+        y = self._phase_to_signal(amp, phase)
+        gain = fe.filter_gain(f_rel)
+        if fe.filter_low_hz is not None:
+            y = y * gain
+        return y, f_rel, gain, st, period, shape, lo_hi
+
+    def _quantised(self, x: np.ndarray) -> tuple[np.ndarray, float]:
+        """(counts: int8 up to 8 bits, else int16; I, Q interleaved for a complex front end, share of them at either
+        end of the quantiser's range)."""
+        fe = self.front_end
+        dtype = np.int8 if fe.bits <= 8 else np.int16
+        if fe.is_complex:
+            c = np.empty(2 * x.size, dtype=dtype)
+            c[0::2] = _quantise(x.real, fe.bits, self.step)
+            c[1::2] = _quantise(x.imag, fe.bits, self.step)
+        else:
+            c = _quantise(x, fe.bits, self.step).astype(dtype)
+        if fe.bits <= 3:
+            top = 2 ** fe.bits - 1
+            lo_code, hi_code = -top, top
+        else:
+            lo_code, hi_code = -(2 ** (fe.bits - 1)), 2 ** (fe.bits - 1) - 1
+        clipped = float(np.mean((c == lo_code) | (c == hi_code))) if c.size else 0.0
+        return c, clipped
 
 
 def js_for_jn_db(front_end: FrontEndConfig, jn_db: float) -> float:
