@@ -365,35 +365,8 @@ class GnssEpochBuilder:
         drift_mps = SPEED_OF_LIGHT_MPS * drift_s
         freq_arr = np.asarray(freqs, dtype=float)
 
-        if self._ref is not None:
-            ref, source = self._ref, "given"
-        else:
-            # One receiver clock for all systems: fix on GPS alone when it has 4 satellites (the
-            # inter-system biases are tens of ns), else on everything (tens of metres suffice here).
-            gps_rows = np.array([s == "G" for s in systems])
-            rows = gps_rows if int(np.sum(gps_rows)) >= 4 else np.ones(n, dtype=bool)
-            fix = coarse_position_fix(pos[rows], pr_arr[rows] + clk_m[rows])
-            if fix is not None:
-                ref, source = fix, "coarse_fix"
-
-        iono = np.zeros(n)
-        tropo = np.zeros(n)
-        if source == "none":
-            iono[:] = math.nan
-            tropo[:] = math.nan
-        else:
-            lat, lon, h = ecef_to_geodetic(ref)
-            rot_pos, _, _ = earth_rotation_correction(pos, ref)
-            az, el = azimuth_elevation(ref, rot_pos)
-            if p.apply_ionosphere:
-                if self._alpha is not None and self._beta is not None:
-                    iono = klobuchar_delay_m(self._alpha, self._beta, lat, lon, az, el, tow) * (
-                        ionosphere_frequency_scale(freq_arr)
-                    )
-                else:
-                    extra["ionosphere_unavailable"] = float(n)
-            if p.apply_troposphere:
-                tropo = troposphere_delay_m(lat, h, el)
+        ref, source = self._reference_position(systems, pos, pr_arr, clk_m)
+        iono, tropo = self._atmosphere(ref, source, pos, freq_arr, tow, extra)
 
         rates = -(SPEED_OF_LIGHT_MPS / freq_arr) * np.asarray(dops)
         observations = tuple(
@@ -422,6 +395,44 @@ class GnssEpochBuilder:
         return EpochBuildResult(
             epoch, skipped, tuple(skipped_sats), np.array(ref, dtype=float), source, extra, by_system, codes_used
         )
+
+    def _reference_position(self, systems: list[str], pos: np.ndarray, pr: np.ndarray, clk_m: np.ndarray
+                            ) -> tuple[np.ndarray, str]:
+        """(position the atmospheric delays are computed at, its source: "given", "coarse_fix" or "none")."""
+        if self._ref is not None:
+            return self._ref, "given"
+        # One receiver clock for all systems: fix on GPS alone when it has 4 satellites (the
+        # inter-system biases are tens of ns), else on everything (tens of metres suffice here).
+        gps_rows = np.array([s == "G" for s in systems])
+        rows = gps_rows if int(np.sum(gps_rows)) >= 4 else np.ones(len(systems), dtype=bool)
+        fix = coarse_position_fix(pos[rows], pr[rows] + clk_m[rows])
+        if fix is not None:
+            return fix, "coarse_fix"
+        return np.full(3, math.nan), "none"
+
+    def _atmosphere(self, ref: np.ndarray, source: str, pos: np.ndarray, freq: np.ndarray, tow: float,
+                    extra: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
+        """(ionosphere, troposphere) delays of each satellite at ref, m (Klobuchar scaled to each carrier; NaN with
+        no reference position; 0 when not applied; a missing Klobuchar model counted in extra)."""
+        p = self.params
+        n = pos.shape[0]
+        if source == "none":
+            return np.full(n, math.nan), np.full(n, math.nan)
+        iono = np.zeros(n)
+        tropo = np.zeros(n)
+        lat, lon, h = ecef_to_geodetic(ref)
+        rot_pos, _, _ = earth_rotation_correction(pos, ref)
+        az, el = azimuth_elevation(ref, rot_pos)
+        if p.apply_ionosphere:
+            if self._alpha is not None and self._beta is not None:
+                iono = klobuchar_delay_m(self._alpha, self._beta, lat, lon, az, el, tow) * (
+                    ionosphere_frequency_scale(freq)
+                )
+            else:
+                extra["ionosphere_unavailable"] = float(n)
+        if p.apply_troposphere:
+            tropo = troposphere_delay_m(lat, h, el)
+        return iono, tropo
 
 
 def _states_at_transmit(
