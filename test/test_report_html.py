@@ -164,7 +164,7 @@ def test_the_page_holds_every_heading_figure_and_table_of_the_markdown(report):
 
 
 @pytest.mark.parametrize('screen', [DESKTOP, PHONE], ids=['desktop', 'phone'])
-def test_every_figure_loads_with_no_error_in_a_headless_browser(report, browser, screen):
+def test_every_figure_loads_with_no_error_in_a_headless_browser(browser, report, screen):
     result = browser.open(report / 'index.html', CHECK_PAGE, **screen)
     assert result.errors == []
     page = Html((report / 'index.html').read_text())
@@ -176,7 +176,7 @@ def test_every_figure_loads_with_no_error_in_a_headless_browser(report, browser,
     assert result.value['pageWidth'] <= result.value['viewportWidth']  # no sideways scroll of the page
 
 
-def test_the_linked_replay_page_opens_with_no_error(report, browser):
+def test_the_linked_replay_page_opens_with_no_error(browser, report):
     result = browser.open(report / 'replay.html', 'document.querySelectorAll("td").length', **PHONE)
     assert result.errors == [] and result.value == 3
 
