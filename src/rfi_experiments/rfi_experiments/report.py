@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from rfi_experiments.bag_io import BagReader
+from rfi_experiments.report_html import write_html
 from rfi_experiments.report_integrity import integrity_section
 from rfi_sim.evaluation import ecef_errors_enu, empirical_cdf, error_3d_m, error_stats, horizontal_error_m
 
@@ -71,8 +72,9 @@ class ReportSummary:
         self.rows.append((what, measured, reference, note))
 
     def table(self) -> str:
+        """The rows as a Markdown table; a ``|`` in a cell (``median |error|``) is escaped."""
         lines = ['| figure | this run | paper / goal | note |', '|---|---|---|---|']
-        lines += [f'| {a} | {b} | {c} | {d} |' for a, b, c, d in self.rows]
+        lines += ['| ' + ' | '.join(cell.replace('|', '\\|') for cell in row) + ' |' for row in self.rows]
         return '\n'.join(lines)
 
 
@@ -193,7 +195,7 @@ def _jammer_section(truth: list[Any], estimates: list[Any], out: Path, summary: 
     lines += ['', 'Figure: the frequency at each block end, the sweep period and the J/S, reported against the truth. '
               'A period is drawn only where the monitor published one (a period it cannot tell from a multiple of a '
               'shorter one is NaN); J/S only for blocks with a reported jammer (a NONE block carries no J/S).']
-    return lines + ['', '![jammer](jammer.png)', '']
+    return lines + ['', '![Jammer frequency track, sweep period and J/S: rfi_monitor against truth](jammer.png)', '']
 
 
 # -- positioning ----------------------------------------------------------------------------------
@@ -349,7 +351,8 @@ def _fusion_section(truth: Mapping[str, list[Any]], odometry: list[Any], out: Pa
     fig.tight_layout()
     fig.savefig(out / 'positioning.png', dpi=110)
     plt.close(fig)
-    return lines + ['', '![positioning](positioning.png)', '']
+    return lines + ['', '![Positioning error under the jamming schedule: horizontal error over time and CDF of the 3D '
+                    'error](positioning.png)', '']
 
 
 # -- carrier --------------------------------------------------------------------------------------
@@ -437,7 +440,8 @@ def _carrier_section(truth_msgs: list[Any], estimates: list[Any], out: Path, sum
     fig.tight_layout()
     fig.savefig(out / 'carrier.png', dpi=110)
     plt.close(fig)
-    return lines + ['', '![carrier](carrier.png)', '']
+    return lines + ['', '![Carrier phase: IMM against PLL on the same correlators (phase error of the worst '
+                    'satellite, error std per satellite)](carrier.png)', '']
 
 
 def write_report(bag: str | os.PathLike[str], outputs: Mapping[str, list[Any]], out_dir: str | os.PathLike[str],
@@ -469,5 +473,6 @@ def write_report(bag: str | os.PathLike[str], outputs: Mapping[str, list[Any]], 
         body += _carrier_section(truth['/truth/carrier'], list(outputs['/carrier/estimates']), out, summary)
     lines += ['## Headline figures', '', summary.table(), ''] + body
     (out / 'index.md').write_text('\n'.join(lines) + '\n')
+    write_html(out / 'index.md')
     (out / 'summary.json').write_text(json.dumps(summary.values, indent=2, sort_keys=True) + '\n')
     return summary

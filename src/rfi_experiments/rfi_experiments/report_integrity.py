@@ -95,7 +95,8 @@ def integrity_section(truth: Mapping[str, list[Any]], outputs: Mapping[str, list
         summary.values['fusion_rms_over_attack_m'] = rms['during']
         summary.values['fusion_max_over_attack_m'] = worst
     _figure(t, state, attack_s, err, excluded, out, plt)
-    return lines + ['', '![integrity](integrity.png)', '']
+    return lines + ['', '![Spoofing: what gnss_integrity reported and what the fusion did with it (spoofing state, '
+                    'fusion horizontal error)](integrity.png)', '']
 
 
 def _fusion_errors(truth: Mapping[str, list[Any]], outputs: Mapping[str, list[Any]],

@@ -25,7 +25,8 @@ when its input stops (the fusion's ``idle_flush_s``).
 
 A window of the bag can be replayed (``--start``, ``--duration``). At the end a summary table is
 printed and a report folder written: ``index.md`` with figures (rfi_experiments.report, scored on
-the replayed window), ``summary.json`` and ``replay.md`` (per-topic counts, the nodes' final
+the replayed window) and the same as one self-contained web page, ``index.html`` (with
+``replay.html``), ``summary.json`` and ``replay.md`` (per-topic counts, the nodes' final
 diagnostics, where the time went); with ``processes`` also ``logs/`` (the output of each process).
 ``--no-report`` writes only ``replay.md`` (and ``--record-outputs``).
 The summary and the report end with a warning when the fusion node rejected messages as later than
@@ -323,7 +324,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print()
     for warning in warnings:
         print(f'warning: {warning}')
-    print(f'report written to {out / "index.md"} (figures and tables; evaluation took '
+    print(f'report written to {out / "index.md"} and {out / "index.html"} (figures and tables; evaluation took '
           f'{time.monotonic() - start:.1f} s)')
     return 0
 
