@@ -345,6 +345,20 @@ def config_yaml(node_name: str, params_cls: type, header: str, width: int = 100)
     return '\n'.join(lines) + '\n'
 
 
+def markdown_table(params_cls: type, group: str | None = USER) -> str:
+    """A Markdown table of the parameters of ``group`` (all if None): name, default, range, settable while
+    running, description; for docs/reference/parameters.md (written by ``tools/generate_config.py``)."""
+    rows = ['| parameter | default | range | settable while running | description |', '|---|---|---|---|---|']
+    for field in parameter_fields(params_cls):
+        doc = _doc(field)
+        if group is not None and doc['group'] != group:
+            continue
+        cells = [f'`{field.name}`', f'`{yaml_value(_default(field))}`', _limits(doc).replace('|', '\\|'),
+                 '' if doc['read_only'] else 'yes', doc['description'].replace('|', '\\|')]
+        rows.append('| ' + ' | '.join(cells) + ' |')
+    return '\n'.join(rows) + '\n'
+
+
 @dataclasses.dataclass(frozen=True)
 class ConfigFile:
     """A node's shipped config file, generated from its parameter dataclass (:func:`config_yaml`).

@@ -74,14 +74,25 @@ class FusionNodeParams(FusionParams):
 
     # --- node ------------------------------------------------------------------------------
     earth_frame_id: str = parameter(
-        FRAME_EARTH, 'Frame id of ECEF (REP 105 earth): expected on /gnss/measurements and on UwbRange '
-        'messages with ECEF anchors; header.frame_id of the outputs in ECEF.', group=USER)
+        FRAME_EARTH,
+        'Frame id of ECEF (REP 105 earth). GNSS measurement arrays in any other frame are rejected; UWB '
+        'ranges in it have ECEF anchor positions; outputs estimated in ECEF carry it. Change only if the '
+        'system names ECEF differently.',
+        group=USER,
+    )
     map_frame_id: str = parameter(
-        FRAME_MAP, 'Frame id of the anchors\' local frame (UWB-only mode, axes taken as ENU): UwbRange '
-        'messages in this frame run the filter in it; header.frame_id of the outputs then.', group=USER)
+        FRAME_MAP,
+        "Frame id of the anchors' local frame (axes taken as east, north, up). UWB ranges in it run the "
+        'filter in that frame (UWB-only mode: set use_gnss false); the odometry then carries it and no '
+        'NavSatFix is published. Set it to the frame your anchor survey uses.',
+        group=USER,
+    )
     child_frame_id: str = parameter(
-        'gnss_antenna', 'Odometry child_frame_id and NavSatFix frame_id: the point estimated (the GNSS antenna).',
-        group=USER)
+        'gnss_antenna',
+        'Odometry child_frame_id and NavSatFix header.frame_id: the point the filter estimates, i.e. the '
+        'GNSS antenna (the UWB tag is offset from it by uwb_lever_arm_m).',
+        group=USER,
+    )
     base_frame_id: str = parameter(
         'base_link', 'child_frame_id of fusion/local_odometry: the robot body frame (REP 105 base_link) whose '
         'origin the local odometry gives, from antenna_position_m.', group=USER)
@@ -97,9 +108,13 @@ class FusionNodeParams(FusionParams):
         0.5, 'With heading_source velocity: the horizontal speed from which the course is taken as the yaw, '
         'm/s (below it the yaw is unknown).', minimum=0.01, maximum=100.0, read_only=False)
     local_origin: str = parameter(
-        'first_fix', 'Origin of the local ENU frame (map_frame_id) of fusion/local_odometry: first_fix (the '
-        'antenna position of the first solution published in ECEF) or datum (the datum parameter). Published '
-        'on fusion/datum (latched).', choices=LOCAL_ORIGINS, group=USER)
+        'first_fix',
+        'Origin of the local ENU frame map_frame_id of /fusion/local_odometry: first_fix (the antenna '
+        "position of the first solution published in ECEF; it then stays for the node's life) or datum (the "
+        "datum parameter, e.g. the same datum as navsat_transform's). The origin is published once, latched, "
+        'on /fusion/datum.',
+        choices=LOCAL_ORIGINS, group=USER,
+    )
     datum: tuple = parameter(
         (0.0, 0.0, 0.0), 'With local_origin datum: WGS 84 [latitude deg, longitude deg, ellipsoidal altitude m] '
         'of the origin of the local ENU frame.', group=USER)
@@ -127,10 +142,15 @@ class FusionNodeParams(FusionParams):
     stamp_jump_confirmations: int = stamp_jump_confirmations_parameter(5)  # type: ignore[assignment]
     input_timeout_s: float = input_timeout_parameter()  # type: ignore[assignment]
     act_on_integrity: bool = parameter(
-        True, 'Act on /gnss/integrity (gnss_integrity node): a DETECTED spoofing state excludes the GNSS it '
-        'implicates (all, constellations or satellites) until integrity_readmit_clean_s of NONE; its jamming J/S '
-        'weights the GNSS (Cao et al., eq. 4) where no SDR /rfi/jammer_state is fresh. False: received and '
-        'counted, not used.', read_only=False, group=USER)
+        True,
+        'Act on /gnss/integrity (the gnss_integrity node): a DETECTED spoofing state excludes the GNSS it '
+        'implicates (all GNSS, constellations or satellites) from the filter until integrity_readmit_clean_s '
+        'of NONE, and the filter keeps positioning on UWB and its motion model; fusion/status says what is '
+        'excluded (gnss_excluded) and /diagnostics warns. Its jamming J/S weights the GNSS like the SDR '
+        "monitor's (Cao et al., eq. 4) while no /rfi/jammer_state is fresh. False: the verdicts are received "
+        'and counted, nothing is done.',
+        read_only=False, group=USER,
+    )
     integrity_readmit_clean_s: float = parameter(
         30.0, 'Spoofing NONE for this long without a break readmits the excluded GNSS (hysteresis), s.',
         minimum=0.0, maximum=3600.0)

@@ -206,7 +206,7 @@ class FusionParams:
     # sensors and models (.measurement_models, .gnss_update, .uwb_update)
     use_gnss: bool = parameter(
         True,
-        'Apply GNSS pseudoranges (false: UWB-only filter).',
+        'Apply GNSS pseudoranges (Cao et al., eq. 5). false: UWB-only filter (needs 3 anchors to initialise).',
         group=USER,
     )
     use_doppler: bool = parameter(
@@ -215,7 +215,7 @@ class FusionParams:
     )
     use_uwb: bool = parameter(
         True,
-        'Apply UWB ranges (false: the GNSS-only baseline filter).',
+        'Apply UWB ranges (Cao et al., eq. 7). false: the GNSS-only baseline filter of the paper.',
         group=USER,
     )
     accel_psd_m2ps3: float = parameter(
@@ -257,12 +257,15 @@ class FusionParams:
     )
     uwb_range_std_m: float = parameter(
         0.1,
-        'UWB range 1-sigma used when a message gives NaN range_std_m, m.',
+        'UWB range 1-sigma used when a UwbRange gives NaN range_std_m, m. DW1000 line of sight: 0.05-0.1. '
+        'Values larger than about 0.3 let range-only updates pull the estimate towards the anchors '
+        '(docs/uwb_gnss_fusion/fusion_jamming.md, known limitations).',
         minimum=0.0001, maximum=100.0, read_only=False, group=USER,
     )
     uwb_lever_arm_m: tuple[float, float, float] = parameter(
         (0.0, 0.0, 0.0),
-        'UWB tag minus GNSS antenna, in the state frame (ECEF or map), m, [x, y, z].',
+        'UWB tag minus GNSS antenna, in the state frame (ECEF or map), m, [x, y, z]. The filter has no '
+        'attitude, so this is a fixed offset in that frame; keep it zero when the tag sits at the antenna.',
         group=USER,
     )
     uwb_max_range_m: float = parameter(
@@ -278,7 +281,8 @@ class FusionParams:
     )
     elevation_mask_deg: float = parameter(
         10.0,
-        'Satellites below this elevation are rejected, deg.',
+        "Satellites below this elevation are rejected, deg. 10 deg (the SPP's mask): below it residual "
+        'troposphere and multipath dominate on real stations (docs/uwb_gnss_fusion/fusion_real_gnss.md).',
         minimum=-90.0, maximum=89.0, read_only=False, group=USER,
     )
     min_cn0_dbhz: float = parameter(
@@ -288,12 +292,13 @@ class FusionParams:
     )
     nominal_cn0_dbhz: float = parameter(
         45.0,
-        'Jammer-free C/N0 fed to eq. 4 when a J/S is known, dB-Hz.',
+        'Jammer-free C/N0 to which eq. 4 applies the received J/S, dB-Hz (typical open sky: 45).',
         minimum=0.0, maximum=70.0, read_only=False, group=USER,
     )
     jammer_quality_factor: float = parameter(
         1.0,
-        'Jamming resistance quality factor Q of eq. 4 (1: narrowband/swept jammer).',
+        'Jamming resistance quality factor Q of eq. 4: 1 for narrowband / swept (chirp) jammers, about 1.5 '
+        'for matched-spectrum, 2 for wideband noise.',
         minimum=0.01, maximum=100.0, read_only=False, group=USER,
     )
     jammer_info_timeout_s: float = parameter(
@@ -416,8 +421,10 @@ class FusionParams:
     # multi-GNSS: inter-system clock biases (issue 15 item 1)
     multi_gnss: bool = parameter(
         True,
-        'Use Galileo, BeiDou, GLONASS and QZSS as well as GPS, each with an inter-system clock bias '
-        'state (false: GPS only, the others counted as skipped_constellation.<name>).',
+        'Use Galileo, BeiDou, GLONASS and QZSS satellites as well as GPS, each system other than GPS with an '
+        'inter-system clock bias state (added when the system is first seen: a GPS-only input keeps the '
+        '8-state filter). false: GPS only, the others counted as skipped_constellation.<name>. Gain on a '
+        'real station: docs/uwb_gnss_fusion/fusion_multignss.md.',
         group=USER,
     )
     # time-correlated pseudorange errors, one Gauss-Markov state per satellite (issue 15 item 2)
@@ -455,9 +462,10 @@ class FusionParams:
     )
     uwb_tag_side_of_anchor_plane: int = parameter(
         0,
-        'The tag moves below (-1) or above (+1) the plane of its coplanar anchors, or unknown (0): with '
-        '-1/+1 an estimate on the other side (the mirror ambiguity of three anchors) is reflected back '
-        'across the plane (counted as uwb_side_prior_flip) and uwb_mirror_test is not used.',
+        "The installer's knowledge of the mirror ambiguity of coplanar anchors (three anchors always are): "
+        'the tag moves below (-1) or above (+1) the plane of its coplanar anchors (along the local '
+        'vertical), or unknown (0). With -1/+1 an estimate on the other side is reflected back across the '
+        'plane (counted as uwb_side_prior_flip) and uwb_mirror_test is not used. Beyond the paper.',
         minimum=-1, maximum=1, group=USER,
     )
     uwb_mirror_covariance: bool = parameter(
