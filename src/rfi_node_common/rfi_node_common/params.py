@@ -73,6 +73,30 @@ def internal(default: Any = dataclasses.MISSING, *, default_factory: Any = datac
     return dataclasses.field(default=default, default_factory=default_factory, metadata={_INTERNAL: True})
 
 
+def parameter_from(owner: type, name: str, **changes: Any) -> Any:
+    """A node's parameter field that is the field ``name`` of the core dataclass ``owner``, defined there
+    with :func:`parameter`: same default, description, range and group (``changes`` may set ``read_only``,
+    ``group`` or ``description``). For a node whose parameter names differ from its core's (a prefix, a
+    core split in several dataclasses): the default and the text stay in the core's definition.
+
+    Raises:
+        TypeError: ``owner`` has no such field, or it was not defined with :func:`parameter`.
+    """
+    fields = {f.name: f for f in dataclasses.fields(owner)}
+    if name not in fields or _DOC not in fields[name].metadata:
+        raise TypeError(f'{owner.__name__}.{name} is not a field defined with parameter()')
+    field = fields[name]
+    doc = dict(field.metadata[_DOC])
+    unknown = set(changes) - {'read_only', 'group', 'description'}
+    if unknown:
+        raise TypeError(f'parameter_from cannot change {", ".join(sorted(unknown))}')
+    doc.update(changes)
+    if doc['group'] not in GROUPS:
+        raise ValueError(f'parameter group {doc["group"]!r} is not one of {", ".join(GROUPS)}')
+    return dataclasses.field(default=field.default, default_factory=field.default_factory,  # type: ignore[misc]
+                             metadata={_DOC: doc})
+
+
 def parameter_fields(params_cls: Any) -> list[dataclasses.Field]:
     """The fields of ``params_cls`` (a class or an instance) that are ROS parameters, the :data:`USER`
     group first, each group in field order."""
