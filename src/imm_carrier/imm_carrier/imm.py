@@ -26,6 +26,7 @@ from gnss_common.clock_model import (
 from gnss_common.constants import GPS_L1_FREQUENCY_HZ
 from imm_carrier.layout import IMM_OUT_LEN, IMM_STATE_LEN, ImmOut, ImmState
 from imm_carrier.measurement_model import IQ_SCALINGS, check_step_inputs, correlator_batch
+from rfi_node_common.params import USER, parameter
 
 TWO_PI = 2.0 * math.pi
 
@@ -36,31 +37,65 @@ TWO_PI = 2.0 * math.pi
 class ImmParams:
     """Parameters of the IMM carrier filter.
 
+    Fields written with :func:`rfi_node_common.params.parameter` are parameters of imm_carrier_node:
+    their default, description and range are there (``--help``, config/imm_carrier.yaml).
+
     Attributes:
         clock: h-coefficients of the receiver clock model (default: the paper's LPFRS rubidium).
-        process_noise_form: "brown_hwang" (exact, default) or "zhao_eq8" (text of eq. 8).
-        process_noise_scale: factor on the whole W (sensitivity study: 1e3, 1e7), > 0.
-        carrier_hz: carrier frequency, Hz, > 0.
-        bit_transition_probability: probability that the data bit differs between consecutive
-            intervals, 0..1 (0.5: independent bits, the paper's choice for T = 20 ms).
-        iq_scaling: "unit_amplitude" (A = 1, eq. 5) or "unit_noise" (sigma_v = 1).
-        initial_phase_std_rad: phase 1-sigma when initialised from one correlator, rad, > 0.
-        initial_frequency_std_hz: frequency 1-sigma at initialisation, Hz, > 0.
-        lock_phase_std_max_rad: ``locked`` requires phase_std_rad below this, rad, > 0.
-        slip_jump_threshold_rad: a posterior phase that moves more than this from the prediction
-            in one step is counted as a (detected) slip, rad, > 0.
     """
 
     clock: ClockHCoefficients = RUBIDIUM_LPFRS
-    process_noise_form: str = "brown_hwang"
-    process_noise_scale: float = 1.0
-    carrier_hz: float = GPS_L1_FREQUENCY_HZ
-    bit_transition_probability: float = 0.5
-    iq_scaling: str = "unit_amplitude"
-    initial_phase_std_rad: float = 0.5
-    initial_frequency_std_hz: float = 1.0
-    lock_phase_std_max_rad: float = 0.5
-    slip_jump_threshold_rad: float = math.pi / 2.0
+    process_noise_form: str = parameter(
+        "brown_hwang",
+        'Discretisation of the clock process noise W: brown_hwang (exact, W22 = S_g T) or zhao_eq8 (text of '
+        'the paper, W22 = S_f/T + 4 S_g T/3).',
+        choices=PROCESS_NOISE_FORMS,
+    )
+    process_noise_scale: float = parameter(
+        1.0,
+        'Factor on the whole process noise W of the IMM (sensitivity study), dimensionless.',
+        minimum=1e-06, maximum=1000000000000.0,
+    )
+    carrier_hz: float = parameter(
+        GPS_L1_FREQUENCY_HZ,
+        'Carrier frequency of the tracked signal, Hz (default GPS L1). Converts the clock model into carrier '
+        'phase. Change only for another signal (e.g. L5: 1176450000.0).',
+        minimum=1e6, maximum=1e11, group=USER,
+    )
+    bit_transition_probability: float = parameter(
+        0.5,
+        'Probability that the navigation data bit changes between two 20 ms bits (IMM mode transition), '
+        '0..1; 0.5 = independent bits (the paper).',
+        minimum=0.0, maximum=1.0,
+    )
+    iq_scaling: str = parameter(
+        "unit_amplitude",
+        'Normalisation of the input correlators (Zhao et al., eq. 2-5): unit_amplitude (signal amplitude 1, '
+        'noise std 1/sqrt(2 T C/N0), eq. 5) or unit_noise (noise std 1, amplitude from C/N0). Must match the '
+        "receiver's output.",
+        choices=IQ_SCALINGS, group=USER,
+    )
+    initial_phase_std_rad: float = parameter(
+        0.5,
+        'IMM phase 1-sigma when a channel starts from its first correlator, rad.',
+        minimum=1e-06, maximum=10.0,
+    )
+    initial_frequency_std_hz: float = parameter(
+        1.0,
+        'IMM frequency 1-sigma when a channel starts, Hz.',
+        minimum=1e-09, maximum=10000.0,
+    )
+    lock_phase_std_max_rad: float = parameter(
+        0.5,
+        'IMM estimate reported locked only while its phase 1-sigma is below this, rad.',
+        minimum=1e-06, maximum=3.141592653589793,
+    )
+    slip_jump_threshold_rad: float = parameter(
+        math.pi / 2.0,
+        'An IMM update moving the phase more than this from its prediction counts as a detected cycle slip, '
+        'rad.',
+        minimum=0.001, maximum=6.283185307179586,
+    )
 
     def __post_init__(self) -> None:
         if not isinstance(self.clock, ClockHCoefficients):

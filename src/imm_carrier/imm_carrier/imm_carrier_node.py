@@ -74,7 +74,6 @@ C/N0 (which already reflects the jamming), and CarrierPhase has no field a jamme
 
 from __future__ import annotations
 
-import math
 from collections import Counter
 from dataclasses import dataclass
 
@@ -82,11 +81,9 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message, serialize_message
 
-from gnss_common.clock_model import PRESETS, PROCESS_NOISE_FORMS, RUBIDIUM_LPFRS, ClockHCoefficients
-from gnss_common.constants import GPS_L1_FREQUENCY_HZ
+from gnss_common.clock_model import PRESETS, RUBIDIUM_LPFRS, ClockHCoefficients
 from imm_carrier.cdr import CDR_LE, DecodedCorrelatorArray, decode_correlator_array, encode_carrier_phase_array
 from imm_carrier.imm import ImmParams
-from imm_carrier.measurement_model import IQ_SCALINGS, MAX_INTEGRATION_TIME_S, MIN_INTEGRATION_TIME_S
 from imm_carrier.pll import PllParams
 from imm_carrier.tracker import CarrierTracker, TrackerParams
 from rfi_msgs.msg import CarrierPhaseArray, CorrelatorArray
@@ -110,7 +107,16 @@ from rfi_node_common.diagnostics import (
 from rfi_node_common.input_checks import NS_PER_S, STAMP_REASONS, StampGate
 from rfi_node_common.inputs import InputHealth, StaleInputWatch, subscribe_input
 from rfi_node_common.main import run_node
-from rfi_node_common.params import RuntimeParameters, changed_names, declare, parameter, validate_ranges
+from rfi_node_common.params import (
+    USER,
+    ConfigFile,
+    RuntimeParameters,
+    changed_names,
+    declare,
+    parameter,
+    parameter_from,
+    validate_ranges,
+)
 from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS
 
 TOPICS = """topics:
@@ -141,75 +147,57 @@ class CarrierNodeParams:
         imm_carrier.tracker.TrackerParams for the decisions taken where the paper is silent.
     """
 
-    method: str = parameter('imm', 'Tracker to run: imm, pll or both (side by side on the same input).',
-                            choices=('imm', 'pll', 'both'))
+    method: str = parameter(
+        'imm',
+        'Which tracker runs: imm (the interacting multiple model filter, two modes = data bit +1/-1), pll '
+        '(Costas PLL baseline, third-order loop) or both, side by side on the same correlators (both sets of '
+        'estimates in each output array, told apart by CarrierPhase.method). Change to both to compare the '
+        'trackers; pll alone is only a baseline.',
+        choices=('imm', 'pll', 'both'), group=USER,
+    )
     clock_preset: str = parameter(
-        'rubidium', 'Receiver clock model (h-coefficients) of the IMM: a preset of gnss_common.clock_model, or '
-        'custom to use clock_h0_s and clock_h_minus2_hz.', choices=(*PRESETS, CUSTOM_CLOCK))
+        'rubidium',
+        'Receiver clock model (h-coefficients) of the IMM (Zhao et al., eq. 6-8, Fig. 4), by preset: '
+        "rubidium (SpectraTime LPFRS bound, the paper's), rubidium_vibration (the paper's vibration bound, "
+        'h0 = 2e-21), tcxo, ocxo (Van Dierendonck, in Kaplan & Hegarty), ocxo_brown_hwang, '
+        'compensated_crystal_brown_hwang (Brown & Hwang), or custom (then clock_h0_s and clock_h_minus2_hz '
+        "are used). Change to match the receiver's oscillator: a filter that assumes a better clock than the "
+        'real one slips; one that assumes a worse clock is noisier.',
+        choices=(*PRESETS, CUSTOM_CLOCK), group=USER,
+    )
     clock_h0_s: float = parameter(
-        RUBIDIUM_LPFRS.h0, 'White-FM coefficient h0 of the custom clock, s (1/Hz). Only with clock_preset custom.',
-        minimum=0.0, maximum=1e-15)
+        RUBIDIUM_LPFRS.h0,
+        'White-FM coefficient h0 of the custom clock, s (= 1/Hz). Default: the LPFRS value. Used only with '
+        'clock_preset custom (setting it with another preset is an error).',
+        minimum=0.0, maximum=1e-15, group=USER,
+    )
     clock_h_minus2_hz: float = parameter(
-        RUBIDIUM_LPFRS.h_minus2, 'Random-walk-FM coefficient h_-2 of the custom clock, 1/s (Hz). Only with '
-        'clock_preset custom.', minimum=0.0, maximum=1e-15)
-    process_noise_form: str = parameter(
-        'brown_hwang', 'Discretisation of the clock process noise W: brown_hwang (exact, W22 = S_g T) or '
-        'zhao_eq8 (text of the paper, W22 = S_f/T + 4 S_g T/3).', choices=PROCESS_NOISE_FORMS)
-    process_noise_scale: float = parameter(
-        1.0, 'Factor on the whole process noise W of the IMM (sensitivity study), dimensionless.',
-        minimum=1e-6, maximum=1e12)
-    bit_transition_probability: float = parameter(
-        0.5, 'Probability that the navigation data bit changes between two 20 ms bits (IMM mode transition), '
-        '0..1; 0.5 = independent bits (the paper).', minimum=0.0, maximum=1.0)
-    bit_period_s: float = parameter(
-        0.02, 'Known data-bit timing: with T shorter than this, bit changes are allowed only on intervals '
-        'starting on a bit edge of the GPS time grid (ROS stamps converted from GPS time are on it: GPS - UTC is '
-        'whole seconds), s; 0 = edges unknown.',
-        minimum=0.0, maximum=1.0)
-    iq_scaling: str = parameter(
-        'unit_amplitude', 'Normalisation of the input correlators: unit_amplitude (A = 1, noise std from C/N0) '
-        'or unit_noise (noise std 1, A from C/N0).', choices=IQ_SCALINGS)
-    carrier_frequency_hz: float = parameter(
-        GPS_L1_FREQUENCY_HZ, 'Carrier frequency of the tracked signal, Hz (scales the clock noise).',
-        minimum=1e6, maximum=1e11)
-    initial_phase_std_rad: float = parameter(
-        0.5, 'IMM phase 1-sigma when a channel starts from its first correlator, rad.', minimum=1e-6, maximum=10.0)
-    initial_frequency_std_hz: float = parameter(
-        1.0, 'IMM frequency 1-sigma when a channel starts, Hz.', minimum=1e-9, maximum=1e4)
-    lock_phase_std_max_rad: float = parameter(
-        0.5, 'IMM estimate reported locked only while its phase 1-sigma is below this, rad.',
-        minimum=1e-6, maximum=math.pi)
-    slip_jump_threshold_rad: float = parameter(
-        math.pi / 2.0, 'An IMM update moving the phase more than this from its prediction counts as a detected '
-        'cycle slip, rad.', minimum=1e-3, maximum=2.0 * math.pi)
-    pll_start_bandwidth_hz: float = parameter(
-        15.0, 'PLL noise bandwidth when a channel starts, Hz (paper: 15).', minimum=0.01, maximum=100.0)
-    pll_end_bandwidth_hz: float = parameter(
-        1.0, 'PLL noise bandwidth after the tightening, Hz (paper: 1); <= pll_start_bandwidth_hz.',
-        minimum=0.01, maximum=100.0)
-    pll_tightening_duration_s: float = parameter(
-        70.0, 'Time over which the PLL bandwidth goes from start to end (eq. 10 shape), s (paper: 70).',
-        minimum=1e-3, maximum=1e5)
-    pll_lock_time_constant_s: float = parameter(
-        1.0, 'Time constant of the PLL lock indicator averages, s.', minimum=1e-3, maximum=1e3)
-    pll_lock_threshold: float = parameter(
-        0.5, 'PLL reported locked while the estimate of cos(2 phase error) exceeds this, dimensionless.',
-        minimum=0.01, maximum=0.99)
-    channel_timeout_s: float = parameter(
-        1.0, 'A satellite channel not seen for longer than this (stamp time) is dropped, s.',
-        minimum=1e-3, maximum=3600.0)
-    max_gap_intervals: float = parameter(
-        1.5, 'A gap longer than this many integration times breaks phase continuity: the channel restarts, '
-        'integration intervals.', minimum=1.01, maximum=1e6)
-    min_integration_time_s: float = parameter(
-        MIN_INTEGRATION_TIME_S, 'Shortest coherent integration time T the receiver produces, s; a correlator with '
-        'a shorter T is rejected (rejected_integration_time).', minimum=1e-6, maximum=1.0)
-    max_integration_time_s: float = parameter(
-        MAX_INTEGRATION_TIME_S, 'Longest coherent integration time T the receiver produces, s (Zhao et al.: '
-        '1-20 ms); a correlator with a longer T is rejected (rejected_integration_time).', minimum=1e-5, maximum=10.0)
-    max_iq_magnitude_ratio: float = parameter(
-        100.0, 'A correlator whose magnitude sqrt(I^2 + Q^2) exceeds this many times the RMS expected from its '
-        'C/N0 and T is rejected (rejected_iq_magnitude), dimensionless.', minimum=2.0, maximum=1e6)
+        RUBIDIUM_LPFRS.h_minus2,
+        'Random-walk-FM coefficient h_-2 of the custom clock, 1/s (= Hz). Default: the LPFRS value. Used '
+        'only with clock_preset custom. h_-1 (flicker FM) cannot be represented in the two-state model and '
+        'is not a parameter.',
+        minimum=0.0, maximum=1e-15, group=USER,
+    )
+    process_noise_form: str = parameter_from(ImmParams, 'process_noise_form')
+    process_noise_scale: float = parameter_from(ImmParams, 'process_noise_scale')
+    bit_transition_probability: float = parameter_from(ImmParams, 'bit_transition_probability')
+    bit_period_s: float = parameter_from(TrackerParams, 'bit_period_s')
+    iq_scaling: str = parameter_from(ImmParams, 'iq_scaling')
+    carrier_frequency_hz: float = parameter_from(ImmParams, 'carrier_hz')
+    initial_phase_std_rad: float = parameter_from(ImmParams, 'initial_phase_std_rad')
+    initial_frequency_std_hz: float = parameter_from(ImmParams, 'initial_frequency_std_hz')
+    lock_phase_std_max_rad: float = parameter_from(ImmParams, 'lock_phase_std_max_rad')
+    slip_jump_threshold_rad: float = parameter_from(ImmParams, 'slip_jump_threshold_rad')
+    pll_start_bandwidth_hz: float = parameter_from(PllParams, 'start_bandwidth_hz')
+    pll_end_bandwidth_hz: float = parameter_from(PllParams, 'end_bandwidth_hz')
+    pll_tightening_duration_s: float = parameter_from(PllParams, 'tightening_duration_s')
+    pll_lock_time_constant_s: float = parameter_from(PllParams, 'lock_time_constant_s')
+    pll_lock_threshold: float = parameter_from(PllParams, 'lock_threshold')
+    channel_timeout_s: float = parameter_from(TrackerParams, 'channel_timeout_s')
+    max_gap_intervals: float = parameter_from(TrackerParams, 'max_gap_intervals')
+    min_integration_time_s: float = parameter_from(TrackerParams, 'min_integration_time_s')
+    max_integration_time_s: float = parameter_from(TrackerParams, 'max_integration_time_s')
+    max_iq_magnitude_ratio: float = parameter_from(TrackerParams, 'max_iq_magnitude_ratio')
     max_stamp_jump_s: float = max_stamp_jump_parameter(120.0)
     stamp_jump_confirmations: int = stamp_jump_confirmations_parameter(5)
     input_timeout_s: float = input_timeout_parameter()
@@ -269,6 +257,37 @@ class CarrierNodeParams:
                              min_integration_time_s=self.min_integration_time_s,
                              max_integration_time_s=self.max_integration_time_s,
                              max_iq_magnitude_ratio=self.max_iq_magnitude_ratio)
+
+
+CONFIG_FILE = ConfigFile('imm_carrier', 'config/imm_carrier.yaml', 'imm_carrier', CarrierNodeParams, """
+Parameters of imm_carrier_node (imm_carrier/imm_carrier_node.py, CarrierNodeParams).
+GENERATED by tools/generate_config.py from the parameter definitions: the trackers' in
+imm_carrier/imm.py (ImmParams), pll.py (PllParams) and tracker.py (TrackerParams), the node's own in
+imm_carrier_node.py (CarrierNodeParams). Change a default or a description there and run
+`python tools/generate_config.py`; a test checks this file equals it.
+Method: Zhao, Khanafseh & Pervan, "Clock Dynamics Analysis in IMM Filter for Carrier Phase
+Estimation Through Interference". Design decisions: docs/imm_carrier/README.md.
+
+Use:   ros2 run imm_carrier imm_carrier_node --ros-args --params-file imm_carrier.yaml
+Every value below is the default. The user parameters (tracker, clock model, input scaling and
+range) come first; the tuning parameters after them are the tested values of the method.
+An invalid value stops the node with a one-line error naming the parameter, and so does a
+parameter the node does not have. Floats must be written with a decimal point.
+Parameters marked [settable while running] can be changed with `ros2 param set /imm_carrier NAME
+VALUE` (validated as at start, applied before the next array). The others are read-only: each
+tracker compiles its parameters into its kernel when it is built, and a new tracker would restart
+every channel.
+
+Input  /gnss/correlators (rfi_msgs/CorrelatorArray): prompt correlators, one array per
+       integration interval, stamp = end of the interval, ROS (UTC) time (gnss_common.gps_time).
+       Subscribed with the publishers' reliability (reliable with play or the suite's nodes, best
+       effort once a best-effort sensor driver is there, so it is accepted); fix it with
+       -p qos_overrides./gnss/correlators.subscription.reliability:=reliable (or best_effort).
+Output /carrier/estimates (rfi_msgs/CarrierPhaseArray): one array per accepted input array,
+       same header; /diagnostics: counters every diagnostics_period_s of accepted stamp time,
+       and a STALE report when no input arrives for input_timeout_s (wall time).
+""")
+"""The shipped config/imm_carrier.yaml (:func:`rfi_node_common.params.config_yaml`)."""
 
 
 def decode_input(msg: CorrelatorArray | bytes) -> tuple[DecodedCorrelatorArray, bytes] | None:

@@ -15,6 +15,7 @@ from numba import njit
 
 from imm_carrier.layout import PLL_OUT_LEN, PLL_STATE_LEN, PllOut, PllState
 from imm_carrier.measurement_model import IQ_SCALINGS, check_step_inputs, correlator_batch
+from rfi_node_common.params import parameter
 
 TWO_PI = 2.0 * math.pi
 
@@ -66,21 +67,39 @@ def bandwidth_schedule_hz(
 class PllParams:
     """Parameters of the Costas PLL baseline.
 
+    Fields written with :func:`rfi_node_common.params.parameter` are parameters of imm_carrier_node:
+    their default, description and range are there (``--help``, config/imm_carrier.yaml).
+
     Attributes:
-        start_bandwidth_hz: noise bandwidth at start, Hz, > 0 (paper: 15).
-        end_bandwidth_hz: final noise bandwidth, Hz, > 0 (paper: 1).
-        tightening_duration_s: time to go from start to end bandwidth, s, > 0 (paper: 70).
         iq_scaling: "unit_amplitude" or "unit_noise" (only for the lock indicator).
-        lock_time_constant_s: time constant of the lock-indicator averages, s, > 0.
-        lock_threshold: lock when the noise-corrected cos(2 dphi) estimate exceeds this, 0..1.
     """
 
-    start_bandwidth_hz: float = 15.0
-    end_bandwidth_hz: float = 1.0
-    tightening_duration_s: float = 70.0
+    start_bandwidth_hz: float = parameter(
+        15.0,
+        'PLL noise bandwidth when a channel starts, Hz (paper: 15).',
+        minimum=0.01, maximum=100.0,
+    )
+    end_bandwidth_hz: float = parameter(
+        1.0,
+        'PLL noise bandwidth after the tightening, Hz (paper: 1); <= pll_start_bandwidth_hz.',
+        minimum=0.01, maximum=100.0,
+    )
+    tightening_duration_s: float = parameter(
+        70.0,
+        'Time over which the PLL bandwidth goes from start to end (eq. 10 shape), s (paper: 70).',
+        minimum=0.001, maximum=100000.0,
+    )
     iq_scaling: str = "unit_amplitude"
-    lock_time_constant_s: float = 1.0
-    lock_threshold: float = 0.5
+    lock_time_constant_s: float = parameter(
+        1.0,
+        'Time constant of the PLL lock indicator averages, s.',
+        minimum=0.001, maximum=1000.0,
+    )
+    lock_threshold: float = parameter(
+        0.5,
+        'PLL reported locked while the estimate of cos(2 phase error) exceeds this, dimensionless.',
+        minimum=0.01, maximum=0.99,
+    )
 
     def __post_init__(self) -> None:
         for key in (

@@ -54,6 +54,7 @@ from imm_carrier.measurement_model import (
     CorrelatorSample,
 )
 from imm_carrier.pll import PllParams, pll_step, scheduled_bandwidth_hz
+from rfi_node_common.params import USER, parameter
 
 METHODS = ("imm", "pll")
 MAX_SVID = 255
@@ -71,13 +72,13 @@ assert _STATE_WIDTH >= max(IMM_STATE_LEN, PLL_STATE_LEN)
 class TrackerParams:
     """Parameters of the per-channel manager.
 
+    Fields written with :func:`rfi_node_common.params.parameter` are parameters of imm_carrier_node:
+    their default, description and range are there (``--help``, config/imm_carrier.yaml).
+
     Attributes:
         method: "imm" or "pll".
         imm: IMM parameters.
         pll: PLL parameters.
-        channel_timeout_s: drop a channel not seen for longer than this, s, > 0.
-        max_gap_intervals: a gap longer than this many integration times breaks phase continuity
-            (missed satellite-motion phase changes): the channel restarts, counted, > 1.
         bit_period_s: navigation data-bit duration, s (GPS L1 C/A: 0.02). When the integration time
             is shorter, the IMM's bit-transition probability is used only on intervals that start on
             a bit edge (stamps on the GPS bit grid; ROS stamps from GPS time are, GPS - UTC being whole
@@ -96,12 +97,45 @@ class TrackerParams:
     method: str = "imm"
     imm: ImmParams = field(default_factory=ImmParams)
     pll: PllParams = field(default_factory=PllParams)
-    channel_timeout_s: float = 1.0
-    max_gap_intervals: float = 1.5
-    bit_period_s: float = 0.02
-    min_integration_time_s: float = MIN_INTEGRATION_TIME_S
-    max_integration_time_s: float = MAX_INTEGRATION_TIME_S
-    max_iq_magnitude_ratio: float = 100.0
+    channel_timeout_s: float = parameter(
+        1.0,
+        'A satellite channel not seen for longer than this (stamp time) is dropped, s.',
+        minimum=0.001, maximum=3600.0,
+    )
+    max_gap_intervals: float = parameter(
+        1.5,
+        'A gap longer than this many integration times breaks phase continuity: the channel restarts, '
+        'integration intervals.',
+        minimum=1.01, maximum=1000000.0,
+    )
+    bit_period_s: float = parameter(
+        0.02,
+        'Known data-bit timing: with T shorter than this, bit changes are allowed only on intervals starting '
+        'on a bit edge of the GPS time grid (ROS stamps converted from GPS time are on it: GPS - UTC is '
+        'whole seconds), s; 0 = edges unknown.',
+        minimum=0.0, maximum=1.0,
+    )
+    min_integration_time_s: float = parameter(
+        MIN_INTEGRATION_TIME_S,
+        'Shortest coherent integration time T the receiver produces, s; a correlator with a shorter T is '
+        'rejected (<method>.rejected_integration_time). Widen only for a receiver that really integrates '
+        'shorter.',
+        minimum=1e-06, maximum=1.0, group=USER,
+    )
+    max_integration_time_s: float = parameter(
+        MAX_INTEGRATION_TIME_S,
+        'Longest coherent integration time T the receiver produces, s; a correlator with a longer T is '
+        "rejected (<method>.rejected_integration_time): a T of 1e6 s once threw the IMM's phase by 6000 rad. "
+        'Zhao et al. use 1-20 ms; 100 ms covers pilot signals. Widen only for a receiver that really '
+        'integrates longer.',
+        minimum=1e-05, maximum=10.0, group=USER,
+    )
+    max_iq_magnitude_ratio: float = parameter(
+        100.0,
+        'A correlator whose magnitude sqrt(I^2 + Q^2) exceeds this many times the RMS expected from its C/N0 '
+        'and T is rejected (rejected_iq_magnitude), dimensionless.',
+        minimum=2.0, maximum=1000000.0,
+    )
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:

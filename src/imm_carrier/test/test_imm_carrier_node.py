@@ -217,6 +217,35 @@ def test_config_file_values_equal_the_dataclass_defaults(rig_factory):
         assert rig.node.get_parameter(name).value == getattr(CarrierNodeParams(), name), name
 
 
+def test_config_file_is_the_one_generated_from_the_parameter_definitions():
+    """config/imm_carrier.yaml is written by tools/generate_config.py from the parameter definitions."""
+    from imm_carrier.imm_carrier_node import CONFIG_FILE
+
+    assert CONFIG.read_text() == CONFIG_FILE.text(), 'run python tools/generate_config.py'
+
+
+def test_tracker_parameters_are_defined_once_in_the_core():
+    """The node's tracker parameters take default, description and range from the core dataclasses (one
+    definition each), and the default node parameters give the cores' default parameters."""
+    import dataclasses
+
+    from imm_carrier.imm import ImmParams
+    from imm_carrier.pll import PllParams
+    from imm_carrier.tracker import TrackerParams
+
+    node = {f.name: f for f in dataclasses.fields(CarrierNodeParams)}
+    pairs = [(f'pll_{f.name}', f) for f in dataclasses.fields(PllParams) if 'rfi_doc' in f.metadata]
+    pairs += [('carrier_frequency_hz' if f.name == 'carrier_hz' else f.name, f)
+              for f in dataclasses.fields(ImmParams) if 'rfi_doc' in f.metadata]
+    pairs += [(f.name, f) for f in dataclasses.fields(TrackerParams) if 'rfi_doc' in f.metadata]
+    assert len(pairs) == 20
+    for name, core in pairs:
+        assert node[name].metadata['rfi_doc'] == core.metadata['rfi_doc'], name
+        assert node[name].default == core.default, name
+    for method in ('imm', 'pll'):
+        assert CarrierNodeParams().tracker_params(method) == TrackerParams(method=method)
+
+
 @pytest.mark.parametrize('params, words', [
     ({'method': 'kalman'}, 'method'),
     ({'pll_start_bandwidth_hz': 2.0, 'pll_end_bandwidth_hz': 5.0}, 'end_bandwidth_hz'),

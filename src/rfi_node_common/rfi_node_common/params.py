@@ -31,30 +31,84 @@ from typing import Any, Generic, TypeVar
 T = TypeVar('T')
 
 _DOC = 'rfi_doc'
+_INTERNAL = 'rfi_internal'
+
+USER = 'user'
+"""Group of the few parameters a user sets for an installation (frames, lever arms, sensors used):
+listed first by ``--help``, the config file and docs/reference/parameters.md."""
+TUNING = 'tuning'
+"""Group of the parameters of the method (noise levels, thresholds, windows): the defaults are the
+tested values; change them only with a reason the description gives."""
+GROUPS = (USER, TUNING)
 
 
 def parameter(default: Any, description: str, *, minimum: float | None = None,
-              maximum: float | None = None, read_only: bool = True, choices: tuple[str, ...] = ()) -> Any:
-    """A dataclass field that is also a documented ROS parameter.
+              maximum: float | None = None, read_only: bool = True, choices: tuple[str, ...] = (),
+              group: str = TUNING) -> Any:
+    """A dataclass field that is also a documented ROS parameter: the one place of its default and text.
 
     Args:
         default: default value (its type is the parameter's type).
-        description: meaning and unit, as shown by ``--help`` and ``ros2 param describe``.
+        description: meaning and unit, as shown by ``--help``, ``ros2 param describe`` and the generated
+            config file (:func:`config_yaml`).
         minimum, maximum: inclusive range of a numeric parameter.
         read_only: the parameter cannot change after start-up (the default). False: settable while the
             node runs (:class:`RuntimeParameters`), for values the node can apply between two messages.
         choices: allowed values of a string parameter.
+        group: :data:`USER` (set per installation, listed first) or :data:`TUNING` (the default).
     """
+    if group not in GROUPS:
+        raise ValueError(f'parameter group {group!r} is not one of {", ".join(GROUPS)}')
     doc = {'description': description, 'minimum': minimum, 'maximum': maximum,
-           'read_only': read_only, 'choices': tuple(choices)}
+           'read_only': read_only, 'choices': tuple(choices), 'group': group}
     if isinstance(default, (list, tuple)):
         return dataclasses.field(default_factory=lambda: tuple(default), metadata={_DOC: doc})
     return dataclasses.field(default=default, metadata={_DOC: doc})
 
 
+def internal(default: Any = dataclasses.MISSING, *, default_factory: Any = dataclasses.MISSING) -> Any:
+    """A field of a parameter dataclass that is not a ROS parameter (e.g. a value derived from parameters,
+    or a core's option that a node fills from its inputs): :func:`declare`, :func:`describe`,
+    :func:`config_yaml` and :func:`validate_ranges` skip it."""
+    return dataclasses.field(default=default, default_factory=default_factory, metadata={_INTERNAL: True})
+
+
+def parameter_from(owner: type, name: str, **changes: Any) -> Any:
+    """A node's parameter field that is the field ``name`` of the core dataclass ``owner``, defined there
+    with :func:`parameter`: same default, description, range and group (``changes`` may set ``read_only``,
+    ``group`` or ``description``). For a node whose parameter names differ from its core's (a prefix, a
+    core split in several dataclasses): the default and the text stay in the core's definition.
+
+    Raises:
+        TypeError: ``owner`` has no such field, or it was not defined with :func:`parameter`.
+    """
+    fields = {f.name: f for f in dataclasses.fields(owner)}
+    if name not in fields or _DOC not in fields[name].metadata:
+        raise TypeError(f'{owner.__name__}.{name} is not a field defined with parameter()')
+    field = fields[name]
+    doc = dict(field.metadata[_DOC])
+    unknown = set(changes) - {'read_only', 'group', 'description'}
+    if unknown:
+        raise TypeError(f'parameter_from cannot change {", ".join(sorted(unknown))}')
+    doc.update(changes)
+    if doc['group'] not in GROUPS:
+        raise ValueError(f'parameter group {doc["group"]!r} is not one of {", ".join(GROUPS)}')
+    return dataclasses.field(default=field.default, default_factory=field.default_factory,  # type: ignore[misc]
+                             metadata={_DOC: doc})
+
+
+def parameter_fields(params_cls: Any) -> list[dataclasses.Field]:
+    """The fields of ``params_cls`` (a class or an instance) that are ROS parameters, the :data:`USER`
+    group first, each group in field order."""
+    fields = [f for f in dataclasses.fields(params_cls) if not f.metadata.get(_INTERNAL, False)]
+    return sorted(fields, key=lambda f: GROUPS.index(_doc(f)['group']))
+
+
 def _doc(field: dataclasses.Field) -> dict[str, Any]:
-    return dict(field.metadata.get(_DOC, {'description': '', 'minimum': None, 'maximum': None,
-                                          'read_only': True, 'choices': ()}))
+    doc = {'description': '', 'minimum': None, 'maximum': None, 'read_only': True, 'choices': (),
+           'group': TUNING}
+    doc.update(field.metadata.get(_DOC, {}))
+    return doc
 
 
 def _default(field: dataclasses.Field) -> Any:
@@ -71,7 +125,7 @@ def validate_ranges(params: Any) -> None:
     Raises:
         ValueError: naming the parameter, its value and the allowed range.
     """
-    for field in dataclasses.fields(params):
+    for field in parameter_fields(params):
         doc = _doc(field)
         value = getattr(params, field.name)
         if isinstance(value, (int, float)) and not isinstance(value, bool):
@@ -95,7 +149,7 @@ def declare(node: Any, params_cls: type[T]) -> T:
     from rclpy.exceptions import ParameterException
 
     values = {}
-    for field in dataclasses.fields(params_cls):  # type: ignore[arg-type]
+    for field in parameter_fields(params_cls):
         doc = _doc(field)
         default = _default(field)
         descriptor = ParameterDescriptor(description=doc['description'], read_only=doc['read_only'])
@@ -135,7 +189,7 @@ def build(params_cls: type[T], values: dict[str, Any]) -> T:
 
 def runtime_parameter_names(params_cls: type) -> tuple[str, ...]:
     """Names of the fields settable while the node runs (declared with ``read_only=False``)."""
-    return tuple(f.name for f in dataclasses.fields(params_cls) if not _doc(f)['read_only'])
+    return tuple(f.name for f in parameter_fields(params_cls) if not _doc(f)['read_only'])
 
 
 class RuntimeParameters(Generic[T]):
@@ -161,9 +215,8 @@ class RuntimeParameters(Generic[T]):
     def __init__(self, node: Any, params: T) -> None:
         self.current = params
         self._pending: T | None = None
-        self._names = {f.name for f in dataclasses.fields(params)}  # type: ignore[arg-type]
-        self._tuples = {f.name for f in dataclasses.fields(params)  # type: ignore[arg-type]
-                        if isinstance(getattr(params, f.name), tuple)}
+        self._names = {f.name for f in parameter_fields(params)}
+        self._tuples = {f.name for f in parameter_fields(params) if isinstance(getattr(params, f.name), tuple)}
         self.changes_applied = 0
         self.changes_refused = 0
         node.add_on_set_parameters_callback(self._on_set)
@@ -189,7 +242,7 @@ class RuntimeParameters(Generic[T]):
             ValueError: as :func:`build` at start.
         """
         base = self._pending if self._pending is not None else self.current
-        values = {f.name: getattr(base, f.name) for f in dataclasses.fields(base)}  # type: ignore[arg-type]
+        values = {f.name: getattr(base, f.name) for f in parameter_fields(base)}
         values.update(changes)
         return build(type(base), values)
 
@@ -219,7 +272,7 @@ class RuntimeParameters(Generic[T]):
 
 def changed_names(old: Any, new: Any) -> list[str]:
     """Fields whose value differs between two instances of one parameter dataclass."""
-    return [f.name for f in dataclasses.fields(old) if getattr(old, f.name) != getattr(new, f.name)]
+    return [f.name for f in parameter_fields(old) if getattr(old, f.name) != getattr(new, f.name)]
 
 
 def _first_line(err: Exception) -> str:
@@ -227,21 +280,130 @@ def _first_line(err: Exception) -> str:
     return text[0] if text else type(err).__name__
 
 
+def _limits(doc: dict[str, Any]) -> str:
+    if doc['choices']:
+        return f'{{{", ".join(doc["choices"])}}}'
+    if doc['minimum'] is not None or doc['maximum'] is not None:
+        low = doc['minimum'] if doc['minimum'] is not None else '-inf'
+        high = doc['maximum'] if doc['maximum'] is not None else 'inf'
+        return f'[{low}, {high}]'
+    return ''
+
+
+GROUP_TITLES = {USER: 'user parameters (set for your installation)',
+                TUNING: 'tuning parameters (the method; defaults are the tested values)'}
+
+
 def describe(params_cls: type) -> str:
-    """Plain-text documentation of the parameters, for ``--help``."""
+    """Plain-text documentation of the parameters, for ``--help``: the :data:`USER` group first."""
     lines = []
-    for field in dataclasses.fields(params_cls):
+    group = None
+    for field in parameter_fields(params_cls):
         doc = _doc(field)
-        default = _default(field)
-        limits = ''
-        if doc['minimum'] is not None or doc['maximum'] is not None:
-            limits = f' [{doc["minimum"] if doc["minimum"] is not None else "-inf"}, ' \
-                     f'{doc["maximum"] if doc["maximum"] is not None else "inf"}]'
-        if doc['choices']:
-            limits = f' {{{", ".join(doc["choices"])}}}'
+        if doc['group'] != group:
+            group = doc['group']
+            lines.append(f' {GROUP_TITLES[group]}:')
+        limits = _limits(doc)
+        limits = f' {limits}' if limits else ''
         live = '' if doc['read_only'] else ' [settable while running]'
-        lines.append(f'  {field.name} (default {default!r}){limits}{live}\n      {doc["description"]}')
+        lines.append(f'  {field.name} (default {_default(field)!r}){limits}{live}\n      {doc["description"]}')
     return '\n'.join(lines)
+
+
+def yaml_value(value: Any) -> str:
+    """``value`` written as the ROS 2 parameter-file parser reads it back with the same type (floats with
+    a decimal point, ``.inf``; tuples as flow sequences)."""
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if math.isnan(value):
+            return '.nan'
+        if math.isinf(value):
+            return '.inf' if value > 0 else '-.inf'
+        text = repr(value)
+        if 'e' in text and '.' not in text.split('e')[0]:
+            mantissa, exponent = text.split('e')
+            text = f'{mantissa}.0e{exponent}'
+        return text
+    if isinstance(value, (tuple, list)):
+        return '[' + ', '.join(yaml_value(v) for v in value) + ']'
+    if isinstance(value, str):
+        import json
+
+        plain = value and value.replace('_', '').replace('-', '').replace('+', '').replace('#', '').isalnum() \
+            and not value[0].isdigit() and value.lower() not in {'true', 'false', 'yes', 'no', 'on', 'off', 'null'}
+        return value if plain else json.dumps(value)
+    raise TypeError(f'no YAML form for {value!r}')
+
+
+def config_yaml(node_name: str, params_cls: type, header: str, width: int = 100) -> str:
+    """The config file of a node, generated from its parameter dataclass: ``header`` as comment lines, then
+    ``node_name: ros__parameters:`` with every parameter (the :data:`USER` group first) at its default,
+    each after its description, its range and ``[settable while running]`` where it is.
+
+    The shipped ``config/<node>.yaml`` is this text (``tools/generate_config.py`` writes it; each node's
+    tests check that the file equals it), so a default or a description is changed in the dataclass only.
+    """
+    import textwrap
+
+    lines = [('# ' + line).rstrip() for line in header.strip().splitlines()]
+    lines += [f'{node_name}:', '  ros__parameters:']
+    group = None
+    for field in parameter_fields(params_cls):
+        doc = _doc(field)
+        if doc['group'] != group:
+            group = doc['group']
+            title = f'# --- {GROUP_TITLES[group]} '
+            lines += ['', '    ' + title + '-' * max(3, width - 4 - len(title))]
+        text = doc['description']
+        if not doc['read_only']:
+            text = '[settable while running] ' + text
+        limits = _limits(doc)
+        if limits:
+            text += f' Range {limits}.' if not doc['choices'] else f' One of {limits}.'
+        lines += textwrap.wrap(text, width=width, initial_indent='    # ', subsequent_indent='    # ',
+                               break_on_hyphens=False, break_long_words=False)
+        lines.append(f'    {field.name}: {yaml_value(_default(field))}')
+    return '\n'.join(lines) + '\n'
+
+
+def markdown_table(params_cls: type, group: str | None = USER) -> str:
+    """A Markdown table of the parameters of ``group`` (all if None): name, default, range, settable while
+    running, description; for docs/reference/parameters.md (written by ``tools/generate_config.py``)."""
+    rows = ['| parameter | default | range | settable while running | description |', '|---|---|---|---|---|']
+    for field in parameter_fields(params_cls):
+        doc = _doc(field)
+        if group is not None and doc['group'] != group:
+            continue
+        cells = [f'`{field.name}`', f'`{yaml_value(_default(field))}`', _limits(doc).replace('|', '\\|'),
+                 '' if doc['read_only'] else 'yes', doc['description'].replace('|', '\\|')]
+        rows.append('| ' + ' | '.join(cells) + ' |')
+    return '\n'.join(rows) + '\n'
+
+
+@dataclasses.dataclass(frozen=True)
+class ConfigFile:
+    """A node's shipped config file, generated from its parameter dataclass (:func:`config_yaml`).
+
+    Attributes:
+        package: the ROS package (directory ``src/<package>``).
+        path: the file, relative to the package directory (``config/<node>.yaml``).
+        node_name: the node's name, the file's top-level key.
+        params_cls: the node's parameter dataclass.
+        header: comment text above the parameters (use, inputs, outputs), without ``#``.
+    """
+
+    package: str
+    path: str
+    node_name: str
+    params_cls: type
+    header: str
+
+    def text(self) -> str:
+        """The file's content."""
+        return config_yaml(self.node_name, self.params_cls, self.header)
 
 
 def unknown_parameters(node: Any) -> list[str]:

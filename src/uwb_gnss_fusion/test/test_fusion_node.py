@@ -403,29 +403,45 @@ def test_uwb_only_in_map_frame(rig_factory):
 
 
 def test_config_file_values_equal_the_dataclass_defaults(rig_factory):
-    fields = FusionNodeParams.__dataclass_fields__
+    from rfi_node_common.params import parameter_fields
+
+    names = [f.name for f in parameter_fields(FusionNodeParams)]
     data = yaml.safe_load(CONFIG.read_text())['uwb_gnss_fusion']['ros__parameters']
-    assert set(data) == set(fields)
+    assert list(data) == names
     rig = rig_factory(args=['fusion_node', '--ros-args', '--params-file', str(CONFIG)])
     assert rig.node.params == FusionNodeParams()
-    for name in fields:
+    for name in names:
         value = rig.node.get_parameter(name).value
         default = getattr(FusionNodeParams(), name)
         assert (tuple(value) if isinstance(default, tuple) else value) == default, name
     assert rig.node.filter.params == FusionNodeParams().fusion_params()
 
 
-def test_every_filter_parameter_is_a_node_parameter():
+def test_config_file_is_the_one_generated_from_the_parameter_definitions():
+    """config/fusion.yaml is written by tools/generate_config.py from FusionParams / FusionNodeParams."""
+    from uwb_gnss_fusion.fusion_node_params import CONFIG_FILE
+
+    assert CONFIG.read_text() == CONFIG_FILE.text(), 'run python tools/generate_config.py'
+
+
+def test_every_filter_parameter_is_a_node_parameter_defined_once():
     import dataclasses
 
     from gnss_common.jamming_weights import TrackingLoopParams
+    from rfi_node_common.params import parameter_fields
     from uwb_gnss_fusion.fusion_filter import FusionParams
 
-    node_fields = set(FusionNodeParams.__dataclass_fields__)
-    core = {f.name for f in dataclasses.fields(FusionParams)} - {'loop', 'anchors'}
+    node = {f.name: f for f in parameter_fields(FusionNodeParams)}
+    core = {f.name: f for f in parameter_fields(FusionParams)}
+    assert set(core) == {f.name for f in dataclasses.fields(FusionParams)} - {'loop', 'anchors'}
     loop = {f'loop_{f.name}' for f in dataclasses.fields(TrackingLoopParams)}
-    assert core | loop <= node_fields
+    assert set(core) | loop <= set(node)
+    # the node inherits the core's definitions (default, description, range): one place to change them
+    assert all(node[name] is core[name] for name in core)
     assert FusionNodeParams().fusion_params() == FusionParams()
+    changed = FusionNodeParams(loop_dll_bandwidth_hz=4.0, min_cn0_dbhz=30.0)
+    assert changed.loop == dataclasses.replace(TrackingLoopParams(), dll_bandwidth_hz=4.0)
+    assert changed.fusion_params() == FusionParams(loop=changed.loop, min_cn0_dbhz=30.0)
 
 
 @pytest.mark.parametrize('params, words', [
