@@ -5,7 +5,7 @@ Measures, as a multiple of real time (bag seconds per wall second, median of rep
 - a 20 s window over the middleware (DDS) on one executor, for comparison;
 and profiles one direct replay (cProfile), grouping the time by node callback.
 
-Usage (workspace sourced): python benchmarks/demo_speed.py [--repeats N]
+Usage (workspace sourced): python benchmarks/demo_speed.py [--repeats N] [--quiet]
 Writes docs/demo_speed.md. Every number depends on the machine's load: read the ratios.
 """
 
@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 
 import rclpy
+from bench_progress import add_quiet_argument, case_log
 from doc_paths import portable_text
 from rclpy.context import Context
 
@@ -63,9 +64,12 @@ def replay(transport: str, topics: list[str], window_s=None, profile: cProfile.P
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--repeats', type=int, default=3)
+    add_quiet_argument(parser)
     args = parser.parse_args()
     os.environ.setdefault('RMW_FASTRTPS_PUBLICATION_MODE', 'SYNCHRONOUS')
+    log = case_log(__file__, total=6, quiet=args.quiet)  # warm-up, 4 replays, the profile
     replay('direct', ALL_INPUTS, window_s=(0.0, 5.0))  # warm-up: numba compilation, imports
+    log.done('warm-up (numba compilation, imports)')
     rows = []
     cases = [
         ('whole bag, direct transport (make demo)', 'direct', ALL_INPUTS, None),
@@ -79,10 +83,11 @@ def main() -> None:
         factor = statistics.median(r[0] for r in runs)
         wall = statistics.median(r[1] for r in runs)
         rows.append((label, runs[0][2], wall, factor))
-        print(f'{label}: {factor:.1f}x real time ({wall:.1f} s wall)', flush=True)
+        log.done(f'{label}: {factor:.1f}x real time ({wall:.1f} s wall, median of {args.repeats})')
 
     profile = cProfile.Profile()
     replay('direct', ALL_INPUTS, profile=profile)
+    log.done('profiled direct replay')
     out = io.StringIO()
     stats = pstats.Stats(profile, stream=out)
     total = stats.total_tt
@@ -125,7 +130,8 @@ def main() -> None:
     lines += [line for line in profile_text.splitlines() if line.strip()][:40]
     lines += ['```', '</details>', '']
     (ROOT / 'docs' / 'demo_speed.md').write_text('\n'.join(lines))
-    print('\n'.join(lines[:12 + len(rows)]))
+    log.say('\n'.join(lines[:12 + len(rows)]))
+    log.finish(f'wrote {(ROOT / "docs" / "demo_speed.md").relative_to(ROOT)}')
 
 
 if __name__ == '__main__':

@@ -25,6 +25,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from bench_progress import add_quiet_argument, case_log
 
 from gnss_common.measurements import GnssEpochBuilder
 from gnss_common.observations import GnssEpoch
@@ -88,14 +89,17 @@ def score(epochs: list[GnssEpoch], truth: np.ndarray, repair: bool) -> dict:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=OUT)
+    add_quiet_argument(ap)
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
+    log = case_log(__file__, total=len(STATIONS) * len(CASES), quiet=args.quiet)
     rows = []
     for name, obs_name, nav_name in STATIONS:
         epochs, truth = station_epochs(obs_name, nav_name)
         for case, steps in CASES:
             data = stepped(epochs, steps)
             rows.append((name, case, score(data, truth, True), score(data, truth, False)))
+            log.done(f"{name}, {case}")
     lines = [
         "# Receiver clock steps on real stations (`receiver_clock_steps`)",
         "",
@@ -117,7 +121,8 @@ def main(argv: list[str] | None = None) -> int:
         )
     text = "\n".join(lines) + "\n"
     args.out.write_text(text)
-    print(text)
+    log.say(text)
+    log.finish(f"wrote {args.out}")
     return 0
 
 

@@ -24,6 +24,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from bench_progress import add_quiet_argument, case_log
 
 from gnss_common.observations import UwbRangeMeasurement
 from rfi_sim.evaluation import HANYANG_WINDOWS, hanyang_authors_rmse
@@ -81,7 +82,9 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=ROOT.parent / "shared" / "data" / "uwb_outdoor_hanyang",
                     help="root of the Hanyang dataset (holds Dynamic_measurements/)")
+    add_quiet_argument(ap)
     args = ap.parse_args(argv)
+    log = case_log(__file__, total=len(CASES), quiet=args.quiet)
     dyn = args.data / "Dynamic_measurements"
     if not dyn.is_dir():
         print(f"no Dynamic_measurements/ under {args.data}: give --data", file=sys.stderr)
@@ -109,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
             row[label] = hanyang_authors_rmse(truth, ts, xyz, rule)[:2]
             row[label + " plain"] = plain_rmse(truth, ts, xyz)
         rows.append(row)
-        print(f"{case}: done", file=sys.stderr)
+        log.done(case)
     variants = list(HANYANG_VARIANTS)
     lines = [
         "# UWB-only on the real Hanyang dataset, scored as the dataset authors score",
@@ -161,7 +164,8 @@ def main(argv: list[str] | None = None) -> int:
         lines.append(f"- {row['case']}: CKF {ours:.2f} m 3D against the authors' best {peer:.2f} m "
                      f"({'better' if ours < peer else 'NOT better'}; best variant of ours {best[row['case']]:.2f} m).")
     OUT.write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    log.say("\n".join(lines))
+    log.finish(f"wrote {OUT}")
     return 0
 
 

@@ -40,6 +40,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from bench_progress import add_quiet_argument, case_log
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import fusion_never_worse as nw  # noqa: E402  (the runs, anchors and scoring of item 2)
@@ -130,9 +131,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=8)
     ap.add_argument("--workers", type=int, default=2, help="processes (at most 2 on the shared machine)")
     ap.add_argument("--out", type=Path, default=OUT)
+    add_quiet_argument(ap)
     args = ap.parse_args(argv)
     workers = max(1, min(args.workers, 2))
     t0 = time.perf_counter()
+    log = case_log(__file__, total=2 * args.seeds, quiet=args.quiet)  # one case: the J/S rows of one seed
     layouts: dict[bool, dict[int, dict[int, dict]]] = {}
     for flip in (False, True):
         tasks = [(i, k, args.duration_s, flip) for k in range(args.seeds) for i in range(len(JSR_SCENARIOS_DB))]
@@ -141,8 +144,7 @@ def main(argv: list[str] | None = None) -> int:
             for n_done, (i, k, row) in enumerate(pool.imap_unordered(run_one, tasks), 1):
                 results[i][k] = row
                 if n_done % len(JSR_SCENARIOS_DB) == 0:
-                    print(f"{'flipped' if flip else 'paper'} layout: {n_done}/{len(tasks)} runs "
-                          f"({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
+                    log.done(f"{'flipped' if flip else 'paper'} layout: {n_done}/{len(tasks)} runs")
         layouts[flip] = results
     # e0: the UWB-only 3D RMS of the runs on the right side (error below d / 2), median per J/S over both layouts
     e0_m = []
@@ -169,7 +171,8 @@ def main(argv: list[str] | None = None) -> int:
     ]
     text = "\n".join(lines)
     args.out.write_text(text)
-    print(text)
+    log.say(text)
+    log.finish(f"wrote {args.out}")
     return 0
 
 

@@ -53,6 +53,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from bench_progress import CaseLog, add_quiet_argument, case_log
 
 from gnss_common.constants import GPS_CA_CHIP_RATE_HZ
 from gnss_common.coordinates import azimuth_elevation, ecef_to_enu_rotation, ecef_to_geodetic
@@ -197,15 +198,16 @@ def spp_rms(epochs: list[GnssEpoch]) -> tuple[float, float, int]:
             len(a))
 
 
-def ladder(epochs: list[GnssEpoch]) -> list[str]:
-    """Systems added one at a time, 10 deg mask (module docstring)."""
+def ladder(epochs: list[GnssEpoch], log: CaseLog) -> list[str]:
+    """Systems added one at a time, 10 deg mask (module docstring); ``log`` gets each row."""
     n = len(epochs)
     lines = ["Systems added one at a time, 10 deg mask (multi_gnss=True on the reduced epochs):", "",
              "| systems | median satellites used | epochs with an estimate | horizontal RMS m | 3D RMS m | "
              "static model entered / left |", "|---|---|---|---|---|---|"]
     h, d, k = spp_rms(epochs)
     lines.append(f"| our SPP (GPS, gnss_common.spp) | - | {k} / {n} | {h:.2f} | {d:.2f} | - |")
-    print(lines[-1], flush=True)
+    log.done("ladder: our SPP")
+    log.say(lines[-1])
     prev: tuple[float, float] | None = None
     never_worse = True
     for name, systems in LADDER:
@@ -214,7 +216,8 @@ def ladder(epochs: list[GnssEpoch]) -> list[str]:
         assert isinstance(c, dict)
         lines.append(f"| {name} | {r['sats']:.0f} | {r['estimates']} / {n} | {r['h_rms']:.2f} | {r['rms']:.2f} | "
                      f"{c.get('motion_static_entered', 0)} / {c.get('motion_static_left', 0)} |")
-        print(lines[-1], flush=True)
+        log.done(f"ladder: {name}")
+        log.say(lines[-1])
         cur = (float(r["h_rms"]), float(r["rms"]))  # type: ignore[arg-type]
         if prev is not None and (round(cur[0], 2) > round(prev[0], 2) or round(cur[1], 2) > round(prev[1], 2)):
             never_worse = False
@@ -224,7 +227,7 @@ def ladder(epochs: list[GnssEpoch]) -> list[str]:
     return lines
 
 
-def section(title: str, epochs: list[GnssEpoch]) -> list[str]:
+def section(title: str, epochs: list[GnssEpoch], log: CaseLog) -> list[str]:
     n = len(epochs)
     lines = [
         f"## {title}",
@@ -248,7 +251,8 @@ def section(title: str, epochs: list[GnssEpoch]) -> list[str]:
                 events = {k: v for k, v in r["counts"].items() if k.startswith("inter_system_bias")}
                 notes.append(f"- mask {mask:g} deg: reference clock {r['reference']}; inter-system biases at the "
                              f"end: {b}; {events}")
-            print(lines[-1], flush=True)
+            log.done(f"mask {mask:g} deg, {name}")
+            log.say(lines[-1])
     lines += ["", "Multi-GNSS filter, inter-system bias estimates (relative to the reference clock):", "",
               *notes, ""]
     lines += [
@@ -269,14 +273,17 @@ def section(title: str, epochs: list[GnssEpoch]) -> list[str]:
                 f"{r['estimates']} / {n} | {r['h_rms']:.2f} | {r['rms']:.2f} | {r['p95']:.2f} | {r['max']:.2f} | "
                 f"{r['within']:.0f} / {n} ({100 * r['within'] / n:.0f} %) | {r['ms_per_epoch']:.2f} |"
             )
-            print(lines[-1], flush=True)
-    return lines + [""] + ladder(epochs)
+            log.done(f"J/S {js:g} dB, {name}")
+            log.say(lines[-1])
+    return lines + [""] + ladder(epochs, log)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--day", nargs=2, type=Path, metavar=("OBS", "NAV"), help="the whole-day files")
+    add_quiet_argument(parser)
     args = parser.parse_args()
+    log = case_log(__file__, quiet=args.quiet)
     text = [
         "# Fusion filter: GPS alone against multi-GNSS on a real station (ESBC00DNK)",
         "",
@@ -294,10 +301,10 @@ def main() -> None:
     if args.day:
         sections.append(("whole day (2020-06-25, 2,880 epochs)", tuple(args.day)))
     for title, (obs_path, nav_path) in sections:
-        text += section(title, build_epochs(obs_path, nav_path))
+        text += section(title, build_epochs(obs_path, nav_path), log)
     OUT.parent.mkdir(parents=True, exist_ok=True)
     OUT.write_text("\n".join(text))
-    print(f"wrote {OUT}")
+    log.finish(f"wrote {OUT}")
 
 
 if __name__ == "__main__":

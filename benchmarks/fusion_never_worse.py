@@ -35,11 +35,11 @@ import math
 import multiprocessing
 import os
 import platform
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from bench_progress import add_quiet_argument, case_log
 
 from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic
 from gnss_common.observations import GnssEpoch
@@ -164,7 +164,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--flip-anchor-heights", action="store_true",
                     help="negate the heights of anchors 1-3 (the tag on the other side of their plane)")
     ap.add_argument("--out", type=Path, default=None)
+    add_quiet_argument(ap)
     args = ap.parse_args(argv)
+    log = case_log(__file__, total=args.seeds, quiet=args.quiet)  # one case: the J/S rows of one seed
     extra = _parse_set(args.set)
     flip = args.flip_anchor_heights
     out_path = args.out if args.out is not None else (OUT if not (extra or flip) else None)
@@ -176,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
         for n_done, (i, k, row) in enumerate(pool.imap_unordered(run_scenario, tasks), 1):
             results[i][k] = row
             if n_done % len(JSR_SCENARIOS_DB) == 0:
-                print(f"{n_done}/{len(tasks)} runs ({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
+                log.done(f"{n_done}/{len(tasks)} runs")
     wall_s = time.perf_counter() - t0
     seeds = range(args.seeds)
     fp = FusionParams(**extra)
@@ -260,7 +262,9 @@ def main(argv: list[str] | None = None) -> int:
         if NOTES_MARKER in old:
             text += "\n" + old[old.index(NOTES_MARKER):]
         out_path.write_text(text)
-    print(text)
+    log.say(text)
+    log.finish(f"wrote {out_path}" if out_path is not None else "--set / --flip-anchor-heights without --out: "
+               "nothing written")
     return 0
 
 

@@ -51,6 +51,7 @@ from pathlib import Path
 
 import numpy as np
 import rclpy
+from bench_progress import CaseLog, add_quiet_argument, case_log
 from rclpy.context import Context
 
 import rfi_experiments.replay as replay_module
@@ -290,8 +291,9 @@ def replay_subprocess(baseline_src: str | None, bag: Path, dump: Path | None = N
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def speed_rows(bag: Path, repeats: int, baseline_src: str | None, label: str) -> dict:
-    """Interleaved repeats of the current (and baseline) code on one bag; medians and ratios."""
+def speed_rows(bag: Path, repeats: int, baseline_src: str | None, label: str, log: CaseLog) -> dict:
+    """Interleaved repeats of the current (and baseline) code on one bag; medians and ratios (``log``: a line
+    per repeat)."""
     rows, base_rows = [], []
     published = None
     for k in range(repeats):
@@ -306,7 +308,7 @@ def speed_rows(bag: Path, repeats: int, baseline_src: str | None, label: str) ->
             b = replay_subprocess(baseline_src, bag)
             base_rows.append((b['wall_s'], b['wall_s'] / r['wall_s']))
             line += f'; baseline {b["wall_s"]:.3f} s'
-        print(line, flush=True)
+        log.done(line)
     out = {'bag_s': r['bag_s'], 'inputs': r['inputs'],
            'wall_s': statistics.median(x[0] for x in rows), 'ref_s': statistics.median(x[1] for x in rows),
            'speed': statistics.median(x[2] for x in rows),
@@ -326,6 +328,7 @@ def main() -> None:
     ap.add_argument('--single', action='store_true', help='internal: one replay, print JSON')
     ap.add_argument('--bag', default=str(BAG), help='internal: bag of --single')
     ap.add_argument('--dump', default=None, help='internal: save the outputs of --single (.npz)')
+    add_quiet_argument(ap)
     args = ap.parse_args()
     if args.single:
         r = replay(Path(args.bag), keep_outputs=args.dump is not None)
@@ -337,7 +340,9 @@ def main() -> None:
     bags = [('bags/default', BAG)]
     if args.six_minute:
         bags.append(('simulated 360 s (gnss_uwb of scenarios/default, schedule twice)', make_six_minute_bag()))
-    results = [(label, speed_rows(bag, args.repeats, args.baseline_src, label)) for label, bag in bags]
+    log = case_log(__file__, total=len(bags) * (args.repeats + (1 if args.baseline_src else 0)) + 1,
+                   quiet=args.quiet)  # the timed repeats, the output comparisons, the instrumented replay
+    results = [(label, speed_rows(bag, args.repeats, args.baseline_src, label, log)) for label, bag in bags]
     diffs = []
     if args.baseline_src:
         for label, bag in bags:
@@ -345,7 +350,9 @@ def main() -> None:
             replay_subprocess(None, bag, cur)
             replay_subprocess(args.baseline_src, bag, base)
             diffs.append((label, compare_outputs(dict(np.load(cur)), dict(np.load(base)))))
+            log.done(f'{label}: outputs compared with the baseline')
     inst = replay(instrument=True)
+    log.done('instrumented replay')
     check = check_outputs(inst)
     node_s = inst['node_s']
     parts = {k: inst.get(k, 0.0) for k in ('core_uwb_s', 'core_gnss_s', 'spp_s', 'publish_s')}
@@ -408,7 +415,7 @@ def main() -> None:
     verdict = 'met' if best >= 100.0 else 'not met'
     table += ['', f'Goal 100x real time (median): **{verdict}** ({speeds}).']
     text = '\n'.join(table)
-    print(text)
+    log.say(text)
     OUT_MD.parent.mkdir(parents=True, exist_ok=True)
     OUT_MD.write_text(
         '# Fusion node speed (in-process replay)\n\n'
@@ -421,6 +428,7 @@ def main() -> None:
         + (' --six-minute' if args.six_minute else '')
         + (' --baseline-src <older gnss_common/ + uwb_gnss_fusion/>' if args.baseline_src else '') + '`\n\n'
         + text + '\n\n' + NOTES)
+    log.finish(f'wrote {OUT_MD}')
 
 
 NOTES = """\

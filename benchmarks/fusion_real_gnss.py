@@ -41,6 +41,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import rclpy  # noqa: E402
+from bench_progress import case_log  # noqa: E402
 from rclpy.context import Context  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
@@ -109,6 +110,7 @@ def stats_row(err_enu: np.ndarray) -> dict[str, float]:
 
 
 def main() -> None:
+    log = case_log(__file__, total=len(STATIONS) * (1 + len(CONFIGS)))  # -q/--quiet: no progress, tables, summary
     OUT.mkdir(parents=True, exist_ok=True)
     rows: list[dict[str, Any]] = []
     series: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
@@ -126,6 +128,7 @@ def main() -> None:
             rows.append({"station": name, "solution": "SPP", "epochs": len(conv.epochs),
                          "reinit": "", "gated": "", "motion": "", **stats_row(spp_err)})
             series[(name, "SPP")] = (spp_t, spp_err)
+            log.done(f"{name}: SPP")
             for config, params in CONFIGS:
                 t, p, acc, wall = replay_station(bag, params)
                 err = ecef_errors_enu(p, truth)
@@ -138,6 +141,7 @@ def main() -> None:
                              "gated": gated, "motion": motion, "wall": wall, "accounting_ok": acc["accounting_ok"],
                              **stats_row(err)})
                 series[(name, config)] = (t, err)
+                log.done(f"{name}: fusion node ({config})")
     header = ("| station | solution | epochs with estimate / total | horiz. RMS (m) | horiz. p95 (m) | horiz. max (m) "
               "| 3D RMS (m) | 3D p95 (m) | 3D max (m) | resets (divergence, time gap, rejected stamp) "
               "| gated pseudoranges | static model entered / left / epochs opened |")
@@ -156,12 +160,14 @@ def main() -> None:
             fus = next(r for r in rows if r["station"] == name and r["solution"] == f"fusion node ({config})")
             better.append(fus["h_rms"] < spp["h_rms"] and fus["d_rms"] < spp["d_rms"])
         verdicts.append((config, all(better), better))
-    print(table)
-    print()
-    print(f"SPP within {GOAL_SPP_HORIZONTAL_RMS_M} m horizontal RMS on every station: {'met' if spp_ok else 'NOT met'}")
+    log.say(table)
+    log.say()
+    log.say(f"SPP within {GOAL_SPP_HORIZONTAL_RMS_M} m horizontal RMS on every station: "
+            f"{'met' if spp_ok else 'NOT met'}")
     for config, ok, per in verdicts:
-        print(f"fusion node ({config}) better than SPP (horizontal and 3D RMS) on every station: "
-              f"{'met' if ok else 'NOT met'} ({', '.join(f'{s[0]}: {b}' for s, b in zip(STATIONS, per, strict=True))})")
+        log.say(f"fusion node ({config}) better than SPP (horizontal and 3D RMS) on every station: "
+                f"{'met' if ok else 'NOT met'} "
+                f"({', '.join(f'{s[0]}: {b}' for s, b in zip(STATIONS, per, strict=True))})")
     gains = []
     for name, _, _ in STATIONS:
         spp = next(r for r in rows if r["station"] == name and r["solution"] == "SPP")
@@ -171,9 +177,9 @@ def main() -> None:
     gain_line = (f"Shipped defaults at least {100 * GOAL_GAIN_OVER_SPP:.0f} % better than SPP in horizontal RMS on "
                  f"every station: **{'met' if gain_ok else 'NOT met'}** ("
                  + ", ".join(f"{n}: {100 * g:.0f} %" for n, g in gains) + ").")
-    print(gain_line)
+    log.say(gain_line)
     all_ok = all(r.get("accounting_ok", True) for r in rows)
-    print(f"node input accounting adds up in every replay: {all_ok}")
+    log.say(f"node input accounting adds up in every replay: {all_ok}")
 
     fig, axes = plt.subplots(len(STATIONS), 2, figsize=(11, 3.2 * len(STATIONS)), sharex="row")
     for i, (name, _, _) in enumerate(STATIONS):
@@ -267,7 +273,7 @@ def main() -> None:
         "SPP what averaging the epoch-to-epoch noise gives, about 15-25 %.\n\n"
         "![errors](fusion_real_gnss.png)\n"
     )
-    print(f"wrote {doc} and {OUT / 'fusion_real_gnss.png'}")
+    log.finish(f"wrote {doc} and {OUT / 'fusion_real_gnss.png'}")
 
 
 if __name__ == "__main__":

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import rclpy
+from bench_progress import add_quiet_argument, case_log
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import SingleThreadedExecutor
 
@@ -231,8 +232,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=3, help="runs of each configuration, alternated (default 3); "
                     "each cell gives the runs' values separated by ' ; '")
+    add_quiet_argument(ap)
     args = ap.parse_args()
-    runs = [[run_once(data, n, tmp, extra) for _, extra in CONFIGS] for _ in range(max(1, args.repeat))]
+    repeats = max(1, args.repeat)
+    log = case_log(__file__, total=repeats * len(CONFIGS), quiet=args.quiet)
+    runs = [[run_once(data, n, tmp, extra) for _, extra in log.cases_of(CONFIGS, lambda c: c[0])]
+            for _ in range(repeats)]
     results = [(name, [(k, " ; ".join(str(r[i][j][1]) for r in runs)) for j, (k, _) in enumerate(runs[0][i])])
                for i, (name, _) in enumerate(CONFIGS)]
     cpu = "unknown"
@@ -244,7 +249,7 @@ def main() -> None:
     table = ("| quantity | " + " | ".join(name for name, _ in results) + " |\n|---|" + "---|" * len(results) + "\n"
              + "\n".join(f"| {k} | " + " | ".join(str(rows[i][1]) for _, rows in results) + " |"
                           for i, (k, _) in enumerate(results[0][1])))
-    print(table)
+    log.say(table)
     OUT.write_text(
         "# Live stream at 1x: rfi_monitor_node as its own process (issue 14 item 6)\n\n"
         "From `benchmarks/rfi_monitor_live_stream.py`: if_source publishes a continuous 38.192 MS/s 8-bit real\n"
@@ -258,6 +263,7 @@ def main() -> None:
         f"Each configuration was run {len(runs)} times, alternated; a cell gives the runs' values separated by ' ; '.\n"
         f"CPU: {cpu}; 1-minute load average at the end: {load:.2f} on 2 cores (shared machine).\n\n"
         + table + "\n\n" + NOTES)
+    log.finish(f"wrote {OUT}")
 
 
 if __name__ == "__main__":

@@ -33,6 +33,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from bench_progress import add_quiet_argument, case_log  # noqa: E402
 
 from rfi_monitor.classifier import CHIRP, CW, NONE, WIDEBAND  # noqa: E402
 from rfi_monitor.if_measurement import measure_if  # noqa: E402
@@ -200,7 +201,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--print-only", action="store_true",
                     help="print the tables only (no figures, docs/ left unchanged), e.g. to compare a change")
+    add_quiet_argument(ap)
     args = ap.parse_args()
+    log = case_log(__file__, total=14, quiet=args.quiet)  # 2 + 5 + 5 table rows, confusion matrix, real captures
     write = not args.print_only
     OUT.mkdir(parents=True, exist_ok=True)
     md = ["# Kang et al. reproduction (benchmarks/rfi_monitor_paper.py)", ""]
@@ -214,6 +217,7 @@ def main() -> None:
         pe = _period_errors(rs)
         md.append(f"| {label} | {jn:.1f} | {med['KF']:.4f} | {med['AKF']:.4f} | {med['proposed']:.4f} | "
                   f"{med['ours']:.4f} | {med['AFKF + true resets']:.4f} | {pe} |")
+        log.done(f"J/S 30 dB, noise {label}")
     # 2. RMSE vs J/S (J/N on the 2 MHz reading: J/N = J/S - 18.8 dB)
     md += ["", "## RMSE vs J/S (noise over 2 MHz: J/N = J/S - 18.8 dB), sweep 1e12 Hz/s, median of 3 seeds", "",
            "| J/S dB | J/N dB | KF | AKF | proposed (paper method) | ours | AFKF + true resets "
@@ -227,6 +231,7 @@ def main() -> None:
         curve.append((jn, med))
         md.append(f"| {js} | {jn:.1f} | {med['KF']:.4f} | {med['AKF']:.4f} | {med['proposed']:.4f} | "
                   f"{med['ours']:.4f} | {med['AFKF + true resets']:.4f} | {pe} |")
+        log.done(f"J/S {js} dB")
     # 3. sweep rates at J/N 11.2 dB
     md += ["", "## RMSE vs sweep rate (J/N 11.2 dB, symmetric sweep 0.1832..0.3168), median of 3 seeds", "",
            "| rate Hz/s | period us | KF | AKF | proposed (paper method) | ours | AFKF + true resets "
@@ -238,11 +243,13 @@ def main() -> None:
         per_us = 2 * (9.548e6 - 0.1832 * FS) / rate * 1e6
         md.append(f"| {rate:.0e} | {per_us:.2f} | {med['KF']:.4f} | {med['AKF']:.4f} | {med['proposed']:.4f} | "
                   f"{med['ours']:.4f} | {med['AFKF + true resets']:.4f} | {pe} |")
+        log.done(f"sweep rate {rate:.0e} Hz/s")
     # 4. Fig. 4-like plot
     if write:
         _figures(curve)
     # 5. confusion matrix
     cm = confusion(50)
+    log.done("confusion matrix (200 cases)")
     names = ["NONE", "CW", "CHIRP", "WIDEBAND", "UNKNOWN"]
     md += ["", "## Confusion matrix (ours): 200 seeded cases, third 1 ms block "
            "(J/N uniform 3-20 dB, 2/4/8-bit, random parameters)", "",
@@ -256,10 +263,12 @@ def main() -> None:
            "", "| capture | blocks after calibration | false alarms | chirp detected | period us |",
            "|---|---|---|---|---|"]
     md += real_captures()
+    log.done("real captures")
     text = "\n".join(md)
-    print(text)
+    log.say(text)
     if write:
         (OUT / "paper_results.md").write_text(text + "\n")
+    log.finish(f"wrote {OUT / 'paper_results.md'}" if write else "--print-only: docs/ left unchanged")
 
 
 def _figures(curve: list) -> None:

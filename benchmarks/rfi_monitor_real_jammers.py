@@ -63,6 +63,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from bench_progress import CaseLog, add_quiet_argument, case_log
 from doc_paths import portable_path
 
 from rfi_sim.if_signal import (
@@ -582,7 +583,10 @@ def verdict(res: RowResult) -> str:
     return "**met**" if not bad else "not met: " + ", ".join(bad)
 
 
-def run(selected: Sequence[str], n_blocks: int | None, capture_blocks: int) -> tuple[list[RowResult], list[str]]:
+def run(selected: Sequence[str], n_blocks: int | None, capture_blocks: int,
+        log: CaseLog | None = None) -> tuple[list[RowResult], list[str]]:
+    """Every selected row scored; ``log`` gets a line per row (its verdict and time), default: a case log."""
+    log = log if log is not None else case_log(__file__)
     caps = load_captures()
     results = []
     sources = [f"{c.name}: {c.source}, {c.n_samples / c.sample_rate_hz * 1e3:.0f} ms" for c in caps]
@@ -601,10 +605,10 @@ def run(selected: Sequence[str], n_blocks: int | None, capture_blocks: int) -> t
                 ests, secs = run_stream(fe, blocks)
                 results.append(score(f"{row.name} ({cap.name})", fe, blocks, ests, secs))
                 r = results[-1]
-                print(f"{verdict(r):40s} {r.name}: {r.cells['type']}", file=sys.stderr)
+                log.done(f"{verdict(r):40s} {r.name}: {r.cells['type']}")
             continue
         r = results[-1]
-        print(f"{verdict(r):40s} {r.name}: {r.cells['type']}", file=sys.stderr)
+        log.done(f"{verdict(r):40s} {r.name}: {r.cells['type']}")
     return results, sources
 
 
@@ -687,14 +691,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--capture-blocks", type=int, default=45, help="blocks per real capture row")
     ap.add_argument("--monitor-from", default="", help="say where the measured rfi_monitor came from (e.g. a "
                     "`git archive` export of a commit), instead of its path and the tree's git state")
+    add_quiet_argument(ap)
     a = ap.parse_args(argv)
     t0 = time.time()
-    results, sources = run(a.rows, a.blocks, a.capture_blocks)
+    log = case_log(__file__, quiet=a.quiet)
+    results, sources = run(a.rows, a.blocks, a.capture_blocks, log)
     _, unknown = shipped_node_params()
     md = markdown(results, sources, unknown, time.time() - t0, a.monitor_from)
-    print(md)
+    log.say(md)
     if a.out is not None:
         a.out.write_text(md)
+    log.finish(f"wrote {a.out}" if a.out is not None else "no --out: nothing written")
     return 0
 
 

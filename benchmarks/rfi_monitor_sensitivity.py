@@ -52,6 +52,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_progress import CaseLog, add_quiet_argument, case_log  # noqa: E402  (next door)
 from doc_paths import portable_path  # noqa: E402  (the docs' path rule, next door)
 from rfi_monitor_real_jammers import (  # noqa: E402  (the benchmark next door: one copy of these)
     BLOCK_S,
@@ -241,7 +242,9 @@ def upper95(k: int, n: int) -> float:
     return float(beta.ppf(0.95, k + 1, n - k))
 
 
-def sweep(caps: Sequence[Source], grid: Sequence[float], trials: int) -> list[Curve]:
+def sweep(caps: Sequence[Source], grid: Sequence[float], trials: int, log: CaseLog | None = None) -> list[Curve]:
+    """The curves of every capture, jammer kind and method; ``log`` gets a line per curve (default: a case log)."""
+    log = log if log is not None else case_log(__file__)
     curves = []
     for cap in caps:
         fe = front_end_of(cap)
@@ -265,8 +268,8 @@ def sweep(caps: Sequence[Source], grid: Sequence[float], trials: int) -> list[Cu
                     c.latency_blocks.append(float(np.median(lats)))
                     c.all_trials_reported.append(every)
                 curves.append(c)
-                print(f"{cap.name:32s} {kind.name:9s} {method:6s} P(rep) " +
-                      " ".join(f"{p:.2f}" for p in c.p_reported), file=sys.stderr)
+                log.done(f"{cap.name:32s} {kind.name:9s} {method:6s} P(rep) " +
+                         " ".join(f"{p:.2f}" for p in c.p_reported))
     return curves
 
 
@@ -403,6 +406,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="smoke run: 3 J/N points, 1 trial, first 40 ms of captures")
     ap.add_argument("--monitor-from", default="", help="say where the measured rfi_monitor came from (e.g. a "
                     "`git archive` export of a commit), instead of its path and the tree's git state")
+    add_quiet_argument(ap)
     a = ap.parse_args(argv)
     t0 = time.time()
     # the GNSS-SDR capture (4 ms) is too short for trials; the simulated 8-bit front end shows the same
@@ -416,7 +420,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         grid, trials = (-5.0, 0.0, 6.0), 1
         fa_caps = [dataclasses.replace(c, counts=c.counts[:(2 if c.is_complex else 1) * int(c.sample_rate_hz * 0.04)])
                    for c in fa_caps]
-    curves = sweep(caps, grid, trials)
+    log = case_log(__file__, total=len(caps) * len(KINDS) * len(METHODS) + 2 * len(METHODS), quiet=a.quiet)
+    curves = sweep(caps, grid, trials, log)
     fa = {}
     fa_notes: dict[tuple[str, str], list[str]] = {}
     for method in METHODS:
@@ -424,7 +429,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             k, n, notes = false_alarms(fa_caps, method, bs)
             fa[(method, label)] = (k, n)
             fa_notes[(method, label)] = notes
-            print(f"false alarms {method} {label}: {k}/{n} ({'; '.join(notes)})", file=sys.stderr)
+            log.done(f"false alarms {method} {label}: {k}/{n} ({'; '.join(notes)})")
     goal_lines = goals(curves, fa)
     goal_lines += ["", "False alarms per capture (false / counted blocks; types):", ""]
     goal_lines += [f"- {m}, {'1 ms' if lab == '1ms' else '1024-sample'} blocks: " + "; ".join(v)
@@ -433,9 +438,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if a.out is not None:
         figure(curves, a.out.parent / fig_name)
     md = markdown(curves, goal_lines, fa_caps, fig_name, time.time() - t0, trials, a.monitor_from)
-    print(md)
+    log.say(md)
     if a.out is not None:
         a.out.write_text(md)
+    log.finish(f"wrote {a.out} and {a.out.parent / fig_name}" if a.out is not None else "no --out: nothing written")
     return 0
 
 

@@ -9,6 +9,8 @@ shared, and wall-clock time would count the time other processes hold the core. 
 
     PYTHONPATH=src/gnss_common:src/rfi_monitor:src/rfi_experiments python benchmarks/rfi_monitor_speed.py
 
+``--quiet`` (``-q``): no progress lines (one per phase on stderr), no tables and no summary on stdout.
+
 ``--stages``: only the stage table of issue 26 item 2 (rfi_monitor_stages.py, the tree against STAGES_BASELINE),
 written into its section of docs/rfi_monitor/speed.md (about 10 minutes).
 """
@@ -26,6 +28,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from bench_progress import case_log
 
 from rfi_monitor.classifier import ClassifierParams, block_features
 from rfi_monitor.if_measurement import measure_if
@@ -435,12 +438,16 @@ def main() -> None:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     except (AttributeError, OSError):
         pass
+    stages_only = "--stages" in sys.argv[1:]
+    log = case_log(__file__, total=1 if stages_only else 3 + LIVE_RUNS)
     section = stage_section(stage_measurements())
-    print(section)
-    if "--stages" in sys.argv[1:]:
+    log.done("stage table")
+    log.say(section)
+    if stages_only:
         write_stage_section(section)
+        log.finish(f"wrote the stage section of {OUT / 'speed.md'}")
         return
-    runs = [live_stream_rows() for _ in range(LIVE_RUNS)]
+    runs = [live_stream_rows() for _ in log.cases_of(range(LIVE_RUNS), lambda k: f"live-stream rows, run {k + 1}")]
     rows = [(runs[0][i][0], float(np.median([r[i][1] for r in runs]))) for i in range(len(runs[0]))]
     ref_rate = math.nan
     for name, fe in (("real IF 38.192 MS/s", FrontEndConfig(noise_density_dbm_per_mhz=-124.0)),
@@ -493,11 +500,12 @@ def main() -> None:
                     mon = RfiMonitor(p)
                     mon._run_tracker(x, False, 0, False)
                 rows.append((f"fused per-sample loop only ({label}, one call)", _median_rate(loop, x.size)))
+        log.done(f"rows of the {name} front end")
     lines = ["| stage | MS/s | real-time factor vs 38.192 MS/s | ratio to the fading KF alone |", "|---|---|---|---|"]
     for name, r in rows:
         lines.append(f"| {name} | {r / 1e6:.1f} | {r / PAPER_FS:.2f} | {r / ref_rate:.2f} |")
     table = "\n".join(lines)
-    print(table)
+    log.say(table)
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "speed.md").write_text(
@@ -526,6 +534,7 @@ def main() -> None:
         + "\n" + RIDGE_SPEEDUP
         + "\n" + NOT_KEPT)
     write_stage_section(section)
+    log.finish(f"wrote {OUT / 'speed.md'}")
 
 
 def real_time_verdict(rows: list[tuple[str, float]]) -> str:

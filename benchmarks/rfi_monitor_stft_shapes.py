@@ -4,7 +4,7 @@ Each case: 5 blocks of 1 ms, the jammer on from the first sample (no clean start
 noise, the generator of src/rfi_monitor/test/test_stft_estimator.py (exact closed-form frequency law).
 Writes docs/rfi_monitor/stft_shapes.md. Run:
 
-    PYTHONPATH=src/rfi_monitor:src/rfi_monitor/test python benchmarks/rfi_monitor_stft_shapes.py
+    PYTHONPATH=src/rfi_monitor:src/rfi_monitor/test python benchmarks/rfi_monitor_stft_shapes.py [--quiet]
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+from bench_progress import case_log
 from test_stft_estimator import CASES, jammed, run, sweep_frequency
 
 from rfi_monitor.classifier import CHIRP
@@ -24,6 +25,7 @@ SEEDS = (11, 12, 13)
 
 
 def main() -> None:
+    log = case_log(__file__, total=len(CASES) * len(JN_DB))  # -q/--quiet: no progress line, no table, no summary
     lines = ["| case | J/N dB | CHIRP blocks | periods published | max period error % | shapes reported "
              "| median J/N dB | swept band MHz (true) | block-end frequency RMS error kHz |",
              "|---|---|---|---|---|---|---|---|---|"]
@@ -52,7 +54,8 @@ def main() -> None:
                          f"{max(per) if per else math.nan:.3f} | {', '.join(shapes)} | "
                          f"{np.median([e.jammer_to_noise_db for e in ests]):.1f} | "
                          f"{np.median(bw) / 1e6 if bw else math.nan:.2f} ({(hi - lo) / 1e6:.2f}) | {rms:.0f} |")
-            print(lines[-1], flush=True)
+            log.done(f"{name}, J/N {jn:.0f} dB")
+            log.say(lines[-1])
     OUT.write_text(
         "# The stft estimator across sweep shapes, sample rates and J/N\n\n"
         "From `benchmarks/rfi_monitor_stft_shapes.py`: 5 blocks of 1 ms per seed, seeds 11-13, the jammer on\n"
@@ -62,6 +65,7 @@ def main() -> None:
         "sweep. Periods published: CHIRP blocks with a sweep period (a block below the detection J/N publishes\n"
         "its period only when the evidence over blocks found the same; the max period error is over those).\n\n"
         + "\n".join(lines) + "\n")
+    log.finish(f"wrote {OUT}")
 
 
 if __name__ == "__main__":

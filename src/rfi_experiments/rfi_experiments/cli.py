@@ -1,7 +1,7 @@
 """What the command-line tools of rfi_experiments share: exit codes and the one-line error report.
 
-Every tool (play, record, run, simulate, rinex_to_bag, uwb_dataset_to_bag) reports a refused input
-as ``<prog>: error: <message>`` on stderr, on one line, and exits with :data:`EXIT_USAGE`; a run
+Every tool (play, record, run, simulate, if_to_bag, rinex_to_bag, ubx_to_bag, uwb_dataset_to_bag) reports a
+refused input as ``<prog>: error: <message>`` on stderr, on one line, and exits with :data:`EXIT_USAGE`; a run
 that started but failed exits with :data:`EXIT_FAILED`.
 """
 
@@ -16,6 +16,8 @@ from collections.abc import Callable, Sequence
 from functools import partial
 from pathlib import Path
 from typing import Any
+
+from rfi_experiments.progress import add_quiet_argument, summary_printer
 
 EXIT_FAILED = 1
 """Exit code of a run that started but failed (a node died, messages were lost)."""
@@ -86,6 +88,9 @@ def run_converter(parser: argparse.ArgumentParser, argv: Sequence[str] | None, r
                   summary: Callable[[argparse.Namespace, Any], Sequence[str]]) -> int:
     """A converter's ``main``: :func:`converter_start`, then ``convert(args, out)``, then the summary.
 
+    The parser gets ``-q/--quiet`` here (:func:`rfi_experiments.progress.add_quiet_argument`): ``convert``
+    shows its progress line only without it (``args.quiet``), and the summary is printed only without it.
+
     Args:
         parser, argv, report: as :func:`converter_start` (``report`` prints a one-line error and returns
             the exit code).
@@ -97,6 +102,7 @@ def run_converter(parser: argparse.ArgumentParser, argv: Sequence[str] | None, r
     Returns:
         0, or the exit code of argparse, ``report`` or ``convert``.
     """
+    add_quiet_argument(parser)
     start = converter_start(parser, argv, report)
     if isinstance(start, int):  # --help (0), a usage error (2, argparse printed it) or an existing output
         return start
@@ -107,9 +113,10 @@ def run_converter(parser: argparse.ArgumentParser, argv: Sequence[str] | None, r
         return report(str(err))
     if isinstance(result, int):
         return result
-    print(f"{parser.prog}: wrote {out}")
+    say = summary_printer(args.quiet)
+    say(f"{parser.prog}: wrote {out}")
     for line in summary(args, result):
-        print(line)
+        say(line)
     return 0
 
 

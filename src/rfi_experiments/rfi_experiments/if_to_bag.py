@@ -30,6 +30,7 @@ from rfi_experiments.if_formats import (
     parse_start_time,
 )
 from rfi_experiments.if_source import FORMAT_FIELDS, IfSourceParams, block_message
+from rfi_experiments.progress import ProgressLine
 
 PROG = 'if_to_bag'
 _fail = cli.error_reporter(PROG)
@@ -83,8 +84,11 @@ def _bool(text: str) -> bool:
 
 def convert(input_path: str, out: str | Path, fmt: IfFormat, block_duration_s: float, start_ns: int, *,
             frame_id: str = 'gnss_front_end', overwrite: bool = False, max_duration_s: float = 0.0,
-            stdin: object = None) -> BlockAssembler:
+            stdin: object = None, progress: ProgressLine | None = None) -> BlockAssembler:
     """Write the blocks of ``input_path`` ('-': ``stdin``, a binary stream) to the bag ``out``.
+
+    ``progress``, if given, gets its total (the blocks to write; unknown for ``stdin``) and one count per
+    block, and is closed at the end.
 
     Returns:
         The assembler, whose ``counters`` say what was written and what was left over.
@@ -101,13 +105,22 @@ def convert(input_path: str, out: str | Path, fmt: IfFormat, block_duration_s: f
         stream = stdin if stdin is not None else sys.stdin.buffer
         blocks = _stream_blocks(stream, asm)
     else:
-        check_file_size(input_path, fmt, block_samples)  # before the bag exists: a refused input leaves nothing
+        size = check_file_size(input_path, fmt, block_samples)  # before the bag exists: a refused input leaves nothing
         blocks = iter_file_blocks(input_path, fmt, block_samples, start_ns, asm, READ_BYTES)
-    with BagWriter(out, overwrite=overwrite) as bag:
-        for n, block in enumerate(blocks, 1):
-            bag.write(IF_TOPIC, block_message(block, fmt, frame_id), block.stamp_ns)
-            if max_blocks and n >= max_blocks:
-                break
+        if progress is not None:
+            in_file = size // fmt.chunk_bytes * fmt.chunk_samples // block_samples
+            progress.total = min(in_file, max_blocks) if max_blocks else in_file
+    try:
+        with BagWriter(out, overwrite=overwrite) as bag:
+            for n, block in enumerate(blocks, 1):
+                bag.write(IF_TOPIC, block_message(block, fmt, frame_id), block.stamp_ns)
+                if progress is not None:
+                    progress.update(1)
+                if max_blocks and n >= max_blocks:
+                    break
+    finally:
+        if progress is not None:
+            progress.close()
     return asm
 
 
@@ -126,8 +139,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _convert(args: argparse.Namespace, out: Path) -> tuple[IfFormat, BlockAssembler]:
     fmt = IfFormat(**{name: getattr(args, name) for name in FORMAT_FIELDS})
     start_ns = parse_start_time(args.start_time)
+    progress = ProgressLine(f'if_to_bag {Path(args.input).name}', unit='block', enabled=not args.quiet)
     return fmt, convert(args.input, out, fmt, args.block_duration_s, start_ns, frame_id=args.frame_id,
-                        overwrite=args.overwrite, max_duration_s=args.max_duration_s)
+                        overwrite=args.overwrite, max_duration_s=args.max_duration_s, progress=progress)
 
 
 def _summary(args: argparse.Namespace, result: tuple[IfFormat, BlockAssembler]) -> list[str]:

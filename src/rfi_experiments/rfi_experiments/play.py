@@ -42,12 +42,13 @@ import argparse
 import math
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 from rfi_experiments.bag_io import BagError, BagReader, message_class
 from rfi_experiments.cli import bounded_teardown, error_reporter, exit_now, release_endpoints
+from rfi_experiments.progress import ProgressLine, add_quiet_argument, summary_printer
 
 fail = error_reporter('play')
 
@@ -88,7 +89,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--sync-timeout', type=float, default=10.0, metavar='SECONDS',
                         help='longest wait for an answer on OUT; an input left unanswered (a rejected one) is '
                              'counted and reported (default 10)')
-    parser.add_argument('--no-progress', action='store_true', help='no progress bar')
+    parser.add_argument('--no-progress', action='store_true', help='no progress line')
+    add_quiet_argument(parser)
     return parser
 
 
@@ -347,10 +349,7 @@ def main(argv: Sequence[str] | None = None, *, teardown: bool = True) -> int:
                 reliable, best_effort = subscribers_by_reliability(node, p.topic_name)
                 delivery[t].reliable |= reliable
                 delivery[t].best_effort |= best_effort
-            progress = None
-            if not args.no_progress:
-                from tqdm import tqdm
-                progress = tqdm(total=total, unit='msg', desc='play', file=sys.stderr, mininterval=0.5)
+            progress = ProgressLine('play', total, 'msg', enabled=not (args.no_progress or args.quiet))
             wall_start = time.monotonic()
             bag_start = None
             for message in reader.messages(topics, start_ns=start_ns, stop_ns=stop_ns):
@@ -380,10 +379,8 @@ def main(argv: Sequence[str] | None = None, *, teardown: bool = True) -> int:
                         unanswered[message.topic] += 1
                 elif fusion or watching:
                     executor.spin_once(timeout_sec=0)  # keep up with /fusion/status and /diagnostics
-                if progress is not None:
-                    progress.update(1)
-            if progress is not None:
-                progress.close()
+                progress.update(1)
+            progress.close()
             unacked = [t for t, p in publishers.items()
                        if p.get_subscription_count() > 0 and not p.wait_for_all_acked(
                            rclpy.duration.Duration(seconds=args.ack_timeout))]
@@ -395,8 +392,9 @@ def main(argv: Sequence[str] | None = None, *, teardown: bool = True) -> int:
                 end = time.monotonic() + 0.5
                 while time.monotonic() < end:
                     executor.spin_once(timeout_sec=0.05)
-            print_summary(topics, available, delivery, sync, unanswered, args.sync_timeout, fusion)
-            print_receipts(delivery, reports, unacked)
+            say = summary_printer(args.quiet)
+            print_summary(topics, available, delivery, sync, unanswered, args.sync_timeout, fusion, say)
+            print_receipts(delivery, reports, unacked, say)
             if unacked:
                 print(f'play: warning: not acknowledged by every subscriber within {args.ack_timeout} s: '
                       f'{", ".join(unacked)}', file=sys.stderr)
@@ -417,17 +415,18 @@ def main(argv: Sequence[str] | None = None, *, teardown: bool = True) -> int:
 
 def print_summary(topics: Sequence[str], available: dict[str, tuple[str, int]], delivery: dict[str, Delivery],
                   sync: dict[str, str], unanswered: dict[str, int], sync_timeout: float,
-                  fusion: dict[str, int]) -> None:
-    """The table per topic (published, subscribers, to nobody), then the warnings."""
+                  fusion: dict[str, int], say: Callable[..., None] = print) -> None:
+    """The table per topic (published, subscribers, to nobody) through ``say`` (stdout; nothing with --quiet),
+    then the warnings (stderr, always)."""
     width = max(len(t) for t in topics)
-    print(f'{"topic":<{width}}  {"type":<34} {"published":>9} {"subscribers":>11} {"to nobody":>9}')
+    say(f'{"topic":<{width}}  {"type":<34} {"published":>9} {"subscribers":>11} {"to nobody":>9}')
     for t in topics:
         d = delivery[t]
-        print(f'{t:<{width}}  {available[t][0]:<34} {d.published:>9} {d.subscribers:>11} {d.to_nobody:>9}')
-    print(f'{"total":<{width}}  {"":<34} {sum(d.published for d in delivery.values()):>9} {"":>11} '
+        say(f'{t:<{width}}  {available[t][0]:<34} {d.published:>9} {d.subscribers:>11} {d.to_nobody:>9}')
+    say(f'{"total":<{width}}  {"":<34} {sum(d.published for d in delivery.values()):>9} {"":>11} '
           f'{sum(d.to_nobody for d in delivery.values()):>9}')
     for inp, n in unanswered.items():
-        print(f'sync {inp} -> {sync[inp]}: {delivery[inp].published - n} answered, {n} not within {sync_timeout:g} s')
+        say(f'sync {inp} -> {sync[inp]}: {delivery[inp].published - n} answered, {n} not within {sync_timeout:g} s')
     nobody = {t: d.to_nobody for t, d in delivery.items() if d.to_nobody}
     if nobody:
         print('play: warning: messages published while no subscriber was matched (lost): '
@@ -445,22 +444,23 @@ def print_summary(topics: Sequence[str], available: dict[str, tuple[str, int]], 
               'the replay; play at a lower --rate, or raise the node\'s reorder_window_s', file=sys.stderr)
 
 
-def print_receipts(delivery: dict[str, Delivery], reports: InputReports, unacked: Sequence[str]) -> None:
+def print_receipts(delivery: dict[str, Delivery], reports: InputReports, unacked: Sequence[str],
+                   say: Callable[..., None] = print) -> None:
     """Per topic: how many messages were sent and to whom, acknowledged or not, and what the subscribers'
-    /diagnostics said they received and lost (a reported loss is a warning)."""
+    /diagnostics said they received and lost, through ``say`` (a reported loss is a warning, on stderr always)."""
     for t, d in delivery.items():
         if d.reliable:
             acked = ('not every message acknowledged' if t in unacked else
                      'every message acknowledged (a subscriber that falls more than its queue depth behind drops '
                      f'the oldest and counts them: input.{t}.lost in its /diagnostics)')
-            print(f'delivery {t}: {d.published} sent; reliable subscribers {", ".join(sorted(d.reliable))}: {acked}')
+            say(f'delivery {t}: {d.published} sent; reliable subscribers {", ".join(sorted(d.reliable))}: {acked}')
         if d.best_effort:
-            print(f'delivery {t}: {d.published} sent; best-effort subscribers {", ".join(sorted(d.best_effort))}: '
+            say(f'delivery {t}: {d.published} sent; best-effort subscribers {", ".join(sorted(d.best_effort))}: '
                   'not acknowledged')
         for (name, topic), (received, lost) in sorted(reports.items()):
             if topic != t:
                 continue
-            print(f'delivery {t}: {name} reported (last /diagnostics) {received} received, {lost} lost '
+            say(f'delivery {t}: {name} reported (last /diagnostics) {received} received, {lost} lost '
                   '(by its last report seen during the play; it may still be taking the rest)')
             if lost:
                 print(f'play: warning: {t}: {name} reports {lost} messages lost before reaching it '

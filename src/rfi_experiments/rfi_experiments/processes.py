@@ -412,12 +412,13 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
         play_cmd += [f'--sync={inp}:{out}' for _, inp, out in SYNCED if inp in inputs]
         subscribers = {t: sum(t in subscribes for subscribes, _ in NODE_ENDPOINTS.values()) for t in inputs}
         play_cmd += [f'--expect-subscribers={t}:{n}' for t, n in subscribers.items()]
-        if args.no_progress:
+        quiet = args.no_progress or args.quiet  # play's summary goes to its log either way
+        if quiet:
             play_cmd.append('--no-progress')
         moved = namespace_arguments(namespace, sorted(set(inputs) | set(OUTPUT_TYPES)))
         play_cmd += ['--ros-args', *moved, '--'] if moved else []
         play_cmd += forwarded
-        player = children.start('play', play_cmd, stderr_to_terminal=not args.no_progress)
+        player = children.start('play', play_cmd, stderr_to_terminal=not quiet)
         while player.poll() is None:
             executor.spin_once(timeout_sec=0.05)
             children.check_alive(node_names)

@@ -63,6 +63,7 @@ from gnss_common.rinex import SYSTEM_NAMES, RinexFormatError, read_rinex_navs, r
 from rfi_experiments import cli
 from rfi_experiments.bag_io import BagError, BagWriter
 from rfi_experiments.cli import error_reporter
+from rfi_experiments.progress import ProgressLine
 from rfi_node_common.conversions import epoch_to_msg, point_to_msg
 
 PROG = "rinex_to_bag"
@@ -162,6 +163,7 @@ def convert_rinex(
     nav_path: str | Path | Sequence[str | Path],
     elevation_mask_deg: float = 0.0,
     constellations: Sequence[str] = SUPPORTED_SYSTEMS,
+    progress: ProgressLine | None = None,
 ) -> RinexConversion:
     """Read a RINEX observation file and its navigation file(s) and build every epoch.
 
@@ -171,6 +173,8 @@ def convert_rinex(
         elevation_mask_deg: satellites below this elevation, deg, in [-90, 90], are dropped.
         constellations: RINEX system letters to convert (of
             :data:`gnss_common.measurements.SUPPORTED_SYSTEMS`); the others are skipped and counted.
+        progress: if given, gets the number of epochs as its total and one count per epoch built (the
+            slow part: satellite positions), and is closed at the end.
 
     Returns:
         :class:`RinexConversion`.
@@ -197,7 +201,9 @@ def convert_rinex(
     codes: dict[str, dict[str, int]] = {}
     epochs = []
     without_ref = 0
-    for rinex_epoch in obs.epochs:
+    if progress is not None:
+        progress.total = len(obs.epochs)
+    for rinex_epoch in (obs.epochs if progress is None else progress.iterate(obs.epochs)):
         result = builder.build(rinex_epoch)
         for reason, n in result.skipped.items():
             skipped[reason] = skipped.get(reason, 0) + n
@@ -311,7 +317,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _convert(args: argparse.Namespace, out: Path) -> tuple[RinexConversion, dict[str, int]]:
-    conversion = convert_rinex(args.obs, args.nav, args.elevation_mask_deg, args.constellations)
+    conversion = convert_rinex(args.obs, args.nav, args.elevation_mask_deg, args.constellations,
+                               progress=ProgressLine(f'rinex_to_bag {Path(args.obs).name}', unit='epoch',
+                                                     enabled=not args.quiet))
     return conversion, write_bag(conversion, out, overwrite=args.overwrite)
 
 

@@ -55,6 +55,7 @@ from rfi_experiments.processes import (
     ros_arguments,
     run_processes,
 )
+from rfi_experiments.progress import ProgressLine, add_quiet_argument, summary_printer
 
 fail = error_reporter('run')
 
@@ -107,7 +108,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--no-report', action='store_true',
                         help='write only replay.md (counts, diagnostics) and --record-outputs, no figures or scores '
                              '(index.md, summary.json): about 10 s less per run')
-    parser.add_argument('--no-progress', action='store_true', help='no progress bar')
+    parser.add_argument('--no-progress', action='store_true', help='no progress line')
+    add_quiet_argument(parser)
     return parser
 
 
@@ -307,25 +309,26 @@ def main(argv: Sequence[str] | None = None) -> int:
         lines += ['', f'## Diagnostics of {name}', '', '| key | value |', '|---|---|']
         lines += [f'| {k} | {v} |' for k, v in values.items()]
     (out / 'replay.md').write_text('\n'.join(lines) + '\n')
+    say = summary_printer(args.quiet)  # the warnings are on stderr already
     if args.no_report:
-        print(replay_line)
+        say(replay_line)
         for warning in warnings:
-            print(f'warning: {warning}')
-        print(f'counts and diagnostics written to {out / "replay.md"} (--no-report: no figures, no scores)')
+            say(f'warning: {warning}')
+        say(f'counts and diagnostics written to {out / "replay.md"} (--no-report: no figures, no scores)')
         return 0
     start = time.monotonic()
     header = replay_line + ' Counts and diagnostics: [replay.md](replay.md).'
     if warnings:
         header += ''.join(f'\n\n**Warning**: {w}.' for w in warnings)
     summary = write_report(args.bag, outputs, out, window_ns=replayed_ns, header=header)
-    print(replay_line)
-    print()
-    print(summary.table())
-    print()
+    say(replay_line)
+    say()
+    say(summary.table())
+    say()
     for warning in warnings:
-        print(f'warning: {warning}')
-    print(f'report written to {out / "index.md"} and {out / "index.html"} (figures and tables; evaluation took '
-          f'{time.monotonic() - start:.1f} s)')
+        say(f'warning: {warning}')
+    say(f'report written to {out / "index.md"} and {out / "index.html"} (figures and tables; evaluation took '
+        f'{time.monotonic() - start:.1f} s)')
     return 0
 
 
@@ -370,17 +373,10 @@ def run_in_process(args: argparse.Namespace, argv: Sequence[str], inputs: list[s
                 n_inputs = sum(1 for _ in reader.messages(inputs, start_ns=start_ns, stop_ns=stop_ns))
         else:
             n_inputs = sum(topics[t][1] for t in inputs)
-        progress = None
-        if not args.no_progress:
-            from tqdm import tqdm
-            progress = tqdm(total=n_inputs, unit='msg', desc=f'replay {Path(args.bag).name}', file=sys.stderr,
-                            mininterval=0.5)
-        try:
+        with ProgressLine(f'replay {Path(args.bag).name}', n_inputs, 'msg',
+                          enabled=not (args.no_progress or args.quiet)) as progress:
             result = harness.run(args.bag, topics=inputs, rate=args.rate, window_s=harness_window,
-                                 progress=(lambda done, _total: progress.update(1)) if progress else None)
-        finally:
-            if progress is not None:
-                progress.close()
+                                 progress=lambda done, _total: progress.set_done(done))
         harness.destroy()
         return result
     finally:

@@ -53,6 +53,7 @@ from pathlib import Path
 from typing import Any
 
 from rfi_experiments.bag_io import BagWriter
+from rfi_experiments.progress import ProgressLine
 from rfi_experiments.schema import JAMMING_TYPES, ScenarioError, number, parse_phases
 
 
@@ -280,23 +281,25 @@ def scenario_messages(scenario: Scenario) -> Iterator[tuple[int, str, Any]]:
 
 
 def write_scenario_bag(scenario: Scenario, out: Path, *, overwrite: bool = False,
-                       progress: bool = False) -> dict[str, int]:
-    """Simulate every stream of ``scenario`` and write them, merged by stamp, to the bag ``out``."""
-    messages = scenario_messages(scenario)
-    bar = None
-    if progress:
-        import sys
+                       progress: ProgressLine | None = None) -> dict[str, int]:
+    """Simulate every stream of ``scenario`` and write them, merged by stamp, to the bag ``out``.
 
-        from tqdm import tqdm
-        bar = tqdm(total=round(scenario.duration_s), unit='s', desc=f'simulate {scenario.name}', file=sys.stderr)
-    with BagWriter(out, overwrite=overwrite) as bag:
-        first = None
-        for stamp_ns, topic, message in messages:
-            bag.write(topic, message, stamp_ns)
-            if bar is not None:
-                first = stamp_ns if first is None else first
-                bar.update(max(0, round((stamp_ns - first) * 1e-9) - bar.n))
-        counts = dict(bag.counts)
-    if bar is not None:
-        bar.close()
+    ``progress``, if given, gets the scenario's whole seconds as its total, is moved to the seconds of data
+    written, and is closed at the end.
+    """
+    messages = scenario_messages(scenario)
+    if progress is not None:
+        progress.total = round(scenario.duration_s)
+    try:
+        with BagWriter(out, overwrite=overwrite) as bag:
+            first = None
+            for stamp_ns, topic, message in messages:
+                bag.write(topic, message, stamp_ns)
+                if progress is not None:
+                    first = stamp_ns if first is None else first
+                    progress.set_done(max(progress.done, round((stamp_ns - first) * 1e-9)))
+            counts = dict(bag.counts)
+    finally:
+        if progress is not None:
+            progress.close()
     return counts

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from rfi_experiments.bag_io import BagError
 from rfi_experiments.cli import error_reporter
+from rfi_experiments.progress import ProgressLine, add_quiet_argument, summary_printer
 from rfi_experiments.scenario import ScenarioError, load_scenario, scenario_path, write_scenario_bag
 
 fail = error_reporter('simulate')
@@ -28,7 +29,8 @@ def build_parser() -> argparse.ArgumentParser:
                                          '(e.g. "default")')
     parser.add_argument('out', help='bag directory to write')
     parser.add_argument('--overwrite', action='store_true', help='replace an existing bag')
-    parser.add_argument('--no-progress', action='store_true', help='no progress bar')
+    parser.add_argument('--no-progress', action='store_true', help='no progress line')
+    add_quiet_argument(parser)
     return parser
 
 
@@ -38,14 +40,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         path = scenario_path(args.scenario)
         scenario = load_scenario(path)
-        counts = write_scenario_bag(scenario, Path(args.out), overwrite=args.overwrite,
-                                    progress=not args.no_progress)
+        progress = ProgressLine(f'simulate {scenario.name}', unit='s', enabled=not (args.no_progress or args.quiet))
+        counts = write_scenario_bag(scenario, Path(args.out), overwrite=args.overwrite, progress=progress)
     except (ScenarioError, BagError) as err:
         return fail(err)
+    say = summary_printer(args.quiet)
     width = max((len(t) for t in counts), default=5)
     for topic, n in sorted(counts.items()):
-        print(f'{topic:<{width}}  {n:>8}')
-    print(f'simulate: wrote {sum(counts.values())} messages to {args.out}')
+        say(f'{topic:<{width}}  {n:>8}')
+    say(f'simulate: wrote {sum(counts.values())} messages to {args.out}')
     return 0
 
 

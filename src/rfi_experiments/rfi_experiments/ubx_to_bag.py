@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -32,6 +33,7 @@ from gnss_common.rinex import RinexFormatError, read_rinex_nav
 from rfi_experiments import cli
 from rfi_experiments.bag_io import BagError, BagWriter
 from rfi_experiments.cli import error_reporter
+from rfi_experiments.progress import ProgressLine
 from rfi_experiments.ubx_decode import EpochOutput, InterferenceReport, SpectrumReport, UbxDecoder, UbxDecoderParams
 
 PROG = "ubx_to_bag"
@@ -81,12 +83,19 @@ def make_decoder(
     return UbxDecoder(params, ephs, alpha, beta, ref)
 
 
-def convert_ubx(ubx_path: str | Path, decoder: UbxDecoder) -> UbxConversion:
-    """Decode a whole UBX log with ``decoder``."""
+def convert_ubx(ubx_path: str | Path, decoder: UbxDecoder, progress: ProgressLine | None = None) -> UbxConversion:
+    """Decode a whole UBX log with ``decoder``. ``progress``, if given, counts the log's kB read (its size the
+    total) and is closed at the end."""
     epochs: list[EpochOutput] = []
     reports: list[InterferenceReport] = []
     spectra: list[SpectrumReport] = []
+    if progress is not None:
+        progress.total = os.stat(ubx_path).st_size // 1024
+    read_bytes = 0
     for chunk in read_chunks(ubx_path):
+        read_bytes += len(chunk)
+        if progress is not None:
+            progress.set_done(read_bytes // 1024)
         for item in decoder.feed(chunk):
             if isinstance(item, EpochOutput):
                 epochs.append(item)
@@ -95,6 +104,8 @@ def convert_ubx(ubx_path: str | Path, decoder: UbxDecoder) -> UbxConversion:
             else:
                 reports.append(item)
     decoder.finish()
+    if progress is not None:
+        progress.close()
     return UbxConversion(tuple(epochs), tuple(reports), decoder, tuple(spectra))
 
 
@@ -190,7 +201,8 @@ def _convert(args: argparse.Namespace, out: Path) -> tuple[UbxDecoder, dict[str,
                               use_receiver_std=not args.no_receiver_std,
                               publish_without_ephemeris=not args.skip_without_ephemeris)
     decoder = make_decoder(args.nav, args.reference_position, params)
-    conversion = convert_ubx(args.ubx, decoder)
+    conversion = convert_ubx(args.ubx, decoder, ProgressLine(f"ubx_to_bag {Path(args.ubx).name}", unit="kB",
+                                                             enabled=not args.quiet))
     if not conversion.epochs and not conversion.interference and not conversion.spectra:
         return _fail(f"{args.ubx}: nothing to write (no RXM-RAWX epoch to write, no interference report or "
                      f"spectrum; {decoder.counts['frames']} valid UBX frames, "

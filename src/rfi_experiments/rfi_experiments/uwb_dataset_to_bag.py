@@ -75,6 +75,7 @@ from gnss_common.observations import UwbRangeMeasurement
 from rfi_experiments import cli
 from rfi_experiments.bag_io import BagError, BagWriter
 from rfi_experiments.cli import error_reporter
+from rfi_experiments.progress import ProgressLine
 from rfi_node_common.conversions import point_to_msg, uwb_to_msg
 
 PROG = "uwb_dataset_to_bag"
@@ -455,7 +456,7 @@ def uwb_measurements(
 
 
 def write_case_bag(case: HanyangCase, out: str | Path, *, overwrite: bool = False,
-                   range_std_m: float = math.nan) -> dict[str, int]:
+                   range_std_m: float = math.nan, progress: ProgressLine | None = None) -> dict[str, int]:
     """Write one case to a bag, all topics merged in stamp order (log time = header stamp).
 
     Args:
@@ -463,6 +464,8 @@ def write_case_bag(case: HanyangCase, out: str | Path, *, overwrite: bool = Fals
         out: bag directory to create.
         overwrite: replace an existing bag.
         range_std_m: 1-sigma of every UWB range, m, > 0 or NaN.
+        progress: if given, gets the number of messages as its total and one count per message written,
+            and is closed at the end.
 
     Returns:
         Topic -> messages written.
@@ -485,8 +488,10 @@ def write_case_bag(case: HanyangCase, out: str | Path, *, overwrite: bool = Fals
             items.append((int(stamp), order[topic], seq, topic, point_to_msg(int(stamp), xyz, MAP_FRAME_ID)))
             seq += 1
     items.sort(key=lambda it: it[:3])
+    if progress is not None:
+        progress.total = len(items)
     with BagWriter(out, overwrite=overwrite) as bag:
-        for stamp, _, _, topic, msg in items:
+        for stamp, _, _, topic, msg in (items if progress is None else progress.iterate(items)):
             bag.write(topic, msg, stamp)
         return dict(bag.counts)
 
@@ -519,7 +524,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _convert(args: argparse.Namespace, out: Path) -> tuple[HanyangCase, TimeBaseReport, dict[str, int]]:
     case = read_case(args.case_dir)
     report = check_time_bases(case)
-    return case, report, write_case_bag(case, out, overwrite=args.overwrite, range_std_m=args.range_std_m)
+    progress = ProgressLine(f"{PROG} {Path(args.case_dir).name}", unit="msg", enabled=not args.quiet)
+    return case, report, write_case_bag(case, out, overwrite=args.overwrite, range_std_m=args.range_std_m,
+                                        progress=progress)
 
 
 def _summary(args: argparse.Namespace, result: tuple[HanyangCase, TimeBaseReport, dict[str, int]]) -> list[str]:

@@ -167,6 +167,7 @@ def test_bad_input_is_refused_with_one_line(tmp_path, capsys):
     assert 'invalid choice' in capsys.readouterr().err
     assert not Path(out).exists()
     assert main(['if_to_bag', src, out, '--item-type', 'ibyte', *base]) == 0
+    capsys.readouterr()  # the run's progress lines (stderr) and summary
     _refused(capsys, [src, out, '--item-type', 'ibyte', *base], 'exists already')
 
 
@@ -187,5 +188,7 @@ def test_max_duration(tmp_path, capsys):
     assert main(['if_to_bag', str(DATA / CASES[1][0]), str(tmp_path / 'bag'), *CASES[1][1], '--max-duration-s',
                  '0.003']) == 0
     assert [m.first_sample_index for m in read_bag(tmp_path / 'bag')] == [0, 4000, 8000]
+    last = capsys.readouterr().err.splitlines()[-1]  # --max-duration-s sets the progress line's total
+    assert last.startswith('if_to_bag pocketsdr_L1_4MHz_IQ_10ms.bin: 100% (3/3 block)')
     _refused(capsys, [str(DATA / CASES[1][0]), str(tmp_path / 'bag2'), *CASES[1][1], '--max-duration-s', '0.0001'],
              'shorter than one block')
