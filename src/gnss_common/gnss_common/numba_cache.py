@@ -15,7 +15,7 @@ holds however the code runs (``make``, a colcon build on a ROS install, installe
 Every package ``__init__`` of the suite imports this module first, so that the stamp is in place
 before any of its kernels is decorated. Importing it does not import numba: numba's cache module is
 patched when it is imported (or at once if it already was), and the suite's sources are hashed once
-per process, when the first cached kernel is decorated (about 10 ms for 2.4 MB).
+per process, when the first cached kernel is decorated (2.4 MB: `docs/numba_cache.md` gives the time).
 
 The stamp is applied through numba's default list of cache locators
 (``numba.core.caching.CacheImpl._locator_classes``); when the user replaces that list with
@@ -24,17 +24,15 @@ The stamp is applied through numba's default list of cache locators
 
 from __future__ import annotations
 
-import hashlib
-import importlib.abc
 import importlib.machinery
 import importlib.util
 import os
 import sys
-import warnings
-from collections.abc import Iterable, Sequence
-from pathlib import Path
 from types import ModuleType
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable, Sequence
 
 SUITE_PACKAGES: tuple[str, ...] = (
     'gnss_common', 'gnss_integrity', 'imm_carrier', 'rfi_experiments', 'rfi_monitor',
@@ -67,6 +65,8 @@ def source_hash(packages: Iterable[str]) -> str:
     """
     key = frozenset(packages)
     if key not in _hashes:
+        import hashlib  # here, not at import: a process with no cached kernel never pays for it
+
         digest = hashlib.sha256()
         dirs = []
         for name in sorted(key):
@@ -75,9 +75,12 @@ def source_hash(packages: Iterable[str]) -> str:
             if root is None:
                 continue
             dirs.append(root)
-            for path in sorted(Path(root).rglob('*.py')):
-                digest.update(path.relative_to(root).as_posix().encode() + b'\0')
-                digest.update(path.read_bytes())
+            files = sorted(os.path.relpath(os.path.join(where, f), root)
+                           for where, _, names in os.walk(root) for f in names if f.endswith('.py'))
+            for rel in files:
+                digest.update(rel.replace(os.sep, '/').encode() + b'\0')
+                with open(os.path.join(root, rel), 'rb') as source:
+                    digest.update(source.read())
                 digest.update(b'\0')
         _hashes[key] = digest.hexdigest()
         _dirs[key] = tuple(dirs)
@@ -136,15 +139,17 @@ def _patch(caching: ModuleType) -> None:
     impl._locator_classes = [_make_locator_class(caching, defaults), *defaults]
     config = sys.modules.get('numba.core.config')
     if config is not None and str(getattr(config, 'CACHE_LOCATOR_CLASSES', None) or ''):
+        import warnings
+
         warnings.warn('NUMBA_CACHE_LOCATOR_CLASSES is set: the caches of the suite\'s kernels are '
                       'keyed on their own file only and may keep stale code after an edit of '
                       'another module', RuntimeWarning, stacklevel=2)
 
 
-class _PatchingLoader(importlib.abc.Loader):
+class _PatchingLoader:
     """Runs numba's cache module, then patches it."""
 
-    def __init__(self, inner: importlib.abc.Loader) -> None:
+    def __init__(self, inner: Any) -> None:
         self._inner = inner
 
     def create_module(self, spec: importlib.machinery.ModuleSpec) -> ModuleType | None:
@@ -158,7 +163,7 @@ class _PatchingLoader(importlib.abc.Loader):
         return getattr(self._inner, name)
 
 
-class _PatchOnImport(importlib.abc.MetaPathFinder):
+class _PatchOnImport:
     """Finds ``numba.core.caching`` with the other finders and wraps its loader (once)."""
 
     def find_spec(self, fullname: str, path: Any, target: Any = None) -> Any:
@@ -167,7 +172,7 @@ class _PatchOnImport(importlib.abc.MetaPathFinder):
         sys.meta_path[:] = [f for f in sys.meta_path if not isinstance(f, _PatchOnImport)]
         spec = importlib.machinery.PathFinder.find_spec(fullname, path, target)
         if spec is not None and spec.loader is not None:
-            spec.loader = _PatchingLoader(spec.loader)
+            spec.loader = _PatchingLoader(spec.loader)  # type: ignore[assignment]  # a Loader by protocol
         return spec
 
 
