@@ -68,16 +68,6 @@ mkdir -p log
 start=$(date +%s)
 colcon --log-level error build --base-paths src --event-handlers console_cohesion- summary- status- \
   > log/last_build.txt 2>&1 || { cat log/last_build.txt >&2; die "colcon build failed (output above, also in log/last_build.txt)"; }
-# numba's on-disk cache checks only the source file of each compiled function, not the modules it
-# inlines: when any source of a package changed, drop that package's compiled cache.
-for pkg_dir in src/*/; do
-  pkg=$(basename "$pkg_dir")
-  [ -d "install/$pkg" ] && [ -d "$pkg_dir$pkg" ] || continue   # Python packages only
-  sum=$(find "$pkg_dir$pkg" -name '*.py' -print0 | sort -z | xargs -0 cat | sha256sum | cut -d' ' -f1)
-  mark="install/$pkg/.rfi-source-hash"
-  if [ ! -f "$mark" ] || [ "$(cat "$mark")" != "$sum" ]; then
-    find "install/$pkg" \( -name '*.nbi' -o -name '*.nbc' \) -delete
-    echo "$sum" > "$mark"
-  fi
-done
+# numba's on-disk caches in install/ need no clearing here: each package's __init__ keys them on the
+# sources of the whole suite (gnss_common/numba_cache.py), so an edit of any package makes them stale.
 echo "setup: colcon build done in $(( $(date +%s) - start )) s"
