@@ -49,7 +49,7 @@ from gnss_common.constants import (
     GPS_L1_FREQUENCY_HZ,
     GPS_NAV_BIT_RATE_HZ,
 )
-from rfi_sim.gps_ca import G2_DELAY_CHIPS, ca_code
+from gnss_common.gps_ca import G2_DELAY_CHIPS, ca_code
 from rfi_sim.jammer_waveforms import SweepJammer, SweepLaw, sweep_cycles, sweep_law
 
 PAPER_SAMPLE_RATE_HZ = 38.192e6
