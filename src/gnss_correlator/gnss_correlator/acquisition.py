@@ -3,7 +3,7 @@
 For each PRN and each trial Doppler ``f_d`` of a grid, the samples are wiped off by the carrier
 ``exp(-j 2 pi f_c(f_d) n / fs)`` (continuous phase over the whole window), cut into consecutive
 1-ms code periods, and each period is circularly correlated with the sampled code replica by FFT
-(Borre et al., "A Software-Defined GPS and Galileo Receiver", ch. 6.3, parallel code-phase search):
+(the parallel code-phase search of Borre et al., "A Software-Defined GPS and Galileo Receiver", 2007):
 
     Y_k(tau, f_d) = IFFT( FFT(x_k e^{-j 2 pi f_c n / fs}) conj(FFT(c)) )[tau],
 
@@ -45,8 +45,9 @@ Fine estimates of a detected PRN
 * Code delay: the triangle (the code's autocorrelation) through the signal amplitudes
   ``sqrt(S - K sigma^2)`` at the peak and its two neighbours.
 * Doppler: from the 1-ms prompts ``z_j`` aligned on the code epochs, wiped at the coarse Doppler,
-  ``delta_f = arg(sum_j z_{j+1} conj(z_j)) / (2 pi 1 ms)`` (Kay's phase-difference estimator; a data
-  bit flip between two prompts negates one product of ~20 and leaves the argument unbiased).
+  ``delta_f = arg(sum_j z_{j+1} conj(z_j)) / (2 pi 1 ms)`` (the argument of the lag-one
+  autocorrelation, the unweighted form of Kay's phase-difference estimator; a data bit flip between
+  two prompts negates one product of ~20 and leaves the argument unbiased).
   Unambiguous for |delta_f| < 500 Hz, i.e. for any coarse step up to 1 kHz.
 * C/N0: the prompts recomputed at the fine Doppler and code delay give the coherent power per
   1-ms prompt ``mean |z_j|^2 = |A|^2 + sigma_1^2`` with ``sigma_1^2 = sigma^2 / M`` from the grid's
@@ -265,6 +266,9 @@ def _check_input(samples: np.ndarray, sample_rate_hz: float, intermediate_freque
         raise ValueError(f'sample_rate_hz must be >= {MIN_SAMPLE_RATE_HZ:g}, got {sample_rate_hz}')
     if not math.isfinite(intermediate_frequency_hz):
         raise ValueError(f'intermediate_frequency_hz must be finite, got {intermediate_frequency_hz}')
+    if is_complex and abs(intermediate_frequency_hz) + config.doppler_max_hz >= sample_rate_hz / 2:
+        raise ValueError(f'complex samples need |IF| + doppler_max_hz < fs/2: IF {intermediate_frequency_hz} Hz, '
+                         f'fs {sample_rate_hz} Hz')
     if not is_complex:
         lo = abs(intermediate_frequency_hz) - config.doppler_max_hz
         hi = abs(intermediate_frequency_hz) + config.doppler_max_hz
@@ -429,7 +433,7 @@ def acquire(samples: np.ndarray, sample_rate_hz: float, intermediate_frequency_h
 
 def _refine(x: np.ndarray, is_complex: bool, fs: float, if_hz: float, prn: int, delays: tuple[float, float],
             coarse_hz: float, sigma1_2: float) -> tuple[float, float, int]:
-    """Fine Doppler (Kay's phase-difference estimator) and C/N0 from the 1-ms prompts (module notes).
+    """Fine Doppler (lag-one autocorrelation of the prompts) and C/N0 from the 1-ms prompts (module notes).
 
     The prompts are taken at whichever of two delays gives the more power: the interpolated one, and
     half a sample before the grid's peak. Where the rate is a multiple of the chip rate (2.046 MHz),

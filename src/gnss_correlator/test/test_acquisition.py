@@ -138,7 +138,7 @@ def test_finds_synthetic_satellites_and_only_them(fs, if_hz, cplx, bits):
         assert _delay_error_chips(r.code_delay_chips, sat) < 0.5
         assert abs(r.code_delay_samples - r.code_delay_chips * fs / CHIP_RATE_HZ) < 1e-6
         assert abs(r.doppler_hz - sat.doppler_hz) < 100.0
-        # 2-bit quantisation costs 0.55 dB of SNR (Kaplan & Hegarty, 3rd ed., 14.4); the estimate's
+        # 2-bit quantisation at the optimum threshold costs about 0.55 dB of SNR; the estimate's
         # spread: SNR = mean|z|^2 / sigma^2 - 1 over N prompts has std sqrt((1 + 2 SNR) / N)
         expected = _cn0_dbhz(sat) - (0.55 if bits == 2 else 0.0)
         snr = 10 ** (expected / 10) * 1e-3
@@ -289,6 +289,8 @@ def test_bad_input_is_refused_clearly():
         acquire(x, 4e6, 0.0, AcquisitionConfig(noncoherent_count=2))
     with pytest.raises(ValueError, match='sample_rate_hz'):
         acquire(x, 1e6, 0.0, AcquisitionConfig(noncoherent_count=1))
+    with pytest.raises(ValueError, match='complex samples'):
+        acquire(x, 4e6, 1.99e6, AcquisitionConfig(noncoherent_count=1))
     with pytest.raises(ValueError, match='real samples'):
         acquire(np.ones(4000), 4e6, 0.0, AcquisitionConfig(noncoherent_count=1))
     with pytest.raises(ValueError, match='NaN'):
