@@ -4,10 +4,10 @@ Every module under ``src/<pkg>/<pkg>/`` and ``src/<pkg>/test/`` is parsed with `
 inside functions included: a lazy import is still a dependency) and each import of a suite package
 is checked against the layering (lowest first)::
 
-    rfi_msgs < gnss_common < rfi_node_common < rfi_sim < {rfi_monitor, uwb_gnss_fusion, imm_carrier}
-             < rfi_experiments
+    rfi_msgs < gnss_common < rfi_node_common < rfi_sim
+             < {rfi_monitor, uwb_gnss_fusion, imm_carrier, gnss_integrity, gnss_correlator} < rfi_experiments
 
-A package may import itself and the packages of lower layers only: the three node packages do not
+A package may import itself and the packages of lower layers only: the node packages do not
 import each other, and no package (nor its tests) imports one above it. Every suite package a
 package imports must be declared in its package.xml: ``depend``/``exec_depend`` for the package's
 modules, any of ``depend``/``exec_depend``/``test_depend`` for its tests. Finally, the
@@ -31,7 +31,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ('gnss_common',),
     ('rfi_node_common',),
     ('rfi_sim',),
-    ('rfi_monitor', 'uwb_gnss_fusion', 'imm_carrier', 'gnss_integrity'),
+    ('rfi_monitor', 'uwb_gnss_fusion', 'imm_carrier', 'gnss_integrity', 'gnss_correlator'),
     ('rfi_experiments',),
 )
 """The declared order, lowest first; packages of one layer do not import each other."""

@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     from collections.abc import Iterable, Sequence
 
 SUITE_PACKAGES: tuple[str, ...] = (
-    'gnss_common', 'gnss_integrity', 'imm_carrier', 'rfi_experiments', 'rfi_monitor',
+    'gnss_common', 'gnss_correlator', 'gnss_integrity', 'imm_carrier', 'rfi_experiments', 'rfi_monitor',
     'rfi_node_common', 'rfi_sim', 'uwb_gnss_fusion',
 )
 """The suite's Python packages (``src/<pkg>/<pkg>/``); a test keeps this list equal to ``src/``."""

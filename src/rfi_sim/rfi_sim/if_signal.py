@@ -49,7 +49,7 @@ from gnss_common.constants import (
     GPS_L1_FREQUENCY_HZ,
     GPS_NAV_BIT_RATE_HZ,
 )
-from rfi_sim.gps_ca import G2_DELAY_CHIPS, ca_code
+from gnss_common.gps_ca import G2_DELAY_CHIPS, ca_code
 from rfi_sim.if_scene import (
     CHIRP,
     CW,

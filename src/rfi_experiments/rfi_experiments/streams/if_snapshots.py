@@ -66,9 +66,9 @@ from typing import Any
 import numpy as np
 
 from gnss_common.constants import GPS_CA_CHIP_RATE_HZ, GPS_CA_CODE_LENGTH_CHIPS, GPS_L1_FREQUENCY_HZ
+from gnss_common.gps_ca import G2_DELAY_CHIPS
 from rfi_experiments.scenario import Scenario
 from rfi_experiments.schema import Phase, ScenarioError, number, parse_phases
-from rfi_sim.gps_ca import G2_DELAY_CHIPS
 from rfi_sim.if_signal import (
     CHIRP,
     CW,

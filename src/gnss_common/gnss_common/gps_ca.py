@@ -6,7 +6,7 @@ ones) and G2_i is G2 delayed by the PRN's chip delay (IS-GPS-200, Table 3-Ia and
 
 Example
 -------
->>> from rfi_sim.gps_ca import ca_code_bits
+>>> from gnss_common.gps_ca import ca_code_bits
 >>> ''.join(str(b) for b in ca_code_bits(1)[:10])   # octal 1440
 '1100100000'
 """
