@@ -38,8 +38,9 @@ from scipy.stats import chi2
 from gnss_common.constants import WGS84_ECCENTRICITY_SQUARED, WGS84_SEMI_MAJOR_AXIS_M
 from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic_scalar
 from gnss_common.earth_rotation import rotate_about_z, sagnac_rotate
-from gnss_common.observations import GPS, GnssEpoch
+from gnss_common.observations import GnssEpoch
 from gnss_common.positioning import CONVERGED, SINGULAR, least_squares_position, weighted_least_squares
+from gnss_common.spp_screening import ScreenedEpoch, screen_epoch
 
 STATUS_OK = "ok"
 STATUS_OK_WITH_EXCLUSIONS = "ok_with_exclusions"
@@ -350,7 +351,7 @@ class SinglePointPositioner:
             counts[reason] += 1
             rejected.append((int(svid), reason))
 
-        m = _screen(epoch, reject)
+        m = screen_epoch(epoch, reject)
         extra = {"missing_corrections": float(m.missing_corrections)}
         svids, sat_pos, sat_vel, rate_corr, rate_std = m.svids, m.sat_pos, m.sat_vel, m.rate_corr, m.rate_std
 
@@ -419,7 +420,7 @@ class SinglePointPositioner:
             extra=extra,
         )
 
-    def _solve_with_fde(self, m: _Screened, x0: np.ndarray, reject: Callable[[int, str], None]):
+    def _solve_with_fde(self, m: ScreenedEpoch, x0: np.ndarray, reject: Callable[[int, str], None]):
         """The position solution with the elevation mask and fault detection and exclusion (module docstring):
         (the last solution, its status, the satellites used, the number excluded as outliers)."""
         p = self.params
@@ -555,103 +556,6 @@ class SinglePointPositioner:
             los_all=los_all,
             scale_all=scale_all,
         )
-
-
-@dataclass(frozen=True)
-class _Screened:
-    """The measurements of an epoch that passed the input checks (``_screen``), by increasing svid: corrected
-    pseudoranges ``y_corr`` (clock, ionosphere and troposphere removed), corrected rates (NaN where unusable)."""
-
-    n: int
-    svids: np.ndarray
-    sat_pos: np.ndarray
-    sat_vel: np.ndarray
-    y_corr: np.ndarray
-    rate_corr: np.ndarray
-    cn0: np.ndarray
-    iono_m: np.ndarray
-    pr_std: np.ndarray
-    rate_std: np.ndarray
-    missing_corrections: int
-
-
-def _screen(epoch: GnssEpoch, reject: Callable[[int, str], None]) -> _Screened:
-    """The input checks of ``SinglePointPositioner.process`` (module docstring: rejection reasons): each rejected
-    measurement handed to reject(svid, reason); the others corrected and sorted by svid."""
-    obs = list(epoch.observations)
-    svid_count: dict[int, int] = {}
-    for o in obs:
-        if o.constellation == GPS:
-            svid_count[o.svid] = svid_count.get(o.svid, 0) + 1
-    rows = []
-    missing_corrections = 0
-    for o in obs:
-        if o.constellation != GPS:
-            reject(o.svid, "unsupported_constellation")
-            continue
-        if svid_count[o.svid] > 1:
-            reject(o.svid, "duplicate_svid")
-            continue
-        sat = np.asarray(o.satellite_position_ecef_m, dtype=float).reshape(-1)
-        vel = np.asarray(o.satellite_velocity_ecef_mps, dtype=float).reshape(-1)
-        if sat.shape != (3,) or vel.shape != (3,):
-            reject(o.svid, "invalid_input")
-            continue
-        core = (o.pseudorange_m, o.satellite_clock_bias_m, sat[0], sat[1], sat[2])
-        if not all(math.isfinite(v) for v in core):
-            reject(o.svid, "invalid_input")
-            continue
-        r_sat = math.sqrt(sat[0] ** 2 + sat[1] ** 2 + sat[2] ** 2)
-        if not (
-            1.0e7 <= o.pseudorange_m <= 4.0e7
-            and 2.0e7 <= r_sat <= 5.0e7
-            and abs(o.satellite_clock_bias_m) < 3.0e5
-        ):
-            reject(o.svid, "non_physical")
-            continue
-        iono = o.ionosphere_delay_m
-        tropo = o.troposphere_delay_m
-        if not (math.isfinite(iono) and math.isfinite(tropo)):
-            missing_corrections += 1
-            iono = iono if math.isfinite(iono) else 0.0
-            tropo = tropo if math.isfinite(tropo) else 0.0
-        if iono < 0.0 or tropo < 0.0 or iono > 200.0 or tropo > 100.0:
-            reject(o.svid, "non_physical")
-            continue
-        rate_ok = (
-            math.isfinite(o.pseudorange_rate_mps)
-            and math.isfinite(o.satellite_clock_drift_mps)
-            and bool(np.all(np.isfinite(vel)))
-            and abs(o.pseudorange_rate_mps) < 1.0e5
-        )
-        rows.append(
-            (
-                o.svid,
-                sat,
-                vel,
-                o.pseudorange_m + o.satellite_clock_bias_m - iono - tropo,
-                (o.pseudorange_rate_mps + o.satellite_clock_drift_mps) if rate_ok else math.nan,
-                o.cn0_dbhz if math.isfinite(o.cn0_dbhz) else math.nan,
-                iono,
-                o.pseudorange_std_m,
-                o.pseudorange_rate_std_mps,
-            )
-        )
-    rows.sort(key=lambda r: r[0])
-    n = len(rows)
-    return _Screened(
-        n,
-        np.array([r[0] for r in rows], dtype=int),
-        np.array([r[1] for r in rows], dtype=float).reshape(n, 3),
-        np.array([r[2] for r in rows], dtype=float).reshape(n, 3),
-        np.array([r[3] for r in rows], dtype=float),
-        np.array([r[4] for r in rows], dtype=float),
-        np.array([r[5] for r in rows], dtype=float),
-        np.array([r[6] for r in rows], dtype=float),
-        np.array([r[7] for r in rows], dtype=float),
-        np.array([r[8] for r in rows], dtype=float),
-        missing_corrections,
-    )
 
 
 def _dop(h: np.ndarray, rot: np.ndarray | None) -> Dop:
