@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 CONFIG_FILES = (
     'uwb_gnss_fusion.fusion_node_params:CONFIG_FILE',
-    'imm_carrier.imm_carrier_node:CONFIG_FILE',
+    'imm_carrier.node_params:CONFIG_FILE',
 )
 """``module:attribute`` of each node's :class:`rfi_node_common.params.ConfigFile`."""
 

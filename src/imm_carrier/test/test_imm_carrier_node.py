@@ -219,7 +219,7 @@ def test_config_file_values_equal_the_dataclass_defaults(rig_factory):
 
 def test_config_file_is_the_one_generated_from_the_parameter_definitions():
     """config/imm_carrier.yaml is written by tools/generate_config.py from the parameter definitions."""
-    from imm_carrier.imm_carrier_node import CONFIG_FILE
+    from imm_carrier.node_params import CONFIG_FILE
 
     assert CONFIG.read_text() == CONFIG_FILE.text(), 'run python tools/generate_config.py'
 
