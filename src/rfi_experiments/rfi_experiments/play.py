@@ -260,6 +260,41 @@ LATE_REASON = 'late_beyond_reorder_window'
 """The fusion node's rejection reason for a message that came after its re-ordering window."""
 
 
+def _checked_arguments(args: argparse.Namespace) -> tuple[tuple[float, float] | None, dict[str, str]] | str:
+    """(the play window, the --sync pairs IN -> OUT) of the parsed arguments, or what is wrong with them."""
+    if not args.max and not args.rate > 0.0:
+        return f'--rate must be > 0 (got {args.rate})'
+    try:
+        window = window_s(args.start, args.duration)
+    except ValueError as err:
+        return str(err)
+    for name in ('start_delay', 'warmup', 'wait_subscribers'):
+        value = getattr(args, name)
+        if not (math.isfinite(value) and value >= 0):
+            return f'--{name.replace("_", "-")} must be a finite number >= 0 (got {value})'
+    if not (math.isfinite(args.warmup_rate) and args.warmup_rate > 0):
+        return f'--warmup-rate must be a finite number > 0 (got {args.warmup_rate})'
+    sync: dict[str, str] = {}
+    for item in args.sync:
+        inp, sep, out = item.partition(':')
+        if not sep or not inp.startswith('/') or not out.startswith('/'):
+            return f'--sync wants IN:OUT (two topic names), got {item!r}'
+        sync[inp] = out
+    if not (math.isfinite(args.sync_timeout) and args.sync_timeout > 0):
+        return f'--sync-timeout must be a finite number > 0 (got {args.sync_timeout})'
+    return window, sync
+
+
+def _await_answer(executor: Any, answered: dict[str, int], out: str, message: Any, timeout_s: float) -> bool:
+    """Spin until a message stamped at least as late as ``message`` came on ``out`` (``--sync``), or timeout_s."""
+    header = message.decode().header.stamp
+    stamp_ns = header.sec * 1_000_000_000 + header.nanosec
+    give_up = time.monotonic() + timeout_s
+    while answered.get(out, -1) < stamp_ns and time.monotonic() < give_up:
+        executor.spin_once(timeout_sec=0.01)
+    return answered.get(out, -1) >= stamp_ns
+
+
 def main(argv: Sequence[str] | None = None, *, teardown: bool = True) -> int:
     """Play (module docstring); the exit code. ``teardown`` False: leave the node and ROS as they are once the
     messages are delivered (the executable, which ends the process at once: :func:`cli`)."""
@@ -271,26 +306,10 @@ def main(argv: Sequence[str] | None = None, *, teardown: bool = True) -> int:
 
     argv = list(sys.argv if argv is None else argv)
     args = build_parser().parse_args(remove_ros_args(argv)[1:])
-    if not args.max and not args.rate > 0.0:
-        return fail(f'--rate must be > 0 (got {args.rate})')
-    try:
-        window = window_s(args.start, args.duration)
-    except ValueError as err:
-        return fail(str(err))
-    for name in ('start_delay', 'warmup', 'wait_subscribers'):
-        value = getattr(args, name)
-        if not (math.isfinite(value) and value >= 0):
-            return fail(f'--{name.replace("_", "-")} must be a finite number >= 0 (got {value})')
-    if not (math.isfinite(args.warmup_rate) and args.warmup_rate > 0):
-        return fail(f'--warmup-rate must be a finite number > 0 (got {args.warmup_rate})')
-    sync: dict[str, str] = {}
-    for item in args.sync:
-        inp, sep, out = item.partition(':')
-        if not sep or not inp.startswith('/') or not out.startswith('/'):
-            return fail(f'--sync wants IN:OUT (two topic names), got {item!r}')
-        sync[inp] = out
-    if not (math.isfinite(args.sync_timeout) and args.sync_timeout > 0):
-        return fail(f'--sync-timeout must be a finite number > 0 (got {args.sync_timeout})')
+    checked = _checked_arguments(args)
+    if isinstance(checked, str):
+        return fail(checked)
+    window, sync = checked
 
     try:
         reader = BagReader(args.bag)
@@ -369,13 +388,7 @@ def main(argv: Sequence[str] | None = None, *, teardown: bool = True) -> int:
                 if matched == 0:
                     d.to_nobody += 1
                 if message.topic in sync:
-                    out = sync[message.topic]
-                    header = message.decode().header.stamp
-                    stamp_ns = header.sec * 1_000_000_000 + header.nanosec
-                    give_up = time.monotonic() + args.sync_timeout
-                    while answered.get(out, -1) < stamp_ns and time.monotonic() < give_up:
-                        executor.spin_once(timeout_sec=0.01)
-                    if answered.get(out, -1) < stamp_ns:
+                    if not _await_answer(executor, answered, sync[message.topic], message, args.sync_timeout):
                         unanswered[message.topic] += 1
                 elif fusion or watching:
                     executor.spin_once(timeout_sec=0)  # keep up with /fusion/status and /diagnostics
