@@ -2,8 +2,9 @@
 41.0 s in all``) and a summary on stdout, neither with ``--quiet`` (``-q``).
 
 A thin layer over :class:`rfi_experiments.progress.CaseLog`, the suite's one implementation of the progress
-line; that module imports only the standard library, so it is taken from ``src/rfi_experiments`` when the
-install tree is not sourced (the benchmarks run with ``PYTHONPATH=src/<pkg>:...`` too).
+line; that module imports only the standard library (its package's ``__init__`` imports gnss_common's kernel-cache
+hook, itself standard library until numba loads), so it is taken from ``src/rfi_experiments`` and ``src/gnss_common``
+when the install tree is not sourced (the benchmarks run with ``PYTHONPATH=src/<pkg>:...`` too).
 
     from bench_progress import add_quiet_argument, case_log
     log = case_log(__file__, total=len(CASES), quiet=args.quiet)
@@ -23,7 +24,11 @@ ROOT = Path(__file__).resolve().parents[1]
 try:
     from rfi_experiments.progress import CaseLog, add_quiet_argument
 except ImportError:  # not on the path: the source tree's copy (the module is pure standard library)
-    sys.path.insert(0, str(ROOT / 'src' / 'rfi_experiments'))
+    for _pkg in ('gnss_common', 'rfi_experiments'):
+        if str(ROOT / 'src' / _pkg) not in sys.path:
+            sys.path.insert(0, str(ROOT / 'src' / _pkg))
+    for _name in [m for m in sys.modules if m == 'rfi_experiments' or m.startswith('rfi_experiments.')]:
+        del sys.modules[_name]       # a failed partial import must not be reused
     from rfi_experiments.progress import CaseLog, add_quiet_argument
 
 __all__ = ['CaseLog', 'add_quiet_argument', 'case_log', 'quiet_requested']

@@ -10,6 +10,7 @@ same files without ``ros2 launch``.
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import time
@@ -21,7 +22,10 @@ ROOT = Path(__file__).resolve().parents[1]
 TOOL = ROOT.parent / 'shared' / 'tools' / 'ros2cli' / 'install.sh'
 NODES = ('rfi_monitor', 'gnss_integrity', 'uwb_gnss_fusion', 'imm_carrier')
 START_TIMEOUT_S = 180.0
-"""The four nodes load numba's compiled kernels at start-up (seconds each; more on a loaded machine)."""
+"""The four nodes load numba's compiled kernels at start-up (seconds each; minutes with a cold cache on a loaded
+machine)."""
+STOP_TIMEOUT_S = 60.0
+"""ros2 launch and its nodes end this soon after a SIGINT (launch itself escalates to SIGTERM after 5 s)."""
 
 
 def _workspace_ready() -> str | None:
@@ -85,15 +89,34 @@ def _problems(names: set[str], topics: dict, root_names: set[str], ns: str) -> l
     return out
 
 
-def test_the_suite_starts_in_a_namespace_and_its_topics_connect(ros2_launch):
+def _node_pids(log: str) -> list[int]:
+    """The node processes ros2 launch reports it started ("process started with pid [N]")."""
+    return [int(m) for m in re.findall(r'process started with pid \[(\d+)\]', log)]
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def test_the_suite_starts_in_a_namespace_and_its_topics_connect(ros2_launch, tmp_path):
     import rclpy
 
     ns = f'/launch_test_{os.getpid()}'
-    proc = subprocess.Popen(_shell(f'exec ros2 launch rfi_experiments suite.launch.xml namespace:={ns}'), cwd=ROOT,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    log_path = tmp_path / 'launch.log'
+    # the log goes to a file, not a pipe: a pipe's end stays open as long as any node holds it; the nodes'
+    # diagnostics go into the namespace too, so that nothing of this suite reaches another test's /diagnostics
+    with open(log_path, 'w') as log_file:
+        proc = subprocess.Popen(_shell(f'exec ros2 launch rfi_experiments suite.launch.xml namespace:={ns} '
+                                       f'diagnostics_topic:={ns}/diagnostics'), cwd=ROOT, stdout=log_file,
+                                stderr=subprocess.STDOUT, start_new_session=True)
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     node = rclpy.create_node('launch_test_observer', context=ctx)
+    stopped_in_time = True
     try:
         deadline = time.monotonic() + START_TIMEOUT_S
         problems = ['not looked yet']
@@ -102,14 +125,29 @@ def test_the_suite_starts_in_a_namespace_and_its_topics_connect(ros2_launch):
             names, topics = _graph(node, ns)
             root_names = {n for n, space in node.get_node_names_and_namespaces() if space == '/'}
             problems = _problems(names, topics, root_names, ns)
-        assert proc.poll() is None, 'ros2 launch ended early:\n' + proc.communicate(timeout=30)[0][-3000:]
+        assert proc.poll() is None, 'ros2 launch ended early:\n' + log_path.read_text()[-3000:]
         assert not problems, problems
     finally:
         node.destroy_node()
         rclpy.shutdown(context=ctx)
+        pids = _node_pids(log_path.read_text())
         if proc.poll() is None:
             proc.send_signal(signal.SIGINT)              # as Ctrl-C on ros2 launch
-        out = proc.communicate(timeout=120)[0]
+        try:
+            proc.wait(timeout=STOP_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            stopped_in_time = False
+        end = time.monotonic() + 10.0
+        while any(_alive(p) for p in pids) and time.monotonic() < end:
+            time.sleep(0.2)
+        left = [p for p in pids if _alive(p)]
+        for p in left:                                   # never leave a node of this test running
+            os.kill(p, signal.SIGKILL)
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    out = log_path.read_text()
+    assert stopped_in_time and not left, f'still running {STOP_TIMEOUT_S} s after SIGINT: {left}\n{out[-3000:]}'
     assert proc.returncode == 0, out[-3000:]
     assert out.count('process has finished cleanly') == len(NODES), out[-3000:]
     assert 'process has died' not in out, out[-3000:]
