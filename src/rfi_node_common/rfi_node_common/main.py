@@ -44,8 +44,10 @@ def run_node(node_factory: Callable[[], Any], *, executable: str, summary: str, 
     node = None
     try:
         rclpy.init(args=argv)
-        restore.ros_running = True
         node = node_factory()
+        # from here Ctrl-C ends the node through the context's shutdown (rclpy's handler); while the node is built
+        # (its compiled kernels loaded: up to a minute with a cold cache) it stops it at once, as before rclpy.init
+        restore.ros_running = True
         unknown = unknown_parameters(node)
         if unknown:
             raise ValueError(unknown_parameters_message(node, unknown))
@@ -80,9 +82,10 @@ class _SigintHandler:
     ExternalShutdownException) and then calls the Python-level handler that was there before it. Python's default
     one raises KeyboardInterrupt in the main thread at whatever bytecode it is running: inside an rclpy object's
     constructor (the executor builds a Task for every callback) it leaves a half-built object whose ``__del__``
-    prints a traceback at exit (seen on Ctrl-C of ubx_source while it read a port). Once ROS runs this handler does
-    nothing, and the context's shutdown alone ends the node; before (imports, rclpy.init itself) it raises
-    KeyboardInterrupt as usual."""
+    prints a traceback at exit (seen on Ctrl-C of ubx_source while it read a port). Once the node is built and spins
+    this handler does nothing, and the context's shutdown alone ends the node; before (imports, rclpy.init, the node's
+    construction with its warm-up of compiled kernels) it raises KeyboardInterrupt as usual, so that Ctrl-C during a
+    long start-up stops the node at once instead of after it (``run_node`` returns 0)."""
 
     def __init__(self) -> None:
         import signal
