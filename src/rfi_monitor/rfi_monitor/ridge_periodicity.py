@@ -6,7 +6,10 @@ first lag whose peak reaches 0.6 of the highest one and stands ``detect_sigma`` 
 (``1 / sqrt(2 (T - lag))`` for T frames) and ``min_strength`` above the lowest value before it is the coarse period
 (a third or a half of it when the autocorrelation peaks there too: a period of a few frames is smeared by the frame);
 it is refined by a least-squares fit over the interpolated peaks at its multiples (up to half the block: the error of
-one peak is divided by the number of periods).
+one peak is divided by the number of periods). A multiple's peak enters the fit when it reaches half the coarse
+peak's strength, or half the coarse peak where the trough is deeply negative (a sweep over the whole complex band
+turns its phasor as a pure rotation: the trough is minus the peak; before this rule no multiple entered and the
+period stayed a whole number of frames, 1-4 % off in 5 % of such sequences).
 """
 
 from __future__ import annotations
@@ -88,6 +91,10 @@ def _period_from_autocorrelation(R: np.ndarray, lmin: int, lmax: int, min_streng
             T0 = float(j)
             break
     strength = r[int(T0)] - trough[int(T0) - 1]
+    # a multiple's peak counts when it reaches half the strength, or half the first peak where the trough lies below
+    # zero by more than that peak's height would allow (a sweep over the whole complex band: its phasor is a pure
+    # rotation, the trough is minus the peak, and no multiple reached half the peak-to-trough)
+    keep = min(0.5 * strength, 0.5 * r[int(T0)])
     # refine on multiples (least squares through the origin): 1, 2, 3, 4, 6, 9, 13, ... (geometric: the far
     # ones give the precision, each step keeps the search window of the next one within 15 % of the period)
     num, den = 0.0, 0.0
@@ -98,7 +105,7 @@ def _period_from_autocorrelation(R: np.ndarray, lmin: int, lmax: int, min_streng
         w = max(1, int(np.rint(0.15 * Tc)))
         lo, hi = max(c - w, 1), min(c + w, T - 2)
         j = first_argmax(r, lo, hi)
-        if r[j] < 0.5 * strength or j <= 0 or j >= T - 1:
+        if r[j] < keep or j <= 0 or j >= T - 1:
             m = m + 1 if m < 4 else m + m // 2
             continue
         a, b, cc = r[j - 1], r[j], r[j + 1]
@@ -130,7 +137,7 @@ def _period_from_autocorrelation(R: np.ndarray, lmin: int, lmax: int, min_streng
             den2 = a - 2 * b + cc
             d = 0.5 * (a - cc) / den2 if den2 < 0 else 0.0
             pos = j + min(max(d, -0.5), 0.5)
-            if b >= 0.5 * strength:
+            if b >= keep:
                 mp[n_ok] = mi * pos
                 m2 += mi * mi
                 n_ok += 1

@@ -2,7 +2,8 @@
 item 2: ridge.py and integration.py split into their stages, behaviour unchanged).
 
 ``python split_reference.py`` writes ``data/split_reference.npz`` from the rfi_monitor package it imports (it was
-generated from commit 6657d8c, the last one before the split); ``python split_reference.py --check`` compares the
+generated from commit 6657d8c, the last one before the split, and regenerated after each deliberate change listed in
+``test_split_equivalence.py``); ``python split_reference.py --check`` compares the
 package it imports with that file and prints, per stream, how many values are bit-identical (the test,
 ``test_split_equivalence.py``, does the same comparison with a tolerance for other machines).
 
