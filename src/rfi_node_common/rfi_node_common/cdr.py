@@ -432,19 +432,135 @@ def _write_uint(out, o, size, v):
 
 
 @njit(cache=True, inline="always")
-def _walk(write, program, pc, src, dst, o, ints, floats, text, marks, strict_strings):  # noqa: C901 - one dispatch
+def _move_primitives(write, size, kind, count, src, dst, o, n, ints, floats, ni, nf, b8, tmp8, b4, tmp4):
+    """_walk's leaf for a run of ``count`` primitives of ``size`` bytes and ``kind``: reads them from ``src`` into the
+    streams or writes them from the streams into ``dst``, from offset ``o`` (aligned here). Returns (status, offset,
+    ints used, floats used); status 0, or _walk's failure code."""
+    o = _align(o, size)
+    if o + size * count > n:
+        return (_FULL if write else _ERR), o, ni, nf
+    if kind == KIND_FLOAT:
+        if nf + count > floats.shape[0]:
+            return _ERR, o, ni, nf
+        if write:
+            for _ in range(count):
+                if size == 8:
+                    tmp8[0] = floats[nf]
+                    for m in range(8):
+                        dst[o + m] = b8[m]
+                else:
+                    tmp4[0] = floats[nf]
+                    for m in range(4):
+                        dst[o + m] = b4[m]
+                nf += 1
+                o += size
+        else:
+            for _ in range(count):
+                if size == 8:
+                    for m in range(8):
+                        b8[m] = src[o + m]
+                    floats[nf] = tmp8[0]
+                else:
+                    for m in range(4):
+                        b4[m] = src[o + m]
+                    floats[nf] = tmp4[0]
+                nf += 1
+                o += size
+        return 0, o, ni, nf
+    if ni + count > ints.shape[0]:
+        return _ERR, o, ni, nf
+    if write:
+        for _ in range(count):
+            v = ints[ni]
+            _write_uint(dst, o, size, (1 if v != 0 else 0) if kind == KIND_BOOL else v)
+            ni += 1
+            o += size
+    else:
+        for _ in range(count):
+            v = _read_uint(src, o, size)
+            if kind == KIND_SIGNED and size < 8 and v >= np.int64(1) << (8 * size - 1):
+                v -= np.int64(1) << (8 * size)
+            elif kind == KIND_BOOL and v > 1:
+                return _ERR, o, ni, nf
+            ints[ni] = v
+            ni += 1
+            o += size
+    return 0, o, ni, nf
+
+
+@njit(cache=True, inline="always")
+def _move_string(write, bound, src, dst, o, n, ints, text, ni, strict_strings):
+    """_walk's leaf for a string: [start, length without NUL] in ints <-> uint32 length with NUL, bytes, NUL.
+    Returns (status, offset after it, ints used); status 0, or _walk's failure code."""
+    if write:
+        if ni + 2 > ints.shape[0]:
+            return _ERR, o, ni
+        first = ints[ni]
+        length = ints[ni + 1]
+        if first < 0 or length < 0 or first + length > text.shape[0] or (bound > 0 and length > bound):
+            return _ERR, o, ni
+        o = _align(o, 4)
+        if o + 5 + length > n:
+            return _FULL, o, ni
+        _write_uint(dst, o, 4, length + 1)
+        for m in range(length):
+            dst[o + 4 + m] = text[first + m]
+        dst[o + 4 + length] = 0
+    else:
+        o = _align(o, 4)
+        if o + 4 > n:
+            return _ERR, o, ni
+        length = _read_uint(src, o, 4) - 1
+        if length < 0 or length + 1 > n - o - 4 or src[o + 4 + length] != 0 or (bound > 0 and length > bound):
+            return _ERR, o, ni
+        if strict_strings:
+            for m in range(length):
+                if src[o + 4 + m] == 0:
+                    return _ERR, o, ni
+        if ni + 2 > ints.shape[0]:
+            return _ERR, o, ni
+        ints[ni] = o + 4
+        ints[ni + 1] = length
+    return 0, o + 5 + length, ni + 2
+
+
+@njit(cache=True, inline="always")
+def _move_count(write, bound, src, dst, o, n, ints, ni):
+    """_walk's leaf for a sequence's uint32 element count <-> ints. Returns (status, count, offset after it, ints
+    used); status 0, or _walk's failure code."""
+    o = _align(o, 4)
+    if write:
+        if ni >= ints.shape[0]:
+            return _ERR, 0, o, ni
+        count = ints[ni]
+        if count < 0 or count >= 2**32 or (bound > 0 and count > bound):
+            return _ERR, count, o, ni
+        if o + 4 > n:
+            return _FULL, count, o, ni
+        _write_uint(dst, o, 4, count)
+    else:
+        if o + 4 > n:
+            return _ERR, 0, o, ni
+        count = _read_uint(src, o, 4)
+        if (bound > 0 and count > bound) or ni >= ints.shape[0]:
+            return _ERR, count, o, ni
+        ints[ni] = count
+    return 0, count, o + 4, ni + 1
+
+
+@njit(cache=True, inline="always")
+def _walk(write, program, pc, src, dst, o, ints, floats, text, marks, strict_strings):
     """The one walk of a layout program, for both directions: from row ``pc`` and byte offset ``o``, read
     the bytes ``src`` into the streams (``write`` False), or write the streams into the bytes ``dst``
-    (``write`` True). Alignment, runs, nesting and every bounds and stream check are written once here;
-    only the leaves that move a value differ by direction. The other byte array is not touched (two
-    arrays, not one: the bytes read are often read-only).
+    (``write`` True). Alignment, runs, nesting and every bounds and stream check are written once here and in
+    its three leaves (``_move_primitives``, ``_move_string``, ``_move_count``), each for both directions. The
+    other byte array is not touched (two arrays, not one: the bytes read are often read-only).
 
     Returns (end offset, ints used, floats used), the offset negative on failure: -1 for bytes that are
     malformed (reading) or streams that do not fit the program (writing), -2 for a ``dst`` too small
     (writing; reading, bytes too short are malformed). Every access to the bytes is bounds-checked first.
     """
     n = dst.shape[0] if write else src.shape[0]
-    short = _FULL if write else _ERR
     ni = 0
     nf = 0
     left = np.zeros(_MAX_DEPTH, dtype=np.int64)
@@ -457,120 +573,24 @@ def _walk(write, program, pc, src, dst, o, ints, floats, text, marks, strict_str
     while pc < n_ops:
         op = program[pc, 0]
         if op == OP_PRIM:
-            size = program[pc, 1]
-            kind = program[pc, 2]
-            count = program[pc, 3]
-            o = _align(o, size)
-            if o + size * count > n:
-                return short, ni, nf
-            if kind == KIND_FLOAT:
-                if nf + count > floats.shape[0]:
-                    return _ERR, ni, nf
-                if write:
-                    for _ in range(count):
-                        if size == 8:
-                            tmp8[0] = floats[nf]
-                            for m in range(8):
-                                dst[o + m] = b8[m]
-                        else:
-                            tmp4[0] = floats[nf]
-                            for m in range(4):
-                                dst[o + m] = b4[m]
-                        nf += 1
-                        o += size
-                else:
-                    for _ in range(count):
-                        if size == 8:
-                            for m in range(8):
-                                b8[m] = src[o + m]
-                            floats[nf] = tmp8[0]
-                        else:
-                            for m in range(4):
-                                b4[m] = src[o + m]
-                            floats[nf] = tmp4[0]
-                        nf += 1
-                        o += size
-            else:
-                if ni + count > ints.shape[0]:
-                    return _ERR, ni, nf
-                if write:
-                    for _ in range(count):
-                        v = ints[ni]
-                        _write_uint(dst, o, size, (1 if v != 0 else 0) if kind == KIND_BOOL else v)
-                        ni += 1
-                        o += size
-                else:
-                    for _ in range(count):
-                        v = _read_uint(src, o, size)
-                        if kind == KIND_SIGNED and size < 8 and v >= np.int64(1) << (8 * size - 1):
-                            v -= np.int64(1) << (8 * size)
-                        elif kind == KIND_BOOL and v > 1:
-                            return _ERR, ni, nf
-                        ints[ni] = v
-                        ni += 1
-                        o += size
-        elif op == OP_STRING:  # [start, length without NUL] <-> uint32 length with NUL, bytes, NUL
-            bound = program[pc, 1]
-            if write:
-                if ni + 2 > ints.shape[0]:
-                    return _ERR, ni, nf
-                first = ints[ni]
-                length = ints[ni + 1]
-                if first < 0 or length < 0 or first + length > text.shape[0] or (bound > 0 and length > bound):
-                    return _ERR, ni, nf
-                o = _align(o, 4)
-                if o + 5 + length > n:
-                    return _FULL, ni, nf
-                _write_uint(dst, o, 4, length + 1)
-                for m in range(length):
-                    dst[o + 4 + m] = text[first + m]
-                dst[o + 4 + length] = 0
-            else:
-                o = _align(o, 4)
-                if o + 4 > n:
-                    return _ERR, ni, nf
-                length = _read_uint(src, o, 4) - 1
-                if length < 0 or length + 1 > n - o - 4 or src[o + 4 + length] != 0 or (bound > 0 and length > bound):
-                    return _ERR, ni, nf
-                if strict_strings:
-                    for m in range(length):
-                        if src[o + 4 + m] == 0:
-                            return _ERR, ni, nf
-                if ni + 2 > ints.shape[0]:
-                    return _ERR, ni, nf
-                ints[ni] = o + 4
-                ints[ni + 1] = length
-            ni += 2
-            o += 5 + length
+            status, o, ni, nf = _move_primitives(write, program[pc, 1], program[pc, 2], program[pc, 3], src, dst, o,
+                                                 n, ints, floats, ni, nf, b8, tmp8, b4, tmp4)
+            if status != 0:
+                return status, ni, nf
+        elif op == OP_STRING:
+            status, o, ni = _move_string(write, program[pc, 1], src, dst, o, n, ints, text, ni, strict_strings)
+            if status != 0:
+                return status, ni, nf
         elif op == OP_SEQUENCE or op == OP_ARRAY:
-            if op == OP_SEQUENCE:  # uint32 count <-> ints
-                bound = program[pc, 2]
-                if write:
-                    if ni >= ints.shape[0]:
-                        return _ERR, ni, nf
-                    count = ints[ni]
-                    if count < 0 or count >= 2**32 or (bound > 0 and count > bound):
-                        return _ERR, ni, nf
-                    o = _align(o, 4)
-                    if o + 4 > n:
-                        return _FULL, ni, nf
-                    _write_uint(dst, o, 4, count)
-                else:
-                    o = _align(o, 4)
-                    if o + 4 > n:
-                        return _ERR, ni, nf
-                    count = _read_uint(src, o, 4)
-                    if (bound > 0 and count > bound) or ni >= ints.shape[0]:
-                        return _ERR, ni, nf
-                    ints[ni] = count
-                ni += 1
-                o += 4
+            if op == OP_SEQUENCE:
+                status, count, o, ni = _move_count(write, program[pc, 2], src, dst, o, n, ints, ni)
+                if status != 0:
+                    return status, ni, nf
                 if count == 0:
                     pc = program[pc, 1] + 1
                     continue
-                if count > n - o:  # reading: every element takes at least one byte
-                    if not write:
-                        return _ERR, ni, nf
+                if count > n - o and not write:  # reading: every element takes at least one byte
+                    return _ERR, ni, nf
             else:
                 count = program[pc, 2]
             if depth >= _MAX_DEPTH:
@@ -625,6 +645,7 @@ def encode_program(program, start, head, ints, floats, text, out):
     return end
 
 
-CODEC_KERNELS = ("_align", "_read_uint", "_write_uint", "_walk", "decode_program", "encode_program")
+CODEC_KERNELS = ("_align", "_read_uint", "_write_uint", "_move_primitives", "_move_string", "_move_count", "_walk",
+                 "decode_program", "encode_program")
 """The compiled functions of the codec, by name: a test swaps each for its ``py_func`` (numpy indexing
 raises on any access out of bounds) to check that the compiled ones never read outside the bytes."""
