@@ -58,152 +58,9 @@ squared innovations (chi-square with one degree of freedom, often near zero) do 
 
 
 @dataclass(frozen=True)
-class FusionParams:
-    """Parameters of :class:`FusionFilter` (validated on construction).
+class _SensorModels:
+    """FusionParams, sensors and models (.measurement_models, .gnss_update, .uwb_update)."""
 
-    Each field is a parameter of fusion_node written once, with its default, description, range,
-    group and whether it is settable while running (:func:`rfi_node_common.params.parameter`; shown by
-    ``fusion_node --help`` and config/fusion.yaml, which is generated from them). ``loop`` and
-    ``anchors`` are not parameters (the node builds ``loop`` from its ``loop_*`` parameters; anchor
-    positions come in the UwbRange messages).
-
-    Design notes (why, and the evidence; the meaning is in each field's description):
-        motion_detection: let :class:`.motion_model.StationarityDetector` switch between the moving
-            model and a static one (GNSS epochs in the earth frame, no UWB range in the last
-            ``uwb_init_window_s``); False: always the moving model.
-        anchors: optional registry ``((anchor_id, x, y, z), ...)`` in the anchors' frame, m. If
-            non-empty, ranges from other anchor ids are rejected ("unknown_anchor") and the
-            registered position is used.
-        init_clock_drift_unobserved_std_mps: clock-drift 1-sigma at an initialisation where the
-            drift is unobserved (no Doppler in the fix) and no earlier drift estimate exists, m/s
-            (1000 m/s covers a crystal's +-3 ppm; GEONET receivers drift by +418 and -330 m/s). On a
-            reinitialisation the drift of the lost state is kept (the oscillator did not change).
-        divergence_uwb_gated_fraction: divergence is declared when at least this fraction of the
-            last ``divergence_uwb_ranges`` ranges was gated out, in (0, 1] (1: that many
-            consecutive gated ranges, the original rule).
-        uwb_latency_s: age of a UWB range at its stamp, s (>= 0; 0: the paper's model). The range
-            is modelled as the distance at ``stamp - uwb_latency_s`` (constant-velocity
-            back-propagation). Beyond the paper; set it from the ranging hardware / time-base
-            calibration, not per data set.
-        max_update_iterations: Gauss-Newton (iterated) refinement steps allowed after a cubature
-            update whose linearisation error is significant (0: the plain CKF update of Cao et al.
-            eq. 17-24). Beyond the paper; see :meth:`.ckf.CubatureKalmanFilter.update`.
-        uwb_huber_k_positive: Huber threshold for positive UWB innovations (measured range longer
-            than predicted, the non-line-of-sight direction); inf: positive innovations are not
-            down-weighted.
-        common_mode_screen: before the CKF update, drop pseudoranges and pseudorange rates whose
-            innovation departs from the epoch's median (common clock) innovation by more than the
-            gate allows with the clock-free variance (:mod:`.robust_screen`; beyond the paper).
-            Counted as ``common_mode_pseudorange`` / ``common_mode_doppler``; they count as gated
-            for the divergence rule.
-        receiver_clock_steps: take a step common to every pseudorange that the predicted clock
-            cannot explain (at least five satellites and more than half agreeing) for a step of the
-            receiver clock and move the clock bias by it before the screen and the update, instead
-            of rejecting every pseudorange and rebuilding the position
-            (:func:`.clock_steps.receiver_clock_step`; beyond the paper). Whole milliseconds (the
-            usual adjustment of receivers whose clock drifts) are counted as
-            ``receiver_clock_step_ms``, other steps as ``receiver_clock_step``.
-        multi_gnss: use Galileo, BeiDou, GLONASS and QZSS satellites as well as GPS, each system
-            other than the reference (GPS) with an inter-system clock bias state (appended to the
-            state when the system is first seen, so that a GPS-only stream keeps the 8-state
-            filter; process model and initialisation: :data:`INTER_SYSTEM_BIAS_PSD_M2PS`,
-            :data:`INTER_SYSTEM_BIAS_INIT_STD_M`, :data:`INTER_SYSTEM_BIAS_MAX_GAP_S`); False: GPS
-            only, the others counted as ``skipped_constellation.<name>``. SBAS is always skipped.
-        pseudorange_correlated_std_m / pseudorange_correlated_tau_s: stationary 1-sigma (m) and
-            correlation time (s) of the time-correlated part of each pseudorange error (residual
-            orbit, clock and atmosphere, multipath), a first-order Gauss-Markov state per tracked
-            satellite (Brown & Hwang, 4th ed., sec. 4.2), allocated when the satellite appears and
-            removed after :data:`CORRELATED_ERROR_MAX_GAP_TAU` correlation times unseen. Treated
-            as white, such errors are averaged over every epoch of a correlation time and the
-            filter becomes overconfident (docs/uwb_gnss_fusion/fusion_never_worse.md).
-            Std 0: off (white pseudorange errors, the 8-state filter).
-        uwb_mirror_test: resolve the mirror ambiguity of coplanar anchors (three anchors always
-            are) with the pseudoranges: a GNSS log-likelihood ratio of the reflection of the
-            estimate across the anchors' plane against the estimate, accumulated over the epochs,
-            and a jump to the mirror when it exceeds ``uwb_mirror_switch_log_lr``
-            (:mod:`.mirror_test`; beyond the paper). Active only with GNSS and UWB, in the earth
-            frame, while the anchors heard within ``uwb_init_window_s`` lie in a plane.
-            Counted as ``uwb_mirror_switch``.
-        uwb_gated_anchor_reinit: when one anchor has had ``divergence_uwb_ranges`` consecutive
-            ranges gated while a multi-start multilateration on the latest range of every anchor
-            heard (at least four; three with ``uwb_tag_side_of_anchor_plane``, the fix on that side
-            of their plane) explains all of them within ``UWB_FIX_CONSISTENT_SIGMA`` range
-            1-sigmas and lies outside the 3-dof gate around the state, reinitialise the position
-            from that fix: the state sits in a wrong local minimum of the ranges (e.g. near the
-            mirror of three of four anchors after a GNSS start metres off in height) and the gate
-            keeps out the anchor that would pull it back. If no such fix exists the anchor's ranges
-            are faulty (e.g. NLOS) and stay gated. At most once per anchor id in the filter's life
-            (a biased anchor whose fix also explains the ranges in a weak geometry must not make the
-            filter cycle). Beyond the paper; counted as ``uwb_anchor_gated_reinit``.
-        uwb_tag_side_of_anchor_plane: what the installer knows of the mirror ambiguity: -1 the tag
-            moves below the plane of its coplanar anchors (anchors mounted high), +1 above it, 0
-            unknown (the default). With -1 or +1, whenever the anchors heard are coplanar and the
-            estimate lies on the other side of their plane (along the local vertical), the filter
-            jumps to its mirror (position, velocity and covariance reflected; counted as
-            ``uwb_side_prior_flip``) and the GNSS test (``uwb_mirror_test``) is not used. For tags
-            that stay clearly on one side: a tag that crosses the plane is pulled back to the side
-            given. Beyond the paper.
-        uwb_mirror_covariance: while the side is unknown (``uwb_tag_side_of_anchor_plane`` 0) and the
-            anchors heard are coplanar, add the mirror ambiguity to the published position
-            covariance: ``p d^2`` along the plane's normal, ``d`` the distance from the estimate to its
-            mirror and ``p`` the probability of the wrong side (:mod:`.mirror_test`). Without it three
-            anchors publish centimetre 1-sigmas for a solution that is on the mirror, 1.3 m off, in
-            about a third of the simulated runs (``docs/uwb_gnss_fusion/fusion_never_worse.md``). The
-            filter's own covariance is unchanged. Beyond the paper.
-        uwb_mirror_gnss_std_m: 1-sigma of the GNSS position error along the normal of the anchors'
-            plane (about the vertical error of single-frequency GNSS), m, for that probability:
-            ``p = Phi(-d / (2 sigma))`` with GNSS, 0.5 without (> 0).
-        uwb_range_curvature_noise: add to each range's noise variance the second-order variance of
-            the range over the position uncertainty across its line of sight
-            (:func:`.ckf_kernels.range_curvature_variance`, ``|T P T|_F^2 / (2 rho^2)``): caps the
-            information a stream of precise ranges piles up while the tag is uncertain across the
-            line of sight (1-2 anchors), and vanishes once the position is known. Beyond the paper.
-        uwb_range_noise_adaptive: estimate each anchor's range noise from its own innovations
-            (:class:`.uwb_update.RangeNoiseEstimate`): a factor on the stated variance (the
-            message's ``range_std_m`` or ``uwb_range_std_m``), so that the weight of the ranges
-            follows the hardware. The 1-sigma used stays within
-            [``uwb_range_std_floor_m``, ``uwb_range_std_ceiling_m``] (widened to include the stated
-            1-sigma). Counted as ``uwb_noise_estimates`` once per anchor. Acts while GNSS is used (the
-            weight of the ranges against the pseudoranges); without GNSS only with
-            ``uwb_range_noise_adaptive_without_gnss``. Beyond the paper.
-        uwb_range_noise_adaptive_without_gnss: also estimate the range noise in a filter without GNSS
-            (``use_gnss`` false or the map frame; default false: on the real Hanyang cases, UWB alone,
-            the estimate scored 1.25 / 0.60 / 1.07 m against 1.17 / 0.56 / 1.13 m with the stated noise,
-            because with a moving tag the innovations also carry the motion model's errors).
-        uwb_iterate_min_anchors: with GNSS in use, a range may be refined by the iterated update
-            (``max_update_iterations``) only while at least this many anchors were heard within
-            ``uwb_init_window_s`` (0: always; default 3). With one or two anchors the iterated point
-            moves along directions the ranges do not observe and the information of a stream of ranges
-            leaks across their lines of sight (the fused filter got worse than GNSS alone at +22 / +30 dB
-            with the adaptive noise; docs/uwb_gnss_fusion/fusion_never_worse.md); three or more anchors fix
-            the position among themselves and need the refinement. The UWB-only filter is never limited.
-            Beyond the paper.
-        divergence_fix_confirm_s: the filter starts from a GNSS snapshot fix, and a GNSS-declared divergence
-            re-initialises from one, only when an earlier fix, at least this many seconds before (and at most
-            ten times that), agrees with it within 3 combined standard deviations (0: at once, the default).
-            Until then a diverging state is kept (not reset), the fix is held for the next comparison, and
-            the events are counted as ``gnss_init_unconfirmed`` / ``divergence_unconfirmed``. Outlier
-            bursts under jamming (0.2-2 s) make the state gate most pseudoranges for a few epochs while it
-            is right, and a fix of such an epoch is wrong; two fixes a second apart from different bursts
-            rarely agree, while a state that really diverged is outvoted by fixes that do. Beyond the paper.
-        uwb_range_bias_std_m: while GNSS is used and fewer than three anchors were heard within
-            ``uwb_init_window_s`` (ranges alone do not fix the position), the ranges of one anchor
-            are taken to share a bias of this 1-sigma, m, over ``uwb_range_bias_time_s``: the n-th
-            range of the anchor within that time is applied with the variance ``std^2 + n
-            uwb_range_bias_std_m^2`` (0: off). A stream of 20 Hz ranges then tells a few times this
-            much along a line of sight, not millimetres, and that information no longer leaks across
-            lines of sight that turn as the estimate moves (one anchor at +30 dB: 3.93 -> 2.40 m 3D
-            against GNSS alone 2.39 m; docs/uwb_gnss_fusion/fusion_never_worse.md). Two-way UWB ranges
-            do carry biases of centimetres to decimetres that change slowly (antenna delay against
-            signal level and orientation, multipath). Beyond the paper.
-        uwb_range_std_floor_m / uwb_range_std_ceiling_m: bounds of the estimated 1-sigma, m. The
-            floor (1 cm) lies below the precision of two-way-ranging UWB chips (DW1000 / DW3000
-            datasheets: about 10 cm; 2-5 cm measured static, line of sight): it only stops a run
-            of small innovations from collapsing the weight. The ceiling (1 m) is where an anchor
-            stops being worth more than the gate; NLOS ranges beyond it are the gate's business.
-    """
-
-    # sensors and models (.measurement_models, .gnss_update, .uwb_update)
     use_gnss: bool = parameter(
         True,
         'Apply GNSS pseudoranges (Cao et al., eq. 5). false: UWB-only filter (needs 3 anchors to initialise).',
@@ -223,7 +80,21 @@ class FusionParams:
         'White-acceleration PSD per axis of the constant-velocity model, m^2/s^3.',
         minimum=1e-09, maximum=10000.0,
     )
-    # the static model and its detector (.motion_model, issue 27 item 4)
+
+
+@dataclass(frozen=True)
+class _StaticModel:
+    """FusionParams, the static model and its detector (.motion_model, issue 27 item 4).
+
+    Design notes (why, and the evidence; the meaning is in each field's description):
+        motion_detection: let :class:`.motion_model.StationarityDetector` switch between the moving
+            model and a static one (GNSS epochs in the earth frame, no UWB range in the last
+            ``uwb_init_window_s``); False: always the moving model.
+        anchors: optional registry ``((anchor_id, x, y, z), ...)`` in the anchors' frame, m. If
+            non-empty, ranges from other anchor ids are rejected ("unknown_anchor") and the
+            registered position is used.
+    """
+
     motion_detection: bool = parameter(
         True,
         'Find out from the GNSS epochs whether the receiver is static and then run the static model '
@@ -307,7 +178,19 @@ class FusionParams:
         minimum=0.01, maximum=3600.0, read_only=False,
     )
     loop: TrackingLoopParams = internal(default_factory=TrackingLoopParams)
-    # initialisation (.initialisation)
+
+
+@dataclass(frozen=True)
+class _Initialisation:
+    """FusionParams, initialisation (.initialisation).
+
+    Design notes (why, and the evidence; the meaning is in each field's description):
+        init_clock_drift_unobserved_std_mps: clock-drift 1-sigma at an initialisation where the
+            drift is unobserved (no Doppler in the fix) and no earlier drift estimate exists, m/s
+            (1000 m/s covers a crystal's +-3 ppm; GEONET receivers drift by +418 and -330 m/s). On a
+            reinitialisation the drift of the lost state is kept (the oscillator did not change).
+    """
+
     min_satellites_init: int = parameter(
         5,
         'Satellites needed to initialise from GNSS alone.',
@@ -339,7 +222,12 @@ class FusionParams:
         'm/s.',
         minimum=0.0001, maximum=100000.0,
     )
-    # time gaps and divergence (.divergence), re-initialisation
+
+
+@dataclass(frozen=True)
+class _GapsAndDivergence:
+    """FusionParams, time gaps and divergence (.divergence), re-initialisation."""
+
     max_prediction_s: float = parameter(
         120.0,
         'A measurement further than this after the filter time resets the filter, s.',
@@ -371,7 +259,40 @@ class FusionParams:
         'Ranges used for UWB multilateration must lie within this window, s.',
         minimum=0.01, maximum=3600.0,
     )
-    # beyond the paper: UWB latency, divergence window, iterated update, Huber, common-mode screen
+
+
+@dataclass(frozen=True)
+class _BeyondThePaper:
+    """FusionParams, beyond the paper: UWB latency, divergence window, iterated update, Huber, common-mode screen.
+
+    Design notes (why, and the evidence; the meaning is in each field's description):
+        divergence_uwb_gated_fraction: divergence is declared when at least this fraction of the
+            last ``divergence_uwb_ranges`` ranges was gated out, in (0, 1] (1: that many
+            consecutive gated ranges, the original rule).
+        uwb_latency_s: age of a UWB range at its stamp, s (>= 0; 0: the paper's model). The range
+            is modelled as the distance at ``stamp - uwb_latency_s`` (constant-velocity
+            back-propagation). Beyond the paper; set it from the ranging hardware / time-base
+            calibration, not per data set.
+        max_update_iterations: Gauss-Newton (iterated) refinement steps allowed after a cubature
+            update whose linearisation error is significant (0: the plain CKF update of Cao et al.
+            eq. 17-24). Beyond the paper; see :meth:`.ckf.CubatureKalmanFilter.update`.
+        uwb_huber_k_positive: Huber threshold for positive UWB innovations (measured range longer
+            than predicted, the non-line-of-sight direction); inf: positive innovations are not
+            down-weighted.
+        common_mode_screen: before the CKF update, drop pseudoranges and pseudorange rates whose
+            innovation departs from the epoch's median (common clock) innovation by more than the
+            gate allows with the clock-free variance (:mod:`.robust_screen`; beyond the paper).
+            Counted as ``common_mode_pseudorange`` / ``common_mode_doppler``; they count as gated
+            for the divergence rule.
+        receiver_clock_steps: take a step common to every pseudorange that the predicted clock
+            cannot explain (at least five satellites and more than half agreeing) for a step of the
+            receiver clock and move the clock bias by it before the screen and the update, instead
+            of rejecting every pseudorange and rebuilding the position
+            (:func:`.clock_steps.receiver_clock_step`; beyond the paper). Whole milliseconds (the
+            usual adjustment of receivers whose clock drifts) are counted as
+            ``receiver_clock_step_ms``, other steps as ``receiver_clock_step``.
+    """
+
     uwb_latency_s: float = parameter(
         0.0,
         'Age of a UWB range at its stamp (modelled by constant-velocity back-propagation), s.',
@@ -418,7 +339,21 @@ class FusionParams:
         'clock by it, instead of rejecting every pseudorange (beyond the paper).',
         read_only=False,
     )
-    # multi-GNSS: inter-system clock biases (issue 15 item 1)
+
+
+@dataclass(frozen=True)
+class _MultiGnss:
+    """FusionParams, multi-GNSS: inter-system clock biases (issue 15 item 1).
+
+    Design notes (why, and the evidence; the meaning is in each field's description):
+        multi_gnss: use Galileo, BeiDou, GLONASS and QZSS satellites as well as GPS, each system
+            other than the reference (GPS) with an inter-system clock bias state (appended to the
+            state when the system is first seen, so that a GPS-only stream keeps the 8-state
+            filter; process model and initialisation: :data:`INTER_SYSTEM_BIAS_PSD_M2PS`,
+            :data:`INTER_SYSTEM_BIAS_INIT_STD_M`, :data:`INTER_SYSTEM_BIAS_MAX_GAP_S`); False: GPS
+            only, the others counted as ``skipped_constellation.<name>``. SBAS is always skipped.
+    """
+
     multi_gnss: bool = parameter(
         True,
         'Use Galileo, BeiDou, GLONASS and QZSS satellites as well as GPS, each system other than GPS with an '
@@ -427,7 +362,23 @@ class FusionParams:
         'real station: docs/uwb_gnss_fusion/fusion_multignss.md.',
         group=USER,
     )
-    # time-correlated pseudorange errors, one Gauss-Markov state per satellite (issue 15 item 2)
+
+
+@dataclass(frozen=True)
+class _CorrelatedErrors:
+    """FusionParams, time-correlated pseudorange errors, one Gauss-Markov state per satellite (issue 15 item 2).
+
+    Design notes (why, and the evidence; the meaning is in each field's description):
+        pseudorange_correlated_std_m / pseudorange_correlated_tau_s: stationary 1-sigma (m) and
+            correlation time (s) of the time-correlated part of each pseudorange error (residual
+            orbit, clock and atmosphere, multipath), a first-order Gauss-Markov state per tracked
+            satellite (Brown & Hwang, 4th ed., sec. 4.2), allocated when the satellite appears and
+            removed after :data:`CORRELATED_ERROR_MAX_GAP_TAU` correlation times unseen. Treated
+            as white, such errors are averaged over every epoch of a correlation time and the
+            filter becomes overconfident (docs/uwb_gnss_fusion/fusion_never_worse.md).
+            Std 0: off (white pseudorange errors, the 8-state filter).
+    """
+
     pseudorange_correlated_std_m: float = parameter(
         0.0,
         'Stationary 1-sigma of the time-correlated pseudorange error, m: one first-order Gauss-Markov '
@@ -439,7 +390,51 @@ class FusionParams:
         'Correlation time of that error, s.',
         minimum=0.1, maximum=86400.0,
     )
-    # the mirror ambiguity of coplanar anchors, resolved by GNSS (issue 15 item 2)
+
+
+@dataclass(frozen=True)
+class _MirrorAmbiguity:
+    """FusionParams, the mirror ambiguity of coplanar anchors, resolved by GNSS (issue 15 item 2).
+
+    Design notes (why, and the evidence; the meaning is in each field's description):
+        uwb_mirror_test: resolve the mirror ambiguity of coplanar anchors (three anchors always
+            are) with the pseudoranges: a GNSS log-likelihood ratio of the reflection of the
+            estimate across the anchors' plane against the estimate, accumulated over the epochs,
+            and a jump to the mirror when it exceeds ``uwb_mirror_switch_log_lr``
+            (:mod:`.mirror_test`; beyond the paper). Active only with GNSS and UWB, in the earth
+            frame, while the anchors heard within ``uwb_init_window_s`` lie in a plane.
+            Counted as ``uwb_mirror_switch``.
+        uwb_gated_anchor_reinit: when one anchor has had ``divergence_uwb_ranges`` consecutive
+            ranges gated while a multi-start multilateration on the latest range of every anchor
+            heard (at least four; three with ``uwb_tag_side_of_anchor_plane``, the fix on that side
+            of their plane) explains all of them within ``UWB_FIX_CONSISTENT_SIGMA`` range
+            1-sigmas and lies outside the 3-dof gate around the state, reinitialise the position
+            from that fix: the state sits in a wrong local minimum of the ranges (e.g. near the
+            mirror of three of four anchors after a GNSS start metres off in height) and the gate
+            keeps out the anchor that would pull it back. If no such fix exists the anchor's ranges
+            are faulty (e.g. NLOS) and stay gated. At most once per anchor id in the filter's life
+            (a biased anchor whose fix also explains the ranges in a weak geometry must not make the
+            filter cycle). Beyond the paper; counted as ``uwb_anchor_gated_reinit``.
+        uwb_tag_side_of_anchor_plane: what the installer knows of the mirror ambiguity: -1 the tag
+            moves below the plane of its coplanar anchors (anchors mounted high), +1 above it, 0
+            unknown (the default). With -1 or +1, whenever the anchors heard are coplanar and the
+            estimate lies on the other side of their plane (along the local vertical), the filter
+            jumps to its mirror (position, velocity and covariance reflected; counted as
+            ``uwb_side_prior_flip``) and the GNSS test (``uwb_mirror_test``) is not used. For tags
+            that stay clearly on one side: a tag that crosses the plane is pulled back to the side
+            given. Beyond the paper.
+        uwb_mirror_covariance: while the side is unknown (``uwb_tag_side_of_anchor_plane`` 0) and the
+            anchors heard are coplanar, add the mirror ambiguity to the published position
+            covariance: ``p d^2`` along the plane's normal, ``d`` the distance from the estimate to its
+            mirror and ``p`` the probability of the wrong side (:mod:`.mirror_test`). Without it three
+            anchors publish centimetre 1-sigmas for a solution that is on the mirror, 1.3 m off, in
+            about a third of the simulated runs (``docs/uwb_gnss_fusion/fusion_never_worse.md``). The
+            filter's own covariance is unchanged. Beyond the paper.
+        uwb_mirror_gnss_std_m: 1-sigma of the GNSS position error along the normal of the anchors'
+            plane (about the vertical error of single-frequency GNSS), m, for that probability:
+            ``p = Phi(-d / (2 sigma))`` with GNSS, 0.5 without (> 0).
+    """
+
     uwb_mirror_test: bool = parameter(
         False,
         'Resolve the mirror ambiguity of coplanar anchors (three anchors always are) with a GNSS '
@@ -481,7 +476,63 @@ class FusionParams:
         'of the wrong side is Phi(-d / (2 sigma)) with GNSS, 0.5 without.',
         minimum=0.01, maximum=100.0, read_only=False,
     )
-    # range noise: curvature term and adaptive estimate per anchor (issue 15 item 2)
+
+
+@dataclass(frozen=True)
+class _RangeNoise:
+    """FusionParams, range noise: curvature term and adaptive estimate per anchor (issue 15 item 2).
+
+    Design notes (why, and the evidence; the meaning is in each field's description):
+        uwb_range_curvature_noise: add to each range's noise variance the second-order variance of
+            the range over the position uncertainty across its line of sight
+            (:func:`.ckf_kernels.range_curvature_variance`, ``|T P T|_F^2 / (2 rho^2)``): caps the
+            information a stream of precise ranges piles up while the tag is uncertain across the
+            line of sight (1-2 anchors), and vanishes once the position is known. Beyond the paper.
+        uwb_range_noise_adaptive: estimate each anchor's range noise from its own innovations
+            (:class:`.uwb_update.RangeNoiseEstimate`): a factor on the stated variance (the
+            message's ``range_std_m`` or ``uwb_range_std_m``), so that the weight of the ranges
+            follows the hardware. The 1-sigma used stays within
+            [``uwb_range_std_floor_m``, ``uwb_range_std_ceiling_m``] (widened to include the stated
+            1-sigma). Counted as ``uwb_noise_estimates`` once per anchor. Acts while GNSS is used (the
+            weight of the ranges against the pseudoranges); without GNSS only with
+            ``uwb_range_noise_adaptive_without_gnss``. Beyond the paper.
+        uwb_range_noise_adaptive_without_gnss: also estimate the range noise in a filter without GNSS
+            (``use_gnss`` false or the map frame; default false: on the real Hanyang cases, UWB alone,
+            the estimate scored 1.25 / 0.60 / 1.07 m against 1.17 / 0.56 / 1.13 m with the stated noise,
+            because with a moving tag the innovations also carry the motion model's errors).
+        uwb_iterate_min_anchors: with GNSS in use, a range may be refined by the iterated update
+            (``max_update_iterations``) only while at least this many anchors were heard within
+            ``uwb_init_window_s`` (0: always; default 3). With one or two anchors the iterated point
+            moves along directions the ranges do not observe and the information of a stream of ranges
+            leaks across their lines of sight (the fused filter got worse than GNSS alone at +22 / +30 dB
+            with the adaptive noise; docs/uwb_gnss_fusion/fusion_never_worse.md); three or more anchors fix
+            the position among themselves and need the refinement. The UWB-only filter is never limited.
+            Beyond the paper.
+        divergence_fix_confirm_s: the filter starts from a GNSS snapshot fix, and a GNSS-declared divergence
+            re-initialises from one, only when an earlier fix, at least this many seconds before (and at most
+            ten times that), agrees with it within 3 combined standard deviations (0: at once, the default).
+            Until then a diverging state is kept (not reset), the fix is held for the next comparison, and
+            the events are counted as ``gnss_init_unconfirmed`` / ``divergence_unconfirmed``. Outlier
+            bursts under jamming (0.2-2 s) make the state gate most pseudoranges for a few epochs while it
+            is right, and a fix of such an epoch is wrong; two fixes a second apart from different bursts
+            rarely agree, while a state that really diverged is outvoted by fixes that do. Beyond the paper.
+        uwb_range_bias_std_m: while GNSS is used and fewer than three anchors were heard within
+            ``uwb_init_window_s`` (ranges alone do not fix the position), the ranges of one anchor
+            are taken to share a bias of this 1-sigma, m, over ``uwb_range_bias_time_s``: the n-th
+            range of the anchor within that time is applied with the variance ``std^2 + n
+            uwb_range_bias_std_m^2`` (0: off). A stream of 20 Hz ranges then tells a few times this
+            much along a line of sight, not millimetres, and that information no longer leaks across
+            lines of sight that turn as the estimate moves (one anchor at +30 dB: 3.93 -> 2.40 m 3D
+            against GNSS alone 2.39 m; docs/uwb_gnss_fusion/fusion_never_worse.md). Two-way UWB ranges
+            do carry biases of centimetres to decimetres that change slowly (antenna delay against
+            signal level and orientation, multipath). Beyond the paper.
+        uwb_range_std_floor_m / uwb_range_std_ceiling_m: bounds of the estimated 1-sigma, m. The
+            floor (1 cm) lies below the precision of two-way-ranging UWB chips (DW1000 / DW3000
+            datasheets: about 10 cm; 2-5 cm measured static, line of sight): it only stops a run
+            of small innovations from collapsing the weight. The ceiling (1 m) is where an anchor
+            stops being worth more than the gate; NLOS ranges beyond it are the gate's business.
+    """
+
     uwb_range_curvature_noise: bool = parameter(
         True,
         'Add to each range variance the second-order (curvature) variance of the range over the position '
@@ -541,6 +592,23 @@ class FusionParams:
         minimum=0.1, maximum=3600.0,
     )
 
+
+@dataclass(frozen=True)
+class FusionParams(_RangeNoise, _MirrorAmbiguity, _CorrelatedErrors, _MultiGnss, _BeyondThePaper,
+                   _GapsAndDivergence, _Initialisation, _StaticModel, _SensorModels):
+    """Parameters of :class:`FusionFilter` (validated on construction).
+
+    Each field is a parameter of fusion_node written once, with its default, description, range,
+    group and whether it is settable while running (:func:`rfi_node_common.params.parameter`; shown by
+    ``fusion_node --help`` and config/fusion.yaml, which is generated from them). ``loop`` and
+    ``anchors`` are not parameters (the node builds ``loop`` from its ``loop_*`` parameters; anchor
+    positions come in the UwbRange messages).
+
+    The fields come in groups, one base class each, in this order (a dataclass takes the fields of its
+    bases last base first, hence the bases listed in reverse): ``_SensorModels``, ``_StaticModel``,
+    ``_Initialisation``, ``_GapsAndDivergence``, ``_BeyondThePaper``, ``_MultiGnss``, ``_CorrelatedErrors``,
+    ``_MirrorAmbiguity``, ``_RangeNoise``. Each base's docstring holds the design notes of its fields.
+    """
 
     def __post_init__(self) -> None:
         pos = {
