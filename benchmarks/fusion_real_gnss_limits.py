@@ -14,15 +14,15 @@ measurements, each on the stations' epochs as ``rinex_to_bag.convert_rinex`` bui
    a range of static process noise (white-acceleration PSD): whether any motion model setting
    reaches the 20 % goal. The filter core (``FusionFilter``, GNSS only) on the epochs, as the node
    runs it (same figures as the node rows of the table at the shipped defaults).
-4. **Ionosphere-free pseudoranges.** ``PR_IF = (f1^2 P_L1 - f2^2 P_L2) / (f1^2 - f2^2)`` from the
-   RINEX L1 and L2 codes of each GPS satellite (Hofmann-Wellenhof et al. 2008, eq. 5.76), with no
-   ionospheric model (``ionosphere_delay_m`` 0) and the broadcast clock without T_GD (T_GD is the
-   L1-only user's correction; the clock polynomial refers to the P1/P2 ionosphere-free
-   combination, IS-GPS-200 20.3.3.3.3.2): our SPP and the filter core on these epochs (weights
-   as for L1: the combination's 3x larger noise not modelled). ARL1 has P1 and C1; GEONET only C1
-   and P2. The broadcast T_GD refers to P1/P2, so C1 with P2 leaves each satellite's P1-C1 code
-   bias (a few dm) amplified by f1^2 / (f1^2 - f2^2) = 2.55 (not in broadcast messages: an external
-   DCB product would be needed). ARL1, converted both ways, shows what that costs.
+4. **Ionosphere-free pseudoranges.** ``PR_IF = (f1^2 P_L1 - f2^2 P_L2) / (f1^2 - f2^2)``
+   (:func:`gnss_common.corrections.ionosphere_free_pseudorange_m`, IS-GPS-200 20.3.3.3.3.3) with no
+   ionospheric model (``ionosphere_delay_m`` 0) and the broadcast clock without T_GD (the clock
+   polynomial refers to the P1/P2 combination, 20.3.3.3.3.2): our SPP and the filter core on these
+   epochs (weights as for L1: the combination's 3x larger noise not modelled). ``P1``: the shipped
+   conversion, ``convert_rinex(..., ionosphere_free=True)`` (``rinex_to_bag --ionosphere-free``).
+   ``C1``: C/A with P2, which the conversion refuses, formed here to show why: T_GD refers to
+   P1/P2, so each satellite's P1-C1 code bias (a few dm, in no broadcast message) stays, amplified
+   by f1^2 / (f1^2 - f2^2) = 2.55. ARL1 has P1 and C1 (both shown); GEONET only C1 and P2.
 
 Run through benchmarks/fusion_real_gnss.py (no command line of its own).
 """
@@ -37,11 +37,13 @@ from pathlib import Path
 import numpy as np
 
 from gnss_common.constants import GPS_L1_FREQUENCY_HZ, GPS_L2_FREQUENCY_HZ, SPEED_OF_LIGHT_MPS
+from gnss_common.corrections import ionosphere_free_pseudorange_m
 from gnss_common.gps_time import gps_to_ros_stamp_ns
 from gnss_common.observations import GPS, GnssEpoch
 from gnss_common.rinex_nav import read_rinex_navs
 from gnss_common.rinex_obs import read_rinex_obs
 from gnss_common.spp import SinglePointPositioner
+from rfi_experiments.rinex_to_bag import convert_rinex
 from rfi_sim.evaluation import ecef_errors_enu, error_3d_m, horizontal_error_m
 from uwb_gnss_fusion.fusion_filter import FusionFilter
 from uwb_gnss_fusion.fusion_params import FusionParams
@@ -52,10 +54,6 @@ SLOW_WINDOWS_MIN = (5.0, 10.0, 20.0)
 """Moving-average windows of the spectrum split, min."""
 STATIC_PSD_SCAN_M2PS3 = (1.0e-10, 1.0e-9, 1.0e-8, 1.0e-7, 1.0e-6)
 """Static white-acceleration PSDs tried, m^2/s^3 (1e-8 is the shipped ``static_accel_psd_m2ps3``)."""
-IF_GAMMA_1 = GPS_L1_FREQUENCY_HZ**2 / (GPS_L1_FREQUENCY_HZ**2 - GPS_L2_FREQUENCY_HZ**2)
-"""Ionosphere-free weight of the L1 code (2.546)."""
-IF_GAMMA_2 = GPS_L2_FREQUENCY_HZ**2 / (GPS_L1_FREQUENCY_HZ**2 - GPS_L2_FREQUENCY_HZ**2)
-"""Ionosphere-free weight of the L2 code (1.546)."""
 
 
 @dataclass(frozen=True)
@@ -115,9 +113,12 @@ def ionosphere_free_epochs(station: StationData, l1_code: str) -> tuple[tuple[Gn
     """The station's GPS epochs with ionosphere-free pseudoranges from ``l1_code`` and P2 (module docstring).
 
     Returns:
-        (epochs, satellites dropped for a missing code). The other fields (satellite states,
-        troposphere, Doppler, C/N0) are those of the L1 epochs.
+        (epochs, satellites dropped for a missing code). ``P1``: the shipped conversion; ``C1``: the
+        L1 epochs with the C1/P2 combination (satellite states, troposphere, Doppler, C/N0 kept).
     """
+    if l1_code == "P1":
+        conv = convert_rinex(station.obs_path, station.nav_path, ionosphere_free=True)
+        return conv.epochs, conv.skipped["missing_dual_frequency"]
     obs = read_rinex_obs(station.obs_path)
     tgd = {e.prn: e.tgd_s for e in read_rinex_navs([station.nav_path]).keplerian_ephemerides if e.system == "G"}
     by_stamp = {e.stamp_ns: e for e in station.epochs}
@@ -134,7 +135,8 @@ def ionosphere_free_epochs(station: StationData, l1_code: str) -> tuple[tuple[Gn
             if o.constellation != GPS or not (math.isfinite(p1) and math.isfinite(p2)):
                 dropped += 1
                 continue
-            kept.append(replace(o, pseudorange_m=IF_GAMMA_1 * p1 - IF_GAMMA_2 * p2, ionosphere_delay_m=0.0,
+            pr_if = float(ionosphere_free_pseudorange_m(p1, p2, GPS_L1_FREQUENCY_HZ, GPS_L2_FREQUENCY_HZ))
+            kept.append(replace(o, pseudorange_m=pr_if, ionosphere_delay_m=0.0,
                                 satellite_clock_bias_m=o.satellite_clock_bias_m
                                 + SPEED_OF_LIGHT_MPS * tgd.get(o.svid, 0.0)))
         out.append(replace(epoch, observations=tuple(kept)))
