@@ -138,6 +138,35 @@ def ionosphere_frequency_scale(carrier_frequency_hz: np.ndarray | float) -> np.n
     return (GPS_L1_FREQUENCY_HZ / f) ** 2
 
 
+def ionosphere_free_pseudorange_m(
+    pr1_m: np.ndarray | float, pr2_m: np.ndarray | float, f1_hz: float, f2_hz: float
+) -> np.ndarray:
+    """Ionosphere-free combination of two code pseudoranges, m: (f1^2 PR1 - f2^2 PR2) / (f1^2 - f2^2).
+
+    Args:
+        pr1_m: pseudorange(s) on the carrier ``f1_hz``, m, scalar or (N,).
+        pr2_m: pseudorange(s) on the carrier ``f2_hz``, m, same shape.
+        f1_hz, f2_hz: the two carriers, Hz, finite, > 0, different (GPS L1 1575.42e6, L2 1227.60e6).
+
+    Returns:
+        The combination, m, shape of the inputs: free of the first-order ionospheric delay
+        (40.3 TEC / f^2), with the code noise and multipath of the two signals amplified
+        (GPS L1/L2: weights 2.546 and -1.546, noise about 3x that of one signal).
+
+    Notes
+    -----
+    IS-GPS-200, 20.3.3.3.3.3: ``PR = (PR_L2 - gamma PR_L1) / (1 - gamma)`` with
+    ``gamma = (f1 / f2)^2``, the same combination; the dual-frequency P(Y) user applies the
+    broadcast clock polynomial without T_GD (20.3.3.3.3.2), whose reference this combination is.
+    """
+    f1, f2 = float(f1_hz), float(f2_hz)
+    if not (math.isfinite(f1) and math.isfinite(f2) and f1 > 0.0 and f2 > 0.0 and f1 != f2):
+        raise ValueError(f"need two different finite carriers > 0, got {f1_hz}, {f2_hz}")
+    g1 = f1 * f1 / (f1 * f1 - f2 * f2)
+    g2 = f2 * f2 / (f1 * f1 - f2 * f2)
+    return g1 * np.asarray(pr1_m, dtype=float) - g2 * np.asarray(pr2_m, dtype=float)
+
+
 def standard_atmosphere(
     height_m: float, relative_humidity: float = STANDARD_RELATIVE_HUMIDITY
 ) -> tuple[float, float, float]:

@@ -37,9 +37,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gnss_common.constants import SPEED_OF_LIGHT_MPS
+from gnss_common.constants import GPS_L1_FREQUENCY_HZ, GPS_L2_FREQUENCY_HZ, SPEED_OF_LIGHT_MPS
 from gnss_common.coordinates import azimuth_elevation, ecef_to_geodetic
-from gnss_common.corrections import ionosphere_frequency_scale, klobuchar_delay_m, troposphere_delay_m
+from gnss_common.corrections import (
+    ionosphere_free_pseudorange_m,
+    ionosphere_frequency_scale,
+    klobuchar_delay_m,
+    troposphere_delay_m,
+)
 from gnss_common.ephemeris import (
     EphemerisStore,
     GpsEphemeris,
@@ -68,8 +73,16 @@ SKIP_REASONS = (
     "no_ephemeris",
     "unhealthy",
     "stale_ephemeris",
+    "missing_dual_frequency",
 )
 """Keys of :attr:`EpochBuildResult.skipped` (always all present, zero when nothing skipped)."""
+
+GPS_DUAL_FREQUENCY_CODES = {2: ("P1", "P2"), 3: ("C1W", "C2W"), 4: ("C1W", "C2W")}
+"""RINEX major version -> the GPS L1 and L2 P(Y) codes of the ionosphere-free combination
+(:attr:`MeasurementBuilderParams.ionosphere_free`). Only the P(Y) pair: the broadcast T_GD and the
+clock polynomial refer to P1/P2, so C/A (``C1``, ``C1C``) with P2 would carry each satellite's
+P1-C1 code bias times 2.55, which no broadcast message gives (measured:
+docs/uwb_gnss_fusion/fusion_real_gnss.md, section 4)."""
 
 CONSTELLATION_CODES = {"G": GPS, "R": GLONASS, "E": GALILEO, "C": BEIDOU, "J": QZSS, "S": SBAS}
 """RINEX system letter -> constellation code of rfi_msgs/GnssMeasurement."""
@@ -98,6 +111,13 @@ class MeasurementBuilderParams:
             of other systems are skipped as ``unsupported_constellation``.
         signals: the signal of each system and its tracking attributes in priority order
             (:data:`gnss_common.observation_codes.DEFAULT_SIGNALS`).
+        ionosphere_free: GPS pseudoranges as the ionosphere-free combination of the L1 and L2
+            P(Y) codes (:data:`GPS_DUAL_FREQUENCY_CODES`,
+            :func:`gnss_common.corrections.ionosphere_free_pseudorange_m`), with no ionospheric
+            delay (``ionosphere_delay_m`` 0) and the broadcast clock without T_GD; a GPS satellite
+            without both codes is skipped as ``missing_dual_frequency``. Doppler, C/N0 and the
+            carrier stay those of the L1 signal. The other systems are unchanged (single
+            frequency, Klobuchar). False (the default): every system single frequency.
     """
 
     min_pseudorange_m: float = 1.0e7
@@ -109,6 +129,7 @@ class MeasurementBuilderParams:
     apply_troposphere: bool = True
     constellations: tuple[str, ...] = SUPPORTED_SYSTEMS
     signals: dict[str, SignalPreference] = field(default_factory=lambda: dict(DEFAULT_SIGNALS), hash=False)
+    ionosphere_free: bool = False
 
     def __post_init__(self) -> None:
         unknown = [c for c in self.constellations if c not in SUPPORTED_SYSTEMS]
@@ -311,7 +332,10 @@ class GnssEpochBuilder:
         dops: list[float] = []
         cn0s: list[float] = []
         freqs: list[float] = []
+        dual: list[bool] = []
         codes_used: dict[str, str] = {}
+        version_pair = (GPS_DUAL_FREQUENCY_CODES.get(int(self.rinex_version))
+                        if p.ionosphere_free and self.rinex_version is not None else None)
         for sat_id in sorted(obs_epoch.observations):
             values = obs_epoch.observations[sat_id]
             sys_char = sat_id[0]
@@ -324,6 +348,18 @@ class GnssEpochBuilder:
                 skip(sat_id, "missing_pseudorange")
                 continue
             pr = selected.pseudorange_m
+            code = selected.pseudorange_observable
+            if p.ionosphere_free and sys_char == "G":
+                # version unknown: the RINEX 2 names if the satellite has one, else the RINEX 3 ones
+                pair = version_pair or (GPS_DUAL_FREQUENCY_CODES[2] if ("P1" in values or "P2" in values)
+                                        else GPS_DUAL_FREQUENCY_CODES[3])
+                pr1 = values.get(pair[0], math.nan)
+                pr2 = values.get(pair[1], math.nan)
+                if not (math.isfinite(pr1) and math.isfinite(pr2) and pr1 > 0.0 and pr2 > 0.0):
+                    skip(sat_id, "missing_dual_frequency")
+                    continue
+                pr = float(ionosphere_free_pseudorange_m(pr1, pr2, GPS_L1_FREQUENCY_HZ, GPS_L2_FREQUENCY_HZ))
+                code = f"{pair[0]}+{pair[1]}"
             max_pr = p.max_pseudorange_high_orbit_m if sys_char in ("C", "J") else p.max_pseudorange_m
             if not p.min_pseudorange_m <= pr <= max_pr:
                 skip(sat_id, "pseudorange_out_of_range")
@@ -340,7 +376,8 @@ class GnssEpochBuilder:
                 skip(sat_id, reason)
                 continue
             cn0 = selected.cn0_dbhz
-            codes_used[sat_id] = selected.pseudorange_observable
+            codes_used[sat_id] = code
+            dual.append(p.ionosphere_free and sys_char == "G")
             systems.append(sys_char)
             prns.append(prn)
             ephs.append(eph)
@@ -367,6 +404,13 @@ class GnssEpochBuilder:
 
         ref, source = self._reference_position(systems, pos, pr_arr, clk_m)
         iono, tropo = self._atmosphere(ref, source, pos, freq_arr, tow, extra)
+        if any(dual):
+            # the ionosphere-free user: no ionospheric model, the clock polynomial without T_GD
+            # (IS-GPS-200, 20.3.3.3.3.2-3); _states_at_transmit subtracted T_GD (L1 user)
+            is_dual = np.asarray(dual)
+            tgd_m = np.array([SPEED_OF_LIGHT_MPS * getattr(e, "tgd_s", 0.0) for e in ephs])
+            clk_m = np.where(is_dual, clk_m + tgd_m, clk_m)
+            iono = np.where(is_dual & np.isfinite(iono), 0.0, iono)
 
         rates = -(SPEED_OF_LIGHT_MPS / freq_arr) * np.asarray(dops)
         observations = tuple(

@@ -19,6 +19,14 @@ When the observation header has an APPROX POSITION XYZ, the same point is
 written on ``/truth/position`` (``geometry_msgs/PointStamped``, frame "earth") at every epoch: it
 is the station's published coordinate, used as truth for a static receiver.
 
+``--ionosphere-free``: the GPS pseudoranges are the ionosphere-free combination of the L1 and L2
+P(Y) codes (RINEX 2 ``P1``/``P2``, RINEX 3/4 ``C1W``/``C2W``) with ``ionosphere_delay_m`` 0 and
+the broadcast clock without T_GD (IS-GPS-200, 20.3.3.3.3.2-3); Doppler, C/N0 and the carrier stay
+L1's. A GPS satellite without both codes is skipped (``missing_dual_frequency``); C/A with P2 is
+not combined (each satellite's P1-C1 code bias, times 2.55, is in no broadcast message). The bag's
+metadata says which (:data:`IONOSPHERE_FREE_METADATA_KEY`). The filter weighs these ranges as L1
+ranges (their code noise is about 3x larger; on a static station the averaging absorbs it).
+
 Time base: header stamps and bag log times are ROS time (UTC-based Unix time, integer ns), converted
 from each epoch's GPS time by :func:`gnss_common.gps_time.gps_to_ros_stamp_ns` (leap seconds from
 its one table); the exact GPS week and time of week are in the message's ``gps_week`` and
@@ -78,6 +86,9 @@ CODES_METADATA_KEY = "gnss_observation_codes"
 PRIORITY_METADATA_KEY = "gnss_observation_code_priority"
 """Bag ``custom_data`` key: JSON ``{constellation: [pseudorange observables in the order tried]}``
 for the file's RINEX version (:data:`gnss_common.observation_codes.DEFAULT_SIGNALS`)."""
+IONOSPHERE_FREE_METADATA_KEY = "gnss_ionosphere_free"
+"""Bag ``custom_data`` key: ``"true"`` when the GPS pseudoranges are the ionosphere-free L1/L2 P(Y)
+combination (``--ionosphere-free``; ``ionosphere_delay_m`` 0, clock without T_GD), else ``"false"``."""
 
 
 @dataclass(frozen=True)
@@ -100,6 +111,8 @@ class RinexConversion:
             C/N0 of one tracking attribute).
         code_priority: constellation name -> pseudorange observables in the order they were tried
             (for the file's RINEX version), for the constellations converted.
+        ionosphere_free: the GPS pseudoranges are the ionosphere-free P1/P2 combination
+            (:attr:`gnss_common.measurements.MeasurementBuilderParams.ionosphere_free`).
     """
 
     epochs: tuple[GnssEpoch, ...]
@@ -111,6 +124,7 @@ class RinexConversion:
     nav_skipped: dict[str, dict[str, int]] = field(default_factory=dict)
     codes_by_constellation: dict[str, dict[str, int]] = field(default_factory=dict)
     code_priority: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    ionosphere_free: bool = False
 
     @property
     def measurement_count(self) -> int:
@@ -164,6 +178,7 @@ def convert_rinex(
     elevation_mask_deg: float = 0.0,
     constellations: Sequence[str] = SUPPORTED_SYSTEMS,
     progress: ProgressLine | None = None,
+    ionosphere_free: bool = False,
 ) -> RinexConversion:
     """Read a RINEX observation file and its navigation file(s) and build every epoch.
 
@@ -175,6 +190,10 @@ def convert_rinex(
             :data:`gnss_common.measurements.SUPPORTED_SYSTEMS`); the others are skipped and counted.
         progress: if given, gets the number of epochs as its total and one count per epoch built (the
             slow part: satellite positions), and is closed at the end.
+        ionosphere_free: GPS pseudoranges as the ionosphere-free combination of the L1 and L2 P(Y)
+            codes (RINEX 2 ``P1``/``P2``, RINEX 3/4 ``C1W``/``C2W``), without ionospheric model and
+            T_GD; GPS satellites without both are skipped as ``missing_dual_frequency``
+            (:attr:`gnss_common.measurements.MeasurementBuilderParams.ionosphere_free`).
 
     Returns:
         :class:`RinexConversion`.
@@ -186,7 +205,7 @@ def convert_rinex(
     """
     if not (math.isfinite(elevation_mask_deg) and -90.0 <= elevation_mask_deg <= 90.0):
         raise ValueError(f"--elevation-mask-deg must be in [-90, 90], got {elevation_mask_deg}")
-    params = MeasurementBuilderParams(constellations=tuple(constellations))
+    params = MeasurementBuilderParams(constellations=tuple(constellations), ionosphere_free=ionosphere_free)
     obs = read_rinex_obs(obs_path)
     navs = [nav_path] if isinstance(nav_path, (str, Path)) else list(nav_path)
     nav = read_rinex_navs(navs)
@@ -239,6 +258,7 @@ def convert_rinex(
             SYSTEM_NAMES[letter]: params.signals[letter].pseudorange_observables(obs.header.version)
             for letter in params.constellations
         },
+        ionosphere_free=ionosphere_free,
     )
 
 
@@ -262,6 +282,7 @@ def write_bag(conversion: RinexConversion, out: str | Path, *, overwrite: bool =
         bag.set_custom_data(CODES_METADATA_KEY, json.dumps(conversion.codes_by_constellation, sort_keys=True))
         bag.set_custom_data(PRIORITY_METADATA_KEY, json.dumps(
             {k: list(v) for k, v in conversion.code_priority.items()}, sort_keys=True))
+        bag.set_custom_data(IONOSPHERE_FREE_METADATA_KEY, "true" if conversion.ionosphere_free else "false")
         for epoch in conversion.epochs:
             bag.write(MEASUREMENTS_TOPIC, epoch_to_msg(epoch, EARTH_FRAME_ID), epoch.stamp_ns)
             if conversion.truth_position_ecef_m is not None:
@@ -295,6 +316,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--overwrite", action="store_true", help="replace an existing bag")
     parser.add_argument("--elevation-mask-deg", type=float, default=0.0, metavar="X",
                         help="drop satellites below X degrees of elevation (default 0: below the horizon)")
+    parser.add_argument("--ionosphere-free", action="store_true",
+                        help="GPS pseudoranges as the ionosphere-free combination of the L1 and L2 P(Y) codes "
+                             "(RINEX 2 P1/P2, RINEX 3/4 C1W/C2W), no ionospheric model, clock without T_GD; GPS "
+                             "satellites without both codes are skipped (missing_dual_frequency). C/A with P2 "
+                             "is not combined (it needs the P1-C1 code biases, which no broadcast message has)")
     return parser
 
 
@@ -319,7 +345,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _convert(args: argparse.Namespace, out: Path) -> tuple[RinexConversion, dict[str, int]]:
     conversion = convert_rinex(args.obs, args.nav, args.elevation_mask_deg, args.constellations,
                                progress=ProgressLine(f'rinex_to_bag {Path(args.obs).name}', unit='epoch',
-                                                     enabled=not args.quiet))
+                                                     enabled=not args.quiet),
+                               ionosphere_free=args.ionosphere_free)
     return conversion, write_bag(conversion, out, overwrite=args.overwrite)
 
 
@@ -332,6 +359,8 @@ def _summary(args: argparse.Namespace, result: tuple[RinexConversion, dict[str, 
     has_truth = conversion.truth_position_ecef_m is not None
     truth = "header APPROX POSITION" if has_truth else "none (no APPROX POSITION)"
     lines.append(f"  truth         {truth}")
+    if conversion.ionosphere_free:
+        lines.append("  GPS pseudoranges  ionosphere-free L1/L2 P(Y) combination (no ionospheric model)")
     for topic, n in sorted(counts.items()):
         lines.append(f"  {topic}  {n}")
     lines.append("  measurements by constellation:")

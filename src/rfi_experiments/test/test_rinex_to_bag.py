@@ -15,7 +15,13 @@ from gnss_common.gps_time import gps_to_ros_stamp_ns
 from gnss_common.measurements import GnssEpochBuilder
 from gnss_common.rinex import read_rinex_nav, read_rinex_obs
 from rfi_experiments.bag_io import BagReader
-from rfi_experiments.rinex_to_bag import MEASUREMENTS_TOPIC, TRUTH_TOPIC, convert_rinex, main
+from rfi_experiments.rinex_to_bag import (
+    IONOSPHERE_FREE_METADATA_KEY,
+    MEASUREMENTS_TOPIC,
+    TRUTH_TOPIC,
+    convert_rinex,
+    main,
+)
 from rfi_node_common.conversions import msg_to_epoch, msg_to_point
 
 DATA = Path(__file__).resolve().parents[2] / "gnss_common" / "test" / "data"
@@ -175,3 +181,22 @@ def test_help_says_truth_is_published_position(capsys: pytest.CaptureFixture[str
     assert _run("--help") == 0
     text = " ".join(capsys.readouterr().out.split())
     assert "APPROX POSITION" in text and "published position" in text
+
+
+def test_ionosphere_free_option(arl1_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--ionosphere-free: GPS P1/P2 combination without ionospheric delay, said in the summary and the metadata."""
+    out = tmp_path / "arl1_if"
+    assert _run(OBS, NAV, out, "--ionosphere-free") == 0
+    assert "ionosphere-free L1/L2 P(Y) combination" in capsys.readouterr().out
+    expected = convert_rinex(OBS, NAV, ionosphere_free=True)
+    assert expected.codes_by_constellation == {"gps": {"P1+P2": expected.measurement_count}}
+    with BagReader(out) as bag:
+        assert bag.custom_data[IONOSPHERE_FREE_METADATA_KEY] == "true"
+        msgs = [m.decode() for m in bag.messages([MEASUREMENTS_TOPIC])]
+    assert len(msgs) == len(expected.epochs)
+    for msg, epoch in zip(msgs, expected.epochs, strict=True):
+        got = msg_to_epoch(msg)
+        assert [o.pseudorange_m for o in got.observations] == [o.pseudorange_m for o in epoch.observations]
+        assert all(o.ionosphere_delay_m == 0.0 for o in got.observations)
+    with BagReader(arl1_bag) as bag:
+        assert bag.custom_data[IONOSPHERE_FREE_METADATA_KEY] == "false"
