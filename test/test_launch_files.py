@@ -20,7 +20,7 @@ import pytest
 import yaml
 from ament_index_python.packages import get_package_prefix, get_package_share_directory
 
-PACKAGES = ('rfi_monitor', 'gnss_integrity', 'uwb_gnss_fusion', 'imm_carrier', 'rfi_experiments')
+PACKAGES = ('rfi_monitor', 'gnss_integrity', 'uwb_gnss_fusion', 'imm_carrier', 'gnss_correlator', 'rfi_experiments')
 """The packages that ship launch files (test_every_node_package_ships_one checks the node packages do)."""
 SUITE = ('rfi_experiments', 'suite.launch.xml')
 
@@ -72,7 +72,8 @@ def _param_names(section: str) -> set[str]:
 def test_every_node_package_ships_one():
     names = {f.name for f in FILES}
     for expected in ('rfi_monitor.launch.xml', 'gnss_integrity.launch.xml', 'fusion.launch.xml',
-                     'imm_carrier.launch.xml', 'if_source.launch.xml', 'ubx_source.launch.xml', 'suite.launch.xml'):
+                     'imm_carrier.launch.xml', 'gnss_correlator.launch.xml',
+                     'if_source.launch.xml', 'ubx_source.launch.xml', 'suite.launch.xml'):
         assert expected in names, (expected, sorted(names))
 
 

@@ -102,7 +102,8 @@ O_N = 14  # samples in the period
 O_PERIOD = 15  # period count since the channel's start (0 = the first, usually partial)
 O_CN0 = 16  # C/N0 over the last window of prompts, dB-Hz (NaN until the window is full)
 O_LOCK = 17  # PLL lock indicator over the same window (NaN until full)
-N_OUT = 18
+O_NOISE = 18  # noise power of one prompt (both components) over the same window, (input units x samples)^2
+N_OUT = 19
 
 
 @dataclass(frozen=True)
@@ -145,8 +146,9 @@ class TrackingConfig:
 
 
 @njit(cache=True, nogil=True)
-def _window_quality(ring: np.ndarray, t_s: float) -> tuple[float, float]:
-    """C/N0 (M2M4, dB-Hz) and lock indicator (mean(I^2 - Q^2) / mean(I^2 + Q^2)) of a window of prompts."""
+def _window_quality(ring: np.ndarray, t_s: float) -> tuple[float, float, float]:
+    """C/N0 (M2M4, dB-Hz), lock indicator (mean(I^2 - Q^2) / mean(I^2 + Q^2)) and the noise power per prompt
+    (M2M4's P_n) of a window of prompts."""
     m2 = 0.0
     m4 = 0.0
     d = 0.0
@@ -161,12 +163,12 @@ def _window_quality(ring: np.ndarray, t_s: float) -> tuple[float, float]:
     lock = d / w / m2 if m2 > 0 else math.nan
     disc = 2.0 * m2 * m2 - m4
     if not disc > 0:
-        return math.nan, lock
+        return math.nan, lock, m2
     ps = math.sqrt(disc)
     pn = m2 - ps
     if not pn > 0:
-        return math.nan, lock
-    return 10.0 * math.log10(ps / pn / t_s), lock
+        return math.nan, lock, math.nan
+    return 10.0 * math.log10(ps / pn / t_s), lock, pn
 
 
 @njit(cache=True, nogil=True)
@@ -212,12 +214,13 @@ def _close_period(st: np.ndarray, out: np.ndarray, ring: np.ndarray, row: int, e
     out[row, O_PERIOD] = st[S_PERIODS]
     out[row, O_CN0] = math.nan
     out[row, O_LOCK] = math.nan
+    out[row, O_NOISE] = math.nan
     if st[S_PERIODS] > 0:  # the first period is partial: left out of the window
         w = ring.shape[0]
         ring[int(st[S_RING_COUNT]) % w] = complex(p_re, p_im)
         st[S_RING_COUNT] += 1.0
         if st[S_RING_COUNT] >= w:
-            out[row, O_CN0], out[row, O_LOCK] = _window_quality(ring, t)
+            out[row, O_CN0], out[row, O_LOCK], out[row, O_NOISE] = _window_quality(ring, t)
     # carrier loop (Kaplan & Hegarty Fig. 5-23): second-order PLL, first-order FLL assist while pulling in
     w0f_now = w0f if st[S_PERIODS] < assist_periods else 0.0
     w_old = st[S_W]
@@ -346,6 +349,9 @@ class TrackedPeriods:
         cn0_dbhz: C/N0 estimate over the last ``cn0_window_ms`` prompts, dB-Hz (NaN until the window is
             full, or when the estimate has no signal power).
         lock_indicator: smoothed cos(2 e_p) over the same window, [-1, 1] (NaN until full).
+        noise_power: the moments estimator's noise power of one prompt (I and Q together) over the same
+            window, (input units x samples)^2 (NaN until full); the signal power is
+            ``noise_power x 10^(cn0_dbhz / 10) x T``.
     """
 
     prn: np.ndarray
@@ -364,6 +370,7 @@ class TrackedPeriods:
     period: np.ndarray
     cn0_dbhz: np.ndarray
     lock_indicator: np.ndarray
+    noise_power: np.ndarray
 
     def of(self, prn: int) -> TrackedPeriods:
         """The rows of one PRN."""
@@ -539,4 +546,5 @@ class Tracker:
             code_rate_hz=table[order, O_CODE_RATE], pll_error_rad=table[order, O_PLL_ERR],
             fll_error_hz=table[order, O_FLL_ERR], dll_error_chips=table[order, O_DLL_ERR],
             n_samples=table[order, O_N].astype(np.int64), period=table[order, O_PERIOD].astype(np.int64),
-            cn0_dbhz=table[order, O_CN0], lock_indicator=table[order, O_LOCK])
+            cn0_dbhz=table[order, O_CN0], lock_indicator=table[order, O_LOCK],
+            noise_power=table[order, O_NOISE])
