@@ -127,7 +127,8 @@ def test_the_suite_starts_every_node_of_the_suite():
     included = {Path(_resolve(i.get('file'), values)).name: i.get('if') for i in root.iter('include')}
     assert included == {'rfi_monitor.launch.xml': None, 'gnss_integrity.launch.xml': '$(var with_integrity)',
                         'fusion.launch.xml': None, 'imm_carrier.launch.xml': '$(var with_imm)',
+                        'gnss_correlator.launch.xml': '$(var with_correlator)',
                         'if_source.launch.xml': '$(var with_if_source)',
                         'ubx_source.launch.xml': '$(var with_ubx_source)'}
     assert values['with_integrity'] == values['with_imm'] == 'true'
-    assert values['with_if_source'] == values['with_ubx_source'] == 'false'
+    assert values['with_if_source'] == values['with_ubx_source'] == values['with_correlator'] == 'false'
