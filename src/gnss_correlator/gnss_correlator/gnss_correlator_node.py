@@ -142,6 +142,7 @@ class GnssCorrelatorNode(Node):
             return
         if decision.restart:
             self.counts['stamp_restarts'] += 1
+            self.receiver.close()
             self.receiver = Receiver(self.params.receiver())
         counts = decode_counts(msg).astype('float64') * msg.scale
         samples = counts[0::2] + 1j * counts[1::2] if msg.is_complex else counts
@@ -153,6 +154,7 @@ class GnssCorrelatorNode(Node):
         except Exception as err:  # noqa: BLE001 - a core fault must not end the node (module docstring)
             self.counts['core_errors'] += 1
             self.get_logger().error(f'receiver failed on a block ({type(err).__name__}: {err}); restarted')
+            self.receiver.close()
             self.receiver = Receiver(self.params.receiver())
             intervals = []
         else:
@@ -162,6 +164,11 @@ class GnssCorrelatorNode(Node):
             self.counts['arrays_published'] += 1
         if self._diag_timer.due(stamp_ns):
             self.diag_pub.publish(self.diagnostics(stamp_ns))
+
+    def destroy_node(self) -> None:
+        """Stop the receiver's reacquisition worker, then destroy the node."""
+        self.receiver.close()
+        super().destroy_node()
 
     def _values(self) -> dict[str, object]:
         values: dict[str, object] = dict(self.counts)

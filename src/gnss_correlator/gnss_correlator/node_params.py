@@ -51,8 +51,12 @@ class CorrelatorNodeParams:
         1e-3, 'Stated false-alarm probability of one satellite search (the threshold is derived from it).',
         minimum=1e-9, maximum=0.1)
     reacquisition_period_s: float = parameter(
-        10.0, 'Stream time between searches for the PRNs not tracked, s. Each search runs in the callback '
-        '(0.3-2 s of CPU): the outputs of that block come late, none is lost.', minimum=0.1, maximum=3600.0)
+        10.0, 'Stream time between searches for the PRNs not tracked, s. Each search runs in a worker thread '
+        '(0.3-2 s of CPU) while the tracked channels go on.', minimum=0.1, maximum=3600.0)
+    reacquisition_lag_s: float = parameter(
+        1.0, 'Stream time from the end of a search window to the block where the channels it found start, s. '
+        'The node waits for the search there only if it has not finished: a lag longer than a search takes '
+        'never delays a block, and the outputs do not depend on the machine.', minimum=0.0, maximum=60.0)
     pll_bandwidth_hz: float = parameter(
         TrackingConfig.pll_bandwidth_hz, 'Noise bandwidth of the second-order Costas PLL, Hz.',
         minimum=1.0, maximum=50.0)
@@ -108,7 +112,8 @@ class CorrelatorNodeParams:
         return ReceiverConfig(
             prns=tuple(int(p) for p in self.prns), acquisition_ms=self.acquisition_ms,
             doppler_max_hz=self.doppler_max_hz, false_alarm_probability=self.false_alarm_probability,
-            reacquisition_period_s=self.reacquisition_period_s, tracking=tracking,
+            reacquisition_period_s=self.reacquisition_period_s, reacquisition_lag_s=self.reacquisition_lag_s,
+            tracking=tracking,
             min_cn0_dbhz=self.min_cn0_dbhz, drop_after_ms=self.drop_after_ms, iq_scaling=self.iq_scaling,
             spectrum_inverted=self.spectrum_inverted)
 

@@ -10,12 +10,16 @@ Life cycle of a stream
   ``prns``; each PRN detected gets a channel (:class:`gnss_correlator.tracking.Tracker`) started on the
   buffer's first sample, and the buffer itself is tracked, so no sample is lost.
 * Every ``reacquisition_period_s`` of stream time, the PRNs not tracked are searched again on the latest
-  ``acquisition_ms`` of samples (kept in a ring), and new channels start there.
+  ``acquisition_ms`` of samples, in a worker thread while the tracked channels go on; the channels it finds
+  start at the first block that begins ``reacquisition_lag_s`` of stream time after that window's end (code
+  phase carried forward from the window), the receiver waiting for the search there only if it has not
+  finished. So the outputs do not depend on how fast the machine is (replays are repeatable), and a search
+  that takes less than the lag never delays a block.
 * A channel whose C/N0 estimate stays below ``min_cn0_dbhz`` (or unknown) for ``drop_after_ms`` periods in a
   row after its first estimate is dropped (``channels_dropped``); its PRN can be found again.
 
-Acquisition runs in the caller's thread: a search (0.3-2 s of CPU at 4-12 MHz for 32 PRNs) delays the
-tracked channels by as much; their outputs are late, not lost.
+The first acquisition of a stream runs in the caller's thread (no channel is tracked yet: 0.3-2 s of CPU
+at 4-12 MHz for 32 PRNs). :meth:`Receiver.close` stops the worker.
 
 Output: correlator intervals and the NCO
 ----------------------------------------
@@ -47,11 +51,12 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from gnss_correlator.acquisition import AcquisitionConfig, acquire
+from gnss_correlator.acquisition import AcquisitionConfig, AcquisitionResult, acquire
 from gnss_correlator.tracking import TrackedPeriods, Tracker, TrackingConfig
 
 NS_PER_S = 1_000_000_000
@@ -70,6 +75,8 @@ class ReceiverConfig:
         doppler_max_hz: acquisition's Doppler range +-, Hz.
         false_alarm_probability: acquisition's P_fa per satellite search.
         reacquisition_period_s: stream time between searches for untracked PRNs, s (> 0).
+        reacquisition_lag_s: stream time from the end of a reacquisition's window to the block where its
+            channels start, s (>= 0); the search runs in a worker thread meanwhile (module docstring).
         tracking: loop parameters.
         min_cn0_dbhz: a channel below this C/N0 for drop_after_ms periods is dropped, dB-Hz.
         drop_after_ms: periods in a row below min_cn0_dbhz before a drop, >= 1.
@@ -83,6 +90,7 @@ class ReceiverConfig:
     doppler_max_hz: float = 5000.0
     false_alarm_probability: float = 1e-3
     reacquisition_period_s: float = 10.0
+    reacquisition_lag_s: float = 1.0
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
     min_cn0_dbhz: float = 30.0
     drop_after_ms: int = 200
@@ -94,6 +102,8 @@ class ReceiverConfig:
             raise ValueError(f'acquisition_ms must be >= 2, got {self.acquisition_ms}')
         if not self.reacquisition_period_s > 0:
             raise ValueError(f'reacquisition_period_s must be > 0, got {self.reacquisition_period_s}')
+        if not self.reacquisition_lag_s >= 0:
+            raise ValueError(f'reacquisition_lag_s must be >= 0, got {self.reacquisition_lag_s}')
         if self.drop_after_ms < 1:
             raise ValueError(f'drop_after_ms must be >= 1, got {self.drop_after_ms}')
         if self.iq_scaling not in IQ_SCALINGS:
@@ -158,12 +168,23 @@ class Receiver:
             self.counts[key] += 0
         self._format: tuple[float, float, bool] | None = None
         self.tracker: Tracker | None = None
+        self._pool: ThreadPoolExecutor | None = None
+        self._reacquisition: tuple[Future[list[AcquisitionResult]], int, int] | None = None
         self._reset_stream()
 
+    def close(self) -> None:
+        """Stop the reacquisition worker (a search running is abandoned)."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None
+        self._reacquisition = None
+
     def _reset_stream(self) -> None:
+        if getattr(self, '_reacquisition', None) is not None:
+            self._reacquisition[0].cancel()  # type: ignore[index]
+        self._reacquisition = None
         self.tracker = None
         self._buffer: list[np.ndarray] = []
-        self._buffer_start: int | None = None
         self._next_index: int | None = None
         self._grid_origin = 0
         self._next_grid = 1  # index k of the next interval to emit (its end is origin + k fs / 1000)
@@ -205,7 +226,6 @@ class Receiver:
         self.counts['samples'] += x.size
         if self._next_index is None:
             self._grid_origin = int(block.first_sample_index)
-            self._buffer_start = int(block.first_sample_index)
             self._next_search_index = int(block.first_sample_index)
         self._next_index = int(block.first_sample_index) + x.size
         self._ref_stamp_ns, self._ref_index = int(block.stamp_ns), int(block.first_sample_index)
@@ -219,39 +239,57 @@ class Receiver:
                 return out
             window = np.concatenate(self._buffer)
             self._buffer = [window[-need:]]
-            self._buffer_start = self._next_index - need
             self.tracker = Tracker(fs, fmt[1], fmt[2], self.config.tracking)
-            assert self._buffer_start is not None
             start = self._next_index - window.size
             self._search(window[:need], start)
             self._next_search_index = start + round(self.config.reacquisition_period_s * fs)
             periods = self.tracker.process(window, start)
         else:
+            if self._reacquisition is not None and block.first_sample_index >= self._reacquisition[2]:
+                future, start, _ = self._reacquisition
+                self._reacquisition = None
+                self._start_channels(future.result(), start)
             periods = self.tracker.process(x, block.first_sample_index)
             if buffered > need:
                 joined = np.concatenate(self._buffer)[-need:]
                 self._buffer = [joined]
-            if self._next_index >= self._next_search_index:
+            if self._next_index >= self._next_search_index and self._reacquisition is None:
                 untracked = tuple(p for p in self.config.prns if p not in self.tracker.prns)
                 if untracked and buffered >= need:
-                    self._search(self._buffer[-1], self._next_index - need, untracked, resume=True)
+                    self._reacquire(self._buffer[-1].copy(), self._next_index - need, untracked)
                 self._next_search_index = self._next_index + round(self.config.reacquisition_period_s * fs)
         self._queue(periods, fs)
         self._drop_weak(periods)
         return self._emit(fs)
 
-    def _search(self, window: np.ndarray, start: int, prns: tuple[int, ...] | None = None,
-                resume: bool = False) -> None:
-        """Acquire on ``window`` (first sample ``start``); start a channel per PRN detected. With ``resume`` the
-        window has already been tracked: the new channel's code phase is carried to the next sample."""
-        assert self.tracker is not None and self._format is not None
+    def _config_for(self, prns: tuple[int, ...] | None) -> AcquisitionConfig:
         cfg = self.config.acquisition()
-        if prns is not None:
-            cfg = AcquisitionConfig(prns=prns, noncoherent_count=cfg.noncoherent_count,
-                                    doppler_max_hz=cfg.doppler_max_hz,
-                                    false_alarm_probability=cfg.false_alarm_probability)
+        if prns is None:
+            return cfg
+        return AcquisitionConfig(prns=prns, noncoherent_count=cfg.noncoherent_count, doppler_max_hz=cfg.doppler_max_hz,
+                                 false_alarm_probability=cfg.false_alarm_probability)
+
+    def _search(self, window: np.ndarray, start: int) -> None:
+        """Acquire on ``window`` (first sample ``start``) now; start a channel per PRN detected."""
+        assert self._format is not None
         self.counts['acquisitions'] += 1
-        for r in acquire(window, self._format[0], self._format[1], cfg):
+        self._start_channels(acquire(window, self._format[0], self._format[1], self._config_for(None)), start)
+
+    def _reacquire(self, window: np.ndarray, start: int, prns: tuple[int, ...]) -> None:
+        """Search ``prns`` on ``window`` (an owned copy; first sample ``start``) in the worker thread; its
+        channels start at the first block from ``start + window + lag`` on (module docstring)."""
+        assert self._format is not None
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix='gnss_correlator_acquisition')
+        self.counts['acquisitions'] += 1
+        future = self._pool.submit(acquire, window, self._format[0], self._format[1], self._config_for(prns))
+        apply_at = start + window.size + round(self.config.reacquisition_lag_s * self._format[0])
+        self._reacquisition = (future, start, apply_at)
+
+    def _start_channels(self, results: list[AcquisitionResult], start: int) -> None:
+        """A channel per detected PRN not tracked yet, its code phase referred to sample ``start``."""
+        assert self.tracker is not None
+        for r in results:
             if r.detected and r.prn not in self.tracker.prns:
                 self.tracker.add_channel(r.prn, r.code_delay_samples, r.doppler_hz, start)
                 self.counts['channels_started'] += 1

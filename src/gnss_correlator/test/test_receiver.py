@@ -4,10 +4,12 @@ I + jQ is the carrier's Doppler phase, the predicted change the NCO's), the I/Q 
 from __future__ import annotations
 
 import math
+import threading
 
 import numpy as np
 import pytest
 
+from gnss_correlator import receiver as receiver_module
 from gnss_correlator.receiver import CorrelatorInterval, IfBlock, Receiver, ReceiverConfig
 from rfi_sim.if_signal import FrontEndConfig, GpsSatellite, IfSimulator
 
@@ -92,3 +94,39 @@ def test_gap_and_format_change_restart(samples):
         rx.process(IfBlock(T0_NS + 40_000_000, FS, 1.0e6, False, 4 * n, samples[4 * n:5 * n]))
     with pytest.raises(ValueError, match='iq_scaling'):
         ReceiverConfig(iq_scaling='volts')
+
+
+def test_reacquisition_runs_in_the_worker_and_outputs_do_not_depend_on_it(samples, monkeypatch):
+    """A channel lost (dropped here by hand) is found again by the periodic search, which runs in the worker
+    thread and starts its channel at the block the lag says: two runs give the same outputs."""
+    threads: list[str] = []
+
+    def recording_acquire(*args, **kwargs):
+        threads.append(threading.current_thread().name)
+        return receiver_module.acquire.__wrapped__(*args, **kwargs)
+
+    recording_acquire.__wrapped__ = receiver_module.acquire  # type: ignore[attr-defined]
+    monkeypatch.setattr(receiver_module, 'acquire', recording_acquire)
+    config = ReceiverConfig(prns=(7, 21), acquisition_ms=4, reacquisition_period_s=0.05, reacquisition_lag_s=0.02)
+    runs = []
+    for _ in range(2):
+        rx = Receiver(config)
+        out: list[CorrelatorInterval] = []
+        started_at = None
+        block = 20_000
+        for i in range(0, samples.size, block):
+            out += rx.process(IfBlock(T0_NS + round(i / FS * 1e9), FS, 0.0, True, i, samples[i:i + block]))
+            if i == 2 * block:
+                assert rx.tracker is not None
+                rx.tracker.drop_channel(21)
+            if started_at is None and i > 2 * block and 21 in rx.tracked_prns:
+                started_at = i
+        rx.close()
+        assert 21 in rx.tracked_prns and rx.counts['channels_started'] == 3
+        # searched on the 4 ms before the period's end, started 20 ms of stream later, at a block boundary
+        assert started_at is not None and started_at / FS >= 0.05 + 0.02
+        runs.append((started_at, [(iv.stamp_ns, iv.svid.tolist(), iv.in_phase.tolist()) for iv in out]))
+    assert runs[0] == runs[1]
+    # per run: the first acquisition in the caller's thread, the reacquisitions in the worker
+    assert threads.count('MainThread') == 2 and len(threads) > 2
+    assert all(t.startswith('gnss_correlator_acquisition') for t in threads if t != 'MainThread')
