@@ -100,12 +100,12 @@ def test_reacquisition_runs_in_the_worker_and_outputs_do_not_depend_on_it(sample
     """A channel lost (dropped here by hand) is found again by the periodic search, which runs in the worker
     thread and starts its channel at the block the lag says: two runs give the same outputs."""
     threads: list[str] = []
+    original = receiver_module.acquire
 
     def recording_acquire(*args, **kwargs):
         threads.append(threading.current_thread().name)
-        return receiver_module.acquire.__wrapped__(*args, **kwargs)
+        return original(*args, **kwargs)
 
-    recording_acquire.__wrapped__ = receiver_module.acquire  # type: ignore[attr-defined]
     monkeypatch.setattr(receiver_module, 'acquire', recording_acquire)
     config = ReceiverConfig(prns=(7, 21), acquisition_ms=4, reacquisition_period_s=0.05, reacquisition_lag_s=0.02)
     runs = []
