@@ -18,6 +18,7 @@ EXECUTABLES = [
     ('uwb_gnss_fusion', 'fusion_node'),
     ('imm_carrier', 'imm_carrier_node'),
     ('gnss_integrity', 'gnss_integrity_node'),
+    ('gnss_correlator', 'gnss_correlator_node'),
     ('rfi_experiments', 'play'),
     ('rfi_experiments', 'record'),
     ('rfi_experiments', 'run'),
@@ -143,7 +144,8 @@ def test_node_accepts_the_qos_override_of_its_inputs():
     ('imm_carrier', 'imm_carrier_node', ('gnss/correlators', 'carrier/estimates')),
     ('gnss_integrity', 'gnss_integrity_node', ('gnss/measurements', 'uwb/ranges', 'gnss/receiver_interference',
                                                'gnss/receiver_spectrum', 'rfi/jammer_state', 'gnss/integrity')),
-], ids=['rfi_monitor_node', 'fusion_node', 'imm_carrier_node', 'gnss_integrity_node'])
+    ('gnss_correlator', 'gnss_correlator_node', ('rfi/if_samples', 'gnss/correlators')),
+], ids=['rfi_monitor_node', 'fusion_node', 'imm_carrier_node', 'gnss_integrity_node', 'gnss_correlator_node'])
 def test_node_topics_follow_its_namespace(package, name, topics):
     """Issue 11, item 1: with -r __ns:=/robot1 every data topic moves under /robot1 (two receivers or two robots
     no longer collide); /diagnostics stays at the root, where diagnostic aggregators listen."""

@@ -20,7 +20,7 @@ import pytest
 import yaml
 from ament_index_python.packages import get_package_prefix, get_package_share_directory
 
-PACKAGES = ('rfi_monitor', 'gnss_integrity', 'uwb_gnss_fusion', 'imm_carrier', 'rfi_experiments')
+PACKAGES = ('rfi_monitor', 'gnss_integrity', 'uwb_gnss_fusion', 'imm_carrier', 'gnss_correlator', 'rfi_experiments')
 """The packages that ship launch files (test_every_node_package_ships_one checks the node packages do)."""
 SUITE = ('rfi_experiments', 'suite.launch.xml')
 
@@ -72,7 +72,8 @@ def _param_names(section: str) -> set[str]:
 def test_every_node_package_ships_one():
     names = {f.name for f in FILES}
     for expected in ('rfi_monitor.launch.xml', 'gnss_integrity.launch.xml', 'fusion.launch.xml',
-                     'imm_carrier.launch.xml', 'if_source.launch.xml', 'ubx_source.launch.xml', 'suite.launch.xml'):
+                     'imm_carrier.launch.xml', 'gnss_correlator.launch.xml',
+                     'if_source.launch.xml', 'ubx_source.launch.xml', 'suite.launch.xml'):
         assert expected in names, (expected, sorted(names))
 
 
@@ -126,7 +127,8 @@ def test_the_suite_starts_every_node_of_the_suite():
     included = {Path(_resolve(i.get('file'), values)).name: i.get('if') for i in root.iter('include')}
     assert included == {'rfi_monitor.launch.xml': None, 'gnss_integrity.launch.xml': '$(var with_integrity)',
                         'fusion.launch.xml': None, 'imm_carrier.launch.xml': '$(var with_imm)',
+                        'gnss_correlator.launch.xml': '$(var with_correlator)',
                         'if_source.launch.xml': '$(var with_if_source)',
                         'ubx_source.launch.xml': '$(var with_ubx_source)'}
     assert values['with_integrity'] == values['with_imm'] == 'true'
-    assert values['with_if_source'] == values['with_ubx_source'] == 'false'
+    assert values['with_if_source'] == values['with_ubx_source'] == values['with_correlator'] == 'false'

@@ -1,0 +1,205 @@
+"""ROS node of the correlators: /rfi/if_samples -> /gnss/correlators, /diagnostics.
+
+Thin: declares the parameters (:mod:`gnss_correlator.node_params`), checks and decodes each
+``rfi_msgs/IfSamples`` with the checks the monitor uses (:mod:`rfi_node_common.if_blocks`), hands the samples
+to :class:`gnss_correlator.receiver.Receiver` (acquisition, tracking, the 1-ms output grid, all the maths) and
+publishes one ``rfi_msgs/CorrelatorArray`` per completed 1-ms interval (stamp from the IfSamples stamps,
+``frame_id`` from the parameter).
+
+Rejected blocks, each counted as ``rejected_<reason>`` with a throttled warning, never reach the core:
+the field checks of :func:`rfi_node_common.if_blocks.check_block` (format, bits, rate, IF, scale, centre
+frequency, sizes, index), ``values_exceed_bits``, ``blank_block``, ``rate_below_2mhz`` (the C/A code needs
+2 MS/s), ``band_outside_nyquist`` (real samples whose |IF| -+ doppler_max_hz leaves (0, fs/2), complex
+ones whose |IF| + doppler_max_hz reaches fs/2), and the stamp checks of
+:class:`rfi_node_common.input_checks.StampGate`. A change of rate, IF or sample type, or a gap in
+``first_sample_index`` restarts acquisition in the core (``core.restarts_format``, ``core.restarts_gap``).
+Should the core raise on a block that passed the checks (a bug), the block is counted as ``core_errors``,
+the receiver is rebuilt, /diagnostics says ERROR, and the node keeps running.
+
+Diagnostics (every ``diagnostics_period_s`` of accepted stamp time): the counters, the tracked PRNs;
+ERROR after a core error since the last report, WARN when more than ``warn_rejected_fraction`` of the
+blocks of the last ``diagnostics_window_s`` were rejected, else OK; STALE (node clock) when no block
+arrived for ``input_timeout_s`` of wall time.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.node import Node
+
+from gnss_correlator.acquisition import MIN_SAMPLE_RATE_HZ
+from gnss_correlator.node_params import CorrelatorNodeParams
+from gnss_correlator.receiver import CorrelatorInterval, IfBlock, Receiver
+from rfi_msgs.msg import Correlator, CorrelatorArray, GnssMeasurement, IfSamples
+from rfi_node_common.diagnostics import (
+    ERROR,
+    OK,
+    STALE,
+    WARN,
+    CountWindow,
+    StampTimer,
+    degraded_inputs,
+    diagnostic_array,
+)
+from rfi_node_common.if_blocks import check_block, decode_counts, exceeds_bits, is_blank
+from rfi_node_common.input_checks import STAMP_REASONS, StampGate
+from rfi_node_common.inputs import InputHealth, StaleInputWatch, subscribe_input
+from rfi_node_common.main import run_node
+from rfi_node_common.params import declare
+from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS
+from rfi_node_common.stamps import NS_PER_S, ns_to_stamp
+
+TOPICS = """topics:
+  subscribes /rfi/if_samples (rfi_msgs/IfSamples)
+  publishes  /gnss/correlators (rfi_msgs/CorrelatorArray), /diagnostics (diagnostic_msgs/DiagnosticArray)"""
+
+IF_TOPIC = 'rfi/if_samples'
+OUTPUT_TOPIC = 'gnss/correlators'
+BLOCK_REASONS = ('unknown_sample_format', 'bad_bits_per_sample', 'bad_sample_rate', 'bad_intermediate_frequency',
+                 'bad_scale', 'bad_center_frequency', 'empty_block', 'truncated_sample', 'odd_length_iq',
+                 'short_block', 'long_block', 'bad_first_sample_index', 'values_exceed_bits', 'blank_block',
+                 'rate_below_2mhz', 'band_outside_nyquist', 'stamp_malformed', *STAMP_REASONS)
+"""Why a block is rejected (``rejected_<reason>``, module docstring)."""
+
+
+def block_problem(msg: IfSamples, doppler_max_hz: float, max_block_samples: int) -> str | None:
+    """Why a block cannot be correlated (a key of :data:`BLOCK_REASONS` without the stamp ones), or None."""
+    reason = check_block(msg, 1, max_block_samples)
+    if reason is not None:
+        return reason
+    if msg.sample_rate_hz < MIN_SAMPLE_RATE_HZ:
+        return 'rate_below_2mhz'
+    fs, if_hz = msg.sample_rate_hz, abs(msg.intermediate_frequency_hz)
+    if msg.is_complex:
+        if if_hz + doppler_max_hz >= fs / 2:
+            return 'band_outside_nyquist'
+    elif not (if_hz - doppler_max_hz > 0 and if_hz + doppler_max_hz < fs / 2):
+        return 'band_outside_nyquist'
+    counts = decode_counts(msg)
+    if exceeds_bits(counts, msg.bits_per_sample):
+        return 'values_exceed_bits'
+    if is_blank(counts, msg.is_complex):
+        return 'blank_block'
+    return None
+
+
+def correlator_array(interval: CorrelatorInterval, frame_id: str) -> CorrelatorArray:
+    """CorrelatorInterval -> rfi_msgs/CorrelatorArray (GPS, one Correlator per channel)."""
+    msg = CorrelatorArray()
+    msg.header.stamp = ns_to_stamp(interval.stamp_ns)
+    msg.header.frame_id = frame_id
+    msg.correlators = [
+        Correlator(constellation=GnssMeasurement.GPS, svid=int(s), integration_time_s=float(t), in_phase=float(i),
+                   quadrature=float(q), cn0_dbhz=float(c), predicted_phase_change_rad=float(d))
+        for s, i, q, c, d, t in zip(interval.svid, interval.in_phase, interval.quadrature, interval.cn0_dbhz,
+                                    interval.predicted_phase_change_rad, interval.integration_time_s, strict=True)]
+    return msg
+
+
+class GnssCorrelatorNode(Node):
+    """Thin node around the receiver (module docstring)."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('gnss_correlator', **kwargs)
+        self.params = declare(self, CorrelatorNodeParams)
+        self.receiver = Receiver(self.params.receiver())
+        self.counts: Counter[str] = Counter()
+        for key in ('blocks_received', 'blocks_processed', 'core_errors', 'stamp_restarts', 'arrays_published'):
+            self.counts[key] += 0
+        for reason in BLOCK_REASONS:
+            self.counts[f'rejected_{reason}'] += 0
+        self.gate = StampGate(self.params.max_stamp_jump_s, self.params.stamp_jump_confirmations)
+        self._window = CountWindow(self.params.diagnostics_window_s)
+        self._diag_timer = StampTimer(self.params.diagnostics_period_s)
+        self._errors_at_report = 0
+        self.health = InputHealth()
+        self.publisher = self.create_publisher(CorrelatorArray, OUTPUT_TOPIC, DATA_QOS)
+        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self.subscription = subscribe_input(self, IfSamples, IF_TOPIC, self.on_block, self.health,
+                                            warning_throttle_s=self.params.warning_throttle_s)
+        self.stale_watch = StaleInputWatch(self, self.health, self.params.input_timeout_s, self._publish_stale)
+
+    def _reject(self, reason: str) -> None:
+        self.counts[f'rejected_{reason}'] += 1
+        self.get_logger().warning(f'IF block rejected: {reason}', throttle_duration_sec=self.params.warning_throttle_s)
+
+    def on_block(self, msg: IfSamples) -> None:
+        """One IfSamples block: check, correlate, publish the completed intervals."""
+        self.counts['blocks_received'] += 1
+        if msg.header.stamp.nanosec >= NS_PER_S:
+            self._reject('stamp_malformed')
+            return
+        reason = block_problem(msg, self.params.doppler_max_hz, self.params.max_block_samples)
+        if reason is not None:
+            self._reject(reason)
+            return
+        stamp_ns = msg.header.stamp.sec * NS_PER_S + msg.header.stamp.nanosec
+        decision = self.gate.admit(stamp_ns)
+        if decision.reason is not None:
+            self._reject(decision.reason)
+            return
+        if decision.restart:
+            self.counts['stamp_restarts'] += 1
+            self.receiver.close()
+            self.receiver = Receiver(self.params.receiver())
+        counts = decode_counts(msg).astype('float64') * msg.scale
+        samples = counts[0::2] + 1j * counts[1::2] if msg.is_complex else counts
+        block = IfBlock(stamp_ns=stamp_ns, sample_rate_hz=msg.sample_rate_hz,
+                        intermediate_frequency_hz=msg.intermediate_frequency_hz, is_complex=msg.is_complex,
+                        first_sample_index=int(msg.first_sample_index), samples=samples)
+        try:
+            intervals = self.receiver.process(block)
+        except Exception as err:  # noqa: BLE001 - a core fault must not end the node (module docstring)
+            self.counts['core_errors'] += 1
+            self.get_logger().error(f'receiver failed on a block ({type(err).__name__}: {err}); restarted')
+            self.receiver.close()
+            self.receiver = Receiver(self.params.receiver())
+            intervals = []
+        else:
+            self.counts['blocks_processed'] += 1
+        for interval in intervals:
+            self.publisher.publish(correlator_array(interval, self.params.frame_id))
+            self.counts['arrays_published'] += 1
+        if self._diag_timer.due(stamp_ns):
+            self.diag_pub.publish(self.diagnostics(stamp_ns))
+
+    def destroy_node(self) -> None:
+        """Stop the receiver's reacquisition worker, then destroy the node."""
+        self.receiver.close()
+        super().destroy_node()
+
+    def _values(self) -> dict[str, object]:
+        values: dict[str, object] = dict(self.counts)
+        values.update({f'core.{k}': v for k, v in self.receiver.counts.items()})
+        values['tracked_prns'] = ' '.join(str(p) for p in self.receiver.tracked_prns)
+        values['input.lost'] = self.health.lost_total()
+        return values
+
+    def diagnostics(self, stamp_ns: int) -> DiagnosticArray:
+        """The /diagnostics report at ``stamp_ns`` (module docstring)."""
+        values = self._values()
+        rejected = sum(v for k, v in self.counts.items() if k.startswith('rejected_'))
+        w = self._window.update(stamp_ns, {'received': self.counts['blocks_received'], 'rejected': rejected})
+        errors = self.counts['core_errors'] - self._errors_at_report
+        self._errors_at_report = self.counts['core_errors']
+        if errors:
+            level, text = ERROR, f'{errors} receiver faults since the last report (restarted)'
+        else:
+            degraded = degraded_inputs([('rejected blocks', w['rejected'], w['received'])],
+                                       self.params.warn_rejected_fraction)
+            level, text = (WARN, 'inputs degraded: ' + '; '.join(degraded)) if degraded else (OK, 'correlating')
+        return diagnostic_array(stamp_ns, 'gnss_correlator', self.params.hardware_id, level,
+                                f'{text}; tracking PRN {values["tracked_prns"] or "none"}', values)
+
+    def _publish_stale(self, silent_s: float) -> None:
+        self.diag_pub.publish(diagnostic_array(
+            self.get_clock().now().nanoseconds, 'gnss_correlator', self.params.hardware_id, STALE,
+            f'no input on {self.subscription.topic_name} for {silent_s:.1f} s (wall clock)', self._values()))
+
+
+def main(argv=None) -> int:
+    return run_node(GnssCorrelatorNode, executable='gnss_correlator_node', params_cls=CorrelatorNodeParams,
+                    topics=TOPICS, summary='GPS L1 C/A correlators (acquisition, DLL, FLL-assisted PLL) from the '
+                    'front-end IF stream, for imm_carrier.', argv=argv)

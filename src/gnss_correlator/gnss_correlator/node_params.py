@@ -1,0 +1,139 @@
+"""Parameters of gnss_correlator_node, each written once (pure: no rclpy); the shipped
+``config/gnss_correlator.yaml`` is generated from them (:data:`CONFIG_FILE`, ``tools/generate_config.py``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from gnss_correlator.receiver import IQ_SCALINGS, ReceiverConfig
+from gnss_correlator.tracking import TrackingConfig
+from rfi_node_common.diagnostics import (
+    diagnostics_window_parameter,
+    hardware_id_parameter,
+    input_timeout_parameter,
+    max_stamp_jump_parameter,
+    stamp_jump_confirmations_parameter,
+    warn_lost_fraction_parameter,
+    warn_rejected_fraction_parameter,
+)
+from rfi_node_common.params import USER, ConfigFile, parameter, validate_ranges
+
+
+@dataclass(frozen=True)
+class CorrelatorNodeParams:
+    """Parameters of the gnss_correlator node (documented for users in config/gnss_correlator.yaml).
+
+    Notes:
+        Acquisition: parallel code-phase FFT search (Borre et al. 2007) with a derived threshold
+        (gnss_correlator.acquisition). Tracking: Kaplan & Hegarty Fig. 5-23 and Table 5-6
+        (gnss_correlator.tracking). Output convention: Zhao et al., eq. 2-3 (gnss_correlator.receiver).
+    """
+
+    prns: tuple[int, ...] = parameter(
+        list(range(1, 33)), 'GPS PRNs searched by the acquisition (1..37).', group=USER)
+    spectrum_inverted: bool = parameter(
+        False, 'Complex samples whose spectrum is inverted (the signal is I - jQ): conjugated before use. True '
+        'for the PocketSDR 4 MHz I/Q sample capture (docs/gnss_correlator/README.md). Real samples say it with a '
+        'negative IF in the IfSamples message instead.', group=USER)
+    iq_scaling: str = parameter(
+        'unit_amplitude', "Normalisation of the published I/Q; must equal imm_carrier's iq_scaling: "
+        'unit_amplitude (signal amplitude 1) or unit_noise (noise std 1 per component).',
+        choices=IQ_SCALINGS, group=USER)
+    frame_id: str = parameter(
+        'gnss_receiver', 'header.frame_id of the published CorrelatorArray (the receiver).', group=USER)
+    doppler_max_hz: float = parameter(
+        5000.0, 'Acquisition Doppler range +-, Hz: satellite motion (about +-5 kHz) plus the oscillator offset '
+        '(a 1 ppm TCXO adds 1.6 kHz).', minimum=100.0, maximum=50000.0, group=USER)
+    acquisition_ms: int = parameter(
+        10, 'Milliseconds of samples per acquisition (1-ms coherent sums added non-coherently); more finds '
+        'weaker satellites and takes longer.', minimum=2, maximum=100)
+    false_alarm_probability: float = parameter(
+        1e-3, 'Stated false-alarm probability of one satellite search (the threshold is derived from it).',
+        minimum=1e-9, maximum=0.1)
+    reacquisition_period_s: float = parameter(
+        10.0, 'Stream time between searches for the PRNs not tracked, s. Each search runs in a worker thread '
+        '(0.3-2 s of CPU) while the tracked channels go on.', minimum=0.1, maximum=3600.0)
+    reacquisition_lag_s: float = parameter(
+        1.0, 'Stream time from the end of a search window to the block where the channels it found start, s. '
+        'The node waits for the search there only if it has not finished: a lag longer than a search takes '
+        'never delays a block, and the outputs do not depend on the machine.', minimum=0.0, maximum=60.0)
+    pll_bandwidth_hz: float = parameter(
+        TrackingConfig.pll_bandwidth_hz, 'Noise bandwidth of the second-order Costas PLL, Hz.',
+        minimum=1.0, maximum=50.0)
+    fll_bandwidth_hz: float = parameter(
+        TrackingConfig.fll_bandwidth_hz, 'Noise bandwidth of the first-order FLL assist during pull-in, Hz (0: '
+        'none).', minimum=0.0, maximum=50.0)
+    fll_assist_ms: int = parameter(
+        TrackingConfig.fll_assist_ms, 'Periods (ms) after a channel starts with the FLL assist on.',
+        minimum=0, maximum=100000)
+    dll_bandwidth_hz: float = parameter(
+        TrackingConfig.dll_bandwidth_hz, 'Noise bandwidth of the carrier-aided first-order DLL, Hz.',
+        minimum=0.1, maximum=10.0)
+    early_late_offset_chips: float = parameter(
+        TrackingConfig.early_late_offset_chips, 'Offset of the early and late replicas from the prompt, chips.',
+        minimum=0.05, maximum=0.5)
+    cn0_window_ms: int = parameter(
+        TrackingConfig.cn0_window_ms, 'Prompts in the C/N0 (M2M4) and lock-indicator window; no correlator is '
+        'published for a channel before its first window is full.', minimum=10, maximum=10000)
+    min_cn0_dbhz: float = parameter(
+        30.0, 'A channel whose C/N0 stays below this for drop_after_ms periods is dropped, dB-Hz.',
+        minimum=0.0, maximum=60.0)
+    drop_after_ms: int = parameter(
+        200, 'Periods (ms) in a row below min_cn0_dbhz before a channel is dropped.', minimum=1, maximum=100000)
+    max_block_samples: int = parameter(
+        40_000_000, 'Longest IF block accepted, samples (complex: I/Q pairs); longer ones are rejected '
+        '(long_block).', minimum=1, maximum=2 ** 31 - 1)
+    max_stamp_jump_s: float = max_stamp_jump_parameter(120.0)  # type: ignore[assignment]
+    stamp_jump_confirmations: int = stamp_jump_confirmations_parameter(5)  # type: ignore[assignment]
+    input_timeout_s: float = input_timeout_parameter()  # type: ignore[assignment]
+    diagnostics_period_s: float = parameter(
+        1.0, 'Period of /diagnostics in message (stamp) time, s.', minimum=0.01, maximum=3600.0)
+    warning_throttle_s: float = parameter(
+        5.0, 'Shortest interval between two warnings about rejected input, s (wall time; logging only).',
+        minimum=0.0, maximum=3600.0)
+    hardware_id: str = hardware_id_parameter('gnss_receiver')  # type: ignore[assignment]
+    diagnostics_window_s: float = diagnostics_window_parameter()  # type: ignore[assignment]
+    warn_rejected_fraction: float = warn_rejected_fraction_parameter()  # type: ignore[assignment]
+    warn_lost_fraction: float = warn_lost_fraction_parameter()  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        validate_ranges(self)
+        try:
+            self.receiver()
+        except ValueError as err:
+            raise ValueError(f'invalid receiver parameters: {err}') from None
+
+    def receiver(self) -> ReceiverConfig:
+        """The core's configuration."""
+        tracking = TrackingConfig(
+            pll_bandwidth_hz=self.pll_bandwidth_hz, fll_bandwidth_hz=self.fll_bandwidth_hz,
+            fll_assist_ms=self.fll_assist_ms, dll_bandwidth_hz=self.dll_bandwidth_hz,
+            early_late_offset_chips=self.early_late_offset_chips, cn0_window_ms=self.cn0_window_ms)
+        return ReceiverConfig(
+            prns=tuple(int(p) for p in self.prns), acquisition_ms=self.acquisition_ms,
+            doppler_max_hz=self.doppler_max_hz, false_alarm_probability=self.false_alarm_probability,
+            reacquisition_period_s=self.reacquisition_period_s, reacquisition_lag_s=self.reacquisition_lag_s,
+            tracking=tracking,
+            min_cn0_dbhz=self.min_cn0_dbhz, drop_after_ms=self.drop_after_ms, iq_scaling=self.iq_scaling,
+            spectrum_inverted=self.spectrum_inverted)
+
+
+CONFIG_FILE = ConfigFile('gnss_correlator', 'config/gnss_correlator.yaml', 'gnss_correlator', CorrelatorNodeParams, """
+Parameters of gnss_correlator_node (gnss_correlator/gnss_correlator_node.py, CorrelatorNodeParams).
+GENERATED by tools/generate_config.py from gnss_correlator/node_params.py. Change a default or a
+description there and run `python tools/generate_config.py`; a test checks this file equals it.
+Method and measurements: docs/gnss_correlator/README.md.
+
+Use:   ros2 run gnss_correlator gnss_correlator_node --ros-args --params-file gnss_correlator.yaml
+Every value below is the default. An invalid value stops the node with a one-line error naming the
+parameter, and so does a parameter the node does not have. Floats need a decimal point.
+
+Input  /rfi/if_samples (rfi_msgs/IfSamples): the front end's stream, as rfi_monitor takes it (real or
+       complex, INT8 or INT16, any rate from 2 MS/s, IF from the message). A change of rate, IF or
+       sample type, or a gap in first_sample_index, restarts acquisition (counted).
+Output /gnss/correlators (rfi_msgs/CorrelatorArray): one array per 1-ms interval of the stream with
+       the prompt of every tracked channel whose code period ended in it, in imm_carrier's convention
+       (the carrier NCO in the role of the open-loop replica); stamp = end of the interval, from the
+       IfSamples stamps. /diagnostics: counters every diagnostics_period_s of stamp time.
+""")
+"""The shipped config/gnss_correlator.yaml (:func:`rfi_node_common.params.config_yaml`)."""

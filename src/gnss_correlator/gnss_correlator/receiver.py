@@ -1,0 +1,356 @@
+"""The receiver behind gnss_correlator_node (pure: no rclpy): IF blocks in, one correlator array per 1-ms
+interval out, in the form imm_carrier consumes.
+
+Life cycle of a stream
+----------------------
+* The first block, a change of sample rate, IF or sample type, or a gap / overlap in
+  ``first_sample_index`` (counted: ``restarts_format``, ``restarts_gap``) (re)starts the receiver: every
+  channel is dropped and ``acquisition_ms`` of samples are buffered.
+* When the buffer is full, GPS L1 C/A acquisition (:mod:`gnss_correlator.acquisition`) searches every PRN of
+  ``prns``; each PRN detected gets a channel (:class:`gnss_correlator.tracking.Tracker`) started on the
+  buffer's first sample, and the buffer itself is tracked, so no sample is lost.
+* Every ``reacquisition_period_s`` of stream time, the PRNs not tracked are searched again on the latest
+  ``acquisition_ms`` of samples, in a worker thread while the tracked channels go on; the channels it finds
+  start at the first block that begins ``reacquisition_lag_s`` of stream time after that window's end (code
+  phase carried forward from the window), the receiver waiting for the search there only if it has not
+  finished. So the outputs do not depend on how fast the machine is (replays are repeatable), and a search
+  that takes less than the lag never delays a block.
+* A channel whose C/N0 estimate stays below ``min_cn0_dbhz`` (or unknown) for ``drop_after_ms`` periods in a
+  row after its first estimate is dropped (``channels_dropped``); its PRN can be found again.
+
+The first acquisition of a stream runs in the caller's thread (no channel is tracked yet: 0.3-2 s of CPU
+at 4-12 MHz for 32 PRNs). :meth:`Receiver.close` stops the worker.
+
+Output: correlator intervals and the NCO
+----------------------------------------
+The stream is cut on a 1-ms grid from the first sample of the (re)start, ``g_k = s0 + k fs / 1000`` (sample
+indices). Each channel's code period (1 ms of the satellite's code, which drifts against the receiver's
+grid by the code Doppler) goes into the interval of the grid in which it ends, at most one per channel per
+interval (a second one, once every few hundred seconds of code drift, waits for the next interval). An
+interval is emitted when the stream has passed its end; its stamp is the time of ``g_k`` from the header
+stamps (the latest block's stamp plus the samples since its first one over fs). A channel's period ends
+within the 1 ms before the stamp; each correlator carries its own ``integration_time_s`` (samples / fs).
+
+Each correlator is what imm_carrier's measurement model (Zhao et al., eq. 2-3) takes, with the receiver's
+carrier NCO in the role of the simulator's open-loop replica:
+
+    I + jQ = P e^{j phi_nco,k} / s,      predicted_phase_change_rad = phi_nco,k - phi_nco,k-1 = 2 pi f_nco,k T_k,
+
+with P the prompt (relative to the NCO), phi_nco,k the NCO's accumulated Doppler phase at the period's end
+and f_nco,k its Doppler during the period. So the angle of I + jQ is the carrier's Doppler phase
+(the NCO's phase plus what the NCO missed), and the phase the IMM or the PLL estimates, the angle minus the
+accumulated predicted change, is the correlator's own tracking error plus a constant: the part of the carrier
+that the correlator's NCO did not follow. The NCO runs whatever the IMM does (no feedback from the IMM
+to the correlator). ``s`` normalises the amplitude as ``iq_scaling`` says, from the M2M4 moments over the
+last ``cn0_window_ms`` prompts: ``unit_amplitude`` (A = 1, Zhao et al. eq. 5: s = sqrt(P_s)) or
+``unit_noise`` (noise std 1 per component: s = sqrt(P_n / 2)). Periods whose C/N0 is not known yet (the
+first ``cn0_window_ms`` of a channel) are withheld (``correlators_withheld``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gnss_correlator.acquisition import AcquisitionConfig, AcquisitionResult, acquire
+from gnss_correlator.tracking import TrackedPeriods, Tracker, TrackingConfig
+
+NS_PER_S = 1_000_000_000
+GRID_S = 1e-3
+"""Output interval, s (one C/A code period)."""
+IQ_SCALINGS = ('unit_amplitude', 'unit_noise')
+
+
+@dataclass(frozen=True)
+class ReceiverConfig:
+    """What the receiver searches and how it tracks (see the module docstring).
+
+    Attributes:
+        prns: PRNs searched.
+        acquisition_ms: ms of samples per acquisition (non-coherent 1-ms sums), >= 2.
+        doppler_max_hz: acquisition's Doppler range +-, Hz.
+        false_alarm_probability: acquisition's P_fa per satellite search.
+        reacquisition_period_s: stream time between searches for untracked PRNs, s (> 0).
+        reacquisition_lag_s: stream time from the end of a reacquisition's window to the block where its
+            channels start, s (>= 0); the search runs in a worker thread meanwhile (module docstring).
+        tracking: loop parameters.
+        min_cn0_dbhz: a channel below this C/N0 for drop_after_ms periods is dropped, dB-Hz.
+        drop_after_ms: periods in a row below min_cn0_dbhz before a drop, >= 1.
+        iq_scaling: 'unit_amplitude' or 'unit_noise' (match imm_carrier's iq_scaling).
+        spectrum_inverted: complex samples whose spectrum is inverted (the signal is I - jQ): they are
+            conjugated first. Real samples say it with a negative IF instead.
+    """
+
+    prns: tuple[int, ...] = tuple(range(1, 33))
+    acquisition_ms: int = 10
+    doppler_max_hz: float = 5000.0
+    false_alarm_probability: float = 1e-3
+    reacquisition_period_s: float = 10.0
+    reacquisition_lag_s: float = 1.0
+    tracking: TrackingConfig = field(default_factory=TrackingConfig)
+    min_cn0_dbhz: float = 30.0
+    drop_after_ms: int = 200
+    iq_scaling: str = 'unit_amplitude'
+    spectrum_inverted: bool = False
+
+    def __post_init__(self) -> None:
+        if self.acquisition_ms < 2:
+            raise ValueError(f'acquisition_ms must be >= 2, got {self.acquisition_ms}')
+        if not self.reacquisition_period_s > 0:
+            raise ValueError(f'reacquisition_period_s must be > 0, got {self.reacquisition_period_s}')
+        if not self.reacquisition_lag_s >= 0:
+            raise ValueError(f'reacquisition_lag_s must be >= 0, got {self.reacquisition_lag_s}')
+        if self.drop_after_ms < 1:
+            raise ValueError(f'drop_after_ms must be >= 1, got {self.drop_after_ms}')
+        if self.iq_scaling not in IQ_SCALINGS:
+            raise ValueError(f'iq_scaling must be one of {IQ_SCALINGS}, got {self.iq_scaling!r}')
+        self.acquisition()  # validates the search parameters
+
+    def acquisition(self) -> AcquisitionConfig:
+        """The acquisition's configuration."""
+        return AcquisitionConfig(prns=self.prns, noncoherent_count=self.acquisition_ms,
+                                 doppler_max_hz=self.doppler_max_hz,
+                                 false_alarm_probability=self.false_alarm_probability)
+
+
+@dataclass(frozen=True)
+class IfBlock:
+    """One block of the front end's stream, decoded (the node's IfSamples after its checks).
+
+    Attributes:
+        stamp_ns: time of the first sample, ns (header.stamp).
+        sample_rate_hz: fs, Hz.
+        intermediate_frequency_hz: IF, Hz.
+        is_complex: complex samples.
+        first_sample_index: absolute index of the first sample.
+        samples: values, float64 (n,) real or complex128 (n,).
+    """
+
+    stamp_ns: int
+    sample_rate_hz: float
+    intermediate_frequency_hz: float
+    is_complex: bool
+    first_sample_index: int
+    samples: np.ndarray = field(repr=False)
+
+
+@dataclass(frozen=True)
+class CorrelatorInterval:
+    """The correlators of one 1-ms output interval (one CorrelatorArray).
+
+    Attributes:
+        stamp_ns: end of the interval, ns (from the header stamps).
+        svid, in_phase, quadrature, cn0_dbhz, predicted_phase_change_rad, integration_time_s: one entry per
+            channel with a period in the interval, shape (n,) each (module docstring).
+    """
+
+    stamp_ns: int
+    svid: np.ndarray
+    in_phase: np.ndarray
+    quadrature: np.ndarray
+    cn0_dbhz: np.ndarray
+    predicted_phase_change_rad: np.ndarray
+    integration_time_s: np.ndarray
+
+
+class Receiver:
+    """Acquisition, tracking and the 1-ms output grid of one stream (module docstring)."""
+
+    def __init__(self, config: ReceiverConfig = ReceiverConfig()) -> None:
+        self.config = config
+        self.counts: Counter[str] = Counter()
+        for key in ('blocks', 'samples', 'restarts_format', 'restarts_gap', 'acquisitions', 'channels_started',
+                    'channels_dropped', 'intervals', 'correlators', 'correlators_withheld'):
+            self.counts[key] += 0
+        self._format: tuple[float, float, bool] | None = None
+        self.tracker: Tracker | None = None
+        self._pool: ThreadPoolExecutor | None = None
+        self._reacquisition: tuple[Future[list[AcquisitionResult]], int, int] | None = None
+        self._reset_stream()
+
+    def close(self) -> None:
+        """Stop the reacquisition worker (a search running is abandoned)."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None
+        self._reacquisition = None
+
+    def _reset_stream(self) -> None:
+        if getattr(self, '_reacquisition', None) is not None:
+            self._reacquisition[0].cancel()  # type: ignore[index]
+        self._reacquisition = None
+        self.tracker = None
+        self._buffer: list[np.ndarray] = []
+        self._next_index: int | None = None
+        self._grid_origin = 0
+        self._next_grid = 1  # index k of the next interval to emit (its end is origin + k fs / 1000)
+        self._pending: dict[int, list[tuple[float, np.ndarray]]] = {}
+        self._last_grid: dict[int, int] = {}
+        self._low_cn0: dict[int, int] = {}
+        self._ref_stamp_ns = 0
+        self._ref_index = 0
+        self._next_search_index = 0
+
+    @property
+    def tracked_prns(self) -> tuple[int, ...]:
+        """PRNs tracked now."""
+        return self.tracker.prns if self.tracker is not None else ()
+
+    def process(self, block: IfBlock) -> list[CorrelatorInterval]:
+        """One block of the stream; returns the intervals completed by it (possibly none).
+
+        Raises:
+            ValueError: samples whose type does not match ``is_complex``, or non-finite samples.
+        """
+        x = np.asarray(block.samples)
+        if bool(np.iscomplexobj(x)) != block.is_complex or x.ndim != 1:
+            raise ValueError('samples must be one-dimensional, complex iff is_complex')
+        if not np.all(np.isfinite(x)):
+            raise ValueError('samples hold NaN or infinity')
+        if block.is_complex and self.config.spectrum_inverted:
+            x = np.conj(x)
+        fmt = (float(block.sample_rate_hz), float(block.intermediate_frequency_hz), bool(block.is_complex))
+        if self._format is not None and fmt != self._format:
+            self.counts['restarts_format'] += 1
+            self._reset_stream()
+        elif self._next_index is not None and block.first_sample_index != self._next_index:
+            self.counts['restarts_gap'] += 1
+            self._reset_stream()
+        self._format = fmt
+        fs = fmt[0]
+        self.counts['blocks'] += 1
+        self.counts['samples'] += x.size
+        if self._next_index is None:
+            self._grid_origin = int(block.first_sample_index)
+            self._next_search_index = int(block.first_sample_index)
+        self._next_index = int(block.first_sample_index) + x.size
+        self._ref_stamp_ns, self._ref_index = int(block.stamp_ns), int(block.first_sample_index)
+        need = math.ceil(self.config.acquisition_ms * GRID_S * fs)
+        self._buffer.append(x)
+        buffered = sum(b.size for b in self._buffer)
+        # keep only the latest acquisition window once tracking runs
+        out: list[CorrelatorInterval] = []
+        if self.tracker is None:
+            if buffered < need:
+                return out
+            window = np.concatenate(self._buffer)
+            self._buffer = [window[-need:]]
+            self.tracker = Tracker(fs, fmt[1], fmt[2], self.config.tracking)
+            start = self._next_index - window.size
+            self._search(window[:need], start)
+            self._next_search_index = start + round(self.config.reacquisition_period_s * fs)
+            periods = self.tracker.process(window, start)
+        else:
+            if self._reacquisition is not None and block.first_sample_index >= self._reacquisition[2]:
+                future, start, _ = self._reacquisition
+                self._reacquisition = None
+                self._start_channels(future.result(), start)
+            periods = self.tracker.process(x, block.first_sample_index)
+            if buffered > need:
+                joined = np.concatenate(self._buffer)[-need:]
+                self._buffer = [joined]
+            if self._next_index >= self._next_search_index and self._reacquisition is None:
+                untracked = tuple(p for p in self.config.prns if p not in self.tracker.prns)
+                if untracked and buffered >= need:
+                    self._reacquire(self._buffer[-1].copy(), self._next_index - need, untracked)
+                self._next_search_index = self._next_index + round(self.config.reacquisition_period_s * fs)
+        self._queue(periods, fs)
+        self._drop_weak(periods)
+        return self._emit(fs)
+
+    def _config_for(self, prns: tuple[int, ...] | None) -> AcquisitionConfig:
+        cfg = self.config.acquisition()
+        if prns is None:
+            return cfg
+        return AcquisitionConfig(prns=prns, noncoherent_count=cfg.noncoherent_count, doppler_max_hz=cfg.doppler_max_hz,
+                                 false_alarm_probability=cfg.false_alarm_probability)
+
+    def _search(self, window: np.ndarray, start: int) -> None:
+        """Acquire on ``window`` (first sample ``start``) now; start a channel per PRN detected."""
+        assert self._format is not None
+        self.counts['acquisitions'] += 1
+        self._start_channels(acquire(window, self._format[0], self._format[1], self._config_for(None)), start)
+
+    def _reacquire(self, window: np.ndarray, start: int, prns: tuple[int, ...]) -> None:
+        """Search ``prns`` on ``window`` (an owned copy; first sample ``start``) in the worker thread; its
+        channels start at the first block from ``start + window + lag`` on (module docstring)."""
+        assert self._format is not None
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix='gnss_correlator_acquisition')
+        self.counts['acquisitions'] += 1
+        future = self._pool.submit(acquire, window, self._format[0], self._format[1], self._config_for(prns))
+        apply_at = start + window.size + round(self.config.reacquisition_lag_s * self._format[0])
+        self._reacquisition = (future, start, apply_at)
+
+    def _start_channels(self, results: list[AcquisitionResult], start: int) -> None:
+        """A channel per detected PRN not tracked yet, its code phase referred to sample ``start``."""
+        assert self.tracker is not None
+        for r in results:
+            if r.detected and r.prn not in self.tracker.prns:
+                self.tracker.add_channel(r.prn, r.code_delay_samples, r.doppler_hz, start)
+                self.counts['channels_started'] += 1
+                self._low_cn0[r.prn] = 0
+                self._pending.setdefault(r.prn, [])
+
+    def _queue(self, periods: TrackedPeriods, fs: float) -> None:
+        if self.config.iq_scaling == 'unit_noise':
+            scale = np.sqrt(periods.noise_power / 2.0)
+        else:
+            t = periods.n_samples / fs
+            scale = np.sqrt(periods.noise_power * 10.0 ** (periods.cn0_dbhz / 10.0) * t)
+        with np.errstate(invalid='ignore', divide='ignore'):  # NaN scale: C/N0 not known yet (withheld)
+            iq = periods.prompt * np.exp(1j * np.mod(periods.nco_phase_rad, 2.0 * np.pi)) / scale
+        dphi = 2.0 * np.pi * periods.doppler_hz * periods.n_samples / fs
+        usable = np.isfinite(periods.cn0_dbhz) & np.isfinite(scale) & (scale > 0)
+        self.counts['correlators_withheld'] += int(np.count_nonzero(~usable))
+        for j in np.flatnonzero(usable):
+            row = np.array([iq[j].real, iq[j].imag, periods.cn0_dbhz[j], dphi[j], periods.n_samples[j] / fs])
+            self._pending.setdefault(int(periods.prn[j]), []).append((float(periods.end_index[j]), row))
+
+    def _drop_weak(self, periods: TrackedPeriods) -> None:
+        assert self.tracker is not None
+        for prn in np.unique(periods.prn):
+            o = periods.of(int(prn))
+            for cn0, full in zip(o.cn0_dbhz, o.period > self.config.tracking.cn0_window_ms, strict=True):
+                if full:
+                    weak = not cn0 >= self.config.min_cn0_dbhz
+                    self._low_cn0[int(prn)] = self._low_cn0.get(int(prn), 0) + 1 if weak else 0
+            if self._low_cn0.get(int(prn), 0) >= self.config.drop_after_ms:
+                self.tracker.drop_channel(int(prn))
+                self.counts['channels_dropped'] += 1
+                self._low_cn0.pop(int(prn), None)
+
+    def _emit(self, fs: float) -> list[CorrelatorInterval]:
+        assert self._next_index is not None
+        step = fs * GRID_S
+        out = []
+        while self._grid_origin + self._next_grid * step <= self._next_index:
+            k = self._next_grid
+            end = self._grid_origin + k * step
+            rows, svids = [], []
+            for prn, queue in self._pending.items():
+                if queue and queue[0][0] <= end:
+                    _, row = queue.pop(0)
+                    rows.append(row)
+                    svids.append(prn)
+                    self._last_grid[prn] = k
+            self._next_grid += 1
+            if not rows:
+                continue
+            table = np.array(rows)
+            stamp = self._ref_stamp_ns + round((end - self._ref_index) / fs * NS_PER_S)
+            out.append(CorrelatorInterval(
+                stamp_ns=int(stamp), svid=np.array(svids, dtype=np.int64), in_phase=table[:, 0],
+                quadrature=table[:, 1], cn0_dbhz=table[:, 2], predicted_phase_change_rad=table[:, 3],
+                integration_time_s=table[:, 4]))
+            self.counts['intervals'] += 1
+            self.counts['correlators'] += len(rows)
+        # channels no longer tracked: their queues go
+        tracked = set(self.tracked_prns)
+        for prn in [p for p in self._pending if p not in tracked and not self._pending[p]]:
+            del self._pending[prn]
+        return out

@@ -1,0 +1,602 @@
+"""GPS L1 C/A tracking: per channel a DLL and an FLL-assisted PLL closing on 1-ms early/prompt/late
+correlators, in one compiled kernel per block of samples (no Python per sample).
+
+Each channel holds two numerically controlled oscillators (NCOs):
+
+* the **carrier NCO**, at the frequency the stream carries the satellite's carrier,
+  ``f_c = carrier_frequency_hz(f_d)`` (IF + Doppler, or |IF| - Doppler for a spectrally inverted real
+  IF); its Doppler phase ``phi_nco = 2 pi int f_d dt`` (rad, from the channel's start) is reported;
+* the **code NCO**, at ``f_chip (1 + f_d / f_L1)`` (carrier aiding) plus the DLL's correction.
+
+Per sample: ``y_n = x_n exp(-j 2 pi phi_c(n))`` (carrier wipe-off, the exponential from a 1024-entry table),
+then ``E, P, L += y_n c(chip_n +- d)``, ``c(chip_n)`` with ``d`` = ``early_late_offset_chips`` (0.5: one chip
+between early and late). Inside a code period both phases of sample k are computed from k (no running
+sum, no test per sample); the kernel cuts the block at the period ends and closes the loops there. The
+prompts of one code period (1 ms, chip 0 to chip 1022, so a period never straddles a data bit edge)
+close the loops at the period's end (T = that period's duration):
+
+* **PLL** (Costas, insensitive to the data bit): ``e_p = atan(Q_P / I_P)`` rad;
+* **FLL** (cross/dot of consecutive prompts, insensitive to a bit flip between them):
+  ``e_f = atan(cross / dot) / T`` rad/s, ``cross = I_{k-1} Q_k - Q_{k-1} I_k``,
+  ``dot = I_{k-1} I_k + Q_{k-1} Q_k``; unambiguous for |frequency error| < 1 / (4 T) = 250 Hz;
+* **carrier loop filter**: the second-order PLL with first-order FLL assist of Ward, Betz & Hegarty
+  (Kaplan & Hegarty, "Understanding GPS", 2nd ed., Fig. 5-23 and Table 5-6), bilinear integrator:
+
+      w_k = w_{k-1} + T (w0p^2 e_p + w0f e_f),     Omega_k = (w_k + w_{k-1}) / 2 + a2 w0p e_p,
+
+  ``w0p = B_pll / 0.53``, ``a2 = 1.414``, ``w0f = 4 B_fll`` (noise bandwidths B in Hz); Doppler of the
+  next period ``f_d = f_acq + Omega_k / (2 pi)``. The FLL assist pulls in acquisition errors of tens of
+  Hz that the PLL alone does not (on simulated IF a 15-Hz PLL alone lost 25 and 50 Hz offsets; with a
+  5-Hz FLL assist both were pulled in); it is switched off (``w0f = 0``) after ``fll_assist_ms``
+  periods, because its 1-ms cross-product discriminator is noisy (on the real 4 MHz capture a 10-20 Hz
+  assist delayed lock by 50-100 ms against 5 Hz). A second-order loop follows a frequency ramp
+  R (Hz/s) with a static phase error 2 pi R / w0p^2 (0.008 rad per Hz/s at 15 Hz: a static receiver's
+  satellite and TCXO drift of a few Hz/s costs a few hundredths of a radian). A third-order loop was
+  tried and dropped: the ringing of its rate integrator after pull-in lasted 0.5 s on simulated IF.
+* **DLL** (normalised non-coherent early-minus-late envelope, Kaplan & Hegarty Table 5-4):
+  ``e_c = (1 - d) (|E| - |L|) / (|E| + |L|)`` chips (exact for the infinite-bandwidth triangle while
+  |error| < d), a first-order loop of noise bandwidth ``B_dll``: code rate
+  ``f_chip (1 + f_d / f_L1) + 4 B_dll e_c`` chips/s (B_n = K / 4 for a first-order loop).
+
+Real samples are mixed with the complex NCO as they are: the image at ``-2 f_c`` integrates out over
+1 ms (f_c >= ~1 MHz). For a spectrally inverted real IF the prompts are conjugated at each period's end,
+so that every loop, phase and output is in terms of the Doppler (sign as the acquisition's).
+
+C/N0 is estimated outside the kernel from the 1-ms prompts by the moments (M2M4) estimator of
+Pauluzzi & Beaulieu (IEEE Trans. Commun. 48(10), 2000), insensitive to the carrier phase and to the data
+bits; the PLL lock indicator is ``cos(2 e_p)`` estimated as ``(I^2 - Q^2) / (I^2 + Q^2)`` smoothed
+(Van Dierendonck, in Parkinson & Spilker, vol. I, ch. 8), 1 when locked, ~0 when not.
+
+Time and index conventions: samples are addressed by their absolute index in the stream (the
+IfSamples ``first_sample_index``); a period's end ``end_index`` is fractional (where the code NCO
+crossed chip 1023), so its time is ``stamp(first sample) + (end_index - first_sample_index) / fs``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from gnss_common.constants import GPS_CA_CHIP_RATE_HZ, GPS_CA_CODE_LENGTH_CHIPS, GPS_L1_FREQUENCY_HZ
+from gnss_common.gps_ca import G2_DELAY_CHIPS, ca_code
+from gnss_correlator.acquisition import MIN_SAMPLE_RATE_HZ
+
+TWO_PI = 2.0 * math.pi
+PLL_A2 = 1.414
+"""a2 of the second-order PLL (Kaplan & Hegarty, Table 5-6)."""
+PLL_W0_PER_BN = 1.0 / 0.53
+"""w0 / B_n of the second-order PLL, rad/s per Hz (Kaplan & Hegarty, Table 5-6: B_n = 0.53 w0)."""
+FLL_W0_PER_BN = 4.0
+"""w0 / B_n of the first-order FLL assist, rad/s per Hz (Kaplan & Hegarty, Table 5-6: B_n = 0.25 w0)."""
+
+# ---- layout of the kernel's per-channel state (float64 row) ---------------------------------------
+S_CODE_PHASE = 0  # code NCO phase at the next sample, chips, [0, 1023)
+S_CODE_CORR = 1  # DLL correction to the carrier-aided code rate, chips/s
+S_CARR_CYC = 2  # carrier NCO phase of the sampled stream at the next sample, cycles, [0, 1)
+S_DOPPLER = 3  # carrier NCO Doppler, Hz
+S_DOPPLER_ACQ = 4  # Doppler the loop started from, Hz
+S_W = 5  # carrier loop filter integrator w, rad/s
+S_PHASE_RAD = 6  # accumulated Doppler phase of the NCO at the next sample, rad
+S_E_RE, S_E_IM, S_P_RE, S_P_IM, S_L_RE, S_L_IM = 7, 8, 9, 10, 11, 12  # running sums of the period
+S_N = 13  # samples summed into the running period
+S_PREV_RE, S_PREV_IM = 14, 15  # previous period's prompt (0, 0: none)
+S_PERIODS = 16  # periods closed since the start
+S_PERIOD_START = 17  # fractional index where the running period started
+S_PRN = 18
+S_ACTIVE = 19  # 1 while the channel is tracked
+S_RING_COUNT = 20  # full periods written to the channel's prompt ring (C/N0 and lock window)
+N_STATE = 21
+
+# ---- layout of one output row (one closed code period of one channel) -----------------------------
+O_END = 0  # fractional absolute sample index of the period's end (code NCO at chip 1023)
+O_START = 1  # fractional absolute sample index of its start
+O_E_RE, O_E_IM, O_P_RE, O_P_IM, O_L_RE, O_L_IM = 2, 3, 4, 5, 6, 7
+O_DOPPLER = 8  # carrier NCO Doppler during the period, Hz
+O_PHASE_RAD = 9  # NCO Doppler phase at the period's end, rad (since the channel's start)
+O_CODE_RATE = 10  # code NCO rate during the period, chips/s
+O_PLL_ERR = 11  # PLL discriminator, rad
+O_FLL_ERR = 12  # FLL discriminator, Hz (0 on the first period)
+O_DLL_ERR = 13  # DLL discriminator, chips
+O_N = 14  # samples in the period
+O_PERIOD = 15  # period count since the channel's start (0 = the first, usually partial)
+O_CN0 = 16  # C/N0 over the last window of prompts, dB-Hz (NaN until the window is full)
+O_LOCK = 17  # PLL lock indicator over the same window (NaN until full)
+O_NOISE = 18  # noise power of one prompt (both components) over the same window, (input units x samples)^2
+N_OUT = 19
+
+
+@dataclass(frozen=True)
+class TrackingConfig:
+    """Loop parameters of every channel.
+
+    Attributes:
+        pll_bandwidth_hz: noise bandwidth of the second-order PLL, Hz, (0, 50]. 15-18 Hz: a static or
+            slow receiver with a TCXO at 1-ms integration (Kaplan & Hegarty: thermal noise
+            sigma_PLL grows as sqrt(B_n), dynamic stress falls as 1 / B_n^2).
+        fll_bandwidth_hz: noise bandwidth of the first-order FLL assist during pull-in, Hz, [0, 50].
+        fll_assist_ms: code periods (ms) with the FLL assist on after a channel starts, >= 0; then a
+            pure second-order PLL.
+        dll_bandwidth_hz: noise bandwidth of the first-order DLL, Hz, (0, 10]; carrier aiding removes
+            the dynamics, so 1-2 Hz is enough.
+        early_late_offset_chips: d, offset of the early and late replicas from the prompt, chips,
+            (0, 0.5]; 0.5 = one chip between early and late.
+        cn0_window_ms: prompts of the C/N0 estimate and the lock indicator, >= 10.
+    """
+
+    pll_bandwidth_hz: float = 15.0
+    fll_bandwidth_hz: float = 5.0
+    fll_assist_ms: int = 100
+    dll_bandwidth_hz: float = 2.0
+    early_late_offset_chips: float = 0.5
+    cn0_window_ms: int = 50
+
+    def __post_init__(self) -> None:
+        checks = (
+            ('pll_bandwidth_hz', 0.0 < self.pll_bandwidth_hz <= 50.0, '(0, 50]'),
+            ('fll_bandwidth_hz', 0.0 <= self.fll_bandwidth_hz <= 50.0, '[0, 50]'),
+            ('fll_assist_ms', self.fll_assist_ms >= 0, '>= 0'),
+            ('dll_bandwidth_hz', 0.0 < self.dll_bandwidth_hz <= 10.0, '(0, 10]'),
+            ('early_late_offset_chips', 0.0 < self.early_late_offset_chips <= 0.5, '(0, 0.5]'),
+            ('cn0_window_ms', self.cn0_window_ms >= 10, '>= 10'),
+        )
+        for name, ok, rule in checks:
+            if not ok:
+                raise ValueError(f'{name} must be {rule}, got {getattr(self, name)}')
+
+
+@njit(cache=True, nogil=True)
+def _window_quality(ring: np.ndarray, t_s: float) -> tuple[float, float, float]:
+    """C/N0 (M2M4, dB-Hz), lock indicator (mean(I^2 - Q^2) / mean(I^2 + Q^2)) and the noise power per prompt
+    (M2M4's P_n) of a window of prompts."""
+    m2 = 0.0
+    m4 = 0.0
+    d = 0.0
+    for z in ring:
+        p2 = z.real * z.real + z.imag * z.imag
+        m2 += p2
+        m4 += p2 * p2
+        d += z.real * z.real - z.imag * z.imag
+    w = ring.shape[0]
+    m2 /= w
+    m4 /= w
+    lock = d / w / m2 if m2 > 0 else math.nan
+    disc = 2.0 * m2 * m2 - m4
+    if not disc > 0:
+        return math.nan, lock, m2
+    ps = math.sqrt(disc)
+    pn = m2 - ps
+    if not pn > 0:
+        return math.nan, lock, math.nan
+    return 10.0 * math.log10(ps / pn / t_s), lock, pn
+
+
+@njit(cache=True, nogil=True)
+def _close_period(st: np.ndarray, out: np.ndarray, ring: np.ndarray, row: int, end_index: float, code_rate: float,
+                  inverted: bool, w0p: float, w0f: float, assist_periods: float, k_dll: float,
+                  d_chips: float, sign: float, if0: float, fs: float) -> float:
+    """Write the period's output row, run the discriminators and loop filters, reset the sums.
+
+    Returns the new carrier NCO frequency of the stream, Hz.
+    """
+    n = st[S_N]
+    t = n / fs
+    e_re, e_im = st[S_E_RE], st[S_E_IM]
+    p_re, p_im = st[S_P_RE], st[S_P_IM]
+    l_re, l_im = st[S_L_RE], st[S_L_IM]
+    if inverted:  # conjugate: phases in terms of the Doppler
+        e_im, p_im, l_im = -e_im, -p_im, -l_im
+    # discriminators
+    pll = math.atan(p_im / p_re) if p_re != 0.0 else (0.5 * math.pi if p_im > 0 else -0.5 * math.pi)
+    fll = 0.0
+    if st[S_PREV_RE] != 0.0 or st[S_PREV_IM] != 0.0:
+        cross = st[S_PREV_RE] * p_im - st[S_PREV_IM] * p_re
+        dot = st[S_PREV_RE] * p_re + st[S_PREV_IM] * p_im
+        if dot != 0.0:
+            fll = math.atan(cross / dot) / t
+        else:
+            fll = (0.5 * math.pi if cross > 0 else -0.5 * math.pi) / t
+    ea = math.sqrt(e_re * e_re + e_im * e_im)
+    la = math.sqrt(l_re * l_re + l_im * l_im)
+    dll = (1.0 - d_chips) * (ea - la) / (ea + la) if ea + la > 0 else 0.0
+    out[row, O_END] = end_index
+    out[row, O_START] = st[S_PERIOD_START]
+    out[row, O_E_RE], out[row, O_E_IM] = e_re, e_im
+    out[row, O_P_RE], out[row, O_P_IM] = p_re, p_im
+    out[row, O_L_RE], out[row, O_L_IM] = l_re, l_im
+    out[row, O_DOPPLER] = st[S_DOPPLER]
+    out[row, O_PHASE_RAD] = st[S_PHASE_RAD]
+    out[row, O_CODE_RATE] = code_rate
+    out[row, O_PLL_ERR] = pll
+    out[row, O_FLL_ERR] = fll / TWO_PI
+    out[row, O_DLL_ERR] = dll
+    out[row, O_N] = n
+    out[row, O_PERIOD] = st[S_PERIODS]
+    out[row, O_CN0] = math.nan
+    out[row, O_LOCK] = math.nan
+    out[row, O_NOISE] = math.nan
+    if st[S_PERIODS] > 0:  # the first period is partial: left out of the window
+        w = ring.shape[0]
+        ring[int(st[S_RING_COUNT]) % w] = complex(p_re, p_im)
+        st[S_RING_COUNT] += 1.0
+        if st[S_RING_COUNT] >= w:
+            out[row, O_CN0], out[row, O_LOCK], out[row, O_NOISE] = _window_quality(ring, t)
+    # carrier loop (Kaplan & Hegarty Fig. 5-23): second-order PLL, first-order FLL assist while pulling in
+    w0f_now = w0f if st[S_PERIODS] < assist_periods else 0.0
+    w_old = st[S_W]
+    w_new = w_old + t * (w0p * w0p * pll + w0f_now * fll)
+    omega = 0.5 * (w_old + w_new) + PLL_A2 * w0p * pll
+    st[S_W] = w_new
+    st[S_DOPPLER] = st[S_DOPPLER_ACQ] + omega / TWO_PI
+    st[S_CODE_CORR] = k_dll * dll
+    st[S_PREV_RE], st[S_PREV_IM] = p_re, p_im
+    st[S_E_RE] = st[S_E_IM] = st[S_P_RE] = st[S_P_IM] = st[S_L_RE] = st[S_L_IM] = 0.0
+    st[S_N] = 0.0
+    st[S_PERIODS] += 1.0
+    st[S_PERIOD_START] = end_index
+    return if0 + sign * st[S_DOPPLER]
+
+
+LUT_BITS = 10
+"""The carrier NCO's sine table has 2^LUT_BITS entries (phase resolution 2 pi / 1024: a worst-case phase error of
+0.003 rad in the wipe-off, a correlation loss below 1e-5 dB; the NCO's phase itself is kept in float64)."""
+_LUT_SIZE = 1 << LUT_BITS
+_COS = np.cos(2.0 * np.pi * np.arange(_LUT_SIZE) / _LUT_SIZE)
+_SIN = np.sin(2.0 * np.pi * np.arange(_LUT_SIZE) / _LUT_SIZE)
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def _segment(xr: np.ndarray, xi: np.ndarray | None, i0: int, m: int, cyc0: float, cstep: float, cp0: float,
+             code_step: float, code: np.ndarray, d_plus: float, d_minus: float
+             ) -> tuple[float, float, float, float, float, float]:
+    """E, P, L sums (re, im) of samples i0 .. i0 + m - 1, all inside one code period (no branch per sample:
+    the carrier phase and the code phase of sample k are computed from k, so the loop vectorises).
+
+    ``y_k = x_k exp(-j 2 pi (cyc0 + k cstep))`` (table look-up), chips ``cp0 + k code_step`` (+- the early
+    and late offsets); ``xi`` None for real samples.
+    """
+    er = ei = pr = pi = lr = li = 0.0
+    for k in range(m):
+        j = int(math.floor((cyc0 + k * cstep) * _LUT_SIZE)) & (_LUT_SIZE - 1)
+        co = _COS[j]
+        si = _SIN[j]
+        a = xr[i0 + k]
+        if xi is None:
+            yr = a * co
+            yi = -a * si
+        else:
+            b = xi[i0 + k]
+            yr = a * co + b * si
+            yi = b * co - a * si
+        chips = cp0 + k * code_step
+        cpv = code[int(chips) + 1]
+        cev = code[int(chips + d_plus)]
+        clv = code[int(chips + d_minus)]
+        pr += yr * cpv
+        pi += yi * cpv
+        er += yr * cev
+        ei += yi * cev
+        lr += yr * clv
+        li += yi * clv
+    return er, ei, pr, pi, lr, li
+
+
+@njit(cache=True, nogil=True)
+def track_block(xr: np.ndarray, xi: np.ndarray | None, first_index: int, fs: float, if0: float, sign: float,
+                inverted: bool, state: np.ndarray, codes: np.ndarray, rings: np.ndarray, out: np.ndarray,
+                n_out: np.ndarray, w0p: float, w0f: float, assist_periods: float, k_dll: float, d_chips: float) -> None:
+    """Track every active channel of ``state`` over one contiguous block of samples (compiled).
+
+    Args:
+        xr: real parts (real samples: the samples), shape (n,), float64.
+        xi: imaginary parts, shape (n,), float64; None for real samples.
+        first_index: absolute index of x[0].
+        fs: sample rate, Hz.
+        if0: the stream's carrier frequency at zero Doppler, Hz (IF, or -IF for an inverted real IF).
+        sign: d f_c / d f_d: +1, or -1 for an inverted real IF.
+        inverted: conjugate the prompts (spectral inversion).
+        state: per-channel state, shape (n_ch, N_STATE), updated in place.
+        codes: +-1 C/A code of each channel with one chip of wrap each side, shape (n_ch, 1025):
+            ``codes[:, k + 1]`` is chip k mod 1023 for k = -1..1023.
+        rings: the last prompts of each channel (C/N0 and lock window), shape (n_ch, window), complex128.
+        out: output rows, shape (n_ch, max_periods, N_OUT), written from row 0.
+        n_out: rows written per channel, shape (n_ch,), set.
+        w0p, w0f: natural frequencies of the PLL and the FLL assist, rad/s.
+        assist_periods: periods with the FLL assist on.
+        k_dll: DLL gain 4 B_dll, 1/s.
+        d_chips: early/late offset, chips.
+    """
+    n_total = xr.shape[0]
+    n_ch = state.shape[0]
+    n_code = codes.shape[1] - 2
+    d_plus = 1.0 + d_chips
+    d_minus = 1.0 - d_chips
+    for c in range(n_ch):
+        n_out[c] = 0
+        st = state[c]
+        if st[S_ACTIVE] == 0.0:
+            continue
+        code = codes[c]
+        f_c = if0 + sign * st[S_DOPPLER]
+        code_rate = GPS_CA_CHIP_RATE_HZ * (1.0 + st[S_DOPPLER] / GPS_L1_FREQUENCY_HZ) + st[S_CODE_CORR]
+        code_step = code_rate / fs
+        cstep = f_c / fs
+        dstep = TWO_PI * st[S_DOPPLER] / fs
+        cyc = st[S_CARR_CYC]
+        cp = st[S_CODE_PHASE]
+        e_re, e_im = st[S_E_RE], st[S_E_IM]
+        p_re, p_im = st[S_P_RE], st[S_P_IM]
+        l_re, l_im = st[S_L_RE], st[S_L_IM]
+        n_in = 0  # samples since the running period's sums were last written to st
+        i = 0
+        while i < n_total:
+            # samples k >= 0 of this period left: those with cp + k code_step < 1023
+            n_left = max(1, int(math.ceil((n_code - cp) / code_step)))
+            m = min(n_left, n_total - i)
+            se_re, se_im, sp_re, sp_im, sl_re, sl_im = _segment(
+                xr, xi, i, m, cyc, cstep, cp, code_step, code, d_plus, d_minus)
+            e_re += se_re
+            e_im += se_im
+            p_re += sp_re
+            p_im += sp_im
+            l_re += sl_re
+            l_im += sl_im
+            cp += m * code_step
+            cyc = (cyc + m * cstep) % 1.0
+            n_in += m
+            i += m
+            if m < n_left:
+                break
+            # the period ends inside the last sample step: close it
+            cp = max(cp - n_code, 0.0)
+            end_index = first_index + i - cp / code_step
+            st[S_E_RE], st[S_E_IM] = e_re, e_im
+            st[S_P_RE], st[S_P_IM] = p_re, p_im
+            st[S_L_RE], st[S_L_IM] = l_re, l_im
+            st[S_N] += n_in
+            st[S_PHASE_RAD] += n_in * dstep
+            row = n_out[c]
+            if row >= out.shape[1]:  # no room (cannot happen with the sizes process() allocates): stop
+                st[S_ACTIVE] = 0.0
+                break
+            f_c = _close_period(st, out[c], rings[c], row, end_index, code_rate, inverted, w0p, w0f,
+                                assist_periods, k_dll, d_chips, sign, if0, fs)
+            n_out[c] = row + 1
+            n_in = 0
+            e_re = e_im = p_re = p_im = l_re = l_im = 0.0
+            code_rate = GPS_CA_CHIP_RATE_HZ * (1.0 + st[S_DOPPLER] / GPS_L1_FREQUENCY_HZ) + st[S_CODE_CORR]
+            code_step = code_rate / fs
+            cstep = f_c / fs
+            dstep = TWO_PI * st[S_DOPPLER] / fs
+        st[S_E_RE], st[S_E_IM] = e_re, e_im
+        st[S_P_RE], st[S_P_IM] = p_re, p_im
+        st[S_L_RE], st[S_L_IM] = l_re, l_im
+        st[S_N] += n_in
+        st[S_PHASE_RAD] += n_in * dstep
+        st[S_CARR_CYC] = cyc
+        st[S_CODE_PHASE] = cp
+
+
+@dataclass(frozen=True)
+class TrackedPeriods:
+    """The code periods closed in one block, all channels, in order of their end.
+
+    Attributes (each shape (n,)):
+        prn: the channel's PRN.
+        end_index: absolute (fractional) sample index where the period ended (code NCO at chip 1023).
+        start_index: absolute (fractional) sample index where it started.
+        early, prompt, late: complex correlator sums, (input units) x samples; phases relative to the
+            carrier NCO, conjugated for a spectrally inverted IF.
+        doppler_hz: carrier NCO Doppler during the period, Hz.
+        nco_phase_rad: the NCO's accumulated Doppler phase at the period's end, rad, since the
+            channel's start (2 pi int f_d dt).
+        code_rate_hz: code NCO rate during the period, chips/s.
+        pll_error_rad, fll_error_hz, dll_error_chips: discriminator outputs.
+        n_samples: samples summed.
+        period: the period's count since the channel's start (0 is partial).
+        cn0_dbhz: C/N0 estimate over the last ``cn0_window_ms`` prompts, dB-Hz (NaN until the window is
+            full, or when the estimate has no signal power).
+        lock_indicator: smoothed cos(2 e_p) over the same window, [-1, 1] (NaN until full).
+        noise_power: the moments estimator's noise power of one prompt (I and Q together) over the same
+            window, (input units x samples)^2 (NaN until full); the signal power is
+            ``noise_power x 10^(cn0_dbhz / 10) x T``.
+    """
+
+    prn: np.ndarray
+    end_index: np.ndarray
+    start_index: np.ndarray
+    early: np.ndarray
+    prompt: np.ndarray
+    late: np.ndarray
+    doppler_hz: np.ndarray
+    nco_phase_rad: np.ndarray
+    code_rate_hz: np.ndarray
+    pll_error_rad: np.ndarray
+    fll_error_hz: np.ndarray
+    dll_error_chips: np.ndarray
+    n_samples: np.ndarray
+    period: np.ndarray
+    cn0_dbhz: np.ndarray
+    lock_indicator: np.ndarray
+    noise_power: np.ndarray
+
+    def of(self, prn: int) -> TrackedPeriods:
+        """The rows of one PRN."""
+        m = self.prn == prn
+        return TrackedPeriods(**{k: getattr(self, k)[m] for k in self.__dataclass_fields__})
+
+    @staticmethod
+    def concatenate(parts: list[TrackedPeriods]) -> TrackedPeriods:
+        """Rows of several blocks, in order."""
+        return TrackedPeriods(**{k: np.concatenate([getattr(p, k) for p in parts])
+                                 for k in TrackedPeriods.__dataclass_fields__})
+
+
+def m2m4_cn0_dbhz(prompts: np.ndarray, integration_time_s: float) -> float:
+    """C/N0 from coherent prompts by the moments estimator (Pauluzzi & Beaulieu 2000, eq. 14 for
+    complex samples): ``P_s = sqrt(2 M2^2 - M4)``, ``P_n = M2 - P_s``, ``C/N0 = P_s / P_n / T``.
+
+    Args:
+        prompts: complex prompts, shape (n,), n >= 2.
+        integration_time_s: T of each prompt, s.
+
+    Returns:
+        dB-Hz; NaN when the moments give no signal power (2 M2^2 <= M4) or no noise power.
+    """
+    p2 = np.abs(prompts) ** 2
+    m2 = float(np.mean(p2))
+    m4 = float(np.mean(p2 * p2))
+    disc = 2.0 * m2 * m2 - m4
+    if not disc > 0:
+        return math.nan
+    ps = math.sqrt(disc)
+    pn = m2 - ps
+    if not pn > 0:
+        return math.nan
+    return 10.0 * math.log10(ps / pn / integration_time_s)
+
+
+class Tracker:
+    """The channels of one sample stream (fixed rate, IF and sample type), fed contiguous blocks.
+
+    Args:
+        sample_rate_hz: fs, Hz (complex: I/Q pairs per second), >= 2 MHz.
+        intermediate_frequency_hz: IF, Hz (0: complex baseband; < 0 with real samples: spectral inversion).
+        is_complex: complex samples.
+        config: loop parameters.
+
+    Example:
+        >>> import numpy as np
+        >>> t = Tracker(4e6, 0.0, True)
+        >>> t.add_channel(prn=3, code_delay_samples=100.0, doppler_hz=500.0, reference_index=0)
+        >>> x = np.random.default_rng(0).normal(size=8000) + 0j
+        >>> out = t.process(x, first_sample_index=0)
+        >>> out.prn.tolist()
+        [3, 3]
+    """
+
+    def __init__(self, sample_rate_hz: float, intermediate_frequency_hz: float, is_complex: bool,
+                 config: TrackingConfig = TrackingConfig()) -> None:
+        if not (math.isfinite(sample_rate_hz) and sample_rate_hz >= MIN_SAMPLE_RATE_HZ):
+            raise ValueError(f'sample_rate_hz must be >= {MIN_SAMPLE_RATE_HZ:g}, got {sample_rate_hz}')
+        if not math.isfinite(intermediate_frequency_hz):
+            raise ValueError(f'intermediate_frequency_hz must be finite, got {intermediate_frequency_hz}')
+        self.fs = float(sample_rate_hz)
+        self.if_hz = float(intermediate_frequency_hz)
+        self.is_complex = bool(is_complex)
+        self.config = config
+        self.inverted = (not self.is_complex) and self.if_hz < 0
+        self._if0 = -self.if_hz if self.inverted else self.if_hz
+        self._sign = -1.0 if self.inverted else 1.0
+        self._state = np.zeros((0, N_STATE))
+        self._codes = np.zeros((0, GPS_CA_CODE_LENGTH_CHIPS + 2))
+        self._rings = np.zeros((0, config.cn0_window_ms), dtype=np.complex128)
+        self.next_index: int | None = None
+
+    @property
+    def prns(self) -> tuple[int, ...]:
+        """PRNs of the active channels."""
+        return tuple(int(p) for p in self._state[self._state[:, S_ACTIVE] > 0, S_PRN])
+
+    def add_channel(self, prn: int, code_delay_samples: float, doppler_hz: float, reference_index: int) -> None:
+        """Start a channel from an acquisition.
+
+        Args:
+            prn: 1..37, not already tracked.
+            code_delay_samples: samples from ``reference_index`` to a start of chip 0 (acquisition's
+                ``code_delay_samples`` of a search whose first sample was ``reference_index``).
+            doppler_hz: the acquisition's Doppler, Hz.
+            reference_index: absolute index of the acquisition window's first sample; at most the
+                next sample to be processed (the code phase is carried forward to it).
+        """
+        if int(prn) not in G2_DELAY_CHIPS:
+            raise ValueError(f'prn must be in 1..37, got {prn}')
+        if int(prn) in self.prns:
+            raise ValueError(f'PRN {prn} is already tracked')
+        if not (math.isfinite(code_delay_samples) and math.isfinite(doppler_hz)):
+            raise ValueError('code_delay_samples and doppler_hz must be finite')
+        start = reference_index if self.next_index is None else self.next_index
+        if reference_index > start:
+            raise ValueError(f'reference_index {reference_index} is after the next sample {start}')
+        rate = GPS_CA_CHIP_RATE_HZ * (1.0 + doppler_hz / GPS_L1_FREQUENCY_HZ)
+        chips = ((start - reference_index - code_delay_samples) * rate / self.fs) % GPS_CA_CODE_LENGTH_CHIPS
+        row = np.zeros(N_STATE)
+        row[S_CODE_PHASE] = chips
+        row[S_DOPPLER] = row[S_DOPPLER_ACQ] = doppler_hz
+        row[S_PERIOD_START] = start
+        row[S_PRN] = prn
+        row[S_ACTIVE] = 1.0
+        keep = self._state[:, S_ACTIVE] > 0
+        self._state = np.vstack([self._state[keep], row[None, :]])
+        code = ca_code(int(prn)).astype(np.float64)
+        wrapped = np.concatenate([code[-1:], code, code[:1]])
+        self._codes = np.vstack([self._codes[keep], wrapped[None, :]])
+        self._rings = np.vstack([self._rings[keep], np.zeros((1, self.config.cn0_window_ms), dtype=np.complex128)])
+
+    def drop_channel(self, prn: int) -> None:
+        """Stop tracking a PRN (no error if it is not tracked)."""
+        keep = self._state[:, S_PRN] != prn
+        self._state, self._codes, self._rings = self._state[keep], self._codes[keep], self._rings[keep]
+
+    def reset(self) -> None:
+        """Drop every channel and forget the stream position."""
+        self._state = np.zeros((0, N_STATE))
+        self._codes = np.zeros((0, GPS_CA_CODE_LENGTH_CHIPS + 2))
+        self._rings = np.zeros((0, self.config.cn0_window_ms), dtype=np.complex128)
+        self.next_index = None
+
+    def process(self, samples: np.ndarray, first_sample_index: int) -> TrackedPeriods:
+        """Track every channel over one block.
+
+        Args:
+            samples: real or complex samples (complex iff the tracker's ``is_complex``), shape (n,).
+            first_sample_index: absolute index of samples[0]; must be the previous block's end (the
+                first block sets the stream position).
+
+        Returns:
+            the code periods closed in the block.
+
+        Raises:
+            ValueError: a gap or overlap, a sample type that is not the tracker's, non-finite samples.
+        """
+        x = np.asarray(samples)
+        if x.ndim != 1:
+            raise ValueError(f'samples must be one-dimensional, got shape {x.shape}')
+        if bool(np.iscomplexobj(x)) != self.is_complex:
+            raise ValueError(f'samples must be {"complex" if self.is_complex else "real"}')
+        if self.next_index is not None and first_sample_index != self.next_index:
+            raise ValueError(f'block starts at {first_sample_index}, expected {self.next_index} (gap or overlap)')
+        x = x.astype(np.complex128 if self.is_complex else np.float64)
+        if not np.all(np.isfinite(x)):
+            raise ValueError('samples hold NaN or infinity')
+        self.next_index = int(first_sample_index) + x.size
+        n_ch = self._state.shape[0]
+        max_periods = int(x.size * GPS_CA_CHIP_RATE_HZ * 1.01 / (GPS_CA_CODE_LENGTH_CHIPS * self.fs)) + 2
+        out = np.zeros((n_ch, max_periods, N_OUT))
+        n_out = np.zeros(n_ch, dtype=np.int64)
+        cfg = self.config
+        if n_ch:
+            xr = np.ascontiguousarray(x.real) if self.is_complex else x
+            xi = np.ascontiguousarray(x.imag) if self.is_complex else None
+            track_block(xr, xi, int(first_sample_index), self.fs, self._if0, self._sign, self.inverted, self._state,
+                        self._codes, self._rings, out, n_out, cfg.pll_bandwidth_hz * PLL_W0_PER_BN,
+                        cfg.fll_bandwidth_hz * FLL_W0_PER_BN, float(cfg.fll_assist_ms),
+                        4.0 * cfg.dll_bandwidth_hz, cfg.early_late_offset_chips)
+        rows = [out[c, :n_out[c]] for c in range(n_ch)]
+        prns = np.concatenate([np.full(n_out[c], self._state[c, S_PRN], dtype=np.int64) for c in range(n_ch)]) \
+            if n_ch else np.zeros(0, dtype=np.int64)
+        table = np.concatenate(rows) if n_ch else np.zeros((0, N_OUT))
+        order = np.argsort(table[:, O_END], kind='stable')
+        return TrackedPeriods(
+            prn=prns[order], end_index=table[order, O_END], start_index=table[order, O_START],
+            early=table[order, O_E_RE] + 1j * table[order, O_E_IM],
+            prompt=table[order, O_P_RE] + 1j * table[order, O_P_IM],
+            late=table[order, O_L_RE] + 1j * table[order, O_L_IM],
+            doppler_hz=table[order, O_DOPPLER], nco_phase_rad=table[order, O_PHASE_RAD],
+            code_rate_hz=table[order, O_CODE_RATE], pll_error_rad=table[order, O_PLL_ERR],
+            fll_error_hz=table[order, O_FLL_ERR], dll_error_chips=table[order, O_DLL_ERR],
+            n_samples=table[order, O_N].astype(np.int64), period=table[order, O_PERIOD].astype(np.int64),
+            cn0_dbhz=table[order, O_CN0], lock_indicator=table[order, O_LOCK],
+            noise_power=table[order, O_NOISE])

@@ -1,0 +1,132 @@
+"""The receiver core on simulated IF (rfi_sim truth): the 1-ms output grid, imm_carrier's convention (the angle of
+I + jQ is the carrier's Doppler phase, the predicted change the NCO's), the I/Q scalings, restarts."""
+
+from __future__ import annotations
+
+import math
+import threading
+
+import numpy as np
+import pytest
+
+from gnss_correlator import receiver as receiver_module
+from gnss_correlator.receiver import CorrelatorInterval, IfBlock, Receiver, ReceiverConfig
+from rfi_sim.if_signal import FrontEndConfig, GpsSatellite, IfSimulator
+
+FS = 4e6
+T0_NS = 1_800_000_000 * 1_000_000_000
+SATS = (GpsSatellite(prn=7, doppler_hz=1234.0, code_phase_chips=300.2, carrier_phase_rad=0.4, power_dbm=-127.0),
+        GpsSatellite(prn=21, doppler_hz=-2210.0, code_phase_chips=12.7, carrier_phase_rad=2.0, power_dbm=-127.0))
+CN0_DBHZ = -127.0 + 174.0  # the front end's -114 dBm/MHz noise density
+
+
+@pytest.fixture(scope='module')
+def samples() -> np.ndarray:
+    fe = FrontEndConfig(sample_rate_hz=FS, intermediate_frequency_hz=0.0, is_complex=True, bits=4)
+    v = IfSimulator(fe, satellites=SATS, seed=11).generate(int(FS * 0.4)).counts.astype(np.float64)
+    return v[0::2] + 1j * v[1::2]
+
+
+def run(x: np.ndarray, config: ReceiverConfig, block: int = 28_001) -> tuple[Receiver, list[CorrelatorInterval]]:
+    rx = Receiver(config)
+    out: list[CorrelatorInterval] = []
+    for i in range(0, x.size, block):
+        out += rx.process(IfBlock(T0_NS + round(i / FS * 1e9), FS, 0.0, True, i, x[i:i + block]))
+    return rx, out
+
+
+def per_prn(out: list[CorrelatorInterval], prn: int) -> dict[str, np.ndarray]:
+    rows = [(iv.stamp_ns, iv.in_phase[k], iv.quadrature[k], iv.predicted_phase_change_rad[k], iv.cn0_dbhz[k])
+            for iv in out for k in np.flatnonzero(iv.svid == prn)]
+    a = np.array(rows)
+    return {'t': (a[:, 0] - T0_NS) / 1e9, 'iq': a[:, 1] + 1j * a[:, 2], 'dphi': a[:, 3], 'cn0': a[:, 4]}
+
+
+def test_grid_convention_and_unit_amplitude(samples):
+    rx, out = run(samples, ReceiverConfig(prns=(3, 7, 21)))
+    assert set(rx.tracked_prns) == {7, 21} and rx.counts['acquisitions'] == 1
+    stamps = np.array([iv.stamp_ns for iv in out])
+    assert np.all((stamps - T0_NS) % 1_000_000 == 0) and np.all(np.diff(stamps) == 1_000_000)
+    assert all(len(set(iv.svid.tolist())) == iv.svid.size for iv in out)  # one correlator per channel per array
+    for sat in SATS:
+        r = per_prn(out, sat.prn)
+        settled = r['t'] > 0.2
+        # the predicted change is the NCO's: 2 pi f_d T with the tracked Doppler, close to the truth
+        assert np.median(r['dphi'][settled]) == pytest.approx(2 * np.pi * sat.doppler_hz * 1e-3, abs=0.01)
+        # the angle of I + jQ is the carrier's Doppler phase (modulo pi, the data bit), up to a constant: the
+        # period ends up to 1 ms before the stamp, at an offset that drifts by < 1 us over the run
+        d = np.angle(r['iq'][settled]) - 2 * np.pi * sat.doppler_hz * r['t'][settled]
+        z = np.exp(2j * d)
+        d = np.angle(z * np.conj(np.mean(z))) / 2
+        sigma = 1.0 / math.sqrt(2 * 1e-3 * 10 ** (CN0_DBHZ / 10))  # the prompt's phase noise, rad
+        assert np.sqrt(np.mean(d ** 2)) < 1.5 * sigma + 0.03
+        # unit amplitude: |I + jQ| about 1 (noise std sigma per component around it)
+        assert np.median(np.abs(r['iq'][settled])) == pytest.approx(1.0, abs=0.1)
+        assert np.median(r['cn0'][settled]) == pytest.approx(CN0_DBHZ, abs=1.5)
+
+
+def test_unit_noise_scaling(samples):
+    _, out = run(samples, ReceiverConfig(prns=(7,), iq_scaling='unit_noise'))
+    r = per_prn(out, 7)
+    settled = r['t'] > 0.2
+    # the NCO's accumulated phase removed (imm_carrier's residual), the signal sits on one axis (+- the bits)
+    iq = (r['iq'] * np.exp(-1j * np.cumsum(r['dphi'])))[settled]
+    # the component across that axis is noise of std 1
+    z = iq ** 2
+    axis = np.angle(np.mean(z)) / 2
+    across = (iq * np.exp(-1j * axis)).imag
+    assert np.std(across) == pytest.approx(1.0, abs=0.15)
+    amp = math.sqrt(2 * 1e-3 * 10 ** (CN0_DBHZ / 10))
+    assert np.median(np.abs(iq)) == pytest.approx(amp, rel=0.15)
+
+
+def test_gap_and_format_change_restart(samples):
+    rx = Receiver(ReceiverConfig(prns=(7, 21), acquisition_ms=4))
+    n = 40_000
+    assert rx.process(IfBlock(T0_NS, FS, 0.0, True, 0, samples[:n])) == []
+    assert set(rx.tracked_prns) == {7, 21}
+    rx.process(IfBlock(T0_NS + 10_000_000, FS, 0.0, True, n, samples[n:2 * n]))
+    rx.process(IfBlock(T0_NS + 20_250_000, FS, 0.0, True, 2 * n + 1000, samples[2 * n + 1000:3 * n]))
+    assert rx.counts['restarts_gap'] == 1
+    rx.process(IfBlock(T0_NS + 30_000_000, FS, 1.0e6, False, 3 * n, samples[3 * n:4 * n].real.copy()))
+    assert rx.counts['restarts_format'] == 1 and rx.tracked_prns == ()
+    with pytest.raises(ValueError, match='complex iff'):
+        rx.process(IfBlock(T0_NS + 40_000_000, FS, 1.0e6, False, 4 * n, samples[4 * n:5 * n]))
+    with pytest.raises(ValueError, match='iq_scaling'):
+        ReceiverConfig(iq_scaling='volts')
+
+
+def test_reacquisition_runs_in_the_worker_and_outputs_do_not_depend_on_it(samples, monkeypatch):
+    """A channel lost (dropped here by hand) is found again by the periodic search, which runs in the worker
+    thread and starts its channel at the block the lag says: two runs give the same outputs."""
+    threads: list[str] = []
+    original = receiver_module.acquire
+
+    def recording_acquire(*args, **kwargs):
+        threads.append(threading.current_thread().name)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(receiver_module, 'acquire', recording_acquire)
+    config = ReceiverConfig(prns=(7, 21), acquisition_ms=4, reacquisition_period_s=0.05, reacquisition_lag_s=0.02)
+    runs = []
+    for _ in range(2):
+        rx = Receiver(config)
+        out: list[CorrelatorInterval] = []
+        started_at = None
+        block = 20_000
+        for i in range(0, samples.size, block):
+            out += rx.process(IfBlock(T0_NS + round(i / FS * 1e9), FS, 0.0, True, i, samples[i:i + block]))
+            if i == 2 * block:
+                assert rx.tracker is not None
+                rx.tracker.drop_channel(21)
+            if started_at is None and i > 2 * block and 21 in rx.tracked_prns:
+                started_at = i
+        rx.close()
+        assert 21 in rx.tracked_prns and rx.counts['channels_started'] == 3
+        # searched on the 4 ms before the period's end, started 20 ms of stream later, at a block boundary
+        assert started_at is not None and started_at / FS >= 0.05 + 0.02
+        runs.append((started_at, [(iv.stamp_ns, iv.svid.tolist(), iv.in_phase.tolist()) for iv in out]))
+    assert runs[0] == runs[1]
+    # per run: the first acquisition in the caller's thread, the reacquisitions in the worker
+    assert threads.count('MainThread') == 2 and len(threads) > 2
+    assert all(t.startswith('gnss_correlator_acquisition') for t in threads if t != 'MainThread')
