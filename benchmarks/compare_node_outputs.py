@@ -1,0 +1,144 @@
+"""Behaviour check of a refactor of gnss_integrity or rfi_monitor: the node's outputs of this tree against a base
+commit's.
+
+The same method as ``benchmarks/compare_fusion_outputs.py`` (whose flattening and comparison it uses): the base
+commit is put in a temporary ``git worktree``; each bag is replayed through the node twice, each time in a child
+Python process whose ``sys.path`` starts with one tree's ``src/<package>`` directories of the pure-Python
+packages (the node's package, ``gnss_common``, ``rfi_node_common``; the child checks it imported them from
+there), the messages and the replay harness (:class:`rfi_experiments.replay.ReplayHarness`, direct transport,
+as fast as possible) from the install tree. Every message the node publishes is flattened field by field and so
+is its final accounting; both runs must publish as many messages per topic and every field must agree (strings,
+integers and booleans exactly, floats both NaN or within ``--rtol`` relative, default 1e-9).
+
+Cases (node: bag):
+
+* ``integrity:default``: gnss_integrity_node on bags/default (GNSS, UWB, /truth/jammer as the SDR verdict);
+* ``integrity:spoofed``: gnss_integrity_node on bags/spoofed (GNSS and UWB, the spoofer from 60 s);
+* ``monitor:default``: rfi_monitor_node on bags/default (/rfi/if_samples, 180 blocks).
+
+Usage::
+
+    source /work/main/.venv/bin/activate && source install/setup.bash
+    python benchmarks/compare_node_outputs.py --base 4c5248c [--cases integrity:default monitor:default]
+
+Exit status 0 when every case agrees, 1 otherwise. The result is printed (nothing is written to docs/).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import pickle
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from compare_fusion_outputs import compare, flatten  # noqa: E402
+
+NODES = {
+    # node: (package, module, class, topics published)
+    'integrity': ('gnss_integrity', 'gnss_integrity.gnss_integrity_node', 'GnssIntegrityNode',
+                  ('/gnss/integrity', '/diagnostics')),
+    'monitor': ('rfi_monitor', 'rfi_monitor.rfi_monitor_node', 'RfiMonitorNode',
+                ('/rfi/jammer_state', '/diagnostics')),
+}
+CASES = {
+    # case: (input topics, remappings)
+    'integrity:default': (('/gnss/measurements', '/uwb/ranges', '/truth/jammer'),
+                          ('/rfi/jammer_state:=/truth/jammer',)),
+    'integrity:spoofed': (('/gnss/measurements', '/uwb/ranges'), ()),
+    'monitor:default': (('/rfi/if_samples',), ()),
+}
+
+
+def child(src: Path, case: str, out_path: Path) -> None:
+    """Replay the case's bag through the node of the tree ``src`` and pickle the flattened outputs."""
+    import importlib
+
+    node_key, bag = case.split(':')
+    package, module_name, class_name, collect = NODES[node_key]
+    packages = (package, 'gnss_common', 'rfi_node_common')
+    for pkg in reversed(packages):
+        sys.path.insert(0, str(src / pkg))
+    import rclpy
+
+    from rfi_experiments.replay import ReplayHarness
+
+    node_cls = getattr(importlib.import_module(module_name), class_name)
+    for name in packages:
+        module = importlib.import_module(name)
+        if not Path(module.__file__).resolve().is_relative_to(src.resolve()):
+            raise RuntimeError(f'{name} imported from {module.__file__}, not from {src}')
+    topics, remaps = CASES[case]
+    context = rclpy.Context()
+    rclpy.init(context=context, args=[])
+    try:
+        node = node_cls(context=context, cli_args=['--ros-args'] + [a for r in remaps for a in ('-r', r)])
+        harness = ReplayHarness([node], context=context, collect=collect, transport='direct')
+        result = harness.run(ROOT / 'bags' / bag, topics=topics)
+        accounting = node.accounting() if hasattr(node, 'accounting') else {}
+        harness.destroy()
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    flat = {t: [flatten(m) for m in result.messages(t)] for t in collect}
+    flat['accounting'] = [sorted((k, v) for k, v in accounting.items())]
+    with open(out_path, 'wb') as f:
+        pickle.dump(flat, f)
+
+
+def run_tree(src: Path, case: str, out: Path) -> dict:
+    subprocess.run([sys.executable, __file__, '--child', '--src', str(src), '--case', case, '--out', str(out)],
+                   check=True, env=dict(os.environ), cwd=ROOT)
+    with open(out, 'rb') as f:
+        return pickle.load(f)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap.add_argument('--base', help='the commit to compare with (required)')
+    ap.add_argument('--cases', nargs='+', default=list(CASES), choices=list(CASES))
+    ap.add_argument('--rtol', type=float, default=1e-9, help='relative tolerance of float fields')
+    ap.add_argument('--child', action='store_true', help=argparse.SUPPRESS)
+    ap.add_argument('--src', type=Path, help=argparse.SUPPRESS)
+    ap.add_argument('--case', help=argparse.SUPPRESS)
+    ap.add_argument('--out', type=Path, help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.child:
+        child(args.src, args.case, args.out)
+        return 0
+    if not args.base:
+        ap.error('--base is required')
+    failed = False
+    with tempfile.TemporaryDirectory(prefix='node_compare_') as tmp:
+        base_tree = Path(tmp) / 'base'
+        subprocess.run(['git', 'worktree', 'add', '--detach', '--quiet', str(base_tree), args.base],
+                       check=True, cwd=ROOT)
+        try:
+            head = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], capture_output=True, text=True,
+                                  cwd=ROOT, check=True).stdout.strip()
+            dirty = subprocess.run(['git', 'status', '--porcelain', '--', 'src'], capture_output=True, text=True,
+                                   cwd=ROOT, check=True).stdout.strip()
+            print(f'base {args.base} against this tree (HEAD {head}{", src/ modified" if dirty else ""}), '
+                  f'rtol {args.rtol:g}')
+            for case in args.cases:
+                base = run_tree(base_tree / 'src', case, Path(tmp) / f'{case}_base.pkl')
+                new = run_tree(ROOT / 'src', case, Path(tmp) / f'{case}_new.pkl')
+                problems, counts, worst = compare(base, new, args.rtol)
+                summary = ', '.join(f'{t} {n}' for t, n in counts.items())
+                verdict = 'EQUAL' if not problems else 'DIFFERENT'
+                print(f'{case}: {verdict}; messages: {summary}; largest relative difference {worst:.3g}')
+                for line in problems:
+                    print('   ', line)
+                failed = failed or bool(problems)
+        finally:
+            subprocess.run(['git', 'worktree', 'remove', '--force', str(base_tree)], check=False, cwd=ROOT)
+    return 1 if failed else 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
