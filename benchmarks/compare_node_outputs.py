@@ -31,13 +31,12 @@ import os
 import pickle
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from compare_fusion_outputs import compare, flatten  # noqa: E402
+from compare_fusion_outputs import base_worktree, replay_to_file, report  # noqa: E402
 
 NODES = {
     # node: (package, module, class, topics published)
@@ -64,31 +63,14 @@ def child(src: Path, case: str, out_path: Path) -> None:
     packages = (package, 'gnss_common', 'rfi_node_common')
     for pkg in reversed(packages):
         sys.path.insert(0, str(src / pkg))
-    import rclpy
-
-    from rfi_experiments.replay import ReplayHarness
-
     node_cls = getattr(importlib.import_module(module_name), class_name)
     for name in packages:
         module = importlib.import_module(name)
         if not Path(module.__file__).resolve().is_relative_to(src.resolve()):
             raise RuntimeError(f'{name} imported from {module.__file__}, not from {src}')
     topics, remaps = CASES[case]
-    context = rclpy.Context()
-    rclpy.init(context=context, args=[])
-    try:
-        node = node_cls(context=context, cli_args=['--ros-args'] + [a for r in remaps for a in ('-r', r)])
-        harness = ReplayHarness([node], context=context, collect=collect, transport='direct')
-        result = harness.run(ROOT / 'bags' / bag, topics=topics)
-        accounting = node.accounting() if hasattr(node, 'accounting') else {}
-        harness.destroy()
-        node.destroy_node()
-    finally:
-        rclpy.try_shutdown(context=context)
-    flat = {t: [flatten(m) for m in result.messages(t)] for t in collect}
-    flat['accounting'] = [sorted((k, v) for k, v in accounting.items())]
-    with open(out_path, 'wb') as f:
-        pickle.dump(flat, f)
+    cli_args = ['--ros-args'] + [a for r in remaps for a in ('-r', r)]
+    replay_to_file(lambda context: node_cls(context=context, cli_args=cli_args), bag, topics, collect, out_path)
 
 
 def run_tree(src: Path, case: str, out: Path) -> dict:
@@ -114,29 +96,11 @@ def main(argv: list[str] | None = None) -> int:
     if not args.base:
         ap.error('--base is required')
     failed = False
-    with tempfile.TemporaryDirectory(prefix='node_compare_') as tmp:
-        base_tree = Path(tmp) / 'base'
-        subprocess.run(['git', 'worktree', 'add', '--detach', '--quiet', str(base_tree), args.base],
-                       check=True, cwd=ROOT)
-        try:
-            head = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], capture_output=True, text=True,
-                                  cwd=ROOT, check=True).stdout.strip()
-            dirty = subprocess.run(['git', 'status', '--porcelain', '--', 'src'], capture_output=True, text=True,
-                                   cwd=ROOT, check=True).stdout.strip()
-            print(f'base {args.base} against this tree (HEAD {head}{", src/ modified" if dirty else ""}), '
-                  f'rtol {args.rtol:g}')
-            for case in args.cases:
-                base = run_tree(base_tree / 'src', case, Path(tmp) / f'{case}_base.pkl')
-                new = run_tree(ROOT / 'src', case, Path(tmp) / f'{case}_new.pkl')
-                problems, counts, worst = compare(base, new, args.rtol)
-                summary = ', '.join(f'{t} {n}' for t, n in counts.items())
-                verdict = 'EQUAL' if not problems else 'DIFFERENT'
-                print(f'{case}: {verdict}; messages: {summary}; largest relative difference {worst:.3g}')
-                for line in problems:
-                    print('   ', line)
-                failed = failed or bool(problems)
-        finally:
-            subprocess.run(['git', 'worktree', 'remove', '--force', str(base_tree)], check=False, cwd=ROOT)
+    with base_worktree(args.base, args.rtol, 'node_compare_') as (base_tree, tmp):
+        for case in args.cases:
+            base = run_tree(base_tree / 'src', case, tmp / f'{case}_base.pkl')
+            new = run_tree(ROOT / 'src', case, tmp / f'{case}_new.pkl')
+            failed = not report(case, base, new, args.rtol) or failed
     return 1 if failed else 0
 
 

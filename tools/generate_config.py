@@ -30,6 +30,7 @@ CONFIG_FILES = (
     'gnss_integrity.node_params:CONFIG_FILE',
     'rfi_experiments.if_source:CONFIG_FILE',
     'rfi_experiments.ubx_source:CONFIG_FILE',
+    'rfi_monitor.node_params:CONFIG_FILE',
 )
 """``module:attribute`` of each node's :class:`rfi_node_common.params.ConfigFile`."""
 
