@@ -1,5 +1,5 @@
-"""Behaviour check of a refactor of gnss_integrity or rfi_monitor: the node's outputs of this tree against a base
-commit's.
+"""Behaviour check of a refactor of gnss_integrity, rfi_monitor or imm_carrier: the node's outputs of this tree
+against a base commit's.
 
 The same method as ``benchmarks/compare_fusion_outputs.py`` (whose flattening and comparison it uses): the base
 commit is put in a temporary ``git worktree``; each bag is replayed through the node twice, each time in a child
@@ -14,12 +14,13 @@ Cases (node: bag):
 
 * ``integrity:default``: gnss_integrity_node on bags/default (GNSS, UWB, /truth/jammer as the SDR verdict);
 * ``integrity:spoofed``: gnss_integrity_node on bags/spoofed (GNSS and UWB, the spoofer from 60 s);
-* ``monitor:default``: rfi_monitor_node on bags/default (/rfi/if_samples, 180 blocks).
+* ``monitor:default``: rfi_monitor_node on bags/default (/rfi/if_samples, 180 blocks);
+* ``carrier:default``: imm_carrier_node on bags/default (/gnss/correlators), method both (the IMM and the PLL).
 
 Usage::
 
     source /work/main/.venv/bin/activate && source install/setup.bash
-    python benchmarks/compare_node_outputs.py --base 4c5248c [--cases integrity:default monitor:default]
+    python benchmarks/compare_node_outputs.py --base 4c5248c [--cases integrity:default carrier:default]
 
 Exit status 0 when every case agrees, 1 otherwise. The result is printed (nothing is written to docs/).
 """
@@ -44,13 +45,16 @@ NODES = {
                   ('/gnss/integrity', '/diagnostics')),
     'monitor': ('rfi_monitor', 'rfi_monitor.rfi_monitor_node', 'RfiMonitorNode',
                 ('/rfi/jammer_state', '/diagnostics')),
+    'carrier': ('imm_carrier', 'imm_carrier.imm_carrier_node', 'ImmCarrierNode',
+                ('/carrier/estimates', '/diagnostics')),
 }
 CASES = {
-    # case: (input topics, remappings)
+    # case: (input topics, remappings, parameters)
     'integrity:default': (('/gnss/measurements', '/uwb/ranges', '/truth/jammer'),
-                          ('/rfi/jammer_state:=/truth/jammer',)),
-    'integrity:spoofed': (('/gnss/measurements', '/uwb/ranges'), ()),
-    'monitor:default': (('/rfi/if_samples',), ()),
+                          ('/rfi/jammer_state:=/truth/jammer',), {}),
+    'integrity:spoofed': (('/gnss/measurements', '/uwb/ranges'), (), {}),
+    'monitor:default': (('/rfi/if_samples',), (), {}),
+    'carrier:default': (('/gnss/correlators',), (), {'method': 'both'}),
 }
 
 
@@ -68,9 +72,13 @@ def child(src: Path, case: str, out_path: Path) -> None:
         module = importlib.import_module(name)
         if not Path(module.__file__).resolve().is_relative_to(src.resolve()):
             raise RuntimeError(f'{name} imported from {module.__file__}, not from {src}')
-    topics, remaps = CASES[case]
+    from rclpy.parameter import Parameter
+
+    topics, remaps, params = CASES[case]
     cli_args = ['--ros-args'] + [a for r in remaps for a in ('-r', r)]
-    replay_to_file(lambda context: node_cls(context=context, cli_args=cli_args), bag, topics, collect, out_path)
+    overrides = [Parameter(name, value=value) for name, value in params.items()]
+    replay_to_file(lambda context: node_cls(context=context, cli_args=cli_args, parameter_overrides=overrides),
+                   bag, topics, collect, out_path)
 
 
 def run_tree(src: Path, case: str, out: Path) -> dict:
