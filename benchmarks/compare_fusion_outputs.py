@@ -31,13 +31,16 @@ Exit status 0 when every bag agrees, 1 otherwise. The result is printed (nothing
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import pickle
 import subprocess
 import sys
 import tempfile
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ('uwb_gnss_fusion', 'gnss_common', 'rfi_node_common')
@@ -83,11 +86,9 @@ def child(src: Path, bag: str, out_path: Path) -> None:
     """Replay ``bag`` through the FusionNode of the tree ``src`` and pickle the flattened outputs."""
     for pkg in reversed(PACKAGES):
         sys.path.insert(0, str(src / pkg))
-    import rclpy
     from rclpy.parameter import Parameter
 
     import uwb_gnss_fusion
-    from rfi_experiments.replay import ReplayHarness
     from uwb_gnss_fusion.fusion_node import FusionNode
 
     for module in (uwb_gnss_fusion, __import__('gnss_common'), __import__('rfi_node_common')):
@@ -102,19 +103,31 @@ def child(src: Path, bag: str, out_path: Path) -> None:
         for node_params in loaded.values():
             for name, value in node_params.get('ros__parameters', {}).items():
                 overrides.append(Parameter(name, value=value))
+    cli_args = ['--ros-args'] + [a for r in remaps for a in ('-r', r)]
+    replay_to_file(lambda context: FusionNode(context=context, parameter_overrides=overrides, cli_args=cli_args),
+                   bag, topics, TOPICS, out_path)
+
+
+def replay_to_file(make_node: Callable[[Any], Any], bag: str, topics: tuple[str, ...], collect: tuple[str, ...],
+                   out_path: Path) -> None:
+    """Replay ``topics`` of bags/``bag`` through the node ``make_node(context)`` (direct transport, as fast as
+    possible) and pickle the flattened messages it published on ``collect`` and its final accounting."""
+    import rclpy
+
+    from rfi_experiments.replay import ReplayHarness
+
     context = rclpy.Context()
     rclpy.init(context=context, args=[])
     try:
-        node = FusionNode(context=context, parameter_overrides=overrides,
-                          cli_args=['--ros-args'] + [a for r in remaps for a in ('-r', r)])
-        harness = ReplayHarness([node], context=context, collect=TOPICS, transport='direct')
+        node = make_node(context)
+        harness = ReplayHarness([node], context=context, collect=collect, transport='direct')
         result = harness.run(ROOT / 'bags' / bag, topics=topics)
         accounting = node.accounting()
         harness.destroy()
         node.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
-    flat = {t: [flatten(m) for m in result.messages(t)] for t in TOPICS}
+    flat = {t: [flatten(m) for m in result.messages(t)] for t in collect}
     flat['accounting'] = [sorted((k, v) for k, v in accounting.items())]
     with open(out_path, 'wb') as f:
         pickle.dump(flat, f)
@@ -157,6 +170,37 @@ def compare(base: dict, new: dict, rtol: float) -> tuple[list[str], dict[str, in
     return problems, counts, worst
 
 
+@contextlib.contextmanager
+def base_worktree(base: str, rtol: float, prefix: str) -> Iterator[tuple[Path, Path]]:
+    """A temporary ``git worktree`` of commit ``base`` and a scratch directory, both removed afterwards; prints
+    what is compared with what."""
+    with tempfile.TemporaryDirectory(prefix=prefix) as tmp:
+        tree = Path(tmp) / 'base'
+        subprocess.run(['git', 'worktree', 'add', '--detach', '--quiet', str(tree), base], check=True, cwd=ROOT)
+        try:
+            head = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], capture_output=True, text=True,
+                                  cwd=ROOT, check=True).stdout.strip()
+            dirty = subprocess.run(['git', 'status', '--porcelain', '--', 'src'], capture_output=True, text=True,
+                                   cwd=ROOT, check=True).stdout.strip()
+            print(f'base {base} against this tree (HEAD {head}{", src/ modified" if dirty else ""}), rtol {rtol:g}')
+            yield tree, Path(tmp)
+        finally:
+            subprocess.run(['git', 'worktree', 'remove', '--force', str(tree)], check=False, cwd=ROOT)
+
+
+def report(case: str, base: dict, new: dict, rtol: float, extra: str = '') -> bool:
+    """Compare the outputs of one case, print the verdict (and ``extra``, then the differences); True if equal."""
+    problems, counts, worst = compare(base, new, rtol)
+    summary = ', '.join(f'{t} {n}' for t, n in counts.items())
+    verdict = 'EQUAL' if not problems else 'DIFFERENT'
+    print(f'{case}: {verdict}; messages: {summary}; largest relative difference {worst:.3g}')
+    if extra:
+        print(f'    {extra}')
+    for line in problems:
+        print('   ', line)
+    return not problems
+
+
 def run_tree(src: Path, bag: str, out: Path) -> dict:
     env = dict(os.environ)
     subprocess.run([sys.executable, __file__, '--child', '--src', str(src), '--bag', bag, '--out', str(out)],
@@ -179,31 +223,12 @@ def main(argv: list[str] | None = None) -> int:
         child(args.src, args.bag, args.out)
         return 0
     failed = False
-    with tempfile.TemporaryDirectory(prefix='fusion_compare_') as tmp:
-        base_tree = Path(tmp) / 'base'
-        subprocess.run(['git', 'worktree', 'add', '--detach', '--quiet', str(base_tree), args.base],
-                       check=True, cwd=ROOT)
-        try:
-            head = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], capture_output=True, text=True,
-                                  cwd=ROOT, check=True).stdout.strip()
-            dirty = subprocess.run(['git', 'status', '--porcelain', '--', 'src'], capture_output=True, text=True,
-                                   cwd=ROOT, check=True).stdout.strip()
-            print(f'base {args.base} against this tree (HEAD {head}{", src/ modified" if dirty else ""}), '
-                  f'rtol {args.rtol:g}')
-            for bag in args.bags:
-                base = run_tree(base_tree / 'src', bag, Path(tmp) / f'{bag}_base.pkl')
-                new = run_tree(ROOT / 'src', bag, Path(tmp) / f'{bag}_new.pkl')
-                problems, counts, worst = compare(base, new, args.rtol)
-                summary = ', '.join(f'{t} {n}' for t, n in counts.items())
-                verdict = 'EQUAL' if not problems else 'DIFFERENT'
-                print(f'{bag}: {verdict}; messages: {summary}; largest relative difference {worst:.3g}')
-                exercised = {k: v for k, v in new['accounting'][0] if k in EXERCISED and v}
-                print(f'    paths exercised (this tree): {exercised}')
-                for line in problems:
-                    print('   ', line)
-                failed = failed or bool(problems)
-        finally:
-            subprocess.run(['git', 'worktree', 'remove', '--force', str(base_tree)], check=False, cwd=ROOT)
+    with base_worktree(args.base, args.rtol, 'fusion_compare_') as (base_tree, tmp):
+        for bag in args.bags:
+            base = run_tree(base_tree / 'src', bag, tmp / f'{bag}_base.pkl')
+            new = run_tree(ROOT / 'src', bag, tmp / f'{bag}_new.pkl')
+            exercised = {k: v for k, v in new['accounting'][0] if k in EXERCISED and v}
+            failed = not report(bag, base, new, args.rtol, f'paths exercised (this tree): {exercised}') or failed
     return 1 if failed else 0
 
 

@@ -28,6 +28,10 @@ CONFIG_FILES = (
     'uwb_gnss_fusion.fusion_node_params:CONFIG_FILE',
     'imm_carrier.node_params:CONFIG_FILE',
     'gnss_correlator.node_params:CONFIG_FILE',
+    'gnss_integrity.node_params:CONFIG_FILE',
+    'rfi_experiments.if_source:CONFIG_FILE',
+    'rfi_experiments.ubx_source:CONFIG_FILE',
+    'rfi_monitor.node_params:CONFIG_FILE',
 )
 """``module:attribute`` of each node's :class:`rfi_node_common.params.ConfigFile`."""
 
@@ -60,7 +64,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--check', action='store_true', help='compare, do not write; exit 1 on a difference')
     args = ap.parse_args(argv)
-    for package in ('rfi_node_common', 'gnss_common', 'uwb_gnss_fusion', 'imm_carrier', 'gnss_correlator'):
+    for package in ('rfi_node_common', 'gnss_common', 'uwb_gnss_fusion', 'imm_carrier', 'gnss_correlator',
+                    'gnss_integrity', 'rfi_monitor', 'rfi_experiments'):
         sys.path.insert(0, str(ROOT / 'src' / package))
     from rfi_node_common.params import markdown_table
 

@@ -40,6 +40,7 @@ import numpy as np
 
 from gnss_common.clock_model import PRESETS, ClockHCoefficients, clock_process_noise_m, transition_matrix
 from gnss_common.constants import SPEED_OF_LIGHT_MPS
+from rfi_node_common.params import USER, parameter
 
 from .kernels import RunningMedian, clock_kalman_step
 from .outcome import (
@@ -64,6 +65,9 @@ MAX_NOISE_SCALE = 4.0
 class ClockTestParams:
     """Parameters of the clock tests.
 
+    ``oscillator`` is also a parameter of gnss_integrity_node (:func:`rfi_node_common.params.parameter`:
+    its default, description and range are written here once).
+
     Attributes:
         oscillator: name of a ``gnss_common.clock_model.PRESETS`` entry (default "tcxo": the
             Van Dierendonck TCXO of Kaplan & Hegarty), or ``custom`` with ``h0``, ``h_minus2``.
@@ -83,7 +87,13 @@ class ClockTestParams:
         scale_history: clean epochs whose NIS median sets the noise scale.
     """
 
-    oscillator: str = "tcxo"
+    oscillator: str = parameter(
+        "tcxo",
+        "Receiver oscillator whose h-coefficients bound the clock tests (gnss_common.clock_model presets): tcxo "
+        "(u-blox and most COTS receivers), ocxo, ocxo_brown_hwang, compensated_crystal_brown_hwang, rubidium. A "
+        "more stable class makes the clock tests more sensitive; a class more stable than the real one "
+        "false-alarms.",
+        choices=(*PRESETS, "custom"), group=USER)
     h0: float = 1e-21
     h_minus2: float = 2e-20
     process_noise_factor: float = 3.0

@@ -40,7 +40,6 @@ from __future__ import annotations
 import math
 import os
 from collections import Counter
-from dataclasses import dataclass, replace
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -48,14 +47,11 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
 from gnss_integrity import kernels, uwb_range_rate
-from gnss_integrity.clock_test import ClockTestParams
 from gnss_integrity.cn0_model import Cn0Models
 from gnss_integrity.integrity_messages import receiver_report, report_to_msg, spectrum_input
-from gnss_integrity.integrity_state import StateParams
-from gnss_integrity.kinematics_test import KinematicsTestParams
-from gnss_integrity.monitor import IntegrityMonitor, MonitorParams
+from gnss_integrity.monitor import IntegrityMonitor
+from gnss_integrity.node_params import IntegrityNodeParams
 from gnss_integrity.outcome import STATE_DETECTED
-from gnss_integrity.uwb_range_rate import UwbRangeRateParams
 from rfi_msgs.msg import (
     GnssIntegrity,
     GnssMeasurementArray,
@@ -74,18 +70,11 @@ from rfi_node_common.diagnostics import (
     StampTimer,
     degraded_inputs,
     diagnostic_array,
-    diagnostics_window_parameter,
-    hardware_id_parameter,
-    input_timeout_parameter,
-    max_stamp_jump_parameter,
-    stamp_jump_confirmations_parameter,
-    warn_lost_fraction_parameter,
-    warn_rejected_fraction_parameter,
 )
 from rfi_node_common.input_checks import StampGate
 from rfi_node_common.inputs import InputHealth, StaleInputWatch, subscribe_input
 from rfi_node_common.main import run_node
-from rfi_node_common.params import declare, parameter, validate_ranges
+from rfi_node_common.params import RuntimeParameters, changed_names, declare
 from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS
 from rfi_node_common.stamps import stamp_to_ns
 
@@ -97,58 +86,7 @@ TOPICS = """topics:
 
 KINDS = ('gnss', 'uwb', 'receiver', 'spectrum', 'sdr')
 """Input kinds, as used in the counter names (``<kind>_received``, ``_rejected``, ``_processed``)."""
-OSCILLATORS = ('tcxo', 'ocxo', 'ocxo_brown_hwang', 'compensated_crystal_brown_hwang', 'rubidium')
-
-
-@dataclass(frozen=True)
-class IntegrityNodeParams:
-    """The node's parameters (config/gnss_integrity.yaml documents each)."""
-
-    earth_frame_id: str = parameter('earth', 'frame_id of ECEF GNSS epochs and UWB anchors.')
-    oscillator: str = parameter(
-        'tcxo', 'Receiver oscillator whose h-coefficients bound the clock tests (gnss_common.clock_model presets).',
-        choices=OSCILLATORS)
-    gnss_error_std_m: float = parameter(
-        2.0, 'Horizontal 1-sigma of the clean snapshot position error the kinematic tests allow, m.',
-        minimum=0.1, maximum=100.0)
-    uwb_std_m: float = parameter(
-        0.1, 'UWB range 1-sigma when a range carries none, m.', minimum=0.001, maximum=10.0)
-    detection_persistence_s: float = parameter(
-        10.0, 'A test SUSPECT this long without a break makes the state DETECTED, s.', minimum=0.1, maximum=3600.0)
-    clean_period_s: float = parameter(
-        30.0, 'NONE for this long ends an alarm episode (first_alarm_stamp reset), s.', minimum=0.1, maximum=3600.0)
-    cn0_model_file: str = parameter(
-        '', 'JSON file of a learned clean C/N0 model to load at start (empty: learn from scratch).')
-    save_cn0_model: bool = parameter(False, 'Save the learned C/N0 model to cn0_model_file at shutdown.')
-    max_stamp_jump_s: float = max_stamp_jump_parameter(120.0)
-    stamp_jump_confirmations: int = stamp_jump_confirmations_parameter(5)
-    input_timeout_s: float = input_timeout_parameter()
-    diagnostics_period_s: float = parameter(
-        1.0, 'Period of /diagnostics in GNSS stamp time, s.', minimum=0.01, maximum=3600.0)
-    warning_throttle_s: float = parameter(
-        5.0, 'Shortest interval between two warnings about rejected input, s (wall time; logging only).',
-        minimum=0.0, maximum=3600.0)
-    hardware_id: str = hardware_id_parameter('gnss_receiver')
-    diagnostics_window_s: float = diagnostics_window_parameter()
-    warn_rejected_fraction: float = warn_rejected_fraction_parameter()
-    warn_lost_fraction: float = warn_lost_fraction_parameter()
-
-    def __post_init__(self) -> None:
-        validate_ranges(self)
-        if not self.earth_frame_id:
-            raise ValueError('parameter earth_frame_id must be a non-empty string')
-        if self.save_cn0_model and not self.cn0_model_file:
-            raise ValueError('parameter save_cn0_model needs cn0_model_file')
-
-    def monitor_params(self) -> MonitorParams:
-        """The core's parameters."""
-        base = MonitorParams()
-        return replace(base, clock=ClockTestParams(oscillator=self.oscillator),
-                       kinematics=replace(KinematicsTestParams(), error_std_m=self.gnss_error_std_m,
-                                          uwb_std_m=self.uwb_std_m),
-                       range_rate=replace(UwbRangeRateParams(), uwb_std_m=self.uwb_std_m),
-                       state=StateParams(persistence_s=self.detection_persistence_s,
-                                         clean_period_s=self.clean_period_s))
+__all__ = ['GnssIntegrityNode', 'IntegrityNodeParams', 'main']
 
 
 class GnssIntegrityNode(Node):
@@ -157,6 +95,7 @@ class GnssIntegrityNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('gnss_integrity', **kwargs)
         self.params = declare(self, IntegrityNodeParams)
+        self.runtime = RuntimeParameters(self, self.params)  # the settable parameters: applied between messages
         self.monitor = IntegrityMonitor(self.params.monitor_params())
         self.counts: Counter[str] = Counter({f'{k}_{what}': 0 for k in KINDS
                                              for what in ('received', 'rejected', 'processed')})
@@ -190,6 +129,8 @@ class GnssIntegrityNode(Node):
         handle = getattr(self, f'on_{kind}')
 
         def callback(raw: bytes) -> None:
+            if self.runtime.pending:
+                self.runtime.apply_pending(self._apply_parameters)
             self.counts[f'{kind}_received'] += 1
             try:
                 msg = deserialize_message(raw, cls)
@@ -213,6 +154,14 @@ class GnssIntegrityNode(Node):
             if due is not None:  # after the counting: the report's accounting includes this message
                 self.diag_pub.publish(self.diagnostics(due))
         return callback
+
+    def _apply_parameters(self, old: IntegrityNodeParams, new: IntegrityNodeParams) -> None:
+        """A change of the settable parameters (hardware_id, the diagnostics window and thresholds,
+        warning_throttle_s; the tests' parameters are read-only)."""
+        self.params = new
+        self._window.window_ns = int(round(new.diagnostics_window_s * 1e9))
+        self.get_logger().info('parameters changed: ' + ', '.join(
+            f'{name} = {getattr(new, name)!r}' for name in changed_names(old, new)))
 
     def _reject(self, kind: str, reason: str, text: str) -> None:
         self.counts[f'{kind}_rejected'] += 1

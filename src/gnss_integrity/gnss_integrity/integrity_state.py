@@ -21,6 +21,8 @@ import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
+from rfi_node_common.params import parameter
+
 from .outcome import (
     DECISION_ALARM,
     DECISION_SUSPECT,
@@ -41,7 +43,8 @@ NS_PER_S = 1_000_000_000
 
 @dataclass(frozen=True)
 class StateParams:
-    """Parameters of the state rule.
+    """Parameters of the state rule (``persistence_s`` and ``clean_period_s`` are also parameters of
+    gnss_integrity_node, ``detection_persistence_s`` and ``clean_period_s``, written here once).
 
     Attributes:
         min_categories_for_detection: SUSPECT tests in this many categories at once make DETECTED.
@@ -50,8 +53,12 @@ class StateParams:
     """
 
     min_categories_for_detection: int = 2
-    persistence_s: float = 10.0
-    clean_period_s: float = 30.0
+    persistence_s: float = parameter(
+        10.0, "A test SUSPECT this long without a break makes the spoofing state DETECTED, s.",
+        minimum=0.1, maximum=3600.0)
+    clean_period_s: float = parameter(
+        30.0, "NONE for this long ends an alarm episode (first_alarm_stamp and first_detection_stamp reset), s.",
+        minimum=0.1, maximum=3600.0)
 
     def __post_init__(self) -> None:
         if int(self.min_categories_for_detection) < 2:

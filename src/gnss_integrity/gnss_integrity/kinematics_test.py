@@ -38,6 +38,7 @@ import numpy as np
 
 from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic_scalar
 from gnss_common.multilateration import multilaterate
+from rfi_node_common.params import USER, parameter
 
 from .kernels import RunningMedian, chi2_form, lagged_chi2
 from .outcome import (
@@ -65,6 +66,9 @@ _HORIZONTAL = {"e": _EYE[0], "n": _EYE[1]}
 class KinematicsTestParams:
     """Parameters of the kinematic tests.
 
+    ``error_std_m`` and ``uwb_std_m`` are also parameters of gnss_integrity_node (``gnss_error_std_m``,
+    ``uwb_std_m``; :func:`rfi_node_common.params.parameter`: default, description and range written here once).
+
     Attributes:
         error_std_m: horizontal 1-sigma of the clean GNSS snapshot position error, m.
         vertical_factor: vertical 1-sigma over horizontal.
@@ -84,11 +88,18 @@ class KinematicsTestParams:
         scale_history: passing epochs whose NIS median sets the noise scale.
     """
 
-    error_std_m: float = 2.0
+    error_std_m: float = parameter(
+        2.0,
+        "Horizontal 1-sigma of the clean snapshot position error the kinematic tests allow, m (vertical twice "
+        "that). Raise it for a receiver with poor sky (urban canyon), lower it for a geodetic antenna to see a "
+        "slow drag sooner.",
+        minimum=0.1, maximum=100.0, group=USER)
     vertical_factor: float = 2.0
     error_tau_s: float = 120.0
     white_std_m: float = 1.0
-    uwb_std_m: float = 0.1
+    uwb_std_m: float = parameter(
+        0.1, "UWB range 1-sigma when a range carries none, m (kinematic and UWB range-rate tests).",
+        minimum=0.001, maximum=10.0)
     max_range_age_s: float = 0.5
     tag_speed_allowance_mps: float = 2.0
     lags_s: tuple[float, ...] = (5.0, 10.0, 30.0, 100.0, 300.0)

@@ -47,7 +47,7 @@ from numba import njit
 from gnss_common.multilateration import multilaterate
 
 from .kernels import RunningMedian
-from .kinematics_test import AnchorRange
+from .kinematics_test import AnchorRange, KinematicsTestParams
 from .outcome import (
     CATEGORY_KINEMATICS,
     DECISION_PASS,
@@ -94,7 +94,7 @@ class UwbRangeRateParams:
 
     window_s: float = 1.0
     min_ranges: int = 8
-    uwb_std_m: float = 0.1
+    uwb_std_m: float = KinematicsTestParams.uwb_std_m  # one default: the node sets both from uwb_std_m
     velocity_std_floor_mps: float = 0.03
     model_std_mps: float = 0.05
     position_std_m: float = 3.0

@@ -154,6 +154,65 @@ def test_config_file_values_equal_the_dataclass_defaults(rig_factory):
     assert rig.node.params == IntegrityNodeParams()
 
 
+def test_config_file_is_the_one_generated_from_the_parameter_definitions():
+    """config/gnss_integrity.yaml is written by tools/generate_config.py from the parameter definitions."""
+    from gnss_integrity.node_params import CONFIG_FILE
+
+    assert CONFIG.read_text() == CONFIG_FILE.text(), 'run python tools/generate_config.py'
+
+
+def test_test_parameters_are_defined_once_in_the_core():
+    """The node's test parameters take default, description and range from the core dataclasses (one definition
+    each; ``oscillator`` offers a subset of the core's choices), and the default node parameters give the core's
+    default parameters."""
+    import dataclasses
+
+    from gnss_integrity.clock_test import ClockTestParams
+    from gnss_integrity.integrity_state import StateParams
+    from gnss_integrity.kinematics_test import KinematicsTestParams
+    from gnss_integrity.monitor import MonitorParams
+    from gnss_integrity.uwb_range_rate import UwbRangeRateParams
+
+    node = {f.name: f for f in dataclasses.fields(IntegrityNodeParams)}
+    pairs = {'oscillator': (ClockTestParams, 'oscillator'),
+             'gnss_error_std_m': (KinematicsTestParams, 'error_std_m'),
+             'uwb_std_m': (KinematicsTestParams, 'uwb_std_m'),
+             'detection_persistence_s': (StateParams, 'persistence_s'),
+             'clean_period_s': (StateParams, 'clean_period_s')}
+    for name, (owner, core_name) in pairs.items():
+        core = {f.name: f for f in dataclasses.fields(owner)}[core_name]
+        node_doc, core_doc = dict(node[name].metadata['rfi_doc']), dict(core.metadata['rfi_doc'])
+        if name == 'oscillator':
+            assert set(node_doc.pop('choices')) < set(core_doc.pop('choices'))
+        assert node_doc == core_doc, name
+        assert node[name].default == core.default, name
+    assert UwbRangeRateParams().uwb_std_m == KinematicsTestParams().uwb_std_m
+    assert IntegrityNodeParams().monitor_params() == MonitorParams()
+
+
+def test_diagnostics_parameters_are_settable_while_running(rig_factory):
+    """hardware_id and the diagnostics thresholds are declared settable: a change is applied before the next
+    message; the tests' parameters are read-only."""
+    from rfi_node_common.params import set_parameters_remotely
+
+    rig = rig_factory()
+
+    def param_set(**values):
+        return set_parameters_remotely(rig.io, rig.executor, '/gnss_integrity', values)
+
+    assert all(r.successful for r in param_set(hardware_id='receiver#2', warn_rejected_fraction=0.3,
+                                               diagnostics_window_s=20.0))
+    epoch = _run().gnss_epochs[0]
+    rig.send('/gnss/measurements', epoch_to_msg(epoch))
+    assert rig.out['/diagnostics'][-1].status[0].hardware_id == 'receiver#2'
+    assert rig.node.params.warn_rejected_fraction == 0.3 and rig.node._window.window_ns == 20 * 10**9
+    for name, value in (('gnss_error_std_m', 3.0), ('oscillator', 'ocxo'), ('max_stamp_jump_s', 10.0)):
+        (result,) = param_set(**{name: value})
+        assert not result.successful and 'read-only' in result.reason, name
+    (result,) = param_set(warn_lost_fraction=1.5)
+    assert not result.successful and 'out of range' in result.reason
+
+
 @pytest.mark.parametrize('params, words', [
     ({'oscillator': 'quartz'}, 'oscillator'),
     ({'save_cn0_model': True}, 'cn0_model_file'),

@@ -161,24 +161,18 @@ def _logaddexp(a: float, b: float) -> float:
 
 
 @njit(cache=True)
-def imm_step(st, zi, zq, amp, sig, t, dphi, p_change, prior_plus, q_f, q_g, form_code, out):
-    """One IMM cycle (mixing, mode-matched EKF prediction and update, mode probabilities, combination).
+def _mixing(l1: float, l2: float, p_change: float) -> tuple[float, float, float, float, float, float]:
+    """Mixing probabilities of the two modes, transition matrix [[1-p, p], [p, 1-p]], in the log domain:
+    log c_j = log sum_i Pi[i, j] mu_i, log mu_{i|j} = log Pi[i, j] + log mu_i - log c_j (Bar-Shalom et al.,
+    Section 11.6.6, step 1).
 
-    st: state, float64[13], updated in place; out: float64[11], written. Zhao et al., Fig. 2-3;
-    Bar-Shalom, Li & Kirubarajan (2001), Section 11.6.6 (IMM). NaN zi/zq: prediction only.
+    Args:
+        l1, l2: log mode probabilities before the step.
+        p_change: probability of a bit change over the interval.
 
-    The mode probabilities are kept as logarithms (state slots 10-11) and combined with log-sum-exp.
-    In linear form a probability that underflows to exactly 0 (inside a data bit at T = 1 ms and high
-    C/N0 the other bit's probability falls by 2 T C/N0 = 4000 in log per look at 60 dB-Hz) made
-    ``c_j L_j`` zero for both modes as soon as one correlator favoured the vanished mode by more than
-    ~745 (exp underflow), and the normalisation divided 0 by 0. The log form is exact, needs no floor
-    (a floor would change the filter's answer, e.g. let a glitch flip a bit that cannot change), and
-    equals the linear IMM to rounding wherever that one is defined (tested against the reference).
+    Returns:
+        (mu_{1|1}, mu_{2|1}, mu_{1|2}, mu_{2|2}, log c_1, log c_2).
     """
-    l1 = st[ImmState.LOGMU]
-    l2 = st[ImmState.LOGMU + 1]
-    # 1. Mixing probabilities, transition matrix [[1-p, p], [p, 1-p]], in the log domain:
-    # log c_j = log sum_i Pi[i, j] mu_i, log mu_{i|j} = log Pi[i, j] + log mu_i - log c_j.
     ls = _log0(1.0 - p_change)
     lp = _log0(p_change)
     b11, b21 = ls + l1, lp + l2
@@ -197,6 +191,43 @@ def imm_step(st, zi, zq, amp, sig, t, dphi, p_change, prior_plus, q_f, q_g, form
     else:
         a12 = math.exp(l1)
         a22 = math.exp(l2)
+    return a11, a21, a12, a22, lc1, lc2
+
+
+@njit(cache=True)
+def _mode_log_probabilities(valid: bool, lc1: float, lc2: float, ll1: float, ll2: float) -> tuple[float, float]:
+    """Updated log mode probabilities, log mu_j = log c_j + log L_j - log sum_i c_i L_i (step 5). In the log
+    domain a mode whose probability is below the smallest double (e.g. the other bit after 20 looks at T = 1 ms
+    and 60 dB-Hz, log mu = -80 000) keeps its exact log value instead of 0, so no 0/0 can arise. Not ``valid``
+    (prediction only) or both likelihoods non-finite (absurd I/Q): the predicted probabilities."""
+    if valid:
+        lu1 = lc1 + ll1
+        lu2 = lc2 + ll2
+        lt = _logaddexp(lu1, lu2)
+        if not abs(lt) < math.inf:  # no mode information
+            lu1, lu2, lt = lc1, lc2, _logaddexp(lc1, lc2)
+    else:
+        lu1, lu2, lt = lc1, lc2, _logaddexp(lc1, lc2)
+    return lu1 - lt, lu2 - lt
+
+
+@njit(cache=True)
+def imm_step(st, zi, zq, amp, sig, t, dphi, p_change, prior_plus, q_f, q_g, form_code, out):
+    """One IMM cycle (mixing, mode-matched EKF prediction and update, mode probabilities, combination).
+
+    st: state, float64[13], updated in place; out: float64[11], written. Zhao et al., Fig. 2-3;
+    Bar-Shalom, Li & Kirubarajan (2001), Section 11.6.6 (IMM). NaN zi/zq: prediction only.
+
+    The mode probabilities are kept as logarithms (state slots 10-11) and combined with log-sum-exp.
+    In linear form a probability that underflows to exactly 0 (inside a data bit at T = 1 ms and high
+    C/N0 the other bit's probability falls by 2 T C/N0 = 4000 in log per look at 60 dB-Hz) made
+    ``c_j L_j`` zero for both modes as soon as one correlator favoured the vanished mode by more than
+    ~745 (exp underflow), and the normalisation divided 0 by 0. The log form is exact, needs no floor
+    (a floor would change the filter's answer, e.g. let a glitch flip a bit that cannot change), and
+    equals the linear IMM to rounding wherever that one is defined (tested against the reference).
+    """
+    # 1. Mixing probabilities (log domain).
+    a11, a21, a12, a22, lc1, lc2 = _mixing(st[ImmState.LOGMU], st[ImmState.LOGMU + 1], p_change)
     if prior_plus == prior_plus:  # known or partly known bit: overrides the predicted mode probability
         c1 = min(max(prior_plus, 1e-12), 1.0 - 1e-12)
         lc1 = math.log(c1)
@@ -263,19 +294,8 @@ def imm_step(st, zi, zq, amp, sig, t, dphi, p_change, prior_plus, q_f, q_g, form
         pr[1, 2] + (pr[1, 0] - prior_phi) ** 2
     )
     prior_p22 = cw1 * (pr[0, 3] + (pr[0, 1] - prior_om) ** 2) + cw2 * (pr[1, 3] + (pr[1, 1] - prior_om) ** 2)
-    # 5. Mode probabilities, log mu_j = log c_j + log L_j - log sum_i c_i L_i. In the log domain a mode
-    # whose probability is below the smallest double (e.g. the other bit after 20 looks at T = 1 ms and
-    # 60 dB-Hz, log mu = -80 000) keeps its exact log value instead of 0, so no 0/0 can arise.
-    if valid:
-        lu1 = lc1 + ll[0]
-        lu2 = lc2 + ll[1]
-        lt = _logaddexp(lu1, lu2)
-        if not abs(lt) < math.inf:  # both likelihoods non-finite (absurd I/Q): no mode information
-            lu1, lu2, lt = lc1, lc2, _logaddexp(lc1, lc2)
-    else:
-        lu1, lu2, lt = lc1, lc2, _logaddexp(lc1, lc2)
-    l1 = lu1 - lt
-    l2 = lu2 - lt
+    # 5. Mode probabilities (log domain).
+    l1, l2 = _mode_log_probabilities(valid, lc1, lc2, ll[0], ll[1])
     mu1 = math.exp(l1)
     mu2 = math.exp(l2)
     # 6. Combination.

@@ -11,15 +11,7 @@ from gnss_common.clock_model import PRESETS, RUBIDIUM_LPFRS, ClockHCoefficients
 from imm_carrier.imm import ImmParams
 from imm_carrier.pll import PllParams
 from imm_carrier.tracker import TrackerParams
-from rfi_node_common.diagnostics import (
-    diagnostics_window_parameter,
-    hardware_id_parameter,
-    input_timeout_parameter,
-    max_stamp_jump_parameter,
-    stamp_jump_confirmations_parameter,
-    warn_lost_fraction_parameter,
-    warn_rejected_fraction_parameter,
-)
+from rfi_node_common.diagnostics import NodeDiagnosticsParams, hardware_id_parameter
 from rfi_node_common.params import (
     USER,
     ConfigFile,
@@ -32,7 +24,7 @@ CUSTOM_CLOCK = 'custom'
 """clock_preset value that takes the clock from clock_h0_s and clock_h_minus2_hz."""
 
 @dataclass(frozen=True)
-class CarrierNodeParams:
+class CarrierNodeParams(NodeDiagnosticsParams):
     """Parameters of the imm_carrier node (documented for users in config/imm_carrier.yaml).
 
     Notes:
@@ -93,18 +85,7 @@ class CarrierNodeParams:
     min_integration_time_s: float = parameter_from(TrackerParams, 'min_integration_time_s')
     max_integration_time_s: float = parameter_from(TrackerParams, 'max_integration_time_s')
     max_iq_magnitude_ratio: float = parameter_from(TrackerParams, 'max_iq_magnitude_ratio')
-    max_stamp_jump_s: float = max_stamp_jump_parameter(120.0)  # type: ignore[assignment]
-    stamp_jump_confirmations: int = stamp_jump_confirmations_parameter(5)  # type: ignore[assignment]
-    input_timeout_s: float = input_timeout_parameter()  # type: ignore[assignment]
-    diagnostics_period_s: float = parameter(
-        1.0, 'Period of /diagnostics in message (stamp) time, s.', minimum=0.01, maximum=3600.0)
-    warning_throttle_s: float = parameter(
-        5.0, 'Shortest interval between two warnings about rejected input, s (wall time; logging only).',
-        minimum=0.0, maximum=3600.0, read_only=False)
-    hardware_id: str = hardware_id_parameter('gnss_receiver')  # type: ignore[assignment]
-    diagnostics_window_s: float = diagnostics_window_parameter()  # type: ignore[assignment]
-    warn_rejected_fraction: float = warn_rejected_fraction_parameter()  # type: ignore[assignment]
-    warn_lost_fraction: float = warn_lost_fraction_parameter()  # type: ignore[assignment]
+    hardware_id: str = hardware_id_parameter('gnss_receiver')
 
     def __post_init__(self) -> None:
         validate_ranges(self)

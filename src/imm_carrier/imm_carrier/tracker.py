@@ -270,6 +270,108 @@ def _init_channel(method, st, zi, zq, dphi, cfg, row):
 
 
 @njit(cache=True)
+def _imm_update(st, i_k, q_k, amp, sig, tk, d_k, stamp_ns, cfg, imm_out, row, slot, slips, counters):
+    """One IMM step of a running channel and its output row; returns (finite, valid, locked) (see _track_epoch)."""
+    p = _transition_probability(stamp_ns, tk, cfg[KernelConfig.P_BIT], cfg[KernelConfig.BIT_PERIOD])
+    imm_step(
+        st, i_k, q_k, amp, sig, tk, d_k, p, math.nan, cfg[KernelConfig.QF], cfg[KernelConfig.QG],
+        int(cfg[KernelConfig.FORM]), imm_out
+    )
+    phase = imm_out[ImmOut.PHI]
+    omega = imm_out[ImmOut.OMEGA]
+    std = math.sqrt(max(imm_out[ImmOut.P11], 0.0))
+    freq_std = math.sqrt(max(imm_out[ImmOut.P22], 0.0)) / (2.0 * math.pi)
+    mu1 = imm_out[ImmOut.MU1]
+    mu2 = imm_out[ImmOut.MU2]
+    finite = abs(phase) < math.inf and abs(omega) < math.inf and std < math.inf and freq_std < math.inf
+    if finite and abs(phase - imm_out[ImmOut.PRIOR_PHI]) > cfg[KernelConfig.SLIP_THR]:
+        slips[slot] += 1
+        counters[Counter.SLIPS_DETECTED] += 1
+    freq = omega / (2.0 * math.pi)
+    # A covariance that collapsed to 0 (cancellation) or a state beyond any trackable value: diverged.
+    valid = finite and std > 0.0 and freq_std > 0.0 and _sane(phase, freq, tk)
+    locked = finite and std < cfg[KernelConfig.LOCK_STD]
+    if locked and not valid:  # final check at the output: locked only if valid
+        locked = False
+        counters[Counter.LOCKED_SUPPRESSED_INVALID] += 1
+    row[BatchColumn.PHASE_RAD] = phase
+    row[BatchColumn.PHASE_STD_RAD] = std
+    row[BatchColumn.FREQUENCY_HZ] = freq
+    row[BatchColumn.FREQUENCY_STD_HZ] = freq_std
+    row[BatchColumn.DATA_BIT] = 1.0 if mu1 > mu2 else (-1.0 if mu2 > mu1 else 0.0)
+    row[BatchColumn.DATA_BIT_PROBABILITY] = max(mu1, mu2)
+    row[BatchColumn.MODE_PROBABILITY_PLUS] = mu1
+    row[BatchColumn.MODE_PROBABILITY_MINUS] = mu2
+    return finite, valid, locked
+
+
+@njit(cache=True)
+def _pll_update(st, i_k, q_k, amp, tk, d_k, cfg, pll_out, row, slot, slips, was_locked, counters):
+    """One PLL step of a running channel and its output row; returns (finite, valid, locked) (see _track_epoch)."""
+    bn = scheduled_bandwidth_hz(st[PllState.ELAPSED], cfg[KernelConfig.BW_START], cfg[KernelConfig.BW_END],
+                                cfg[KernelConfig.BW_DURATION])
+    alpha = min(tk / cfg[KernelConfig.LOCK_TC], 1.0)
+    pll_step(st, i_k, q_k, tk, d_k, bn, amp, alpha, pll_out)
+    phase = pll_out[PllOut.PHASE]
+    freq = pll_out[PllOut.FREQUENCY] / (2.0 * math.pi)
+    finite = abs(phase) < math.inf and abs(pll_out[PllOut.FREQUENCY]) < math.inf
+    # the lock averages too
+    finite = finite and abs(pll_out[PllOut.LOCK_METRIC]) < math.inf and abs(st[PllState.EMA_SUM]) < math.inf
+    valid = finite and _sane(phase, freq, tk)  # the PLL has no std (NaN by definition)
+    locked = finite and pll_out[PllOut.LOCK_METRIC] > cfg[KernelConfig.LOCK_THR]
+    if locked and not valid:  # final check at the output: locked only if valid
+        locked = False
+        counters[Counter.LOCKED_SUPPRESSED_INVALID] += 1
+    if was_locked[slot] and not locked:
+        slips[slot] += 1
+        counters[Counter.SLIPS_DETECTED] += 1
+    was_locked[slot] = locked
+    # Costas loop: the bit is the sign of the rotated prompt I (phase error within +-pi/2).
+    th = st[PllState.SAT_PHASE] + phase
+    i_rot = i_k * math.cos(th) + q_k * math.sin(th)
+    bit = 1.0 if i_rot > 0.0 else (-1.0 if i_rot < 0.0 else 0.0)
+    row[BatchColumn.PHASE_RAD] = phase
+    row[BatchColumn.PHASE_STD_RAD] = math.nan
+    row[BatchColumn.FREQUENCY_HZ] = freq
+    row[BatchColumn.FREQUENCY_STD_HZ] = math.nan
+    row[BatchColumn.DATA_BIT] = bit
+    row[BatchColumn.DATA_BIT_PROBABILITY] = 0.5 if bit == 0.0 else 1.0
+    row[BatchColumn.MODE_PROBABILITY_PLUS] = math.nan
+    row[BatchColumn.MODE_PROBABILITY_MINUS] = math.nan
+    return finite, valid, locked
+
+
+@njit(cache=True)
+def _open_channel(method, key, stamp_ns, c0, i_k, q_k, d_k, cfg, row, slot_of_key, key_of_slot, last_stamp, last_cn0,
+                  slips, was_locked, state, counters):
+    """Start the channel ``key`` in the first free slot (the caller guarantees one) from its first correlator."""
+    slot = -1
+    for s in range(key_of_slot.shape[0]):
+        if key_of_slot[s] < 0:
+            slot = s
+            break
+    slot_of_key[key] = slot
+    key_of_slot[slot] = key
+    last_stamp[slot] = stamp_ns
+    last_cn0[slot] = c0
+    slips[slot] = 0
+    was_locked[slot] = False
+    _init_channel(method, state[slot], i_k, q_k, d_k, cfg, row)
+    counters[Counter.CHANNELS_STARTED] += 1
+
+
+@njit(cache=True)
+def _drop_timed_out(stamp_ns, timeout_ns, slot_of_key, key_of_slot, last_stamp, counters):
+    """Channels not seen for longer than the timeout are dropped."""
+    for s in range(key_of_slot.shape[0]):
+        key = key_of_slot[s]
+        if key >= 0 and stamp_ns - last_stamp[s] > timeout_ns:
+            slot_of_key[key] = -1
+            key_of_slot[s] = -1
+            counters[Counter.CHANNELS_DROPPED_TIMEOUT] += 1
+
+
+@njit(cache=True)
 def _track_epoch(
     method,
     stamp_ns,
@@ -298,13 +400,7 @@ def _track_epoch(
 
     Returns the number of rows written into values (one per accepted correlator, input order).
     """
-    # Channels not seen for longer than the timeout are dropped.
-    for s in range(key_of_slot.shape[0]):
-        key = key_of_slot[s]
-        if key >= 0 and stamp_ns - last_stamp[s] > timeout_ns:
-            slot_of_key[key] = -1
-            key_of_slot[s] = -1
-            counters[Counter.CHANNELS_DROPPED_TIMEOUT] += 1
+    _drop_timed_out(stamp_ns, timeout_ns, slot_of_key, key_of_slot, last_stamp, counters)
     imm_out = np.empty(IMM_OUT_LEN)
     pll_out = np.empty(PLL_OUT_LEN)
     unit_noise = cfg[KernelConfig.UNIT_NOISE] > 0.5
@@ -362,84 +458,18 @@ def _track_epoch(
         row[BatchColumn.CONSTELLATION] = c
         row[BatchColumn.SVID] = sv
         if slot < 0:
-            for s in range(key_of_slot.shape[0]):  # the caller guarantees a free slot
-                if key_of_slot[s] < 0:
-                    slot = s
-                    break
-            slot_of_key[key] = slot
-            key_of_slot[slot] = key
-            last_stamp[slot] = stamp_ns
-            last_cn0[slot] = c0
-            slips[slot] = 0
-            was_locked[slot] = False
-            _init_channel(method, state[slot], i_k, q_k, d_k, cfg, row)
-            counters[Counter.CHANNELS_STARTED] += 1
+            _open_channel(method, key, stamp_ns, c0, i_k, q_k, d_k, cfg, row, slot_of_key, key_of_slot, last_stamp,
+                          last_cn0, slips, was_locked, state, counters)
             continue
         last_stamp[slot] = stamp_ns
         last_cn0[slot] = c0
         st = state[slot]
         if method == _M_IMM:
-            p = _transition_probability(stamp_ns, tk, cfg[KernelConfig.P_BIT], cfg[KernelConfig.BIT_PERIOD])
-            imm_step(
-                st, i_k, q_k, amp, sig, tk, d_k, p, math.nan, cfg[KernelConfig.QF], cfg[KernelConfig.QG],
-                int(cfg[KernelConfig.FORM]), imm_out
-            )
-            phase = imm_out[ImmOut.PHI]
-            omega = imm_out[ImmOut.OMEGA]
-            std = math.sqrt(max(imm_out[ImmOut.P11], 0.0))
-            freq_std = math.sqrt(max(imm_out[ImmOut.P22], 0.0)) / (2.0 * math.pi)
-            mu1 = imm_out[ImmOut.MU1]
-            mu2 = imm_out[ImmOut.MU2]
-            finite = abs(phase) < math.inf and abs(omega) < math.inf and std < math.inf and freq_std < math.inf
-            if finite and abs(phase - imm_out[ImmOut.PRIOR_PHI]) > cfg[KernelConfig.SLIP_THR]:
-                slips[slot] += 1
-                counters[Counter.SLIPS_DETECTED] += 1
-            freq = omega / (2.0 * math.pi)
-            # A covariance that collapsed to 0 (cancellation) or a state beyond any trackable value: diverged.
-            valid = finite and std > 0.0 and freq_std > 0.0 and _sane(phase, freq, tk)
-            locked = finite and std < cfg[KernelConfig.LOCK_STD]
-            if locked and not valid:  # final check at the output: locked only if valid
-                locked = False
-                counters[Counter.LOCKED_SUPPRESSED_INVALID] += 1
-            row[BatchColumn.PHASE_RAD] = phase
-            row[BatchColumn.PHASE_STD_RAD] = std
-            row[BatchColumn.FREQUENCY_HZ] = freq
-            row[BatchColumn.FREQUENCY_STD_HZ] = freq_std
-            row[BatchColumn.DATA_BIT] = 1.0 if mu1 > mu2 else (-1.0 if mu2 > mu1 else 0.0)
-            row[BatchColumn.DATA_BIT_PROBABILITY] = max(mu1, mu2)
-            row[BatchColumn.MODE_PROBABILITY_PLUS] = mu1
-            row[BatchColumn.MODE_PROBABILITY_MINUS] = mu2
+            finite, valid, locked = _imm_update(st, i_k, q_k, amp, sig, tk, d_k, stamp_ns, cfg, imm_out, row, slot,
+                                                slips, counters)
         else:
-            bn = scheduled_bandwidth_hz(st[PllState.ELAPSED], cfg[KernelConfig.BW_START], cfg[KernelConfig.BW_END],
-                                        cfg[KernelConfig.BW_DURATION])
-            alpha = min(tk / cfg[KernelConfig.LOCK_TC], 1.0)
-            pll_step(st, i_k, q_k, tk, d_k, bn, amp, alpha, pll_out)
-            phase = pll_out[PllOut.PHASE]
-            freq = pll_out[PllOut.FREQUENCY] / (2.0 * math.pi)
-            finite = abs(phase) < math.inf and abs(pll_out[PllOut.FREQUENCY]) < math.inf
-            # the lock averages too
-            finite = finite and abs(pll_out[PllOut.LOCK_METRIC]) < math.inf and abs(st[PllState.EMA_SUM]) < math.inf
-            valid = finite and _sane(phase, freq, tk)  # the PLL has no std (NaN by definition)
-            locked = finite and pll_out[PllOut.LOCK_METRIC] > cfg[KernelConfig.LOCK_THR]
-            if locked and not valid:  # final check at the output: locked only if valid
-                locked = False
-                counters[Counter.LOCKED_SUPPRESSED_INVALID] += 1
-            if was_locked[slot] and not locked:
-                slips[slot] += 1
-                counters[Counter.SLIPS_DETECTED] += 1
-            was_locked[slot] = locked
-            # Costas loop: the bit is the sign of the rotated prompt I (phase error within +-pi/2).
-            th = st[PllState.SAT_PHASE] + phase
-            i_rot = i_k * math.cos(th) + q_k * math.sin(th)
-            bit = 1.0 if i_rot > 0.0 else (-1.0 if i_rot < 0.0 else 0.0)
-            row[BatchColumn.PHASE_RAD] = phase
-            row[BatchColumn.PHASE_STD_RAD] = math.nan
-            row[BatchColumn.FREQUENCY_HZ] = freq
-            row[BatchColumn.FREQUENCY_STD_HZ] = math.nan
-            row[BatchColumn.DATA_BIT] = bit
-            row[BatchColumn.DATA_BIT_PROBABILITY] = 0.5 if bit == 0.0 else 1.0
-            row[BatchColumn.MODE_PROBABILITY_PLUS] = math.nan
-            row[BatchColumn.MODE_PROBABILITY_MINUS] = math.nan
+            finite, valid, locked = _pll_update(st, i_k, q_k, amp, tk, d_k, cfg, pll_out, row, slot, slips,
+                                                was_locked, counters)
         row[BatchColumn.LOCKED] = 1.0 if locked else 0.0
         row[BatchColumn.CYCLE_SLIPS] = slips[slot]
         if not finite:  # the filter overflowed: restart on the next sample (answer published unlocked)

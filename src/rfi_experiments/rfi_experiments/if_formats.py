@@ -76,6 +76,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rfi_node_common.params import USER, parameter
+
 INT8 = 0
 """IfSamples.INT8 (samples holds int8 values); checked against rfi_msgs by the tests."""
 INT16 = 1
@@ -175,19 +177,41 @@ class IfFormat:
         bits_per_sample: IfSamples.bits_per_sample; 0: the item type's default.
         scale: IfSamples.scale, volts (or full-scale units) per count; 0: the item type's default.
         float_counts_per_unit: gr_complex: counts per unit of the file's floats (> 0).
+
+    The fields with a default are also parameters of if_source (and options of if_to_bag): default,
+    description and range written here once (:func:`rfi_node_common.params.parameter`).
     """
 
     item_type: str
     sampling_frequency_hz: float
-    intermediate_frequency_hz: float = 0.0
-    center_frequency_hz: float = 1575.42e6
-    spectral_inversion: bool = False
-    sample_type: str = ''
-    big_endian_bytes: bool = False
-    big_endian_items: bool = True
-    bits_per_sample: int = 0
-    scale: float = 0.0
-    float_counts_per_unit: float = 1.0
+    intermediate_frequency_hz: float = parameter(
+        0.0, 'IF of the signal as it appears in the samples, Hz: real in [0, fs/2), complex in (-fs/2, fs/2); 0 for '
+        'complex baseband (PocketSDR 12 MHz real L1: 3000000.0).', minimum=-5.0e10, maximum=5.0e10, group=USER)
+    center_frequency_hz: float = parameter(
+        1575.42e6, 'RF frequency the samples are referenced to, Hz (GPS L1: 1575.42e6). The monitor reports jammer '
+        'frequencies relative to it.', minimum=0.0, maximum=1.0e11, group=USER)
+    spectral_inversion: bool = parameter(
+        False, 'The RF spectrum is mirrored in the samples (high-side LO injection): real samples are published with '
+        'a negative IF (the IfSamples convention), complex samples with I and Q swapped.', group=USER)
+    sample_type: str = parameter(
+        '', "Packed types only: real, iq or qi (GNSS-SDR's names); empty: real, four_bit_cpx: iq.",
+        choices=('', 'real', 'iq', 'qi'))
+    big_endian_bytes: bool = parameter(
+        False, 'two_bit_packed*: the first sample of a byte is in its two most significant bits (GNSS-SDR: false).')
+    big_endian_items: bool = parameter(
+        True, "two_bit_packed_short: the 16-bit words are big-endian (GNSS-SDR's default: true).")
+    bits_per_sample: int = parameter(
+        0, "Quantisation reported in the message, bits; 0: the item type's (8 for int8, 16 for int16 and gr_complex, "
+        "9 for uibyte, 2 for two_bit_packed, 5 for four_bit_cpx). PocketSDR's int8 files hold 2-bit values: set 2 "
+        '(the monitor then makes no saturation check, as for any 1-3 bit front end).', minimum=0, maximum=16)
+    scale: float = parameter(
+        0.0, "Volts (or full-scale units) per stored count; 0: the item type's (1 for integer items, 0.5 for the "
+        '2v+1 codes of uibyte and the packed types, 1/float_counts_per_unit for gr_complex).',
+        minimum=0.0, maximum=1.0e3)
+    float_counts_per_unit: float = parameter(
+        1.0, "gr_complex: counts per unit of the file's floats. 1: the floats are ADC counts (GNSS-SDR's own "
+        'short-to-complex conversion); 32767 for floats normalised to +-1 (UHD fc32, osmocom). Rounding, clipping '
+        'to +-32767 and non-finite values are counted on /diagnostics.', minimum=1.0e-6, maximum=1.0e9)
 
     def __post_init__(self) -> None:
         item = ITEM_TYPES.get(self.item_type)

@@ -79,7 +79,7 @@ from rfi_experiments.if_formats import (
 from rfi_msgs.msg import IfSamples
 from rfi_node_common.diagnostics import StampTimer, counted_level, publish_status
 from rfi_node_common.main import run_node
-from rfi_node_common.params import declare, parameter, validate_ranges
+from rfi_node_common.params import USER, ConfigFile, declare, parameter, parameter_from, validate_ranges
 from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS
 from rfi_node_common.stamps import ns_to_stamp
 
@@ -111,66 +111,63 @@ FORMAT_FIELDS = ('item_type', 'sampling_frequency_hz', 'intermediate_frequency_h
 
 @dataclass(frozen=True)
 class IfSourceParams:
-    """Parameters of if_source (``--help`` lists them; if_to_bag takes the format ones as options)."""
+    """Parameters of if_source (``--help`` lists them; if_to_bag takes the format ones as options). The format
+    parameters with a default are :class:`rfi_experiments.if_formats.IfFormat`'s, written there once."""
 
-    input: str = parameter('-', 'Capture file, "-" for standard input, or a named pipe.')
+    input: str = parameter(
+        '-', 'Capture file, "-" for standard input, or a named pipe. Standard input and pipes are live streams '
+        '(paced by their source, gaps detected); standard input redirected from a regular file is a file.',
+        group=USER)
     item_type: str = parameter(
-        'ibyte', 'Sample format on disk / in the stream (rfi_experiments.if_formats): byte, ibyte, cbyte, short, '
-        'ishort, cshort, gr_complex (float32 I/Q), uibyte (rtl_sdr), two_bit_packed, two_bit_packed_short, '
-        'four_bit_cpx.', choices=tuple(ITEM_TYPES))
+        'ibyte', 'Layout of the bytes (rfi_experiments.if_formats): byte (int8 real: PocketSDR -I files), ibyte / '
+        'cbyte (int8 I,Q: PocketSDR IQ files, hackrf_transfer), short, ishort / cshort (int16 LE; UHD sc16), '
+        'gr_complex (float32 I,Q), uibyte (uint8 I,Q with zero at 127.5: rtl_sdr), two_bit_packed, '
+        "two_bit_packed_short and four_bit_cpx (GNSS-SDR's packed file sources).",
+        choices=tuple(ITEM_TYPES), group=USER)
     sampling_frequency_hz: float = parameter(
-        4.0e6, 'Samples per second (complex: I/Q pairs per second), Hz.', minimum=1.0e5, maximum=1.0e11)
-    intermediate_frequency_hz: float = parameter(
-        0.0, 'IF of the signal as it appears in the samples, Hz: real in [0, fs/2), complex in (-fs/2, fs/2); '
-        '0 for complex baseband.', minimum=-5.0e10, maximum=5.0e10)
-    center_frequency_hz: float = parameter(
-        1575.42e6, 'RF frequency the samples are referenced to, Hz (GPS L1: 1575.42e6).', minimum=0.0, maximum=1.0e11)
-    spectral_inversion: bool = parameter(
-        False, 'The RF spectrum is mirrored in the samples (high-side LO): real samples get a negative IF in the '
-        'message, complex samples have I and Q swapped.')
-    sample_type: str = parameter(
-        '', 'Packed types only: real, iq or qi (GNSS-SDR\'s names; empty: real, four_bit_cpx: iq).',
-        choices=('', 'real', 'iq', 'qi'))
-    big_endian_bytes: bool = parameter(
-        False, 'two_bit_packed*: the first sample of a byte is in its two most significant bits.')
-    big_endian_items: bool = parameter(
-        True, 'two_bit_packed_short: the 16-bit words are big-endian (GNSS-SDR\'s default).')
-    bits_per_sample: int = parameter(
-        0, 'Quantisation reported in the message, bits; 0: the item type\'s (PocketSDR int8 files hold 2-bit '
-        'values: 2).', minimum=0, maximum=16)
-    scale: float = parameter(
-        0.0, 'Volts (or full-scale units) per stored count; 0: the item type\'s (1 for integer items, 0.5 for '
-        '2v+1 codes, 1/float_counts_per_unit for gr_complex).', minimum=0.0, maximum=1.0e3)
-    float_counts_per_unit: float = parameter(
-        1.0, 'gr_complex: counts per unit of the file\'s floats (1: the floats are ADC counts; 32767 for '
-        'floats normalised to +-1).', minimum=1.0e-6, maximum=1.0e9)
+        4.0e6, 'Samples per second (complex: I/Q pairs per second), Hz.', minimum=1.0e5, maximum=1.0e11, group=USER)
+    intermediate_frequency_hz: float = parameter_from(IfFormat, 'intermediate_frequency_hz')
+    center_frequency_hz: float = parameter_from(IfFormat, 'center_frequency_hz')
+    spectral_inversion: bool = parameter_from(IfFormat, 'spectral_inversion')
+    sample_type: str = parameter_from(IfFormat, 'sample_type')
+    big_endian_bytes: bool = parameter_from(IfFormat, 'big_endian_bytes')
+    big_endian_items: bool = parameter_from(IfFormat, 'big_endian_items')
+    bits_per_sample: int = parameter_from(IfFormat, 'bits_per_sample')
+    scale: float = parameter_from(IfFormat, 'scale')
+    float_counts_per_unit: float = parameter_from(IfFormat, 'float_counts_per_unit')
     block_duration_s: float = parameter(
-        0.001, 'Duration of one published block, s (rounded to whole samples).', minimum=1.0e-6, maximum=10.0)
+        0.001, 'Duration of one published block, s (rounded to whole samples). The monitor needs at least '
+        'min_block_samples (1024) per block.', minimum=1.0e-6, maximum=10.0)
     start_time: str = parameter(
-        '', 'Time of the first sample: ISO 8601 UTC (2021-12-02T08:47:00Z) or Unix seconds; empty: the ROS '
-        'clock when the first byte arrives.')
+        '', 'Time of the first sample: ISO 8601 UTC (2021-12-02T08:47:00Z) or Unix seconds written as a string '
+        '("\'1638434820.5\'" on the command line); empty: the ROS clock when the first byte arrives. Stamps are '
+        'start + first_sample_index / sampling_frequency_hz (ROS time, UTC based).', group=USER)
     pace: str = parameter(
         'real_time', 'real_time: a file is published at its sample rate; max: as fast as the subscribers take '
         'it (reliable: acknowledged every 500 blocks and at the end). A live stream is paced by its source.',
-        choices=('real_time', 'max'))
+        choices=('real_time', 'max'), group=USER)
     reliability: str = parameter(
         'reliable', 'QoS of /rfi/if_samples: reliable (keep last 1000) or best_effort (sensor data profile).',
         choices=('reliable', 'best_effort'))
     wait_for_subscribers: int = parameter(
-        0, 'Hold the input until this many subscribers of /rfi/if_samples have matched.', minimum=0, maximum=1000)
+        0, 'Hold the input until this many subscribers of /rfi/if_samples have matched (1: wait for the '
+        'monitor), for at most wait_timeout_s.', minimum=0, maximum=1000)
     wait_timeout_s: float = parameter(
         30.0, 'Longest wait for wait_for_subscribers, s; then reading starts anyway (with a warning).',
         minimum=0.0, maximum=86400.0)
     gap_tolerance_s: float = parameter(
-        0.5, 'Live streams: a lag of the samples received behind the sample rate larger than this is a gap, s; '
-        '0: no gap detection.', minimum=0.0, maximum=3600.0)
-    frame_id: str = parameter('gnss_front_end', 'header.frame_id of the blocks (the front end / antenna).')
+        0.5, 'Live streams: a lag of the samples received behind the sample rate of more than this is declared a '
+        'gap (first_sample_index jumps, gaps and samples_lost counted), s; 0: no gap detection. It must cover the '
+        "SDR tool's buffering and the sampling clock's drift over a run (50 ppm x 1 h = 0.18 s).",
+        minimum=0.0, maximum=3600.0)
+    frame_id: str = parameter(
+        'gnss_front_end', 'header.frame_id of the blocks (the front end / antenna).', group=USER)
     hardware_id: str = parameter(
         'rf_front_end', 'DiagnosticStatus.hardware_id of the node\'s reports: the device behind its input '
         '(model and serial number); diagnostic aggregators group statuses by it.')
     diagnostics_period_s: float = parameter(
         1.0, 'Period of /diagnostics in stamp time, s.', minimum=0.001, maximum=3600.0)
-    exit_at_end: bool = parameter(True, 'Shut the node down at the end of the input.')
+    exit_at_end: bool = parameter(True, 'Shut the node down at the end of the input (exit code 0).')
 
     def __post_init__(self) -> None:
         validate_ranges(self)
@@ -182,6 +179,26 @@ class IfSourceParams:
     def format(self) -> IfFormat:
         """The input format (raises FormatError, a ValueError, on a combination that cannot be)."""
         return IfFormat(**{name: getattr(self, name) for name in FORMAT_FIELDS})
+
+
+CONFIG_FILE = ConfigFile('rfi_experiments', 'config/if_source.yaml', 'if_source', IfSourceParams, """
+Parameters of if_source (rfi_experiments/if_source.py, IfSourceParams): a capture file, standard input or
+a named pipe -> /rfi/if_samples (rfi_msgs/IfSamples). The byte layouts: rfi_experiments/if_formats.py.
+GENERATED by tools/generate_config.py from the parameter definitions: the format's in
+rfi_experiments/if_formats.py (IfFormat), the node's own in if_source.py (IfSourceParams). Change a
+default or a description there and run `python tools/generate_config.py`; a test checks this file
+equals it.
+
+Use:   ros2 run rfi_experiments if_source --ros-args --params-file if_source.yaml
+       rtl_sdr -f 1575420000 -s 2048000 - | ros2 run rfi_experiments if_source --ros-args \\
+           -p item_type:=uibyte -p sampling_frequency_hz:=2048000.0
+Every value below is the default; the user parameters (the input, its format, its start time) come
+first. All parameters are read once at start-up. A value that cannot describe a capture stops the
+node with a one-line error naming it (exit code 2). Floats must be written with a decimal point.
+if_to_bag takes the format parameters as options (--item-type, --sampling-frequency-hz, ...), with
+the same meaning.
+""")
+"""The shipped config/if_source.yaml (:func:`rfi_node_common.params.config_yaml`)."""
 
 
 def block_message(block: IfBlock, fmt: IfFormat, frame_id: str) -> IfSamples:
@@ -427,3 +444,4 @@ def main(argv: Any = None) -> int:
 if __name__ == '__main__':
     import sys
     sys.exit(main())
+

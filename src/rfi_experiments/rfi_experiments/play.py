@@ -317,29 +317,10 @@ def main(argv: Sequence[str] | None = None, *, teardown: bool = True) -> int:
         return fail(str(err))
     with reader:
         available = reader.topics
-        topics = sorted(available) if not args.topics else list(dict.fromkeys(args.topics))
-        unknown = [t for t in topics if t not in available]
-        if unknown:
-            return fail(f'topic filter matches nothing in {args.bag}: {", ".join(unknown)} '
-                        f'(the bag has {", ".join(sorted(available)) or "no topics"})')
-        if not topics:
-            return fail(f'{args.bag} holds no topics')
-        try:
-            expected = parse_expectations(args.expect_subscribers, topics)
-            classes = {t: message_class(available[t][0]) for t in topics}
-        except (ValueError, BagError) as err:
-            return fail(str(err))
-        start_ns, stop_ns = window_ns(reader.start_ns, window)
-        if window is None:
-            total = sum(available[t][1] for t in topics)
-        else:
-            total = sum(1 for _ in reader.messages(topics, start_ns=start_ns, stop_ns=stop_ns))
-            if total == 0:
-                return fail(f'no message of {", ".join(topics)} in the window {window[0]}-{window[1]} s of {args.bag}')
-
-        not_played = [t for t in sync if t not in topics]
-        if not_played:
-            return fail(f'--sync input {", ".join(not_played)} is not played')
+        selection = _selection(reader, args, window, sync)
+        if isinstance(selection, str):
+            return fail(selection)
+        topics, expected, classes, start_ns, stop_ns, total = selection
 
         rclpy.init(args=argv)
         node = rclpy.create_node('rfi_play')
@@ -424,6 +405,37 @@ def main(argv: Sequence[str] | None = None, *, teardown: bool = True) -> int:
                 bounded_teardown('play', executor, node, rclpy)
             else:
                 release_endpoints(node)
+
+
+def _selection(reader: BagReader, args: argparse.Namespace, window: tuple[float, float] | None,
+               sync: dict[str, str]) -> str | tuple[list[str], dict[str, int] | None, dict[str, Any], int | None,
+                                                    int | None, int]:
+    """What to play: the topics (``--topics`` or all), the subscribers expected on each, their message classes,
+    the window in bag time (ns, None: open) and the number of messages; or the reason it cannot be played."""
+    available = reader.topics
+    topics = sorted(available) if not args.topics else list(dict.fromkeys(args.topics))
+    unknown = [t for t in topics if t not in available]
+    if unknown:
+        return (f'topic filter matches nothing in {args.bag}: {", ".join(unknown)} '
+                f'(the bag has {", ".join(sorted(available)) or "no topics"})')
+    if not topics:
+        return f'{args.bag} holds no topics'
+    try:
+        expected = parse_expectations(args.expect_subscribers, topics)
+        classes = {t: message_class(available[t][0]) for t in topics}
+    except (ValueError, BagError) as err:
+        return str(err)
+    start_ns, stop_ns = window_ns(reader.start_ns, window)
+    if window is None:
+        total = sum(available[t][1] for t in topics)
+    else:
+        total = sum(1 for _ in reader.messages(topics, start_ns=start_ns, stop_ns=stop_ns))
+        if total == 0:
+            return f'no message of {", ".join(topics)} in the window {window[0]}-{window[1]} s of {args.bag}'
+    not_played = [t for t in sync if t not in topics]
+    if not_played:
+        return f'--sync input {", ".join(not_played)} is not played'
+    return topics, expected, classes, start_ns, stop_ns, total
 
 
 def print_summary(topics: Sequence[str], available: dict[str, tuple[str, int]], delivery: dict[str, Delivery],

@@ -400,25 +400,9 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
         _wait_for_graph(node, executor, subs, children, args.timeout, namespace, external)
         node_names = list(paths)
         wall_start = time.monotonic()
-        play_cmd = [play, str(args.bag), '--topics', *inputs, '--rate', repr(rate), '--start', repr(seg.start_s)]
-        if seg.duration_s is not None:
-            play_cmd += ['--duration', repr(seg.duration_s)]
-        play_cmd += ['--warmup', repr(args.warmup), '--warmup-rate', repr(args.warmup_rate),
-                     '--wait-subscribers', repr(args.timeout), '--start-delay', repr(DISCOVERY_SETTLE_S),
-                     '--ack-timeout', repr(args.timeout),
-                     # the first answers include each node's first-call cost (numba compilation on a
-                     # cold cache: 15-30 s per node with three starting at once on two cores)
-                     '--sync-timeout', repr(args.timeout)]
-        play_cmd += [f'--sync={inp}:{out}' for _, inp, out in SYNCED if inp in inputs]
-        subscribers = {t: sum(t in subscribes for subscribes, _ in NODE_ENDPOINTS.values()) for t in inputs}
-        play_cmd += [f'--expect-subscribers={t}:{n}' for t, n in subscribers.items()]
         quiet = args.no_progress or args.quiet  # play's summary goes to its log either way
-        if quiet:
-            play_cmd.append('--no-progress')
-        moved = namespace_arguments(namespace, sorted(set(inputs) | set(OUTPUT_TYPES)))
-        play_cmd += ['--ros-args', *moved, '--'] if moved else []
-        play_cmd += forwarded
-        player = children.start('play', play_cmd, stderr_to_terminal=not quiet)
+        player = children.start('play', _play_command(args, play, inputs, seg, rate, namespace, forwarded),
+                                stderr_to_terminal=not quiet)
         while player.poll() is None:
             executor.spin_once(timeout_sec=0.05)
             children.check_alive(node_names)
@@ -442,6 +426,29 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
                           inputs={t: n for t, n in seg.counts.items() if n}, wall_time_s=wall_time_s,
                           bag_duration_s=(seg.last_ns - seg.first_ns) * 1e-9)
     return result, ProcessesRun(exit_codes=exit_codes, completion=completion)
+
+
+def _play_command(args: argparse.Namespace, play: str, inputs: list[str], seg: Segment, rate: float, namespace: str,
+                  forwarded: list[str]) -> list[str]:
+    """The command line of ``play`` for :func:`run_processes`: the segment at ``rate`` after the slow start, an
+    answer awaited after each input of :data:`SYNCED`, the subscribers each input must have, the namespace."""
+    command = [play, str(args.bag), '--topics', *inputs, '--rate', repr(rate), '--start', repr(seg.start_s)]
+    if seg.duration_s is not None:
+        command += ['--duration', repr(seg.duration_s)]
+    command += ['--warmup', repr(args.warmup), '--warmup-rate', repr(args.warmup_rate),
+                '--wait-subscribers', repr(args.timeout), '--start-delay', repr(DISCOVERY_SETTLE_S),
+                '--ack-timeout', repr(args.timeout),
+                # the first answers include each node's first-call cost (numba compilation on a
+                # cold cache: 15-30 s per node with three starting at once on two cores)
+                '--sync-timeout', repr(args.timeout)]
+    command += [f'--sync={inp}:{out}' for _, inp, out in SYNCED if inp in inputs]
+    subscribers = {t: sum(t in subscribes for subscribes, _ in NODE_ENDPOINTS.values()) for t in inputs}
+    command += [f'--expect-subscribers={t}:{n}' for t, n in subscribers.items()]
+    if args.no_progress or args.quiet:
+        command.append('--no-progress')
+    moved = namespace_arguments(namespace, sorted(set(inputs) | set(OUTPUT_TYPES)))
+    command += ['--ros-args', *moved, '--'] if moved else []
+    return command + list(forwarded)
 
 
 def _raise_interrupt(signum: int, _frame: Any) -> None:

@@ -92,6 +92,7 @@ from rfi_experiments.ubx_reports import (
     interference_from_message,
     spectrum_from_message,
 )
+from rfi_node_common.params import parameter
 
 __all__ = [  # the framing and report names are re-exported: callers import them from here
     "JAMMING_CRITICAL", "JAMMING_OK", "JAMMING_UNKNOWN", "JAMMING_WARNING", "MAX_PAYLOAD_BYTES",
@@ -144,12 +145,29 @@ class UbxDecoderParams:
         publish_without_ephemeris: publish satellites without a usable ephemeris with NaN
             satellite states (and their real pseudorange, rate and C/N0) instead of skipping them;
             ``min_satellites`` then counts them too.
+
+    The first four are also parameters of ubx_source (:func:`rfi_node_common.params.parameter`: default,
+    description and range written here once).
     """
 
-    min_satellites: int = 4
-    use_receiver_std: bool = True
-    use_sfrbx: bool = True
-    publish_without_ephemeris: bool = True
+    min_satellites: int = parameter(
+        4, 'An epoch is published only with at least this many satellites (modelled: ephemeris present, healthy, '
+        'plausible pseudorange; with publish_without_ephemeris also those without ephemeris); fewer: counted as '
+        'epochs_waiting_for_ephemeris. 4 = enough for a position; 1 publishes whatever there is.',
+        minimum=1, maximum=64)
+    use_receiver_std: bool = parameter(
+        True, "Fill pseudorange_std_m / pseudorange_rate_std_mps from the receiver's prStdev / doStdev. false: NaN, "
+        'and the fusion weights by C/N0 (and J/S) instead.')
+    use_sfrbx: bool = parameter(
+        True, 'Decode GPS LNAV subframes 1-3 (ephemeris) and subframe 4 page 18 (Klobuchar), and Galileo I/NAV word '
+        'types 1-5 (ephemeris, clock, BGD, health), from RXM-SFRBX. false: ephemerides only from nav_file.')
+    publish_without_ephemeris: bool = parameter(
+        True, 'Satellites without a usable ephemeris (none decoded yet, RXM-SFRBX off and no nav_file, or only '
+        'stale records) are published with NaN satellite states (position, velocity, clock, ionosphere, '
+        'troposphere) and their real pseudorange, Doppler rate and C/N0, counted as satellites_without_ephemeris: '
+        'the C/N0 jamming test of gnss_integrity works without ephemeris; the fusion rejects such satellites and '
+        'counts them (nonfinite_pseudorange). false: skip them (counted as skipped_no_ephemeris / '
+        'skipped_stale_ephemeris).')
     max_ephemerides_per_satellite: int = 4
     builder: MeasurementBuilderParams = field(default_factory=MeasurementBuilderParams)
 

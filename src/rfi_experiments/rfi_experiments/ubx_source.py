@@ -49,7 +49,7 @@ from rfi_experiments.ubx_decode import EpochOutput, SpectrumReport, UbxDecoder, 
 from rfi_msgs.msg import GnssMeasurementArray, ReceiverInterference, ReceiverSpectrum
 from rfi_node_common.diagnostics import StampTimer, counted_level, publish_status
 from rfi_node_common.main import run_node
-from rfi_node_common.params import declare, parameter, validate_ranges
+from rfi_node_common.params import USER, ConfigFile, declare, parameter, parameter_from, validate_ranges
 from rfi_node_common.qos import DATA_QOS, DATA_QOS_DEPTH, DIAGNOSTICS_QOS
 
 TOPICS = """topics:
@@ -76,47 +76,53 @@ FINAL_ACK_TIMEOUT_S = 2.0
 
 @dataclass(frozen=True)
 class UbxSourceParams:
-    """Parameters of ubx_source (``--help`` lists them)."""
+    """Parameters of ubx_source (``--help`` lists them). The decoder's (``min_satellites``, ``use_sfrbx``,
+    ``publish_without_ephemeris``, ``use_receiver_std``) are :class:`rfi_experiments.ubx_decode.UbxDecoderParams`'s,
+    written there once."""
 
-    input: str = parameter('/dev/ttyACM0', 'Serial device of the receiver, or a UBX log file.')
-    baud_rate: int = parameter(115200, 'Serial baud rate, bit/s (ignored by USB CDC-ACM receivers).',
-                               minimum=1200, maximum=4_000_000)
-    nav_file: str = parameter('', 'RINEX navigation file with broadcast ephemerides (empty: only those decoded '
-                                  'from RXM-SFRBX).')
-    use_sfrbx: bool = parameter(True, 'Decode ephemerides from RXM-SFRBX: GPS LNAV (and its Klobuchar page), '
-                                      'Galileo I/NAV.')
+    input: str = parameter(
+        '/dev/ttyACM0', 'Serial device of the receiver (/dev/ttyACM0 for USB, /dev/ttyUSB0 or /dev/ttyS0 for UART), '
+        'or a UBX log file (read to its end).', group=USER)
+    baud_rate: int = parameter(
+        115200, "Serial baud rate, bit/s. Must match the receiver's UART setting; USB CDC-ACM ignores it.",
+        minimum=1200, maximum=4_000_000, group=USER)
+    nav_file: str = parameter(
+        '', 'RINEX navigation file (2.x or 3.x, GPS and other systems) with broadcast ephemerides, used together '
+        "with those decoded from RXM-SFRBX (empty: only those). Give one (e.g. the day's BRDC file) to publish from "
+        'the first epoch instead of after ~30 s of navigation data, or for BeiDou, QZSS and GLONASS satellites '
+        '(only GPS LNAV and Galileo I/NAV are decoded from SFRBX here).', group=USER)
+    use_sfrbx: bool = parameter_from(UbxDecoderParams, 'use_sfrbx')
     reference_position_ecef_m: str = parameter(
-        '', 'Receiver ECEF position "X,Y,Z", m, for the ionosphere / troposphere models; empty: a coarse '
-            'single-point fix per epoch (tens of metres suffice).')
-    min_satellites: int = parameter(4, 'Publish an epoch only with at least this many satellites (modelled, and '
-                                       'with publish_without_ephemeris those without ephemeris); fewer: counted, '
-                                       'not published.', minimum=1, maximum=64)
-    publish_without_ephemeris: bool = parameter(
-        True, 'Publish satellites without a usable ephemeris (none yet, RXM-SFRBX off, stale) with NaN satellite '
-              'states and their real pseudorange, rate and C/N0 (for C/N0 jamming tests; a position filter '
-              'rejects them); false: skip them.')
-    use_receiver_std: bool = parameter(True, 'Fill pseudorange_std_m / pseudorange_rate_std_mps from the '
-                                             'receiver\'s prStdev / doStdev (false: NaN, the filter weights by C/N0).')
-    pace: str = parameter('real_time', 'Files: real_time publishes at the pace of the RAWX epochs; max as fast '
-                                       'as the subscribers take it. A serial port is paced by the receiver.',
-                          choices=('real_time', 'max'))
-    frame_id: str = parameter('gnss', 'header.frame_id of gnss/receiver_interference and gnss/receiver_spectrum '
-                                      '(the receiver); the measurements are in "earth".')
-    reconnect_period_s: float = parameter(1.0, 'Serial: wait between attempts to reopen a lost port, s.',
-                                          minimum=0.01, maximum=3600.0)
-    max_reconnect_attempts: int = parameter(30, 'Serial: failed reopen attempts in a row before the node exits '
-                                                '(code 1); 0: exit at the first loss.', minimum=0, maximum=1_000_000)
+        '', 'Receiver ECEF position "X,Y,Z", m, used only to evaluate the ionosphere and troposphere models; '
+        'empty: a coarse single-point fix per epoch (tens of metres are enough there).', group=USER)
+    min_satellites: int = parameter_from(UbxDecoderParams, 'min_satellites')
+    publish_without_ephemeris: bool = parameter_from(UbxDecoderParams, 'publish_without_ephemeris')
+    use_receiver_std: bool = parameter_from(UbxDecoderParams, 'use_receiver_std')
+    pace: str = parameter(
+        'real_time', 'Files only: real_time publishes at the pace of the RAWX epochs (as the receiver did); max as '
+        'fast as the subscribers take it (nothing dropped for a reliable subscriber). A serial port is paced by '
+        'the receiver.', choices=('real_time', 'max'), group=USER)
+    frame_id: str = parameter(
+        'gnss', 'header.frame_id of gnss/receiver_interference and gnss/receiver_spectrum (the receiver); the '
+        'measurements are in "earth".', group=USER)
+    reconnect_period_s: float = parameter(
+        1.0, 'Serial only: a lost port (receiver unplugged) is reopened every reconnect_period_s, s, at most '
+        'max_reconnect_attempts times in a row.', minimum=0.01, maximum=3600.0)
+    max_reconnect_attempts: int = parameter(
+        30, 'Serial only: failed reopen attempts in a row before the node exits with code 1 and the reason; 0: '
+        'exit at the first loss (let a supervisor restart it).', minimum=0, maximum=1_000_000)
     hardware_id: str = parameter(
         'gnss_receiver', 'DiagnosticStatus.hardware_id of the node\'s reports: the device behind its input '
         '(model and serial number); diagnostic aggregators group statuses by it.')
-    diagnostics_period_s: float = parameter(1.0, 'Period of /diagnostics in stamp time, s.',
-                                            minimum=0.001, maximum=3600.0)
-    exit_at_end: bool = parameter(True, 'Files: shut the node down at the end of the file.')
-    wait_for_subscribers: int = parameter(0, 'Hold the input until this many subscribers of gnss/measurements '
-                                             'have matched (a file replayed into a node started at the same time).',
-                                          minimum=0, maximum=1000)
-    wait_timeout_s: float = parameter(30.0, 'Longest wait for wait_for_subscribers, s; then reading starts anyway.',
-                                      minimum=0.0, maximum=86400.0)
+    diagnostics_period_s: float = parameter(
+        1.0, 'Period of /diagnostics in stamp (receiver) time, s.', minimum=0.001, maximum=3600.0)
+    exit_at_end: bool = parameter(True, 'Files only: shut the node down (exit code 0) at the end of the file.')
+    wait_for_subscribers: int = parameter(
+        0, 'Hold the input until this many subscribers of gnss/measurements have matched (a log replayed into a '
+        'fusion node started at the same moment loses nothing); 0: start at once.', minimum=0, maximum=1000)
+    wait_timeout_s: float = parameter(
+        30.0, 'Longest wait for wait_for_subscribers, s; then reading starts anyway (with a warning).',
+        minimum=0.0, maximum=86400.0)
 
     def __post_init__(self) -> None:
         validate_ranges(self)
@@ -126,6 +132,41 @@ class UbxSourceParams:
         return UbxDecoderParams(min_satellites=self.min_satellites, use_receiver_std=self.use_receiver_std,
                                 use_sfrbx=self.use_sfrbx, publish_without_ephemeris=self.publish_without_ephemeris)
 
+
+
+CONFIG_FILE = ConfigFile('rfi_experiments', 'config/ubx_source.yaml', 'ubx_source', UbxSourceParams, """
+Parameters of ubx_source (rfi_experiments/ubx_source.py, UbxSourceParams): a u-blox receiver
+(serial port) or a UBX log file -> gnss/measurements, gnss/receiver_interference and
+gnss/receiver_spectrum.
+GENERATED by tools/generate_config.py from the parameter definitions: the decoder's in
+rfi_experiments/ubx_decode.py (UbxDecoderParams), the node's own in ubx_source.py (UbxSourceParams).
+Change a default or a description there and run `python tools/generate_config.py`; a test checks
+this file equals it.
+
+Use:   ros2 run rfi_experiments ubx_source --ros-args --params-file ubx_source.yaml
+       (or -p input:=/dev/ttyACM0 alone). Every value below is the default; the user parameters (the
+port or file, its navigation data and pace, the frame) come first. An invalid value, or a parameter
+the node does not have, stops the node with a one-line error (exit 2); so does a port or file that
+cannot be opened.
+
+The receiver must send UBX-RXM-RAWX (measurements) and, unless nav_file is given, UBX-RXM-SFRBX
+(navigation data; without it the satellites are published with NaN states, see
+publish_without_ephemeris); UBX-MON-HW / MON-RF / SEC-SIG feed gnss/receiver_interference,
+UBX-MON-SPAN gnss/receiver_spectrum. Configure the port's output with u-center or ubxtool; NMEA
+mixed in is skipped (counted as skipped_bytes).
+
+Output gnss/measurements (rfi_msgs/GnssMeasurementArray): one per RXM-RAWX epoch with at least
+       min_satellites satellites, header stamp = receive time in ROS (UTC) time.
+       gnss/receiver_interference (rfi_msgs/ReceiverInterference): one per MON-HW, per MON-RF
+       block, per SEC-SIG, stamped with the latest RAWX epoch's time.
+       gnss/receiver_spectrum (rfi_msgs/ReceiverSpectrum): one per MON-SPAN RF block (256 bins,
+       dB), stamped with the latest RAWX epoch's time.
+       /diagnostics: every counter (frames, bad_checksum, truncated, unknown_messages,
+       epochs_waiting_for_ephemeris, satellites_without_ephemeris, spectrum_reports, skipped_*
+       per reason, sfrbx_rejected_*, port_state, ...) every diagnostics_period_s of stamp time
+       and at the end of the input.
+""")
+"""The shipped config/ubx_source.yaml (:func:`rfi_node_common.params.config_yaml`)."""
 
 def parse_position(text: str) -> tuple[float, float, float] | None:
     """``"X,Y,Z"`` (m) -> a tuple, ``""`` -> None. Raises ValueError otherwise."""

@@ -38,6 +38,7 @@ from rfi_monitor.sweep_analysis import SweepAnalysisParams
 from rfi_monitor.sweep_period import SweepPeriodParams
 from rfi_monitor.tracker import MAX_REFINE_WINDOW
 from rfi_monitor.tracking_filters import MODE_AFKF, TrackingFilterParams
+from rfi_node_common.params import USER, parameter
 
 ESTIMATORS = ("stft", "kalman")
 """Values of ``RfiMonitorParams.estimator``."""
@@ -96,6 +97,9 @@ class Method:
 class RfiMonitorParams:
     """Validated parameters of the monitor.
 
+    Its scalar fields are parameters of rfi_monitor_node: default, description and range written here once
+    (:func:`rfi_node_common.params.parameter`; the node takes them with ``parameter_from``).
+
     Attributes:
         estimator: ``"stft"`` (default, ours: the short-time FFT ridge analysis of each block, module
             rfi_monitor.ridge; no per-sample loop, no clean start needed, real sweep shapes) or
@@ -150,32 +154,98 @@ class RfiMonitorParams:
         analysis: SweepAnalysisParams of the block-level periodicity detector (ours).
     """
 
-    estimator: str = "stft"
+    estimator: str = parameter(
+        "stft",
+        'The estimator. stft (default, ours): a short-time FFT of each block; its noise level is measured inside the '
+        'block (no clean start needed: a jammer on from the first sample cannot become the floor), a swept jammer of '
+        'any shape (saw-tooth up/down, triangle, hooked, non-linear rate, wider than the band) is a ridge whose '
+        "autocorrelation gives the sweep period; no per-sample loop. kalman: Kang et al.'s per-sample tracker (the "
+        'parameters from chirp_correction to the sweep_* and analysis_* groups below; they do nothing with stft). '
+        'docs/rfi_monitor/stft_estimator.md.', choices=ESTIMATORS, group=USER)
     tracker: TrackingFilterParams = field(default_factory=lambda: TrackingFilterParams(mode=MODE_AFKF))
     sweep: SweepPeriodParams = field(default_factory=lambda: SweepPeriodParams(lattice_voting=True))
     classifier: ClassifierParams = field(default_factory=ClassifierParams)
-    chirp_correction: bool = True
-    reset_at_sweep_start: bool = True
-    min_abs_ratio: float = 0.02
-    domain_margin: float = 0.05
-    power_time_constant: float = 1024.0
-    phase_gain: float = 0.3
-    noise_floor_power: float = 0.0
-    calibration_blocks: int = 5
-    signal_power_dbm: float = -130.0
-    noise_density_dbm_per_mhz: float = -114.0
-    noise_bandwidth_hz: float = 0.0
-    max_invalid_fraction: float = 0.05
-    min_block_samples: int = 1024
-    refine_window: int = 24
-    lattice_period_drift: float = 1e-5
-    noise_compensation: bool = True
-    reset_cross_covariance: bool = True
-    confirm_fits: int = 4
+    chirp_correction: bool = parameter(
+        True, 'Correct the three-sample measurement for the sweep during the three samples (Kang et al., eq. 10, '
+        're-derived; real samples only). Set false only to reproduce the uncorrected eq. 8.')
+    reset_at_sweep_start: bool = parameter(
+        True,
+        'Reset the tracking filter at the estimated sweep starts (Kang et al., eq. 21-22). Set false to compare with '
+        "the plain adaptive fading filter (the paper's AFKF baseline).")
+    min_abs_ratio: float = parameter(
+        0.02,
+        'Near-zero guard, dimensionless: a sample with |x| <= this times the running RMS gives no measurement (the '
+        'arccos ratio would divide by ~0). Raise it if the measurement is noisy.', minimum=0.0, maximum=1.0)
+    domain_margin: float = parameter(
+        0.05, 'arccos domain margin, dimensionless: ratios beyond 1 + this are rejected (not clipped).',
+        minimum=0.0, maximum=10.0)
+    power_time_constant: float = parameter(
+        1024.0, 'Time constant of the running RMS used by the near-zero guard, samples.', minimum=1.0, maximum=1e9)
+    phase_gain: float = parameter(
+        0.3,
+        'Gain of the phase correction of the predicted sweep-start lattice by detected peaks, (0, 1]. Lower it if '
+        'resets jitter at low J/N; raise it for sweeps whose period drifts.', minimum=1e-6, maximum=1.0)
+    noise_floor_power: float = parameter(
+        0.0,
+        'Fixed noise power of the decoded samples, V^2 (counts * scale, squared). 0 (default): learn the noise floor '
+        'and the front-end noise shape from the first calibration_blocks blocks. Set it when a chirp or wideband '
+        'jammer may be on at start-up (learning would take it for noise).', minimum=0.0, maximum=1e12)
+    calibration_blocks: int = parameter(
+        5, 'Blocks used to learn the noise floor (median over blocks). kalman: the first blocks, reported as UNKNOWN. '
+        'stft: the last blocks that passed as noise inside the block too (no jammer seen, no clipping); blocks are '
+        'reported from the first one. A change of sample rate, IF or complexness starts the learning again.',
+        minimum=1, maximum=100000)
+    signal_power_dbm: float = parameter(
+        -130.0, 'Nominal GNSS signal power S for J/S = J/N + N - S, dBm (Kang et al.: -130).',
+        minimum=-250.0, maximum=50.0, group=USER)
+    noise_density_dbm_per_mhz: float = parameter(
+        -114.0, "Nominal noise density for N, dBm/MHz (Kang et al.: -114). Set to the front end's value.",
+        minimum=-250.0, maximum=50.0, group=USER)
+    noise_bandwidth_hz: float = parameter(
+        0.0, 'Bandwidth over which N is counted, Hz; 0: the sampled band (fs/2 real, fs complex). Set it to the front '
+        "end's noise bandwidth (e.g. 2000000.0 for a 2 MHz C/A front end) so that J/S matches the link budget the "
+        'user has in mind.', minimum=0.0, maximum=1e10, group=USER)
+    max_invalid_fraction: float = parameter(
+        0.05, 'A block with more non-finite samples than this fraction is rejected (non_finite); samples at full '
+        'scale never reject a block (clipping is evidence of a strong jammer).', minimum=0.0, maximum=1.0)
+    min_block_samples: int = parameter(
+        1024,
+        'Shortest block analysed, samples (complex: I/Q pairs); shorter blocks are rejected (short_block). Must be >='
+        ' classifier_nfft. 1 ms at 38.192 MHz is 38192 samples.', minimum=32, maximum=2**31 - 1)
+    refine_window: int = parameter(
+        24, 'Half-window W of the step fit that refines the predicted sweep starts (ours), samples, 0..24. 0 runs the '
+        "paper's lattice from the LPD peaks only (for comparison with Kang et al.).",
+        minimum=0, maximum=MAX_REFINE_WINDOW)
+    lattice_period_drift: float = parameter(
+        1e-5,
+        'Random walk of the sweep period per sweep, relative, of the step-fit lattice filter (ours), 0..0.01. Raise '
+        'it for a jammer whose sweep period drifts (e.g. 1e-4 for a free-running analog sweep); the resets then '
+        'jitter more.', minimum=0.0, maximum=0.01)
+    noise_compensation: bool = parameter(
+        True,
+        'Divide the real three-sample ratio of eq. 8/10 by kappa = 1 - N/P (running power P, calibrated noise floor '
+        "N): removes the measurement's bias towards fs/4 at moderate J/N (ours). No effect on complex samples. false "
+        "runs the paper's measurement.")
+    reset_cross_covariance: bool = parameter(
+        True,
+        "At a sweep reset keep the exact covariance of eq. 21's linear map instead of eq. 22's uncorrelated P(1,1) "
+        "(ours). false runs the paper's eq. 22.")
+    confirm_fits: int = parameter(
+        4, 'Tracking mode (ours): after this many consecutive significant sweep-start fits the LPD / AR(10) / peak '
+        'search of the paper is suspended (the step-fit lattice holds the sweep) and resumed after two failed fits; '
+        'it roughly doubles the throughput on a steady chirp. 0: always search (the paper).', minimum=0, maximum=10**6)
     analysis: SweepAnalysisParams = field(default_factory=SweepAnalysisParams)
     ridge: RidgeParams = field(default_factory=RidgeParams)
-    noise_floor_dbfs: float = 0.0
-    clip_lower_bound_fraction: float = 1e-3
+    noise_floor_dbfs: float = parameter(
+        0.0,
+        'Thermal noise of the front end per real component relative to full scale squared, dB (needs bits_per_sample '
+        '>= 4: full scale = (2^(bits-1) - 1) * scale). The J/N reference when set (e.g. -30.0 for noise at 3.2 % rms '
+        'of full scale), which also sees a wideband noise jammer that is on from the start. 0.0: not documented (the '
+        'floor learned from blocks that passed as noise, else the in-block noise level).',
+        minimum=-300.0, maximum=0.0, group=USER)
+    clip_lower_bound_fraction: float = parameter(
+        1e-3, 'Above this share of samples at full scale the J/N of a reported jammer is flagged as a lower bound '
+        '(jammer_to_noise_is_lower_bound): clipping caps the measured power. 0..1.', minimum=0.0, maximum=1.0)
     integration: IntegrationParams = field(default_factory=IntegrationParams)
     spectral_step: SpectralStepParams = field(default_factory=SpectralStepParams)
 

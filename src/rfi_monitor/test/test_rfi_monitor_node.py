@@ -519,11 +519,32 @@ def test_config_yaml_equals_defaults():
     doc = yaml.safe_load(CONFIG.read_text())
     assert list(doc) == ['rfi_monitor']
     values = doc['rfi_monitor']['ros__parameters']
-    defaults = {f.name: _default(f) for f in dataclasses.fields(MonitorNodeParams)}
-    assert list(values) == list(defaults)
+    from rfi_node_common.params import parameter_fields
+
+    defaults = {f.name: _default(f) for f in parameter_fields(MonitorNodeParams)}   # the user group first
+    assert list(values) == list(defaults) and set(defaults) == {f.name for f in dataclasses.fields(MonitorNodeParams)}
     for name, default in defaults.items():
         assert type(values[name]) is type(default), name   # e.g. 1 in the file would be an int parameter
         assert values[name] == default, name
+
+
+def test_config_file_is_the_one_generated_from_the_parameter_definitions():
+    """config/rfi_monitor.yaml is written by tools/generate_config.py from the parameter definitions."""
+    from rfi_monitor.node_params import CONFIG_FILE
+
+    assert CONFIG.read_text() == CONFIG_FILE.text(), 'run python tools/generate_config.py'
+
+
+def test_core_scalar_parameters_are_defined_once_in_the_core():
+    """The node's parameters named as RfiMonitorParams' scalar fields take default, description, range and group from
+    the core's definition (rfi_monitor/params.py); every core field so defined is a node parameter."""
+    core = {f.name: f for f in dataclasses.fields(RfiMonitorParams) if 'rfi_doc' in f.metadata}
+    node = {f.name: f for f in dataclasses.fields(MonitorNodeParams)}
+    assert len(core) == 21 and set(core) <= set(node)
+    for name, field in core.items():
+        assert node[name].metadata['rfi_doc'] == field.metadata['rfi_doc'], name
+        assert node[name].default == field.default, name
+    assert MonitorNodeParams().monitor_params() == RfiMonitorParams()
 
 
 def test_config_yaml_loads_as_a_params_file():

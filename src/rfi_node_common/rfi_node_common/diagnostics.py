@@ -20,10 +20,12 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
+from rfi_node_common.params import parameter
 from rfi_node_common.stamps import ns_to_stamp
 
 OK = DiagnosticStatus.OK
@@ -105,65 +107,86 @@ class StampTimer:
 STALE = DiagnosticStatus.STALE
 
 
-def input_timeout_parameter() -> object:
+def input_timeout_parameter() -> Any:
     """The ``input_timeout_s`` parameter field shared by the nodes (rfi_node_common.inputs.StaleInputWatch)."""
-    from rfi_node_common.params import parameter
     return parameter(
         5.0, 'Wall-clock silence after which /diagnostics reports the node STALE (no input received), s; '
         '0: never. Used only for this report: no estimate depends on the wall clock.', minimum=0.0, maximum=86400.0)
 
 
-def max_stamp_jump_parameter(default_s: float = 120.0) -> object:
+def max_stamp_jump_parameter(default_s: float = 120.0) -> Any:
     """The ``max_stamp_jump_s`` parameter field shared by the nodes (rfi_node_common.input_checks.StampGate)."""
-    from rfi_node_common.params import parameter
     return parameter(
         default_s, 'A header stamp further than this from the latest accepted stamp is rejected '
         '(stamp_far_future / stamp_far_past) unless stamp_jump_confirmations messages in a row agree on the '
         'jump (a clock or bag restart), s.', minimum=0.01, maximum=1.0e6)
 
 
-def stamp_jump_confirmations_parameter(default: int = 5) -> object:
+def stamp_jump_confirmations_parameter(default: int = 5) -> Any:
     """The ``stamp_jump_confirmations`` parameter field shared by the nodes."""
-    from rfi_node_common.params import parameter
     return parameter(
         default, 'Consecutive messages, each newer than the last and within max_stamp_jump_s of it, that '
         'confirm a stamp jump; the node then restarts its state from the new time line.',
         minimum=1, maximum=100000)
 
 
-def hardware_id_parameter(default: str) -> object:
+def hardware_id_parameter(default: str) -> Any:
     """The ``hardware_id`` parameter field (DiagnosticStatus.hardware_id of every report of the node)."""
-    from rfi_node_common.params import parameter
     return parameter(
         default, 'DiagnosticStatus.hardware_id of the node\'s reports: the device behind its input (model and '
         'serial number of the front end, receiver or UWB tag); diagnostic aggregators group statuses by it.',
         read_only=False)
 
 
-def diagnostics_window_parameter(default_s: float = 10.0) -> object:
+def diagnostics_window_parameter(default_s: float = 10.0) -> Any:
     """The ``diagnostics_window_s`` parameter field: the window of :class:`CountWindow`."""
-    from rfi_node_common.params import parameter
     return parameter(
         default_s, 'Window of message (stamp) time over which /diagnostics computes the rejected and lost '
         'fractions of the input that set WARN, s (counts since start until the window has filled).',
         minimum=0.001, maximum=3600.0, read_only=False)
 
 
-def warn_rejected_fraction_parameter(default: float = 0.1) -> object:
+def warn_rejected_fraction_parameter(default: float = 0.1) -> Any:
     """The ``warn_rejected_fraction`` parameter field (:func:`degraded_inputs`)."""
-    from rfi_node_common.params import parameter
     return parameter(
         default, 'WARN (inputs degraded) when more than this fraction of an input (messages or measurements, '
         'per kind) was rejected over diagnostics_window_s; 1: never.', minimum=0.0, maximum=1.0, read_only=False)
 
 
-def warn_lost_fraction_parameter(default: float = 0.01) -> object:
+def warn_lost_fraction_parameter(default: float = 0.01) -> Any:
     """The ``warn_lost_fraction`` parameter field (:func:`degraded_inputs`)."""
-    from rfi_node_common.params import parameter
     return parameter(
         default, 'WARN (inputs degraded) when more than this fraction of the messages published to the node '
         'was lost before reaching it (publisher sequence gaps, middleware loss) over diagnostics_window_s; 1: '
         'never.', minimum=0.0, maximum=1.0, read_only=False)
+
+
+@dataclass(frozen=True)
+class NodeDiagnosticsParams:
+    """The parameters every node that judges an input stream shares, written once: its stamp gate
+    (:class:`rfi_node_common.input_checks.StampGate`), its silence watch
+    (:class:`rfi_node_common.inputs.StaleInputWatch`) and its /diagnostics (period, ``hardware_id``, the WARN
+    window and thresholds of :class:`CountWindow` and :func:`degraded_inputs`, the warning throttle).
+
+    A node's parameter dataclass extends it and redefines a field whose default differs for the node (its
+    ``hardware_id``, a ``max_stamp_jump_s`` suited to its input rate) with the same helper. Settable while
+    running (the node applies them with :class:`rfi_node_common.params.RuntimeParameters` between two messages):
+    ``hardware_id``, ``diagnostics_window_s``, the WARN thresholds and ``warning_throttle_s``; the others size
+    the stamp gate and the timers, which hold state.
+    """
+
+    max_stamp_jump_s: float = max_stamp_jump_parameter(120.0)
+    stamp_jump_confirmations: int = stamp_jump_confirmations_parameter(5)
+    input_timeout_s: float = input_timeout_parameter()
+    diagnostics_period_s: float = parameter(
+        1.0, 'Period of /diagnostics in message (stamp) time, s.', minimum=0.001, maximum=3600.0)
+    warning_throttle_s: float = parameter(
+        5.0, 'Shortest interval between two warnings about rejected input, s (wall time; logging only).',
+        minimum=0.0, maximum=3600.0, read_only=False)
+    hardware_id: str = hardware_id_parameter('unknown')
+    diagnostics_window_s: float = diagnostics_window_parameter()
+    warn_rejected_fraction: float = warn_rejected_fraction_parameter()
+    warn_lost_fraction: float = warn_lost_fraction_parameter()
 
 
 class CountWindow:

@@ -76,20 +76,27 @@ def internal(default: Any = dataclasses.MISSING, *, default_factory: Any = datac
 def parameter_from(owner: type, name: str, **changes: Any) -> Any:
     """A node's parameter field that is the field ``name`` of the core dataclass ``owner``, defined there
     with :func:`parameter`: same default, description, range and group (``changes`` may set ``read_only``,
-    ``group`` or ``description``). For a node whose parameter names differ from its core's (a prefix, a
+    ``group`` or ``description``, and ``choices`` to a subset of the core's, for a node that offers fewer
+    values than its core accepts). For a node whose parameter names differ from its core's (a prefix, a
     core split in several dataclasses): the default and the text stay in the core's definition.
 
     Raises:
         TypeError: ``owner`` has no such field, or it was not defined with :func:`parameter`.
+        ValueError: ``choices`` that are not a subset of the core's or leave out the default.
     """
     fields = {f.name: f for f in dataclasses.fields(owner)}
     if name not in fields or _DOC not in fields[name].metadata:
         raise TypeError(f'{owner.__name__}.{name} is not a field defined with parameter()')
     field = fields[name]
     doc = dict(field.metadata[_DOC])
-    unknown = set(changes) - {'read_only', 'group', 'description'}
+    unknown = set(changes) - {'read_only', 'group', 'description', 'choices'}
     if unknown:
         raise TypeError(f'parameter_from cannot change {", ".join(sorted(unknown))}')
+    if 'choices' in changes:
+        changes['choices'] = tuple(changes['choices'])
+        if not set(changes['choices']) <= set(doc['choices']) or field.default not in changes['choices']:
+            raise ValueError(f'choices of {owner.__name__}.{name} must be a subset of {doc["choices"]} '
+                             f'that holds the default {field.default!r}')
     doc.update(changes)
     if doc['group'] not in GROUPS:
         raise ValueError(f'parameter group {doc["group"]!r} is not one of {", ".join(GROUPS)}')

@@ -92,3 +92,28 @@ def test_yaml_values_keep_their_type(value, text):
 
 def test_groups_are_the_two_documented_ones():
     assert (USER, TUNING) == ('user', 'tuning')
+
+
+def test_parameter_from_copies_the_core_definition_and_may_narrow_its_choices():
+    """A node's field taken from a core field keeps its default, description, range and group; ``choices`` may be
+    narrowed to a subset that holds the default, anything else is refused."""
+    from rfi_node_common.params import parameter_from
+
+    @dataclass(frozen=True)
+    class Narrow:
+        mode: str = parameter_from(Node, 'mode', choices=('none',))
+        count: int = parameter_from(Node, 'count', read_only=False)
+
+    narrow = {f.name: f for f in parameter_fields(Narrow)}
+    assert narrow['mode'].metadata['rfi_doc']['choices'] == ('none',)
+    assert narrow['count'].metadata['rfi_doc']['minimum'] == 1 and runtime_parameter_names(Narrow) == ('count',)
+    assert Narrow().mode == 'none' and Narrow().count == 5
+    with pytest.raises(ValueError, match='not one of none'):
+        build(Narrow, {'mode': 'velocity'})
+    for choices in (('none', 'other'), ('velocity',)):
+        with pytest.raises(ValueError, match='subset'):
+            parameter_from(Node, 'mode', choices=choices)
+    with pytest.raises(TypeError, match='cannot change default'):
+        parameter_from(Node, 'count', default=3)
+    with pytest.raises(TypeError, match='not a field defined with parameter'):
+        parameter_from(Node, 'registry')
