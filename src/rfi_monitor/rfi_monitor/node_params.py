@@ -16,6 +16,7 @@ from rfi_monitor.monitor import RfiMonitorParams
 from rfi_monitor.params import ESTIMATORS
 from rfi_monitor.ridge import RidgeParams
 from rfi_monitor.spectral_step import SpectralStepParams
+from rfi_monitor.spectrum_view import WaterfallParams
 from rfi_monitor.sweep_analysis import SweepAnalysisParams
 from rfi_monitor.sweep_period import SweepPeriodParams
 from rfi_monitor.tracker import MAX_REFINE_WINDOW
@@ -29,7 +30,7 @@ from rfi_node_common.diagnostics import (
     warn_lost_fraction_parameter,
     warn_rejected_fraction_parameter,
 )
-from rfi_node_common.params import parameter, validate_ranges
+from rfi_node_common.params import parameter, parameter_from, validate_ranges
 
 TRACKER_MODES = {'kf': MODE_KF, 'akf': MODE_AKF, 'afkf': MODE_AFKF}
 """tracker_mode parameter -> tracking_filters mode code."""
@@ -397,8 +398,16 @@ class MonitorNodeParams:
         _C.confidence_slope_db, 'J/N margin that maps to a logistic confidence of 0.73, dB.',
         minimum=1e-6, maximum=100.0)
 
+    # --- topics made to be drawn (issue 30; defined in rfi_monitor.spectrum_view) ---------------
+    spectrum_rate_hz: float = parameter_from(WaterfallParams, 'spectrum_rate_hz')
+    spectrum_rows: int = parameter_from(WaterfallParams, 'spectrum_rows')
+    spectrum_min_dbfs: float = parameter_from(WaterfallParams, 'spectrum_min_dbfs')
+    spectrum_max_dbfs: float = parameter_from(WaterfallParams, 'spectrum_max_dbfs')
+    spectrum_frame_id: str = parameter_from(WaterfallParams, 'spectrum_frame_id')
+
     def __post_init__(self) -> None:
         validate_ranges(self)
+        WaterfallParams(**{f.name: getattr(self, f.name) for f in dataclasses.fields(WaterfallParams)})
         if self.max_block_samples < self.min_block_samples:
             raise ValueError(f'max_block_samples {self.max_block_samples} must be >= min_block_samples '
                              f'{self.min_block_samples}')
