@@ -32,6 +32,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
 from bench_progress import add_quiet_argument, case_log
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -102,6 +103,76 @@ def monitor_single(subscribed_rate_hz: float) -> dict:
         rclpy.shutdown(context=ctx)
 
 
+def added_work() -> dict:
+    """The work the drawn topics add per input while nobody subscribes, timed directly in this interpreter (thread
+    CPU time over many calls; far less sensitive to the machine's load than the end-to-end ratio): the monitor's
+    ``_draw`` per block and the ``BlockSpectrum`` its estimator keeps, against the node's own time per block; the
+    fusion's ``_draw`` per input at the input rate of bags/default."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
+
+    from rfi_monitor.estimate import BlockSpectrum
+    from rfi_monitor.rfi_monitor_node import RfiMonitorNode
+    from rfi_msgs.msg import IfSamples
+    from rfi_node_common.stamps import ns_to_stamp
+    from rfi_sim.if_signal import ChirpJammer, FrontEndConfig, IfSimulator
+    from uwb_gnss_fusion.fusion_node import FusionNode
+    from uwb_gnss_fusion.input_admission import Item
+
+    fe = FrontEndConfig(noise_bandwidth_hz=2.0e6)
+    size = round(1e-3 * fe.sample_rate_hz)
+    sim = IfSimulator(fe, (ChirpJammer(js_db=40.0),), seed=4)
+    msgs = []
+    for k in range(WARM_UP + 200):
+        blk = sim.generate(size)
+        m = IfSamples(sample_rate_hz=blk.sample_rate_hz, intermediate_frequency_hz=blk.intermediate_frequency_hz,
+                      center_frequency_hz=1575.42e6, is_complex=False, first_sample_index=k * size,
+                      scale=float(blk.scale), bits_per_sample=blk.bits, sample_format=IfSamples.INT8)
+        m.header.stamp = ns_to_stamp(START_NS + k * 1_000_000)
+        m.samples = blk.counts.astype('<i1').tobytes()
+        msgs.append(m)
+    ctx = Context()
+    rclpy.init(context=ctx)
+    try:
+        node = RfiMonitorNode(context=ctx, parameter_overrides=[Parameter('max_cpu_load', value=0.0),
+                                                                Parameter('input_timeout_s', value=0.0)])
+        for m in msgs[:WARM_UP]:
+            node.on_block(m)
+        t0 = time.thread_time()
+        for m in msgs[WARM_UP:]:
+            node.on_block(m)
+        block_s = (time.thread_time() - t0) / (len(msgs) - WARM_UP)
+        spec = node.monitor.last_spectrum
+        est = node.monitor.process(np.frombuffer(bytes(msgs[-1].samples), dtype='<i1').astype(np.float64),
+                                   msgs[-1].sample_rate_hz, msgs[-1].intermediate_frequency_hz,
+                                   msgs[-1].first_sample_index + size, START_NS + 10**9)
+        n = 100_000
+        t0 = time.thread_time()
+        for k in range(n):
+            node._draw(START_NS + k, est, msgs[-1])
+        draw_s = (time.thread_time() - t0) / n
+        t0 = time.thread_time()
+        for k in range(n):
+            BlockSpectrum(k, spec.psd, spec.sample_rate_hz, spec.intermediate_frequency_hz, spec.cplx)
+        keep_s = (time.thread_time() - t0) / n
+        assert node.spectrum.published == 0 and node.counts['spectrum_errors'] == 0
+        node.destroy_node()
+        fusion = FusionNode(context=ctx, parameter_overrides=[Parameter('idle_flush_s', value=0.0),
+                                                             Parameter('input_timeout_s', value=0.0)])
+        period_ns = round(180e9 / 11700)                  # bags/default: 11,700 inputs in 180 s
+        items = [Item(START_NS + k * period_ns, 'uwb', None) for k in range(n)]   # the node makes these anyway
+        t0 = time.thread_time()
+        for item in items:
+            fusion._draw(item, None)
+        fusion_s = (time.thread_time() - t0) / n
+        assert fusion.view.published == 0 and fusion.counts['view_errors'] == 0
+        fusion.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)
+    return {'block_s': block_s, 'draw_s': draw_s, 'keep_s': keep_s, 'fusion_draw_s': fusion_s, 'calls': n}
+
+
 def run(env_src: Path | None, args: list[str]) -> dict:
     """A fresh interpreter running ``args`` (``env_src``: baseline packages first on PYTHONPATH); its last stdout
     line as JSON."""
@@ -120,15 +191,56 @@ def export_baseline(commit: str, into: Path) -> Path:
     return into / 'src'
 
 
+ADDED_START = '<!-- added work: start -->'
+ADDED_END = '<!-- added work: end -->'
+
+
+def added_work_section(r: dict) -> str:
+    """The generated section of the direct timing (between ADDED_START and ADDED_END)."""
+    mon_us = 1e6 * (r['draw_s'] + r['keep_s'])
+    fus_us = 1e6 * r['fusion_draw_s']
+    return (
+        f'{ADDED_START}\n## The added work, timed directly (nobody subscribed)\n\n'
+        'The end-to-end ratios above are as noisy as the shared machine (the same code with and without a viewer at '
+        '5 Hz differs by as much). The work the drawn topics add per input while nobody subscribes, timed over '
+        f'{r["calls"]:,} calls in one interpreter (thread CPU time, `--added-work-only`):\n\n'
+        '| quantity | value |\n|---|---|\n'
+        f'| rfi_monitor_node: its own time per 1 ms block (38.192 MS/s, chirp, full analysis) | '
+        f'{1e6 * r["block_s"]:.0f} us |\n'
+        f'| rfi_monitor_node: `_draw` per block (two subscription counts, nothing else) | '
+        f'{1e6 * r["draw_s"]:.2f} us |\n'
+        f'| rfi_monitor core: the `BlockSpectrum` the estimator keeps per block (a reference, no copy) | '
+        f'{1e6 * r["keep_s"]:.2f} us |\n'
+        f'| **rfi_monitor_node: added / own time per block** | **{mon_us / (1e6 * r["block_s"]):.2%}** |\n'
+        f'| fusion_node: `_draw` per input at the 65 Hz input rate of bags/default (one comparison; three '
+        f'subscription counts per 1/view_rate_hz) | {fus_us:.2f} us |\n'
+        f'| **fusion_node: added / own time per input** (178 us per input, docs/uwb_gnss_fusion/node_speed.md) | '
+        f'**{fus_us / 178.0:.2%}** |\n{ADDED_END}\n')
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--repeats', type=int, default=7)
     ap.add_argument('--baseline-commit', default=BASELINE_COMMIT)
     ap.add_argument('--monitor-single', type=float, default=None, help='internal: one monitor run, print JSON')
+    ap.add_argument('--added-work-only', action='store_true',
+                    help='only the direct timing of the added work: rewrite that section of the output')
+    ap.add_argument('--added-work-json', action='store_true', help='internal: added_work() as JSON')
     add_quiet_argument(ap)
     args = ap.parse_args()
+    if args.added_work_json:
+        print(json.dumps(added_work()))
+        return
     if args.monitor_single is not None:
         print(json.dumps(monitor_single(args.monitor_single)))
+        return
+    if args.added_work_only:
+        section = added_work_section(run(None, [str(Path(__file__).resolve()), '--added-work-json']))
+        text = OUT.read_text()
+        head, _, rest = text.partition(ADDED_START)
+        _, _, tail = rest.partition(ADDED_END)
+        OUT.write_text(head + section + tail)
+        print(section)
         return
     tmp = Path(tempfile.mkdtemp(prefix='view_topics_cost_'))
     base = export_baseline(args.baseline_commit, tmp)
@@ -191,7 +303,8 @@ def main() -> None:
         + table + '\n\n'
         'Nobody subscribed, the monitor asks its two drawn publishers for their subscription count per block '
         '(about 1.6 us each, measured with rclpy on this machine) and does nothing else; the fusion node compares '
-        'one integer per input and asks its three publishers once per 1/view_rate_hz of stamp time.\n')
+        'one integer per input and asks its three publishers once per 1/view_rate_hz of stamp time.\n\n'
+        + added_work_section(run(None, [me, '--added-work-json'])))
     log.finish(f'wrote {OUT.relative_to(ROOT)}')
 
 
