@@ -7,9 +7,10 @@
   horizontal confidence ellipse of the position at ``covariance_probability``, :func:`.fusion_view.covariance_ellipse`);
 * ``fusion/satellites`` (``visualization_msgs/MarkerArray``): the satellites of the latest GNSS epoch as a sky plot
   around the antenna (``satellite_marker_distance_m`` along each line of sight): namespace ``satellites_used``
-  (green spheres: pseudoranges the filter applied), ``satellites_rejected`` (red: dropped by the checks, the
-  screen or the gate, or not applied), ``satellite_labels`` (``G05``, ...); the array starts with a DELETEALL so that
-  satellites that set are removed.
+  (green spheres: pseudoranges the filter applied), ``satellites_rejected`` (red: the core's checks, elevation mask,
+  common-mode screen or gate rejected them, or the epoch was not applied), ``satellite_labels`` (``G05``, ...); the
+  array starts with a DELETEALL so that satellites that set are removed. Satellites the node's message checks drop
+  (impossible values, no state) never reach the epoch and are not drawn: /fusion/status counts them.
 
 Cost. Every ``1 / view_rate_hz`` of stamp time (never the wall clock) :meth:`FusionView.after_input` asks the three
 publishers for their subscription count; between two such times an input costs one integer comparison. While nobody
