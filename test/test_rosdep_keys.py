@@ -50,6 +50,7 @@ JAZZY_PACKAGES = {
     'nav_msgs': f'{JAZZY}: repository common_interfaces',
     'sensor_msgs': f'{JAZZY}: repository common_interfaces',
     'diagnostic_msgs': f'{JAZZY}: repository common_interfaces',
+    'visualization_msgs': f'{JAZZY}: repository common_interfaces',
     'builtin_interfaces': f'{JAZZY}: repository rcl_interfaces',
     'rosidl_default_generators': f'{JAZZY}: repository rosidl_defaults',
     'rosidl_default_runtime': f'{JAZZY}: repository rosidl_defaults',

@@ -14,6 +14,7 @@ setup(
         ('share/' + package_name + '/config', glob('config/*.yaml')),
         ('share/' + package_name + '/launch', glob('launch/*.launch.xml')),
         ('share/' + package_name + '/scenarios', glob('scenarios/*.yaml')),
+        ('share/' + package_name + '/viz', glob('viz/*.json') + glob('viz/*.rviz')),
         ('share/' + package_name + '/data', sorted(glob('data/*.1[0-9][no]')) + ['data/README.md']),
     ],
     install_requires=['setuptools'],

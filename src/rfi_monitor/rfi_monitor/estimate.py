@@ -101,6 +101,26 @@ class JammerEstimate:
     light: bool = False
 
 
+@dataclass(frozen=True)
+class BlockSpectrum:
+    """The Welch power spectrum an estimator computed for a block's analysis, exposed for display
+    (``RfiMonitor.last_spectrum``; rfi_monitor.spectrum_view draws it). Nothing is computed for it: it is the
+    array the analysis made (``classifier.welch_psd``), kept by reference.
+
+    Attributes:
+        stamp_ns: the block's stamp, ns.
+        psd: power per bin, sample units^2 (psd.sum() is the block's mean power), ``welch_psd`` order: real input
+            (nfft // 2 + 1,) from 0 to fs/2, complex input (nfft,) from -fs/2 (fftshift order). Read only.
+        sample_rate_hz: fs, Hz; intermediate_frequency_hz: the block's IF, Hz; cplx: complex samples.
+    """
+
+    stamp_ns: int
+    psd: np.ndarray
+    sample_rate_hz: float
+    intermediate_frequency_hz: float
+    cplx: bool
+
+
 SATURATED = "saturated"
 """Former rejection of clipped blocks (no longer produced: clipped blocks are analysed)."""
 NON_FINITE = "non_finite"

@@ -16,7 +16,16 @@ import math
 import numpy as np
 
 from rfi_monitor import sweep_period as sp
-from rfi_monitor.classifier import CHIRP, CW, NONE, UNKNOWN, block_features, classify, smooth_template
+from rfi_monitor.classifier import (
+    CHIRP,
+    CW,
+    NONE,
+    UNKNOWN,
+    classify,
+    features_from_psd,
+    smooth_template,
+    welch_psd,
+)
 from rfi_monitor.estimate import (
     BLANK_BLOCK,
     MIN_BLOCK_POWER,
@@ -26,6 +35,7 @@ from rfi_monitor.estimate import (
     SPECTRAL_STEP_COUNTERS,
     Block,
     BlockCounters,
+    BlockSpectrum,
     BlockTraces,
     JammerEstimate,
     jammer_to_signal_db,
@@ -83,6 +93,8 @@ class KalmanEstimator:
         self._template: np.ndarray | None = None
         self._floor: float = params.noise_floor_power if params.noise_floor_power > 0 else math.nan
         self._resets_in_block = 0
+        self.last_spectrum: BlockSpectrum | None = None
+        """The Welch spectrum of the last block identified (for display: ``RfiMonitor.last_spectrum``)."""
         self._reset_tracker()
 
     def reset(self, keep_calibration: bool) -> None:
@@ -248,7 +260,9 @@ class KalmanEstimator:
         st = self._state
         nan = math.nan
         # while calibrating the template is None (flat), as block_features needs it then
-        feat = block_features(xs, self._template, cp)
+        psd, frames = welch_psd(xs, cp.nfft, cp.max_frames)        # block_features, the spectrum kept for display
+        self.last_spectrum = BlockSpectrum(stamp_ns, psd, fs, fif, cplx)
+        feat = features_from_psd(psd, frames, self._template, cp, cplx)
         if not math.isfinite(feat.power):
             return self._counts.rejected(POWER_OVERFLOW, block, traces)
         if not feat.power >= MIN_BLOCK_POWER:

@@ -86,6 +86,7 @@ from rfi_monitor.estimate import (  # noqa: F401  (re-exported: the names users 
     REJECTIONS,
     Block,
     BlockCounters,
+    BlockSpectrum,
     BlockTraces,
     Estimator,
     JammerEstimate,
@@ -203,6 +204,12 @@ class RfiMonitor:
     def last_integration(self) -> IntegratedDecision | None:
         """The "stft" estimator's last decision of the evidence over blocks (None: none yet, or "kalman")."""
         return getattr(self.estimator, "last_integration", None)
+
+    @property
+    def last_spectrum(self) -> BlockSpectrum | None:
+        """The Welch spectrum of the last block the estimator analysed in full (``estimate.BlockSpectrum``; None:
+        none yet). A light analysis or a rejected block leaves the previous one (its ``stamp_ns`` says which)."""
+        return getattr(self.estimator, "last_spectrum", None)
 
     @property
     def state_summary(self) -> dict[str, float]:

@@ -22,6 +22,7 @@ from rfi_monitor.load_policy import SHED_CREDIT_CAP_S
 from rfi_monitor.monitor import RfiMonitorParams
 from rfi_monitor.ridge import RidgeParams
 from rfi_monitor.spectral_step import SpectralStepParams
+from rfi_monitor.spectrum_view import WaterfallParams
 from rfi_monitor.sweep_analysis import SweepAnalysisParams
 from rfi_monitor.sweep_period import SweepPeriodParams
 from rfi_monitor.tracking_filters import MODE_AFKF, MODE_AKF, MODE_KF, TrackingFilterParams
@@ -422,8 +423,16 @@ class MonitorNodeParams(NodeDiagnosticsParams):
         _C.confidence_slope_db, 'J/N margin over the threshold that maps to a confidence of 0.73, dB.',
         minimum=1e-6, maximum=100.0)
 
+    # --- topics made to be drawn (issue 30; defined in rfi_monitor.spectrum_view) ---------------
+    spectrum_rate_hz: float = parameter_from(WaterfallParams, 'spectrum_rate_hz')
+    spectrum_rows: int = parameter_from(WaterfallParams, 'spectrum_rows')
+    spectrum_min_dbfs: float = parameter_from(WaterfallParams, 'spectrum_min_dbfs')
+    spectrum_max_dbfs: float = parameter_from(WaterfallParams, 'spectrum_max_dbfs')
+    spectrum_frame_id: str = parameter_from(WaterfallParams, 'spectrum_frame_id')
+
     def __post_init__(self) -> None:
         validate_ranges(self)
+        WaterfallParams(**{f.name: getattr(self, f.name) for f in dataclasses.fields(WaterfallParams)})
         if self.max_block_samples < self.min_block_samples:
             raise ValueError(f'max_block_samples {self.max_block_samples} must be >= min_block_samples '
                              f'{self.min_block_samples}')

@@ -49,6 +49,7 @@ from rfi_monitor.estimate import (
     TRACKER_COUNTERS,
     Block,
     BlockCounters,
+    BlockSpectrum,
     JammerEstimate,
     jammer_to_signal_db,
     off_floor,
@@ -142,6 +143,8 @@ class StftEstimator:
         self._sweep = SweepMemory(params.integration.window_s)
         self.last_step: StepDecision | None = None
         self.last_integration: IntegratedDecision | None = None
+        self.last_spectrum: BlockSpectrum | None = None
+        """The Welch spectrum of the last block analysed in full (for display: ``RfiMonitor.last_spectrum``)."""
         self._last_single = NONE
         self._off_floor_run = 0
         self._last_full: LastFull | None = None
@@ -281,6 +284,7 @@ class StftEstimator:
         p = self.params
         cp = p.classifier
         psd, frames = welch_psd(block.samples, cp.nfft, cp.max_frames)
+        self.last_spectrum = BlockSpectrum(block.stamp_ns, psd, block.fs, block.fif, block.cplx)   # for display
         power = float(psd.sum())
         if not math.isfinite(power):
             return self._counts.rejected(POWER_OVERFLOW, block)

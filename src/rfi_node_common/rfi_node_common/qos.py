@@ -94,3 +94,14 @@ LATCHED_QOS = QoSProfile(
 )
 """A value set once that a late subscriber must still get (REP 2003 latched status; the fusion node's
 datum): reliable, transient local, depth 1. A subscriber asks for TRANSIENT_LOCAL to receive it on joining."""
+
+VIEW_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=5,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+"""Topics made to be drawn (the monitor's waterfall, the fusion's path and markers; issue 30): reliable, volatile,
+keep last 5. Reliable so that a bag recorder gets every one; rviz2 and Foxglove subscribe best effort or reliable,
+both accepted. A shallow queue: a viewer that falls behind gets the newest picture, not a backlog (each message
+replaces the last: a waterfall, a whole path, a whole marker set)."""

@@ -84,6 +84,8 @@ class FilterState:
     last_gnss_stamp: int | None = None
     last_uwb_stamp: int | None = None
     last_prep: tuple[int, PreparedEpoch] | None = None
+    # (stamp, keys constellation * 1000 + svid of the pseudoranges the last GNSS epoch applied): for display
+    last_used_satellites: tuple[int, np.ndarray] | None = None
     uwb_scratch: np.ndarray = field(default_factory=lambda: np.zeros(6))  # the compiled UWB update's diagnostics
     # ---- start-up and divergence (.lifecycle)
     drift_memory_mps: float | None = None

@@ -34,6 +34,9 @@ the parameter). When no input has arrived for ``input_timeout_s`` of wall time, 
 input for N s", with the counters) is published instead, stamped with the node clock's now: the only
 use of the wall clock besides ``idle_flush_s``.
 
+Topics made to be drawn (issue 30): /fusion/path, /fusion/markers, /fusion/satellites in ``map_frame_id``, only
+while subscribed (:mod:`.view_topics`, geometry in :mod:`.fusion_view`).
+
 Parameters settable while running (``ros2 param set``): see :class:`FusionNodeParams`; a change is
 validated as at start (:class:`rfi_node_common.params.RuntimeParameters`) and applied before the
 re-ordering buffer next releases a message to the core (:meth:`FusionNode.apply_parameter_changes`).
@@ -71,15 +74,19 @@ from uwb_gnss_fusion.fusion_node_params import FusionNodeParams
 from uwb_gnss_fusion.fusion_output import all_finite
 from uwb_gnss_fusion.input_admission import InputAdmission, Item, admit_jammer_state, jammer_rejection_text
 from uwb_gnss_fusion.integrity_policy import verdict_of
-from uwb_gnss_fusion.local_frame import LocalFrame
+from uwb_gnss_fusion.local_frame import LocalFrame, LocalSolution
 from uwb_gnss_fusion.message_checks import checked_satellites, uwb_range_reason
+from uwb_gnss_fusion.view_topics import FusionView
 
 TOPICS = """topics:
   subscribes /gnss/measurements (rfi_msgs/GnssMeasurementArray), /uwb/ranges (rfi_msgs/UwbRange),
              /rfi/jammer_state (rfi_msgs/JammerState), /gnss/integrity (rfi_msgs/GnssIntegrity)
   publishes  /fusion/odometry (nav_msgs/Odometry, ECEF), /fusion/local_odometry (nav_msgs/Odometry, map ->
              base_link), /fusion/fix (sensor_msgs/NavSatFix), /fusion/datum (sensor_msgs/NavSatFix, latched: the
-             origin of map), /fusion/status (rfi_msgs/FusionStatus), /diagnostics (diagnostic_msgs/DiagnosticArray)"""
+             origin of map), /fusion/status (rfi_msgs/FusionStatus), /diagnostics (diagnostic_msgs/DiagnosticArray),
+             /fusion/path (nav_msgs/Path, map), /fusion/markers (visualization_msgs/MarkerArray: UWB anchors,
+             covariance ellipse), /fusion/satellites (visualization_msgs/MarkerArray: used, rejected) (the last three
+             only while subscribed, every 1/view_rate_hz of stamp time)"""
 
 JAMMER_TYPES = frozenset((JammerState.NONE, JammerState.CW, JammerState.CHIRP, JammerState.WIDEBAND,
                           JammerState.UNKNOWN))
@@ -114,6 +121,8 @@ class FusionNode(Node):
         self.datum_pub = self.create_publisher(NavSatFix, 'fusion/datum', LATCHED_QOS)
         self.status_pub = self.create_publisher(FusionStatus, 'fusion/status', DATA_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self.view = FusionView(self, p, self.local_frame)   # path and markers: published only while subscribed
+        self._last_solution: LocalSolution | None = None
         # compile before subscribing: the node appears when it can keep up
         for module in (ckf_kernels, fusion_output, local_frame, multilateration):
             module.warm_up()
@@ -300,6 +309,18 @@ class FusionNode(Node):
             self.get_logger().error(f'publishing the output of a {item.kind} message at {item.stamp_ns} ns failed: '
                                     f'{type(err).__name__}: {err}',
                                     throttle_duration_sec=self.params.warning_throttle_s)
+        self._draw(item, out)
+
+    def _draw(self, item: Item, out: FusionOutput) -> None:
+        """The topics made to be drawn (:mod:`.view_topics`: one comparison per input while nobody subscribes); a
+        failure is counted (``view_errors``) and logged, never raised."""
+        try:
+            self.view.after_input(item.stamp_ns, item.kind, item.payload, out, self._last_solution,
+                                  self.core.filter.state.last_used_satellites)
+        except Exception as err:  # noqa: BLE001 - a drawing must never cost an estimate
+            self.counts['view_errors'] += 1
+            self.get_logger().error(f'fusion view topics not published: {type(err).__name__}: {err}',
+                                    throttle_duration_sec=self.params.warning_throttle_s)
 
     def apply_parameter_changes(self) -> bool:
         """Apply a change of the settable parameters (validated when it was set, :class:`RuntimeParameters`)
@@ -359,6 +380,7 @@ class FusionNode(Node):
                                                   earth, p.antenna_position_m, p.heading_source,
                                                   p.heading_min_speed_mps)
         self.local_odom_pub.publish(msgs.local_odometry_msg(sol, p.map_frame_id, p.base_frame_id))
+        self._last_solution = sol
 
     # ------------------------------------------------------------------ diagnostics
     def accounting(self) -> dict[str, object]:

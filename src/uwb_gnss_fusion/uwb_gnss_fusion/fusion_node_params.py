@@ -26,8 +26,9 @@ from rfi_node_common.diagnostics import (
     warn_lost_fraction_parameter,
     warn_rejected_fraction_parameter,
 )
-from rfi_node_common.params import USER, ConfigFile, parameter, validate_ranges
+from rfi_node_common.params import USER, ConfigFile, parameter, parameter_from, validate_ranges
 from uwb_gnss_fusion.fusion_params import FRAME_EARTH, FRAME_MAP, FusionParams
+from uwb_gnss_fusion.fusion_view import FusionViewParams
 from uwb_gnss_fusion.local_frame import HEADING_SOURCES
 
 LOCAL_ORIGINS = ('first_fix', 'datum')
@@ -184,6 +185,11 @@ class FusionNodeParams(FusionParams):
     loop_rate_floor_mps: float = parameter(
         _LOOP.rate_floor_mps, 'Pseudorange-rate 1-sigma floor added in quadrature, m/s.',
         minimum=0.0, maximum=100.0, read_only=False)
+    # --- topics made to be drawn (issue 30; defined in uwb_gnss_fusion.fusion_view) ------------
+    view_rate_hz: float = parameter_from(FusionViewParams, 'view_rate_hz')
+    path_max_poses: int = parameter_from(FusionViewParams, 'path_max_poses')
+    covariance_probability: float = parameter_from(FusionViewParams, 'covariance_probability')
+    satellite_marker_distance_m: float = parameter_from(FusionViewParams, 'satellite_marker_distance_m')
 
     def __post_init__(self) -> None:
         # the core's ``loop`` is not a parameter of its own: it is made of the loop_* parameters
@@ -253,6 +259,8 @@ Outputs /fusion/odometry (nav_msgs/Odometry, ECEF), /fusion/local_odometry (nav_
         map_frame_id -> base_frame_id, for robot_localization), /fusion/fix (sensor_msgs/NavSatFix,
         earth frame only, for navsat_transform), /fusion/datum (NavSatFix, latched: origin of
         map_frame_id), /fusion/status (rfi_msgs/FusionStatus, one per processed measurement),
-        /diagnostics (every diagnostics_period_s of stamp time).
+        /diagnostics (every diagnostics_period_s of stamp time); only while subscribed, every
+        1/view_rate_hz of stamp time: /fusion/path (nav_msgs/Path), /fusion/markers and
+        /fusion/satellites (visualization_msgs/MarkerArray), all in map_frame_id.
 """)
 """The shipped config/fusion.yaml (:func:`rfi_node_common.params.config_yaml`)."""

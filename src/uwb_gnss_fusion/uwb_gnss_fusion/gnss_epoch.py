@@ -132,6 +132,8 @@ def process_gnss(f: FilterFacade, epoch: GnssEpoch) -> FusionOutput:
     if (f.params.uwb_mirror_test or f.params.uwb_tag_side_of_anchor_plane) and f.params.use_uwb:
         mirror_check(f, stamp, prep, acc_pr, cols)
     used = int(acc_pr.sum())
+    if prep.sat_id is not None:
+        s.last_used_satellites = (stamp, prep.sat_id[acc_pr])
     if used or acc_rate.any():
         s.last_gnss_stamp = stamp
     n_applied = int(res.accepted.sum())
@@ -174,6 +176,8 @@ def start_from_fix(f: FilterFacade, stamp: int, prep: PreparedEpoch, n_obs: int,
     s.ref_system = fix_system
     s.update_bias_states(stamp, prep, f.count)
     s.last_gnss_stamp = stamp
+    if prep.sat_id is not None:
+        s.last_used_satellites = (stamp, prep.sat_id)
     return f.output(False, sat_used=prep.pr.size, sat_rej=pre_rejected)
 
 
