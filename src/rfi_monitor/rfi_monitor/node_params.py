@@ -499,3 +499,10 @@ Output /rfi/jammer_state (rfi_msgs/JammerState): one per analysed block, same he
        row the floor is learned again). The full list: rfi_monitor/rfi_monitor_node.py.
 """)
 """The shipped config/rfi_monitor.yaml (:func:`rfi_node_common.params.config_yaml`)."""
+
+TOPICS = """topics:
+  subscribes /rfi/if_samples (rfi_msgs/IfSamples)
+  publishes  /rfi/jammer_state (rfi_msgs/JammerState), /diagnostics (diagnostic_msgs/DiagnosticArray),
+             /rfi/spectrum/waterfall (sensor_msgs/Image), /rfi/spectrum/swept_band (visualization_msgs/ImageMarker)
+             (the last two only while subscribed, every 1/spectrum_rate_hz of stamp time)"""
+"""The topics of rfi_monitor_node, for its ``--help``."""

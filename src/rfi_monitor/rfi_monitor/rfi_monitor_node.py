@@ -59,14 +59,9 @@ rejected. :func:`warm_up` compiles the numba functions before the node subscribe
 
 Second core: ``analysis_worker`` (off by default; :mod:`rfi_monitor.analysis_worker`): the ridge analysis in a child
 process, the same estimates; a child that fails is counted (``core.worker_failures``); slower on 2 vCPUs.
-
-Topics made to be drawn (issue 30): the spectrum waterfall ``rfi/spectrum/waterfall`` and the swept band on it
-``rfi/spectrum/swept_band``, only while subscribed (:mod:`rfi_monitor.spectrum_topics`,
-:mod:`rfi_monitor.spectrum_view`).
-
-Stale input: :class:`rfi_node_common.inputs.StaleInputWatch` publishes a STALE status (stamped with
-the node clock, the only wall-clock use; no estimate depends on it) while nothing has arrived for
-``input_timeout_s``.
+Drawn topics (issue 30: the waterfall and its swept band), only while subscribed: :mod:`rfi_monitor.spectrum_topics`.
+Stale input: :class:`rfi_node_common.inputs.StaleInputWatch` publishes a STALE status (stamped with the node clock,
+the only wall-clock use; no estimate depends on it) while nothing has arrived for ``input_timeout_s``.
 """
 
 from __future__ import annotations
@@ -97,7 +92,7 @@ from rfi_monitor.block_io import (
 )
 from rfi_monitor.load_policy import FULL, LIGHT, SHED, LoadPolicy, LoadPolicyParams
 from rfi_monitor.monitor import NON_FINITE, RfiMonitor
-from rfi_monitor.node_params import NESTED, TRACKER_MODES, MonitorNodeParams
+from rfi_monitor.node_params import NESTED, TOPICS, TRACKER_MODES, MonitorNodeParams
 from rfi_monitor.spectrum_topics import SpectrumTopics
 from rfi_monitor.warm_up import warm_up
 from rfi_msgs.msg import IfSamples, JammerState
@@ -124,11 +119,6 @@ __all__ = ['MAX_SAMPLE_INDEX', 'NESTED', 'SAMPLE_DTYPES', 'SAMPLE_WIDTH_BYTES', 
 """Also re-exported here: the message conversions (rfi_monitor.block_io), the parameters (rfi_monitor.node_params) and
 warm_up (rfi_monitor.warm_up)."""
 
-TOPICS = """topics:
-  subscribes /rfi/if_samples (rfi_msgs/IfSamples)
-  publishes  /rfi/jammer_state (rfi_msgs/JammerState), /diagnostics (diagnostic_msgs/DiagnosticArray),
-             /rfi/spectrum/waterfall (sensor_msgs/Image), /rfi/spectrum/swept_band (visualization_msgs/ImageMarker)
-             (the last two only while subscribed, every 1/spectrum_rate_hz of stamp time)"""
 
 IF_TOPIC = 'rfi/if_samples'
 """Input topic, relative: /rfi/if_samples without a namespace, /<ns>/rfi/if_samples with ``-r __ns:=/<ns>``."""
@@ -314,18 +304,10 @@ class RfiMonitorNode(Node):
         self._last_clipped_fraction = float(est.clipped_fraction)
         self.state_pub.publish(jammer_state_msg(est, msg))
         self.counts['states_published'] += 1
-        self._draw(stamp_ns, est, msg)
+        # the topics made to be drawn (nothing done unless subscribed; a failure counted, spectrum_errors)
+        self.spectrum.on_estimate_logged(self.counts, self.params.warning_throttle_s, stamp_ns, est,
+                                         self.monitor.last_spectrum, int(msg.bits_per_sample), msg.scale)
         return None
-
-    def _draw(self, stamp_ns: int, est: Any, msg: IfSamples) -> None:
-        """The topics made to be drawn (rfi_monitor.spectrum_topics: nothing done unless subscribed); a failure is
-        counted (``spectrum_errors``) and logged, never raised."""
-        try:
-            self.spectrum.on_estimate(stamp_ns, est, self.monitor.last_spectrum, int(msg.bits_per_sample), msg.scale)
-        except Exception as err:  # noqa: BLE001 - a picture must never cost an estimate
-            self.counts['spectrum_errors'] += 1
-            self.get_logger().error(f'spectrum topics not published: {type(err).__name__}: {err}',
-                                    throttle_duration_sec=self.params.warning_throttle_s)
 
     def _publish(self, make: Any) -> None:
         """Publish the diagnostics ``make()`` builds; a failure is logged, never raised (diagnostics only)."""

@@ -84,6 +84,7 @@ class SpectrumTopics:
         self._timer = StampTimer(self._period_s)
         self.image_pub = node.create_publisher(Image, WATERFALL_TOPIC, VIEW_QOS)
         self.band_pub = node.create_publisher(ImageMarker, SWEPT_BAND_TOPIC, VIEW_QOS)
+        self._logger = node.get_logger()
         self.active = False
         self.published = 0
         """Waterfall images published."""
@@ -93,6 +94,17 @@ class SpectrumTopics:
     def listened(self) -> bool:
         """Someone subscribes to either topic (the first thing asked for each block)."""
         return self.image_pub.get_subscription_count() > 0 or self.band_pub.get_subscription_count() > 0
+
+    def on_estimate_logged(self, counts: Any, throttle_s: float, stamp_ns: int, est: JammerEstimate, spectrum: Any,
+                           bits: int, scale: float) -> None:
+        """:meth:`on_estimate`, a failure counted (``counts['spectrum_errors']``) and logged at most once per
+        ``throttle_s``, never raised: a picture must never cost an estimate."""
+        try:
+            self.on_estimate(stamp_ns, est, spectrum, bits, scale)
+        except Exception as err:  # noqa: BLE001 - a picture must never cost an estimate
+            counts['spectrum_errors'] += 1
+            self._logger.error(f'spectrum topics not published: {type(err).__name__}: {err}',
+                               throttle_duration_sec=throttle_s)
 
     def on_estimate(self, stamp_ns: int, est: JammerEstimate, spectrum: Any, bits: int, scale: float) -> bool:
         """After a block's estimate: when someone listens and a row is due, add the latest spectrum (``spectrum``, a

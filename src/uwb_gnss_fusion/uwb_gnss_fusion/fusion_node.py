@@ -32,10 +32,8 @@ range), /fusion/odometry and /fusion/fix (only while the filter is initialised a
 /diagnostics every ``diagnostics_period_s`` of stamp time (:mod:`.fusion_diagnostics`; ``hardware_id``
 the parameter). When no input has arrived for ``input_timeout_s`` of wall time, a STALE status ("no
 input for N s", with the counters) is published instead, stamped with the node clock's now: the only
-use of the wall clock besides ``idle_flush_s``.
-
-Topics made to be drawn (issue 30): /fusion/path, /fusion/markers, /fusion/satellites in ``map_frame_id``, only
-while subscribed (:mod:`.view_topics`, geometry in :mod:`.fusion_view`).
+use of the wall clock besides ``idle_flush_s``. Drawn topics (issue 30: /fusion/path, /fusion/markers,
+/fusion/satellites), only while subscribed: :mod:`.view_topics`.
 
 Parameters settable while running (``ros2 param set``): see :class:`FusionNodeParams`; a change is
 validated as at start (:class:`rfi_node_common.params.RuntimeParameters`) and applied before the
@@ -70,23 +68,13 @@ from uwb_gnss_fusion import output_messages as msgs
 from uwb_gnss_fusion.fusion_core import FusionCore
 from uwb_gnss_fusion.fusion_diagnostics import MIRROR_WARNING, FusionDiagnostics, accounting
 from uwb_gnss_fusion.fusion_filter import FRAME_EARTH, FRAME_MAP, FusionOutput
-from uwb_gnss_fusion.fusion_node_params import FusionNodeParams
+from uwb_gnss_fusion.fusion_node_params import TOPICS, FusionNodeParams
 from uwb_gnss_fusion.fusion_output import all_finite
 from uwb_gnss_fusion.input_admission import InputAdmission, Item, admit_jammer_state, jammer_rejection_text
 from uwb_gnss_fusion.integrity_policy import verdict_of
 from uwb_gnss_fusion.local_frame import LocalFrame, LocalSolution
 from uwb_gnss_fusion.message_checks import checked_satellites, uwb_range_reason
 from uwb_gnss_fusion.view_topics import FusionView
-
-TOPICS = """topics:
-  subscribes /gnss/measurements (rfi_msgs/GnssMeasurementArray), /uwb/ranges (rfi_msgs/UwbRange),
-             /rfi/jammer_state (rfi_msgs/JammerState), /gnss/integrity (rfi_msgs/GnssIntegrity)
-  publishes  /fusion/odometry (nav_msgs/Odometry, ECEF), /fusion/local_odometry (nav_msgs/Odometry, map ->
-             base_link), /fusion/fix (sensor_msgs/NavSatFix), /fusion/datum (sensor_msgs/NavSatFix, latched: the
-             origin of map), /fusion/status (rfi_msgs/FusionStatus), /diagnostics (diagnostic_msgs/DiagnosticArray),
-             /fusion/path (nav_msgs/Path, map), /fusion/markers (visualization_msgs/MarkerArray: UWB anchors,
-             covariance ellipse), /fusion/satellites (visualization_msgs/MarkerArray: used, rejected) (the last three
-             only while subscribed, every 1/view_rate_hz of stamp time)"""
 
 JAMMER_TYPES = frozenset((JammerState.NONE, JammerState.CW, JammerState.CHIRP, JammerState.WIDEBAND,
                           JammerState.UNKNOWN))
@@ -309,18 +297,9 @@ class FusionNode(Node):
             self.get_logger().error(f'publishing the output of a {item.kind} message at {item.stamp_ns} ns failed: '
                                     f'{type(err).__name__}: {err}',
                                     throttle_duration_sec=self.params.warning_throttle_s)
-        self._draw(item, out)
-
-    def _draw(self, item: Item, out: FusionOutput) -> None:
-        """The topics made to be drawn (:mod:`.view_topics`: one comparison per input while nobody subscribes); a
-        failure is counted (``view_errors``) and logged, never raised."""
-        try:
-            self.view.after_input(item.stamp_ns, item.kind, item.payload, out, self._last_solution,
-                                  self.core.filter.state.last_used_satellites)
-        except Exception as err:  # noqa: BLE001 - a drawing must never cost an estimate
-            self.counts['view_errors'] += 1
-            self.get_logger().error(f'fusion view topics not published: {type(err).__name__}: {err}',
-                                    throttle_duration_sec=self.params.warning_throttle_s)
+        p, state = self.params, self.core.filter.state
+        self.view.after_input_logged(self.counts, p.warning_throttle_s, item.stamp_ns, item.kind, item.payload, out,
+                                     self._last_solution, state.last_used_satellites)
 
     def apply_parameter_changes(self) -> bool:
         """Apply a change of the settable parameters (validated when it was set, :class:`RuntimeParameters`)

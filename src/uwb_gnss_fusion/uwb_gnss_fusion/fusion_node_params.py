@@ -264,3 +264,14 @@ Outputs /fusion/odometry (nav_msgs/Odometry, ECEF), /fusion/local_odometry (nav_
         /fusion/satellites (visualization_msgs/MarkerArray), all in map_frame_id.
 """)
 """The shipped config/fusion.yaml (:func:`rfi_node_common.params.config_yaml`)."""
+
+TOPICS = """topics:
+  subscribes /gnss/measurements (rfi_msgs/GnssMeasurementArray), /uwb/ranges (rfi_msgs/UwbRange),
+             /rfi/jammer_state (rfi_msgs/JammerState), /gnss/integrity (rfi_msgs/GnssIntegrity)
+  publishes  /fusion/odometry (nav_msgs/Odometry, ECEF), /fusion/local_odometry (nav_msgs/Odometry, map ->
+             base_link), /fusion/fix (sensor_msgs/NavSatFix), /fusion/datum (sensor_msgs/NavSatFix, latched: the
+             origin of map), /fusion/status (rfi_msgs/FusionStatus), /diagnostics (diagnostic_msgs/DiagnosticArray),
+             /fusion/path (nav_msgs/Path, map), /fusion/markers (visualization_msgs/MarkerArray: UWB anchors,
+             covariance ellipse), /fusion/satellites (visualization_msgs/MarkerArray: used, rejected) (the last three
+             only while subscribed, every 1/view_rate_hz of stamp time)"""
+"""The topics of fusion_node, for its ``--help``."""

@@ -93,6 +93,7 @@ class FusionView:
         self.path_pub = node.create_publisher(Path, PATH_TOPIC, VIEW_QOS)
         self.markers_pub = node.create_publisher(MarkerArray, MARKERS_TOPIC, VIEW_QOS)
         self.satellites_pub = node.create_publisher(MarkerArray, SATELLITES_TOPIC, VIEW_QOS)
+        self._logger = node.get_logger()
         self.active = False
         self._path: deque[PoseStamped] = deque(maxlen=int(params.path_max_poses))
         self._anchors: dict[str, tuple[np.ndarray, str]] = {}
@@ -105,6 +106,17 @@ class FusionView:
         """Someone subscribes to one of the topics."""
         return (self.path_pub.get_subscription_count() > 0 or self.markers_pub.get_subscription_count() > 0
                 or self.satellites_pub.get_subscription_count() > 0)
+
+    def after_input_logged(self, counts: Any, throttle_s: float, stamp_ns: int, kind: str, payload: Any, out: Any,
+                           solution: LocalSolution | None, used_satellites: tuple[int, np.ndarray] | None) -> None:
+        """:meth:`after_input`, a failure counted (``counts['view_errors']``) and logged at most once per
+        ``throttle_s``, never raised: a drawing must never cost an estimate."""
+        try:
+            self.after_input(stamp_ns, kind, payload, out, solution, used_satellites)
+        except Exception as err:  # noqa: BLE001 - a drawing must never cost an estimate
+            counts['view_errors'] += 1
+            self._logger.error(f'fusion view topics not published: {type(err).__name__}: {err}',
+                               throttle_duration_sec=throttle_s)
 
     def after_input(self, stamp_ns: int, kind: str, payload: Any, out: Any, solution: LocalSolution | None,
                     used_satellites: tuple[int, np.ndarray] | None) -> bool:
