@@ -350,16 +350,11 @@ class GnssEpochBuilder:
             pr = selected.pseudorange_m
             code = selected.pseudorange_observable
             if p.ionosphere_free and sys_char == "G":
-                # version unknown: the RINEX 2 names if the satellite has one, else the RINEX 3 ones
-                pair = version_pair or (GPS_DUAL_FREQUENCY_CODES[2] if ("P1" in values or "P2" in values)
-                                        else GPS_DUAL_FREQUENCY_CODES[3])
-                pr1 = values.get(pair[0], math.nan)
-                pr2 = values.get(pair[1], math.nan)
-                if not (math.isfinite(pr1) and math.isfinite(pr2) and pr1 > 0.0 and pr2 > 0.0):
+                combined = _ionosphere_free_pair(values, version_pair)
+                if combined is None:
                     skip(sat_id, "missing_dual_frequency")
                     continue
-                pr = float(ionosphere_free_pseudorange_m(pr1, pr2, GPS_L1_FREQUENCY_HZ, GPS_L2_FREQUENCY_HZ))
-                code = f"{pair[0]}+{pair[1]}"
+                pr, code = combined
             max_pr = p.max_pseudorange_high_orbit_m if sys_char in ("C", "J") else p.max_pseudorange_m
             if not p.min_pseudorange_m <= pr <= max_pr:
                 skip(sat_id, "pseudorange_out_of_range")
@@ -405,29 +400,16 @@ class GnssEpochBuilder:
         ref, source = self._reference_position(systems, pos, pr_arr, clk_m)
         iono, tropo = self._atmosphere(ref, source, pos, freq_arr, tow, extra)
         if any(dual):
-            # the ionosphere-free user: no ionospheric model, the clock polynomial without T_GD
-            # (IS-GPS-200, 20.3.3.3.3.2-3); _states_at_transmit subtracted T_GD (L1 user)
-            is_dual = np.asarray(dual)
-            tgd_m = np.array([SPEED_OF_LIGHT_MPS * getattr(e, "tgd_s", 0.0) for e in ephs])
-            clk_m = np.where(is_dual, clk_m + tgd_m, clk_m)
-            iono = np.where(is_dual & np.isfinite(iono), 0.0, iono)
+            clk_m, iono = _ionosphere_free_user(np.asarray(dual), ephs, clk_m, iono)
 
         rates = -(SPEED_OF_LIGHT_MPS / freq_arr) * np.asarray(dops)
         observations = tuple(
-            SatelliteObservation(
-                constellation=CONSTELLATION_CODES[systems[i]],
-                svid=prns[i],
-                pseudorange_m=float(pr_arr[i]),
-                pseudorange_rate_mps=float(rates[i]),
-                cn0_dbhz=float(cn0s[i]),
-                satellite_position_ecef_m=pos[i].copy(),
-                satellite_velocity_ecef_mps=vel[i].copy(),
-                satellite_clock_bias_m=float(clk_m[i]),
-                satellite_clock_drift_mps=float(drift_mps[i]),
-                ionosphere_delay_m=float(iono[i]),
-                troposphere_delay_m=float(tropo[i]),
-                carrier_frequency_hz=float(freq_arr[i]),
-            )
+            SatelliteObservation(constellation=CONSTELLATION_CODES[systems[i]], svid=prns[i],
+                                 pseudorange_m=float(pr_arr[i]), pseudorange_rate_mps=float(rates[i]),
+                                 cn0_dbhz=float(cn0s[i]), satellite_position_ecef_m=pos[i].copy(),
+                                 satellite_velocity_ecef_mps=vel[i].copy(), satellite_clock_bias_m=float(clk_m[i]),
+                                 satellite_clock_drift_mps=float(drift_mps[i]), ionosphere_delay_m=float(iono[i]),
+                                 troposphere_delay_m=float(tropo[i]), carrier_frequency_hz=float(freq_arr[i]))
             for i in range(n)
         )
         epoch = GnssEpoch(
@@ -512,3 +494,27 @@ def build_epochs(
     """Build every epoch of an observation file (header APPROX POSITION as reference when present)."""
     builder = GnssEpochBuilder.from_rinex(obs, nav, params)
     return [builder.build(e) for e in obs.epochs]
+
+
+def _ionosphere_free_pair(values: dict[str, float], version_pair: tuple[str, str] | None) -> tuple[float, str] | None:
+    """(the GPS ionosphere-free pseudorange of one satellite's P(Y) pair, m; its code, e.g. "P1+P2") or None when
+    the satellite lacks either code (``MeasurementBuilderParams.ionosphere_free``). ``version_pair``: the pair of
+    the file's RINEX version; None (version unknown): the RINEX 2 names if the satellite has one, else the RINEX 3
+    ones."""
+    pair = version_pair or (GPS_DUAL_FREQUENCY_CODES[2] if ("P1" in values or "P2" in values)
+                            else GPS_DUAL_FREQUENCY_CODES[3])
+    pr1 = values.get(pair[0], math.nan)
+    pr2 = values.get(pair[1], math.nan)
+    if not (math.isfinite(pr1) and math.isfinite(pr2) and pr1 > 0.0 and pr2 > 0.0):
+        return None
+    return (float(ionosphere_free_pseudorange_m(pr1, pr2, GPS_L1_FREQUENCY_HZ, GPS_L2_FREQUENCY_HZ)),
+            f"{pair[0]}+{pair[1]}")
+
+
+def _ionosphere_free_user(is_dual: np.ndarray, ephs: list, clk_m: np.ndarray, iono: np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray]:
+    """(satellite clocks, ionospheric delays), m, of an epoch whose ``is_dual`` satellites carry ionosphere-free
+    pseudoranges: no ionospheric model, the clock polynomial without T_GD (IS-GPS-200, 20.3.3.3.3.2-3;
+    ``_states_at_transmit`` subtracted T_GD, as for an L1 user)."""
+    tgd_m = np.array([SPEED_OF_LIGHT_MPS * getattr(e, "tgd_s", 0.0) for e in ephs])
+    return np.where(is_dual, clk_m + tgd_m, clk_m), np.where(is_dual & np.isfinite(iono), 0.0, iono)
