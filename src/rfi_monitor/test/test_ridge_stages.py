@@ -56,6 +56,22 @@ def test_stft_power_is_the_numpy_stft(cplx):
             np.testing.assert_array_equal(f, f0)
 
 
+def test_fft_inplace_is_numpys_fft():
+    """The period search's autocorrelation calls scipy's pocketfft directly (``stft.fft_inplace``): it gives numpy's
+    np.fft.fft of the zero-padded sequence and np.fft.ifft of its power to the bit, at the sizes the search uses."""
+    rng = np.random.default_rng(7)
+    for T in (60, 255, 511, 1249):
+        nf = 1 << int(math.ceil(math.log2(2 * T)))
+        u = rng.standard_normal(T) + 1j * rng.standard_normal(T)
+        v = u - u.mean()
+        V0 = np.fft.fft(v, nf)
+        V = np.zeros(nf, dtype=np.complex128)
+        V[:T] = v
+        V = stft.fft_inplace(V, True)
+        np.testing.assert_array_equal(V, V0)
+        np.testing.assert_array_equal(stft.fft_inplace(V * np.conj(V), False), np.fft.ifft(V0 * np.conj(V0)))
+
+
 @pytest.mark.parametrize("cplx", [False, True])
 def test_noise_power_of_white_noise_is_its_power(cplx):
     """The in-block noise power (Parseval over the levels, the estimator's gain divided out) of white noise is its
