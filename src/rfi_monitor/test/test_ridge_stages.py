@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from scipy import fft as sp_fft
 
-from rfi_monitor import folded_spectrum, frame_length, ridge_periodicity, stft, sweep_shape
+from rfi_monitor import folded_spectrum, frame_length, numpy_kernels, ridge_periodicity, stft, sweep_shape
 from rfi_monitor import ridge as rg
 
 
@@ -70,6 +70,22 @@ def test_fft_inplace_is_numpys_fft():
         V = stft.fft_inplace(V, True)
         np.testing.assert_array_equal(V, V0)
         np.testing.assert_array_equal(stft.fft_inplace(V * np.conj(V), False), np.fft.ifft(V0 * np.conj(V0)))
+
+
+def test_column_order_statistic_is_numpys_partition():
+    """noise_levels' compiled selection (long columns) gives np.partition's k-th value of each column to the bit: on
+    exponential powers, on values with many ties, with NaN (numpy orders it last), for every kind of k."""
+    rng = np.random.default_rng(8)
+    for n in (1, 2, 9, 64, 255, 768, 1249, 3000):
+        for trial in range(6):
+            S = rng.exponential(size=(n, 5)).astype(np.float32 if trial % 2 else np.float64)
+            if trial in (2, 3):
+                S = np.round(S * 3).astype(S.dtype)                 # ties
+            if trial >= 4 and n > 2:
+                S[rng.integers(0, n, size=max(1, n // 3)), rng.integers(0, 5, size=max(1, n // 3))] = np.nan
+            for k in sorted({0, n // 10, n // 2, n - 2, n - 1} - {-1}):
+                got = numpy_kernels.column_order_statistic(S, k)
+                np.testing.assert_array_equal(got, np.partition(np.ascontiguousarray(S.T), k, axis=1)[:, k])
 
 
 @pytest.mark.parametrize("cplx", [False, True])
