@@ -341,10 +341,10 @@ def stage_measurements() -> dict[tuple[str, str], list[dict]]:
 
 ISSUE26_NOTES = """Issue 26 item 2, this round (2026-12-07): **the goal is not met.** Measured in the run above (the
 machine shared by 4 sessions on 2 cores, so the absolute times are high; the ratios to the bare STFT are the
-figures to read): at 38.192 MS/s the full analysis costs 9-10 bare STFTs of its block (goal: about 3-4), 0.57-0.75x
-real time; at 10 MS/s complex 19-24 bare STFTs (0.46-0.66x); at 24 MS/s real 14-15 (0.55-0.85x). The p99 block was
-at most 4.5 ms in every case once the compiled functions are warmed up as the node does (the cold first blocks of a
-stream cost 70-340 ms: numba loading its cache).
+figures to read): at 38.192 MS/s the full analysis costs 8.3-9.7 bare STFTs of its block (goal: about 3-4),
+0.72-0.93x real time; at 10 MS/s complex 16-21 bare STFTs (0.50-0.77x); at 24 MS/s real 12.5-14 (0.86-0.87x). The p99
+block was at most 4.5 ms in every case once the compiled functions are warmed up as the node does (the cold first
+blocks of a stream cost 70-340 ms: numba loading its cache).
 
 Where the time goes: four different spectrograms of every block, each with its own frame length, window and
 overlap, and 100+ numpy calls of 2-20 us each. Quiet 38.192 MS/s block: the integration over blocks 34 % (its own
@@ -360,6 +360,22 @@ switch-on, equal to those of 93ea8b7; test_ridge_speed_equivalence.py passes): s
 conversion, window and |X|^2 compiled (no temporaries); the integration's fine comb summed from the candidate periods
 directly (no lag and mask arrays of a few hundred candidates x 128 multiples) and its candidate separation compiled.
 Gain 0-5 % of a block, within this machine's noise.
+
+Done, the ridge analysis, second pass (bit-identical: split_reference.py --check, all 900 fields of its 12 streams;
+real_jammers.md's table unchanged): the frame ridges' interpolation, presence flags and means fused into the excess
+pass (two kernels and one np.log instead of ~15 numpy calls; the noise divisors, the complex phasor, the cos/sin tables
+cached per bin count); phase_profiles in one kernel; scipy's pocketfft binding called directly for the STFT's FFT and
+the period search's two FFTs (the same transforms to the bit, without scipy.fft's or numpy.fft's dispatch); the lower
+noise quantile by a compiled selection on long columns (>= 768 frames: 1249 x 16 at 10 MS/s with 16-sample frames,
+where np.partition took 115 us and the selection 48). The ridge stage in bare STFTs, the run above against the
+previous one ('now' of each): 38.192 MS/s 3.3 -> 2.4 (acquisition), 5.2 -> 4.2 (tracking), 4.9 -> 4.0 (switch);
+10 MS/s complex 7.4 -> 5.1, 13.1 -> 11.0, 10.1 -> 9.0; 24 MS/s real 5.0 -> 3.5, 8.7 -> 7.6, 7.8 -> 6.9. What is left
+in it (thread time, a 38.192 MS/s tracking block, the last 16,384 samples at L = 64): the STFT 70 us, the noise levels
+65 us (np.partition 35-45 of it: numpy's selection beats a compiled one on columns of 255-511 frames), the frame
+ridges 45 us, the period search 30 us (its FFTs), the profiles, shape and residuals 40 us, the block-end frequency
+30 us (numpy's linalg in the law's prediction interval, kept for its bits), and the sample-resolution hook test
+(``fine_hook``): 1.5 ms on the 1 block in 20 that runs it (the analytic signal's FFTs of the block), 75-95 us a block
+on average.
 
 What the goal needs (not done): one spectrogram per block shared by the Welch features, the ridge and the
 integration, and the per-block glue in compiled passes. The shared spectrogram changes the statistics (the

@@ -1,7 +1,8 @@
 """Compiled (numba) versions of the numpy reductions the ridge analysis (``rfi_monitor.ridge``) uses inside its
 compiled stages, in numpy's own arithmetic order, so that a compiled stage gives to the bit what the numpy expression
 it replaced gave (issue 14 item 6, issue 26 item 2): the pairwise sum, the first argmax, the linearly interpolated
-quantile and the median of a sorted vector, np.polyfit and np.polyval.
+quantile and the median of a sorted vector, np.polyfit and np.polyval, and the k-th smallest value of each column of a
+matrix (np.partition).
 """
 
 from __future__ import annotations
@@ -120,3 +121,75 @@ def polyfit(x: np.ndarray, y: np.ndarray, deg: int) -> np.ndarray:
             A[i, j] /= scale[j]
     c = np.linalg.lstsq(A, y.copy(), n * 2.220446049250313e-16)[0]
     return c / scale
+
+
+@njit(cache=True, inline="always")
+def _partition_at(a: np.ndarray, left: int, right: int, k: int) -> int:
+    """Floyd and Rivest's partition step: a[left .. right] split about t = a[k] (Hoare's scheme); returns t's place j
+    (a[left .. j - 1] <= t <= a[j + 1 .. right])."""
+    t = a[k]
+    a[left], a[k] = a[k], a[left]
+    if a[right] > t:
+        a[right], a[left] = a[left], a[right]
+    i, j = left, right
+    while i < j:
+        a[i], a[j] = a[j], a[i]
+        i += 1
+        j -= 1
+        while a[i] < t:
+            i += 1
+        while a[j] > t:
+            j -= 1
+    if a[left] == t:
+        a[left], a[j] = a[j], a[left]
+    else:
+        j += 1
+        a[j], a[right] = a[right], a[j]
+    return j
+
+
+@njit(cache=True)
+def _select(a: np.ndarray, k: int) -> Any:
+    """The k-th smallest value (0-based) of a NaN-free vector, which it reorders: Floyd and Rivest's SELECT (1975),
+    its sample step (ranges over 200 values) done by a plain selection instead of a recursion."""
+    left, right = 0, a.size - 1
+    while right > left:
+        if right - left > 200:
+            n = right - left + 1
+            i = k - left + 1
+            z = math.log(n)
+            s = 0.5 * math.exp(2.0 * z / 3.0)
+            sd = 0.5 * math.sqrt(z * s * (n - s) / n) * (1.0 if i - n / 2 >= 0 else -1.0)
+            lo2 = max(left, int(k - i * s / n + sd))
+            hi2 = min(right, int(k + (n - i) * s / n + sd))
+            while hi2 > lo2:
+                j = _partition_at(a, lo2, hi2, k)
+                if j <= k:
+                    lo2 = j + 1
+                if k <= j:
+                    hi2 = j - 1
+        j = _partition_at(a, left, right, k)
+        if j <= k:
+            left = j + 1
+        if k <= j:
+            right = j - 1
+    return a[k]
+
+
+@njit(cache=True)
+def column_order_statistic(S: np.ndarray, k: int) -> np.ndarray:
+    """``np.partition(S.T, k, axis=1)[:, k]`` of a 2-D float array (the k-th smallest value of each column, 0-based;
+    NaN where fewer than k + 1 values of the column are not NaN, as numpy's NaN-last order gives). The value is unique
+    whatever the algorithm (a selection by Floyd and Rivest's SELECT here), so the result is numpy's to the bit."""
+    nfr, B = S.shape
+    q = np.empty(B, dtype=S.dtype)
+    col = np.empty(nfr, dtype=S.dtype)
+    for b in range(B):
+        m = 0
+        for t in range(nfr):
+            v = S[t, b]
+            if v == v:
+                col[m] = v
+                m += 1
+        q[b] = _select(col[:m], k) if k < m else np.nan
+    return q

@@ -250,7 +250,7 @@ def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length
     # the ridge's strongest bins and the sums of the spectral phasor (its periodicity below) in one pass
     rd = frame_ridges(S, freqs, lvl, cplx, par.presence_nats)
     lmax = int(min(par.max_period_s * fs / hop, nfr // 4))
-    per_fr, strength = _periodicity(rd.phasor.astype(np.complex128), int(par.min_period_frames), lmax,
+    per_fr, strength = _periodicity(rd.phasor, int(par.min_period_frames), lmax,
                                     par.min_strength, par.detect_sigma)
     periodic = math.isfinite(per_fr)
     if periodic:

@@ -20,6 +20,7 @@ import numpy as np
 from numba import njit
 
 from rfi_monitor.numpy_kernels import first_argmax, pairwise_sum
+from rfi_monitor.stft import fft_inplace
 
 
 def _periodicity(u: np.ndarray, lmin: int, lmax: int, min_strength: float, detect_sigma: float
@@ -28,10 +29,11 @@ def _periodicity(u: np.ndarray, lmin: int, lmax: int, min_strength: float, detec
     T = u.size
     if lmax <= lmin + 2 or T < 4 * lmin:
         return math.nan, 0.0
-    v = u - u.mean()
     nf = 1 << int(math.ceil(math.log2(2 * T)))
-    V = np.fft.fft(v, nf)
-    R = np.fft.ifft(V * np.conj(V))[:T].real
+    V = np.zeros(nf, dtype=np.complex128)
+    np.subtract(u, u.mean(), out=V[:T])
+    fft_inplace(V, True)                                 # np.fft.fft(u - u.mean(), nf), to the bit
+    R = fft_inplace(V * np.conj(V), False)[:T].real     # np.fft.ifft(V * np.conj(V))[:T].real
     if not R[0] > 0:
         return math.nan, 0.0
     per, strength = _period_from_autocorrelation(np.ascontiguousarray(R), int(lmin), int(lmax),

@@ -367,23 +367,62 @@ class PhaseProfiles:
 def phase_profiles(f: np.ndarray, present: np.ndarray, fuse: np.ndarray, period_frames: float, phase_bins: int,
                    resolution: float) -> PhaseProfiles:
     """The ridge (frequencies f of the frames, present flags, fuse: those whose frequency enters the medians) folded
-    on a period of period_frames frames (module docstring): the fine profile and the coarser one for the shape."""
+    on a period of period_frames frames (module docstring): the fine profile and the coarser one for the shape.
+    Compiled (``_phase_profiles_kernel``)."""
+    prof, inband, se, prof_s, inband_s, se_s, Ks, inb = _phase_profiles_kernel(
+        np.ascontiguousarray(f, dtype=np.float64), np.ascontiguousarray(present, dtype=np.bool_),
+        np.ascontiguousarray(fuse, dtype=np.bool_), float(period_frames), int(phase_bins), float(resolution))
+    return PhaseProfiles(prof, inband, se, prof_s, inband_s, se_s, int(Ks), float(inb))
+
+
+@njit(cache=True)
+def _in_band(prof: np.ndarray, share: np.ndarray, top: float) -> np.ndarray:
+    """Bins with at least half the largest present share (top: the fine profile's) and a finite median;
+    none when top is 0. The share is compared with half of this profile's own largest share."""
+    K = prof.size
+    mx = -np.inf
+    for k in range(K):
+        if share[k] > mx:
+            mx = share[k]
+    out = np.empty(K, dtype=np.bool_)
+    for k in range(K):
+        out[k] = share[k] >= 0.5 * mx and np.isfinite(prof[k]) and top > 0
+    return out
+
+
+@njit(cache=True)
+def _phase_profiles_kernel(f: np.ndarray, present: np.ndarray, use: np.ndarray, period_frames: float, K: int,
+                           resolution: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                                       np.ndarray, int, float]:
+    """phase_profiles, compiled: the same profiles (``_profile_kernel``) and the same tests as the numpy glue it
+    replaced (shares of bins as count / bins, the largest share)."""
     # a period that is not a whole number of frames spreads the frames over all phases, so the profile
     # can be finer than a frame; where it is (nearly) whole, only per_fr phases are seen
-    K = int(phase_bins)
-    prof, share, se = _profile(f, present, period_frames, K, fuse, resolution)
-    if np.mean(np.isnan(prof) & (share == 0)) > 0.25:
+    prof, share, se = _profile_kernel(f, present, use, period_frames, K, resolution)
+    n_empty = 0
+    for k in range(K):
+        if np.isnan(prof[k]) and share[k] == 0:
+            n_empty += 1
+    if n_empty / K > 0.25:
         K = int(max(4, math.floor(period_frames)))
-        prof, share, se = _profile(f, present, period_frames, K, fuse, resolution)
-    top = float(np.max(share))
-    inband = (share >= 0.5 * top) & np.isfinite(prof) & (top > 0)
+        prof, share, se = _profile_kernel(f, present, use, period_frames, K, resolution)
+    top = -np.inf
+    for k in range(K):
+        if share[k] > top:
+            top = share[k]
+    inband = _in_band(prof, share, top)
     # the shape from a coarser profile (at most SHAPE_BINS bins: steps well above the ridge's scatter)
     Ks = min(K, SHAPE_BINS)
-    prof_s, share_s, se_s = (prof, share, se) if Ks == K else _profile(f, present, period_frames, Ks, fuse,
-                                                                       resolution)
-    inband_s = (share_s >= 0.5 * float(np.max(share_s))) & np.isfinite(prof_s) & (top > 0)
-    inb = float(np.mean(inband_s))
+    if Ks == K:
+        prof_s, share_s, se_s = prof, share, se
+    else:
+        prof_s, share_s, se_s = _profile_kernel(f, present, use, period_frames, Ks, resolution)
+    inband_s = _in_band(prof_s, share_s, top)
+    n_in = 0
+    for k in range(Ks):
+        n_in += 1 if inband_s[k] else 0
+    inb = n_in / Ks
     if inb < 0.6 and Ks < K:
         # in band only part of the period: the finer profile has more bins in each in-band run
         Ks, prof_s, inband_s, se_s = K, prof, inband, se
-    return PhaseProfiles(prof, inband, se, prof_s, inband_s, se_s, Ks, inb)
+    return prof, inband, se, prof_s, inband_s, se_s, Ks, inb

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from scipy import fft as sp_fft
 
-from rfi_monitor import folded_spectrum, frame_length, ridge_periodicity, stft, sweep_shape
+from rfi_monitor import folded_spectrum, frame_length, numpy_kernels, ridge_periodicity, stft, sweep_shape
 from rfi_monitor import ridge as rg
 
 
@@ -54,6 +54,38 @@ def test_stft_power_is_the_numpy_stft(cplx):
             assert S.dtype == np.float32 and S.shape == S0.shape
             np.testing.assert_array_equal(S, S0)
             np.testing.assert_array_equal(f, f0)
+
+
+def test_fft_inplace_is_numpys_fft():
+    """The period search's autocorrelation calls scipy's pocketfft directly (``stft.fft_inplace``): it gives numpy's
+    np.fft.fft of the zero-padded sequence and np.fft.ifft of its power to the bit, at the sizes the search uses."""
+    rng = np.random.default_rng(7)
+    for T in (60, 255, 511, 1249):
+        nf = 1 << int(math.ceil(math.log2(2 * T)))
+        u = rng.standard_normal(T) + 1j * rng.standard_normal(T)
+        v = u - u.mean()
+        V0 = np.fft.fft(v, nf)
+        V = np.zeros(nf, dtype=np.complex128)
+        V[:T] = v
+        V = stft.fft_inplace(V, True)
+        np.testing.assert_array_equal(V, V0)
+        np.testing.assert_array_equal(stft.fft_inplace(V * np.conj(V), False), np.fft.ifft(V0 * np.conj(V0)))
+
+
+def test_column_order_statistic_is_numpys_partition():
+    """noise_levels' compiled selection (long columns) gives np.partition's k-th value of each column to the bit: on
+    exponential powers, on values with many ties, with NaN (numpy orders it last), for every kind of k."""
+    rng = np.random.default_rng(8)
+    for n in (1, 2, 9, 64, 255, 768, 1249, 3000):
+        for trial in range(6):
+            S = rng.exponential(size=(n, 5)).astype(np.float32 if trial % 2 else np.float64)
+            if trial in (2, 3):
+                S = np.round(S * 3).astype(S.dtype)                 # ties
+            if trial >= 4 and n > 2:
+                S[rng.integers(0, n, size=max(1, n // 3)), rng.integers(0, 5, size=max(1, n // 3))] = np.nan
+            for k in sorted({0, n // 10, n // 2, n - 2, n - 1} - {-1}):
+                got = numpy_kernels.column_order_statistic(S, k)
+                np.testing.assert_array_equal(got, np.partition(np.ascontiguousarray(S.T), k, axis=1)[:, k])
 
 
 @pytest.mark.parametrize("cplx", [False, True])
