@@ -279,12 +279,11 @@ class ChirpComb:
             self._chirp_thr[ck] = -float(special.ndtri(alpha / _fine_count(lmin, lmax, lag_limit, kf)))
         i = int(np.argmax(zf))
         chirp_z = float(zf[i])
-        _, idf, mf = comb_lags(Pf[i:i + 1], lag_limit, kf)     # the lags of the best candidate
+        _, lags = _multiples(float(Pf[i]), lag_limit, kf)     # the lags of the best candidate (as comb_lags)
         # the normal quantile, moved by the comb's skew (Cornish-Fisher): Z is a quadratic form of the amplitudes
         z0 = self._chirp_thr[ck]
-        gamma = _comb_skew(float(Pf[i]), int(mf[0].sum()), copies, copy_frames)
+        gamma = _comb_skew(float(Pf[i]), int(lags.size), copies, copy_frames)
         chirp_thr = z0 + gamma / 6.0 * (z0 * z0 - 1.0)
-        lags = idf[0][mf[0]]
         strength = comb_strength(r, lags, spread, spread_frames)
         if not (chirp_z > chirp_thr and strength >= min_strength):
             return CombResult(chirp_z, chirp_thr, strength, False)
@@ -322,13 +321,51 @@ def _fine_candidates(periods: np.ndarray, top: list[int], lmin: int, lmax: int, 
     # either end of it; a fine search of +-0.5 step missed the period when the true one lay at the plateau's
     # other end, and the comb then picked twice the period (measured: a 4 MS/s I/Q saw-tooth of 8.972 frames,
     # its period published doubled in 1 of 3 decisions)
-    cand: list[float] = []
+    return _fine_grid(periods, np.asarray(top, dtype=np.int64), float(lmin), float(lmax), int(lag_limit), int(kc),
+                      int(kf), FINE_HALF_WIDTH)
+
+
+@njit(cache=True, nogil=True)
+def _arange(start: float, stop: float, step: float) -> np.ndarray:
+    """np.arange(start, stop, step) of floats, to the bit: ceil((stop - start) / step) values, the i-th
+    start + i * d with d = (start + step) - start (numpy's fill of a float range)."""
+    n = max(int(math.ceil((stop - start) / step)), 0)
+    out = np.empty(n)
+    if n > 0:
+        out[0] = start
+    if n > 1:
+        out[1] = start + step
+        d = out[1] - start
+        for i in range(2, n):
+            out[i] = start + i * d
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _fine_grid(periods: np.ndarray, top: np.ndarray, lmin: float, lmax: float, lag_limit: int, kc: int, kf: int,
+               half_width: float) -> np.ndarray:
+    """:func:`_fine_candidates` compiled (the same values in the same order)."""
+    parts = []
+    n = 0
     for i in top:
-        p0 = float(periods[i])
+        p0 = periods[i]
         k0 = max(2, min(kc, int(lag_limit // p0)))
         k1 = max(2, min(kf, int(lag_limit // p0)))
-        cand.extend(np.arange(p0 - FINE_HALF_WIDTH / k0, p0 + FINE_HALF_WIDTH / k0 + 1e-12, 0.5 / k1).tolist())
-    return np.asarray([c for c in cand if lmin <= c <= lmax] or [float(periods[top[0]])])
+        a = _arange(p0 - half_width / k0, p0 + half_width / k0 + 1e-12, 0.5 / k1)
+        parts.append(a)
+        n += a.size
+    out = np.empty(n)
+    m = 0
+    for a in parts:
+        for c in a:
+            if lmin <= c <= lmax:
+                out[m] = c
+                m += 1
+    if m == 0:
+        out = np.empty(1)
+        out[0] = periods[top[0]]
+        return out
+    return out[:m].copy()
 
 
 def _fine_count(lmin: int, lmax: int, lag_limit: int, kmax: int) -> float:

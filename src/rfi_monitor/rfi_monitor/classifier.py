@@ -46,7 +46,9 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 from scipy import fft as sp_fft
-from scipy.ndimage import median_filter
+
+from rfi_monitor.numpy_kernels import pairwise_sum
+from rfi_monitor.stft import _frames_complex
 
 NONE, CW, CHIRP, WIDEBAND, UNKNOWN = 0, 1, 2, 3, 4
 """Type codes, identical to rfi_msgs/JammerState."""
@@ -144,15 +146,18 @@ def welch_psd(x: np.ndarray, nfft: int, max_frames: int) -> tuple[np.ndarray, in
     if nfr > max_frames:
         fr = fr[np.linspace(0, nfr - 1, max_frames).astype(np.int64)]
     cplx = np.iscomplexobj(x)
-    if not cplx and fr.shape[0] == nfr and x.dtype == np.float64:
-        # real input, all frames (the monitor's case): window and |X|^2 in compiled loops (speed)
+    if fr.shape[0] == nfr and x.dtype == (np.complex128 if cplx else np.float64):
+        # all frames (the monitor's case): the window, |X|^2 summed over the frames, the power and the normalisation
+        # in compiled loops (speed), the same arithmetic in the same order as the numpy expressions below
+        xc = np.ascontiguousarray(x)
+        if cplx:
+            xv = xc.view(np.float64)
+            fwc = np.empty((nfr, nfft), dtype=np.complex64)
+            _frames_complex(xv, nfft, _hann32(nfft), fwc)
+            return _complex_psd(sp_fft.fft(fwc, axis=1, overwrite_x=True), xv), nfr
         fw32 = np.empty((nfr, nfft), dtype=np.float32)
-        _window_frames(x, _hann32(nfft), fw32)
-        spec = sp_fft.rfft(fw32, axis=1, overwrite_x=True)
-        p = frame_power(spec) / nfr
-        fv = x[: nfr * nfft]
-        pw = float(np.add.reduce(fv * fv)) / fv.size      # not np.dot: no multi-threaded BLAS
-        return _normalised(p, pw), nfr
+        _window_frames(xc, _hann32(nfft), fw32)
+        return _real_psd(sp_fft.rfft(fw32, axis=1, overwrite_x=True), xc), nfr
     # single precision FFT (scipy's pocketfft; numpy's float32 path is slower than its float64 one):
     # the PSD needs ~1e-3 relative accuracy (it is smoothed and thresholded in dB), float32 gives
     # 1e-7; 53 us instead of 74 us for 149 frames of 256 on the development machine
@@ -190,6 +195,52 @@ def _window_frames(x: np.ndarray, w32: np.ndarray, out: np.ndarray) -> None:
         o = i * nfft
         for j in range(nfft):
             out[i, j] = np.float32(x[o + j]) * w32[j]
+
+
+@njit(cache=True)
+def _real_psd(spec: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``welch_psd``'s PSD from the rfft of its frames (frames, bins) of the real samples x: |X|^2 summed over the
+    frames in double (``frame_power``) over the frames, normalised (``_normalised``) to the power of the frames'
+    samples (numpy's pairwise sum of the squares)."""
+    nfr = spec.shape[0]
+    nfft = 2 * (spec.shape[1] - 1)
+    p = frame_power(spec) / nfr
+    fv = x[: nfr * nfft]
+    return _normalised_compiled(p, pairwise_sum(fv * fv, 0.0) / fv.size)
+
+
+@njit(cache=True)
+def _complex_psd(spec: np.ndarray, xv: np.ndarray) -> np.ndarray:
+    """``welch_psd``'s PSD from the FFT of its frames (frames, nfft) of complex samples (xv: their float64 view, re and
+    im pairs): re^2 and im^2 each summed over the frames in float32 (as ``np.einsum("ij,ij->j")`` of the float32 view
+    sums them: in frame order), added in double, over the frames, in fftshift order, normalised (``_normalised``) to
+    the power of the frames' samples (numpy's pairwise sum of the squares of the float64 view, over the samples)."""
+    nfr, nfft = spec.shape
+    sre = np.zeros(nfft, dtype=np.float32)
+    sim = np.zeros(nfft, dtype=np.float32)
+    for i in range(nfr):
+        for b in range(nfft):
+            v = spec[i, b]
+            re = v.real
+            im = v.imag
+            sre[b] += re * re
+            sim[b] += im * im
+    p = np.empty(nfft)
+    h = nfft // 2
+    for b in range(nfft):
+        j = b + nfft - h if b < h else b - h                 # np.fft.fftshift
+        p[b] = (np.float64(sre[j]) + np.float64(sim[j])) / nfr
+    fv = xv[: 2 * nfr * nfft]
+    return _normalised_compiled(p, pairwise_sum(fv * fv, 0.0) / (nfr * nfft))
+
+
+@njit(cache=True)
+def _normalised_compiled(p: np.ndarray, power: float) -> np.ndarray:
+    """:func:`_normalised` compiled (numpy's pairwise sum of p)."""
+    total = pairwise_sum(p, 0.0)
+    if not total > 0.0:
+        return np.zeros_like(p)
+    return p * (power / total)
 
 
 @njit(cache=True)
@@ -231,10 +282,36 @@ def _hann(nfft: int) -> np.ndarray:
 
 
 def smooth_template(psd: np.ndarray, width: int) -> np.ndarray:
-    """Noise-shape template from a (clean) PSD: median filter across frequency, sum normalised to 1."""
-    t = median_filter(psd, size=width, mode="nearest")
-    t = np.maximum(t, 1e-6 * np.max(t))
-    return t / t.sum()
+    """Noise-shape template from a (clean) PSD: median filter across frequency, sum normalised to 1.
+
+    One compiled pass (:func:`_smooth_template`; speed: it runs on every block while no template is learned) that
+    gives to the bit what ``scipy.ndimage.median_filter(psd, size=width, mode="nearest")``, the floor at 1e-6 of
+    its largest bin and the division by its (pairwise) sum gave."""
+    return _smooth_template(np.ascontiguousarray(psd, dtype=np.float64), int(width))
+
+
+@njit(cache=True)
+def _smooth_template(psd: np.ndarray, width: int) -> np.ndarray:
+    """:func:`smooth_template`: the running median over ``width`` bins (bins width // 2 before to width - 1 - width // 2
+    after, the edge bins repeated; the element of rank width // 2: scipy's median_filter), the floor, the sum. The
+    PSD is finite (the monitor rejects a block whose power is not)."""
+    n = psd.size
+    h = width // 2
+    buf = np.empty(width)
+    t = np.empty(n)
+    for i in range(n):
+        for k in range(width):                      # insertion sort of the window (a few bins)
+            v = psd[min(max(i - h + k, 0), n - 1)]
+            j = k
+            while j > 0 and buf[j - 1] > v:
+                buf[j] = buf[j - 1]
+                j -= 1
+            buf[j] = v
+        t[i] = buf[h]
+    floor = 1e-6 * np.max(t)
+    for i in range(n):
+        t[i] = max(t[i], floor)
+    return t / pairwise_sum(t, 0.0)
 
 
 def block_features(x: np.ndarray, template: np.ndarray | None, par: ClassifierParams) -> BlockFeatures:

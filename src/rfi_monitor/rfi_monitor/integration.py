@@ -202,12 +202,7 @@ class _Sums:
         self.spread_frames = 0.0  # the same, each weighted by its frames
 
     def add(self, b: _BlockStats) -> None:
-        if self.psd is None or self.r is None or self.v is None:
-            self.psd, self.r, self.v = b.psd_sum.copy(), b.r.copy(), b.var.copy()
-        else:
-            self.psd += b.psd_sum
-            self.r += b.r
-            self.v += b.var
+        """Add the block's counts (its arrays are added to every sum at once: ``Integrator._push``)."""
         self.k += b.psd_frames
         self.frames += b.frames
         self.count += 1
@@ -301,9 +296,21 @@ class Integrator:
         self._blocks.clear()
         # the whole window's sums, then those of the sub-windows, longest first
         self._sums = [_Sums() for _ in range(1 + int(self.params.sub_windows))]
+        self._stacked: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._last_sums = self._sums[0]
 
     def _push(self, b: _BlockStats) -> None:
+        """Add a block to every sum: its arrays to the rows of the stacked sums (one numpy call per statistic for all
+        the window lengths; the sums' arrays are views of those rows), its counts to each."""
+        if self._stacked is None:
+            m = len(self._sums)
+            self._stacked = (np.zeros((m, b.psd_sum.size)), np.zeros((m, b.r.size)), np.zeros((m, b.var.size)))
+            for i, sums in enumerate(self._sums):
+                sums.psd, sums.r, sums.v = self._stacked[0][i], self._stacked[1][i], self._stacked[2][i]
+        psd, r, v = self._stacked
+        psd += b.psd_sum
+        r += b.r
+        v += b.var
         for sums in self._sums:
             sums.add(b)
         self._blocks.append(b)

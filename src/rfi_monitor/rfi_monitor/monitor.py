@@ -273,8 +273,9 @@ class RfiMonitor:
         if cplx and not np.iscomplexobj(x):
             if x.size % 2:
                 raise ValueError(f"interleaved I/Q needs an even number of values, got {x.size}")
-            xf = x.astype(np.float64)
-            xc = xf[0::2] + 1j * xf[1::2]
+            # a copy of the pairs as float64, seen as complex128 (the values of xf[0::2] + 1j * xf[1::2], without
+            # its three temporaries; a non-finite part makes the whole sample invalid either way)
+            xc = np.array(x, dtype=np.float64, order="C").view(np.complex128)
         elif cplx:
             xc = np.asarray(x, dtype=np.complex128)      # no copy when already complex128 (read only)
         elif np.iscomplexobj(x):
