@@ -54,10 +54,18 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
 from rfi_experiments.bag_io import BagMessage, BagReader, deserialize, message_class, msgtype_of, serialize
-from rfi_node_common.qos import DATA_QOS
+from rfi_node_common.qos import DATA_QOS, VIEW_QOS
 
 IGNORED_TOPICS = frozenset({'/rosout', '/parameter_events'})
 """Infrastructure topics the harness neither waits for nor collects."""
+
+
+def collected(pub: Any) -> bool:
+    """Whether the harness collects (and, over DDS, waits for) a node's publisher: not the infrastructure topics,
+    and not the topics made to be drawn (published with ``VIEW_QOS`` and only while a viewer subscribes, issue 30):
+    a replay records what the nodes estimate, and its own subscription would make them draw; a viewer connected to
+    the replay still gets them."""
+    return pub.topic_name not in IGNORED_TOPICS and pub.qos_profile != VIEW_QOS
 
 TRANSPORTS = ('dds', 'direct')
 """Ways the harness moves messages between publishers and subscriptions (module docstring)."""
@@ -168,7 +176,7 @@ class ReplayHarness:
         if not self._direct:
             for node in self._nodes:
                 for pub in node.publishers:
-                    if pub.topic_name not in IGNORED_TOPICS:
+                    if collected(pub):
                         self._wait_matched(pub, pub.topic_name)
 
     # -- direct transport --------------------------------------------------------------------
@@ -281,7 +289,7 @@ class ReplayHarness:
         topics = {}
         for node in self._nodes:
             for pub in node.publishers:
-                if pub.topic_name not in IGNORED_TOPICS:
+                if collected(pub):
                     topics[pub.topic_name] = msgtype_of(pub.msg_type)
         return topics
 
