@@ -77,7 +77,7 @@ def run_node(node_factory: Callable[[], Any], *, executable: str, summary: str, 
         # rclpy.try_shutdown leaves rclpy's SIGINT/SIGTERM handlers installed (rclpy.shutdown of the default context
         # removes them): they would now only shut down a context that is gone, so a SIGTERM while the process exits
         # (ros2 launch's escalation 5 s after its SIGINT) did nothing, and launch killed the node 10 s later (seen in
-        # CI: gnss_integrity_node, whose exit is the longest). With them removed, SIGTERM ends the process at once.
+        # CI: gnss_integrity_node). With them removed, SIGTERM ends the process at once.
         uninstall_signal_handlers()
         restore()
 
@@ -124,9 +124,9 @@ def _skip_final_collection_at_exit() -> None:
     garbage collection, so that the collection does not traverse it.
 
     A node's heap holds numba's compiled kernels, their type objects and scipy: the interpreter's exit then spends most
-    of its time in that last collection, freeing cycles that the process's end frees anyway (0.43 s of CPU for
-    gnss_integrity_node, against 0.06 s with the heap frozen; on a loaded machine that is seconds of wall time, and ros2
-    launch escalates to SIGTERM 5 s after its SIGINT). Exit hooks run last-registered first and before the final
+    of its time in that last collection, freeing cycles that the process's end frees anyway (0.5 s of CPU for
+    gnss_integrity_node, against 0.07 s with the heap frozen: docs/node_exit.md; on a loaded machine that is seconds
+    of wall time, and ros2 launch escalates to SIGTERM 5 s after its SIGINT). Exit hooks run last-registered first and before the final
     collection, so every other hook still runs; ``__del__`` of objects left in reference cycles at exit is not called
     (the nodes release their ROS handles and files in ``destroy_node``, before this). Only at exit: a process that calls
     ``run_node`` and goes on collects as usual."""
