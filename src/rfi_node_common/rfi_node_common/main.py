@@ -126,10 +126,10 @@ def _skip_final_collection_at_exit() -> None:
     A node's heap holds numba's compiled kernels, their type objects and scipy: the interpreter's exit then spends most
     of its time in that last collection, freeing cycles that the process's end frees anyway (0.5 s of CPU for
     gnss_integrity_node, against 0.07 s with the heap frozen: docs/node_exit.md; on a loaded machine that is seconds
-    of wall time, and ros2 launch escalates to SIGTERM 5 s after its SIGINT). Exit hooks run last-registered first and before the final
-    collection, so every other hook still runs; ``__del__`` of objects left in reference cycles at exit is not called
-    (the nodes release their ROS handles and files in ``destroy_node``, before this). Only at exit: a process that calls
-    ``run_node`` and goes on collects as usual."""
+    of wall time, and ros2 launch escalates to SIGTERM 5 s after its SIGINT). Exit hooks run last-registered first
+    and before the final collection, so every other hook still runs; ``__del__`` of objects left in reference cycles
+    at exit is not called (the nodes release their ROS handles and files in ``destroy_node``, before this). Only at
+    exit: a process that calls ``run_node`` and goes on collects as usual."""
     global _FINAL_COLLECTION_SKIPPED
     if _FINAL_COLLECTION_SKIPPED:
         return
