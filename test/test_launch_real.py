@@ -189,11 +189,11 @@ def test_the_suite_starts_in_a_namespace_and_its_topics_connect(ros2_launch, tmp
                       f'{why}\n{out[-1500:]}', stacklevel=1)
         return
     assert proc.returncode == 0, out[-3000:]
+    # every node ends on launch's SIGINT, before launch escalates (SIGTERM after 5 s, SIGKILL 10 s later). Seen in CI
+    # (2026-12-07): gnss_integrity_node's exit (the interpreter's final collection of its numba-laden heap) outlasted
+    # both on a loaded machine, rclpy's handlers left installed swallowed the SIGTERM, and launch killed it; run_node
+    # now removes them after shutdown and skips that collection (test_main.py)
     hung = re.findall(r'\[ERROR\] \[(\w+)-\d\]: process\[\S+\] failed to terminate', out)
-    if hung:
-        # a real defect this test found in CI (2026-12-07): after other tests, gnss_integrity_node did not end on
-        # SIGINT within 5 s nor on SIGTERM within 10 s and was killed by launch; not reproduced alone. Marked as a
-        # known failure, named, until it is fixed (issue 30 / 27 notes); every other check of this test stands
-        pytest.xfail(f'known defect: {sorted(set(hung))} did not stop on SIGINT/SIGTERM and were killed by launch')
+    assert not hung, f'{sorted(set(hung))} did not stop on SIGINT and were killed by launch:\n{out[-3000:]}'
     assert out.count('process has finished cleanly') == len(NODES), out[-3000:]
     assert 'process has died' not in out, out[-3000:]

@@ -31,9 +31,11 @@ Nothing is lost by default:
 With ``--sync IN:OUT`` the player waits after each message on IN until the node that answers it has
 published its stamped output on OUT (closed-loop pacing, used by ``run --transport processes`` so
 that the monitor's jammer state reaches the fusion before the next GNSS/UWB messages, as in a
-replay in one process). A ``/fusion/status`` or ``/diagnostics`` that the player sees while
-playing is read for the fusion node's rejections of messages that came after its re-ordering
-window, which are reported at the end.
+replay in one process). The player reads ``/fusion/status`` for the fusion node's rejections of
+messages that came after its re-ordering window, which are reported at the end: after the last
+message it waits until the fusion node has published a status stamped at or after the latest header
+stamp played on its inputs (every message then processed or rejected), up to ``--status-timeout``,
+and says so if that wait ran out.
 """
 
 from __future__ import annotations
@@ -49,6 +51,7 @@ from typing import Any
 from rfi_experiments.bag_io import BagError, BagReader, message_class
 from rfi_experiments.cli import bounded_teardown, error_reporter, exit_now, release_endpoints
 from rfi_experiments.progress import ProgressLine, add_quiet_argument, summary_printer
+from rfi_node_common.stamps import peek_header_stamp_ns
 
 fail = error_reporter('play')
 
@@ -89,6 +92,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--sync-timeout', type=float, default=10.0, metavar='SECONDS',
                         help='longest wait for an answer on OUT; an input left unanswered (a rejected one) is '
                              'counted and reported (default 10)')
+    parser.add_argument('--status-timeout', type=float, default=10.0, metavar='SECONDS',
+                        help='after playing, wait up to this long for a fusion node (/fusion/status) to have '
+                             'processed the last message played on its inputs, so that its count of late '
+                             'rejections is final (default 10)')
     parser.add_argument('--no-progress', action='store_true', help='no progress line')
     add_quiet_argument(parser)
     return parser
@@ -268,7 +275,7 @@ def _checked_arguments(args: argparse.Namespace) -> tuple[tuple[float, float] | 
         window = window_s(args.start, args.duration)
     except ValueError as err:
         return str(err)
-    for name in ('start_delay', 'warmup', 'wait_subscribers'):
+    for name in ('start_delay', 'warmup', 'wait_subscribers', 'status_timeout'):
         value = getattr(args, name)
         if not (math.isfinite(value) and value >= 0):
             return f'--{name.replace("_", "-")} must be a finite number >= 0 (got {value})'
@@ -329,7 +336,8 @@ def main(argv: Sequence[str] | None = None, *, teardown: bool = True) -> int:
         delivery = {t: Delivery() for t in topics}
         answered: dict[str, int] = {}
         unanswered = {t: 0 for t in sync}
-        fusion: dict[str, int] = {}
+        fusion = FusionWatch()
+        last_stamp: dict[str, int] = {}
         try:
             publishers = {t: node.create_publisher(classes[t], t, PLAYER_QOS) for t in topics}
             missing = wait_for_subscribers(node, executor, publishers, expected, args.wait_subscribers,
@@ -342,7 +350,7 @@ def main(argv: Sequence[str] | None = None, *, teardown: bool = True) -> int:
                 if out_class is None:
                     return fail(f'--sync: no publisher of {out} appeared (is the node answering {inp} up?)')
                 node.create_subscription(out_class, out, _answer_recorder(answered, out), RECORDER_QOS)
-            _watch_fusion_status(node, fusion, RECORDER_QOS)
+            status_sub = _watch_fusion_status(node, fusion, RECORDER_QOS)
             reports: InputReports = {}
             watching = _watch_input_reports(node, topics, reports, RECORDER_QOS)
             for t, p in publishers.items():
@@ -362,6 +370,9 @@ def main(argv: Sequence[str] | None = None, *, teardown: bool = True) -> int:
                         time.sleep(delay)
                 pub = publishers[message.topic]
                 pub.publish(message.raw)
+                stamp = peek_header_stamp_ns(message.raw)
+                if stamp is not None:
+                    last_stamp[message.topic] = max(last_stamp.get(message.topic, stamp), stamp)
                 d = delivery[message.topic]
                 d.published += 1
                 matched = pub.get_subscription_count()
@@ -371,7 +382,7 @@ def main(argv: Sequence[str] | None = None, *, teardown: bool = True) -> int:
                 if message.topic in sync:
                     if not _await_answer(executor, answered, sync[message.topic], message, args.sync_timeout):
                         unanswered[message.topic] += 1
-                elif fusion or watching:
+                elif watching or status_sub.get_publisher_count():
                     executor.spin_once(timeout_sec=0)  # keep up with /fusion/status and /diagnostics
                 progress.update(1)
             progress.close()
@@ -382,12 +393,17 @@ def main(argv: Sequence[str] | None = None, *, teardown: bool = True) -> int:
                 reliable, best_effort = subscribers_by_reliability(node, p.topic_name)
                 delivery[t].reliable |= reliable
                 delivery[t].best_effort |= best_effort
-            if fusion or watching:  # the status of the last messages
+            behind = _await_fusion_status(node, executor, fusion, status_sub,
+                                          {publishers[t].topic_name: s for t, s in last_stamp.items()},
+                                          args.status_timeout)
+            if watching:  # the nodes' /diagnostics of the last messages (a report as seen, not awaited)
                 end = time.monotonic() + 0.5
                 while time.monotonic() < end:
                     executor.spin_once(timeout_sec=0.05)
             say = summary_printer(args.quiet)
-            print_summary(topics, available, delivery, sync, unanswered, args.sync_timeout, fusion, say)
+            print_summary(topics, available, delivery, sync, unanswered, args.sync_timeout, fusion.counts, say)
+            if behind:
+                print(behind, file=sys.stderr)
             print_receipts(delivery, reports, unacked, say)
             if unacked:
                 print(f'play: warning: not acknowledged by every subscriber within {args.ack_timeout} s: '
@@ -503,19 +519,54 @@ def _watch_input_reports(node: Any, topics: Sequence[str], reports: InputReports
     return True
 
 
-def _watch_fusion_status(node: Any, fusion: dict[str, int], qos: Any) -> None:
-    """If a fusion node publishes /fusion/status, keep its cumulative rejection counts in ``fusion``."""
-    topic = node.resolve_topic_name('/fusion/status')
-    if not node.get_publishers_info_by_topic(topic):
-        return
+@dataclass
+class FusionWatch:
+    """What the player saw of a fusion node's ``/fusion/status``."""
+
+    counts: dict[str, int] = field(default_factory=dict)
+    """Cumulative rejection counts of its latest status, per reason (empty: no status seen)."""
+    latest_stamp_ns: int = -1
+    """The latest header stamp of its statuses, ns (-1: none seen)."""
+
+    def on_status(self, msg: Any) -> None:
+        self.counts.update(zip(msg.rejection_reasons, msg.rejection_counts, strict=False))
+        self.counts.setdefault(LATE_REASON, 0)
+        self.latest_stamp_ns = max(self.latest_stamp_ns, msg.header.stamp.sec * 1_000_000_000
+                                   + msg.header.stamp.nanosec)
+
+
+def _watch_fusion_status(node: Any, fusion: FusionWatch, qos: Any) -> Any:
+    """Subscribe ``fusion`` to /fusion/status (whether or not a fusion node is up yet: one that the graph shows
+    only later, or whose publisher is discovered after its subscriptions, is still heard); the subscription."""
     from rfi_msgs.msg import FusionStatus
 
-    def on_status(msg: Any) -> None:
-        fusion.update(zip(msg.rejection_reasons, msg.rejection_counts, strict=False))
-        fusion.setdefault(LATE_REASON, 0)
+    return node.create_subscription(FusionStatus, node.resolve_topic_name('/fusion/status'), fusion.on_status, qos)
 
-    node.create_subscription(FusionStatus, topic, on_status, qos)
-    fusion.setdefault(LATE_REASON, 0)
+
+def _await_fusion_status(node: Any, executor: Any, fusion: FusionWatch, status_sub: Any,
+                         last_stamp: dict[str, int], timeout_s: float) -> str | None:
+    """After the last message: spin until the fusion node has published a status stamped at or after the latest
+    header stamp played on the topics it subscribes to (``last_stamp``: resolved topic -> ns), i.e. until it has
+    processed (or rejected) everything it was sent, or ``timeout_s``. The fusion node processes its inputs in stamp
+    order and publishes a status after each update, also for the messages that its re-ordering window still holds
+    when the input stops (its idle flush). Returns None, or a warning if the wait ran out."""
+    if not status_sub.get_publisher_count():
+        return None
+    publishers = {(i.node_name, i.node_namespace) for i in node.get_publishers_info_by_topic(status_sub.topic_name)}
+    inputs = [t for t in last_stamp
+              if any((i.node_name, i.node_namespace) in publishers for i in node.get_subscriptions_info_by_topic(t))]
+    if not inputs:
+        return None
+    target_ns = max(last_stamp[t] for t in inputs)
+    give_up = time.monotonic() + timeout_s
+    while fusion.latest_stamp_ns < target_ns and time.monotonic() < give_up:
+        executor.spin_once(timeout_sec=0.05)
+    if fusion.latest_stamp_ns >= target_ns:
+        return None
+    seen = 'no status' if fusion.latest_stamp_ns < 0 else f'its last status stamped {fusion.latest_stamp_ns} ns'
+    return (f'play: warning: the fusion node had not processed the last message played on {", ".join(inputs)} '
+            f'(stamped {target_ns} ns) within --status-timeout {timeout_s:g} s ({seen}): its late rejections after '
+            'that are not counted here')
 
 
 def _discover_class(node, executor, topic: str, timeout_s: float):

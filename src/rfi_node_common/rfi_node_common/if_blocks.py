@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from rfi_msgs.msg import IfSamples
-from rfi_node_common.stamps import NS_PER_S
+from rfi_node_common.stamps import peek_header_stamp_ns
 
 SAMPLE_RATE_MIN_HZ = 1.0e5
 """Lowest sample rate accepted, Hz (module docstring: a GNSS band needs >= ~1 MS/s)."""
@@ -74,14 +74,9 @@ def check_block(msg: IfSamples, min_block_samples: int, max_block_samples: int =
 def peek_stamp_ns(raw: bytes) -> int | None:
     """header.stamp of a serialised IfSamples in ns, read from its first bytes (little-endian CDR: a 4-byte
     encapsulation header, then stamp.sec int32 and stamp.nanosec uint32), or None if the bytes do not look
-    like that (the message is then deserialised and checked as usual)."""
-    if len(raw) < 12 or raw[0] != 0 or raw[1] not in (1, 3):      # CDR_LE / PL_CDR_LE
-        return None
-    sec = int.from_bytes(raw[4:8], 'little', signed=True)
-    nsec = int.from_bytes(raw[8:12], 'little')
-    if sec <= 0 or nsec >= NS_PER_S:
-        return None
-    return sec * NS_PER_S + nsec
+    like that (the message is then deserialised and checked as usual). The reading is
+    :func:`rfi_node_common.stamps.peek_header_stamp_ns`, shared with ``play``."""
+    return peek_header_stamp_ns(raw)
 
 
 def decode_counts(msg: IfSamples) -> np.ndarray:
