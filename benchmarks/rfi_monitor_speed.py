@@ -339,13 +339,13 @@ def stage_measurements() -> dict[tuple[str, str], list[dict]]:
     return res
 
 
-ISSUE26_NOTES = """Issue 26 item 2, this round (2026-12-07): **the goal is not met.** Measured in the run above, with both passes
-below merged (the machine shared with other sessions on 2 cores, so the absolute times are high; the ratios to the
-bare STFT are the figures to read): at 38.192 MS/s the full analysis costs 7.1-9.0 bare STFTs of its block (goal:
-about 3-4), 0.82-1.01x real time; at 10 MS/s complex 15.7-18.8 bare STFTs (0.74-0.86x); at 24 MS/s real 12.1-13.7
-(0.87-1.04x). At the start of the day the same table read 9.2-10.0, 18.6-24.1 and 13.6-15.4. The p99 block was at
-most 2.9 ms in every case once the compiled functions are warmed up as the node does (the cold first blocks of a
-stream cost 70-340 ms: numba loading its cache).
+ISSUE26_NOTES = """Issue 26 item 2, this round (2026-12-07): **the goal is not met.** Measured in the run above,
+with both passes below merged (the machine shared with other sessions on 2 cores, so the absolute times are high;
+the ratios to the bare STFT are the figures to read): at 38.192 MS/s the full analysis costs 7.1-9.0 bare STFTs of
+its block (goal: about 3-4), 0.82-1.01x real time; at 10 MS/s complex 15.7-18.8 bare STFTs (0.74-0.86x); at 24 MS/s
+real 12.1-13.7 (0.87-1.04x). At the start of the day the same table read 9.2-10.0, 18.6-24.1 and 13.6-15.4. The p99
+block was at most 2.9 ms in every case once the compiled functions are warmed up as the node does (the cold first
+blocks of a stream cost 70-340 ms: numba loading its cache).
 
 Where the time goes: four different spectrograms of every block, each with its own frame length, window and
 overlap, and 100+ numpy calls of 2-20 us each. Quiet 38.192 MS/s block: the integration over blocks 34 % (its own
