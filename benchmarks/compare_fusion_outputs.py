@@ -22,7 +22,7 @@ parameters).
 
 Usage::
 
-    source /work/main/.venv/bin/activate && source install/setup.bash
+    source .venv/bin/activate && source install/setup.bash
     python benchmarks/compare_fusion_outputs.py [--base 6657d8c] [--bags default spoofed arl1_jammed]
 
 Exit status 0 when every bag agrees, 1 otherwise. The result is printed (nothing is written to docs/).

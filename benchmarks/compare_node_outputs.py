@@ -19,7 +19,7 @@ Cases (node: bag):
 
 Usage::
 
-    source /work/main/.venv/bin/activate && source install/setup.bash
+    source .venv/bin/activate && source install/setup.bash
     python benchmarks/compare_node_outputs.py --base 4c5248c [--cases integrity:default carrier:default]
 
 Exit status 0 when every case agrees, 1 otherwise. The result is printed (nothing is written to docs/).

@@ -3,7 +3,7 @@ and the PLL baseline of imm_carrier, clean and with a chirp jammer added to the 
 
 Prints markdown and writes a figure. Usage (after ``source install/setup.bash``)::
 
-    python benchmarks/correlator_imm_real.py [--captures /work/shared/data] [--figure docs/gnss_correlator/imm_real.png]
+    python benchmarks/correlator_imm_real.py [--captures ../shared/data] [--figure docs/gnss_correlator/imm_real.png]
 
 Input: the 0.5-s capture ``iq_clean_pocketsdr/L1_20211202_084700_4MHz_IQ.bin`` under ``--captures`` when given,
 else the 150-ms copy of the tests. Spectrum inverted (the receiver's ``spectrum_inverted``).

@@ -7,7 +7,7 @@ shipped ``src/<package>/config/<node>.yaml`` is generated from them
 (:class:`rfi_node_common.params.ConfigFile`), and so is the table of each node's user parameters in
 docs/reference/parameters.md. Run after changing a default or a description::
 
-    source /work/main/.venv/bin/activate && source install/setup.bash
+    source .venv/bin/activate && source install/setup.bash
     python tools/generate_config.py           # rewrite the files
     python tools/generate_config.py --check   # exit 1 if a shipped file differs (what the tests check)
 

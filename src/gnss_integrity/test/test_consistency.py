@@ -39,7 +39,7 @@ from gnss_integrity.outcome import (
 )
 
 DATA = Path(__file__).resolve().parents[2] / "gnss_common" / "test" / "data"
-DAY = Path("/work/shared/data/multignss_esbc_2020")
+DAY = Path(__file__).resolve().parents[4] / "shared" / "data" / "multignss_esbc_2020"  # ../shared beside the clone
 SKY = {GPS: ((0, 80), (40, 35), (95, 60), (140, 20), (185, 45), (230, 15), (275, 55), (320, 25)),
        GALILEO: ((20, 50), (70, 25), (130, 65), (170, 30), (250, 40), (300, 70), (345, 18)),
        BEIDOU: ((55, 40), (110, 15), (160, 75), (210, 28), (260, 62), (310, 45), (5, 30))}
