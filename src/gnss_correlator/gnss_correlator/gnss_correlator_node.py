@@ -28,6 +28,7 @@ from collections import Counter
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 
 from gnss_correlator.acquisition import MIN_SAMPLE_RATE_HZ
 from gnss_correlator.node_params import CorrelatorNodeParams
@@ -117,13 +118,31 @@ class GnssCorrelatorNode(Node):
         self.health = InputHealth()
         self.publisher = self.create_publisher(CorrelatorArray, OUTPUT_TOPIC, DATA_QOS)
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
-        self.subscription = subscribe_input(self, IfSamples, IF_TOPIC, self.on_block, self.health,
+        # raw: bytes that rclpy cannot deserialise are then received and counted (rejected_malformed_message); a
+        # typed subscription would lose them unseen
+        self.subscription = subscribe_input(self, IfSamples, IF_TOPIC, self.on_raw_block, self.health, raw=True,
                                             warning_throttle_s=self.params.warning_throttle_s)
         self.stale_watch = StaleInputWatch(self, self.health, self.params.input_timeout_s, self._publish_stale)
 
     def _reject(self, reason: str) -> None:
         self.counts[f'rejected_{reason}'] += 1
         self.get_logger().warning(f'IF block rejected: {reason}', throttle_duration_sec=self.params.warning_throttle_s)
+
+    def on_raw_block(self, raw: bytes | IfSamples) -> None:
+        """A serialised block: deserialised by rclpy and handed to :meth:`on_block`, or counted as received and
+        ``rejected_malformed_message`` (a message object, as an in-process hand-over may give, goes straight on)."""
+        if isinstance(raw, IfSamples):
+            self.on_block(raw)
+            return
+        try:
+            msg = deserialize_message(raw, IfSamples)
+        except Exception as err:  # noqa: BLE001 - rclpy raises RMWError (and others) on malformed CDR
+            self.counts['blocks_received'] += 1
+            self.counts['rejected_malformed_message'] += 1
+            self.get_logger().warning(f'IF block rejected: malformed message ({len(raw)} bytes: {type(err).__name__})',
+                                      throttle_duration_sec=self.params.warning_throttle_s)
+            return
+        self.on_block(msg)
 
     def on_block(self, msg: IfSamples) -> None:
         """One IfSamples block: check, correlate, publish the completed intervals."""
@@ -174,7 +193,13 @@ class GnssCorrelatorNode(Node):
         values: dict[str, object] = dict(self.counts)
         values.update({f'core.{k}': v for k, v in self.receiver.counts.items()})
         values['tracked_prns'] = ' '.join(str(p) for p in self.receiver.tracked_prns)
-        values['input.lost'] = self.health.lost_total()
+        values.update(self.health.values())
+        rejected = sum(v for k, v in self.counts.items() if k.startswith('rejected_'))
+        # every block that reached the subscription reached the handler, and each was processed, rejected (with
+        # its reason) or failed in the receiver (counted, restarted)
+        values['accounting_ok'] = (
+            self.health.counts[f'{self.subscription.topic_name}.received'] == self.counts['blocks_received']
+            == self.counts['blocks_processed'] + rejected + self.counts['core_errors'])
         return values
 
     def diagnostics(self, stamp_ns: int) -> DiagnosticArray:
