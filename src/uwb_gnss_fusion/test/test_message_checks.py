@@ -41,7 +41,7 @@ def test_valid_values_pass():
                                           pseudorange_rate_std_mps=0.1)) is None
 
 
-@pytest.mark.parametrize('std', [-math.inf, math.inf, 0.0, -0.0, -1.0, 100.0001, 1e300])
+@pytest.mark.parametrize('std', [-math.inf, math.inf, 0.0, -0.0, -1.0, 100.0001, 1e300, 5e-324, 9e-7])
 def test_uwb_range_std_only_nan_means_default(std):
     assert mc.uwb_range_reason(_range(range_std_m=std)) == 'invalid_range_std'
 
@@ -98,3 +98,14 @@ def test_reasons_are_listed():
     assert seen == set(mc.SATELLITE_REASONS)
     assert {mc.uwb_range_reason(_range(range_std_m=-1.0)),
             mc.uwb_range_reason(_range(anchor_position_m=np.zeros(3)))} == set(mc.UWB_REASONS)
+
+
+@pytest.mark.parametrize('field, std', [('pseudorange_std_m', 5e-324), ('pseudorange_std_m', 9e-4),
+                                        ('pseudorange_rate_std_mps', 5e-324), ('pseudorange_rate_std_mps', 9e-5)])
+def test_a_subnormal_or_sub_millimetre_std_is_a_corrupt_field(field, std):
+    """The fuzzer's 5e-324 squared to 0 in the core (a singular noise matrix, a counted core exception): such stds are
+    dropped at the node, at or below a floor no receiver reaches (1 mm, 0.1 mm/s); stds above it pass."""
+    values = {'pseudorange_std_m': 3.0, 'pseudorange_rate_std_mps': 0.1, field: std}
+    assert mc.satellite_reason(_satellite(cn0_dbhz=math.nan, **values)) == 'invalid_measurement_std'
+    values[field] = 2e-3 if field == 'pseudorange_std_m' else 2e-4
+    assert mc.satellite_reason(_satellite(cn0_dbhz=math.nan, **values)) is None

@@ -264,3 +264,13 @@ def test_one_anchor_under_jamming_no_longer_collapses_the_height(seed: int) -> N
     rms_off, z_off = score(uwb_range_bias_std_m=0.0)
     assert z_off > 5.0 and z_on < 0.6 * z_off
     assert rms_on < rms_off
+
+
+def test_a_stated_std_whose_square_underflows_is_not_a_sample():
+    """A stated 1-sigma of 5e-324 (the fuzzer's subnormal) squares to 0: the sample divided by it raised
+    ZeroDivisionError in the core (counted core exceptions); it is now ignored, and the estimate is unchanged."""
+    est = RangeNoiseEstimate(window=100, prior_weight=20, floor_m=0.01, ceiling_m=1.0)
+    est.add(0.1, 0.02, 0.1, 0.1)
+    alpha, weight = est.alpha, est.weight
+    est.add(0.1, 0.02, 0.1, 5e-324)
+    assert (est.alpha, est.weight) == (alpha, weight)

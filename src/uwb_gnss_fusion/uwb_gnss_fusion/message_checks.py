@@ -34,6 +34,9 @@ from uwb_gnss_fusion.fusion_filter import FRAME_EARTH
 
 UWB_RANGE_STD_MAX_M = 100.0
 """Largest UWB range 1-sigma accepted, m (the upper bound of the uwb_range_std_m parameter)."""
+UWB_RANGE_STD_MIN_M = 1.0e-6
+"""Smallest UWB range 1-sigma accepted, m: no ranging hardware knows a range to a micrometre (two-way UWB: a few
+centimetres); a smaller stated 1-sigma is a corrupt field (the fuzzer's 5e-324 squared to 0 in the noise estimate)."""
 
 ANCHOR_ECEF_RADIUS_M = (6.0e6, 7.0e6)
 """Geocentric distance of an anchor given in ECEF, m: from 370 km below the WGS 84 polar radius to
@@ -51,6 +54,15 @@ PSEUDORANGE_STD_MAX_M = 1.0e4
 
 PSEUDORANGE_RATE_STD_MAX_MPS = 1.0e3
 """Largest pseudorange-rate 1-sigma accepted, m/s."""
+
+PSEUDORANGE_STD_MIN_M = 1.0e-3
+"""Smallest pseudorange 1-sigma accepted, m: code ranging is not known to a millimetre (receivers report decimetres to
+metres); a smaller one is a corrupt field (the fuzzer's 5e-324 squared to 0 and made the update's noise matrix
+singular, a counted core exception)."""
+
+PSEUDORANGE_RATE_STD_MIN_MPS = 1.0e-4
+"""Smallest pseudorange-rate 1-sigma accepted, m/s (a tenth of a millimetre per second: below any receiver's Doppler
+noise; a smaller one is a corrupt field, as above)."""
 
 SATELLITE_SPEED_MAX_MPS = 1.0e4
 """Largest ECEF satellite speed accepted, m/s (MEO satellites move at about 3-4 km/s in ECEF)."""
@@ -74,9 +86,9 @@ SATELLITE_REASONS = ('nonphysical_cn0', 'invalid_measurement_std', 'nonphysical_
 """Reasons of :func:`satellite_reason`."""
 
 
-def _std_ok(value: float, maximum: float) -> bool:
-    """NaN (unknown: the filter decides) or a finite value in (0, maximum]."""
-    return math.isnan(value) or 0.0 < value <= maximum
+def _std_ok(value: float, maximum: float, minimum: float = 0.0) -> bool:
+    """NaN (unknown: the filter decides) or a finite value in (minimum, maximum] (minimum >= 0)."""
+    return math.isnan(value) or minimum < value <= maximum
 
 
 def _finite_above(value: float, maximum: float) -> bool:
@@ -100,7 +112,7 @@ def uwb_range_reason(meas: UwbRangeMeasurement) -> str | None:
         >>> uwb_range_reason(m)
         'invalid_range_std'
     """
-    if not _std_ok(float(meas.range_std_m), UWB_RANGE_STD_MAX_M):
+    if not _std_ok(float(meas.range_std_m), UWB_RANGE_STD_MAX_M, UWB_RANGE_STD_MIN_M):
         return 'invalid_range_std'
     x, y, z = (float(v) for v in meas.anchor_position_m)
     if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
@@ -126,8 +138,9 @@ def satellite_reason(obs: SatelliteObservation) -> str | None:
     cn0 = float(obs.cn0_dbhz)
     if not (math.isnan(cn0) or (math.isfinite(cn0) and cn0 <= CN0_MAX_DBHZ)):
         return 'nonphysical_cn0'
-    if not (_std_ok(float(obs.pseudorange_std_m), PSEUDORANGE_STD_MAX_M)
-            and _std_ok(float(obs.pseudorange_rate_std_mps), PSEUDORANGE_RATE_STD_MAX_MPS)):
+    if not (_std_ok(float(obs.pseudorange_std_m), PSEUDORANGE_STD_MAX_M, PSEUDORANGE_STD_MIN_M)
+            and _std_ok(float(obs.pseudorange_rate_std_mps), PSEUDORANGE_RATE_STD_MAX_MPS,
+                        PSEUDORANGE_RATE_STD_MIN_MPS)):
         return 'invalid_measurement_std'
     vx, vy, vz = (float(v) for v in obs.satellite_velocity_ecef_mps)
     if math.isfinite(vx) and math.isfinite(vy) and math.isfinite(vz):

@@ -186,8 +186,11 @@ class RangeNoiseEstimate:
 
     def add(self, innovation_m: float, innovation_var_m2: float, used_std_m: float, stated_std_m: float) -> None:
         """One applied range: its prior innovation, the filter's prior innovation variance (noise
-        ``used_std_m^2`` included) and the stated 1-sigma. Non-finite values are ignored."""
+        ``used_std_m^2`` included) and the stated 1-sigma. Non-finite values are ignored, and so is a stated
+        1-sigma whose square is not positive (a subnormal 1-sigma underflows to 0: no scale to measure against)."""
         var = stated_std_m * stated_std_m
+        if not var > 0.0:
+            return
         sample = (innovation_m * innovation_m - (innovation_var_m2 - used_std_m * used_std_m)) / var
         if not (sample == sample and abs(sample) < 1e12 and innovation_var_m2 > 0.0):  # NaN, overflow
             return
