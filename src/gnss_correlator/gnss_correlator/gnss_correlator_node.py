@@ -48,7 +48,7 @@ from rfi_node_common.if_blocks import check_block, decode_counts, exceeds_bits, 
 from rfi_node_common.input_checks import STAMP_REASONS, StampGate
 from rfi_node_common.inputs import InputHealth, StaleInputWatch, subscribe_input
 from rfi_node_common.main import run_node
-from rfi_node_common.params import declare
+from rfi_node_common.params import RuntimeParameters, changed_names, declare
 from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS
 from rfi_node_common.stamps import NS_PER_S, ns_to_stamp
 
@@ -113,6 +113,7 @@ class GnssCorrelatorNode(Node):
             self.counts[f'rejected_{reason}'] += 0
         self.gate = StampGate(self.params.max_stamp_jump_s, self.params.stamp_jump_confirmations)
         self._window = CountWindow(self.params.diagnostics_window_s)
+        self.runtime = RuntimeParameters(self, self.params)
         self._diag_timer = StampTimer(self.params.diagnostics_period_s)
         self._errors_at_report = 0
         self.health = InputHealth()
@@ -146,6 +147,8 @@ class GnssCorrelatorNode(Node):
 
     def on_block(self, msg: IfSamples) -> None:
         """One IfSamples block: check, correlate, publish the completed intervals."""
+        if self.runtime.pending:  # between two blocks: the safe point for a parameter change
+            self.runtime.apply_pending(self._apply_parameters)
         self.counts['blocks_received'] += 1
         if msg.header.stamp.nanosec >= NS_PER_S:
             self._reject('stamp_malformed')
@@ -183,6 +186,13 @@ class GnssCorrelatorNode(Node):
             self.counts['arrays_published'] += 1
         if self._diag_timer.due(stamp_ns):
             self.diag_pub.publish(self.diagnostics(stamp_ns))
+
+    def _apply_parameters(self, old: CorrelatorNodeParams, new: CorrelatorNodeParams) -> None:
+        """A change of the settable parameters (the diagnostics ones of NodeDiagnosticsParams)."""
+        self.params = new
+        self._window.window_ns = int(round(new.diagnostics_window_s * 1e9))
+        self.get_logger().info('parameters changed: ' + ', '.join(
+            f'{name} = {getattr(new, name)!r}' for name in changed_names(old, new)))
 
     def destroy_node(self) -> None:
         """Stop the receiver's reacquisition worker, then destroy the node."""

@@ -7,20 +7,12 @@ from dataclasses import dataclass
 
 from gnss_correlator.receiver import IQ_SCALINGS, ReceiverConfig
 from gnss_correlator.tracking import TrackingConfig
-from rfi_node_common.diagnostics import (
-    diagnostics_window_parameter,
-    hardware_id_parameter,
-    input_timeout_parameter,
-    max_stamp_jump_parameter,
-    stamp_jump_confirmations_parameter,
-    warn_lost_fraction_parameter,
-    warn_rejected_fraction_parameter,
-)
+from rfi_node_common.diagnostics import NodeDiagnosticsParams, hardware_id_parameter
 from rfi_node_common.params import USER, ConfigFile, parameter, validate_ranges
 
 
 @dataclass(frozen=True)
-class CorrelatorNodeParams:
+class CorrelatorNodeParams(NodeDiagnosticsParams):
     """Parameters of the gnss_correlator node (documented for users in config/gnss_correlator.yaml).
 
     Notes:
@@ -83,18 +75,8 @@ class CorrelatorNodeParams:
     max_block_samples: int = parameter(
         40_000_000, 'Longest IF block accepted, samples (complex: I/Q pairs); longer ones are rejected '
         '(long_block).', minimum=1, maximum=2 ** 31 - 1)
-    max_stamp_jump_s: float = max_stamp_jump_parameter(120.0)  # type: ignore[assignment]
-    stamp_jump_confirmations: int = stamp_jump_confirmations_parameter(5)  # type: ignore[assignment]
-    input_timeout_s: float = input_timeout_parameter()  # type: ignore[assignment]
-    diagnostics_period_s: float = parameter(
-        1.0, 'Period of /diagnostics in message (stamp) time, s.', minimum=0.01, maximum=3600.0)
-    warning_throttle_s: float = parameter(
-        5.0, 'Shortest interval between two warnings about rejected input, s (wall time; logging only).',
-        minimum=0.0, maximum=3600.0)
     hardware_id: str = hardware_id_parameter('gnss_receiver')  # type: ignore[assignment]
-    diagnostics_window_s: float = diagnostics_window_parameter()  # type: ignore[assignment]
-    warn_rejected_fraction: float = warn_rejected_fraction_parameter()  # type: ignore[assignment]
-    warn_lost_fraction: float = warn_lost_fraction_parameter()  # type: ignore[assignment]
+    # the stamp gate, silence watch and /diagnostics parameters: rfi_node_common.diagnostics.NodeDiagnosticsParams
 
     def __post_init__(self) -> None:
         validate_ranges(self)

@@ -132,3 +132,21 @@ def test_bad_blocks_are_counted_and_gaps_restart(capture):
         assert c['blocks_processed'] == 4 and c['core_errors'] == 0
     finally:
         rig.close()
+
+
+def test_settable_diagnostics_parameters_are_applied_between_blocks(capture):
+    """hardware_id and diagnostics_window_s are declared settable (the shared NodeDiagnosticsParams): a change is
+    applied before the next block, not accepted and ignored; a read-only one (the stamp gate's) is refused."""
+    rig = CorrelatorRig({'acquisition_ms': 2})
+    try:
+        rig.send(block(capture, 0, n=2000))
+        ok = rig.cn.set_parameters([Parameter('hardware_id', value='rx_42'),
+                                    Parameter('diagnostics_window_s', value=3.0)])
+        assert all(r.successful for r in ok)
+        refused = rig.cn.set_parameters([Parameter('max_stamp_jump_s', value=1.0)])
+        assert not refused[0].successful
+        rig.send(block(capture, 2000, n=2000))
+        assert rig.cn.params.hardware_id == 'rx_42' and rig.cn.params.diagnostics_window_s == 3.0
+        assert rig.cn._window.window_ns == 3 * NS_PER_S and rig.cn.params.max_stamp_jump_s == 120.0
+    finally:
+        rig.close()
