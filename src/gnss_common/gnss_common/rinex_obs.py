@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -230,38 +230,96 @@ def _split_fields(line: str, start: int, count: int) -> list[str]:
     return [padded[start + k * _OBS_FIELD_WIDTH : start + (k + 1) * _OBS_FIELD_WIDTH] for k in range(count)]
 
 
-def _iter_obs2(
-    lines: list[str], idx: int, header: RinexObsHeader, path: str | Path
+@dataclass(frozen=True)
+class _EpochRecordLayout:
+    """Columns of an observation epoch record: RINEX 2.11 Table A2, RINEX 3.04 Table A3 (0-based slices)."""
+
+    marker: str  # the record's first characters ("" in RINEX 2, ">" in RINEX 3 and 4)
+    min_columns: int
+    flag: slice
+    nsat: slice
+    seconds: slice
+    clock: slice
+    date: Callable[[str], tuple[int, int, int, int, int]]  # year, month, day, hour, minute; ValueError if malformed
+
+
+def _epoch_date2(line: str) -> tuple[int, int, int, int, int]:
+    yy, mo, dd, hh, mi = (int(line[k : k + 3]) for k in (0, 3, 6, 9, 12))
+    return two_digit_year(yy), mo, dd, hh, mi
+
+
+def _epoch_date3(line: str) -> tuple[int, int, int, int, int]:
+    mo, dd, hh, mi = (int(line[k : k + 3]) for k in (6, 9, 12, 15))
+    return int(line[2:6]), mo, dd, hh, mi
+
+
+_RINEX2_EPOCH = _EpochRecordLayout("", 32, slice(26, 29), slice(29, 32), slice(15, 26), slice(68, 80), _epoch_date2)
+_RINEX3_EPOCH = _EpochRecordLayout(">", 35, slice(31, 32), slice(32, 35), slice(18, 29), slice(41, 56), _epoch_date3)
+
+_ObsBlockReader = Callable[[int, int, int], tuple[int, dict[str, dict[str, float]]]]
+"""Reads one epoch's satellites and observations: (index of the epoch record, nsat, its line number) ->
+(index of the next record, observations by satellite)."""
+
+
+def _iter_epochs(
+    lines: list[str],
+    idx: int,
+    header: RinexObsHeader,
+    path: str | Path,
+    layout: _EpochRecordLayout,
+    read_block: _ObsBlockReader,
 ) -> Iterator[RinexObsEpoch]:
+    """The epochs of flag 0 or 1 from ``lines[idx:]``; event records (flag > 1) and what they carry skipped."""
     n = len(lines)
-    n_types = len(header.obs_types["G"])
-    lines_per_sat = (n_types + _RINEX2_OBS_PER_LINE - 1) // _RINEX2_OBS_PER_LINE
-    default_sys = header.file_system if header.file_system in "GRESJ" and header.file_system != "M" else "G"
     while idx < n:
         line = lines[idx]
         line_no = idx + 1
         if not line.strip():
             idx += 1
             continue
-        if len(line) < 32:
-            raise RinexFormatError(path, line_no, "epoch record shorter than 32 columns")
-        flag = int_field(line[26:29], path, line_no, "epoch flag")
-        nsat = int_field(line[29:32], path, line_no, "number of satellites")
+        if not line.startswith(layout.marker):
+            raise RinexFormatError(path, line_no, f"expected an epoch record starting with {layout.marker!r}")
+        if len(line) < layout.min_columns:
+            raise RinexFormatError(path, line_no, f"epoch record shorter than {layout.min_columns} columns")
+        flag = int_field(line[layout.flag], path, line_no, "epoch flag")
+        nsat = int_field(line[layout.nsat], path, line_no, "number of satellites")
         if flag > 1:
             # Event: nsat is the number of special records that follow (header lines or slips).
             idx += 1 + nsat
             continue
         try:
-            yy, mo, dd, hh, mi = (int(line[k : k + 3]) for k in (0, 3, 6, 9, 12))
+            year, mo, dd, hh, mi = layout.date(line)
         except ValueError:
-            raise RinexFormatError(path, line_no, f"malformed epoch date in {line[0:26]!r}") from None
-        sec = float_field(line[15:26], path, line_no, "epoch seconds")
-        week, tow = obs_epoch_to_gps(
-            header.time_system, two_digit_year(yy), mo, dd, hh, mi, sec, path, line_no
-        )
+            date_text = line[0 : layout.seconds.stop]
+            raise RinexFormatError(path, line_no, f"malformed epoch date in {date_text!r}") from None
+        sec = float_field(line[layout.seconds], path, line_no, "epoch seconds")
+        week, tow = obs_epoch_to_gps(header.time_system, year, mo, dd, hh, mi, sec, path, line_no)
         clock = (
-            float_field(line[68:80], path, line_no, "receiver clock offset") if len(line) > 68 else math.nan
+            float_field(line[layout.clock], path, line_no, "receiver clock offset")
+            if len(line) > layout.clock.start
+            else math.nan
         )
+        idx, observations = read_block(idx, nsat, line_no)
+        yield RinexObsEpoch(
+            gps_week=week,
+            tow_s=tow,
+            epoch_flag=flag,
+            receiver_clock_offset_s=clock,
+            observations=observations,
+            line_no=line_no,
+        )
+
+
+def _iter_obs2(
+    lines: list[str], idx: int, header: RinexObsHeader, path: str | Path
+) -> Iterator[RinexObsEpoch]:
+    n = len(lines)
+    codes = header.obs_types["G"]
+    lines_per_sat = (len(codes) + _RINEX2_OBS_PER_LINE - 1) // _RINEX2_OBS_PER_LINE
+    default_sys = header.file_system if header.file_system in "GRESJ" and header.file_system != "M" else "G"
+
+    def read_block(idx: int, nsat: int, line_no: int) -> tuple[int, dict[str, dict[str, float]]]:
+        # The satellite list fills columns 33-68 of the epoch record and of its continuation lines.
         sat_lines = (nsat + _RINEX2_SATS_PER_LINE - 1) // _RINEX2_SATS_PER_LINE
         sat_text = ""
         for k in range(max(sat_lines, 1)):
@@ -279,7 +337,6 @@ def _iter_obs2(
                 raise RinexFormatError(path, line_no, f"malformed satellite id {tok!r}") from None
         idx += max(sat_lines, 1)
         observations: dict[str, dict[str, float]] = {}
-        codes = header.obs_types["G"]
         for sat in sats:
             chunks: list[str] = []
             for _ in range(lines_per_sat):
@@ -291,45 +348,18 @@ def _iter_obs2(
                 observations[sat] = _parse_obs_values(chunks, codes)
             except ValueError:
                 raise RinexFormatError(path, idx, f"malformed observation value for {sat}") from None
-        yield RinexObsEpoch(
-            gps_week=week,
-            tow_s=tow,
-            epoch_flag=flag,
-            receiver_clock_offset_s=clock,
-            observations=observations,
-            line_no=line_no,
-        )
+        return idx, observations
+
+    return _iter_epochs(lines, idx, header, path, _RINEX2_EPOCH, read_block)
 
 
 def _iter_obs3(
     lines: list[str], idx: int, header: RinexObsHeader, path: str | Path
 ) -> Iterator[RinexObsEpoch]:
     n = len(lines)
-    while idx < n:
-        line = lines[idx]
-        line_no = idx + 1
-        if not line.strip():
-            idx += 1
-            continue
-        if not line.startswith(">"):
-            raise RinexFormatError(path, line_no, "expected an epoch record starting with '>'")
-        if len(line) < 35:
-            raise RinexFormatError(path, line_no, "epoch record shorter than 35 columns")
-        flag = int_field(line[31:32], path, line_no, "epoch flag")
-        nsat = int_field(line[32:35], path, line_no, "number of satellites")
-        if flag > 1:
-            idx += 1 + nsat
-            continue
-        try:
-            year = int(line[2:6])
-            mo, dd, hh, mi = (int(line[k : k + 3]) for k in (6, 9, 12, 15))
-        except ValueError:
-            raise RinexFormatError(path, line_no, f"malformed epoch date in {line[0:29]!r}") from None
-        sec = float_field(line[18:29], path, line_no, "epoch seconds")
-        week, tow = obs_epoch_to_gps(header.time_system, year, mo, dd, hh, mi, sec, path, line_no)
-        clock = (
-            float_field(line[41:56], path, line_no, "receiver clock offset") if len(line) > 41 else math.nan
-        )
+
+    def read_block(idx: int, nsat: int, line_no: int) -> tuple[int, dict[str, dict[str, float]]]:
+        # One record per satellite after the epoch record: system and number, then the header's codes of its system.
         idx += 1
         observations: dict[str, dict[str, float]] = {}
         for _ in range(nsat):
@@ -350,13 +380,6 @@ def _iter_obs3(
                 observations[sat] = _parse_obs_values(_split_fields(rec, 3, len(codes)), codes)
             except ValueError:
                 raise RinexFormatError(path, rec_no, f"malformed observation value for {sat}") from None
-        yield RinexObsEpoch(
-            gps_week=week,
-            tow_s=tow,
-            epoch_flag=flag,
-            receiver_clock_offset_s=clock,
-            observations=observations,
-            line_no=line_no,
-        )
+        return idx, observations
 
-
+    return _iter_epochs(lines, idx, header, path, _RINEX3_EPOCH, read_block)
