@@ -185,24 +185,24 @@ def ecef_to_enu_rotation_scalar(lat_rad: float, lon_rad: float) -> np.ndarray:
 
 
 @njit(cache=True)
-def _rotate_covariance_kernel(cov: np.ndarray, lat_rad: float, lon_rad: float) -> np.ndarray:
-    """``R cov R^T`` for the 3x3 leading block of ``cov`` (R of :func:`ecef_to_enu_rotation_scalar`), compiled."""
-    r = ecef_to_enu_rotation_scalar(lat_rad, lon_rad)
-    rc = np.zeros((3, 3))
-    for i in range(3):
-        for j in range(3):
-            acc = 0.0
-            for k in range(3):
-                acc += r[i, k] * cov[k, j]
-            rc[i, j] = acc
+def _matmul3(a: np.ndarray, b: np.ndarray, transpose_b: bool) -> np.ndarray:
+    """``A B`` (or ``A B^T`` with ``transpose_b``) of the 3x3 leading blocks, compiled; each element summed over
+    k = 0, 1, 2 in that order (the same bits on every machine, unlike a BLAS call)."""
     out = np.zeros((3, 3))
     for i in range(3):
         for j in range(3):
             acc = 0.0
             for k in range(3):
-                acc += rc[i, k] * r[j, k]
+                acc += a[i, k] * (b[j, k] if transpose_b else b[k, j])
             out[i, j] = acc
     return out
+
+
+@njit(cache=True)
+def _rotate_covariance_kernel(cov: np.ndarray, lat_rad: float, lon_rad: float) -> np.ndarray:
+    """``R cov R^T`` for the 3x3 leading block of ``cov`` (R of :func:`ecef_to_enu_rotation_scalar`), compiled."""
+    r = ecef_to_enu_rotation_scalar(lat_rad, lon_rad)
+    return _matmul3(_matmul3(r, cov, False), r, True)
 
 
 @njit(cache=True)
