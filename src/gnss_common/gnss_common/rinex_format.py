@@ -7,7 +7,7 @@ from __future__ import annotations
 import calendar
 import datetime as _dt
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 
 import hatanaka
@@ -17,6 +17,18 @@ from gnss_common.gps_time import datetime_to_gps, leap_seconds_at_ros_stamp
 
 SYSTEM_NAMES = {"G": "gps", "R": "glonass", "E": "galileo", "C": "beidou", "J": "qzss", "S": "sbas", "I": "navic"}
 """RINEX system letter -> lower-case constellation name (used as counter keys)."""
+
+
+def add_counts(total: dict[str, int], counts: Mapping[str, int]) -> None:
+    """Add ``counts`` into ``total``, key by key (a key new to ``total`` starts at 0)."""
+    for key, n in counts.items():
+        total[key] = total.get(key, 0) + n
+
+
+def add_counts_by_group(total: dict[str, dict[str, int]], counts: Mapping[str, Mapping[str, int]]) -> None:
+    """:func:`add_counts` per group (e.g. skipped records by constellation, then by reason)."""
+    for group, by_key in counts.items():
+        add_counts(total.setdefault(group, {}), by_key)
 
 
 

@@ -17,6 +17,8 @@ from gnss_common.glonass import GlonassEphemeris
 from gnss_common.gps_time import leap_seconds_at_ros_stamp
 from gnss_common.rinex_format import (
     RinexFormatError,
+    add_counts,
+    add_counts_by_group,
     epoch_to_gps,
     float_field,
     header_label,
@@ -290,12 +292,8 @@ def read_rinex_navs(paths: Sequence[str | Path]) -> RinexNav:
     skipped: dict[str, int] = {}
     reasons: dict[str, dict[str, int]] = {}
     for v in navs:
-        for k, c in v.skipped_records.items():
-            skipped[k] = skipped.get(k, 0) + c
-        for k, by in v.skipped_reasons.items():
-            dst = reasons.setdefault(k, {})
-            for r, c in by.items():
-                dst[r] = dst.get(r, 0) + c
+        add_counts(skipped, v.skipped_records)
+        add_counts_by_group(reasons, v.skipped_reasons)
     header = RinexNavHeader(
         version=navs[0].header.version, iono_alpha=iono.iono_alpha, iono_beta=iono.iono_beta, leap_seconds=leap
     )

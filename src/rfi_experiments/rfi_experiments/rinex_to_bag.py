@@ -68,6 +68,7 @@ from gnss_common.measurements import (
 )
 from gnss_common.observations import GnssEpoch
 from gnss_common.rinex import SYSTEM_NAMES, RinexFormatError, read_rinex_navs, read_rinex_obs
+from gnss_common.rinex_format import add_counts, add_counts_by_group
 from rfi_experiments import cli
 from rfi_experiments.bag_io import BagError, BagWriter
 from rfi_experiments.cli import error_reporter
@@ -224,12 +225,8 @@ def convert_rinex(
         progress.total = len(obs.epochs)
     for rinex_epoch in (obs.epochs if progress is None else progress.iterate(obs.epochs)):
         result = builder.build(rinex_epoch)
-        for reason, n in result.skipped.items():
-            skipped[reason] = skipped.get(reason, 0) + n
-        for name, counts in result.skipped_by_constellation.items():
-            dst = by_system.setdefault(name, {})
-            for reason, n in counts.items():
-                dst[reason] = dst.get(reason, 0) + n
+        add_counts(skipped, result.skipped)
+        add_counts_by_group(by_system, result.skipped_by_constellation)
         epoch, dropped, applied = apply_elevation_mask(result, mask_rad)
         skipped[BELOW_MASK] += dropped
         if dropped:
