@@ -48,11 +48,16 @@ def test_known_dates():
     assert datetime_to_gps_ns(label) == int(label.timestamp()) * 1_000_000_000
 
 
+def _random_gps_times(seed: int, count: int, weeks: int):
+    """``count`` seeded (week, tow_s): week in [0, weeks), tow_s on a 1 us grid within the week."""
+    rng = np.random.default_rng(seed)
+    for _ in range(count):
+        week = int(rng.integers(0, weeks))
+        yield week, float(np.round(rng.uniform(0.0, 604800.0 - 1e-3), 6))
+
+
 def test_round_trips():
-    rng = np.random.default_rng(11)
-    for _ in range(200):
-        week = int(rng.integers(0, 3000))
-        tow = float(np.round(rng.uniform(0.0, 604800.0 - 1e-3), 6))
+    for week, tow in _random_gps_times(11, 200, 3000):
         stamp = gps_to_gps_ns(week, tow)
         w2, t2 = gps_ns_to_gps(stamp)
         assert w2 == week
@@ -213,10 +218,7 @@ def test_a_stamp_inside_a_leap_second():
 
 
 def test_ros_round_trips_over_the_whole_table():
-    rng = np.random.default_rng(12)
-    for _ in range(300):
-        week = int(rng.integers(0, 2300))
-        tow = float(np.round(rng.uniform(0.0, 604800.0 - 1e-3), 6))
+    for week, tow in _random_gps_times(12, 300, 2300):
         stamp = gps_to_ros_stamp_ns(week, tow)
         leap = leap_seconds_at_gps(week, tow)
         assert stamp == gps_to_gps_ns(week, tow) - leap * _NS

@@ -10,6 +10,14 @@ import time
 from rfi_experiments import cli
 
 
+def _run_python(code: str) -> subprocess.CompletedProcess:
+    """``python -c code`` in a new interpreter, which must end by itself well before the 30 s kill."""
+    t0 = time.monotonic()
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=30)
+    assert time.monotonic() - t0 < 20
+    return proc
+
+
 class _Node:
     def __init__(self) -> None:
         self.destroyed = False
@@ -71,9 +79,7 @@ def test_exit_now_ends_the_process_with_main_s_code_despite_a_live_thread():
         "    return 3\n"
         "exit_now(main)\n"
     )
-    t0 = time.monotonic()
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=30)
-    assert time.monotonic() - t0 < 20
+    proc = _run_python(code)
     assert proc.returncode == 3 and proc.stdout == "done"
 
 
@@ -110,8 +116,6 @@ def test_release_endpoints_that_hang_end_the_process_with_its_stacks():
         "release_endpoints(Node(), timeout_s=0.5)\n"
         "print('not reached')\n"
     )
-    t0 = time.monotonic()
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=30)
-    assert time.monotonic() - t0 < 20
+    proc = _run_python(code)
     assert proc.returncode == 1 and 'not reached' not in proc.stdout
     assert 'Timeout' in proc.stderr and 'destroy_subscription' in proc.stderr
