@@ -25,7 +25,12 @@ from gnss_common.clock_model import (
 )
 from gnss_common.constants import GPS_L1_FREQUENCY_HZ
 from imm_carrier.layout import IMM_OUT_LEN, IMM_STATE_LEN, ImmOut, ImmState
-from imm_carrier.measurement_model import IQ_SCALINGS, check_step_inputs, correlator_batch
+from imm_carrier.measurement_model import (
+    IQ_SCALINGS,
+    CompiledChannelLoop,
+    check_positive_finite,
+    check_step_inputs,
+)
 from rfi_node_common.params import USER, parameter
 
 TWO_PI = 2.0 * math.pi
@@ -106,17 +111,14 @@ class ImmParams:
             )
         if self.iq_scaling not in IQ_SCALINGS:
             raise ValueError(f"iq_scaling must be one of {IQ_SCALINGS}, got {self.iq_scaling!r}")
-        for key in (
+        check_positive_finite(self, (
             "process_noise_scale",
             "carrier_hz",
             "initial_phase_std_rad",
             "initial_frequency_std_hz",
             "lock_phase_std_max_rad",
             "slip_jump_threshold_rad",
-        ):
-            value = getattr(self, key)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
-                raise ValueError(f"ImmParams.{key} must be finite and > 0, got {value!r}")
+        ))
         p = self.bit_transition_probability
         if not (isinstance(p, (int, float)) and 0.0 <= p <= 1.0):
             raise ValueError(f"ImmParams.bit_transition_probability must be in [0, 1], got {p!r}")
@@ -401,7 +403,7 @@ class ImmBatchResult:
     counters: dict[str, int] = field(default_factory=dict)
 
 
-class ImmCarrierFilter:
+class ImmCarrierFilter(CompiledChannelLoop):
     """Two-mode (data bit +1 / -1) IMM estimating the residual carrier phase of one channel.
 
     Time is not read: each step propagates by the correlator's integration time (s).
@@ -417,21 +419,16 @@ class ImmCarrierFilter:
         Zhao et al., Section II (eq. 1-5, Fig. 2-3) and Section III (eq. 7-8).
     """
 
+    NOT_INITIALISED = "filter not initialised: call initialize() or initialize_from_correlator()"
+
     def __init__(self, params: ImmParams) -> None:
         if not isinstance(params, ImmParams):
             raise ValueError("params must be an ImmParams")
+        super().__init__(IMM_STATE_LEN, IMM_OUT_LEN)
         self.params = params
         self._q_f, self._q_g = params.q_phase
         self._form_code = PROCESS_NOISE_FORMS.index(params.process_noise_form)
         self._unit_noise = params.iq_scaling == "unit_noise"
-        self._st = np.zeros(IMM_STATE_LEN)
-        self._out = np.zeros(IMM_OUT_LEN)
-        self._initialized = False
-
-    @property
-    def initialized(self) -> bool:
-        """True once a state has been set."""
-        return self._initialized
 
     @property
     def residual_phase_rad(self) -> float:
@@ -505,8 +502,7 @@ class ImmCarrierFilter:
     def _check_scalar_inputs(
         self, cn0_dbhz: float, integration_time_s: float, predicted_phase_change_rad: float
     ) -> None:
-        if not self._initialized:
-            raise ValueError("filter not initialised: call initialize() or initialize_from_correlator()")
+        self._require_initialized()
         check_step_inputs(cn0_dbhz, integration_time_s, predicted_phase_change_rad)
 
     def update(
@@ -615,12 +611,11 @@ class ImmCarrierFilter:
         Returns:
             ImmBatchResult; rejected samples leave the state untouched and are counted.
         """
-        if not self._initialized:
-            raise ValueError("filter not initialised: call initialize() or initialize_from_correlator()")
-        batch = correlator_batch(in_phase, quadrature, cn0_dbhz, integration_time_s, predicted_phase_change_rad)
+        batch, idx, raw = self._start_batch(
+            in_phase, quadrature, cn0_dbhz, integration_time_s, predicted_phase_change_rad
+        )
         zi, zq, cn0 = batch.in_phase, batch.quadrature, batch.cn0_dbhz
         t, dphi = batch.integration_time_s, batch.predicted_phase_change_rad
-        n = zi.size
         pch = batch.per_sample(
             "bit_transition_probability",
             self.params.bit_transition_probability
@@ -631,8 +626,6 @@ class ImmCarrierFilter:
         if np.any(~((pch >= 0) & (pch <= 1))):
             raise ValueError("bit_transition_probability must be in [0, 1]")
         accepted, counters = batch.accepted, batch.counters
-        idx = np.flatnonzero(accepted)
-        raw = np.full((n, IMM_OUT_LEN), np.nan)
         if idx.size:
             sub = np.empty((idx.size, IMM_OUT_LEN))
             _imm_run(

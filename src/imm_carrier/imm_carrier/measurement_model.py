@@ -153,6 +153,18 @@ class CarrierPhaseEstimate:
     cycle_slips: int
 
 
+def check_positive_finite(params: object, keys: tuple[str, ...]) -> None:
+    """Refuse a parameter set whose fields ``keys`` are not all finite numbers > 0.
+
+    Raises:
+        ValueError: naming the first such field as ``<class>.<key>``, with its value.
+    """
+    for key in keys:
+        value = getattr(params, key)
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
+            raise ValueError(f"{type(params).__name__}.{key} must be finite and > 0, got {value!r}")
+
+
 def check_step_inputs(cn0_dbhz: float, integration_time_s: float, predicted_phase_change_rad: float) -> None:
     """Refuse a scalar tracker step's invalid T, C/N0 or phase change (the tracker counts these before).
 
@@ -245,3 +257,39 @@ def correlator_batch(
         "coasted_nonfinite_iq": int(np.sum(accepted & ~(np.isfinite(zi) & np.isfinite(zq)))),
     }
     return CorrelatorBatch(zi, zq, cn0, t, dphi, accepted, counters)
+
+
+class CompiledChannelLoop:
+    """What the IMM and the PLL share: the state and output arrays their compiled step and run kernels update
+    in place, whether a state has been set, and the start of a batch.
+
+    Subclasses set :attr:`NOT_INITIALISED` (the message of a step before ``initialize``).
+    """
+
+    NOT_INITIALISED = "not initialised"
+
+    def __init__(self, state_len: int, out_len: int) -> None:
+        self._st = np.zeros(state_len)
+        self._out = np.zeros(out_len)
+        self._initialized = False
+
+    @property
+    def initialized(self) -> bool:
+        """True once a state has been set (``initialize`` or ``initialize_from_correlator``)."""
+        return self._initialized
+
+    def _require_initialized(self) -> None:
+        if not self._initialized:
+            raise ValueError(self.NOT_INITIALISED)
+
+    def _start_batch(self, *correlators: np.ndarray | float) -> tuple[CorrelatorBatch, np.ndarray, np.ndarray]:
+        """The checked batch of ``correlators`` (the arguments of :func:`correlator_batch`, in its order), the
+        indices of its accepted samples and the output rows for the run kernel to fill, shape
+        (n, output length), NaN where a sample is rejected.
+
+        Raises:
+            ValueError: the loop not initialised, or an input of the wrong shape.
+        """
+        self._require_initialized()
+        batch = correlator_batch(*correlators)  # type: ignore[arg-type]
+        return batch, np.flatnonzero(batch.accepted), np.full((batch.in_phase.size, self._out.size), np.nan)

@@ -14,7 +14,12 @@ import numpy as np
 from numba import njit
 
 from imm_carrier.layout import PLL_OUT_LEN, PLL_STATE_LEN, PllOut, PllState
-from imm_carrier.measurement_model import IQ_SCALINGS, check_step_inputs, correlator_batch
+from imm_carrier.measurement_model import (
+    IQ_SCALINGS,
+    CompiledChannelLoop,
+    check_positive_finite,
+    check_step_inputs,
+)
 from rfi_node_common.params import parameter
 
 TWO_PI = 2.0 * math.pi
@@ -102,15 +107,9 @@ class PllParams:
     )
 
     def __post_init__(self) -> None:
-        for key in (
-            "start_bandwidth_hz",
-            "end_bandwidth_hz",
-            "tightening_duration_s",
-            "lock_time_constant_s",
-        ):
-            v = getattr(self, key)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"PllParams.{key} must be finite and > 0, got {v!r}")
+        check_positive_finite(
+            self, ("start_bandwidth_hz", "end_bandwidth_hz", "tightening_duration_s", "lock_time_constant_s")
+        )
         if self.end_bandwidth_hz > self.start_bandwidth_hz:
             raise ValueError("PllParams.end_bandwidth_hz must not exceed start_bandwidth_hz")
         if self.iq_scaling not in IQ_SCALINGS:
@@ -209,7 +208,7 @@ class PllBatchResult:
     counters: dict[str, int] = field(default_factory=dict)
 
 
-class CostasPll:
+class CostasPll(CompiledChannelLoop):
     """Costas PLL with a third-order loop filter and the bandwidth schedule of Zhao et al., eq. 10.
 
     Notes:
@@ -219,18 +218,13 @@ class CostasPll:
         I'^2 - Q'^2 normalised by A^2 from C/N0 (an unbiased estimate of cos 2 dphi).
     """
 
+    NOT_INITIALISED = "PLL not initialised"
+
     def __init__(self, params: PllParams) -> None:
         if not isinstance(params, PllParams):
             raise ValueError("params must be a PllParams")
+        super().__init__(PLL_STATE_LEN, PLL_OUT_LEN)
         self.params = params
-        self._st = np.zeros(PLL_STATE_LEN)
-        self._out = np.zeros(PLL_OUT_LEN)
-        self._initialized = False
-
-    @property
-    def initialized(self) -> bool:
-        """True once the NCO has been set."""
-        return self._initialized
 
     @property
     def elapsed_s(self) -> float:
@@ -289,15 +283,12 @@ class CostasPll:
         Returns:
             PllBatchResult; samples with invalid T, C/N0 or phase change are rejected and counted.
         """
-        if not self._initialized:
-            raise ValueError("PLL not initialised")
-        batch = correlator_batch(in_phase, quadrature, cn0_dbhz, integration_time_s, predicted_phase_change_rad)
+        batch, idx, raw = self._start_batch(
+            in_phase, quadrature, cn0_dbhz, integration_time_s, predicted_phase_change_rad
+        )
         zi, zq, cn0 = batch.in_phase, batch.quadrature, batch.cn0_dbhz
         t, dphi = batch.integration_time_s, batch.predicted_phase_change_rad
-        n = zi.size
         accepted, counters = batch.accepted, batch.counters
-        idx = np.flatnonzero(accepted)
-        raw = np.full((n, PLL_OUT_LEN), np.nan)
         if idx.size:
             ta = t[idx]
             elapsed = self._st[PllState.ELAPSED] + np.cumsum(ta)
@@ -342,8 +333,7 @@ class CostasPll:
             before calling).
         """
         check_step_inputs(cn0_dbhz, integration_time_s, predicted_phase_change_rad)
-        if not self._initialized:
-            raise ValueError("PLL not initialised")
+        self._require_initialized()
         p = self.params
         t = float(integration_time_s)
         bn = scheduled_bandwidth_hz(
