@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from rfi_experiments.bag_io import BagReader
-from rfi_experiments.report_html import write_html
+from rfi_experiments.report_html import save_figure, write_html
 from rfi_experiments.report_integrity import integrity_section
 from rfi_sim.evaluation import ecef_errors_enu, empirical_cdf, error_3d_m, error_stats, horizontal_error_m
 
@@ -188,14 +188,12 @@ def _jammer_section(truth: list[Any], estimates: list[Any], out: Path, summary: 
     axes[2].set_ylabel('J/S, dB')
     axes[2].set_xlabel('time, s')
     axes[2].legend(fontsize=7)
-    fig.suptitle('Jammer frequency track, sweep period and J/S: rfi_monitor against truth')
-    fig.tight_layout()
-    fig.savefig(out / 'jammer.png', dpi=110)
-    plt.close(fig)
+    figure = save_figure(fig, plt, out / 'jammer.png',
+                         'Jammer frequency track, sweep period and J/S: rfi_monitor against truth')
     lines += ['', 'Figure: the frequency at each block end, the sweep period and the J/S, reported against the truth. '
               'A period is drawn only where the monitor published one (a period it cannot tell from a multiple of a '
               'shorter one is NaN); J/S only for blocks with a reported jammer (a NONE block carries no J/S).']
-    return lines + ['', '![Jammer frequency track, sweep period and J/S: rfi_monitor against truth](jammer.png)', '']
+    return lines + figure
 
 
 # -- positioning ----------------------------------------------------------------------------------
@@ -347,12 +345,9 @@ def _fusion_section(truth: Mapping[str, list[Any]], odometry: list[Any], out: Pa
     axes[1].set_ylabel('CDF')
     axes[1].grid(True, which='both', alpha=0.3)
     axes[1].legend(fontsize=8)
-    fig.suptitle('Positioning error under the jamming schedule')
-    fig.tight_layout()
-    fig.savefig(out / 'positioning.png', dpi=110)
-    plt.close(fig)
-    return lines + ['', '![Positioning error under the jamming schedule: horizontal error over time and CDF of the 3D '
-                    'error](positioning.png)', '']
+    return lines + save_figure(fig, plt, out / 'positioning.png', 'Positioning error under the jamming schedule',
+                               'Positioning error under the jamming schedule: horizontal error over time and CDF of '
+                               'the 3D error')
 
 
 # -- carrier --------------------------------------------------------------------------------------
@@ -436,12 +431,9 @@ def _carrier_section(truth_msgs: list[Any], estimates: list[Any], out: Path, sum
     axes[1].set_ylabel('phase error std, deg')
     axes[1].axhline(PAPER_FIGURES['imm_std_deg'], color='k', ls=':', lw=1, label='12 deg (Zhao et al.)')
     axes[1].legend(fontsize=8)
-    fig.suptitle('Carrier phase: IMM against PLL on the same correlators')
-    fig.tight_layout()
-    fig.savefig(out / 'carrier.png', dpi=110)
-    plt.close(fig)
-    return lines + ['', '![Carrier phase: IMM against PLL on the same correlators (phase error of the worst '
-                    'satellite, error std per satellite)](carrier.png)', '']
+    return lines + save_figure(fig, plt, out / 'carrier.png', 'Carrier phase: IMM against PLL on the same correlators',
+                               'Carrier phase: IMM against PLL on the same correlators (phase error of the worst '
+                               'satellite, error std per satellite)')
 
 
 def write_report(bag: str | os.PathLike[str], outputs: Mapping[str, list[Any]], out_dir: str | os.PathLike[str],

@@ -21,6 +21,7 @@ import re
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 MIME_TYPES = {'.png': 'image/png', '.svg': 'image/svg+xml', '.jpg': 'image/jpeg', '.jpeg': 'image/jpeg',
               '.gif': 'image/gif', '.webp': 'image/webp'}
@@ -72,6 +73,30 @@ class _Context:
     base_dir: Path
     linked_pages: list[Path] = field(default_factory=list)
     heading_ids: set[str] = field(default_factory=set)
+
+
+FIGURE_DPI = 110
+"""Resolution of the report's PNG figures, dots per inch."""
+
+
+def save_figure(fig: Any, plt: Any, path: Path, title: str, alt: str = '') -> list[str]:
+    """Title, lay out, write and close one matplotlib figure of a report; the Markdown lines that show it.
+
+    Args:
+        fig: the figure; closed here (``plt.close``).
+        plt: ``matplotlib.pyplot``.
+        path: the PNG to write (FIGURE_DPI); the Markdown links its name, beside ``index.md``.
+        title: the figure's title, also its alt text (the page's caption) unless ``alt`` is given.
+        alt: a longer alt text.
+
+    Returns:
+        ``['', '![alt](name)', '']``, to append to the report's lines.
+    """
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=FIGURE_DPI)
+    plt.close(fig)
+    return ['', f'![{alt or title}]({path.name})', '']
 
 
 def _image_uri(src: str, ctx: _Context) -> tuple[str, tuple[int, int] | None]:

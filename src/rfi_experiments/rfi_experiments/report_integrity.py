@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from rfi_experiments.report_html import save_figure
 from rfi_sim.evaluation import ecef_errors_enu, horizontal_error_m
 
 STATE_NAMES = {0: 'unknown', 1: 'none', 2: 'suspected', 3: 'detected'}
@@ -94,9 +95,7 @@ def integrity_section(truth: Mapping[str, list[Any]], outputs: Mapping[str, list
         summary.values['fusion_rms_before_attack_m'] = rms['before']
         summary.values['fusion_rms_over_attack_m'] = rms['during']
         summary.values['fusion_max_over_attack_m'] = worst
-    _figure(t, state, attack_s, err, excluded, out, plt)
-    return lines + ['', '![Spoofing: what gnss_integrity reported and what the fusion did with it (spoofing state, '
-                    'fusion horizontal error)](integrity.png)', '']
+    return lines + _figure(t, state, attack_s, err, excluded, out, plt)
 
 
 def _fusion_errors(truth: Mapping[str, list[Any]], outputs: Mapping[str, list[Any]],
@@ -121,7 +120,7 @@ def _excluded(outputs: Mapping[str, list[Any]], t0: float) -> tuple[np.ndarray, 
             np.array([getattr(m, 'gnss_excluded', 0) != 0 for m in status]))
 
 
-def _figure(t: np.ndarray, state: np.ndarray, attack_s: float, err, excluded, out: Path, plt: Any) -> None:
+def _figure(t: np.ndarray, state: np.ndarray, attack_s: float, err, excluded, out: Path, plt: Any) -> list[str]:
     fig, axes = plt.subplots(2, 1, figsize=(11, 6), sharex=True)
     axes[0].step(t, state, where='post', label='gnss_integrity spoofing state')
     axes[0].set_yticks(list(STATE_NAMES), [STATE_NAMES[k] for k in STATE_NAMES])
@@ -139,7 +138,6 @@ def _figure(t: np.ndarray, state: np.ndarray, attack_s: float, err, excluded, ou
     axes[1].set_xlabel('time, s')
     axes[1].set_ylabel('horizontal error, m')
     axes[1].legend(fontsize=8, loc='upper left', markerscale=4)
-    fig.suptitle('Spoofing: what gnss_integrity reported and what the fusion did with it')
-    fig.tight_layout()
-    fig.savefig(out / 'integrity.png', dpi=110)
-    plt.close(fig)
+    title = 'Spoofing: what gnss_integrity reported and what the fusion did with it'
+    return save_figure(fig, plt, out / 'integrity.png', title,
+                       f'{title} (spoofing state, fusion horizontal error)')

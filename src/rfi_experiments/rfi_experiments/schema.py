@@ -22,7 +22,7 @@ symmetric sweep about the IF, 5.10 us); wideband ``center_frequency_hz`` (defaul
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -34,6 +34,20 @@ class ScenarioError(Exception):
 
 
 _YAML_EXPONENT_HINT = ' (YAML reads 1.0e12 as a string: write the exponent sign, 1.0e+12)'
+
+
+def reject_unknown_keys(section: Mapping[str, Any], known: Sequence[str], where: str) -> None:
+    """Raise :class:`ScenarioError` naming the keys of ``section`` that are not in ``known`` (and the known ones).
+
+    Args:
+        section: the mapping as written in the scenario.
+        known: the accepted keys, in the order the message lists them.
+        where: the section's name, the message's prefix.
+    """
+    unknown = set(section) - set(known)
+    if unknown:
+        raise ScenarioError(f'{where}: unknown key(s) {", ".join(sorted(map(str, unknown)))} '
+                            f'(known: {", ".join(known)})')
 
 
 def number(value: Any, where: str, low: float = -math.inf, high: float = math.inf, *,

@@ -57,7 +57,7 @@ from gnss_common.clock_model import PRESETS, ClockHCoefficients
 from gnss_common.constants import GPS_NAV_BIT_RATE_HZ
 from gnss_common.gps_time import gps_ns_to_ros_stamp_ns, gps_to_gps_ns
 from rfi_experiments.scenario import Scenario
-from rfi_experiments.schema import ScenarioError, integer, number
+from rfi_experiments.schema import ScenarioError, integer, number, reject_unknown_keys
 from rfi_sim.correlators import CorrelatorScenario, simulate_correlators
 
 CORRELATORS_TOPIC = '/gnss/correlators'
@@ -137,10 +137,7 @@ def parse_section(scenario: Scenario, section: Mapping[str, Any]) -> tuple[Corre
     Raises:
         ScenarioError: unknown key, wrong type or non-physical value (the message names the key).
     """
-    unknown = set(section) - set(DEFAULTS)
-    if unknown:
-        raise ScenarioError(f'correlators: unknown key(s) {", ".join(sorted(map(str, unknown)))} '
-                            f'(known: {", ".join(DEFAULTS)})')
+    reject_unknown_keys(section, tuple(DEFAULTS), 'correlators')
     s = {**DEFAULTS, **section}
     week = _integer(s, 'start_gps_week', 0, 10_000)
     tow_s = _number(s, 'start_gps_tow_s')

@@ -88,7 +88,7 @@ import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -105,6 +105,7 @@ from rfi_experiments.schema import (
     jsr_phases,
     number,
     optional_std,
+    reject_unknown_keys,
 )
 from rfi_sim.gnss_uwb import (
     ARL1_ECEF_M,
@@ -128,12 +129,51 @@ NAV_FILE_NAME = 'arlm2000.15n'
 
 _DEFAULT_SIM = GnssUwbScenario()
 
-_PAPER_ANCHORS = tuple({'range_m': r, 'azimuth_deg': a, 'up_m': u} for r, a, u in zip(
+PAPER_ANCHORS = tuple({'range_m': r, 'azimuth_deg': a, 'up_m': u} for r, a, u in zip(
     PAPER_ANCHOR_RANGES_M, _DEFAULT_SIM.anchor_azimuths_deg, _DEFAULT_SIM.anchor_up_m, strict=True))
+"""Default ``anchors`` of the gnss_uwb and rinex_jammed sections: the paper's three reference ranges."""
 
 
 @dataclass(frozen=True)
-class GnssUwbSection:
+class UwbSkyKeys:
+    """The keys the ``gnss_uwb`` and ``rinex_jammed`` sections share (module docstrings): the UWB ranging and
+    the sky's elevation mask and C/N0 model, with the simulator's defaults. A section checks them first
+    (:meth:`_check_uwb_sky_keys`; the messages name the key under :attr:`SECTION`).
+
+    After the check ``anchors`` is ``(ranges m, azimuths deg, ups m)`` and ``uwb_reported_std_m`` NaN when
+    not given.
+    """
+
+    SECTION: ClassVar[str] = ''
+    uwb_rate_hz: float = _DEFAULT_SIM.uwb_rate_hz
+    anchors: Any = PAPER_ANCHORS
+    uwb_noise_std_m: float = _DEFAULT_SIM.uwb_noise_std_m
+    uwb_reported_std_m: float | None = None
+    elevation_mask_deg: float = _DEFAULT_SIM.elevation_mask_deg
+    cn0_zenith_dbhz: float = _DEFAULT_SIM.cn0_zenith_dbhz
+    cn0_horizon_dbhz: float = _DEFAULT_SIM.cn0_horizon_dbhz
+
+    def _check_uwb_sky_keys(self) -> None:
+        """Validate and convert the shared keys (frozen: set through ``object.__setattr__``).
+
+        Raises:
+            ScenarioError: wrong type or non-physical value (the message names the key).
+        """
+        at = self.SECTION
+        for key, value in (
+            ('uwb_rate_hz', number(self.uwb_rate_hz, f'{at}.uwb_rate_hz', 0.0, 1000.0, low_open=True)),
+            ('anchors', anchors(self.anchors, f'{at}.anchors')),
+            ('uwb_noise_std_m', number(self.uwb_noise_std_m, f'{at}.uwb_noise_std_m', 0.0, 100.0)),
+            ('uwb_reported_std_m', optional_std(self.uwb_reported_std_m, f'{at}.uwb_reported_std_m')),
+            ('elevation_mask_deg', number(self.elevation_mask_deg, f'{at}.elevation_mask_deg', -10.0, 60.0)),
+            ('cn0_zenith_dbhz', number(self.cn0_zenith_dbhz, f'{at}.cn0_zenith_dbhz', 0.0, 70.0)),
+            ('cn0_horizon_dbhz', number(self.cn0_horizon_dbhz, f'{at}.cn0_horizon_dbhz', 0.0, 70.0)),
+        ):
+            object.__setattr__(self, key, value)
+
+
+@dataclass(frozen=True)
+class GnssUwbSection(UwbSkyKeys):
     """The ``gnss_uwb`` section: every key with its default (the simulator's; no jamming), validated
     and converted on construction (module docstring for each key).
 
@@ -147,18 +187,12 @@ class GnssUwbSection:
         ScenarioError: wrong type or non-physical value (the message names the key).
     """
 
+    SECTION: ClassVar[str] = 'gnss_uwb'
     start_gps_week: int = _DEFAULT_SIM.start_week
     start_gps_tow_s: float = _DEFAULT_SIM.start_tow_s
     receiver_ecef_m: Any = ARL1_ECEF_M
     receiver_velocity_enu_mps: Any = (0.0, 0.0, 0.0)
     gnss_rate_hz: float = _DEFAULT_SIM.gnss_rate_hz
-    uwb_rate_hz: float = _DEFAULT_SIM.uwb_rate_hz
-    anchors: Any = _PAPER_ANCHORS
-    uwb_noise_std_m: float = _DEFAULT_SIM.uwb_noise_std_m
-    uwb_reported_std_m: float | None = None
-    elevation_mask_deg: float = _DEFAULT_SIM.elevation_mask_deg
-    cn0_zenith_dbhz: float = _DEFAULT_SIM.cn0_zenith_dbhz
-    cn0_horizon_dbhz: float = _DEFAULT_SIM.cn0_horizon_dbhz
     correlated_error_std_m: float = _DEFAULT_SIM.correlated_error_std_m
     correlated_error_tau_s: float = _DEFAULT_SIM.correlated_error_tau_s
     report_sigmas: bool = _DEFAULT_SIM.report_sigmas
@@ -188,13 +222,7 @@ class GnssUwbSection:
             tuple(number(v, 'gnss_uwb.receiver_velocity_enu_mps', -1000.0, 1000.0) for v in vel))
         put('spoofing', parse_spoofing(self.spoofing, math.inf, 'gnss_uwb.spoofing'))
         put('gnss_rate_hz', number(self.gnss_rate_hz, 'gnss_uwb.gnss_rate_hz', 0.0, 100.0, low_open=True))
-        put('uwb_rate_hz', number(self.uwb_rate_hz, 'gnss_uwb.uwb_rate_hz', 0.0, 1000.0, low_open=True))
-        put('anchors', anchors(self.anchors, 'gnss_uwb.anchors'))
-        put('uwb_noise_std_m', number(self.uwb_noise_std_m, 'gnss_uwb.uwb_noise_std_m', 0.0, 100.0))
-        put('uwb_reported_std_m', optional_std(self.uwb_reported_std_m, 'gnss_uwb.uwb_reported_std_m'))
-        put('elevation_mask_deg', number(self.elevation_mask_deg, 'gnss_uwb.elevation_mask_deg', -10.0, 60.0))
-        put('cn0_zenith_dbhz', number(self.cn0_zenith_dbhz, 'gnss_uwb.cn0_zenith_dbhz', 0.0, 70.0))
-        put('cn0_horizon_dbhz', number(self.cn0_horizon_dbhz, 'gnss_uwb.cn0_horizon_dbhz', 0.0, 70.0))
+        self._check_uwb_sky_keys()
         put('correlated_error_std_m',
             number(self.correlated_error_std_m, 'gnss_uwb.correlated_error_std_m', 0.0, 100.0))
         put('correlated_error_tau_s',
@@ -207,11 +235,7 @@ class GnssUwbSection:
     @classmethod
     def from_mapping(cls, section: Mapping[str, Any]) -> GnssUwbSection:
         """The section as written in the scenario (unknown keys rejected), defaults for the rest."""
-        known = [f.name for f in fields(cls)]
-        unknown = set(section) - set(known)
-        if unknown:
-            raise ScenarioError(f'gnss_uwb: unknown key(s) {", ".join(sorted(map(str, unknown)))} '
-                                f'(known: {", ".join(known)})')
+        reject_unknown_keys(section, [f.name for f in fields(cls)], 'gnss_uwb')
         return cls(**section)
 
 

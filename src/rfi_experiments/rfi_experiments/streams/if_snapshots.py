@@ -68,7 +68,7 @@ import numpy as np
 from gnss_common.constants import GPS_CA_CHIP_RATE_HZ, GPS_CA_CODE_LENGTH_CHIPS, GPS_L1_FREQUENCY_HZ
 from gnss_common.gps_ca import G2_DELAY_CHIPS
 from rfi_experiments.scenario import Scenario
-from rfi_experiments.schema import Phase, ScenarioError, number, parse_phases
+from rfi_experiments.schema import Phase, ScenarioError, number, parse_phases, reject_unknown_keys
 from rfi_sim.if_signal import (
     CHIRP,
     CW,
@@ -169,10 +169,7 @@ def parse_section(scenario: Scenario, section: Mapping[str, Any]) -> dict[str, A
     Raises:
         ScenarioError: unknown key, wrong type or non-physical value (the message names the key).
     """
-    unknown = set(section) - set(DEFAULTS)
-    if unknown:
-        raise ScenarioError(f'if_snapshots: unknown key(s) {", ".join(sorted(map(str, unknown)))} '
-                            f'(known: {", ".join(DEFAULTS)})')
+    reject_unknown_keys(section, tuple(DEFAULTS), 'if_snapshots')
     s = {**DEFAULTS, **section}
     start = s['start_stamp_ns']
     if isinstance(start, bool) or not isinstance(start, int) or start < 0:

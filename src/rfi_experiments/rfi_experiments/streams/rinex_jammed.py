@@ -88,7 +88,7 @@ import math
 from collections.abc import Iterator, Mapping
 from dataclasses import InitVar, dataclass, fields, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -103,26 +103,30 @@ from gnss_common.jamming_weights import (
 from gnss_common.observations import GnssEpoch, SatelliteObservation, UwbRangeMeasurement
 from gnss_common.rinex import RinexFormatError
 from rfi_experiments.scenario import Scenario, data_path
-from rfi_experiments.schema import JsrPhases, ScenarioError, anchors, boolean, jsr_phases, number, optional_std
-from rfi_sim.gnss_uwb import PAPER_ANCHOR_RANGES_M, GnssUwbScenario, JammingEffect, anchor_positions_ecef
-
-GNSS_TOPIC = '/gnss/measurements'
-UWB_TOPIC = '/uwb/ranges'
-TRUTH_POSITION_TOPIC = '/truth/position'
-TRUTH_JAMMER_TOPIC = '/truth/jammer_state'
-EARTH_FRAME = 'earth'
-TRUTH_JAMMER_PERIOD_S = 1.0
-"""Period of /truth/jammer_state within a phase, s."""
+from rfi_experiments.schema import (
+    JsrPhases,
+    ScenarioError,
+    boolean,
+    jsr_phases,
+    number,
+    reject_unknown_keys,
+)
+from rfi_experiments.streams.gnss_uwb import (  # the topics and frame of the gnss_uwb stream, the same here
+    EARTH_FRAME,
+    GNSS_TOPIC,
+    NAV_FILE_NAME,
+    TRUTH_JAMMER_PERIOD_S,
+    TRUTH_JAMMER_TOPIC,
+    TRUTH_POSITION_TOPIC,
+    UWB_TOPIC,
+    UwbSkyKeys,
+)
+from rfi_sim.gnss_uwb import GnssUwbScenario, JammingEffect, anchor_positions_ecef
 
 OBS_FILE_NAME = 'arlm200a.15o'
 """Default observations: ARL1 RINEX 2.11 obs, 2015-07-19 00:00-00:59 GPST, 30 s (with S1 and D1)."""
-NAV_FILE_NAME = 'arlm2000.15n'
-"""Default ephemeris: the matching ARL1 broadcast navigation file."""
 
 _SIM = GnssUwbScenario()
-
-_PAPER_ANCHORS = tuple({'range_m': r, 'azimuth_deg': a, 'up_m': u} for r, a, u in zip(
-    PAPER_ANCHOR_RANGES_M, _SIM.anchor_azimuths_deg, _SIM.anchor_up_m, strict=True))
 
 
 def _error(message: str) -> ScenarioError:
@@ -143,9 +147,10 @@ def _file(value: Any, key: str, default: str, scenario: Scenario) -> Path:
 
 
 @dataclass(frozen=True)
-class Section:
+class Section(UwbSkyKeys):
     """The ``rinex_jammed`` section: every key with its default (the simulator's; no jamming over the
-    whole scenario), validated and converted on construction (module docstring for each key).
+    whole scenario), validated and converted on construction (module docstring for each key; those it
+    shares with gnss_uwb in :class:`~rfi_experiments.streams.gnss_uwb.UwbSkyKeys`).
 
     After construction ``anchors`` is ``(ranges m, azimuths deg, ups m)`` and ``uwb_reported_std_m``
     NaN when not given. Given the ``scenario`` (as :func:`parse_section` does), ``obs_file`` and
@@ -156,16 +161,10 @@ class Section:
         ScenarioError: wrong type or non-physical value (the message names the key).
     """
 
+    SECTION: ClassVar[str] = 'rinex_jammed'
     obs_file: Any = None
     nav_file: Any = None
     start_offset_s: float = 0.0
-    elevation_mask_deg: float = _SIM.elevation_mask_deg
-    uwb_rate_hz: float = _SIM.uwb_rate_hz
-    anchors: Any = _PAPER_ANCHORS
-    uwb_noise_std_m: float = _SIM.uwb_noise_std_m
-    uwb_reported_std_m: float | None = None
-    cn0_zenith_dbhz: float = _SIM.cn0_zenith_dbhz
-    cn0_horizon_dbhz: float = _SIM.cn0_horizon_dbhz
     truth_jammer_state: bool = True
     jamming: Any = ({'jsr_db': None},)
     scenario: InitVar[Scenario | None] = None
@@ -174,18 +173,12 @@ class Section:
         def put(key: str, value: Any) -> None:
             object.__setattr__(self, key, value)
 
-        put('uwb_reported_std_m', optional_std(self.uwb_reported_std_m, 'rinex_jammed.uwb_reported_std_m'))
+        self._check_uwb_sky_keys()
         boolean(self.truth_jammer_state, 'rinex_jammed.truth_jammer_state')
-        put('uwb_rate_hz', number(self.uwb_rate_hz, 'rinex_jammed.uwb_rate_hz', 0.0, 1000.0, low_open=True))
         if scenario is not None:
             put('obs_file', _file(self.obs_file, 'obs_file', OBS_FILE_NAME, scenario))
             put('nav_file', _file(self.nav_file, 'nav_file', NAV_FILE_NAME, scenario))
         put('start_offset_s', number(self.start_offset_s, 'rinex_jammed.start_offset_s', 0.0, 1e7))
-        put('elevation_mask_deg', number(self.elevation_mask_deg, 'rinex_jammed.elevation_mask_deg', -10.0, 60.0))
-        put('anchors', anchors(self.anchors, 'rinex_jammed.anchors'))
-        put('uwb_noise_std_m', number(self.uwb_noise_std_m, 'rinex_jammed.uwb_noise_std_m', 0.0, 100.0))
-        put('cn0_zenith_dbhz', number(self.cn0_zenith_dbhz, 'rinex_jammed.cn0_zenith_dbhz', 0.0, 70.0))
-        put('cn0_horizon_dbhz', number(self.cn0_horizon_dbhz, 'rinex_jammed.cn0_horizon_dbhz', 0.0, 70.0))
         if scenario is not None:
             put('jamming', jsr_phases(self.jamming, scenario.duration_s, 'rinex_jammed.jamming',
                                       {'UWB': self.uwb_rate_hz}))
@@ -202,10 +195,7 @@ def parse_section(scenario: Scenario, section: Mapping[str, Any]) -> Section:
     Raises:
         ScenarioError: unknown key, wrong type, non-physical value (the message names the key).
     """
-    known = [f.name for f in fields(Section)]
-    unknown = set(section) - set(known)
-    if unknown:
-        raise _error(f'unknown key(s) {", ".join(sorted(map(str, unknown)))} (known: {", ".join(known)})')
+    reject_unknown_keys(section, [f.name for f in fields(Section)], 'rinex_jammed')
     return Section(**section, scenario=scenario)
 
 
@@ -371,6 +361,7 @@ def uwb_ranges(receiver_ecef_m: np.ndarray, t0_ns: int, duration_s: float, secti
     n_u = int(round(duration_s * section.uwb_rate_hz))
     offsets_ns = [int(round(j / (k_a * section.uwb_rate_hz) * 1e9)) for j in range(k_a)]
     noise = section.uwb_noise_std_m * rng.standard_normal((n_u, k_a))
+    reported_std_m = math.nan if section.uwb_reported_std_m is None else section.uwb_reported_std_m  # checked: never None
     out = []
     for m in range(n_u):
         base = t0_ns + int(round(m / section.uwb_rate_hz * 1e9))
@@ -378,7 +369,7 @@ def uwb_ranges(receiver_ecef_m: np.ndarray, t0_ns: int, duration_s: float, secti
             out.append(UwbRangeMeasurement(
                 stamp_ns=base + offsets_ns[j], anchor_id=f'A{j + 1}', anchor_position_m=anchors[j].copy(),
                 frame_id=EARTH_FRAME, range_m=float(true_r[j] + noise[m, j]),
-                range_std_m=section.uwb_reported_std_m))
+                range_std_m=reported_std_m))
     return anchors, out
 
 
