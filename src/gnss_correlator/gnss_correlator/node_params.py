@@ -78,6 +78,11 @@ class CorrelatorNodeParams(NodeDiagnosticsParams):
     lock_phase_std_max_rad: float = parameter(
         TrackingConfig.lock_phase_std_max_rad, 'Largest PLL discriminator std of a locked channel over '
         'lock_window_ms, rad (0.5: the 1-ms discriminator noise near 33 dB-Hz).', minimum=0.01, maximum=1.5707963)
+    wrap_block_ms: int = parameter(
+        TrackingConfig.wrap_block_ms, 'Prompts summed per block of the slip detector: a half-cycle wrap is a change '
+        'of the blocks\' Costas angle by more than pi/2 (1: consecutive 1-ms prompts, fastest; more: fewer noise '
+        'wraps below ~38 dB-Hz, a slip seen up to that many ms later). At most lock_window_ms / 2.',
+        minimum=1, maximum=5000)
     min_cn0_dbhz: float = parameter(
         30.0, 'A channel whose C/N0 stays below this for drop_after_ms periods is dropped, dB-Hz.',
         minimum=0.0, maximum=60.0)
@@ -102,7 +107,8 @@ class CorrelatorNodeParams(NodeDiagnosticsParams):
             pll_bandwidth_hz=self.pll_bandwidth_hz, fll_bandwidth_hz=self.fll_bandwidth_hz,
             fll_assist_ms=self.fll_assist_ms, dll_bandwidth_hz=self.dll_bandwidth_hz,
             early_late_offset_chips=self.early_late_offset_chips, cn0_window_ms=self.cn0_window_ms,
-            lock_window_ms=self.lock_window_ms, lock_phase_std_max_rad=self.lock_phase_std_max_rad)
+            lock_window_ms=self.lock_window_ms, lock_phase_std_max_rad=self.lock_phase_std_max_rad,
+            wrap_block_ms=self.wrap_block_ms)
         return ReceiverConfig(
             prns=tuple(int(p) for p in self.prns), acquisition_ms=self.acquisition_ms,
             doppler_max_hz=self.doppler_max_hz, false_alarm_probability=self.false_alarm_probability,

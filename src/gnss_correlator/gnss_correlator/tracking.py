@@ -59,11 +59,13 @@ C/N0, lock and slips (issue 29: a lock and a C/N0 that know a jammer is there):
   the residue as signal (on the real capture with a chirp at J/S 40 dB it *rose* to 48 dB-Hz);
 * **lock rule** over the last ``lock_window_ms`` periods (the issue's "phase error std and no half-cycle
   slip over the last 100 ms"): locked iff the Costas discriminator ``e_p``'s std is at most
-  ``lock_phase_std_max_rad`` and no **half-cycle wrap** occurred, a step of ``e_p`` by more than pi / 2
-  between consecutive periods (WRAP_THRESHOLD_RAD). A half-cycle slip of the loop means its phase error
-  crosses +-pi/2, where atan(Q/I) steps by about pi: every slip makes a wrap (so no wrap in the window
-  means no slip in it); a wrap without a slip (the error crossing back, or noise) is a false alarm, rare
-  above 35 dB-Hz (tested against the simulator's truth). The wraps counted are the slip detector's output.
+  ``lock_phase_std_max_rad`` and no **half-cycle wrap** occurred: the Costas angle atan(Q/I) of a block of
+  ``wrap_block_ms`` summed prompts changed by more than pi / 2 (WRAP_THRESHOLD_RAD) from the previous block's
+  (1: consecutive 1-ms discriminators; a data bit flip inside a block leaves its angle modulo pi unchanged).
+  A half-cycle slip of the loop means its phase error crosses +-pi/2, where atan(Q/I) steps by about pi:
+  every slip makes a wrap (so no wrap in the window means no slip in it); a wrap without a slip (the error
+  crossing back, or noise) is a false alarm, rare above 38 dB-Hz with 1-ms blocks (measured against the
+  simulator's truth: docs/gnss_correlator/lock_rule.md). The wraps counted are the slip detector's output.
 * the lock indicator ``cos(2 e_p)`` estimated as ``(I^2 - Q^2) / (I^2 + Q^2)`` over the C/N0 window
   (Van Dierendonck, in Parkinson & Spilker, vol. I, ch. 8) is reported too, 1 when locked, ~0 when not.
 
@@ -133,7 +135,9 @@ S_PRN = 18
 S_ACTIVE = 19  # 1 while the channel is tracked
 S_RING_COUNT = 20  # full periods written to the channel's rings (C/N0 and lock windows)
 S_NZ_RE, S_NZ_IM = 21, 22  # running sums of the period's noise-reference correlator
-N_STATE = 23
+S_BLK_RE, S_BLK_IM, S_BLK_N = 23, 24, 25  # prompts summed over the running block of the slip detector, their count
+S_BLK_PREV = 26  # Costas angle of the previous block, rad (NaN: none yet)
+N_STATE = 27
 
 # ---- layout of one output row (one closed code period of one channel) -----------------------------
 O_END = 0  # fractional absolute sample index of the period's end (code NCO at chip 1023)
@@ -180,6 +184,9 @@ class TrackingConfig:
             rad, (0, pi / 2]. 0.5: the 1-ms discriminator's noise alone reaches it near 33 dB-Hz
             (1 / sqrt(2 T C/N0)); an unlocked channel's uniform error gives pi / sqrt(12) = 0.91. The same
             number as imm_carrier's ``lock_phase_std_max_rad``.
+        wrap_block_ms: prompts summed per block of the slip detector, [1, lock_window_ms / 2]: 1 compares
+            consecutive 1-ms discriminators (fastest, but noise wraps them below ~38 dB-Hz); K > 1 compares
+            the Costas angles of consecutive K-ms sums (noise sqrt(K) lower; a slip seen up to K ms later).
     """
 
     pll_bandwidth_hz: float = 15.0
@@ -190,6 +197,7 @@ class TrackingConfig:
     cn0_window_ms: int = 50
     lock_window_ms: int = 100
     lock_phase_std_max_rad: float = 0.5
+    wrap_block_ms: int = 1
 
     def __post_init__(self) -> None:
         checks = (
@@ -201,6 +209,7 @@ class TrackingConfig:
             ('cn0_window_ms', self.cn0_window_ms >= 10, '>= 10'),
             ('lock_window_ms', self.lock_window_ms >= 10, '>= 10'),
             ('lock_phase_std_max_rad', 0.0 < self.lock_phase_std_max_rad <= 0.5 * math.pi, '(0, pi / 2]'),
+            ('wrap_block_ms', 1 <= self.wrap_block_ms <= self.lock_window_ms // 2, '[1, lock_window_ms / 2]'),
         )
         for name, ok, rule in checks:
             if not ok:
@@ -243,22 +252,17 @@ def _window_quality(ring: np.ndarray, noise_ring: np.ndarray, t_s: float) -> tup
 
 
 @njit(cache=True, nogil=True)
-def _lock_window(err_ring: np.ndarray, count: float) -> tuple[float, float]:
-    """Std (rad) and half-cycle wraps of the PLL discriminator over the ring, read in time order (the oldest
-    entry is at ``count % len``)."""
+def _lock_window(err_ring: np.ndarray) -> tuple[float, float]:
+    """Std (rad) of the PLL discriminator (column 0) and the half-cycle wraps (column 1) over the ring."""
     w = err_ring.shape[0]
-    first = int(count) % w
     s1 = 0.0
     s2 = 0.0
     wraps = 0.0
-    prev = err_ring[first]
     for j in range(w):
-        e = err_ring[(first + j) % w]
+        e = err_ring[j, 0]
         s1 += e
         s2 += e * e
-        if j > 0 and abs(e - prev) > WRAP_THRESHOLD_RAD:
-            wraps += 1.0
-        prev = e
+        wraps += err_ring[j, 1]
     mean = s1 / w
     return math.sqrt(max(s2 / w - mean * mean, 0.0)), wraps
 
@@ -267,7 +271,7 @@ def _lock_window(err_ring: np.ndarray, count: float) -> tuple[float, float]:
 def _close_period(st: np.ndarray, out: np.ndarray, ring: np.ndarray, noise_ring: np.ndarray, err_ring: np.ndarray,
                   row: int, end_index: float, code_rate: float, inverted: bool, w0p: float, w0f: float,
                   assist_periods: float, k_dll: float, d_chips: float, sign: float, if0: float, fs: float,
-                  lock_std_max: float) -> float:
+                  lock_std_max: float, wrap_block: float) -> float:
     """Write the period's output row, run the discriminators and loop filters, reset the sums.
 
     Returns the new carrier NCO frequency of the stream, Hz.
@@ -320,13 +324,28 @@ def _close_period(st: np.ndarray, out: np.ndarray, ring: np.ndarray, noise_ring:
         count = int(st[S_RING_COUNT])
         ring[count % w] = complex(p_re, p_im)
         noise_ring[count % w] = complex(n_re, n_im)
-        err_ring[count % wl] = pll
+        # slip detector: the Costas angle of blocks of wrap_block prompts (a data bit flip inside a block leaves
+        # its angle modulo pi unchanged); a change by more than pi/2 from the previous block is a wrap
+        st[S_BLK_RE] += p_re
+        st[S_BLK_IM] += p_im
+        st[S_BLK_N] += 1.0
+        wrap = 0.0
+        if st[S_BLK_N] >= wrap_block:
+            b_re, b_im = st[S_BLK_RE], st[S_BLK_IM]
+            ang = math.atan(b_im / b_re) if b_re != 0.0 else (0.5 * math.pi if b_im > 0 else -0.5 * math.pi)
+            prev = st[S_BLK_PREV]
+            if prev == prev and abs(ang - prev) > WRAP_THRESHOLD_RAD:
+                wrap = 1.0
+            st[S_BLK_PREV] = ang
+            st[S_BLK_RE] = st[S_BLK_IM] = st[S_BLK_N] = 0.0
+        err_ring[count % wl, 0] = pll
+        err_ring[count % wl, 1] = wrap
         st[S_RING_COUNT] += 1.0
         if st[S_RING_COUNT] >= w:
             out[row, O_CN0], out[row, O_CN0_M2M4], out[row, O_LOCK], out[row, O_NOISE] = \
                 _window_quality(ring, noise_ring, t)
         if st[S_RING_COUNT] >= wl:
-            std, wraps = _lock_window(err_ring, st[S_RING_COUNT])
+            std, wraps = _lock_window(err_ring)
             out[row, O_ERR_STD], out[row, O_WRAPS] = std, wraps
             out[row, O_LOCKED] = 1.0 if (std <= lock_std_max and wraps == 0.0) else 0.0
     # carrier loop (Kaplan & Hegarty Fig. 5-23): second-order PLL, first-order FLL assist while pulling in
@@ -398,7 +417,8 @@ def _segment(xr: np.ndarray, xi: np.ndarray | None, i0: int, m: int, cyc0: float
 def track_block(xr: np.ndarray, xi: np.ndarray | None, first_index: int, fs: float, if0: float, sign: float,
                 inverted: bool, state: np.ndarray, codes: np.ndarray, noise_codes: np.ndarray, rings: np.ndarray,
                 noise_rings: np.ndarray, err_rings: np.ndarray, out: np.ndarray, n_out: np.ndarray, w0p: float,
-                w0f: float, assist_periods: float, k_dll: float, d_chips: float, lock_std_max: float) -> None:
+                w0f: float, assist_periods: float, k_dll: float, d_chips: float, lock_std_max: float,
+                wrap_block: float) -> None:
     """Track every active channel of ``state`` over one contiguous block of samples (compiled).
 
     Args:
@@ -415,7 +435,8 @@ def track_block(xr: np.ndarray, xi: np.ndarray | None, first_index: int, fs: flo
         noise_codes: the same codes shifted by each channel's noise-reference offset (chip k + offset), same shape.
         rings: the last prompts of each channel (C/N0 window), shape (n_ch, window), complex128.
         noise_rings: the noise-reference correlators of the same periods, shape (n_ch, window), complex128.
-        err_rings: the PLL discriminator of the last periods (lock window), shape (n_ch, lock window), float64.
+        err_rings: per period of the lock window, the PLL discriminator and whether the slip detector found a
+            wrap there (0 / 1), shape (n_ch, lock window, 2), float64.
         out: output rows, shape (n_ch, max_periods, N_OUT), written from row 0.
         n_out: rows written per channel, shape (n_ch,), set.
         w0p, w0f: natural frequencies of the PLL and the FLL assist, rad/s.
@@ -423,6 +444,7 @@ def track_block(xr: np.ndarray, xi: np.ndarray | None, first_index: int, fs: flo
         k_dll: DLL gain 4 B_dll, 1/s.
         d_chips: early/late offset, chips.
         lock_std_max: the lock rule's largest discriminator std, rad.
+        wrap_block: prompts per block of the slip detector.
     """
     n_total = xr.shape[0]
     n_ch = state.shape[0]
@@ -483,7 +505,8 @@ def track_block(xr: np.ndarray, xi: np.ndarray | None, first_index: int, fs: flo
                 st[S_ACTIVE] = 0.0
                 break
             f_c = _close_period(st, out[c], rings[c], noise_rings[c], err_rings[c], row, end_index, code_rate,
-                                inverted, w0p, w0f, assist_periods, k_dll, d_chips, sign, if0, fs, lock_std_max)
+                                inverted, w0p, w0f, assist_periods, k_dll, d_chips, sign, if0, fs, lock_std_max,
+                                wrap_block)
             n_out[c] = row + 1
             n_in = 0
             e_re = e_im = p_re = p_im = l_re = l_im = n_re = n_im = 0.0
@@ -631,7 +654,7 @@ class Tracker:
         self._noise_codes = np.zeros((0, GPS_CA_CODE_LENGTH_CHIPS + 2))
         self._rings = np.zeros((0, config.cn0_window_ms), dtype=np.complex128)
         self._noise_rings = np.zeros((0, config.cn0_window_ms), dtype=np.complex128)
-        self._err_rings = np.zeros((0, config.lock_window_ms))
+        self._err_rings = np.zeros((0, config.lock_window_ms, 2))
         self.next_index: int | None = None
 
     @property
@@ -667,6 +690,7 @@ class Tracker:
         row[S_PERIOD_START] = start
         row[S_PRN] = prn
         row[S_ACTIVE] = 1.0
+        row[S_BLK_PREV] = math.nan
         keep = self._state[:, S_ACTIVE] > 0
         self._state = np.vstack([self._state[keep], row[None, :]])
         code = ca_code(int(prn)).astype(np.float64)
@@ -678,7 +702,7 @@ class Tracker:
         self._noise_codes = np.vstack([self._noise_codes[keep], noise_wrapped[None, :]])
         self._rings = np.vstack([self._rings[keep], np.zeros((1, w), dtype=np.complex128)])
         self._noise_rings = np.vstack([self._noise_rings[keep], np.zeros((1, w), dtype=np.complex128)])
-        self._err_rings = np.vstack([self._err_rings[keep], np.zeros((1, self.config.lock_window_ms))])
+        self._err_rings = np.concatenate([self._err_rings[keep], np.zeros((1, self.config.lock_window_ms, 2))])
 
     def drop_channel(self, prn: int) -> None:
         """Stop tracking a PRN (no error if it is not tracked)."""
@@ -694,7 +718,7 @@ class Tracker:
         self._noise_codes = np.zeros((0, GPS_CA_CODE_LENGTH_CHIPS + 2))
         self._rings = np.zeros((0, self.config.cn0_window_ms), dtype=np.complex128)
         self._noise_rings = np.zeros((0, self.config.cn0_window_ms), dtype=np.complex128)
-        self._err_rings = np.zeros((0, self.config.lock_window_ms))
+        self._err_rings = np.zeros((0, self.config.lock_window_ms, 2))
         self.next_index = None
 
     def process(self, samples: np.ndarray, first_sample_index: int) -> TrackedPeriods:
@@ -734,7 +758,7 @@ class Tracker:
                         self._codes, self._noise_codes, self._rings, self._noise_rings, self._err_rings, out, n_out,
                         cfg.pll_bandwidth_hz * PLL_W0_PER_BN, cfg.fll_bandwidth_hz * FLL_W0_PER_BN,
                         float(cfg.fll_assist_ms), 4.0 * cfg.dll_bandwidth_hz, cfg.early_late_offset_chips,
-                        cfg.lock_phase_std_max_rad)
+                        cfg.lock_phase_std_max_rad, float(cfg.wrap_block_ms))
         rows = [out[c, :n_out[c]] for c in range(n_ch)]
         prns = np.concatenate([np.full(n_out[c], self._state[c, S_PRN], dtype=np.int64) for c in range(n_ch)]) \
             if n_ch else np.zeros(0, dtype=np.int64)

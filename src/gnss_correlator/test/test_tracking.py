@@ -144,13 +144,14 @@ ABSENT_PRN = 7
 """A PRN that no simulated signal carries: its channel is noise (and interference) only."""
 
 
-def _jammed(jammer, bits: int, duration_s: float) -> tuple[np.ndarray, FrontEndConfig, TrackedPeriods]:
+def _jammed(jammer, bits: int, duration_s: float,
+            config: TrackingConfig = TrackingConfig()) -> tuple[np.ndarray, FrontEndConfig, TrackedPeriods]:
     """4 MHz complex IF with SATS and a jammer, tracked from acquisitions 0.1 chip and 10 Hz off, plus a channel
     on the absent PRN."""
     fe = FrontEndConfig(sample_rate_hz=4e6, intermediate_frequency_hz=0.0, is_complex=True, bits=bits)
     v = IfSimulator(fe, satellites=SATS, jammers=(jammer,), seed=3).generate(int(4e6 * duration_s)).counts
     x = v[0::2].astype(np.float64) + 1j * v[1::2]
-    tracker = Tracker(4e6, 0.0, True)
+    tracker = Tracker(4e6, 0.0, True, config)
     for sat in SATS:
         _start(tracker, sat, 4e6, code_error_chips=0.1, doppler_error_hz=10.0)
     tracker.add_channel(ABSENT_PRN, 1234.0, 800.0, 0)
@@ -211,15 +212,17 @@ def test_cn0_follows_a_noise_jammer_to_the_closed_form():
     assert not np.any(o.locked)
 
 
-def test_lock_rule_reports_every_true_slip():
+@pytest.mark.parametrize('wrap_block_ms', [1, 5])
+def test_lock_rule_reports_every_true_slip(wrap_block_ms):
     """A CW jammer 100.02 kHz above PRN 5's carrier (J/S 30 dB from 0.4 s; 2-bit samples as a real front end): the
     despread residue, a tone 20 Hz from PRN 5's carrier as strong as the signal, pulls PRN 5's loop off; PRN 13 is
     not disturbed. Truth from the simulator: the NCO's half cycles off the true Doppler phase. Checked: before the
     jammer every period after the lock window is locked with no wrap; no period is ever reported locked while its
     lock window holds a true half-cycle slip (every slip makes a wrap); PRN 5 truly slips (the check is
-    exercised) and its lock is lost before its first slip; PRN 13 neither slips nor loses lock."""
+    exercised) and its lock is lost before its first slip; PRN 13 neither slips nor loses lock. For the slip
+    detector's 1-ms blocks (default) and 5-ms blocks."""
     jam = CwJammer(frequency_hz=SATS[0].doppler_hz + 100_020.0, js_db=30.0, on_time_s=0.4)
-    _, _, out = _jammed(jam, bits=2, duration_s=0.8)
+    _, _, out = _jammed(jam, bits=2, duration_s=0.8, config=TrackingConfig(wrap_block_ms=wrap_block_ms))
     lock_ms = TrackingConfig().lock_window_ms
     for sat in SATS:
         o = out.of(sat.prn)
@@ -274,6 +277,10 @@ def test_bad_input_is_refused_clearly():
         Tracker(1e6, 0.0, True)
     with pytest.raises(ValueError, match='pll_bandwidth_hz'):
         TrackingConfig(pll_bandwidth_hz=0.0)
+    with pytest.raises(ValueError, match='wrap_block_ms'):
+        TrackingConfig(wrap_block_ms=51)  # more than half the 100-ms lock window
+    with pytest.raises(ValueError, match='lock_phase_std_max_rad'):
+        TrackingConfig(lock_phase_std_max_rad=2.0)
     t.drop_channel(3)
     assert t.prns == ()
 
