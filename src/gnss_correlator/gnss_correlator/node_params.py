@@ -65,8 +65,24 @@ class CorrelatorNodeParams(NodeDiagnosticsParams):
         TrackingConfig.early_late_offset_chips, 'Offset of the early and late replicas from the prompt, chips.',
         minimum=0.05, maximum=0.5)
     cn0_window_ms: int = parameter(
-        TrackingConfig.cn0_window_ms, 'Prompts in the C/N0 (M2M4) and lock-indicator window; no correlator is '
-        'published for a channel before its first window is full.', minimum=10, maximum=10000)
+        TrackingConfig.cn0_window_ms, 'Periods (ms) in the C/N0 window (noise-reference estimator: prompt power '
+        'minus the power of a correlator 300+ chips off the code, over the latter); no correlator is published for '
+        'a channel before its first window is full.', minimum=10, maximum=10000)
+    coherent_ms: int = parameter(
+        1, 'Coherent interval published per channel, ms: 1, or 20 = one correlator per navigation data bit once '
+        'the channel is bit-synchronised (histogram of prompt sign changes; 1-ms ones before).', minimum=1, maximum=20)
+    lock_window_ms: int = parameter(
+        TrackingConfig.lock_window_ms, 'Periods (ms) of the lock rule: a channel is locked while its PLL '
+        'discriminator std over them is at most lock_phase_std_max_rad and it made no half-cycle wrap.',
+        minimum=10, maximum=10000)
+    lock_phase_std_max_rad: float = parameter(
+        TrackingConfig.lock_phase_std_max_rad, 'Largest PLL discriminator std of a locked channel over '
+        'lock_window_ms, rad (0.5: the 1-ms discriminator noise near 33 dB-Hz).', minimum=0.01, maximum=1.5707963)
+    wrap_block_ms: int = parameter(
+        TrackingConfig.wrap_block_ms, 'Prompts summed per block of the slip detector: a half-cycle wrap is a change '
+        'of the blocks\' Costas angle by more than pi/2 (1: consecutive 1-ms prompts, fastest; more: fewer noise '
+        'wraps below ~38 dB-Hz, a slip seen up to that many ms later). At most lock_window_ms / 2.',
+        minimum=1, maximum=5000)
     min_cn0_dbhz: float = parameter(
         30.0, 'A channel whose C/N0 stays below this for drop_after_ms periods is dropped, dB-Hz.',
         minimum=0.0, maximum=60.0)
@@ -90,14 +106,16 @@ class CorrelatorNodeParams(NodeDiagnosticsParams):
         tracking = TrackingConfig(
             pll_bandwidth_hz=self.pll_bandwidth_hz, fll_bandwidth_hz=self.fll_bandwidth_hz,
             fll_assist_ms=self.fll_assist_ms, dll_bandwidth_hz=self.dll_bandwidth_hz,
-            early_late_offset_chips=self.early_late_offset_chips, cn0_window_ms=self.cn0_window_ms)
+            early_late_offset_chips=self.early_late_offset_chips, cn0_window_ms=self.cn0_window_ms,
+            lock_window_ms=self.lock_window_ms, lock_phase_std_max_rad=self.lock_phase_std_max_rad,
+            wrap_block_ms=self.wrap_block_ms)
         return ReceiverConfig(
             prns=tuple(int(p) for p in self.prns), acquisition_ms=self.acquisition_ms,
             doppler_max_hz=self.doppler_max_hz, false_alarm_probability=self.false_alarm_probability,
             reacquisition_period_s=self.reacquisition_period_s, reacquisition_lag_s=self.reacquisition_lag_s,
             tracking=tracking,
             min_cn0_dbhz=self.min_cn0_dbhz, drop_after_ms=self.drop_after_ms, iq_scaling=self.iq_scaling,
-            spectrum_inverted=self.spectrum_inverted)
+            spectrum_inverted=self.spectrum_inverted, coherent_ms=self.coherent_ms)
 
 
 CONFIG_FILE = ConfigFile('gnss_correlator', 'config/gnss_correlator.yaml', 'gnss_correlator', CorrelatorNodeParams, """

@@ -41,10 +41,24 @@ and f_nco,k its Doppler during the period. So the angle of I + jQ is the carrier
 (the NCO's phase plus what the NCO missed), and the phase the IMM or the PLL estimates, the angle minus the
 accumulated predicted change, is the correlator's own tracking error plus a constant: the part of the carrier
 that the correlator's NCO did not follow. The NCO runs whatever the IMM does (no feedback from the IMM
-to the correlator). ``s`` normalises the amplitude as ``iq_scaling`` says, from the M2M4 moments over the
-last ``cn0_window_ms`` prompts: ``unit_amplitude`` (A = 1, Zhao et al. eq. 5: s = sqrt(P_s)) or
+to the correlator). ``s`` normalises the amplitude as ``iq_scaling`` says, from the C/N0 estimate over the
+last ``cn0_window_ms`` periods (the noise-reference estimator of :mod:`gnss_correlator.tracking`: signal power
+from the prompts, noise power from the noise-reference correlator, so a jammer's residue counts as noise):
+``unit_amplitude`` (A = 1, Zhao et al. eq. 5: s = sqrt(P_s)) or
 ``unit_noise`` (noise std 1 per component: s = sqrt(P_n / 2)). Periods whose C/N0 is not known yet (the
 first ``cn0_window_ms`` of a channel) are withheld (``correlators_withheld``).
+
+Bit synchronisation and 20-ms intervals
+---------------------------------------
+Every channel's prompts feed :class:`gnss_correlator.bit_sync.BitSync` (histogram of sign changes on the
+20-period grid; its decision rule in that module; ``bit_syncs`` counted). With ``coherent_ms`` 20, a synchronised
+channel publishes one correlator per data bit: the 20 NCO-relative prompts from a bit edge summed (the data sign
+is constant over them), rotated by the NCO's phase at the bit's end, ``predicted_phase_change_rad`` and
+``integration_time_s`` summed over the 20 periods, scaled as ``iq_scaling`` says with the noise of the sum
+(20 P_n); it goes into the 1-ms interval in which the bit's last period ends (``correlators_20ms``). Until the
+decision, and from it to the next bit edge, the channel's correlators are 1 ms, so the predicted changes of
+consecutive correlators join without a gap. C/N0 and the lock fields of a 20-ms correlator are those of its
+last period.
 """
 
 from __future__ import annotations
@@ -57,12 +71,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gnss_correlator.acquisition import AcquisitionConfig, AcquisitionResult, acquire
+from gnss_correlator.bit_sync import PERIODS_PER_BIT, BitSync, BitSyncConfig
 from gnss_correlator.tracking import TrackedPeriods, Tracker, TrackingConfig
 
 NS_PER_S = 1_000_000_000
 GRID_S = 1e-3
 """Output interval, s (one C/A code period)."""
 IQ_SCALINGS = ('unit_amplitude', 'unit_noise')
+COHERENT_MS = (1, 20)
+"""Coherent intervals the receiver publishes: 1 ms, or 20 ms (one data bit) once the channel is bit-synchronised."""
 
 
 @dataclass(frozen=True)
@@ -83,6 +100,9 @@ class ReceiverConfig:
         iq_scaling: 'unit_amplitude' or 'unit_noise' (match imm_carrier's iq_scaling).
         spectrum_inverted: complex samples whose spectrum is inverted (the signal is I - jQ): they are
             conjugated first. Real samples say it with a negative IF instead.
+        coherent_ms: 1, or 20: once a channel is bit-synchronised (:mod:`gnss_correlator.bit_sync`), one
+            correlator per data bit (the 20 code periods from a bit edge summed coherently), 1-ms ones before.
+        bit_sync: the decision rule of the bit synchronisation.
     """
 
     prns: tuple[int, ...] = tuple(range(1, 33))
@@ -96,6 +116,8 @@ class ReceiverConfig:
     drop_after_ms: int = 200
     iq_scaling: str = 'unit_amplitude'
     spectrum_inverted: bool = False
+    coherent_ms: int = 1
+    bit_sync: BitSyncConfig = field(default_factory=BitSyncConfig)
 
     def __post_init__(self) -> None:
         if self.acquisition_ms < 2:
@@ -108,6 +130,8 @@ class ReceiverConfig:
             raise ValueError(f'drop_after_ms must be >= 1, got {self.drop_after_ms}')
         if self.iq_scaling not in IQ_SCALINGS:
             raise ValueError(f'iq_scaling must be one of {IQ_SCALINGS}, got {self.iq_scaling!r}')
+        if self.coherent_ms not in COHERENT_MS:
+            raise ValueError(f'coherent_ms must be one of {COHERENT_MS}, got {self.coherent_ms}')
         self.acquisition()  # validates the search parameters
 
     def acquisition(self) -> AcquisitionConfig:
@@ -145,7 +169,16 @@ class CorrelatorInterval:
     Attributes:
         stamp_ns: end of the interval, ns (from the header stamps).
         svid, in_phase, quadrature, cn0_dbhz, predicted_phase_change_rad, integration_time_s: one entry per
-            channel with a period in the interval, shape (n,) each (module docstring).
+            channel with a period in the interval, shape (n,) each (module docstring); ``cn0_dbhz`` is the
+            noise-reference estimate (:mod:`gnss_correlator.tracking`), the one CorrelatorArray carries.
+        locked: the correlator's own PLL locked by the lock rule of :mod:`gnss_correlator.tracking` (discriminator
+            std and no half-cycle wrap over the last ``lock_window_ms``), bool, shape (n,).
+        phase_error_std_rad: that window's discriminator std, rad, shape (n,) (NaN until the window is full).
+        half_cycle_wraps: that window's half-cycle wraps (slip candidates), shape (n,) (NaN until full).
+        pll_error_rad: the period's Costas discriminator atan(Q/I), rad, shape (n,): the correlator's own carrier
+            phase estimate is the accumulated predicted change plus this (modulo pi).
+        cn0_m2m4_dbhz: the moments estimator's C/N0 of the same window, dB-Hz, shape (n,) (for comparison).
+    Not published in CorrelatorArray (no field for them): read by the core's users and the benchmarks.
     """
 
     stamp_ns: int
@@ -155,6 +188,11 @@ class CorrelatorInterval:
     cn0_dbhz: np.ndarray
     predicted_phase_change_rad: np.ndarray
     integration_time_s: np.ndarray
+    locked: np.ndarray
+    phase_error_std_rad: np.ndarray
+    half_cycle_wraps: np.ndarray
+    pll_error_rad: np.ndarray
+    cn0_m2m4_dbhz: np.ndarray
 
 
 class Receiver:
@@ -164,7 +202,8 @@ class Receiver:
         self.config = config
         self.counts: Counter[str] = Counter()
         for key in ('blocks', 'samples', 'restarts_format', 'restarts_gap', 'acquisitions', 'channels_started',
-                    'channels_dropped', 'intervals', 'correlators', 'correlators_withheld'):
+                    'channels_dropped', 'intervals', 'correlators', 'correlators_withheld', 'bit_syncs',
+                    'correlators_20ms'):
             self.counts[key] += 0
         self._format: tuple[float, float, bool] | None = None
         self.tracker: Tracker | None = None
@@ -193,6 +232,8 @@ class Receiver:
         self._low_cn0: dict[int, int] = {}
         self._ref_stamp_ns = 0
         self._ref_index = 0
+        self.bit_sync = BitSync(self.config.bit_sync)
+        self._bits: dict[int, list[np.ndarray]] = {}  # PRN -> rows of the data bit being summed
         self._next_search_index = 0
 
     @property
@@ -258,6 +299,10 @@ class Receiver:
                 if untracked and buffered >= need:
                     self._reacquire(self._buffer[-1].copy(), self._next_index - need, untracked)
                 self._next_search_index = self._next_index + round(self.config.reacquisition_period_s * fs)
+        synced = {p for p in self.tracked_prns if self.bit_sync.edge(p) is not None}
+        self.bit_sync.update(periods)
+        self.counts['bit_syncs'] += sum(1 for p in self.tracked_prns
+                                        if p not in synced and self.bit_sync.edge(p) is not None)
         self._queue(periods, fs)
         self._drop_weak(periods)
         return self._emit(fs)
@@ -308,8 +353,45 @@ class Receiver:
         usable = np.isfinite(periods.cn0_dbhz) & np.isfinite(scale) & (scale > 0)
         self.counts['correlators_withheld'] += int(np.count_nonzero(~usable))
         for j in np.flatnonzero(usable):
-            row = np.array([iq[j].real, iq[j].imag, periods.cn0_dbhz[j], dphi[j], periods.n_samples[j] / fs])
-            self._pending.setdefault(int(periods.prn[j]), []).append((float(periods.end_index[j]), row))
+            prn = int(periods.prn[j])
+            row = np.array([iq[j].real, iq[j].imag, periods.cn0_dbhz[j], dphi[j], periods.n_samples[j] / fs,
+                            float(periods.locked[j]), periods.phase_error_std_rad[j], periods.half_cycle_wraps[j],
+                            periods.pll_error_rad[j], periods.cn0_m2m4_dbhz[j]])
+            edge = self.bit_sync.edge(prn) if self.config.coherent_ms == 20 else None
+            if edge is None:
+                self._pending.setdefault(prn, []).append((float(periods.end_index[j]), row))
+                continue
+            k = int(periods.period[j])
+            bit = self._bits.setdefault(prn, [])
+            if k % PERIODS_PER_BIT == edge:
+                bit.clear()  # a bit starts
+            elif not bit:  # between the decision and the next edge: still 1 ms
+                self._pending.setdefault(prn, []).append((float(periods.end_index[j]), row))
+                continue
+            # the prompt relative to the NCO, its noise power and the NCO phase, to be summed over the bit
+            bit.append(np.array([periods.prompt[j].real, periods.prompt[j].imag, periods.noise_power[j],
+                                 periods.nco_phase_rad[j], dphi[j], periods.n_samples[j] / fs, periods.cn0_dbhz[j],
+                                 row[5], row[6], row[7], row[8], row[9]]))
+            if len(bit) == PERIODS_PER_BIT:
+                self._pending.setdefault(prn, []).append((float(periods.end_index[j]), self._bit_row(bit)))
+                self.counts['correlators_20ms'] += 1
+                bit.clear()
+
+    def _bit_row(self, bit: list[np.ndarray]) -> np.ndarray:
+        """One correlator of a whole data bit: the NCO-relative prompts summed (coherent over the bit: the data
+        sign is constant), rotated by the NCO's phase at the bit's end, scaled as ``iq_scaling`` says with the
+        noise power of the sum (20 periods' worth); predicted change and T summed; C/N0 and lock of the last
+        period."""
+        b = np.array(bit)
+        z = complex(b[:, 0].sum(), b[:, 1].sum()) * np.exp(1j * np.mod(b[-1, 3], 2.0 * np.pi))
+        t = float(b[:, 5].sum())
+        noise = float(b[-1, 2]) * len(bit)
+        cn0 = float(b[-1, 6])
+        if self.config.iq_scaling == 'unit_noise':
+            scale = math.sqrt(noise / 2.0)
+        else:
+            scale = math.sqrt(noise * 10.0 ** (cn0 / 10.0) * t)
+        return np.array([z.real / scale, z.imag / scale, cn0, float(b[:, 4].sum()), t, *b[-1, 7:12]])
 
     def _drop_weak(self, periods: TrackedPeriods) -> None:
         assert self.tracker is not None
@@ -321,6 +403,8 @@ class Receiver:
                     self._low_cn0[int(prn)] = self._low_cn0.get(int(prn), 0) + 1 if weak else 0
             if self._low_cn0.get(int(prn), 0) >= self.config.drop_after_ms:
                 self.tracker.drop_channel(int(prn))
+                self.bit_sync.forget(int(prn))
+                self._bits.pop(int(prn), None)
                 self.counts['channels_dropped'] += 1
                 self._low_cn0.pop(int(prn), None)
 
@@ -346,7 +430,8 @@ class Receiver:
             out.append(CorrelatorInterval(
                 stamp_ns=int(stamp), svid=np.array(svids, dtype=np.int64), in_phase=table[:, 0],
                 quadrature=table[:, 1], cn0_dbhz=table[:, 2], predicted_phase_change_rad=table[:, 3],
-                integration_time_s=table[:, 4]))
+                integration_time_s=table[:, 4], locked=table[:, 5] > 0.5, phase_error_std_rad=table[:, 6],
+                half_cycle_wraps=table[:, 7], pll_error_rad=table[:, 8], cn0_m2m4_dbhz=table[:, 9]))
             self.counts['intervals'] += 1
             self.counts['correlators'] += len(rows)
         # channels no longer tracked: their queues go

@@ -42,10 +42,32 @@ Real samples are mixed with the complex NCO as they are: the image at ``-2 f_c``
 1 ms (f_c >= ~1 MHz). For a spectrally inverted real IF the prompts are conjugated at each period's end,
 so that every loop, phase and output is in terms of the Doppler (sign as the acquisition's).
 
-C/N0 is estimated outside the kernel from the 1-ms prompts by the moments (M2M4) estimator of
-Pauluzzi & Beaulieu (IEEE Trans. Commun. 48(10), 2000), insensitive to the carrier phase and to the data
-bits; the PLL lock indicator is ``cos(2 e_p)`` estimated as ``(I^2 - Q^2) / (I^2 + Q^2)`` smoothed
-(Van Dierendonck, in Parkinson & Spilker, vol. I, ch. 8), 1 when locked, ~0 when not.
+C/N0, lock and slips (issue 29: a lock and a C/N0 that know a jammer is there):
+
+* **noise reference**: per channel a fourth correlator, the same code ``noise_offset_chips(prn)`` (>= 300)
+  chips away from the prompt, same carrier wipe-off: it holds no signal (the code's autocorrelation there is
+  -1/1023) but the same noise and, for interference, the same despread residue in expectation (a periodic
+  code's spectral lines have the same magnitudes at every offset); a jammer raises it as it raises the
+  prompt's noise;
+* **C/N0** over the last W = ``cn0_window_ms`` periods: ``P_n = mean |N|^2`` (the noise reference),
+  ``P_s = mean |P|^2 - P_n``, ``C/N0 = P_s / (P_n T)``, i.e. the C/N0 *effective* under interference
+  (C / (N0 + J_eff)); insensitive to the carrier phase and to the data bits; ``P_s`` is floored at
+  CN0_FLOOR_SIGMAS x sqrt(2 / W) P_n (the estimate's spread on noise alone: 26 dB-Hz at W = 50, 1 ms). The
+  moments (M2M4) estimator of Pauluzzi & Beaulieu (IEEE Trans. Commun. 48(10), 2000, eq. 14) is kept beside
+  it for comparison: it measures the prompt's constant-envelope part, and a jammer's despread residue
+  (a chirp's or a CW's lines leak through the code's lines as a tone) is constant-envelope too, so it reads
+  the residue as signal (on the real capture with a chirp at J/S 40 dB it *rose* to 48 dB-Hz);
+* **lock rule** over the last ``lock_window_ms`` periods (the issue's "phase error std and no half-cycle
+  slip over the last 100 ms"): locked iff the Costas discriminator ``e_p``'s std is at most
+  ``lock_phase_std_max_rad`` and no **half-cycle wrap** occurred: the Costas angle atan(Q/I) of a block of
+  ``wrap_block_ms`` summed prompts changed by more than pi / 2 (WRAP_THRESHOLD_RAD) from the previous block's
+  (1: consecutive 1-ms discriminators; a data bit flip inside a block leaves its angle modulo pi unchanged).
+  A half-cycle slip of the loop means its phase error crosses +-pi/2, where atan(Q/I) steps by about pi:
+  every slip makes a wrap (so no wrap in the window means no slip in it); a wrap without a slip (the error
+  crossing back, or noise) is a false alarm, rare above 38 dB-Hz with 1-ms blocks (measured against the
+  simulator's truth: docs/gnss_correlator/lock_rule.md). The wraps counted are the slip detector's output.
+* the lock indicator ``cos(2 e_p)`` estimated as ``(I^2 - Q^2) / (I^2 + Q^2)`` over the C/N0 window
+  (Van Dierendonck, in Parkinson & Spilker, vol. I, ch. 8) is reported too, 1 when locked, ~0 when not.
 
 Time and index conventions: samples are addressed by their absolute index in the stream (the
 IfSamples ``first_sample_index``); a period's end ``end_index`` is fractional (where the code NCO
@@ -71,6 +93,30 @@ PLL_W0_PER_BN = 1.0 / 0.53
 """w0 / B_n of the second-order PLL, rad/s per Hz (Kaplan & Hegarty, Table 5-6: B_n = 0.53 w0)."""
 FLL_W0_PER_BN = 4.0
 """w0 / B_n of the first-order FLL assist, rad/s per Hz (Kaplan & Hegarty, Table 5-6: B_n = 0.25 w0)."""
+WRAP_THRESHOLD_RAD = 0.5 * math.pi
+"""A change of the Costas discriminator atan(Q/I) by more than this from one period to the next is a half-cycle
+wrap (the phase error crossed +-pi/2: a half-cycle slip candidate), rad. A true crossing steps by about pi."""
+CN0_FLOOR_SIGMAS = 2.0
+"""The noise-reference C/N0 reports a signal power of at least this many standard deviations of its estimate on
+noise alone (sqrt(2 / W) P_n over W periods): a reading at the floor means 'not above it'."""
+NOISE_MIN_OFFSET_CHIPS = 300
+"""The noise-reference correlator sits at least this many chips from the prompt (and from the early and late)."""
+
+
+def noise_offset_chips(prn: int) -> int:
+    """Code offset of the noise-reference correlator of ``prn``, chips: the first offset from
+    NOISE_MIN_OFFSET_CHIPS at which the code's periodic autocorrelation is -1 (of 1023: the Gold code's
+    smallest side lobe, IS-GPS-200 codes take -1, -65 and 63) at the offset and at its neighbours +-1 and +-2
+    chips, so that the satellite's own signal leaks into it 60 dB below the prompt even with a code error of a
+    chip."""
+    code = ca_code(int(prn)).astype(np.float64)
+    spec = np.fft.fft(code)
+    acf = np.rint(np.fft.ifft(spec * np.conj(spec)).real).astype(np.int64)
+    n = GPS_CA_CODE_LENGTH_CHIPS
+    for k in range(NOISE_MIN_OFFSET_CHIPS, n - NOISE_MIN_OFFSET_CHIPS):
+        if all(acf[(k + j) % n] == -1 for j in range(-2, 3)):
+            return k
+    raise ValueError(f'no quiet code offset for PRN {prn}')  # never for the 37 C/A codes (tested)
 
 # ---- layout of the kernel's per-channel state (float64 row) ---------------------------------------
 S_CODE_PHASE = 0  # code NCO phase at the next sample, chips, [0, 1023)
@@ -87,8 +133,11 @@ S_PERIODS = 16  # periods closed since the start
 S_PERIOD_START = 17  # fractional index where the running period started
 S_PRN = 18
 S_ACTIVE = 19  # 1 while the channel is tracked
-S_RING_COUNT = 20  # full periods written to the channel's prompt ring (C/N0 and lock window)
-N_STATE = 21
+S_RING_COUNT = 20  # full periods written to the channel's rings (C/N0 and lock windows)
+S_NZ_RE, S_NZ_IM = 21, 22  # running sums of the period's noise-reference correlator
+S_BLK_RE, S_BLK_IM, S_BLK_N = 23, 24, 25  # prompts summed over the running block of the slip detector, their count
+S_BLK_PREV = 26  # Costas angle of the previous block, rad (NaN: none yet)
+N_STATE = 27
 
 # ---- layout of one output row (one closed code period of one channel) -----------------------------
 O_END = 0  # fractional absolute sample index of the period's end (code NCO at chip 1023)
@@ -105,7 +154,12 @@ O_PERIOD = 15  # period count since the channel's start (0 = the first, usually 
 O_CN0 = 16  # C/N0 over the last window of prompts, dB-Hz (NaN until the window is full)
 O_LOCK = 17  # PLL lock indicator over the same window (NaN until full)
 O_NOISE = 18  # noise power of one prompt (both components) over the same window, (input units x samples)^2
-N_OUT = 19
+O_NZ_RE, O_NZ_IM = 19, 20  # noise-reference correlator (same code, NOISE_OFFSET chips away), re and im
+O_CN0_M2M4 = 21  # C/N0 of the moments (M2M4) estimator over the C/N0 window, dB-Hz (NaN until full)
+O_ERR_STD = 22  # std of the PLL discriminator over the lock window, rad (NaN until full)
+O_WRAPS = 23  # half-cycle wraps of the PLL discriminator over the lock window (NaN until full)
+O_LOCKED = 24  # 1: locked by the lock rule (module docstring), 0: not (also 0 until the lock window is full)
+N_OUT = 25
 
 
 @dataclass(frozen=True)
@@ -123,7 +177,16 @@ class TrackingConfig:
             the dynamics, so 1-2 Hz is enough.
         early_late_offset_chips: d, offset of the early and late replicas from the prompt, chips,
             (0, 0.5]; 0.5 = one chip between early and late.
-        cn0_window_ms: prompts of the C/N0 estimate and the lock indicator, >= 10.
+        cn0_window_ms: prompts of the C/N0 estimates and the lock indicator, >= 10.
+        lock_window_ms: periods of the lock rule (discriminator std and half-cycle wraps), >= 10
+            (the issue's "over the last 100 ms").
+        lock_phase_std_max_rad: the lock rule's largest std of the Costas discriminator over the lock window,
+            rad, (0, pi / 2]. 0.5: the 1-ms discriminator's noise alone reaches it near 33 dB-Hz
+            (1 / sqrt(2 T C/N0)); an unlocked channel's uniform error gives pi / sqrt(12) = 0.91. The same
+            number as imm_carrier's ``lock_phase_std_max_rad``.
+        wrap_block_ms: prompts summed per block of the slip detector, [1, lock_window_ms / 2]: 1 compares
+            consecutive 1-ms discriminators (fastest, but noise wraps them below ~38 dB-Hz); K > 1 compares
+            the Costas angles of consecutive K-ms sums (noise sqrt(K) lower; a slip seen up to K ms later).
     """
 
     pll_bandwidth_hz: float = 15.0
@@ -132,6 +195,9 @@ class TrackingConfig:
     dll_bandwidth_hz: float = 2.0
     early_late_offset_chips: float = 0.5
     cn0_window_ms: int = 50
+    lock_window_ms: int = 100
+    lock_phase_std_max_rad: float = 0.5
+    wrap_block_ms: int = 1
 
     def __post_init__(self) -> None:
         checks = (
@@ -141,6 +207,9 @@ class TrackingConfig:
             ('dll_bandwidth_hz', 0.0 < self.dll_bandwidth_hz <= 10.0, '(0, 10]'),
             ('early_late_offset_chips', 0.0 < self.early_late_offset_chips <= 0.5, '(0, 0.5]'),
             ('cn0_window_ms', self.cn0_window_ms >= 10, '>= 10'),
+            ('lock_window_ms', self.lock_window_ms >= 10, '>= 10'),
+            ('lock_phase_std_max_rad', 0.0 < self.lock_phase_std_max_rad <= 0.5 * math.pi, '(0, pi / 2]'),
+            ('wrap_block_ms', 1 <= self.wrap_block_ms <= self.lock_window_ms // 2, '[1, lock_window_ms / 2]'),
         )
         for name, ok, rule in checks:
             if not ok:
@@ -148,35 +217,61 @@ class TrackingConfig:
 
 
 @njit(cache=True, nogil=True)
-def _window_quality(ring: np.ndarray, t_s: float) -> tuple[float, float, float]:
-    """C/N0 (M2M4, dB-Hz), lock indicator (mean(I^2 - Q^2) / mean(I^2 + Q^2)) and the noise power per prompt
-    (M2M4's P_n) of a window of prompts."""
+def _window_quality(ring: np.ndarray, noise_ring: np.ndarray, t_s: float) -> tuple[float, float, float, float]:
+    """Of a window of prompts and of the noise-reference correlators of the same periods: C/N0 of the
+    noise-reference estimator (dB-Hz, floored), C/N0 of the moments estimator (dB-Hz, NaN without signal power),
+    the lock indicator mean(I^2 - Q^2) / mean(I^2 + Q^2), and the noise power per prompt (the noise reference's
+    mean power). See :func:`noise_reference_cn0_dbhz`."""
     m2 = 0.0
     m4 = 0.0
     d = 0.0
-    for z in ring:
+    mn = 0.0
+    for k in range(ring.shape[0]):
+        z = ring[k]
         p2 = z.real * z.real + z.imag * z.imag
         m2 += p2
         m4 += p2 * p2
         d += z.real * z.real - z.imag * z.imag
+        zn = noise_ring[k]
+        mn += zn.real * zn.real + zn.imag * zn.imag
     w = ring.shape[0]
     m2 /= w
     m4 /= w
+    mn /= w
     lock = d / w / m2 if m2 > 0 else math.nan
+    cn0_m2m4 = math.nan
     disc = 2.0 * m2 * m2 - m4
-    if not disc > 0:
-        return math.nan, lock, m2
-    ps = math.sqrt(disc)
-    pn = m2 - ps
-    if not pn > 0:
-        return math.nan, lock, math.nan
-    return 10.0 * math.log10(ps / pn / t_s), lock, pn
+    if disc > 0:
+        ps = math.sqrt(disc)
+        if m2 - ps > 0:
+            cn0_m2m4 = 10.0 * math.log10(ps / (m2 - ps) / t_s)
+    if not mn > 0:
+        return math.nan, cn0_m2m4, lock, math.nan
+    ps_ref = max(m2 - mn, CN0_FLOOR_SIGMAS * math.sqrt(2.0 / w) * mn)
+    return 10.0 * math.log10(ps_ref / mn / t_s), cn0_m2m4, lock, mn
 
 
 @njit(cache=True, nogil=True)
-def _close_period(st: np.ndarray, out: np.ndarray, ring: np.ndarray, row: int, end_index: float, code_rate: float,
-                  inverted: bool, w0p: float, w0f: float, assist_periods: float, k_dll: float,
-                  d_chips: float, sign: float, if0: float, fs: float) -> float:
+def _lock_window(err_ring: np.ndarray) -> tuple[float, float]:
+    """Std (rad) of the PLL discriminator (column 0) and the half-cycle wraps (column 1) over the ring."""
+    w = err_ring.shape[0]
+    s1 = 0.0
+    s2 = 0.0
+    wraps = 0.0
+    for j in range(w):
+        e = err_ring[j, 0]
+        s1 += e
+        s2 += e * e
+        wraps += err_ring[j, 1]
+    mean = s1 / w
+    return math.sqrt(max(s2 / w - mean * mean, 0.0)), wraps
+
+
+@njit(cache=True, nogil=True)
+def _close_period(st: np.ndarray, out: np.ndarray, ring: np.ndarray, noise_ring: np.ndarray, err_ring: np.ndarray,
+                  row: int, end_index: float, code_rate: float, inverted: bool, w0p: float, w0f: float,
+                  assist_periods: float, k_dll: float, d_chips: float, sign: float, if0: float, fs: float,
+                  lock_std_max: float, wrap_block: float) -> float:
     """Write the period's output row, run the discriminators and loop filters, reset the sums.
 
     Returns the new carrier NCO frequency of the stream, Hz.
@@ -186,8 +281,9 @@ def _close_period(st: np.ndarray, out: np.ndarray, ring: np.ndarray, row: int, e
     e_re, e_im = st[S_E_RE], st[S_E_IM]
     p_re, p_im = st[S_P_RE], st[S_P_IM]
     l_re, l_im = st[S_L_RE], st[S_L_IM]
+    n_re, n_im = st[S_NZ_RE], st[S_NZ_IM]
     if inverted:  # conjugate: phases in terms of the Doppler
-        e_im, p_im, l_im = -e_im, -p_im, -l_im
+        e_im, p_im, l_im, n_im = -e_im, -p_im, -l_im, -n_im
     # discriminators
     pll = math.atan(p_im / p_re) if p_re != 0.0 else (0.5 * math.pi if p_im > 0 else -0.5 * math.pi)
     fll = 0.0
@@ -217,12 +313,41 @@ def _close_period(st: np.ndarray, out: np.ndarray, ring: np.ndarray, row: int, e
     out[row, O_CN0] = math.nan
     out[row, O_LOCK] = math.nan
     out[row, O_NOISE] = math.nan
-    if st[S_PERIODS] > 0:  # the first period is partial: left out of the window
+    out[row, O_NZ_RE], out[row, O_NZ_IM] = n_re, n_im
+    out[row, O_CN0_M2M4] = math.nan
+    out[row, O_ERR_STD] = math.nan
+    out[row, O_WRAPS] = math.nan
+    out[row, O_LOCKED] = 0.0
+    if st[S_PERIODS] > 0:  # the first period is partial: left out of the windows
         w = ring.shape[0]
-        ring[int(st[S_RING_COUNT]) % w] = complex(p_re, p_im)
+        wl = err_ring.shape[0]
+        count = int(st[S_RING_COUNT])
+        ring[count % w] = complex(p_re, p_im)
+        noise_ring[count % w] = complex(n_re, n_im)
+        # slip detector: the Costas angle of blocks of wrap_block prompts (a data bit flip inside a block leaves
+        # its angle modulo pi unchanged); a change by more than pi/2 from the previous block is a wrap
+        st[S_BLK_RE] += p_re
+        st[S_BLK_IM] += p_im
+        st[S_BLK_N] += 1.0
+        wrap = 0.0
+        if st[S_BLK_N] >= wrap_block:
+            b_re, b_im = st[S_BLK_RE], st[S_BLK_IM]
+            ang = math.atan(b_im / b_re) if b_re != 0.0 else (0.5 * math.pi if b_im > 0 else -0.5 * math.pi)
+            prev = st[S_BLK_PREV]
+            if prev == prev and abs(ang - prev) > WRAP_THRESHOLD_RAD:
+                wrap = 1.0
+            st[S_BLK_PREV] = ang
+            st[S_BLK_RE] = st[S_BLK_IM] = st[S_BLK_N] = 0.0
+        err_ring[count % wl, 0] = pll
+        err_ring[count % wl, 1] = wrap
         st[S_RING_COUNT] += 1.0
         if st[S_RING_COUNT] >= w:
-            out[row, O_CN0], out[row, O_LOCK], out[row, O_NOISE] = _window_quality(ring, t)
+            out[row, O_CN0], out[row, O_CN0_M2M4], out[row, O_LOCK], out[row, O_NOISE] = \
+                _window_quality(ring, noise_ring, t)
+        if st[S_RING_COUNT] >= wl:
+            std, wraps = _lock_window(err_ring)
+            out[row, O_ERR_STD], out[row, O_WRAPS] = std, wraps
+            out[row, O_LOCKED] = 1.0 if (std <= lock_std_max and wraps == 0.0) else 0.0
     # carrier loop (Kaplan & Hegarty Fig. 5-23): second-order PLL, first-order FLL assist while pulling in
     w0f_now = w0f if st[S_PERIODS] < assist_periods else 0.0
     w_old = st[S_W]
@@ -233,6 +358,7 @@ def _close_period(st: np.ndarray, out: np.ndarray, ring: np.ndarray, row: int, e
     st[S_CODE_CORR] = k_dll * dll
     st[S_PREV_RE], st[S_PREV_IM] = p_re, p_im
     st[S_E_RE] = st[S_E_IM] = st[S_P_RE] = st[S_P_IM] = st[S_L_RE] = st[S_L_IM] = 0.0
+    st[S_NZ_RE] = st[S_NZ_IM] = 0.0
     st[S_N] = 0.0
     st[S_PERIODS] += 1.0
     st[S_PERIOD_START] = end_index
@@ -249,15 +375,16 @@ _SIN = np.sin(2.0 * np.pi * np.arange(_LUT_SIZE) / _LUT_SIZE)
 
 @njit(cache=True, nogil=True, fastmath=True)
 def _segment(xr: np.ndarray, xi: np.ndarray | None, i0: int, m: int, cyc0: float, cstep: float, cp0: float,
-             code_step: float, code: np.ndarray, d_plus: float, d_minus: float
-             ) -> tuple[float, float, float, float, float, float]:
-    """E, P, L sums (re, im) of samples i0 .. i0 + m - 1, all inside one code period (no branch per sample:
+             code_step: float, code: np.ndarray, ncode: np.ndarray, d_plus: float, d_minus: float
+             ) -> tuple[float, float, float, float, float, float, float, float]:
+    """E, P, L and noise-reference sums (re, im) of samples i0 .. i0 + m - 1, all inside one code period
+    (``ncode``: the code shifted by the noise reference's offset, same layout as ``code``) (no branch per sample:
     the carrier phase and the code phase of sample k are computed from k, so the loop vectorises).
 
     ``y_k = x_k exp(-j 2 pi (cyc0 + k cstep))`` (table look-up), chips ``cp0 + k code_step`` (+- the early
     and late offsets); ``xi`` None for real samples.
     """
-    er = ei = pr = pi = lr = li = 0.0
+    er = ei = pr = pi = lr = li = nr = ni = 0.0
     for k in range(m):
         j = int(math.floor((cyc0 + k * cstep) * _LUT_SIZE)) & (_LUT_SIZE - 1)
         co = _COS[j]
@@ -274,19 +401,24 @@ def _segment(xr: np.ndarray, xi: np.ndarray | None, i0: int, m: int, cyc0: float
         cpv = code[int(chips) + 1]
         cev = code[int(chips + d_plus)]
         clv = code[int(chips + d_minus)]
+        cnv = ncode[int(chips) + 1]
+        nr += yr * cnv
+        ni += yi * cnv
         pr += yr * cpv
         pi += yi * cpv
         er += yr * cev
         ei += yi * cev
         lr += yr * clv
         li += yi * clv
-    return er, ei, pr, pi, lr, li
+    return er, ei, pr, pi, lr, li, nr, ni
 
 
 @njit(cache=True, nogil=True)
 def track_block(xr: np.ndarray, xi: np.ndarray | None, first_index: int, fs: float, if0: float, sign: float,
-                inverted: bool, state: np.ndarray, codes: np.ndarray, rings: np.ndarray, out: np.ndarray,
-                n_out: np.ndarray, w0p: float, w0f: float, assist_periods: float, k_dll: float, d_chips: float) -> None:
+                inverted: bool, state: np.ndarray, codes: np.ndarray, noise_codes: np.ndarray, rings: np.ndarray,
+                noise_rings: np.ndarray, err_rings: np.ndarray, out: np.ndarray, n_out: np.ndarray, w0p: float,
+                w0f: float, assist_periods: float, k_dll: float, d_chips: float, lock_std_max: float,
+                wrap_block: float) -> None:
     """Track every active channel of ``state`` over one contiguous block of samples (compiled).
 
     Args:
@@ -300,13 +432,19 @@ def track_block(xr: np.ndarray, xi: np.ndarray | None, first_index: int, fs: flo
         state: per-channel state, shape (n_ch, N_STATE), updated in place.
         codes: +-1 C/A code of each channel with one chip of wrap each side, shape (n_ch, 1025):
             ``codes[:, k + 1]`` is chip k mod 1023 for k = -1..1023.
-        rings: the last prompts of each channel (C/N0 and lock window), shape (n_ch, window), complex128.
+        noise_codes: the same codes shifted by each channel's noise-reference offset (chip k + offset), same shape.
+        rings: the last prompts of each channel (C/N0 window), shape (n_ch, window), complex128.
+        noise_rings: the noise-reference correlators of the same periods, shape (n_ch, window), complex128.
+        err_rings: per period of the lock window, the PLL discriminator and whether the slip detector found a
+            wrap there (0 / 1), shape (n_ch, lock window, 2), float64.
         out: output rows, shape (n_ch, max_periods, N_OUT), written from row 0.
         n_out: rows written per channel, shape (n_ch,), set.
         w0p, w0f: natural frequencies of the PLL and the FLL assist, rad/s.
         assist_periods: periods with the FLL assist on.
         k_dll: DLL gain 4 B_dll, 1/s.
         d_chips: early/late offset, chips.
+        lock_std_max: the lock rule's largest discriminator std, rad.
+        wrap_block: prompts per block of the slip detector.
     """
     n_total = xr.shape[0]
     n_ch = state.shape[0]
@@ -319,6 +457,7 @@ def track_block(xr: np.ndarray, xi: np.ndarray | None, first_index: int, fs: flo
         if st[S_ACTIVE] == 0.0:
             continue
         code = codes[c]
+        ncode = noise_codes[c]
         f_c = if0 + sign * st[S_DOPPLER]
         code_rate = GPS_CA_CHIP_RATE_HZ * (1.0 + st[S_DOPPLER] / GPS_L1_FREQUENCY_HZ) + st[S_CODE_CORR]
         code_step = code_rate / fs
@@ -329,20 +468,23 @@ def track_block(xr: np.ndarray, xi: np.ndarray | None, first_index: int, fs: flo
         e_re, e_im = st[S_E_RE], st[S_E_IM]
         p_re, p_im = st[S_P_RE], st[S_P_IM]
         l_re, l_im = st[S_L_RE], st[S_L_IM]
+        n_re, n_im = st[S_NZ_RE], st[S_NZ_IM]
         n_in = 0  # samples since the running period's sums were last written to st
         i = 0
         while i < n_total:
             # samples k >= 0 of this period left: those with cp + k code_step < 1023
             n_left = max(1, int(math.ceil((n_code - cp) / code_step)))
             m = min(n_left, n_total - i)
-            se_re, se_im, sp_re, sp_im, sl_re, sl_im = _segment(
-                xr, xi, i, m, cyc, cstep, cp, code_step, code, d_plus, d_minus)
+            se_re, se_im, sp_re, sp_im, sl_re, sl_im, sn_re, sn_im = _segment(
+                xr, xi, i, m, cyc, cstep, cp, code_step, code, ncode, d_plus, d_minus)
             e_re += se_re
             e_im += se_im
             p_re += sp_re
             p_im += sp_im
             l_re += sl_re
             l_im += sl_im
+            n_re += sn_re
+            n_im += sn_im
             cp += m * code_step
             cyc = (cyc + m * cstep) % 1.0
             n_in += m
@@ -355,17 +497,19 @@ def track_block(xr: np.ndarray, xi: np.ndarray | None, first_index: int, fs: flo
             st[S_E_RE], st[S_E_IM] = e_re, e_im
             st[S_P_RE], st[S_P_IM] = p_re, p_im
             st[S_L_RE], st[S_L_IM] = l_re, l_im
+            st[S_NZ_RE], st[S_NZ_IM] = n_re, n_im
             st[S_N] += n_in
             st[S_PHASE_RAD] += n_in * dstep
             row = n_out[c]
             if row >= out.shape[1]:  # no room (cannot happen with the sizes process() allocates): stop
                 st[S_ACTIVE] = 0.0
                 break
-            f_c = _close_period(st, out[c], rings[c], row, end_index, code_rate, inverted, w0p, w0f,
-                                assist_periods, k_dll, d_chips, sign, if0, fs)
+            f_c = _close_period(st, out[c], rings[c], noise_rings[c], err_rings[c], row, end_index, code_rate,
+                                inverted, w0p, w0f, assist_periods, k_dll, d_chips, sign, if0, fs, lock_std_max,
+                                wrap_block)
             n_out[c] = row + 1
             n_in = 0
-            e_re = e_im = p_re = p_im = l_re = l_im = 0.0
+            e_re = e_im = p_re = p_im = l_re = l_im = n_re = n_im = 0.0
             code_rate = GPS_CA_CHIP_RATE_HZ * (1.0 + st[S_DOPPLER] / GPS_L1_FREQUENCY_HZ) + st[S_CODE_CORR]
             code_step = code_rate / fs
             cstep = f_c / fs
@@ -373,6 +517,7 @@ def track_block(xr: np.ndarray, xi: np.ndarray | None, first_index: int, fs: flo
         st[S_E_RE], st[S_E_IM] = e_re, e_im
         st[S_P_RE], st[S_P_IM] = p_re, p_im
         st[S_L_RE], st[S_L_IM] = l_re, l_im
+        st[S_NZ_RE], st[S_NZ_IM] = n_re, n_im
         st[S_N] += n_in
         st[S_PHASE_RAD] += n_in * dstep
         st[S_CARR_CYC] = cyc
@@ -396,12 +541,21 @@ class TrackedPeriods:
         pll_error_rad, fll_error_hz, dll_error_chips: discriminator outputs.
         n_samples: samples summed.
         period: the period's count since the channel's start (0 is partial).
-        cn0_dbhz: C/N0 estimate over the last ``cn0_window_ms`` prompts, dB-Hz (NaN until the window is
-            full, or when the estimate has no signal power).
+        noise_reference: the noise-reference correlator (the same code ``noise_offset_chips`` away from the
+            prompt, same carrier wipe-off), complex, same unit as the prompt.
+        cn0_dbhz: C/N0 over the last ``cn0_window_ms`` periods by the noise-reference estimator (module
+            docstring), dB-Hz (NaN until the window is full); at least its floor.
+        cn0_m2m4_dbhz: C/N0 of the moments estimator over the same prompts, dB-Hz (NaN until full, or when
+            the moments give no signal power); kept for comparison: it takes a jammer's coherent residue in
+            the prompt for signal.
         lock_indicator: smoothed cos(2 e_p) over the same window, [-1, 1] (NaN until full).
-        noise_power: the moments estimator's noise power of one prompt (I and Q together) over the same
-            window, (input units x samples)^2 (NaN until full); the signal power is
+        noise_power: noise (and interference) power of one prompt (I and Q together) over the same window:
+            the noise reference's mean power, (input units x samples)^2 (NaN until full); the signal power is
             ``noise_power x 10^(cn0_dbhz / 10) x T``.
+        phase_error_std_rad: std of the PLL discriminator over the last ``lock_window_ms`` periods, rad (NaN
+            until that window is full).
+        half_cycle_wraps: half-cycle wraps of the discriminator in that window (NaN until full).
+        locked: the lock rule (module docstring) over that window; False until it is full.
     """
 
     prn: np.ndarray
@@ -418,9 +572,14 @@ class TrackedPeriods:
     dll_error_chips: np.ndarray
     n_samples: np.ndarray
     period: np.ndarray
+    noise_reference: np.ndarray
     cn0_dbhz: np.ndarray
+    cn0_m2m4_dbhz: np.ndarray
     lock_indicator: np.ndarray
     noise_power: np.ndarray
+    phase_error_std_rad: np.ndarray
+    half_cycle_wraps: np.ndarray
+    locked: np.ndarray
 
     def of(self, prn: int) -> TrackedPeriods:
         """The rows of one PRN."""
@@ -492,7 +651,10 @@ class Tracker:
         self._sign = -1.0 if self.inverted else 1.0
         self._state = np.zeros((0, N_STATE))
         self._codes = np.zeros((0, GPS_CA_CODE_LENGTH_CHIPS + 2))
+        self._noise_codes = np.zeros((0, GPS_CA_CODE_LENGTH_CHIPS + 2))
         self._rings = np.zeros((0, config.cn0_window_ms), dtype=np.complex128)
+        self._noise_rings = np.zeros((0, config.cn0_window_ms), dtype=np.complex128)
+        self._err_rings = np.zeros((0, config.lock_window_ms, 2))
         self.next_index: int | None = None
 
     @property
@@ -528,23 +690,35 @@ class Tracker:
         row[S_PERIOD_START] = start
         row[S_PRN] = prn
         row[S_ACTIVE] = 1.0
+        row[S_BLK_PREV] = math.nan
         keep = self._state[:, S_ACTIVE] > 0
         self._state = np.vstack([self._state[keep], row[None, :]])
         code = ca_code(int(prn)).astype(np.float64)
         wrapped = np.concatenate([code[-1:], code, code[:1]])
+        shifted = np.roll(code, -noise_offset_chips(int(prn)))  # chip k + offset
+        noise_wrapped = np.concatenate([shifted[-1:], shifted, shifted[:1]])
+        w = self.config.cn0_window_ms
         self._codes = np.vstack([self._codes[keep], wrapped[None, :]])
-        self._rings = np.vstack([self._rings[keep], np.zeros((1, self.config.cn0_window_ms), dtype=np.complex128)])
+        self._noise_codes = np.vstack([self._noise_codes[keep], noise_wrapped[None, :]])
+        self._rings = np.vstack([self._rings[keep], np.zeros((1, w), dtype=np.complex128)])
+        self._noise_rings = np.vstack([self._noise_rings[keep], np.zeros((1, w), dtype=np.complex128)])
+        self._err_rings = np.concatenate([self._err_rings[keep], np.zeros((1, self.config.lock_window_ms, 2))])
 
     def drop_channel(self, prn: int) -> None:
         """Stop tracking a PRN (no error if it is not tracked)."""
         keep = self._state[:, S_PRN] != prn
         self._state, self._codes, self._rings = self._state[keep], self._codes[keep], self._rings[keep]
+        self._noise_codes, self._noise_rings = self._noise_codes[keep], self._noise_rings[keep]
+        self._err_rings = self._err_rings[keep]
 
     def reset(self) -> None:
         """Drop every channel and forget the stream position."""
         self._state = np.zeros((0, N_STATE))
         self._codes = np.zeros((0, GPS_CA_CODE_LENGTH_CHIPS + 2))
+        self._noise_codes = np.zeros((0, GPS_CA_CODE_LENGTH_CHIPS + 2))
         self._rings = np.zeros((0, self.config.cn0_window_ms), dtype=np.complex128)
+        self._noise_rings = np.zeros((0, self.config.cn0_window_ms), dtype=np.complex128)
+        self._err_rings = np.zeros((0, self.config.lock_window_ms, 2))
         self.next_index = None
 
     def process(self, samples: np.ndarray, first_sample_index: int) -> TrackedPeriods:
@@ -581,9 +755,10 @@ class Tracker:
             xr = np.ascontiguousarray(x.real) if self.is_complex else x
             xi = np.ascontiguousarray(x.imag) if self.is_complex else None
             track_block(xr, xi, int(first_sample_index), self.fs, self._if0, self._sign, self.inverted, self._state,
-                        self._codes, self._rings, out, n_out, cfg.pll_bandwidth_hz * PLL_W0_PER_BN,
-                        cfg.fll_bandwidth_hz * FLL_W0_PER_BN, float(cfg.fll_assist_ms),
-                        4.0 * cfg.dll_bandwidth_hz, cfg.early_late_offset_chips)
+                        self._codes, self._noise_codes, self._rings, self._noise_rings, self._err_rings, out, n_out,
+                        cfg.pll_bandwidth_hz * PLL_W0_PER_BN, cfg.fll_bandwidth_hz * FLL_W0_PER_BN,
+                        float(cfg.fll_assist_ms), 4.0 * cfg.dll_bandwidth_hz, cfg.early_late_offset_chips,
+                        cfg.lock_phase_std_max_rad, float(cfg.wrap_block_ms))
         rows = [out[c, :n_out[c]] for c in range(n_ch)]
         prns = np.concatenate([np.full(n_out[c], self._state[c, S_PRN], dtype=np.int64) for c in range(n_ch)]) \
             if n_ch else np.zeros(0, dtype=np.int64)
@@ -598,5 +773,7 @@ class Tracker:
             code_rate_hz=table[order, O_CODE_RATE], pll_error_rad=table[order, O_PLL_ERR],
             fll_error_hz=table[order, O_FLL_ERR], dll_error_chips=table[order, O_DLL_ERR],
             n_samples=table[order, O_N].astype(np.int64), period=table[order, O_PERIOD].astype(np.int64),
-            cn0_dbhz=table[order, O_CN0], lock_indicator=table[order, O_LOCK],
-            noise_power=table[order, O_NOISE])
+            noise_reference=table[order, O_NZ_RE] + 1j * table[order, O_NZ_IM],
+            cn0_dbhz=table[order, O_CN0], cn0_m2m4_dbhz=table[order, O_CN0_M2M4], lock_indicator=table[order, O_LOCK],
+            noise_power=table[order, O_NOISE], phase_error_std_rad=table[order, O_ERR_STD],
+            half_cycle_wraps=table[order, O_WRAPS], locked=table[order, O_LOCKED] > 0.5)

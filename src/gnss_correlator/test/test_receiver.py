@@ -130,3 +130,38 @@ def test_reacquisition_runs_in_the_worker_and_outputs_do_not_depend_on_it(sample
     # per run: the first acquisition in the caller's thread, the reacquisitions in the worker
     assert threads.count('MainThread') == 2 and len(threads) > 2
     assert all(t.startswith('gnss_correlator_acquisition') for t in threads if t != 'MainThread')
+
+
+def test_20ms_correlators_after_bit_sync():
+    """``coherent_ms`` 20 on 0.8 s of simulated IF: each satellite is bit-synchronised, then published once per data
+    bit (T = 20 code periods, stamps 20 ms apart), each bit's correlator ending on a true bit edge (the period
+    whose end the simulator's code phase puts at a multiple of 20 x 1023 chips) within the 1 ms of its stamp; the
+    predicted change is 2 pi f_d x 20 ms; unit amplitude (median |I + jQ| 1 +- 0.1); and the angle of I + jQ minus
+    the true Doppler phase is constant modulo pi to within the 20-ms prompt's phase noise (1 / sqrt(2 T C/N0),
+    0.03 rad here) plus the PLL's jitter inside the bit (bound 0.1 rad rms)."""
+    fe = FrontEndConfig(sample_rate_hz=FS, intermediate_frequency_hz=0.0, is_complex=True, bits=4)
+    v = IfSimulator(fe, satellites=SATS, seed=11).generate(int(FS * 0.8)).counts.astype(np.float64)
+    rx, out = run(v[0::2] + 1j * v[1::2], ReceiverConfig(prns=(3, 7, 21), coherent_ms=20))
+    assert rx.counts['bit_syncs'] == 2 and rx.counts['correlators_20ms'] > 0
+    for sat in SATS:
+        rows = [(iv.stamp_ns, iv.in_phase[k], iv.quadrature[k], iv.predicted_phase_change_rad[k],
+                 iv.integration_time_s[k]) for iv in out for k in np.flatnonzero(iv.svid == sat.prn)]
+        a = np.array(rows)
+        long = a[:, 4] > 0.015
+        assert np.count_nonzero(long) >= 10, sat.prn
+        first = np.flatnonzero(long)[0]
+        assert np.all(long[first:]), 'once synchronised, every correlator spans a bit'
+        t = (a[long, 0] - T0_NS) / 1e9
+        assert np.allclose(np.diff(t), 0.02, atol=2e-6)
+        assert np.allclose(a[long, 4], 0.02, atol=2e-5)
+        # each bit's end: the true code phase (chips since a bit edge) at the stamp is 0 to 1 ms past an edge
+        chip_rate = 1.023e6 * (1.0 + sat.doppler_hz / 1575.42e6)
+        past = (sat.code_phase_chips + chip_rate * t) % (20 * 1023) / chip_rate
+        assert np.all(past < 1e-3 + 1e-6), past
+        assert np.median(a[long, 3]) == pytest.approx(2 * np.pi * sat.doppler_hz * 0.02, abs=0.2)
+        iq = a[long, 1] + 1j * a[long, 2]
+        assert np.median(np.abs(iq)) == pytest.approx(1.0, abs=0.1)
+        d = np.angle(iq) - 2 * np.pi * sat.doppler_hz * t
+        z = np.exp(2j * d)
+        d = np.angle(z * np.conj(np.mean(z))) / 2
+        assert np.sqrt(np.mean(d ** 2)) < 0.1, np.sqrt(np.mean(d ** 2))
