@@ -42,32 +42,7 @@ Real samples are mixed with the complex NCO as they are: the image at ``-2 f_c``
 1 ms (f_c >= ~1 MHz). For a spectrally inverted real IF the prompts are conjugated at each period's end,
 so that every loop, phase and output is in terms of the Doppler (sign as the acquisition's).
 
-C/N0, lock and slips (issue 29: a lock and a C/N0 that know a jammer is there):
-
-* **noise reference**: per channel a fourth correlator, the same code ``noise_offset_chips(prn)`` (>= 300)
-  chips away from the prompt, same carrier wipe-off: it holds no signal (the code's autocorrelation there is
-  -1/1023) but the same noise and, for interference, the same despread residue in expectation (a periodic
-  code's spectral lines have the same magnitudes at every offset); a jammer raises it as it raises the
-  prompt's noise;
-* **C/N0** over the last W = ``cn0_window_ms`` periods: ``P_n = mean |N|^2`` (the noise reference),
-  ``P_s = mean |P|^2 - P_n``, ``C/N0 = P_s / (P_n T)``, i.e. the C/N0 *effective* under interference
-  (C / (N0 + J_eff)); insensitive to the carrier phase and to the data bits; ``P_s`` is floored at
-  CN0_FLOOR_SIGMAS x sqrt(2 / W) P_n (the estimate's spread on noise alone: 26 dB-Hz at W = 50, 1 ms). The
-  moments (M2M4) estimator of Pauluzzi & Beaulieu (IEEE Trans. Commun. 48(10), 2000, eq. 14) is kept beside
-  it for comparison: it measures the prompt's constant-envelope part, and a jammer's despread residue
-  (a chirp's or a CW's lines leak through the code's lines as a tone) is constant-envelope too, so it reads
-  the residue as signal (on the real capture with a chirp at J/S 40 dB it *rose* to 48 dB-Hz);
-* **lock rule** over the last ``lock_window_ms`` periods (the issue's "phase error std and no half-cycle
-  slip over the last 100 ms"): locked iff the Costas discriminator ``e_p``'s std is at most
-  ``lock_phase_std_max_rad`` and no **half-cycle wrap** occurred: the Costas angle atan(Q/I) of a block of
-  ``wrap_block_ms`` summed prompts changed by more than pi / 2 (WRAP_THRESHOLD_RAD) from the previous block's
-  (1: consecutive 1-ms discriminators; a data bit flip inside a block leaves its angle modulo pi unchanged).
-  A half-cycle slip of the loop means its phase error crosses +-pi/2, where atan(Q/I) steps by about pi:
-  every slip makes a wrap (so no wrap in the window means no slip in it); a wrap without a slip (the error
-  crossing back, or noise) is a false alarm, rare above 38 dB-Hz with 1-ms blocks (measured against the
-  simulator's truth: docs/gnss_correlator/lock_rule.md). The wraps counted are the slip detector's output.
-* the lock indicator ``cos(2 e_p)`` estimated as ``(I^2 - Q^2) / (I^2 + Q^2)`` over the C/N0 window
-  (Van Dierendonck, in Parkinson & Spilker, vol. I, ch. 8) is reported too, 1 when locked, ~0 when not.
+C/N0, lock and slips: module ``channel_quality`` (the noise-reference C/N0, the lock rule, the wrap count).
 
 Time and index conventions: samples are addressed by their absolute index in the stream (the
 IfSamples ``first_sample_index``); a period's end ``end_index`` is fractional (where the code NCO
@@ -85,6 +60,12 @@ from numba import njit
 from gnss_common.constants import GPS_CA_CHIP_RATE_HZ, GPS_CA_CODE_LENGTH_CHIPS, GPS_L1_FREQUENCY_HZ
 from gnss_common.gps_ca import G2_DELAY_CHIPS, ca_code
 from gnss_correlator.acquisition import MIN_SAMPLE_RATE_HZ
+from gnss_correlator.channel_quality import (
+    WRAP_THRESHOLD_RAD,
+    lock_window,
+    noise_offset_chips,
+    window_quality,
+)
 
 TWO_PI = 2.0 * math.pi
 PLL_A2 = 1.414
@@ -93,30 +74,6 @@ PLL_W0_PER_BN = 1.0 / 0.53
 """w0 / B_n of the second-order PLL, rad/s per Hz (Kaplan & Hegarty, Table 5-6: B_n = 0.53 w0)."""
 FLL_W0_PER_BN = 4.0
 """w0 / B_n of the first-order FLL assist, rad/s per Hz (Kaplan & Hegarty, Table 5-6: B_n = 0.25 w0)."""
-WRAP_THRESHOLD_RAD = 0.5 * math.pi
-"""A change of the Costas discriminator atan(Q/I) by more than this from one period to the next is a half-cycle
-wrap (the phase error crossed +-pi/2: a half-cycle slip candidate), rad. A true crossing steps by about pi."""
-CN0_FLOOR_SIGMAS = 2.0
-"""The noise-reference C/N0 reports a signal power of at least this many standard deviations of its estimate on
-noise alone (sqrt(2 / W) P_n over W periods): a reading at the floor means 'not above it'."""
-NOISE_MIN_OFFSET_CHIPS = 300
-"""The noise-reference correlator sits at least this many chips from the prompt (and from the early and late)."""
-
-
-def noise_offset_chips(prn: int) -> int:
-    """Code offset of the noise-reference correlator of ``prn``, chips: the first offset from
-    NOISE_MIN_OFFSET_CHIPS at which the code's periodic autocorrelation is -1 (of 1023: the Gold code's
-    smallest side lobe, IS-GPS-200 codes take -1, -65 and 63) at the offset and at its neighbours +-1 and +-2
-    chips, so that the satellite's own signal leaks into it 60 dB below the prompt even with a code error of a
-    chip."""
-    code = ca_code(int(prn)).astype(np.float64)
-    spec = np.fft.fft(code)
-    acf = np.rint(np.fft.ifft(spec * np.conj(spec)).real).astype(np.int64)
-    n = GPS_CA_CODE_LENGTH_CHIPS
-    for k in range(NOISE_MIN_OFFSET_CHIPS, n - NOISE_MIN_OFFSET_CHIPS):
-        if all(acf[(k + j) % n] == -1 for j in range(-2, 3)):
-            return k
-    raise ValueError(f'no quiet code offset for PRN {prn}')  # never for the 37 C/A codes (tested)
 
 # ---- layout of the kernel's per-channel state (float64 row) ---------------------------------------
 S_CODE_PHASE = 0  # code NCO phase at the next sample, chips, [0, 1023)
@@ -217,57 +174,6 @@ class TrackingConfig:
 
 
 @njit(cache=True, nogil=True)
-def _window_quality(ring: np.ndarray, noise_ring: np.ndarray, t_s: float) -> tuple[float, float, float, float]:
-    """Of a window of prompts and of the noise-reference correlators of the same periods: C/N0 of the
-    noise-reference estimator (dB-Hz, floored), C/N0 of the moments estimator (dB-Hz, NaN without signal power),
-    the lock indicator mean(I^2 - Q^2) / mean(I^2 + Q^2), and the noise power per prompt (the noise reference's
-    mean power). See :func:`noise_reference_cn0_dbhz`."""
-    m2 = 0.0
-    m4 = 0.0
-    d = 0.0
-    mn = 0.0
-    for k in range(ring.shape[0]):
-        z = ring[k]
-        p2 = z.real * z.real + z.imag * z.imag
-        m2 += p2
-        m4 += p2 * p2
-        d += z.real * z.real - z.imag * z.imag
-        zn = noise_ring[k]
-        mn += zn.real * zn.real + zn.imag * zn.imag
-    w = ring.shape[0]
-    m2 /= w
-    m4 /= w
-    mn /= w
-    lock = d / w / m2 if m2 > 0 else math.nan
-    cn0_m2m4 = math.nan
-    disc = 2.0 * m2 * m2 - m4
-    if disc > 0:
-        ps = math.sqrt(disc)
-        if m2 - ps > 0:
-            cn0_m2m4 = 10.0 * math.log10(ps / (m2 - ps) / t_s)
-    if not mn > 0:
-        return math.nan, cn0_m2m4, lock, math.nan
-    ps_ref = max(m2 - mn, CN0_FLOOR_SIGMAS * math.sqrt(2.0 / w) * mn)
-    return 10.0 * math.log10(ps_ref / mn / t_s), cn0_m2m4, lock, mn
-
-
-@njit(cache=True, nogil=True)
-def _lock_window(err_ring: np.ndarray) -> tuple[float, float]:
-    """Std (rad) of the PLL discriminator (column 0) and the half-cycle wraps (column 1) over the ring."""
-    w = err_ring.shape[0]
-    s1 = 0.0
-    s2 = 0.0
-    wraps = 0.0
-    for j in range(w):
-        e = err_ring[j, 0]
-        s1 += e
-        s2 += e * e
-        wraps += err_ring[j, 1]
-    mean = s1 / w
-    return math.sqrt(max(s2 / w - mean * mean, 0.0)), wraps
-
-
-@njit(cache=True, nogil=True)
 def _close_period(st: np.ndarray, out: np.ndarray, ring: np.ndarray, noise_ring: np.ndarray, err_ring: np.ndarray,
                   row: int, end_index: float, code_rate: float, inverted: bool, w0p: float, w0f: float,
                   assist_periods: float, k_dll: float, d_chips: float, sign: float, if0: float, fs: float,
@@ -343,9 +249,9 @@ def _close_period(st: np.ndarray, out: np.ndarray, ring: np.ndarray, noise_ring:
         st[S_RING_COUNT] += 1.0
         if st[S_RING_COUNT] >= w:
             out[row, O_CN0], out[row, O_CN0_M2M4], out[row, O_LOCK], out[row, O_NOISE] = \
-                _window_quality(ring, noise_ring, t)
+                window_quality(ring, noise_ring, t)
         if st[S_RING_COUNT] >= wl:
-            std, wraps = _lock_window(err_ring)
+            std, wraps = lock_window(err_ring)
             out[row, O_ERR_STD], out[row, O_WRAPS] = std, wraps
             out[row, O_LOCKED] = 1.0 if (std <= lock_std_max and wraps == 0.0) else 0.0
     # carrier loop (Kaplan & Hegarty Fig. 5-23): second-order PLL, first-order FLL assist while pulling in
@@ -591,30 +497,6 @@ class TrackedPeriods:
         """Rows of several blocks, in order."""
         return TrackedPeriods(**{k: np.concatenate([getattr(p, k) for p in parts])
                                  for k in TrackedPeriods.__dataclass_fields__})
-
-
-def m2m4_cn0_dbhz(prompts: np.ndarray, integration_time_s: float) -> float:
-    """C/N0 from coherent prompts by the moments estimator (Pauluzzi & Beaulieu 2000, eq. 14 for
-    complex samples): ``P_s = sqrt(2 M2^2 - M4)``, ``P_n = M2 - P_s``, ``C/N0 = P_s / P_n / T``.
-
-    Args:
-        prompts: complex prompts, shape (n,), n >= 2.
-        integration_time_s: T of each prompt, s.
-
-    Returns:
-        dB-Hz; NaN when the moments give no signal power (2 M2^2 <= M4) or no noise power.
-    """
-    p2 = np.abs(prompts) ** 2
-    m2 = float(np.mean(p2))
-    m4 = float(np.mean(p2 * p2))
-    disc = 2.0 * m2 * m2 - m4
-    if not disc > 0:
-        return math.nan
-    ps = math.sqrt(disc)
-    pn = m2 - ps
-    if not pn > 0:
-        return math.nan
-    return 10.0 * math.log10(ps / pn / integration_time_s)
 
 
 class Tracker:
