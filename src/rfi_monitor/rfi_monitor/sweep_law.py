@@ -28,7 +28,6 @@ import numpy as np
 from numba import njit
 
 from rfi_monitor.numpy_kernels import pairwise_sum, polyfit, polyval
-from rfi_monitor.sweep_shape import _phase_bins
 
 
 def _sawtooth_law(prof: np.ndarray, inband: np.ndarray, period_samples: float, L: int, span: float
@@ -107,29 +106,56 @@ def prediction_std(ee: np.ndarray, deg: int, e: float, rms: float) -> float:
 
 def bin_mean_phase(used: np.ndarray, period_frames: float, K: int) -> np.ndarray:
     """The phase (fraction of the period, in [0, 1)) each of the K profile bins really stands for: the mean phase of
-    its used frames (frame t at phase ``t / period_frames mod 1``, binned as ``sweep_shape`` bins it); the bin's centre
-    ``(k + 0.5) / K`` where it has none. used: bool, shape (frames,): the frames whose ridge entered the profile."""
-    nfr = used.size
-    t = np.arange(nfr, dtype=np.float64)
-    ph = np.mod(t / period_frames, 1.0)
-    kb = _phase_bins(nfr, float(period_frames), int(K))
-    n = np.bincount(kb[used], minlength=K).astype(np.float64)
-    s = np.bincount(kb[used], weights=ph[used], minlength=K)
-    centre = (np.arange(K) + 0.5) / K
-    return np.where(n > 0, s / np.maximum(n, 1.0), centre)
+    its used frames (frame t at phase ``t / period_frames mod 1``, binned as ``sweep_shape._phase_bins`` bins it); the
+    bin's centre ``(k + 0.5) / K`` where it has none. used: bool, shape (frames,): the frames whose ridge entered the
+    profile. Compiled (``_bin_mean_phase_kernel``)."""
+    return _bin_mean_phase_kernel(np.ascontiguousarray(used, dtype=np.bool_), float(period_frames), int(K))
+
+
+@njit(cache=True)
+def _bin_mean_phase_kernel(used: np.ndarray, period_frames: float, K: int) -> np.ndarray:
+    """bin_mean_phase, compiled (the bin of a frame as ``sweep_shape._phase_bins`` computes it)."""
+    n = np.zeros(K)
+    s = np.zeros(K)
+    for t in range(used.size):
+        if used[t]:
+            ph = (t / period_frames) % 1.0
+            j = int(ph * K)
+            j = j if j < K - 1 else K - 1
+            n[j] += 1.0
+            s[j] += ph
+    out = np.empty(K)
+    for k in range(K):
+        out[k] = s[k] / n[k] if n[k] > 0 else (k + 0.5) / K
+    return out
 
 
 def abscissa_bias(law: tuple[float, np.ndarray, float, np.ndarray], prof: np.ndarray, phase_mean: np.ndarray,
                   e: float) -> float:
     """What the law refitted with each fitted bin at the mean phase of its frames (``bin_mean_phase``) gives at the
     elapsed sweep fraction e, minus what the law (fitted at the bins' centres) gives there, cycles/sample (module
-    docstring). prof: the profile the law was fitted to (K bins)."""
+    docstring). prof: the profile the law was fitted to (K bins). Compiled (``_abscissa_bias_kernel``)."""
     phi_j, coef, _, ee = law
+    return float(_abscissa_bias_kernel(float(phi_j), np.ascontiguousarray(coef, dtype=np.float64),
+                                       np.ascontiguousarray(ee, dtype=np.float64),
+                                       np.ascontiguousarray(prof, dtype=np.float64),
+                                       np.ascontiguousarray(phase_mean, dtype=np.float64), float(e)))
+
+
+@njit(cache=True)
+def _abscissa_bias_kernel(phi_j: float, coef: np.ndarray, ee: np.ndarray, prof: np.ndarray, phase_mean: np.ndarray,
+                          e: float) -> float:
+    """abscissa_bias, compiled: the fitted bins from their elapsed fractions (ee = centre - phi_j mod 1)."""
     K = prof.size
-    kk = np.mod(np.rint((ee + phi_j) * K - 0.5).astype(np.int64), K)   # the fitted bins (ee = centre - phi_j mod 1)
-    ea = np.mod(phase_mean[kk] - phi_j, 1.0)
-    refit = polyfit(ea, np.ascontiguousarray(prof[kk], dtype=np.float64), coef.size - 1)
-    return float(polyval(refit, e) - polyval(coef, e))
+    m = ee.size
+    ea = np.empty(m)
+    pa = np.empty(m)
+    for i in range(m):
+        k = int(round((ee[i] + phi_j) * K - 0.5)) % K
+        ea[i] = (phase_mean[k] - phi_j) % 1.0
+        pa[i] = prof[k]
+    refit = polyfit(ea, pa, coef.size - 1)
+    return polyval(refit, e) - polyval(coef, e)
 
 
 def profile_abscissa_bias(prof: np.ndarray, inband: np.ndarray, phase_mean: np.ndarray, periods: float,
