@@ -24,9 +24,11 @@ Stages (``analyse``), each described in its module's docstring:
    from the spectrum folded on the period (``rfi_monitor.folded_spectrum``).
 6. Current frequency: at the block's last sample, from a saw-tooth's sweep law (``rfi_monitor.sweep_law``), else
    from the folded profile at the last sample's phase, else the ridge of the last frame moved on by the rate; NaN
-   when the jammer is out of the band at the block end. Its 1-sigma: the law's fit residual, else the RMS deviation
-   of the present frames' ridge from the profile (periodic), else from the local straight line through three
-   consecutive frames, but at least one bin / sqrt(12).
+   when the jammer is out of the band at the block end. Its 1-sigma: the law's prediction interval, else the RMS
+   deviation of the present frames' ridge from the profile (periodic), else from the local straight line through
+   three consecutive frames, but at least one bin / sqrt(12); read from the law or the profile, with the bias of the
+   profile bins' abscissa in quadrature (``rfi_monitor.sweep_law``'s module docstring: a period of a whole number of
+   frames puts every frame of a bin at its start, not its centre).
 
 A frequency track that is coherent but not periodic inside the block (a single slow sweep, a period
 longer than ``max_period_s``) is reported as ``sweeping`` without a period: present in at least
@@ -63,7 +65,7 @@ from rfi_monitor.frame_length import MIN_SELECT_EXCESS, SELECT_Z, choose_frame_l
 from rfi_monitor.ridge_extraction import FrameRidges, frame_ridges, joined_span
 from rfi_monitor.ridge_periodicity import _periodicity
 from rfi_monitor.stft import _noise_power, estimator_gain, noise_levels, stft_power
-from rfi_monitor.sweep_law import _sawtooth_law, read_law
+from rfi_monitor.sweep_law import _sawtooth_law, bin_mean_phase, profile_abscissa_bias, read_law
 from rfi_monitor.sweep_shape import (
     HOOKED_SAWTOOTH,
     MIN_RETURN_BINS,
@@ -223,6 +225,8 @@ class _Sweep:
     them"""
     inband: np.ndarray | None = None
     se: np.ndarray | None = None
+    phase_mean: np.ndarray | None = None
+    """the mean phase of the frames in each bin of prof (``sweep_law.bin_mean_phase``): for the 1-sigma only"""
 
 
 def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length: int = 0,
@@ -280,7 +284,8 @@ def _periodic_sweep(x: np.ndarray, cplx: bool, S: np.ndarray, freqs: np.ndarray,
     # +0.5 in one phase bin's median)
     fuse = present & (rd.bin > 0) & (rd.bin < B - 1) if cplx else present
     pp = phase_profiles(f, present, fuse, per_fr, int(par.phase_bins), binw)
-    sw = _Sweep(in_band_fraction=pp.in_band_fraction, prof=pp.prof, inband=pp.inband, se=pp.se)
+    sw = _Sweep(in_band_fraction=pp.in_band_fraction, prof=pp.prof, inband=pp.inband, se=pp.se,
+                phase_mean=bin_mean_phase(fuse, per_fr, pp.prof.size))
     shape, low, high, start, step, p_dir = _shape(pp.prof_s, pp.inband_s, par.hook_rate_ratio, pp.se_s)
     if shape in (SAWTOOTH_UP, SAWTOOTH_DOWN) and pp.prof.size > pp.shape_bins and \
             _return_bins(pp.prof, pp.inband, shape == SAWTOOTH_UP)[0] >= MIN_RETURN_BINS:
@@ -371,12 +376,16 @@ def _block_end_frequency(n: int, sw: _Sweep, rd: FrameRidges, periodic: bool, pe
     if law is not None and inband_k is not None:
         # saw-tooth: the sweep law fitted away from the flyback (where frames straddle it) gives the
         # swept band's ends, the mean rate and the frequency at the block end
-        sw.low, sw.high, sw.start, sw.rate, freq, fstd = read_law(law, inband_k, per_fr, L, t_end)
+        sw.low, sw.high, sw.start, sw.rate, freq, fstd = read_law(law, inband_k, per_fr, L, t_end, prof_k,
+                                                                   sw.phase_mean)
     elif periodic and prof_k is not None and inband_k is not None and sw.se is not None:
         # read from one or two profile bins; the 1-sigma stays the frames' scatter around the profile (the sweep at
         # the block end deviates from a bin's median as its frames do; the bins' standard errors alone, tried for
         # issue 26 item 3, covered 0-65 % of the errors where the sweep is not smooth)
         freq = _profile_frequency(prof_k, inband_k, sw.se, t_end / per_fr, sw.high - sw.low)[0]
+        if math.isfinite(freq) and sw.phase_mean is not None:
+            fstd = math.hypot(fstd, profile_abscissa_bias(prof_k, inband_k, sw.phase_mean, t_end / per_fr,
+                                                          sw.high - sw.low))
     elif present[-1]:
         freq = float(f[-1]) + (float(sw.rate) * (t_end - (nfr - 1)) * hop if math.isfinite(sw.rate) else 0.0)
     if math.isfinite(freq) and not (float(freqs[0]) - 0.5 / L <= freq <= float(freqs[-1]) + 0.5 / L):

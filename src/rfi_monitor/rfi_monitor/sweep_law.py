@@ -5,7 +5,19 @@ The flyback is the largest step between consecutive in-band bins of the folded p
 (``rfi_monitor.sweep_shape``); a quadratic in the elapsed sweep fraction (a rate that changes along the sweep) is
 fitted to the bins away from it (``_sawtooth_law``). The law gives the swept band's ends, the mean rate and the
 frequency at the block's last sample (read at that sample's phase of the period: ``read_law``), its 1-sigma from the
-fit's residual.
+fit's residual and from the bias of the profile bins' abscissa (``abscissa_bias``; ``profile_abscissa_bias`` for a
+frequency read off the profile itself).
+
+The abscissa bias (issue 26 item 3): a profile bin k stands, in the law's fit and in the profile's reading, for the
+centre of its phase interval, ``(k + 0.5) / K``; the frames in it lie wherever the frame grid puts them. When the
+period is not close to a whole number of frames their phases spread over the bin and average to its centre; when it
+is (a 12 us sweep at 4 or 12 MS/s with frames of 16 samples: 6 and 18 frames exactly), every frame of bin k sits at
+the same phase, k / K for a whole number, and the profile is read half a bin late: the sweep's rate times half a
+hop, 70 and 125 kHz on the rows of docs/rfi_monitor/real_jammers.md that showed it. The frequency is not corrected
+here (issue 26 item 3 left the published frequencies as they were); the bias the block's own frames give (the law
+refitted at the mean phase of each bin's frames, or the profile interpolated there, minus what is published) enters
+the 1-sigma in quadrature, as a known correction not applied enlarges the stated uncertainty (JCGM 100:2008, the
+GUM, F.2.4.5). docs/rfi_monitor/frequency_std.md gives the coverage before and after.
 """
 
 from __future__ import annotations
@@ -92,8 +104,100 @@ def prediction_std(ee: np.ndarray, deg: int, e: float, rms: float) -> float:
     return rms * math.sqrt(1.0 + max(lev, 0.0))
 
 
+def bin_mean_phase(used: np.ndarray, period_frames: float, K: int) -> np.ndarray:
+    """The phase (fraction of the period, in [0, 1)) each of the K profile bins really stands for: the mean phase of
+    its used frames (frame t at phase ``t / period_frames mod 1``, binned as ``sweep_shape._phase_bins`` bins it); the
+    bin's centre ``(k + 0.5) / K`` where it has none. used: bool, shape (frames,): the frames whose ridge entered the
+    profile. Compiled (``_bin_mean_phase_kernel``)."""
+    return _bin_mean_phase_kernel(np.ascontiguousarray(used, dtype=np.bool_), float(period_frames), int(K))
+
+
+@njit(cache=True)
+def _bin_mean_phase_kernel(used: np.ndarray, period_frames: float, K: int) -> np.ndarray:
+    """bin_mean_phase, compiled (the bin of a frame as ``sweep_shape._phase_bins`` computes it)."""
+    n = np.zeros(K)
+    s = np.zeros(K)
+    for t in range(used.size):
+        if used[t]:
+            ph = (t / period_frames) % 1.0
+            j = int(ph * K)
+            j = j if j < K - 1 else K - 1
+            n[j] += 1.0
+            s[j] += ph
+    out = np.empty(K)
+    for k in range(K):
+        out[k] = s[k] / n[k] if n[k] > 0 else (k + 0.5) / K
+    return out
+
+
+def abscissa_bias(law: tuple[float, np.ndarray, float, np.ndarray], prof: np.ndarray, phase_mean: np.ndarray,
+                  e: float) -> float:
+    """What the law refitted with each fitted bin at the mean phase of its frames (``bin_mean_phase``) gives at the
+    elapsed sweep fraction e, minus what the law (fitted at the bins' centres) gives there, cycles/sample (module
+    docstring). prof: the profile the law was fitted to (K bins). Compiled (``_abscissa_bias_kernel``)."""
+    phi_j, coef, _, ee = law
+    return float(_abscissa_bias_kernel(float(phi_j), np.ascontiguousarray(coef, dtype=np.float64),
+                                       np.ascontiguousarray(ee, dtype=np.float64),
+                                       np.ascontiguousarray(prof, dtype=np.float64),
+                                       np.ascontiguousarray(phase_mean, dtype=np.float64), float(e)))
+
+
+@njit(cache=True)
+def _abscissa_bias_kernel(phi_j: float, coef: np.ndarray, ee: np.ndarray, prof: np.ndarray, phase_mean: np.ndarray,
+                          e: float) -> float:
+    """abscissa_bias, compiled: the fitted bins from their elapsed fractions (ee = centre - phi_j mod 1)."""
+    K = prof.size
+    m = ee.size
+    ea = np.empty(m)
+    pa = np.empty(m)
+    for i in range(m):
+        k = int(round((ee[i] + phi_j) * K - 0.5)) % K
+        ea[i] = (phase_mean[k] - phi_j) % 1.0
+        pa[i] = prof[k]
+    refit = polyfit(ea, pa, coef.size - 1)
+    return polyval(refit, e) - polyval(coef, e)
+
+
+def profile_abscissa_bias(prof: np.ndarray, inband: np.ndarray, phase_mean: np.ndarray, periods: float,
+                          span: float) -> float:
+    """The profile read at a phase (``periods``: the time in periods) on a line through its bins placed at the mean
+    phases of their frames (``bin_mean_phase``), minus what ``ridge._profile_frequency`` reads there (the bins at their
+    centres), cycles/sample: between the two nearest bins when it interpolates them; when it reads the nearer bin
+    alone (the other out of band or across the flyback, a step of half the span), on the line through that bin and
+    its neighbour on the same side (the phase moved at most two bins from it). 0 where there is no such neighbour or
+    two bins' mean phases are closer than a quarter bin (the line through them would not be defined well)."""
+    K = prof.size
+    x = float(np.mod(periods, 1.0))
+    pos = x * K - 0.5
+    k0u = int(math.floor(pos))               # -1 .. K - 1: the bin below the phase, unwrapped
+
+    def at(ku: int) -> float:                # bin ku's mean phase, unwrapped as ku is
+        return float(phase_mean[ku % K]) + (ku - ku % K) / K
+
+    def joined(ku: int, mu: int) -> bool:    # both in band and not across the flyback
+        k, m = ku % K, mu % K
+        return bool(inband[k] and inband[m] and abs(prof[k] - prof[m]) < 0.5 * span)
+
+    if joined(k0u, k0u + 1):
+        a0, a1 = at(k0u), at(k0u + 1)
+        if not a1 - a0 >= 0.25 / K:
+            return 0.0
+        w_a = min(max((x - a0) / (a1 - a0), -1.0), 2.0)
+        return float((w_a - (pos - k0u)) * (prof[(k0u + 1) % K] - prof[k0u % K]))
+    ku = k0u if pos - k0u < 0.5 else k0u + 1
+    mu = ku - 1 if ku == k0u else ku + 1     # the neighbour away from the bin not read
+    if not inband[ku % K] or not joined(ku, mu):
+        return 0.0
+    ak, am = at(ku), at(mu)
+    if not abs(ak - am) >= 0.25 / K:
+        return 0.0
+    slope = (prof[ku % K] - prof[mu % K]) / (ak - am)
+    return float(slope * min(max(x - ak, -2.0 / K), 2.0 / K))
+
+
 def read_law(law: tuple[float, np.ndarray, float, np.ndarray], inband: np.ndarray, period_frames: float, L: int,
-             t_end: float) -> tuple[float, float, float, float, float, float]:
+             t_end: float, prof: np.ndarray | None = None, phase_mean: np.ndarray | None = None
+             ) -> tuple[float, float, float, float, float, float]:
     """What a saw-tooth's law (``_sawtooth_law`` of the fine profile whose in-band bins are inband, fitted away from
     the flyback, where frames straddle it) gives: (low, high: the swept band; the frequency at the sweep start; the
     mean rate, cycles/sample^2; the frequency at the block's last sample, NaN when the jammer is out of band there; its
@@ -102,17 +206,21 @@ def read_law(law: tuple[float, np.ndarray, float, np.ndarray], inband: np.ndarra
 
     The 1-sigma is the law's prediction interval at the block end's phase (``prediction_std``: the residual RMS of
     the profile around the law, which the sweep at that moment may deviate by as any profile bin does, with the law's
-    own standard error there). Issue 26 item 3: twice the RMS, before, covered 89 % of the errors over the rows of
-    docs/rfi_monitor/real_jammers.md (median |error| / std 0.14 on the simulated ones); the law's standard error
-    alone covered 52 % (0-17 % on the 2-bit real captures, whose sweeps deviate from a smooth law); that document
-    gives the coverage now."""
+    own standard error there) and, given the profile the law was fitted to and the mean phase of each bin's frames
+    (``bin_mean_phase``), the abscissa bias there (``abscissa_bias``, module docstring) in quadrature. Issue 26 item 3:
+    twice the RMS, before, covered 89 % of the errors over the rows of docs/rfi_monitor/real_jammers.md (median
+    |error| / std 0.14 on the simulated ones); the law's standard error alone covered 52 % (0-17 % on the 2-bit real
+    captures); docs/rfi_monitor/frequency_std.md gives the coverage now."""
     phi_j, coef, rms, ee = law
     hop = L // 2
     f0, f1 = polyval(coef, 0.0), polyval(coef, 1.0)
     rate = (f1 - f0) / (period_frames * hop)
     ph_end = float(np.mod(t_end / period_frames, 1.0))
     e_end = (ph_end - phi_j) % 1.0
-    fstd = max(prediction_std(ee, coef.size - 1, e_end, rms), 1e-4 / L)
+    fstd = prediction_std(ee, coef.size - 1, e_end, rms)
+    if prof is not None and phase_mean is not None and math.isfinite(fstd):
+        fstd = math.hypot(fstd, abscissa_bias(law, prof, phase_mean, e_end))
+    fstd = max(fstd, 1e-4 / L)
     freq = math.nan
     if inband[min(int(ph_end * inband.size), inband.size - 1)]:
         freq = polyval(coef, e_end)

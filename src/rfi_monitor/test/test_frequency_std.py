@@ -1,0 +1,136 @@
+"""A chirp's published frequency 1-sigma (issue 26 item 3): the abscissa bias of the folded profile's bins
+(``sweep_law.bin_mean_phase``, ``abscissa_bias``, ``profile_abscissa_bias``) against closed forms, and the coverage
+of the published ``frequency_std_hz`` on a seeded set of simulated saw-tooth chirps, with tolerances from the
+binomial distribution of the count within 1 and 2 sigma."""
+
+import math
+
+import numpy as np
+import pytest
+
+from rfi_monitor.classifier import CHIRP
+from rfi_monitor.monitor import RfiMonitor
+from rfi_monitor.numpy_kernels import polyfit
+from rfi_monitor.params import RfiMonitorParams
+from rfi_monitor.sweep_law import abscissa_bias, bin_mean_phase, profile_abscissa_bias
+from rfi_sim.if_signal import ChirpJammer, FrontEndConfig, IfSimulator, js_for_jn_db
+
+
+def test_bin_mean_phase_whole_and_spread_periods():
+    # a period of exactly 4 frames puts frame t of every period at phase (t mod 4) / 4 (exact in binary): the start
+    # of bins 0, 2, 4, 6 of 8; the bins without frames stand for their centres
+    K = 8
+    pm = bin_mean_phase(np.ones(400, dtype=bool), 4.0, K)
+    np.testing.assert_allclose(pm[::2], np.arange(0, K, 2) / K, atol=1e-15)
+    np.testing.assert_allclose(pm[1::2], (np.arange(1, K, 2) + 0.5) / K, atol=1e-15)
+    # an irrational period spreads the frames over each bin: their mean phase is the bin's centre
+    pm = bin_mean_phase(np.ones(20000, dtype=bool), math.pi * 2, 32)
+    np.testing.assert_allclose(pm, (np.arange(32) + 0.5) / 32, atol=2e-3)
+    # only the used frames count
+    used = np.zeros(400, dtype=bool)
+    used[::4] = True                              # the frames at phase 0 only
+    pm = bin_mean_phase(used, 4.0, K)
+    assert pm[0] == 0.0 and pm[2] == pytest.approx(2.5 / K)
+
+
+def test_abscissa_bias_of_a_linear_law_is_half_a_bin():
+    # a linear sweep f = s * phase seen by frames at the bins' starts k / K: the law fitted at the bins' centres
+    # reads s / (2K) low everywhere; refitted at the frames' phases it is exact
+    K, s, phi_j = 18, 0.2, 0.0
+    kk = np.arange(2, K - 2)
+    prof = np.full(K, np.nan)
+    prof[kk] = s * kk / K
+    ee = (kk + 0.5) / K - phi_j
+    coef = polyfit(ee, prof[kk], 1)
+    law = (phi_j, coef, 0.0, ee)
+    pm = np.arange(K) / K
+    for e in (0.2, 0.5, 0.77):
+        assert abscissa_bias(law, prof, pm, e) == pytest.approx(s / (2 * K), rel=1e-9)
+    # frames spread over each bin (their mean phase at its centre): no bias
+    assert abscissa_bias(law, prof, (np.arange(K) + 0.5) / K, 0.5) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_profile_abscissa_bias_between_two_bins_and_from_one():
+    K, s = 6, 0.3
+    prof = s * np.arange(K) / K                   # the sweep's value at each bin's frames, at phases k / K
+    inband = np.ones(K, dtype=bool)
+    pm = np.arange(K) / K
+    span = 1.0
+    # between the centres of bins 2 and 3: read there, the profile is s / (2K) low
+    assert profile_abscissa_bias(prof, inband, pm, 10 + 0.47, span) == pytest.approx(s / (2 * K), rel=1e-9)
+    # bin 3 out of band: bin 2 read alone at 0.47; the line through bins 1 and 2 at their frames' phases gives s * 0.47
+    inband[3] = False
+    assert profile_abscissa_bias(prof, inband, pm, 0.47, span) == pytest.approx(s * (0.47 - 2 / K), rel=1e-9)
+    # the frames at the centres: no bias from the two-bin read
+    inband[3] = True
+    assert profile_abscissa_bias(prof, inband, (np.arange(K) + 0.5) / K, 0.47, span) == pytest.approx(0.0, abs=1e-12)
+
+
+# --- coverage on a seeded simulated set ---------------------------------------------------------------------------
+N_STREAMS = 48
+"""Streams of the coverage test: one scored block each (the last of 3), so the scored errors are independent."""
+FRONT_ENDS = ((12e6, False, 3e6), (4e6, True, 0.0), (10e6, True, 0.0))   # (fs Hz, complex, IF Hz), 8-bit
+Z_TOL = 3.0
+"""Binomial tolerance, standard deviations of the count: a right 1-sigma fails the test with probability ~0.3 %."""
+
+
+def _streams():
+    """(front end, chirp) per stream: saw-tooth up over 30-70 % of half the band, period 6-20 us (every other one a
+    whole number of 8-sample hops: the frames of the monitor's 16-sample frame see the same phases every period),
+    J/N 10-25 dB, a random start in the sweep; seeded."""
+    rng = np.random.default_rng(26)
+    out = []
+    for i in range(N_STREAMS):
+        fs, cplx, fif = FRONT_ENDS[i % len(FRONT_ENDS)]
+        fe = FrontEndConfig(sample_rate_hz=fs, intermediate_frequency_hz=fif, is_complex=cplx, bits=8)
+        half_band = fs / 2 if cplx else fs / 2 - abs(fif)
+        span = rng.uniform(0.3, 0.7) * half_band
+        per = rng.uniform(6e-6, 20e-6)
+        if i % 2 == 0:
+            per = round(per * fs / 8) * 8 / fs
+        jam = ChirpJammer(start_frequency_hz=-span / 2, sweep_rate_hz_per_s=span / per, sweep_period_s=per,
+                          js_db=js_for_jn_db(fe, rng.uniform(10.0, 25.0)), time_offset_s=rng.uniform(0.0, per))
+        out.append((fe, jam, 1000 + i))
+    return out
+
+
+def _last_block_z(fe: FrontEndConfig, jam: ChirpJammer, seed: int) -> float:
+    """|published - truth| / published 1-sigma at the end of the third 1 ms block (NaN: no frequency published)."""
+    mon = RfiMonitor(RfiMonitorParams())
+    sim = IfSimulator(fe, (jam,), seed=seed)
+    n = int(round(fe.sample_rate_hz * 1e-3))
+    z = math.nan
+    for k in range(3):
+        b = sim.generate(n)
+        e = mon.process(b.values(), fe.sample_rate_hz, fe.intermediate_frequency_hz, b.first_sample_index,
+                        1_000_000_000 + k * 1_000_000, is_complex=fe.is_complex, bits=fe.bits)
+        if k == 2 and e.valid and int(e.type) == CHIRP and math.isfinite(e.frequency_hz):
+            z = abs(e.frequency_hz - float(b.truth.frequency_hz[0][-1])) / e.frequency_std_hz
+    return z
+
+
+@pytest.fixture(scope="module")
+def coverage_z():
+    z = np.array([_last_block_z(*s) for s in _streams()])
+    z = z[np.isfinite(z)]
+    assert z.size >= N_STREAMS // 2      # enough published frequencies for the binomial bands below to mean anything
+    return z
+
+
+def _band(p: float, n: int) -> tuple[float, float]:
+    h = Z_TOL * math.sqrt(p * (1 - p) / n)
+    return p - h, p + h
+
+
+def test_within_two_sigma_as_a_normal_error(coverage_z):
+    # the std is not too small: at least 95 % within 2 sigma, less the binomial tolerance
+    n = coverage_z.size
+    lo, _ = _band(0.9545, n)
+    assert np.mean(coverage_z <= 2.0) >= lo, (n, np.sort(coverage_z))
+
+
+def test_within_one_sigma_as_a_normal_error(coverage_z):
+    # about 68 % within 1 sigma, both ways (a std too large fails it as well as one too small)
+    n = coverage_z.size
+    lo, hi = _band(0.6827, n)
+    assert lo <= np.mean(coverage_z <= 1.0) <= hi, (n, np.sort(coverage_z))
