@@ -175,7 +175,7 @@ def _fine_best(r: np.ndarray, v: np.ndarray, periods: np.ndarray, top: np.ndarra
     Pf = _fine_grid(periods, top, lmin, lmax, lag_limit, kc, kf, FINE_HALF_WIDTH)
     Kp = np.empty(Pf.size, dtype=np.int64)
     for j in range(Pf.size):
-        Kp[j] = min(max(np.int64(lag_limit // Pf[j]), 2), kf)
+        Kp[j] = min(max(int(lag_limit // Pf[j]), 2), kf)
     zf = _comb_z_direct(r, v, Pf, Kp, lag_limit)
     i = 0
     for j in range(1, zf.size):
@@ -189,7 +189,7 @@ def _fine_best(r: np.ndarray, v: np.ndarray, periods: np.ndarray, top: np.ndarra
         lag = np.int64(np.rint(p * float(k)))
         if lag <= lag_limit:
             vals[n] = r[lag]
-            lag_sum += lag
+            lag_sum += int(lag)
             n += 1
     return zf[i], p, n, pairwise_sum(vals[:n].copy(), 0.0), float(lag_sum)
 
