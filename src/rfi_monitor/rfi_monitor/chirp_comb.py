@@ -22,6 +22,8 @@ import numpy as np
 from numba import njit
 from scipy import special
 
+from rfi_monitor.numpy_kernels import pairwise_sum
+
 MIN_CHIRP_FRAMES = 512
 """The chirp statistic decides once the window holds this many frames: a sum of products of few frames has heavier
 tails than the normal law its threshold assumes (measured on Gaussian noise: 1024-sample blocks of 12 MS/s real IF,
@@ -109,6 +111,93 @@ def _separated(order: np.ndarray, periods: np.ndarray, count: int) -> np.ndarray
             if n == count:
                 break
     return top[:n]
+
+
+@njit(cache=True, nogil=True)
+def _coarse_top(r: np.ndarray, v: np.ndarray, idx: np.ndarray, mask: np.ndarray, periods: np.ndarray, n_top: int,
+                count: int) -> np.ndarray:
+    """The coarse comb's candidates for the fine one: :func:`_comb_z` of every row, its ``n_top`` largest in
+    descending order, ties to the lower index (the shorter period: the coarse comb is flat over up to two of its
+    steps, and equal values are common), and of those the first ``count`` more than 0.5 frames apart
+    (:func:`_separated`). One compiled pass with a bounded min-heap (issue 26 item 2: a numpy argpartition and
+    argsort before, whose order among equal values was numpy's partition's)."""
+    z = _comb_z(r, v, idx, mask)
+    M = z.size
+    n_top = min(n_top, M)
+    heap = np.empty(n_top, dtype=np.int64)      # min-heap of the best so far: the root is the worst kept
+    n = 0
+    for i in range(M):
+        if n < n_top:
+            heap[n] = i
+            c = n
+            n += 1
+            while c > 0:                           # sift up
+                par = (c - 1) // 2
+                if _worse(z, heap[c], heap[par]):
+                    heap[c], heap[par] = heap[par], heap[c]
+                    c = par
+                else:
+                    break
+        elif _worse(z, heap[0], i):
+            heap[0] = i
+            c = 0
+            while True:                            # sift down
+                a = 2 * c + 1
+                b = a + 1
+                m = c
+                if a < n and _worse(z, heap[a], heap[m]):
+                    m = a
+                if b < n and _worse(z, heap[b], heap[m]):
+                    m = b
+                if m == c:
+                    break
+                heap[c], heap[m] = heap[m], heap[c]
+                c = m
+    order = heap[:n].copy()
+    for a in range(1, n):                          # best first (insertion sort of the few kept)
+        e = order[a]
+        b = a
+        while b > 0 and _worse(z, order[b - 1], e):
+            order[b] = order[b - 1]
+            b -= 1
+        order[b] = e
+    return _separated(order, periods, count)
+
+
+@njit(cache=True, nogil=True)
+def _fine_best(r: np.ndarray, v: np.ndarray, periods: np.ndarray, top: np.ndarray, lmin: float, lmax: float,
+               lag_limit: int, kc: int, kf: int) -> tuple[float, float, int, float, float]:
+    """The fine comb around the coarse candidates ``top`` (:func:`_fine_candidates`, :func:`_comb_z_direct` with
+    K_p = clip(lag_limit // P, 2, kf) as ``comb_lags``) and its best candidate (the first largest, np.argmax):
+    (its Z, its period in frames, the number of its lags (``_multiples``), the pairwise sum of r over them and the
+    sum of the lags (``comb_strength``'s terms)). Compiled in one (issue 26 item 2: ten numpy calls per test before,
+    the same values)."""
+    Pf = _fine_grid(periods, top, lmin, lmax, lag_limit, kc, kf, FINE_HALF_WIDTH)
+    Kp = np.empty(Pf.size, dtype=np.int64)
+    for j in range(Pf.size):
+        Kp[j] = min(max(int(lag_limit // Pf[j]), 2), kf)
+    zf = _comb_z_direct(r, v, Pf, Kp, lag_limit)
+    i = 0
+    for j in range(1, zf.size):
+        if zf[j] > zf[i]:
+            i = j
+    p = Pf[i]
+    vals = np.empty(Kp[i])
+    n = 0
+    lag_sum = 0
+    for k in range(1, Kp[i] + 1):
+        lag = np.int64(np.rint(p * float(k)))
+        if lag <= lag_limit:
+            vals[n] = r[lag]
+            lag_sum += int(lag)
+            n += 1
+    return zf[i], p, n, pairwise_sum(vals[:n].copy(), 0.0), float(lag_sum)
+
+
+@njit(cache=True, nogil=True)
+def _worse(z: np.ndarray, i: int, j: int) -> bool:
+    """Whether candidate i ranks below j: a smaller comb, or an equal one at a higher index (a longer period)."""
+    return z[i] < z[j] or (z[i] == z[j] and i > j)
 
 
 def _multiples(p: float, lag_limit: int, kmax: int) -> tuple[np.ndarray, np.ndarray]:
@@ -267,29 +356,23 @@ class ChirpComb:
         # the best coarse candidates; the threshold counts every fine candidate over the whole range
         # (Bonferroni), so evaluating only some of them keeps the false-alarm rate below alpha
         periods, idx, mask = self._comb_grid(lmin, lmax, lag_limit, kc)
-        zc = _comb_z(r, v, idx, mask)
-        n_top = min(20 * FINE_CANDIDATES, zc.size)
-        order = np.argpartition(zc, zc.size - n_top)[zc.size - n_top:]   # the n_top largest, then sorted
-        order = order[np.argsort(zc[order], kind="stable")[::-1]]
-        top = _separated(order, periods, FINE_CANDIDATES).tolist()
-        Pf = _fine_candidates(periods, top, lmin, lmax, lag_limit, kc, kf)
-        zf = _comb_z_direct(r, v, Pf, np.clip((lag_limit // Pf).astype(np.int64), 2, kf), lag_limit)
+        top = _coarse_top(r, v, idx, mask, periods, 20 * FINE_CANDIDATES, FINE_CANDIDATES)
+        chirp_z, p_best, n_lags, r_sum, lag_sum = _fine_best(r, v, periods, top, float(lmin), float(lmax),
+                                                             int(lag_limit), kc, kf)
         ck = (lmin, lmax, lag_limit, kf, alpha)
         if ck not in self._chirp_thr:
             self._chirp_thr[ck] = -float(special.ndtri(alpha / _fine_count(lmin, lmax, lag_limit, kf)))
-        i = int(np.argmax(zf))
-        chirp_z = float(zf[i])
-        _, lags = _multiples(float(Pf[i]), lag_limit, kf)     # the lags of the best candidate (as comb_lags)
         # the normal quantile, moved by the comb's skew (Cornish-Fisher): Z is a quadratic form of the amplitudes
         z0 = self._chirp_thr[ck]
-        gamma = _comb_skew(float(Pf[i]), int(lags.size), copies, copy_frames)
+        gamma = _comb_skew(p_best, n_lags, copies, copy_frames)
         chirp_thr = z0 + gamma / 6.0 * (z0 * z0 - 1.0)
-        strength = comb_strength(r, lags, spread, spread_frames)
+        scale = n_lags * spread_frames - spread * lag_sum               # comb_strength of the best candidate's lags
+        strength = r_sum / scale if scale > 0 else math.nan
         if not (chirp_z > chirp_thr and strength >= min_strength):
             return CombResult(chirp_z, chirp_thr, strength, False)
         # the comb is large at every multiple of the period: the best candidate's sub-multiples are tested on
         # the same sums (resolve_submultiple); an ambiguous one leaves the period NaN
-        p_res, m, s_res = resolve_submultiple(r, v, spread, spread_frames, float(Pf[i]), lmin, lag_limit, kf)
+        p_res, m, s_res = resolve_submultiple(r, v, spread, spread_frames, p_best, lmin, lag_limit, kf)
         return CombResult(chirp_z, chirp_thr, s_res if m > 1 else strength, True, p_res, m)
 
     def _comb_grid(self, lmin: int, lmax: int, lag_limit: int, kmax: int

@@ -8,6 +8,8 @@ captures, are significant but no jammer), significant in the Welch PSD (the clas
 own running median over ``smooth_bins`` bins (a tone never enters it). A bin is a tone when ``P_b / N_b`` exceeds the
 ``1 - alpha / B`` quantile of ``Gamma(K, 1/K)`` (Bonferroni over the ``B`` bins: a false alarm per block of at most
 ``alpha``; the median's own scatter, ~1.25 / sqrt(K smooth_bins), taken at 4 sigma, multiplies the threshold).
+The running median and the scores are compiled (:func:`_cw_scores`; issue 26 item 2: scipy's median filter and ten
+numpy calls per tested sum before, the same values).
 """
 
 from __future__ import annotations
@@ -15,8 +17,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 from scipy import special
-from scipy.ndimage import median_filter
+
+from rfi_monitor.numpy_kernels import pairwise_sum
 
 
 class CwStatistic:
@@ -39,22 +43,14 @@ class CwStatistic:
         if not cplx and P.size > 3:
             Pm = P.copy()
             Pm[0], Pm[-1] = P[1], P[-2]      # DC and Nyquist (one degree of freedom) do not enter the median
-        # the running median of a Gamma(K, 1/K) variable is its median, not its mean (ln 2 at K = 1): corrected
-        ref = median_filter(Pm, size=self.smooth_bins, mode="wrap" if cplx else "reflect") / self._median_ratio(K)
-        ref = np.maximum(ref, 1e-300)
-        ratio = P / ref
         B = P.size
         thr = self._threshold(K, B, cplx, alpha)
-        score = ratio / thr
-        if not cplx:
-            score[0] = score[-1] = 0.0     # DC and Nyquist of a real IF: outside any front end's pass band
-        j = int(np.argmax(score))
-        cw_score = float(score[j])
+        # the running median of a Gamma(K, 1/K) variable is its median, not its mean (ln 2 at K = 1): corrected; the
+        # score and the tone's excess in one compiled pass (:func:`_cw_scores`)
+        cw_score, j, excess = _cw_scores(np.ascontiguousarray(P, dtype=np.float64),
+                                         np.ascontiguousarray(Pm, dtype=np.float64), thr, self._median_ratio(K),
+                                         self.smooth_bins, bool(cplx))
         cw_f = (j - B // 2) / B if cplx else j / (2 * (B - 1))
-        # the tone's power: the excess over the reference of its bin and two on either side (a Hann window puts
-        # 0.4-0.67 of a tone in its strongest bin), over the noise of the whole band
-        lo_j, hi_j = max(j - 2, 0), min(j + 3, B)
-        excess = float(np.sum(P[lo_j:hi_j] - ref[lo_j:hi_j]) / max(float(ref.sum()), 1e-300))
         return cw_score, float(cw_f), excess
 
     def _median_ratio(self, K: int) -> float:
@@ -87,3 +83,75 @@ class CwStatistic:
                 self._cw_thr.clear()
             self._cw_thr[key] = thr
         return thr
+
+
+@njit(cache=True, nogil=True)
+def running_median(x: np.ndarray, width: int, wrap: bool) -> np.ndarray:
+    """``scipy.ndimage.median_filter(x, size=width, mode="wrap" if wrap else "reflect")`` of a finite vector, width odd:
+    the element of rank width // 2 of the width values centred on each bin, the ends extended periodically (wrap) or
+    mirrored about the end bins' outer edges (d c b a | a b c d | d c b a). A sorted window slid over the vector (one
+    removal and one insertion per bin): an exact selection, the same values as scipy's."""
+    n = x.size
+    h = width // 2
+    out = np.empty(n)
+    buf = np.empty(width)
+
+    def at(i: int) -> float:
+        if wrap:
+            return x[i % n]
+        while i < 0 or i >= n:                       # mirror about the outer edges (repeatedly for short x)
+            i = -i - 1 if i < 0 else 2 * n - i - 1
+        return x[i]
+
+    for k in range(width):                           # the first window, sorted by insertion
+        v = at(k - h)
+        j = k
+        while j > 0 and buf[j - 1] > v:
+            buf[j] = buf[j - 1]
+            j -= 1
+        buf[j] = v
+    out[0] = buf[h]
+    for i in range(1, n):
+        old = at(i - 1 - h)
+        new = at(i + h)
+        j = 0
+        while buf[j] != old:                         # the outgoing value (present: it entered before)
+            j += 1
+        while j < width - 1 and buf[j + 1] < new:    # shift the larger ones down over it
+            buf[j] = buf[j + 1]
+            j += 1
+        while j > 0 and buf[j - 1] > new:            # or the smaller ones up
+            buf[j] = buf[j - 1]
+            j -= 1
+        buf[j] = new
+        out[i] = buf[h]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _cw_scores(P: np.ndarray, Pm: np.ndarray, thr: np.ndarray, median_ratio: float, width: int, cplx: bool
+               ) -> tuple[float, int, float]:
+    """(largest score, its bin, the tone's excess) of ``CwStatistic.test``: the reference N_b, Pm's running median over
+    width bins (:func:`running_median`) over median_ratio, floored at 1e-300; the score (P / N_b) / thr (0 at DC and
+    Nyquist of a real IF: outside any front end's pass band), its first largest bin j; the excess over the reference
+    of bins j - 2 .. j + 2 (a Hann window puts 0.4-0.67 of a tone in its strongest bin) over the reference's sum
+    (the noise of the whole band). The numpy expressions it replaced, element by element, numpy's pairwise sums."""
+    B = P.size
+    ref = running_median(Pm, width, cplx)
+    for i in range(B):
+        ref[i] = max(ref[i] / median_ratio, 1e-300)
+    j = 0
+    best = -math.inf
+    for i in range(B):
+        sc = P[i] / ref[i] / thr[i]
+        if not cplx and (i == 0 or i == B - 1):
+            sc = 0.0
+        if sc > best or i == 0:
+            best = sc
+            j = i
+    lo_j, hi_j = max(j - 2, 0), min(j + 3, B)
+    ex = np.empty(hi_j - lo_j)
+    for i in range(lo_j, hi_j):
+        ex[i - lo_j] = P[i] - ref[i]
+    excess = pairwise_sum(ex, 0.0) / max(pairwise_sum(ref, 0.0), 1e-300)
+    return best, j, excess

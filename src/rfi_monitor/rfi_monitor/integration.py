@@ -374,7 +374,7 @@ class Integrator:
             self._token_stamp = int(stamp_ns)
             if self._tokens < x.size and self._last is not None and self._blocks:
                 self.thinned += 1
-                return dataclasses.replace(self._last, blocks=self._last_sums.count)
+                return self._last_decision()
             self._tokens -= x.size
         L = frame_length(fs, par)
         hop = L // 2
@@ -393,7 +393,7 @@ class Integrator:
         n_frames = self._sums[0].frames
         if (self._last is not None and len(self._blocks) > 1 and n_frames < 1.1 * self._last_frames
                 and int(stamp_ns) - self._last_stamp < int(round(par.decide_interval_s * 1e9))):
-            return dataclasses.replace(self._last, blocks=self._last_sums.count)
+            return self._last_decision()
         self._last = self._decide_all(cplx, fs, lmin, lmax, lag_limit)
         if self._last.type == CHIRP and self._switched_off(self._last, lag_limit, fs):
             # a sweep found only over the blocks gone by: the window restarts with this block (without this, a weak
@@ -406,6 +406,14 @@ class Integrator:
             n_frames = self._sums[0].frames
         self._last_stamp = int(stamp_ns)
         self._last_frames = n_frames
+        return self._last
+
+    def _last_decision(self) -> IntegratedDecision:
+        """The last decision with the blocks its sum holds now (the same object while that count is unchanged:
+        ``dataclasses.replace`` costs more than the rest of a thinned block)."""
+        assert self._last is not None
+        if self._last.blocks != self._last_sums.count:
+            self._last = dataclasses.replace(self._last, blocks=self._last_sums.count)
         return self._last
 
     def _switched_off(self, d: IntegratedDecision, lag_limit: int, fs: float) -> bool:

@@ -83,3 +83,17 @@ def test_monitor_jn_of_a_strong_fast_chirp_on_from_the_start():
         jns.append(e.jammer_to_noise_db)
     assert all(abs(j - 30.0) < 1.0 for j in jns), jns
     assert e is not None and e.counters["jn_from_envelope"] == 6
+
+
+@pytest.mark.parametrize("n", [8192, 8191, 1000, 1125])
+def test_hilbert_transform_is_the_analytic_signals_imaginary_part(n):
+    """The envelope's real-FFT Hilbert transform equals the imaginary part of ridge.analytic_signal (the complex
+    inverse FFT it replaced) to rounding, odd lengths included; the real part there is the samples themselves."""
+    from rfi_monitor.constant_envelope import hilbert_transform
+    from rfi_monitor.ridge import analytic_signal
+    x = np.random.default_rng(n).standard_normal(n) + 3 * np.cos(0.7 * np.arange(n))
+    a = analytic_signal(x)
+    h = hilbert_transform(x)
+    assert h.shape == x.shape
+    np.testing.assert_allclose(h, a.imag, rtol=0, atol=1e-12 * np.abs(a).max())
+    np.testing.assert_allclose(x, a.real, rtol=0, atol=1e-12 * np.abs(a).max())

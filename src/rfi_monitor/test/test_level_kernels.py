@@ -146,3 +146,64 @@ def test_welch_psd_compiled_path_is_the_numpy_path(cplx: bool) -> None:
             np.testing.assert_array_equal(psd, ref)
         else:   # the sum over frames in another order than frame_power's
             np.testing.assert_allclose(psd, ref, rtol=1e-12)
+
+
+@pytest.mark.parametrize("wrap", [True, False])
+@pytest.mark.parametrize("n,width", [(513, 31), (1024, 31), (129, 7), (20, 31), (5, 7)])
+def test_running_median_is_scipys_median_filter(wrap: bool, n: int, width: int) -> None:
+    """The CW statistic's compiled running median equals scipy.ndimage.median_filter (mode wrap for complex input,
+    reflect for real; windows wider than the vector included), with equal values in the window."""
+    from scipy.ndimage import median_filter
+
+    from rfi_monitor.cw_statistic import running_median
+    x = np.random.default_rng(n + width).gamma(3.0, size=n)
+    x[1] = x[3]
+    got = running_median(x, width, wrap)
+    assert np.array_equal(got, median_filter(x, size=width, mode="wrap" if wrap else "reflect"))
+
+
+@pytest.mark.parametrize("cplx", [True, False])
+def test_cw_test_is_the_numpy_expressions(cplx: bool) -> None:
+    """CwStatistic.test (compiled scores) gives to the bit what the scipy median filter and numpy expressions gave,
+    on a summed PSD with a tone."""
+    from scipy.ndimage import median_filter
+
+    from rfi_monitor.cw_statistic import CwStatistic
+    rng = np.random.default_rng(5)
+    B, K = (1024, 300) if cplx else (513, 300)
+    P = rng.gamma(K, 1.0 / K, size=B) * (1.0 + 0.3 * np.cos(np.arange(B) / 40.0))
+    P[200] += 1.0
+    cw = CwStatistic(31)
+    score, f, excess = cw.test(P, K, cplx, 1e-4)
+    Pm = P.copy()
+    if not cplx:
+        Pm[0], Pm[-1] = P[1], P[-2]
+    ref = np.maximum(median_filter(Pm, size=31, mode="wrap" if cplx else "reflect") / cw._median_ratio(K), 1e-300)
+    s = P / ref / cw._threshold(K, B, cplx, 1e-4)
+    if not cplx:
+        s[0] = s[-1] = 0.0
+    j = int(np.argmax(s))
+    assert j == 200 and score == s[j] and score > 1.0
+    assert f == ((j - B // 2) / B if cplx else j / (2 * (B - 1)))
+    assert excess == float(np.sum(P[j - 2:j + 3] - ref[j - 2:j + 3]) / max(float(ref.sum()), 1e-300))
+
+
+def test_coarse_top_is_the_numpy_selection() -> None:
+    """The comb's compiled coarse selection: the same largest combs as numpy's argpartition, ordered best first with
+    equal combs (common: neighbouring candidates with the same rounded lags) to the shorter period, then the
+    separation rule."""
+    from rfi_monitor.chirp_comb import _coarse_top, _comb_z, _separated, comb_lags
+    rng = np.random.default_rng(3)
+    lag_limit = 900
+    periods = np.arange(4.0, 200.0, 1.0 / 32)
+    _, idx, mask = comb_lags(periods, lag_limit, 16)
+    r = rng.standard_normal(lag_limit + 1)
+    v = 1.0 + rng.random(lag_limit + 1)
+    z = _comb_z(r, v, idx, mask)
+    numpy_top = np.argpartition(z, z.size - 240)[z.size - 240:]
+    ranked = np.lexsort((np.arange(z.size), -z))[:240]          # best first, ties to the lower index
+    assert np.array_equal(np.sort(z[ranked]), np.sort(z[numpy_top]))
+    assert np.unique(z[ranked]).size < ranked.size               # ties present: the rule is exercised
+    got = _coarse_top(r, v, idx, mask, periods, 240, 12)
+    assert np.array_equal(got, _separated(ranked, periods, 12))
+    assert got.size == 12
