@@ -176,8 +176,8 @@ class NodeProcess:
         deadline = time.monotonic() + 120.0
         while f'{name} ready' not in self.stderr:
             if time.monotonic() > deadline or self.proc.poll() is not None:
-                self.close()
-                raise AssertionError(f'{name} did not start:\n{self.stderr[-3000:]}')
+                text = self.close()  # what it wrote (the log is closed with it)
+                raise AssertionError(f'{name} did not start:\n{text[-3000:]}')
             time.sleep(0.05)
 
     @property
