@@ -14,9 +14,16 @@ default, best effort once a best-effort driver is there; losses and handler erro
   reasons of :class:`rfi_node_common.input_checks.StampGate` (not positive, not increasing, a jump
   beyond ``max_stamp_jump_s``; a jump confirmed ``stamp_jump_confirmations`` times restarts the
   monitor, ``restarts``).
+  A satellite with a corrupt field (:mod:`rfi_node_common.message_checks`, as in the fusion: a 1-sigma that is
+  not NaN and not in its plausible range, an impossible C/N0, satellite state or atmospheric delay) is dropped
+  from the epoch before the monitor, counted per reason (``dropped_satellites.<reason>``), and the epoch judged
+  on the rest.
 * ``uwb/ranges`` (UwbRange) with anchors in ``earth_frame_id`` (ECEF): the kinematic tests. A range
   in another frame is rejected (``uwb_frame_unsupported``: the monitor needs ECEF anchors), as is a
-  non-finite or non-positive range (``uwb_invalid``).
+  non-finite range or one outside [``UWB_RANGE_MIN_M``, ``UWB_RANGE_MAX_M``] (``uwb_invalid``), a 1-sigma that is not
+  NaN and not plausible (``invalid_range_std``) and an anchor off the Earth (``nonphysical_anchor_position``): the
+  monitor keeps each anchor's newest range, so one corrupt range made every epoch raise until the anchor was
+  heard again (found by the long fuzz: 3 of its 10 valid tail epochs unanswered).
 * ``gnss/receiver_interference`` (ReceiverInterference): the receiver's AGC, jam indicator,
   jamming and spoofing flags.
 * ``gnss/receiver_spectrum`` (ReceiverSpectrum): a spectrum that does not fit (bins, span) is
@@ -54,6 +61,7 @@ from __future__ import annotations
 import math
 import os
 from collections import Counter
+from dataclasses import replace
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -88,6 +96,13 @@ from rfi_node_common.diagnostics import (
 from rfi_node_common.input_checks import STAMP_FAR_FUTURE, STAMP_NOT_POSITIVE, StampGate
 from rfi_node_common.inputs import InputHealth, InputSubscription, StaleInputWatch, subscribe_input
 from rfi_node_common.main import run_node
+from rfi_node_common.message_checks import (
+    FRAME_EARTH,
+    UWB_RANGE_MAX_M,
+    UWB_RANGE_MIN_M,
+    satellite_reason,
+    uwb_range_reason,
+)
 from rfi_node_common.params import RuntimeParameters, changed_names, declare
 from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS
 from rfi_node_common.stamps import stamp_to_ns
@@ -115,6 +130,7 @@ class GnssIntegrityNode(Node):
                                              for what in ('received', 'rejected', 'processed')})
         self.counts.update({'core_exceptions': 0, 'restarts': 0, 'published': 0, 'side_inputs_taken_before_epoch': 0})
         self.reasons: Counter[str] = Counter()
+        self.dropped_satellites: Counter[str] = Counter()  # satellites taken out of accepted epochs, per reason
         self._load_model()
         self.gate = StampGate(self.params.max_stamp_jump_s, self.params.stamp_jump_confirmations)
         self._window = CountWindow(self.params.diagnostics_window_s)
@@ -210,6 +226,14 @@ class GnssIntegrityNode(Node):
         decision = self.gate.admit(epoch.stamp_ns)
         if not decision.accepted:
             return str(decision.reason)
+        kept = []
+        for obs in epoch.observations:
+            if (dropped := satellite_reason(obs)) is None:
+                kept.append(obs)
+            else:
+                self.dropped_satellites[dropped] += 1
+        if len(kept) < len(epoch.observations):
+            epoch = replace(epoch, observations=tuple(kept))
         if decision.restart:
             self.counts['restarts'] += 1
             self.get_logger().warn(f'GNSS stamps jumped to {epoch.stamp_ns} ns: integrity monitor restarted')
@@ -229,9 +253,11 @@ class GnssIntegrityNode(Node):
         if (refused := self._side_stamp(msg.header.stamp)) is not None:
             return refused
         meas = msg_to_uwb(msg)
-        if not (math.isfinite(meas.range_m) and meas.range_m > 0.0) or not all(
+        if not (math.isfinite(meas.range_m) and UWB_RANGE_MIN_M <= meas.range_m <= UWB_RANGE_MAX_M) or not all(
                 math.isfinite(float(v)) for v in meas.anchor_position_m):
             return 'uwb_invalid'
+        if (implausible := uwb_range_reason(replace(meas, frame_id=FRAME_EARTH))) is not None:
+            return implausible
         self.monitor.add_uwb(meas)
         return None
 
@@ -289,6 +315,7 @@ class GnssIntegrityNode(Node):
         (received == rejected + processed, per kind)."""
         values: dict[str, object] = dict(sorted(self.counts.items()))
         values.update({f'rejected.{k}': v for k, v in sorted(self.reasons.items())})
+        values.update({f'dropped_satellites.{k}': v for k, v in sorted(self.dropped_satellites.items())})
         values.update({f'monitor.{k}': v for k, v in self.monitor.counts.items()})
         values['monitor.held_inputs'] = self.monitor.held_inputs  # side inputs stamped after the latest epoch
         values.update({f'clock.{k}': v for k, v in self.monitor.clock.counts.items()})

@@ -316,3 +316,43 @@ def test_verdicts_depend_on_stamps_not_on_arrival_order(rig_factory):
     # the bursts did what they are for: the executor handed each epoch over before side inputs that came with it
     assert second.node.counts['side_inputs_taken_before_epoch'] >= 2 * len(epochs)
     assert first.node.accounting()['accounting_ok'] and second.node.accounting()['accounting_ok']
+
+
+def test_corrupt_fields_are_rejected_before_the_monitor(rig_factory):
+    """Issue 27 (the long fuzz): a UWB range of 1e300 m or 5e-324 m, a 1-sigma of 1e300 m or an anchor off the Earth
+    was kept as its anchor's newest range and made every later epoch raise in the monitor (a counted core exception,
+    no verdict) until the anchor was heard again; a pseudorange 1-sigma of 5e-324 m divided by zero in the fix. Now
+    they are named rejections (the ranges) or a dropped satellite (the epoch is judged on the rest)."""
+    run = _run()
+    rig = rig_factory()
+    epochs = run.gnss_epochs[:6]
+    ranges = [u for u in run.uwb_ranges if u.stamp_ns <= epochs[2].stamp_ns]
+    items = sorted([(e.stamp_ns, 1, '/gnss/measurements', epoch_to_msg(e)) for e in epochs[:3]]
+                   + [(u.stamp_ns, 0, '/uwb/ranges', uwb_to_msg(u)) for u in ranges], key=lambda t: t[:2])
+    for _, _, topic, msg in items:
+        rig.send(topic, msg)
+    last = ranges[-1]
+    corrupt = []
+    for field, value in (('range_m', 1e300), ('range_m', 5e-324), ('range_std_m', 1e300), ('range_std_m', 5e-324),
+                         ('range_std_m', -math.inf)):
+        msg = uwb_to_msg(last)
+        setattr(msg, field, value)
+        corrupt.append(msg)
+    msg = uwb_to_msg(last)
+    msg.anchor_position.x = 1e300
+    corrupt.append(msg)
+    for k, msg in enumerate(corrupt):  # newer than every valid range of the anchor
+        stamp = last.stamp_ns + 1000 * (k + 1)
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 10**9)
+        rig.send('/uwb/ranges', msg)
+    bad_sat = epoch_to_msg(epochs[3])
+    bad_sat.measurements[0].pseudorange_std_m = 5e-324
+    rig.send('/gnss/measurements', bad_sat)
+    for e in epochs[4:]:
+        rig.send('/gnss/measurements', epoch_to_msg(e))
+    c, reasons = rig.node.counts, rig.node.reasons
+    assert c['core_exceptions'] == 0 and c['published'] == len(epochs)
+    assert reasons['uwb_invalid'] == 2 and reasons['invalid_range_std'] == 3
+    assert reasons['nonphysical_anchor_position'] == 1
+    assert rig.node.dropped_satellites['invalid_measurement_std'] == 1
+    assert rig.node.accounting()['accounting_ok']
