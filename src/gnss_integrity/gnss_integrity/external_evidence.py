@@ -77,13 +77,17 @@ class ExternalEvidence:
         self._sdr: tuple[int, int, float] | None = None  # (stamp ns, type, J/N dB)
 
     def add_receiver_flag(self, stamp_ns: int, spoofing_state: int, detection_enabled: bool) -> None:
-        """A receiver report: its spoofing state (ignored when its detection is disabled)."""
+        """A receiver report: its spoofing state (ignored when its detection is disabled, or older than the
+        report kept: the newest by stamp counts, whatever the order of arrival)."""
+        if self._flag is not None and stamp_ns < self._flag[0]:
+            return
         if detection_enabled and spoofing_state in (SPOOFING_NONE, SPOOFING_INDICATED, SPOOFING_AFFIRMED):
             self._flag = (stamp_ns, spoofing_state)
 
     def add_sdr_state(self, stamp_ns: int, jammer_type: int, jammer_to_noise_db: float) -> None:
-        """An SDR monitor's /rfi/jammer_state."""
-        self._sdr = (stamp_ns, jammer_type, jammer_to_noise_db)
+        """An SDR monitor's /rfi/jammer_state (one older than the state kept is ignored: the newest by stamp)."""
+        if self._sdr is None or stamp_ns >= self._sdr[0]:
+            self._sdr = (stamp_ns, jammer_type, jammer_to_noise_db)
 
     def _fresh(self, stamp_ns: int, report_ns: int) -> bool:
         return abs(stamp_ns - report_ns) <= self.params.max_report_age_s * NS_PER_S

@@ -14,14 +14,35 @@ default, best effort once a best-effort driver is there; losses and handler erro
   reasons of :class:`rfi_node_common.input_checks.StampGate` (not positive, not increasing, a jump
   beyond ``max_stamp_jump_s``; a jump confirmed ``stamp_jump_confirmations`` times restarts the
   monitor, ``restarts``).
+  A satellite with a corrupt field (:mod:`rfi_node_common.message_checks`, as in the fusion: a 1-sigma that is
+  not NaN and not in its plausible range, an impossible C/N0, satellite state or atmospheric delay) is dropped
+  from the epoch before the monitor, counted per reason (``dropped_satellites.<reason>``), and the epoch judged
+  on the rest.
 * ``uwb/ranges`` (UwbRange) with anchors in ``earth_frame_id`` (ECEF): the kinematic tests. A range
   in another frame is rejected (``uwb_frame_unsupported``: the monitor needs ECEF anchors), as is a
-  non-finite or non-positive range (``uwb_invalid``).
+  non-finite range or one outside [``UWB_RANGE_MIN_M``, ``UWB_RANGE_MAX_M``] (``uwb_invalid``), a 1-sigma that is not
+  NaN and not plausible (``invalid_range_std``) and an anchor off the Earth (``nonphysical_anchor_position``): the
+  monitor keeps each anchor's newest range, so one corrupt range made every epoch raise until the anchor was
+  heard again (found by the long fuzz: 3 of its 10 valid tail epochs unanswered).
 * ``gnss/receiver_interference`` (ReceiverInterference): the receiver's AGC, jam indicator,
   jamming and spoofing flags.
 * ``gnss/receiver_spectrum`` (ReceiverSpectrum): a spectrum that does not fit (bins, span) is
   rejected as ``spectrum_invalid``.
 * ``rfi/jammer_state`` (JammerState): an SDR monitor's verdict.
+
+A side input (UWB, receiver, spectrum, SDR) stamped at or before 0 (``stamp_not_positive``) or more than
+``max_stamp_jump_s`` after the latest accepted GNSS epoch (``stamp_far_future``) is rejected: the monitor holds
+side inputs until the epoch they precede, and one hostile stamp must not sit there.
+
+Arrival order: each epoch's verdict depends on the stamps and contents of the messages, not on the order in which
+the executor happens to run the callbacks. Before an epoch is judged, every side input that has already reached
+the node is taken (:meth:`rfi_node_common.inputs.InputSubscription.take_pending`: rclpy's executor serves one
+message per ready subscription per wait, GNSS first, so under load an epoch was judged before ranges that came
+earlier), and the monitor uses only the side inputs stamped at or before the epoch, in stamp order, holding the
+later ones for the next epoch (:mod:`gnss_integrity.monitor`). ``play --sync`` (which sends an epoch only after
+every earlier message, and the next messages only after the verdict) therefore gives the verdicts of an
+in-process replay; a side input stamped at or before an epoch that reaches the node only after the epoch's
+verdict is used from the next epoch on. Nothing waits for input that may never come.
 
 A core exception on one message is counted (``core_exceptions``), logged, and the message dropped:
 no message kills the node and nothing is published from a failed evaluation. /diagnostics every
@@ -40,6 +61,7 @@ from __future__ import annotations
 import math
 import os
 from collections import Counter
+from dataclasses import replace
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -71,9 +93,16 @@ from rfi_node_common.diagnostics import (
     degraded_inputs,
     diagnostic_array,
 )
-from rfi_node_common.input_checks import StampGate
-from rfi_node_common.inputs import InputHealth, StaleInputWatch, subscribe_input
+from rfi_node_common.input_checks import STAMP_FAR_FUTURE, STAMP_NOT_POSITIVE, StampGate
+from rfi_node_common.inputs import InputHealth, InputSubscription, StaleInputWatch, subscribe_input
 from rfi_node_common.main import run_node
+from rfi_node_common.message_checks import (
+    FRAME_EARTH,
+    UWB_RANGE_MAX_M,
+    UWB_RANGE_MIN_M,
+    satellite_reason,
+    uwb_range_reason,
+)
 from rfi_node_common.params import RuntimeParameters, changed_names, declare
 from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS
 from rfi_node_common.stamps import stamp_to_ns
@@ -99,8 +128,9 @@ class GnssIntegrityNode(Node):
         self.monitor = IntegrityMonitor(self.params.monitor_params())
         self.counts: Counter[str] = Counter({f'{k}_{what}': 0 for k in KINDS
                                              for what in ('received', 'rejected', 'processed')})
-        self.counts.update({'core_exceptions': 0, 'restarts': 0, 'published': 0})
+        self.counts.update({'core_exceptions': 0, 'restarts': 0, 'published': 0, 'side_inputs_taken_before_epoch': 0})
         self.reasons: Counter[str] = Counter()
+        self.dropped_satellites: Counter[str] = Counter()  # satellites taken out of accepted epochs, per reason
         self._load_model()
         self.gate = StampGate(self.params.max_stamp_jump_s, self.params.stamp_jump_confirmations)
         self._window = CountWindow(self.params.diagnostics_window_s)
@@ -116,12 +146,13 @@ class GnssIntegrityNode(Node):
         # created after the compilation, so that its silence clock starts when the node can listen
         self.health = InputHealth()
         throttle = self.params.warning_throttle_s
+        self.inputs: dict[str, InputSubscription] = {}
         for cls, topic, kind in ((GnssMeasurementArray, 'gnss/measurements', 'gnss'), (UwbRange, 'uwb/ranges', 'uwb'),
                                  (ReceiverInterference, 'gnss/receiver_interference', 'receiver'),
                                  (ReceiverSpectrum, 'gnss/receiver_spectrum', 'spectrum'),
                                  (JammerState, 'rfi/jammer_state', 'sdr')):
-            subscribe_input(self, cls, topic, self._handler(cls, kind), self.health, raw=True,
-                            warning_throttle_s=throttle)
+            self.inputs[kind] = subscribe_input(self, cls, topic, self._handler(cls, kind), self.health, raw=True,
+                                                warning_throttle_s=throttle)
         self.stale_watch = StaleInputWatch(self, self.health, self.params.input_timeout_s, self._publish_stale)
 
     # ------------------------------------------------------------------ inputs
@@ -129,6 +160,8 @@ class GnssIntegrityNode(Node):
         handle = getattr(self, f'on_{kind}')
 
         def callback(raw: bytes) -> None:
+            if kind == 'gnss':  # the side inputs that came before the epoch first (module docstring)
+                self.counts['side_inputs_taken_before_epoch'] += self.take_side_inputs()
             if self.runtime.pending:
                 self.runtime.apply_pending(self._apply_parameters)
             self.counts[f'{kind}_received'] += 1
@@ -155,6 +188,21 @@ class GnssIntegrityNode(Node):
                 self.diag_pub.publish(self.diagnostics(due))
         return callback
 
+    def take_side_inputs(self) -> int:
+        """Handle every side input (UWB, receiver, spectrum, SDR) that has reached the node and waits for the
+        executor; returns how many."""
+        return sum(self.inputs[kind].take_pending() for kind in KINDS if kind != 'gnss')
+
+    def _side_stamp(self, stamp) -> str | None:
+        """Why a side input's stamp is refused (module docstring), or None."""
+        stamp_ns = stamp_to_ns(stamp)
+        if stamp_ns <= 0:
+            return STAMP_NOT_POSITIVE
+        latest = self.gate.latest_ns
+        if latest is not None and stamp_ns - latest > self.gate.max_jump_ns:
+            return STAMP_FAR_FUTURE
+        return None
+
     def _apply_parameters(self, old: IntegrityNodeParams, new: IntegrityNodeParams) -> None:
         """A change of the settable parameters (hardware_id, the diagnostics window and thresholds,
         warning_throttle_s; the tests' parameters are read-only)."""
@@ -178,6 +226,14 @@ class GnssIntegrityNode(Node):
         decision = self.gate.admit(epoch.stamp_ns)
         if not decision.accepted:
             return str(decision.reason)
+        kept = []
+        for obs in epoch.observations:
+            if (dropped := satellite_reason(obs)) is None:
+                kept.append(obs)
+            else:
+                self.dropped_satellites[dropped] += 1
+        if len(kept) < len(epoch.observations):
+            epoch = replace(epoch, observations=tuple(kept))
         if decision.restart:
             self.counts['restarts'] += 1
             self.get_logger().warn(f'GNSS stamps jumped to {epoch.stamp_ns} ns: integrity monitor restarted')
@@ -194,27 +250,39 @@ class GnssIntegrityNode(Node):
     def on_uwb(self, msg: UwbRange) -> str | None:
         if msg.header.frame_id != self.params.earth_frame_id:
             return 'uwb_frame_unsupported'
+        if (refused := self._side_stamp(msg.header.stamp)) is not None:
+            return refused
         meas = msg_to_uwb(msg)
-        if not (math.isfinite(meas.range_m) and meas.range_m > 0.0) or not all(
+        if not (math.isfinite(meas.range_m) and UWB_RANGE_MIN_M <= meas.range_m <= UWB_RANGE_MAX_M) or not all(
                 math.isfinite(float(v)) for v in meas.anchor_position_m):
             return 'uwb_invalid'
+        if (implausible := uwb_range_reason(replace(meas, frame_id=FRAME_EARTH))) is not None:
+            return implausible
         self.monitor.add_uwb(meas)
         return None
 
     def on_receiver(self, msg: ReceiverInterference) -> str | None:
+        if (refused := self._side_stamp(msg.header.stamp)) is not None:
+            return refused
         self.monitor.add_receiver_report(receiver_report(msg))
         return None
 
     def on_spectrum(self, msg: ReceiverSpectrum) -> str | None:
         try:
-            self.monitor.add_spectrum(stamp_to_ns(msg.header.stamp), spectrum_input(msg))
+            spectrum = spectrum_input(msg)
+            self.monitor.spectrum.check(spectrum)
         except ValueError:
             return 'spectrum_invalid'
+        if (refused := self._side_stamp(msg.header.stamp)) is not None:
+            return refused
+        self.monitor.add_spectrum(stamp_to_ns(msg.header.stamp), spectrum)
         return None
 
     def on_sdr(self, msg: JammerState) -> str | None:
         if msg.type > JammerState.UNKNOWN:
             return 'jammer_state_unknown_type'
+        if (refused := self._side_stamp(msg.header.stamp)) is not None:
+            return refused
         self.monitor.add_sdr_state(stamp_to_ns(msg.header.stamp), int(msg.type), float(msg.jammer_to_signal_db),
                                    float(msg.jammer_to_noise_db))
         return None
@@ -247,7 +315,9 @@ class GnssIntegrityNode(Node):
         (received == rejected + processed, per kind)."""
         values: dict[str, object] = dict(sorted(self.counts.items()))
         values.update({f'rejected.{k}': v for k, v in sorted(self.reasons.items())})
+        values.update({f'dropped_satellites.{k}': v for k, v in sorted(self.dropped_satellites.items())})
         values.update({f'monitor.{k}': v for k, v in self.monitor.counts.items()})
+        values['monitor.held_inputs'] = self.monitor.held_inputs  # side inputs stamped after the latest epoch
         values.update({f'clock.{k}': v for k, v in self.monitor.clock.counts.items()})
         values['accounting_ok'] = all(self.counts[f'{k}_received'] == self.counts[f'{k}_rejected']
                                       + self.counts[f'{k}_processed'] for k in KINDS)

@@ -17,11 +17,25 @@ rfi_msgs/GnssIntegrity message. Per epoch:
 4. the C/N0 model learns only from epochs that every other evidence calls clean.
 
 A missing input leaves its tests UNKNOWN: never NONE.
+
+Side inputs are taken in stamp order, not in order of arrival: ``add_uwb``, ``add_receiver_report``,
+``add_sdr_state`` and ``add_spectrum`` only hold what they are given, and :meth:`IntegrityMonitor.process_epoch`
+first applies every held input stamped at or before the epoch, sorted by (stamp, kind, arrival), and keeps the
+later ones for a later epoch. An epoch's verdict is therefore a function of the epochs before it and the side
+inputs stamped at or before it that were given before it, whatever order they came in: a range stamped after the
+epoch is never used for it even if it came first (a GNSS receiver's epochs often reach a node after the UWB
+ranges of the same instant), and a range stamped before the epoch that comes after it is used from the next
+epoch on (as if it had come just before that one). The node gives the monitor every side input that has reached
+it before each epoch (gnss_integrity_node). At most ``max_held_inputs`` are held: beyond that the oldest is
+applied at once (counted, ``inputs_applied_before_an_epoch``; during a GNSS outage of minutes).
 """
 
 from __future__ import annotations
 
+import heapq
+import itertools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -61,6 +75,8 @@ from .uwb_range_rate import UwbRangeRateParams, UwbRangeRateTest
 NS_PER_S = 1_000_000_000
 JAMMER_NONE = 0
 JAMMER_UNKNOWN = 4
+_KIND_UWB, _KIND_RECEIVER, _KIND_SPECTRUM, _KIND_SDR = range(4)
+"""Order of held side inputs of one stamp (they touch independent state; a fixed order keeps it exact)."""
 
 
 @dataclass(frozen=True)
@@ -70,6 +86,9 @@ class MonitorParams:
     Attributes:
         sdr_max_age_s: an SDR /rfi/jammer_state older than this at the epoch is not used, s.
         spectrum_max_age_s: a receiver spectrum analysis older than this at the epoch is not used, s.
+        max_held_inputs: side inputs (UWB ranges, receiver reports, spectra, SDR states) held for the
+            epoch they precede (module docstring); beyond this the oldest is applied at once. 20,000 is
+            minutes of four anchors at 20 Hz with the receiver's reports.
     """
 
     fix: MultiGnssFixParams = field(default_factory=MultiGnssFixParams)
@@ -86,6 +105,11 @@ class MonitorParams:
     state: StateParams = field(default_factory=StateParams)
     sdr_max_age_s: float = 2.0
     spectrum_max_age_s: float = 5.0
+    max_held_inputs: int = 20_000
+
+    def __post_init__(self) -> None:
+        if int(self.max_held_inputs) < 0:
+            raise ValueError(f"max_held_inputs must be >= 0, got {self.max_held_inputs}")
 
 
 @dataclass(frozen=True)
@@ -146,49 +170,87 @@ class IntegrityMonitor:
         self._sdr: tuple[int, int, float, float] | None = None  # stamp, type, J/S, J/N
         self._spectrum: tuple[int, SpectrumDetection] | None = None
         self._cn0_clean = True  # the last epoch's C/N0 verdict: the AGC baseline's learning gate
+        # side inputs held until the epoch they precede: a heap of (stamp ns, kind, arrival, apply)
+        self._held: list[tuple[int, int, int, Callable[[], None]]] = []
+        self._arrivals = itertools.count()
         self.counts: dict[str, int] = {"epochs": 0, "epochs_without_fix": 0, "uwb_ranges": 0,
                                        "receiver_reports": 0, "sdr_states": 0, "spectra": 0,
-                                       "epochs_degraded_by_jamming": 0, "epochs_with_exclusions": 0}
+                                       "epochs_degraded_by_jamming": 0, "epochs_with_exclusions": 0,
+                                       "inputs_applied_before_an_epoch": 0}
 
     # ------------------------------------------------------------------ side inputs
     def add_uwb(self, meas: UwbRangeMeasurement) -> None:
-        """A UWB range whose anchor is in ECEF (``frame_id`` "earth"; the node converts map anchors)."""
+        """A UWB range whose anchor is in ECEF (``frame_id`` "earth"; the node converts map anchors); held
+        for the first epoch stamped at or after it (module docstring)."""
         self.counts["uwb_ranges"] += 1
         rng = AnchorRange(meas.stamp_ns, meas.anchor_id, np.asarray(meas.anchor_position_m, dtype=float),
                           float(meas.range_m), float(meas.range_std_m))
-        self.kinematics.add_range(rng)
-        self.range_rate.add_range(rng)
+        self._hold(meas.stamp_ns, _KIND_UWB, lambda: self._apply_uwb(rng))
 
     def add_receiver_report(self, report: ReceiverInterferenceReport) -> None:
-        """The receiver's interference report (AGC, jam indicator, jamming and spoofing flags)."""
+        """The receiver's interference report (AGC, jam indicator, jamming and spoofing flags); held."""
         self.counts["receiver_reports"] += 1
-        self.receiver.update(report, other_clean=self._cn0_clean)
-        self.external.add_receiver_flag(report.stamp_ns, report.spoofing_state, report.spoofing_detection_enabled)
+        self._hold(report.stamp_ns, _KIND_RECEIVER, lambda: self._apply_receiver_report(report))
 
     def add_sdr_state(self, stamp_ns: int, jammer_type: int, jammer_to_signal_db: float,
                       jammer_to_noise_db: float) -> None:
-        """An SDR monitor's /rfi/jammer_state."""
+        """An SDR monitor's /rfi/jammer_state; held."""
         self.counts["sdr_states"] += 1
-        self._sdr = (stamp_ns, int(jammer_type), float(jammer_to_signal_db), float(jammer_to_noise_db))
-        self.external.add_sdr_state(stamp_ns, int(jammer_type), float(jammer_to_noise_db))
+        state = (int(stamp_ns), int(jammer_type), float(jammer_to_signal_db), float(jammer_to_noise_db))
+        self._hold(stamp_ns, _KIND_SDR, lambda: self._apply_sdr_state(state))
 
-    def add_spectrum(self, stamp_ns: int, spectrum: SpectrumInput) -> SpectrumDetection:
-        """A receiver spectrum report (u-blox MON-SPAN, one RF block), analysed at once.
+    def add_spectrum(self, stamp_ns: int, spectrum: SpectrumInput) -> None:
+        """A receiver spectrum report (u-blox MON-SPAN, one RF block): checked at once, held, analysed when
+        applied.
 
         Raises:
-            ValueError: a spectrum whose bins or span do not fit (:meth:`ReceiverSpectrumMonitor.update`).
+            ValueError: a spectrum whose bins or span do not fit (:meth:`ReceiverSpectrumMonitor.check`).
         """
-        detection = self.spectrum.update(spectrum)
+        self.spectrum.check(spectrum)
         self.counts["spectra"] += 1
+        self._hold(stamp_ns, _KIND_SPECTRUM, lambda: self._apply_spectrum(int(stamp_ns), spectrum))
+
+    @property
+    def held_inputs(self) -> int:
+        """Side inputs held for a later epoch."""
+        return len(self._held)
+
+    def _hold(self, stamp_ns: int, kind: int, apply: Callable[[], None]) -> None:
+        heapq.heappush(self._held, (int(stamp_ns), kind, next(self._arrivals), apply))
+        while len(self._held) > self.params.max_held_inputs:
+            self.counts["inputs_applied_before_an_epoch"] += 1
+            heapq.heappop(self._held)[3]()
+
+    def _release(self, stamp_ns: int) -> None:
+        """Apply every held side input stamped at or before ``stamp_ns``, in (stamp, kind, arrival) order."""
+        held = self._held
+        while held and held[0][0] <= stamp_ns:
+            heapq.heappop(held)[3]()
+
+    def _apply_uwb(self, rng: AnchorRange) -> None:
+        self.kinematics.add_range(rng)
+        self.range_rate.add_range(rng)
+
+    def _apply_receiver_report(self, report: ReceiverInterferenceReport) -> None:
+        self.receiver.update(report, other_clean=self._cn0_clean)
+        self.external.add_receiver_flag(report.stamp_ns, report.spoofing_state, report.spoofing_detection_enabled)
+
+    def _apply_sdr_state(self, state: tuple[int, int, float, float]) -> None:
+        if self._sdr is None or state[0] >= self._sdr[0]:  # the newest by stamp (a late one is older)
+            self._sdr = state
+        self.external.add_sdr_state(state[0], state[1], state[3])
+
+    def _apply_spectrum(self, stamp_ns: int, spectrum: SpectrumInput) -> None:
+        detection = self.spectrum.update(spectrum)
         if self._spectrum is None or detection.state >= self._spectrum[1].state or spectrum.rf_block_id == 0:
             self._spectrum = (stamp_ns, detection)
-        return detection
 
     # ------------------------------------------------------------------ the epoch
     def process_epoch(self, epoch: GnssEpoch) -> IntegrityReport:
-        """Every test on one GNSS epoch (in stamp order)."""
+        """Every test on one GNSS epoch (in stamp order), after the side inputs held for it (module docstring)."""
         self.counts["epochs"] += 1
         stamp = epoch.stamp_ns
+        self._release(stamp)
         fix = solve_multi_gnss(epoch, self.params.fix, initial_position_ecef_m=self._last_position)
         if fix.valid:
             self._last_position = fix.position_ecef_m.copy()

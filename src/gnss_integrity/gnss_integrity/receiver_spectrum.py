@@ -307,8 +307,8 @@ class ReceiverSpectrumMonitor:
         else:
             self._blocks.pop(int(rf_block_id), None)
 
-    def update(self, spectrum: SpectrumInput) -> SpectrumDetection:
-        """Test one report, then learn it if it passed (or while learning without a test).
+    def check(self, spectrum: SpectrumInput) -> None:
+        """Whether :meth:`update` can take ``spectrum``, without taking it.
 
         Raises:
             ValueError: a bin count other than ``params.bins``, or a span that is not
@@ -320,6 +320,16 @@ class ReceiverSpectrumMonitor:
             raise ValueError(f"expected {p.bins} bins, got {n}")
         if abs(n * spectrum.resolution_hz - spectrum.span_hz) > p.geometry_tolerance * spectrum.span_hz:
             raise ValueError(f"span {spectrum.span_hz} Hz is not {n} bins x {spectrum.resolution_hz} Hz")
+
+    def update(self, spectrum: SpectrumInput) -> SpectrumDetection:
+        """Test one report, then learn it if it passed (or while learning without a test).
+
+        Raises:
+            ValueError: a bin count other than ``params.bins``, or a span that is not
+                ``bins * resolution_hz`` within ``geometry_tolerance``.
+        """
+        self.check(spectrum)
+        p = self.params
         self.counts["reports"] += 1
         block = self._block(spectrum)
         if block.count >= p.min_reference_reports and block.sigma is not None:

@@ -236,3 +236,123 @@ def test_cn0_model_file_round_trip(rig_factory, tmp_path):
         rig.send('/gnss/measurements', epoch_to_msg(e))
     rig.node.destroy_node()
     assert path.exists() and 'version' in path.read_text()
+
+
+def _order_test_messages(seconds: float = 12.0) -> list[tuple[int, int, str, object]]:
+    """(stamp ns, tie order, topic, message) of the first ``seconds`` of the simulated run: GNSS epochs at 5 Hz,
+    ranges of three anchors at 5 Hz each (A1 on the epochs' stamps) and, from the middle on, an SDR state 0.1 s
+    after each epoch whose J/S is different each time (so a verdict that used a newer or older state shows it).
+    At equal stamps a side input comes first (tie order 0; epochs 1)."""
+    run = _run()
+    t0 = run.gnss_epochs[0].stamp_ns
+    end = t0 + int(seconds * 1e9)
+    epochs = [e for e in run.gnss_epochs if e.stamp_ns < end]
+    items = [(e.stamp_ns, 1, '/gnss/measurements', epoch_to_msg(e)) for e in epochs]
+    last = epochs[-1].stamp_ns
+    items += [(u.stamp_ns, 0, '/uwb/ranges', uwb_to_msg(u)) for u in run.uwb_ranges if u.stamp_ns <= last]
+    for k, e in enumerate(epochs[len(epochs) // 2:-1]):
+        stamp = e.stamp_ns + 100_000_000
+        state = JammerState(type=JammerState.WIDEBAND, confidence=0.9, jammer_to_noise_db=20.0 + k,
+                            jammer_to_signal_db=10.0 + k)
+        state.header.stamp.sec, state.header.stamp.nanosec = divmod(stamp, 10**9)
+        state.header.frame_id = 'if'
+        items.append((stamp, 0, '/rfi/jammer_state', state))
+    return sorted(items, key=lambda item: item[:2])
+
+
+def _fields(value, path: str = '') -> list[tuple[str, str]]:
+    """(path, repr) of every field of a message, recursively: equal for equal values, NaN included (the serialised
+    bytes are not: the padding between fields is not defined)."""
+    if hasattr(value, 'get_fields_and_field_types'):
+        names = value.get_fields_and_field_types()
+        return [f for name in names for f in _fields(getattr(value, name), f'{path}.{name}')]
+    if isinstance(value, (list, tuple)) or (hasattr(value, '__len__') and not isinstance(value, (str, bytes))):
+        return [f for i, v in enumerate(value) for f in _fields(v, f'{path}[{i}]')]
+    return [(path, repr(float(value)) if isinstance(value, float) else repr(value))]
+
+
+def _verdicts(rig: Rig) -> list[list[tuple[str, str]]]:
+    return [_fields(m) for m in rig.out['/gnss/integrity']]
+
+
+@pytest.mark.slow
+def test_verdicts_depend_on_stamps_not_on_arrival_order(rig_factory):
+    """Issue 27 item 6: the same messages in two arrival orders give the same verdicts, field for field.
+
+    In order: one message at a time, in stamp order. In bursts: for each epoch, the side inputs stamped within
+    0.1 s of it and the epoch are published together before the executor spins, those stamped after the epoch
+    first, then the epoch, then those stamped at or before it. rclpy's executor then serves the GNSS subscription
+    first (it was created first), as under load in test_two_suites: before the fix the epoch was judged without
+    the ranges of its own burst and with an SDR state stamped after it."""
+    items = _order_test_messages()
+    epochs = [(stamp, msg) for stamp, _, topic, msg in items if topic == '/gnss/measurements']
+
+    first = rig_factory()
+    for _, _, topic, msg in items:
+        first.send(topic, msg)
+    in_order = _verdicts(first)
+    assert first.node.counts['side_inputs_taken_before_epoch'] == 0
+    first.close()
+
+    second = rig_factory()
+    for k, (t_ns, epoch) in enumerate(epochs):
+        side = [(stamp, topic, msg) for stamp, _, topic, msg in items if topic != '/gnss/measurements'
+                and (k == 0 or stamp > t_ns - 100_000_000) and stamp <= t_ns + 100_000_000]
+        for _, topic, msg in [s for s in side if s[0] > t_ns] + [(t_ns, '/gnss/measurements', epoch)] + [
+                s for s in reversed(side) if s[0] <= t_ns]:
+            second.pubs[topic].publish(msg)
+            second.sent += 1
+        for pub in second.pubs.values():  # in the node's queues before its executor looks: all ready at once
+            assert pub.wait_for_all_acked(rclpy.duration.Duration(seconds=10.0))
+        second.settle_until(lambda n=k + 1: second.node.counts['published'] == n and sum(
+            second.node.counts[f'{kind}_received'] for kind in ('gnss', 'uwb', 'receiver', 'spectrum', 'sdr'))
+            == second.sent)
+    in_bursts = _verdicts(second)
+    assert second.sent == len(items)
+    assert len(in_order) == len(in_bursts) == len(epochs)
+    differing = [k for k, (a, b) in enumerate(zip(in_order, in_bursts, strict=True)) if a != b]
+    assert not differing, (f'{len(differing)} of {len(epochs)} verdicts differ; at epoch {differing[0]}: '
+                           f'{sorted(set(in_order[differing[0]]) ^ set(in_bursts[differing[0]]))[:6]}')
+    # the bursts did what they are for: the executor handed each epoch over before side inputs that came with it
+    assert second.node.counts['side_inputs_taken_before_epoch'] >= 2 * len(epochs)
+    assert first.node.accounting()['accounting_ok'] and second.node.accounting()['accounting_ok']
+
+
+def test_corrupt_fields_are_rejected_before_the_monitor(rig_factory):
+    """Issue 27 (the long fuzz): a UWB range of 1e300 m or 5e-324 m, a 1-sigma of 1e300 m or an anchor off the Earth
+    was kept as its anchor's newest range and made every later epoch raise in the monitor (a counted core exception,
+    no verdict) until the anchor was heard again; a pseudorange 1-sigma of 5e-324 m divided by zero in the fix. Now
+    they are named rejections (the ranges) or a dropped satellite (the epoch is judged on the rest)."""
+    run = _run()
+    rig = rig_factory()
+    epochs = run.gnss_epochs[:6]
+    ranges = [u for u in run.uwb_ranges if u.stamp_ns <= epochs[2].stamp_ns]
+    items = sorted([(e.stamp_ns, 1, '/gnss/measurements', epoch_to_msg(e)) for e in epochs[:3]]
+                   + [(u.stamp_ns, 0, '/uwb/ranges', uwb_to_msg(u)) for u in ranges], key=lambda t: t[:2])
+    for _, _, topic, msg in items:
+        rig.send(topic, msg)
+    last = ranges[-1]
+    corrupt = []
+    for field, value in (('range_m', 1e300), ('range_m', 5e-324), ('range_std_m', 1e300), ('range_std_m', 5e-324),
+                         ('range_std_m', -math.inf)):
+        msg = uwb_to_msg(last)
+        setattr(msg, field, value)
+        corrupt.append(msg)
+    msg = uwb_to_msg(last)
+    msg.anchor_position.x = 1e300
+    corrupt.append(msg)
+    for k, msg in enumerate(corrupt):  # newer than every valid range of the anchor
+        stamp = last.stamp_ns + 1000 * (k + 1)
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 10**9)
+        rig.send('/uwb/ranges', msg)
+    bad_sat = epoch_to_msg(epochs[3])
+    bad_sat.measurements[0].pseudorange_std_m = 5e-324
+    rig.send('/gnss/measurements', bad_sat)
+    for e in epochs[4:]:
+        rig.send('/gnss/measurements', epoch_to_msg(e))
+    c, reasons = rig.node.counts, rig.node.reasons
+    assert c['core_exceptions'] == 0 and c['published'] == len(epochs)
+    assert reasons['uwb_invalid'] == 2 and reasons['invalid_range_std'] == 3
+    assert reasons['nonphysical_anchor_position'] == 1
+    assert rig.node.dropped_satellites['invalid_measurement_std'] == 1
+    assert rig.node.accounting()['accounting_ok']

@@ -116,3 +116,46 @@ def test_epochs_without_satellite_states_leave_spoofing_unknown():
     assert all(r.spoofing_state in (STATE_UNKNOWN, STATE_NONE) for r in reports)
     assert all(not r.cn0_elevation_model_in_use for r in reports)
     assert all(np.all(np.isnan(r.position_ecef_m)) for r in reports)
+
+
+def _report_fields(report) -> list:
+    """A report as comparable values (NaN equal to NaN)."""
+    return [repr(v) if not isinstance(v, np.ndarray) else repr(v.tolist()) for v in report.__dict__.values()]
+
+
+@pytest.mark.slow
+def test_side_inputs_count_by_stamp_not_by_when_they_are_given():
+    """Issue 27 item 6: ranges stamped after an epoch that are given before it (a GNSS receiver's epochs often come
+    later than the UWB ranges of the same instant) are held for the next epoch: the reports equal those of a replay
+    in stamp order. Before, the epoch used them (the newest range of each anchor)."""
+    run = _run()
+    epochs = run.gnss_epochs[:100]
+    ranges = [u for u in run.uwb_ranges if u.stamp_ns <= epochs[-1].stamp_ns]
+    in_order = IntegrityMonitor()
+    items = sorted([(e.stamp_ns, 1, e) for e in epochs] + [(u.stamp_ns, 0, u) for u in ranges], key=lambda t: t[:2])
+    expected = [in_order.process_epoch(m) if kind else in_order.add_uwb(m) for _, kind, m in items]
+    expected = [_report_fields(r) for r in expected if r is not None]
+    early = IntegrityMonitor()
+    got, given = [], 0
+    for e in epochs:  # every range up to 0.3 s after the epoch first (newest first), then the epoch
+        due = [u for u in ranges[given:] if u.stamp_ns <= e.stamp_ns + 300_000_000]
+        for u in reversed(due):
+            early.add_uwb(u)
+        given += len(due)
+        assert early.held_inputs > 0 or e is epochs[-1]
+        got.append(_report_fields(early.process_epoch(e)))
+    assert len(got) == len(expected) == len(epochs)
+    differing = [k for k, (a, b) in enumerate(zip(got, expected, strict=True)) if a != b]
+    assert not differing, f'{len(differing)} of {len(epochs)} reports differ (first: epoch {differing[0]})'
+
+
+def test_held_side_inputs_are_bounded():
+    run = _run()
+    mon = IntegrityMonitor(replace(IntegrityMonitor().params, max_held_inputs=2))
+    for u in run.uwb_ranges[:5]:
+        mon.add_uwb(u)
+    assert mon.held_inputs == 2 and mon.counts["inputs_applied_before_an_epoch"] == 3
+    mon.process_epoch(run.gnss_epochs[-1])
+    assert mon.held_inputs == 0
+    with pytest.raises(ValueError, match="max_held_inputs"):
+        replace(IntegrityMonitor().params, max_held_inputs=-1)

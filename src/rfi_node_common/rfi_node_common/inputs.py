@@ -143,6 +143,36 @@ class InputSubscription:
             raise AttributeError(name)
         return getattr(self.subscription, name)
 
+    def take_pending(self, limit: int = 10_000) -> int:
+        """Handle now the messages that have reached the subscription but wait for the executor; returns how many.
+
+        Each goes through the subscription's callback (counted, guarded, as if the executor had taken it). A node
+        calls this from another input's callback when what it computes there must not depend on the order in
+        which the executor serves its subscriptions: a ``SingleThreadedExecutor`` takes one message per ready
+        subscription per wait, in the order the subscriptions were created, so under load a message that came
+        later on one topic can be handled before those that came earlier on another. The executor's own take of
+        a subscription emptied here finds nothing and calls nothing. ``limit`` bounds one call (a publisher that
+        floods the topic cannot keep the caller here for ever).
+        """
+        from rclpy.exceptions import InvalidHandle
+
+        sub = self.subscription
+        taken = 0
+        while taken < limit:
+            try:
+                with sub.handle:
+                    msg_info = sub.handle.take_message(sub.msg_type, sub.raw)
+            except InvalidHandle:  # destroyed (shutdown, or a switch to best effort): nothing to take
+                return taken
+            if msg_info is None:
+                return taken
+            taken += 1
+            if sub._callback_type.name == 'MessageOnly':  # as rclpy's executor calls it
+                sub.callback(msg_info[0])
+            else:
+                sub.callback(*msg_info)
+        return taken
+
     def to_best_effort(self) -> bool:
         """Make the subscription best effort (it was reliable and adaptive); returns whether it changed."""
         from rclpy.qos import ReliabilityPolicy
