@@ -96,7 +96,8 @@ def check_carrier_from_capture(out: Path) -> None:
         expected = {(c.svid, method) for c in array.correlators for method in (1, 2)}
         assert {(e.svid, e.method) for e in answer.estimates} == expected
         assert all(math.isfinite(e.phase_rad) for e in answer.estimates)
-    # every block received and processed by the correlator (its last report counts the whole stream)
+    # every block received and processed by the correlator (its report at the stream's end, when it processes
+    # the blocks it gathered, counts the whole stream)
     last = {}
     for array in got['/diagnostics']:
         for status in array.status:
@@ -130,10 +131,10 @@ def test_bag_of_the_capture_through_the_suite_with_the_correlator(tmp_path):
     conversion = subprocess.run(
         [sys.executable, '-m', 'rfi_experiments.if_to_bag', str(CAPTURE), str(bag), '--item-type', 'ibyte',
          '--sampling-frequency-hz', '4000000.0', '--bits-per-sample', '2', '--start-time', START,
-         '--block-duration-s', '0.001', '--no-progress'], capture_output=True, text=True, timeout=120)
+         '--block-duration-s', '0.001', '-q'], capture_output=True, text=True, timeout=120)
     assert conversion.returncode == 0, conversion.stderr
     params = tmp_path / 'correlator.yaml'
-    params.write_text('gnss_correlator:\n  ros__parameters:\n    spectrum_inverted: true\n')
+    params.write_text('gnss_correlator:' + PARAMS.split('gnss_correlator:', 1)[1])
     run([str(bag), '--transport', 'processes', '--with-correlator', '--params-file', str(params), '--no-report'],
         tmp_path / 'run')
     check_carrier_from_capture(tmp_path / 'run')

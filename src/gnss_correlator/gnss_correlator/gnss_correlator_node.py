@@ -18,10 +18,11 @@ the receiver is rebuilt, /diagnostics says ERROR, and the node keeps running.
 
 Batching: accepted blocks that continue one another (the next ``first_sample_index``, the same rate, IF and sample
 type) are gathered until they hold :data:`BATCH_S` of stream and handed to the receiver as one block (the first's
-stamp): its per-call cost made a stream of 1-ms blocks cost 2.5 times its tracking (:data:`BATCH_S`). The receiver
+stamp): its per-call cost made a stream of 1-ms blocks cost 2.5 times as much (:data:`BATCH_S`). The receiver
 gives the same periods whatever the block sizes, so this moves the answers by up to BATCH_S, not their values; blocks
 still gathered when the input has been silent for :data:`IDLE_FLUSH_S` (wall time: the end of a stream) are processed
-then. A block that does not continue the gathered ones (a gap, a format change, a stamp-gate restart) first has them
+then, and a /diagnostics report follows (stamped with the last block's stamp: the counters of the whole stream). A
+block that does not continue the gathered ones (a gap, a format change, a stamp-gate restart) first has them
 processed.
 
 Diagnostics (every ``diagnostics_period_s`` of accepted stamp time): the counters, the tracked PRNs;
@@ -240,7 +241,9 @@ class GnssCorrelatorNode(Node):
 
     def _flush_when_idle(self) -> None:
         if self._pending and time.monotonic() - self._last_block_at >= IDLE_FLUSH_S:
+            last_stamp_ns = self._pending[-1].stamp_ns
             self._flush()
+            self.diag_pub.publish(self.diagnostics(last_stamp_ns))
 
     def _apply_parameters(self, old: CorrelatorNodeParams, new: CorrelatorNodeParams) -> None:
         """A change of the settable parameters (the diagnostics ones of NodeDiagnosticsParams)."""
