@@ -50,17 +50,19 @@ gnss_correlator:
 (docs/gnss_correlator/README.md)."""
 
 
-def run(args: list[str], out: Path) -> subprocess.CompletedProcess:
+def run(args: list[str], out: Path, stdin: bytes | None = None) -> subprocess.CompletedProcess:
     proc = subprocess.Popen([sys.executable, '-m', 'rfi_experiments.run', *args, '--out', str(out), '--no-progress',
                              '--timeout', '240',
                              '--record-outputs', str(out / 'outputs')],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdin=subprocess.PIPE if stdin is not None else subprocess.DEVNULL,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
-        stdout, stderr = proc.communicate(timeout=600)
+        out_bytes, err_bytes = proc.communicate(stdin, timeout=600)
+        stdout, stderr = out_bytes.decode(errors='replace'), err_bytes.decode(errors='replace')
     except subprocess.TimeoutExpired:
         proc.send_signal(signal.SIGINT)  # run stops its node processes on Ctrl-C
-        stdout, stderr = proc.communicate(timeout=60)
-        pytest.fail(f'run took over 600 s (interrupted, nodes stopped):\n{stderr[-3000:]}')
+        _, err_bytes = proc.communicate(timeout=60)
+        pytest.fail(f'run took over 600 s (interrupted, nodes stopped):\n{err_bytes.decode(errors="replace")[-3000:]}')
     done = subprocess.CompletedProcess(proc.args, proc.returncode, stdout, stderr)
     assert done.returncode == 0, done.stderr
     assert 'Traceback' not in done.stderr
@@ -123,6 +125,17 @@ def test_if_capture_to_carrier_phase_in_one_command(tmp_path):
     logs = {p.name for p in (tmp_path / 'run' / 'logs').iterdir()}
     assert {'if_source.log', 'rfi_monitor.log', 'gnss_correlator.log', 'imm_carrier.log'} <= logs
     assert not {'gnss_integrity.log', 'uwb_gnss_fusion.log'} & logs  # no input for them on an IF stream alone
+
+
+@pytest.mark.slow
+def test_if_capture_through_a_pipe_to_carrier_phase(tmp_path):
+    """The capture written to run's standard input (``--if-input -``), as an SDR tool's pipe gives it."""
+    params = tmp_path / 'front_end.yaml'
+    params.write_text(PARAMS)
+    done = run(['--transport', 'processes', '--with-correlator', '--if-input', '-', '--params-file', str(params)],
+               tmp_path / 'run', stdin=CAPTURE.read_bytes())
+    assert f'{BLOCKS} IF blocks of -' in done.stdout
+    check_carrier_from_capture(tmp_path / 'run')
 
 
 @pytest.mark.slow

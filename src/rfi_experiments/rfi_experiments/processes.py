@@ -256,13 +256,16 @@ class ChildProcesses:
         self.procs: dict[str, subprocess.Popen] = {}
         self._logs: dict[str, TextIO] = {}
 
-    def start(self, name: str, command: list[str], *, stderr_to_terminal: bool = False) -> subprocess.Popen:
+    def start(self, name: str, command: list[str], *, stderr_to_terminal: bool = False,
+              inherit_stdin: bool = False) -> subprocess.Popen:
+        """Start ``command``; its standard input is this process's with ``inherit_stdin`` (if_source reading
+        ``-``), else none."""
         self.log_dir.mkdir(parents=True, exist_ok=True)
         log = open(self.log_dir / f'{name}.log', 'w')  # noqa: SIM115 (closed in stop())
         self._logs[name] = log
         log.write('$ ' + ' '.join(command) + '\n')
         log.flush()
-        proc = subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=log,
+        proc = subprocess.Popen(command, stdin=None if inherit_stdin else subprocess.DEVNULL, stdout=log,
                                 stderr=None if stderr_to_terminal else subprocess.STDOUT, start_new_session=True)
         self.procs[name] = proc
         return proc
@@ -463,7 +466,7 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
         else:
             feeder_name = 'if_source'
             player = children.start('if_source', _if_source_command(args, feeder, params_files, namespace, forwarded,
-                                                                    endpoints))
+                                                                    endpoints), inherit_stdin=args.if_input == '-')
         while player.poll() is None:
             executor.spin_once(timeout_sec=0.05)
             children.check_alive(node_names)
@@ -507,7 +510,8 @@ def _if_source_command(args: argparse.Namespace, source: str, params_files: list
     command = [source, '--ros-args']
     for params_file in params_files:
         command += ['--params-file', params_file]
-    command += ['-p', f'input:={args.if_input}', '-p', f'wait_for_subscribers:={subscribers}',
+    quoted = "'" + str(args.if_input).replace("'", "''") + "'"  # a YAML string: "-" or "123" alone are not
+    command += ['-p', f'input:={quoted}', '-p', f'wait_for_subscribers:={subscribers}',
                 '-p', f'wait_timeout_s:={float(args.timeout)!r}', '-p', 'exit_at_end:=true']
     command += namespace_arguments(namespace, ['/diagnostics'])
     return command + (forwarded[1:] if forwarded else [])
