@@ -21,7 +21,8 @@ type) are gathered until they hold :data:`BATCH_S` of stream and handed to the r
 stamp): its per-call cost made a stream of 1-ms blocks cost 2.5 times as much (:data:`BATCH_S`). The receiver
 gives the same periods whatever the block sizes, so this moves the answers by up to BATCH_S, not their values; blocks
 still gathered when the input has been silent for :data:`IDLE_FLUSH_S` (wall time: the end of a stream) are processed
-then, and a /diagnostics report follows (stamped with the last block's stamp: the counters of the whole stream). A
+then; and once the input has been silent that long after a block, a /diagnostics report (stamped with the last
+block's stamp) gives the counters of the whole stream. A
 block that does not continue the gathered ones (a gap, a format change, a stamp-gate restart) first has them
 processed.
 
@@ -155,6 +156,7 @@ class GnssCorrelatorNode(Node):
         self._pending: list[IfBlock] = []  # accepted blocks gathered for the receiver (module docstring)
         self._pending_samples = 0
         self._last_block_at = time.monotonic()
+        self._idle_report_ns: int | None = None  # stamp of the last block accepted since the last idle report
         self._idle_timer = self.create_timer(IDLE_FLUSH_S / 2, self._flush_when_idle)
 
     def _reject(self, reason: str) -> None:
@@ -209,6 +211,7 @@ class GnssCorrelatorNode(Node):
         self._pending.append(block)
         self._pending_samples += samples.size
         self._last_block_at = time.monotonic()
+        self._idle_report_ns = stamp_ns
         if self._pending_samples >= BATCH_S * block.sample_rate_hz:
             self._flush()
         if self._diag_timer.due(stamp_ns):
@@ -240,10 +243,11 @@ class GnssCorrelatorNode(Node):
             self.counts['arrays_published'] += 1
 
     def _flush_when_idle(self) -> None:
-        if self._pending and time.monotonic() - self._last_block_at >= IDLE_FLUSH_S:
-            last_stamp_ns = self._pending[-1].stamp_ns
+        """The end of a stream (no block for IDLE_FLUSH_S): process what is gathered, report once."""
+        if self._idle_report_ns is not None and time.monotonic() - self._last_block_at >= IDLE_FLUSH_S:
             self._flush()
-            self.diag_pub.publish(self.diagnostics(last_stamp_ns))
+            self.diag_pub.publish(self.diagnostics(self._idle_report_ns))
+            self._idle_report_ns = None
 
     def _apply_parameters(self, old: CorrelatorNodeParams, new: CorrelatorNodeParams) -> None:
         """A change of the settable parameters (the diagnostics ones of NodeDiagnosticsParams)."""
