@@ -17,6 +17,15 @@ and so on) and the recorder subscribes there (:func:`suite_topic`): two suites s
 domain do not see each other. With external nodes (``run --external-nodes``) the nodes are not
 started here but expected in the graph (started on another host, say: see
 docs/guide/deployment.md) with reliable inputs; ``play`` and the recorder run here as usual.
+
+With the correlator (``run --with-correlator``) gnss_correlator_node is started too: it takes the same
+``/rfi/if_samples`` as the monitor and publishes the ``/gnss/correlators`` that imm_carrier tracks, so the bag's own
+``/gnss/correlators`` (a simulator's) are not played. With an IF input instead of a bag (``run --if-input FILE``, a
+capture file, ``-`` for standard input, or a named pipe) ``if_source`` takes play's place and only the nodes of the
+IF stream run: the monitor, and with the correlator also gnss_correlator and imm_carrier (:func:`suite_nodes`);
+if_source gets the same ``--params-file`` files (its ``if_source:`` section: the format) and waits for its
+subscribers. The run ends when if_source has ended (end of the file or of the pipe) and each node has answered the
+last block (:func:`if_source_segment`).
 """
 
 from __future__ import annotations
@@ -50,6 +59,16 @@ NODE_EXECUTABLES = (('rfi_monitor', 'rfi_monitor', 'rfi_monitor_node'),
                     ('imm_carrier', 'imm_carrier', 'imm_carrier_node'))
 """(node name, package, executable) of the suite's nodes."""
 
+CORRELATOR_EXECUTABLE = ('gnss_correlator', 'gnss_correlator', 'gnss_correlator_node')
+"""(node name, package, executable) of the correlator, started with ``--with-correlator``."""
+
+IF_STREAM_NODES = ('rfi_monitor', 'gnss_correlator', 'imm_carrier')
+"""The nodes that an IF stream alone feeds (``--if-input``): the others have no input then."""
+
+CORRELATOR_PERIOD_NS = 1_000_000
+"""The correlator's output grid, ns: one CorrelatorArray per 1 ms of the stream, stamped at the interval's end, so
+its last one ends less than this before the end of the last block (gnss_correlator.receiver)."""
+
 NODE_ENDPOINTS = {
     'rfi_monitor': (('/rfi/if_samples',), ('/rfi/jammer_state', '/diagnostics')),
     'gnss_integrity': (('/gnss/measurements', '/uwb/ranges', '/gnss/receiver_interference', '/gnss/receiver_spectrum',
@@ -58,6 +77,7 @@ NODE_ENDPOINTS = {
                         ('/fusion/odometry', '/fusion/local_odometry', '/fusion/fix', '/fusion/datum',
                          '/fusion/status', '/diagnostics')),
     'imm_carrier': (('/gnss/correlators',), ('/carrier/estimates', '/diagnostics')),
+    'gnss_correlator': (('/rfi/if_samples',), ('/gnss/correlators', '/diagnostics')),
 }
 """Node name -> (topics it subscribes, topics it publishes), before remapping."""
 
@@ -72,7 +92,29 @@ OUTPUT_TYPES = {
     '/carrier/estimates': 'rfi_msgs/msg/CarrierPhaseArray',
     '/diagnostics': 'diagnostic_msgs/msg/DiagnosticArray',
 }
-"""Every topic the nodes publish, and its type: what ``processes`` records."""
+"""Every topic the suite's four nodes publish, and its type: what ``processes`` records."""
+
+CORRELATOR_OUTPUT_TYPES = {'/gnss/correlators': 'rfi_msgs/msg/CorrelatorArray'}
+"""What ``processes`` records besides :data:`OUTPUT_TYPES` when the correlator runs."""
+
+
+def suite_nodes(with_correlator: bool, if_input: bool) -> tuple[tuple[str, str, str], ...]:
+    """(node name, package, executable) of the nodes a ``processes`` run starts: the suite's four, plus the
+    correlator with ``with_correlator``; with ``if_input`` (an IF stream, no bag) only those of
+    :data:`IF_STREAM_NODES` (imm_carrier only with the correlator, which feeds it)."""
+    nodes = NODE_EXECUTABLES + ((CORRELATOR_EXECUTABLE,) if with_correlator else ())
+    if if_input:
+        keep = IF_STREAM_NODES if with_correlator else ('rfi_monitor',)
+        nodes = tuple(n for n in nodes if n[0] in keep)
+    return nodes
+
+
+def output_types(nodes: Sequence[tuple[str, str, str]]) -> dict[str, str]:
+    """Topic -> type of what ``nodes`` publish (what the recorder subscribes)."""
+    types = {**OUTPUT_TYPES, **CORRELATOR_OUTPUT_TYPES}
+    names = {name for name, _, _ in nodes}
+    published = {t for name in names for t in NODE_ENDPOINTS[name][1]}
+    return {t: m for t, m in types.items() if t in published}
 
 ANSWERED_BY_STAMP = (('rfi_monitor', ('/rfi/if_samples',), '/rfi/jammer_state'),
                      ('gnss_integrity', ('/gnss/measurements',), '/gnss/integrity'),
@@ -214,13 +256,16 @@ class ChildProcesses:
         self.procs: dict[str, subprocess.Popen] = {}
         self._logs: dict[str, TextIO] = {}
 
-    def start(self, name: str, command: list[str], *, stderr_to_terminal: bool = False) -> subprocess.Popen:
+    def start(self, name: str, command: list[str], *, stderr_to_terminal: bool = False,
+              inherit_stdin: bool = False) -> subprocess.Popen:
+        """Start ``command``; its standard input is this process's with ``inherit_stdin`` (if_source reading
+        ``-``), else none."""
         self.log_dir.mkdir(parents=True, exist_ok=True)
         log = open(self.log_dir / f'{name}.log', 'w')  # noqa: SIM115 (closed in stop())
         self._logs[name] = log
         log.write('$ ' + ' '.join(command) + '\n')
         log.flush()
-        proc = subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=log,
+        proc = subprocess.Popen(command, stdin=None if inherit_stdin else subprocess.DEVNULL, stdout=log,
                                 stderr=None if stderr_to_terminal else subprocess.STDOUT, start_new_session=True)
         self.procs[name] = proc
         return proc
@@ -327,7 +372,10 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
     changes anything else: the nodes take their time from the stamps.
 
     ``args.namespace`` (default ``/``) puts the suite under a namespace (see the module docstring);
-    with ``args.external_nodes`` the nodes are not started but expected in the graph.
+    with ``args.external_nodes`` the nodes are not started but expected in the graph;
+    ``args.with_correlator`` adds gnss_correlator (its ``/gnss/correlators`` feed imm_carrier; ``inputs`` must not
+    hold the topic); ``args.if_input`` (a path, ``-`` or a named pipe; ``args.bag`` then None) feeds the IF
+    stream's nodes from ``if_source`` instead of a bag (module docstring).
 
     Returns:
         ``(ReplayResult, ProcessesRun)``: the recorded outputs (CDR bytes, in arrival order per topic)
@@ -335,7 +383,7 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
 
     Raises:
         RunError: an executable is missing, a process died, discovery or the last outputs did not
-            come within ``--timeout``, or ``play`` failed (the message names it and its log).
+            come within ``--timeout``, or ``play`` (if_source) failed (the message names it and its log).
     """
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
@@ -348,14 +396,23 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
     rate = PROCESSES_DEFAULT_RATE if args.rate is None else args.rate
     namespace = getattr(args, 'namespace', '/')
     external = getattr(args, 'external_nodes', False)
-    paths = {} if external else {name: executable_path(package, exe) for name, package, exe in NODE_EXECUTABLES}
-    play = executable_path('rfi_experiments', 'play')
+    with_correlator = getattr(args, 'with_correlator', False)
+    if_input = getattr(args, 'if_input', None)
+    nodes = suite_nodes(with_correlator, if_input is not None)
+    types = output_types(nodes)
+    endpoints = {name: NODE_ENDPOINTS[name] for name, _, _ in nodes}
+    paths = {} if external else {name: executable_path(package, exe) for name, package, exe in nodes}
     forwarded = ros_arguments(argv)
-    start_s, stop_s = window if window is not None else (0.0, math.inf)
-    with BagReader(args.bag) as reader:
-        seg = _segment(reader, inputs, start_s, None if math.isinf(stop_s) else stop_s - start_s)
-    if seg.first_ns is None or seg.last_ns is None:
-        raise RunError(f'no input message in the selected window of {args.bag}')
+    seg: Segment | None = None
+    if if_input is None:
+        feeder = executable_path('rfi_experiments', 'play')
+        start_s, stop_s = window if window is not None else (0.0, math.inf)
+        with BagReader(args.bag) as reader:
+            seg = _segment(reader, inputs, start_s, None if math.isinf(stop_s) else stop_s - start_s)
+        if seg.first_ns is None or seg.last_ns is None:
+            raise RunError(f'no input message in the selected window of {args.bag}')
+    else:
+        feeder = executable_path('rfi_experiments', 'if_source')
 
     children = ChildProcesses(out / 'logs')
     context = rclpy.context.Context()
@@ -366,7 +423,7 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
     node = rclpy.create_node('rfi_run_recorder', context=context, namespace=namespace)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
-    recorded: dict[str, list[tuple[int, bytes]]] = {t: [] for t in OUTPUT_TYPES}
+    recorded: dict[str, list[tuple[int, bytes]]] = {t: [] for t in types}
     received: dict[str, Any] = {'n': 0, 'at': time.monotonic()}  # messages so far, time of the last
 
     def recorder(topic: str):
@@ -383,11 +440,12 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
     try:
         subs = {t: node.create_subscription(message_class(m), suite_topic(namespace, t), recorder(t), RECORDER_QOS,
                                             raw=True)
-                for t, m in OUTPUT_TYPES.items()}
+                for t, m in types.items()}
+        params_files = [str(namespaced_params_file(Path(f), namespace, out / 'logs')) for f in args.params_file]
         for name, path in paths.items():
             command = [path, '--ros-args']
-            for params_file in args.params_file:
-                command += ['--params-file', str(namespaced_params_file(Path(params_file), namespace, out / 'logs'))]
+            for params_file in params_files:
+                command += ['--params-file', params_file]
             if name == 'imm_carrier':  # run's default, unless a parameters file sets it
                 command += ['-p', f'method:={params["imm_carrier"]["method"]}']
             # the names the node resolves its inputs to (the override is declared under those; another
@@ -397,20 +455,33 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
             command += namespace_arguments(namespace, ['/diagnostics'])
             command += forwarded[1:] if forwarded else []  # after ours: the caller's own -p wins
             children.start(name, command)
-        _wait_for_graph(node, executor, subs, children, args.timeout, namespace, external)
+        _wait_for_graph(node, executor, subs, children, args.timeout, namespace, external, endpoints)
         node_names = list(paths)
         wall_start = time.monotonic()
         quiet = args.no_progress or args.quiet  # play's summary goes to its log either way
-        player = children.start('play', _play_command(args, play, inputs, seg, rate, namespace, forwarded),
-                                stderr_to_terminal=not quiet)
+        if seg is not None:
+            feeder_name = 'play'
+            player = children.start('play', _play_command(args, feeder, inputs, seg, rate, namespace, forwarded,
+                                                          endpoints, types), stderr_to_terminal=not quiet)
+        else:
+            feeder_name = 'if_source'
+            player = children.start('if_source', _if_source_command(args, feeder, params_files, namespace, forwarded,
+                                                                    endpoints), inherit_stdin=args.if_input == '-')
         while player.poll() is None:
             executor.spin_once(timeout_sec=0.05)
             children.check_alive(node_names)
         if player.returncode != 0:
-            raise RunError(f'play exited with code {player.returncode}; the end of {children.log_dir}/play.log:\n'
-                           + children.log_tail('play'))
-        completion = _wait_for_last_outputs(executor, recorded, seg.last_input, received, children, node_names,
-                                            args)
+            raise RunError(f'{feeder_name} exited with code {player.returncode}; the end of '
+                           f'{children.log_dir}/{feeder_name}.log:\n' + children.log_tail(feeder_name))
+        if seg is None:
+            seg = if_source_segment(executor, recorded, children, node_names, args.timeout)
+        last_input = dict(seg.last_input)
+        if with_correlator and 'rfi_monitor' in last_input:
+            # its last array ends within one period before the last block's end, so after the last block's start
+            # less one period (the block is at least one sample long)
+            last_input['gnss_correlator'] = last_input['rfi_monitor'] - CORRELATOR_PERIOD_NS + 1
+        completion = _wait_for_last_outputs(executor, recorded, last_input, received, children, node_names,
+                                            args, with_correlator)
         wall_time_s = received['at'] - wall_start  # the first play's start to the last output
     finally:
         # keep recording while the nodes stop: what they publish on the way out is theirs too
@@ -421,17 +492,78 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
         node.destroy_node()
         executor.shutdown()
         rclpy.try_shutdown(context=context)
+    assert seg.first_ns is not None and seg.last_ns is not None
     result = ReplayResult(outputs={t: v for t, v in recorded.items() if v},
-                          output_types={t: OUTPUT_TYPES[t] for t, v in recorded.items() if v},
+                          output_types={t: types[t] for t, v in recorded.items() if v},
                           inputs={t: n for t, n in seg.counts.items() if n}, wall_time_s=wall_time_s,
                           bag_duration_s=(seg.last_ns - seg.first_ns) * 1e-9)
     return result, ProcessesRun(exit_codes=exit_codes, completion=completion)
 
 
+def _if_source_command(args: argparse.Namespace, source: str, params_files: list[str], namespace: str,
+                       forwarded: list[str], endpoints: dict[str, tuple[tuple[str, ...], tuple[str, ...]]]
+                       ) -> list[str]:
+    """The command line of ``if_source`` for :func:`run_processes` with ``--if-input``: the parameters files (its
+    ``if_source:`` section gives the format), the input, a wait for every subscriber of the IF stream, the
+    namespace, then the caller's ``--ros-args``."""
+    subscribers = sum('/rfi/if_samples' in subscribes for subscribes, _ in endpoints.values())
+    command = [source, '--ros-args']
+    for params_file in params_files:
+        command += ['--params-file', params_file]
+    quoted = "'" + str(args.if_input).replace("'", "''") + "'"  # a YAML string: "-" or "123" alone are not
+    command += ['-p', f'input:={quoted}', '-p', f'wait_for_subscribers:={subscribers}',
+                '-p', f'wait_timeout_s:={float(args.timeout)!r}', '-p', 'exit_at_end:=true']
+    command += namespace_arguments(namespace, ['/diagnostics'])
+    return command + (forwarded[1:] if forwarded else [])
+
+
+def if_source_segment(executor: Any, recorded: dict[str, list[tuple[int, bytes]]], children: ChildProcesses,
+                      node_names: list[str], timeout_s: float) -> Segment:
+    """What an ``if_source`` that has exited published, from its /diagnostics: the blocks (its final report,
+    whose text starts with 'end of input; ', is stamped with the last block's stamp), the first block's stamp (its
+    first report's: the first is due at the first block), the last one's as the monitor's last input.
+
+    Raises:
+        RunError: the final report did not reach the recorder within ``timeout_s``.
+    """
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.serialization import deserialize_message
+
+    deadline = time.monotonic() + timeout_s
+    seen = 0
+    first: int | None = None
+    while True:
+        messages = recorded.get('/diagnostics', [])
+        for _, raw in messages[seen:]:
+            array = deserialize_message(raw, DiagnosticArray)
+            stamp = array.header.stamp.sec * 1_000_000_000 + array.header.stamp.nanosec
+            for status in array.status:
+                if status.name != 'if_source':
+                    continue
+                first = stamp if first is None else min(first, stamp)
+                if status.message.startswith('end of input; '):
+                    values = {kv.key: kv.value for kv in status.values}
+                    blocks = int(values.get('blocks_published', '0'))
+                    if blocks == 0:
+                        raise RunError('if_source published no block (see its log: '
+                                       f'{children.log_dir}/if_source.log)')
+                    return Segment(0.0, None, {'/rfi/if_samples': blocks}, first, stamp, {'rfi_monitor': stamp})
+        seen = len(messages)
+        if time.monotonic() > deadline:
+            raise RunError(f'if_source ended without its final report within {timeout_s:g} s (its log: '
+                           f'{children.log_dir}/if_source.log)')
+        executor.spin_once(timeout_sec=0.05)
+        children.check_alive(node_names)
+
+
 def _play_command(args: argparse.Namespace, play: str, inputs: list[str], seg: Segment, rate: float, namespace: str,
-                  forwarded: list[str]) -> list[str]:
+                  forwarded: list[str], endpoints: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] | None = None,
+                  types: dict[str, str] | None = None) -> list[str]:
     """The command line of ``play`` for :func:`run_processes`: the segment at ``rate`` after the slow start, an
-    answer awaited after each input of :data:`SYNCED`, the subscribers each input must have, the namespace."""
+    answer awaited after each input of :data:`SYNCED`, the subscribers each input must have (those of
+    ``endpoints``, default the suite's four nodes), the namespace."""
+    endpoints = endpoints if endpoints is not None else {n: NODE_ENDPOINTS[n] for n, _, _ in NODE_EXECUTABLES}
+    types = types if types is not None else OUTPUT_TYPES
     command = [play, str(args.bag), '--topics', *inputs, '--rate', repr(rate), '--start', repr(seg.start_s)]
     if seg.duration_s is not None:
         command += ['--duration', repr(seg.duration_s)]
@@ -441,12 +573,12 @@ def _play_command(args: argparse.Namespace, play: str, inputs: list[str], seg: S
                 # the first answers include each node's first-call cost (numba compilation on a
                 # cold cache: 15-30 s per node with three starting at once on two cores)
                 '--sync-timeout', repr(args.timeout)]
-    command += [f'--sync={inp}:{out}' for _, inp, out in SYNCED if inp in inputs]
-    subscribers = {t: sum(t in subscribes for subscribes, _ in NODE_ENDPOINTS.values()) for t in inputs}
+    command += [f'--sync={inp}:{out}' for node, inp, out in SYNCED if inp in inputs and node in endpoints]
+    subscribers = {t: sum(t in subscribes for subscribes, _ in endpoints.values()) for t in inputs}
     command += [f'--expect-subscribers={t}:{n}' for t, n in subscribers.items()]
     if args.no_progress or args.quiet:
         command.append('--no-progress')
-    moved = namespace_arguments(namespace, sorted(set(inputs) | set(OUTPUT_TYPES)))
+    moved = namespace_arguments(namespace, sorted(set(inputs) | set(types)))
     command += ['--ros-args', *moved, '--'] if moved else []
     return command + list(forwarded)
 
@@ -456,9 +588,10 @@ def _raise_interrupt(signum: int, _frame: Any) -> None:
 
 
 def _wait_for_graph(node: Any, executor: Any, subs: dict[str, Any], children: ChildProcesses,
-                    timeout_s: float, namespace: str = '/', external: bool = False) -> None:
-    """Wait until every node (in ``namespace``) shows its endpoints in the graph and the recorder has
-    matched every publisher of the recorded topics.
+                    timeout_s: float, namespace: str = '/', external: bool = False,
+                    endpoints: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] | None = None) -> None:
+    """Wait until every node of ``endpoints`` (default: the suite's four; in ``namespace``) shows its endpoints in
+    the graph and the recorder has matched every publisher of the recorded topics.
 
     Raises:
         RunError: not within ``timeout_s``; a node process exited; an external node's input is best
@@ -466,13 +599,14 @@ def _wait_for_graph(node: Any, executor: Any, subs: dict[str, Any], children: Ch
     """
     from rclpy.qos import ReliabilityPolicy
 
+    endpoints = endpoints if endpoints is not None else {n: NODE_ENDPOINTS[n] for n, _, _ in NODE_EXECUTABLES}
     deadline = time.monotonic() + timeout_s
     ns = '/' + namespace.strip('/')
     while True:
-        children.check_alive([] if external else [n for n, _, _ in NODE_EXECUTABLES])
+        children.check_alive([] if external else list(endpoints))
         missing = []
         best_effort = []
-        for name, (subscribes, publishes) in NODE_ENDPOINTS.items():
+        for name, (subscribes, publishes) in endpoints.items():
             for topic in subscribes:
                 resolved = node.resolve_topic_name(suite_topic(namespace, topic))
                 ours = [i for i in node.get_subscriptions_info_by_topic(resolved)
@@ -512,11 +646,16 @@ def _wait_for_graph(node: Any, executor: Any, subs: dict[str, Any], children: Ch
 
 def _wait_for_last_outputs(executor: Any, recorded: dict[str, list[tuple[int, bytes]]],
                            last_input: dict[str, int], received: dict[str, Any],
-                           children: ChildProcesses, node_names: list[str], args: argparse.Namespace) -> str:
+                           children: ChildProcesses, node_names: list[str], args: argparse.Namespace,
+                           with_correlator: bool = False) -> str:
     """After ``play`` has finished (every input acknowledged by its subscriber), wait until each node
     with a one-to-one stamped output has published it for its last input and nothing has been
     published for ``--settle`` s; a node whose last input was rejected (no output for it) is taken as
     done after five times that quiet time. Return how completion was decided.
+
+    With the correlator, its last input (``last_input['gnss_correlator']``) is the least stamp its last array can
+    have, and imm_carrier's is the stamp of the last array recorded from it (imm_carrier answers each array with
+    its stamp); a correlator that tracks no satellite publishes none and is taken as done by the quiet time.
 
     Raises:
         RunError: not complete within ``--timeout`` s.
@@ -525,20 +664,31 @@ def _wait_for_last_outputs(executor: Any, recorded: dict[str, list[tuple[int, by
 
     from rfi_experiments.bag_io import message_class
 
-    classes = {topic: message_class(OUTPUT_TYPES[topic]) for _, _, topic in ANSWERED_BY_STAMP}
+    answered = [(name, topic) for name, _, topic in ANSWERED_BY_STAMP if topic in recorded]
+    if with_correlator:
+        answered.append(('gnss_correlator', '/gnss/correlators'))
+    types = {**OUTPUT_TYPES, **CORRELATOR_OUTPUT_TYPES}
+    classes = {topic: message_class(types[topic]) for _, topic in answered}
+
+    def last_stamp(topic: str) -> int | None:
+        if not recorded.get(topic):
+            return None
+        stamp = deserialize_message(recorded[topic][-1][1], classes[topic]).header.stamp
+        return stamp.sec * 1_000_000_000 + stamp.nanosec
+
     start = time.monotonic()
     while True:
         executor.spin_once(timeout_sec=0.05)
         children.check_alive(node_names)
         waiting = []
-        for name, _, topic in ANSWERED_BY_STAMP:
-            expected = last_input.get(name)
+        for name, topic in answered:
+            if with_correlator and name == 'imm_carrier':
+                expected = last_stamp('/gnss/correlators')
+            else:
+                expected = last_input.get(name)
             if expected is None:
                 continue
-            got = None
-            if recorded[topic]:
-                stamp = deserialize_message(recorded[topic][-1][1], classes[topic]).header.stamp
-                got = stamp.sec * 1_000_000_000 + stamp.nanosec
+            got = last_stamp(topic)
             if got is None or got < expected:
                 waiting.append(f'{name}: last {topic} stamped {got} ns, its last input {expected} ns')
         quiet_s = time.monotonic() - max(received['at'], start)

@@ -19,6 +19,14 @@ their topics exactly as on a robot, in one of three ways (``--transport``):
   in one domain; ``--external-nodes`` starts no node but replays to and records from nodes already
   running (on another host, say).
 
+With ``--with-correlator`` (processes only) gnss_correlator_node runs beside them on the same
+``/rfi/if_samples`` and feeds imm_carrier its ``/gnss/correlators`` (the bag's own are not played); with
+``--if-input FILE`` instead of a bag (a capture file, ``-`` for standard input or a named pipe: a live SDR) if_source
+feeds the IF stream's nodes (the monitor, and with the correlator gnss_correlator and imm_carrier) with the format
+of the ``if_source:`` section of a ``--params-file``: the one command from an SDR or a capture to jammer state and
+carrier phase (docs/guide/if_to_carrier.md). Without a bag there is no truth to score against: ``replay.md`` then
+holds the counts, the diagnostics and a per-satellite table of the carrier phase estimates.
+
 After the last input the in-process transports call each node's ``end_of_input()`` (the fusion
 node then processes what its re-ordering buffer holds); a node process does the same by itself
 when its input stops (the fusion's ``idle_flush_s``).
@@ -64,7 +72,7 @@ REPORT_TOPICS = ('/rfi/jammer_state', '/gnss/integrity', '/fusion/odometry', '/f
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog='run', description=__doc__.splitlines()[0].split(': ', 1)[1])
-    parser.add_argument('bag', help='bag directory (mcap)')
+    parser.add_argument('bag', nargs='?', default=None, help='bag directory (mcap); none with --if-input')
     parser.add_argument('--out', default='report', help='report folder to write (default: report)')
     parser.add_argument('--rate', type=float, default=None,
                         help='replay pace as a multiple of real time (default: as fast as possible with direct and '
@@ -105,6 +113,16 @@ def build_parser() -> argparse.ArgumentParser:
                              'imm_carrier already running in --namespace (e.g. on another host, see '
                              'docs/guide/deployment.md), their inputs reliable '
                              '(-p qos_overrides.<topic>.subscription.reliability:=reliable)')
+    parser.add_argument('--with-correlator', action='store_true',
+                        help='processes: also start gnss_correlator_node on /rfi/if_samples; its /gnss/correlators '
+                             'feed imm_carrier (the bag\'s own /gnss/correlators are not played). Its parameters '
+                             '(spectrum_inverted, ...) from a --params-file section gnss_correlator:')
+    parser.add_argument('--if-input', metavar='FILE|-',
+                        help='processes, instead of a bag: feed the IF stream\'s nodes (rfi_monitor; with '
+                             '--with-correlator also gnss_correlator and imm_carrier) from if_source reading this '
+                             'capture file, "-" (standard input) or named pipe, in the format given by the '
+                             'if_source: section of a --params-file (item_type, sampling_frequency_hz, ...; '
+                             'docs/guide/if_to_carrier.md); ends at the end of the input')
     parser.add_argument('--no-report', action='store_true',
                         help='write only replay.md (counts, diagnostics) and --record-outputs, no figures or scores '
                              '(index.md, summary.json): about 10 s less per run')
@@ -210,6 +228,30 @@ def delivery_warnings(result: Any) -> list[str]:
     return warnings
 
 
+def carrier_summary(messages: list) -> list[str]:
+    """A markdown table of /carrier/estimates (rfi_msgs/CarrierPhaseArray, in order): per satellite and method the
+    estimates, the stamps of the first and last (s after the first array), the locked fraction of its last 100
+    estimates, the cycle slips counted, the last phase and its 1-sigma. Empty without a message."""
+    if not messages:
+        return []
+    t0 = messages[0].header.stamp.sec + messages[0].header.stamp.nanosec * 1e-9
+    rows: dict[tuple[int, int, int], list[tuple[float, Any]]] = {}
+    for array in messages:
+        t = array.header.stamp.sec + array.header.stamp.nanosec * 1e-9 - t0
+        for e in array.estimates:
+            rows.setdefault((e.constellation, e.svid, e.method), []).append((t, e))
+    methods = {1: 'IMM', 2: 'PLL', 3: 'KF'}
+    lines = ['| constellation / svid | method | estimates | first / last stamp (s) | locked, last 100 | cycle slips | '
+             'last phase (rad) | its 1-sigma (rad) |', '|---|---|---|---|---|---|---|---|']
+    for (constellation, svid, method), got in sorted(rows.items()):
+        tail = [e.locked for _, e in got[-100:]]
+        last = got[-1][1]
+        lines.append(f'| {constellation} / {svid} | {methods.get(method, method)} | {len(got)} | '
+                     f'{got[0][0]:.3f} / {got[-1][0]:.3f} | {100 * sum(tail) / len(tail):.0f} % | {last.cycle_slips} | '
+                     f'{last.phase_rad:.3f} | {last.phase_std_rad:.3f} |')
+    return lines
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     from rclpy.utilities import remove_ros_args
 
@@ -225,8 +267,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         value = getattr(args, name)
         if not (math.isfinite(value) and (value > 0 or (name == 'warmup' and value == 0))):
             return fail(f'--{name.replace("_", "-")} must be a finite number > 0 (got {value})')
-    if args.transport != 'processes' and (args.namespace != '/' or args.external_nodes):
-        return fail('--namespace and --external-nodes apply to --transport processes only')
+    if args.transport != 'processes' and (args.namespace != '/' or args.external_nodes or args.with_correlator
+                                          or args.if_input is not None):
+        return fail('--namespace, --external-nodes, --with-correlator and --if-input apply to --transport processes '
+                    'only')
+    if (args.bag is None) == (args.if_input is None):
+        return fail('give a bag or --if-input FILE (not both)')
+    if args.if_input is not None and (args.start != 0.0 or args.duration is not None):
+        return fail('--start and --duration select a window of a bag; with --if-input cut the capture instead')
     if args.external_nodes and args.params_file:
         return fail('--params-file sets the parameters of the nodes run starts; with --external-nodes give it to the '
                     'nodes themselves (--ros-args --params-file FILE)')
@@ -239,15 +287,27 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as err:
         return fail(str(err))
     params.setdefault('imm_carrier', {}).setdefault('method', 'both')
-    try:
-        with BagReader(args.bag) as reader:
-            topics = reader.topics
-            replayed_ns = window_ns(reader.start_ns, window)
-    except BagError as err:
-        return fail(str(err))
-    inputs = sorted(t for t in topics if not t.startswith('/truth/'))
-    if not inputs:
-        return fail(f'{args.bag} holds no input topics (only {", ".join(sorted(topics)) or "nothing"})')
+    if args.if_input is not None:
+        if args.if_input != '-' and not Path(args.if_input).exists():
+            return fail(f'--if-input {args.if_input}: no such file or named pipe')
+        if 'if_source' not in params:
+            return fail('--if-input needs the format of the samples: a --params-file with an if_source: section '
+                        '(item_type, sampling_frequency_hz, ...; docs/guide/if_to_carrier.md)')
+        topics: dict[str, tuple[str, int]] = {}
+        replayed_ns: tuple[int | None, int | None] = (None, None)
+        inputs = ['/rfi/if_samples']
+    else:
+        try:
+            with BagReader(args.bag) as reader:
+                topics = reader.topics
+                replayed_ns = window_ns(reader.start_ns, window)
+        except BagError as err:
+            return fail(str(err))
+        # with the correlator, imm_carrier's correlators are its, not the bag's
+        inputs = sorted(t for t in topics if not t.startswith('/truth/')
+                        and not (args.with_correlator and t == '/gnss/correlators'))
+        if not inputs:
+            return fail(f'{args.bag} holds no input topics (only {", ".join(sorted(topics)) or "nothing"})')
     if args.record_outputs and Path(args.record_outputs).exists():
         return fail(f'--record-outputs {args.record_outputs} exists already')
     out = Path(args.out)
@@ -263,8 +323,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             print('run: interrupted; node processes stopped', file=sys.stderr)
             return 130
         rate = PROCESSES_DEFAULT_RATE if args.rate is None else args.rate
+        feeder = f'if_source reading {args.if_input}' if args.if_input is not None else f'play at {rate:g}x'
         how = (f'processes transport: {"external nodes" if args.external_nodes else "node executables"} fed by '
-               f'play at {rate:g}x' + ('' if args.namespace == '/' else f', namespace {args.namespace}'))
+               f'{feeder}' + ('' if args.namespace == '/' else f', namespace {args.namespace}'))
         notes.append(f'Completion: {run.completion}.')
         notes.append('Exit codes after SIGINT: ' + ', '.join(f'{n} {c}' for n, c in run.exit_codes.items())
                      + '. Output of each process: [logs/](logs/).')
@@ -289,13 +350,23 @@ def main(argv: Sequence[str] | None = None) -> int:
         except BagError as err:
             return fail(str(err))
     diagnostics = diagnostics_summary(result.messages('/diagnostics')) if '/diagnostics' in result.outputs else {}
-    outputs = {t: result.messages(t) for t in REPORT_TOPICS if t in result.outputs}
+    # the correlator's satellites are not the bag's simulated ones: its carrier phases are listed, not scored
+    outputs = {t: result.messages(t) for t in REPORT_TOPICS
+               if t in result.outputs and not (args.with_correlator and t == '/carrier/estimates')}
     window_text = '' if window is None else (
         f' (window {window[0]:g}-{"end" if math.isinf(window[1]) else f"{window[1]:g}"} s of the bag)')
-    replay_line = (f'{sum(result.inputs.values())} input messages{window_text} replayed through rfi_monitor, '
-                   f'gnss_integrity, uwb_gnss_fusion and imm_carrier ({how}): {result.bag_duration_s:.1f} s of data in '
-                   f'{result.wall_time_s:.1f} s, {result.real_time_factor:.1f}x real time.')
-    lines = [f'# Replay of {args.bag}', '', replay_line, '']
+    if args.if_input is not None:
+        names = 'rfi_monitor' + (', gnss_correlator and imm_carrier' if args.with_correlator else '')
+        replay_line = (f'{sum(result.inputs.values())} IF blocks of {args.if_input} through {names} ({how}): '
+                       f'{result.bag_duration_s:.3f} s of stream (first to last block stamp) in '
+                       f'{result.wall_time_s:.1f} s.')
+    else:
+        names = ('rfi_monitor, gnss_integrity, uwb_gnss_fusion, ' + ('gnss_correlator ' if args.with_correlator
+                                                                     else '') + 'and imm_carrier')
+        replay_line = (f'{sum(result.inputs.values())} input messages{window_text} replayed through {names} '
+                       f'({how}): {result.bag_duration_s:.1f} s of data in {result.wall_time_s:.1f} s, '
+                       f'{result.real_time_factor:.1f}x real time.')
+    lines = [f'# Replay of {args.bag or args.if_input}', '', replay_line, '']
     if notes:
         lines += [' '.join(notes), '']
     lines += ['| topic | direction | messages |', '|---|---|---|']
@@ -305,11 +376,30 @@ def main(argv: Sequence[str] | None = None) -> int:
         lines.append(f'| {t} | out | {len(result.outputs[t])} |')
     for t in sorted(set(topics) - set(inputs)):
         lines.append(f'| {t} | truth (not replayed) | {topics[t][1]} |')
+    carrier = carrier_summary(result.messages('/carrier/estimates')) if (
+        args.with_correlator and '/carrier/estimates' in result.outputs) else []
+    if carrier:
+        lines += ['', '## Carrier phase from the correlator', '',
+                  'Per satellite that gnss_correlator tracked and method of imm_carrier (stamps from the IF stamps, '
+                  's after the first estimate; the estimates themselves: --record-outputs):', '', *carrier]
     for name, values in diagnostics.items():
         lines += ['', f'## Diagnostics of {name}', '', '| key | value |', '|---|---|']
         lines += [f'| {k} | {v} |' for k, v in values.items()]
     (out / 'replay.md').write_text('\n'.join(lines) + '\n')
     say = summary_printer(args.quiet)  # the warnings are on stderr already
+    if args.if_input is not None:
+        say(replay_line)
+        if carrier:
+            say()
+            for line in carrier:
+                say(line)
+            say()
+        elif args.with_correlator:
+            say('no carrier phase estimate: the correlator tracked no satellite (see replay.md, its diagnostics)')
+        for warning in warnings:
+            say(f'warning: {warning}')
+        say(f'counts, diagnostics and carrier phases written to {out / "replay.md"} (no bag: no truth to score)')
+        return 0
     if args.no_report:
         say(replay_line)
         for warning in warnings:
