@@ -222,11 +222,13 @@ def run_once(case: Case, data: Path, n: int, tmp: Path) -> dict[str, object]:
 def in_process_costs(case: Case, seconds: float = 1.5, skip_s: float = 0.5) -> dict[str, float]:
     """The node's own work per ms of stream, without the middleware: the blocks of ``case`` serialised as the
     source sends them, then as the node treats them (deserialise, check, decode, Receiver.process, build the
-    CorrelatorArray, serialise it: what rclpy's publish does), gathered to BATCH_S as the node does; CPU time
-    (this process) per ms of stream after the first ``skip_s`` (acquisition, kernel load), us per step."""
+    CorrelatorArray, serialise it: what rclpy's publish does), gathered to batch_ms as the node does (its
+    default); CPU time (this process) per ms of stream after the first ``skip_s`` (acquisition, kernel load), us
+    per step."""
     from rclpy.serialization import deserialize_message, serialize_message
 
-    from gnss_correlator.gnss_correlator_node import BATCH_S, block_problem, correlator_array
+    from gnss_correlator.gnss_correlator_node import block_problem, correlator_array
+    from gnss_correlator.node_params import CorrelatorNodeParams
     from gnss_correlator.receiver import IfBlock, Receiver, ReceiverConfig
     from rfi_msgs.msg import IfSamples
     from rfi_node_common.if_blocks import decode_counts
@@ -248,7 +250,7 @@ def in_process_costs(case: Case, seconds: float = 1.5, skip_s: float = 0.5) -> d
         m.samples = raw[k * per * width:(k + 1) * per * width].tobytes()
         messages.append(serialize_message(m))
     rx = Receiver(ReceiverConfig())
-    gather = max(1, int(round(BATCH_S / case.block_s)))
+    gather = max(1, int(round(CorrelatorNodeParams.batch_ms * 1e-3 / case.block_s)))
     steps = dict.fromkeys(("deserialise", "check", "decode", "receiver", "build arrays", "serialise arrays"), 0.0)
     pending: list[np.ndarray] = []
     for k, data in enumerate(messages):

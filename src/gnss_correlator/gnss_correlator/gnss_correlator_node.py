@@ -17,14 +17,13 @@ Should the core raise on a block that passed the checks (a bug), the block is co
 the receiver is rebuilt, /diagnostics says ERROR, and the node keeps running.
 
 Batching: accepted blocks that continue one another (the next ``first_sample_index``, the same rate, IF and sample
-type) are gathered until they hold :data:`BATCH_S` of stream and handed to the receiver as one block (the first's
-stamp): its per-call cost made a stream of 1-ms blocks cost 2.5 times as much (:data:`BATCH_S`). The receiver
-gives the same periods whatever the block sizes, so this moves the answers by up to BATCH_S, not their values; blocks
-still gathered when the input has been silent for :data:`IDLE_FLUSH_S` (wall time: the end of a stream) are processed
-then; and once the input has been silent that long after a block, a /diagnostics report (stamped with the last
-block's stamp) gives the counters of the whole stream. A
-block that does not continue the gathered ones (a gap, a format change, a stamp-gate restart) first has them
-processed.
+type) are gathered until they hold ``batch_ms`` of stream and handed to the receiver as one block (the first's
+stamp): its per-call cost made a stream of 1-ms blocks cost 2.5 times as much (``batch_ms``). The receiver
+gives the same periods whatever the block sizes, so this moves the answers by up to ``batch_ms``, not their
+values; blocks still gathered when the input has been silent for ``idle_flush_ms`` (wall time: the end of a stream)
+are processed then; and once the input has been silent that long after a block, a /diagnostics report (stamped
+with the last block's stamp) gives the counters of the whole stream. A block that does not continue the
+gathered ones (a gap, a format change, a stamp-gate restart) first has them processed.
 
 Diagnostics (every ``diagnostics_period_s`` of accepted stamp time): the counters, the tracked PRNs;
 ERROR after a core error since the last report, WARN when more than ``warn_rejected_fraction`` of the
@@ -75,17 +74,6 @@ BLOCK_REASONS = ('unknown_sample_format', 'bad_bits_per_sample', 'bad_sample_rat
                  'short_block', 'long_block', 'bad_first_sample_index', 'values_exceed_bits', 'blank_block',
                  'rate_below_2mhz', 'band_outside_nyquist', 'stamp_malformed', *STAMP_REASONS)
 """Why a block is rejected (``rejected_<reason>``, module docstring)."""
-
-BATCH_S = 0.01
-"""Stream time gathered before the receiver is called, s (module docstring). Measured in process (12 channels,
-4 MS/s complex, simulated, load average 12): Receiver.process costs 0.92 of real time in CPU fed 1-ms blocks and
-0.36 fed 10-ms blocks (its per-call work per channel: the tracker's outputs, the weak-channel check); 1-ms blocks
-are if_source's default and the monitor's."""
-
-IDLE_FLUSH_S = 0.05
-"""Wall time without an input block after which gathered blocks are processed, s (the end of a stream: a live stream
-of blocks shorter than BATCH_S never waits this long between two)."""
-
 
 def block_problem(msg: IfSamples, doppler_max_hz: float, max_block_samples: int) -> str | None:
     """Why a block cannot be correlated (a key of :data:`BLOCK_REASONS` without the stamp ones), or None."""
@@ -157,7 +145,7 @@ class GnssCorrelatorNode(Node):
         self._pending_samples = 0
         self._last_block_at = time.monotonic()
         self._idle_report_ns: int | None = None  # stamp of the last block accepted since the last idle report
-        self._idle_timer = self.create_timer(IDLE_FLUSH_S / 2, self._flush_when_idle)
+        self._idle_timer = self.create_timer(self.params.idle_flush_ms * 5e-4, self._flush_when_idle)
 
     def _reject(self, reason: str) -> None:
         self.counts[f'rejected_{reason}'] += 1
@@ -212,7 +200,7 @@ class GnssCorrelatorNode(Node):
         self._pending_samples += samples.size
         self._last_block_at = time.monotonic()
         self._idle_report_ns = stamp_ns
-        if self._pending_samples >= BATCH_S * block.sample_rate_hz:
+        if self._pending_samples >= self.params.batch_ms * 1e-3 * block.sample_rate_hz:
             self._flush()
         if self._diag_timer.due(stamp_ns):
             self.diag_pub.publish(self.diagnostics(stamp_ns))
@@ -243,8 +231,9 @@ class GnssCorrelatorNode(Node):
             self.counts['arrays_published'] += 1
 
     def _flush_when_idle(self) -> None:
-        """The end of a stream (no block for IDLE_FLUSH_S): process what is gathered, report once."""
-        if self._idle_report_ns is not None and time.monotonic() - self._last_block_at >= IDLE_FLUSH_S:
+        """The end of a stream (no block for ``idle_flush_ms``): process what is gathered, report once."""
+        idle_s = time.monotonic() - self._last_block_at
+        if self._idle_report_ns is not None and idle_s >= self.params.idle_flush_ms * 1e-3:
             self._flush()
             self.diag_pub.publish(self.diagnostics(self._idle_report_ns))
             self._idle_report_ns = None
