@@ -137,12 +137,13 @@ def _bin_mean_phase_kernel(used: np.ndarray, period_frames: float, K: int) -> np
 
 def profile_abscissa_bias(prof: np.ndarray, inband: np.ndarray, phase_mean: np.ndarray, periods: float,
                           span: float) -> float:
-    """The correction ``ridge`` adds to a frequency read off the folded profile (module docstring): the profile read at a phase (``periods``: the time in periods) on a line through its bins placed at the mean
-    phases of their frames (``bin_mean_phase``), minus what ``ridge._profile_frequency`` reads there (the bins at their
-    centres), cycles/sample: between the two nearest bins when it interpolates them; when it reads the nearer bin
-    alone (the other out of band or across the flyback, a step of half the span), on the line through that bin and
-    its neighbour on the same side (the phase moved at most two bins from it). 0 where there is no such neighbour or
-    two bins' mean phases are closer than a quarter bin (the line through them would not be defined well)."""
+    """The correction ``ridge`` adds to a frequency read off the folded profile (module docstring), cycles/sample:
+    the profile read at a phase (``periods``: the time in periods) on a line through its bins placed at the mean
+    phases of their frames (``bin_mean_phase``), minus what ``ridge._profile_frequency`` reads there (the bins at
+    their centres): between the two nearest bins when it interpolates them; when it reads the nearer bin alone (the
+    other out of band or across the flyback, a step of half the span), on the line through that bin and its neighbour
+    on the same side (the phase moved at most two bins from it). 0 where there is no such neighbour or two bins' mean
+    phases are closer than a quarter bin (the line through them would not be defined well)."""
     K = prof.size
     x = float(np.mod(periods, 1.0))
     pos = x * K - 0.5
