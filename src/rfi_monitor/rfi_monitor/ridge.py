@@ -26,9 +26,9 @@ Stages (``analyse``), each described in its module's docstring:
    from the folded profile at the last sample's phase, else the ridge of the last frame moved on by the rate; NaN
    when the jammer is out of the band at the block end. Its 1-sigma: the law's prediction interval, else the RMS
    deviation of the present frames' ridge from the profile (periodic), else from the local straight line through
-   three consecutive frames, but at least one bin / sqrt(12); read from the law or the profile, with the bias of the
-   profile bins' abscissa in quadrature (``rfi_monitor.sweep_law``'s module docstring: a period of a whole number of
-   frames puts every frame of a bin at its start, not its centre).
+   three consecutive frames, but at least one bin / sqrt(12). The law is fitted, and the profile read, with each
+   profile bin at the mean phase of its frames, not at its centre (``rfi_monitor.sweep_law``'s module docstring: a
+   period of a whole number of frames puts every frame of a bin at its start).
 
 A frequency track that is coherent but not periodic inside the block (a single slow sweep, a period
 longer than ``max_period_s``) is reported as ``sweeping`` without a period: present in at least
@@ -226,7 +226,8 @@ class _Sweep:
     inband: np.ndarray | None = None
     se: np.ndarray | None = None
     phase_mean: np.ndarray | None = None
-    """the mean phase of the frames in each bin of prof (``sweep_law.bin_mean_phase``): for the 1-sigma only"""
+    """the mean phase of the frames in each bin of prof (``sweep_law.bin_mean_phase``): where the law is fitted and the
+    profile read"""
 
 
 def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length: int = 0,
@@ -372,20 +373,19 @@ def _block_end_frequency(n: int, sw: _Sweep, rd: FrameRidges, periodic: bool, pe
     prof_k, inband_k = sw.prof, sw.inband
     if periodic and prof_k is not None and inband_k is not None and sw.shape in (SAWTOOTH_UP, SAWTOOTH_DOWN,
                                                                                  HOOKED_SAWTOOTH):
-        law = _sawtooth_law(prof_k, inband_k, per_fr * hop, L, sw.high - sw.low)
+        law = _sawtooth_law(prof_k, inband_k, per_fr * hop, L, sw.high - sw.low, sw.phase_mean)
     if law is not None and inband_k is not None:
         # saw-tooth: the sweep law fitted away from the flyback (where frames straddle it) gives the
         # swept band's ends, the mean rate and the frequency at the block end
-        sw.low, sw.high, sw.start, sw.rate, freq, fstd = read_law(law, inband_k, per_fr, L, t_end, prof_k,
-                                                                   sw.phase_mean)
+        sw.low, sw.high, sw.start, sw.rate, freq, fstd = read_law(law, inband_k, per_fr, L, t_end)
     elif periodic and prof_k is not None and inband_k is not None and sw.se is not None:
         # read from one or two profile bins; the 1-sigma stays the frames' scatter around the profile (the sweep at
         # the block end deviates from a bin's median as its frames do; the bins' standard errors alone, tried for
-        # issue 26 item 3, covered 0-65 % of the errors where the sweep is not smooth)
+        # issue 26 item 3, covered 0-65 % of the errors where the sweep is not smooth); read with the bins at their
+        # frames' mean phases (sweep_law.profile_abscissa_bias: the correction to the read at the bins' centres)
         freq = _profile_frequency(prof_k, inband_k, sw.se, t_end / per_fr, sw.high - sw.low)[0]
         if math.isfinite(freq) and sw.phase_mean is not None:
-            fstd = math.hypot(fstd, profile_abscissa_bias(prof_k, inband_k, sw.phase_mean, t_end / per_fr,
-                                                          sw.high - sw.low))
+            freq += profile_abscissa_bias(prof_k, inband_k, sw.phase_mean, t_end / per_fr, sw.high - sw.low)
     elif present[-1]:
         freq = float(f[-1]) + (float(sw.rate) * (t_end - (nfr - 1)) * hop if math.isfinite(sw.rate) else 0.0)
     if math.isfinite(freq) and not (float(freqs[0]) - 0.5 / L <= freq <= float(freqs[-1]) + 0.5 / L):

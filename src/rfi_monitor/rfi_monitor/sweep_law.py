@@ -3,21 +3,20 @@
 
 The flyback is the largest step between consecutive in-band bins of the folded profile
 (``rfi_monitor.sweep_shape``); a quadratic in the elapsed sweep fraction (a rate that changes along the sweep) is
-fitted to the bins away from it (``_sawtooth_law``). The law gives the swept band's ends, the mean rate and the
-frequency at the block's last sample (read at that sample's phase of the period: ``read_law``), its 1-sigma from the
-fit's residual and from the bias of the profile bins' abscissa (``abscissa_bias``; ``profile_abscissa_bias`` for a
-frequency read off the profile itself).
+fitted to the bins away from it (``_sawtooth_law``), each bin placed at the mean phase of its frames
+(``bin_mean_phase``). The law gives the swept band's ends, the mean rate and the frequency at the block's last sample
+(read at that sample's phase of the period: ``read_law``), its 1-sigma from the fit's residual and the law's standard
+error there. ``profile_abscissa_bias`` is the same correction for a frequency read off the profile itself.
 
-The abscissa bias (issue 26 item 3): a profile bin k stands, in the law's fit and in the profile's reading, for the
-centre of its phase interval, ``(k + 0.5) / K``; the frames in it lie wherever the frame grid puts them. When the
-period is not close to a whole number of frames their phases spread over the bin and average to its centre; when it
-is (a 12 us sweep at 4 or 12 MS/s with frames of 16 samples: 6 and 18 frames exactly), every frame of bin k sits at
-the same phase, k / K for a whole number, and the profile is read half a bin late: the sweep's rate times half a
-hop, 70 and 125 kHz on the rows of docs/rfi_monitor/real_jammers.md that showed it. The frequency is not corrected
-here (issue 26 item 3 left the published frequencies as they were); the bias the block's own frames give (the law
-refitted at the mean phase of each bin's frames, or the profile interpolated there, minus what is published) enters
-the 1-sigma in quadrature, as a known correction not applied enlarges the stated uncertainty (JCGM 100:2008, the
-GUM, F.2.4.5). docs/rfi_monitor/frequency_std.md gives the coverage before and after.
+The bins' abscissa (issue 26 item 3): a profile bin k stands for the centre of its phase interval,
+``(k + 0.5) / K``, but the frames in it lie wherever the frame grid puts them. When the period is not close to a
+whole number of frames their phases spread over the bin and average to its centre; when it is (a 12 us sweep at 4 or
+12 MS/s with frames of 16 samples: 6 and 18 frames exactly), every frame of bin k sits at the same phase, k / K for a
+whole number, and a law fitted (or a profile read) at the bins' centres reads the frequency half a bin late: the
+sweep's rate times half a hop, 70 and 125 kHz on the rows of docs/rfi_monitor/real_jammers.md that showed it. Until
+then that bias was added to the 1-sigma in quadrature; now the frequency is corrected (the law fitted, the profile
+read, at the mean phase of each bin's frames), so the bias is 0 by construction where the frames tell the phase.
+docs/rfi_monitor/frequency_std.md gives the errors and the coverage before and after.
 """
 
 from __future__ import annotations
@@ -30,8 +29,8 @@ from numba import njit
 from rfi_monitor.numpy_kernels import pairwise_sum, polyfit, polyval
 
 
-def _sawtooth_law(prof: np.ndarray, inband: np.ndarray, period_samples: float, L: int, span: float
-                  ) -> tuple[float, np.ndarray, float, np.ndarray] | None:
+def _sawtooth_law(prof: np.ndarray, inband: np.ndarray, period_samples: float, L: int, span: float,
+                  phase_mean: np.ndarray | None = None) -> tuple[float, np.ndarray, float, np.ndarray] | None:
     """(flyback phase, polynomial in the elapsed sweep fraction, RMS residual of the fit, the elapsed fractions of the
     bins fitted) of a saw-tooth's folded profile, or None.
 
@@ -39,16 +38,22 @@ def _sawtooth_law(prof: np.ndarray, inband: np.ndarray, period_samples: float, L
     bin) of it are left out: their frames straddle the flyback. A quadratic (a rate that changes along the
     sweep; linear with fewer than 8 bins) is fitted to the others against the elapsed fraction of the
     sweep since the flyback; None when fewer than 4 bins remain or the fit leaves an RMS residual above a
-    tenth of the span. Compiled (``_sawtooth_law_kernel``: np.polyfit's scaled least squares)."""
+    tenth of the span. Each bin is placed at the mean phase of its frames, phase_mean (``bin_mean_phase``; the bins'
+    centres when None): the module docstring says why. Which bins are fitted is decided on their centres. Compiled
+    (``_sawtooth_law_kernel``: np.polyfit's scaled least squares)."""
+    K = prof.size
+    pm = (np.arange(K) + 0.5) / K if phase_mean is None else np.ascontiguousarray(phase_mean, dtype=np.float64)
+    if pm.shape != (K,):
+        raise ValueError("phase_mean must have one phase per profile bin")
     ok, phi_j, coef, rms, ee = _sawtooth_law_kernel(np.ascontiguousarray(prof, dtype=np.float64),
                                                     np.ascontiguousarray(inband, dtype=np.bool_),
-                                                    float(period_samples), int(L), float(span))
+                                                    float(period_samples), int(L), float(span), pm)
     return (phi_j, coef, rms, ee) if ok else None
 
 
 @njit(cache=True)
-def _sawtooth_law_kernel(prof: np.ndarray, inband: np.ndarray, period_samples: float, L: int, span: float
-                         ) -> tuple[bool, float, np.ndarray, float, np.ndarray]:
+def _sawtooth_law_kernel(prof: np.ndarray, inband: np.ndarray, period_samples: float, L: int, span: float,
+                         phase_mean: np.ndarray) -> tuple[bool, float, np.ndarray, float, np.ndarray]:
     """_sawtooth_law, compiled: (found, flyback phase, coefficients, RMS, elapsed fractions fitted)."""
     K = prof.size
     none = (False, np.nan, np.zeros(3), np.nan, np.zeros(0))
@@ -74,7 +79,7 @@ def _sawtooth_law_kernel(prof: np.ndarray, inband: np.ndarray, period_samples: f
         c = (k + 0.5) / K
         e = (c - phi_j) % 1.0                # Python's float % is np.mod: into [0, 1)
         if inband[k] and np.isfinite(prof[k]) and e > guard and e < 1.0 - guard:
-            ee[m] = e
+            ee[m] = (phase_mean[k] - phi_j) % 1.0    # the bin at its frames' mean phase, in the same bin as c
             pp[m] = prof[k]
             m += 1
     if m < 4:
@@ -130,42 +135,15 @@ def _bin_mean_phase_kernel(used: np.ndarray, period_frames: float, K: int) -> np
     return out
 
 
-def abscissa_bias(law: tuple[float, np.ndarray, float, np.ndarray], prof: np.ndarray, phase_mean: np.ndarray,
-                  e: float) -> float:
-    """What the law refitted with each fitted bin at the mean phase of its frames (``bin_mean_phase``) gives at the
-    elapsed sweep fraction e, minus what the law (fitted at the bins' centres) gives there, cycles/sample (module
-    docstring). prof: the profile the law was fitted to (K bins). Compiled (``_abscissa_bias_kernel``)."""
-    phi_j, coef, _, ee = law
-    return float(_abscissa_bias_kernel(float(phi_j), np.ascontiguousarray(coef, dtype=np.float64),
-                                       np.ascontiguousarray(ee, dtype=np.float64),
-                                       np.ascontiguousarray(prof, dtype=np.float64),
-                                       np.ascontiguousarray(phase_mean, dtype=np.float64), float(e)))
-
-
-@njit(cache=True)
-def _abscissa_bias_kernel(phi_j: float, coef: np.ndarray, ee: np.ndarray, prof: np.ndarray, phase_mean: np.ndarray,
-                          e: float) -> float:
-    """abscissa_bias, compiled: the fitted bins from their elapsed fractions (ee = centre - phi_j mod 1)."""
-    K = prof.size
-    m = ee.size
-    ea = np.empty(m)
-    pa = np.empty(m)
-    for i in range(m):
-        k = int(round((ee[i] + phi_j) * K - 0.5)) % K
-        ea[i] = (phase_mean[k] - phi_j) % 1.0
-        pa[i] = prof[k]
-    refit = polyfit(ea, pa, coef.size - 1)
-    return polyval(refit, e) - polyval(coef, e)
-
-
 def profile_abscissa_bias(prof: np.ndarray, inband: np.ndarray, phase_mean: np.ndarray, periods: float,
                           span: float) -> float:
-    """The profile read at a phase (``periods``: the time in periods) on a line through its bins placed at the mean
-    phases of their frames (``bin_mean_phase``), minus what ``ridge._profile_frequency`` reads there (the bins at their
-    centres), cycles/sample: between the two nearest bins when it interpolates them; when it reads the nearer bin
-    alone (the other out of band or across the flyback, a step of half the span), on the line through that bin and
-    its neighbour on the same side (the phase moved at most two bins from it). 0 where there is no such neighbour or
-    two bins' mean phases are closer than a quarter bin (the line through them would not be defined well)."""
+    """The correction ``ridge`` adds to a frequency read off the folded profile (module docstring), cycles/sample:
+    the profile read at a phase (``periods``: the time in periods) on a line through its bins placed at the mean
+    phases of their frames (``bin_mean_phase``), minus what ``ridge._profile_frequency`` reads there (the bins at
+    their centres): between the two nearest bins when it interpolates them; when it reads the nearer bin alone (the
+    other out of band or across the flyback, a step of half the span), on the line through that bin and its neighbour
+    on the same side (the phase moved at most two bins from it). 0 where there is no such neighbour or two bins' mean
+    phases are closer than a quarter bin (the line through them would not be defined well)."""
     K = prof.size
     x = float(np.mod(periods, 1.0))
     pos = x * K - 0.5
@@ -196,31 +174,26 @@ def profile_abscissa_bias(prof: np.ndarray, inband: np.ndarray, phase_mean: np.n
 
 
 def read_law(law: tuple[float, np.ndarray, float, np.ndarray], inband: np.ndarray, period_frames: float, L: int,
-             t_end: float, prof: np.ndarray | None = None, phase_mean: np.ndarray | None = None
-             ) -> tuple[float, float, float, float, float, float]:
+             t_end: float) -> tuple[float, float, float, float, float, float]:
     """What a saw-tooth's law (``_sawtooth_law`` of the fine profile whose in-band bins are inband, fitted away from
-    the flyback, where frames straddle it) gives: (low, high: the swept band; the frequency at the sweep start; the
-    mean rate, cycles/sample^2; the frequency at the block's last sample, NaN when the jammer is out of band there; its
-    1-sigma), cycles/sample. period_frames: the period in frames of L samples at hop L / 2; t_end: the block's last
-    sample in frame units.
+    the flyback, where frames straddle it, with each bin at the mean phase of its frames) gives: (low, high: the swept
+    band; the frequency at the sweep start; the mean rate, cycles/sample^2; the frequency at the block's last sample,
+    NaN when the jammer is out of band there; its 1-sigma), cycles/sample. period_frames: the period in frames of L
+    samples at hop L / 2; t_end: the block's last sample in frame units.
 
     The 1-sigma is the law's prediction interval at the block end's phase (``prediction_std``: the residual RMS of
     the profile around the law, which the sweep at that moment may deviate by as any profile bin does, with the law's
-    own standard error there) and, given the profile the law was fitted to and the mean phase of each bin's frames
-    (``bin_mean_phase``), the abscissa bias there (``abscissa_bias``, module docstring) in quadrature. Issue 26 item 3:
-    twice the RMS, before, covered 89 % of the errors over the rows of docs/rfi_monitor/real_jammers.md (median
-    |error| / std 0.14 on the simulated ones); the law's standard error alone covered 52 % (0-17 % on the 2-bit real
-    captures); docs/rfi_monitor/frequency_std.md gives the coverage now."""
+    own standard error there). No abscissa bias is added: the law is fitted where the frames are (module docstring).
+    Issue 26 item 3: twice the RMS, before, covered 89 % of the errors over the rows of
+    docs/rfi_monitor/real_jammers.md (median |error| / std 0.14 on the simulated ones); the law's standard error alone
+    covered 52 % (0-17 % on the 2-bit real captures); docs/rfi_monitor/frequency_std.md gives the coverage now."""
     phi_j, coef, rms, ee = law
     hop = L // 2
     f0, f1 = polyval(coef, 0.0), polyval(coef, 1.0)
     rate = (f1 - f0) / (period_frames * hop)
     ph_end = float(np.mod(t_end / period_frames, 1.0))
     e_end = (ph_end - phi_j) % 1.0
-    fstd = prediction_std(ee, coef.size - 1, e_end, rms)
-    if prof is not None and phase_mean is not None and math.isfinite(fstd):
-        fstd = math.hypot(fstd, abscissa_bias(law, prof, phase_mean, e_end))
-    fstd = max(fstd, 1e-4 / L)
+    fstd = max(prediction_std(ee, coef.size - 1, e_end, rms), 1e-4 / L)
     freq = math.nan
     if inband[min(int(ph_end * inband.size), inband.size - 1)]:
         freq = polyval(coef, e_end)
