@@ -84,6 +84,10 @@ def flatten(msg, prefix: str = '') -> list[tuple[str, object]]:
 
 def child(src: Path, bag: str, out_path: Path) -> None:
     """Replay ``bag`` through the FusionNode of the tree ``src`` and pickle the flattened outputs."""
+    import rfi_experiments.replay  # noqa: F401 - this tree's harness, with this tree's rfi_node_common and gnss_common
+
+    for name in [m for m in sys.modules if m.split('.')[0] in PACKAGES]:
+        del sys.modules[name]  # the node imports the tree's copies; the harness keeps the objects it took (its QoS)
     for pkg in reversed(PACKAGES):
         sys.path.insert(0, str(src / pkg))
     from rclpy.parameter import Parameter

@@ -3,12 +3,14 @@ against a base commit's.
 
 The same method as ``benchmarks/compare_fusion_outputs.py`` (whose flattening and comparison it uses): the base
 commit is put in a temporary ``git worktree``; each bag is replayed through the node twice, each time in a child
-Python process whose ``sys.path`` starts with one tree's ``src/<package>`` directories of the pure-Python
-packages (the node's package, ``gnss_common``, ``rfi_node_common``; the child checks it imported them from
-there), the messages and the replay harness (:class:`rfi_experiments.replay.ReplayHarness`, direct transport,
-as fast as possible) from the install tree. Every message the node publishes is flattened field by field and so
-is its final accounting; both runs must publish as many messages per topic and every field must agree (strings,
-integers and booleans exactly, floats both NaN or within ``--rtol`` relative, default 1e-9).
+Python process whose ``sys.path`` starts with one tree's ``src/<package>`` directories of the pure-Python packages
+(the node's package, ``gnss_common``, ``rfi_node_common``; the child checks it imported them from there), the
+messages and the replay harness (:class:`rfi_experiments.replay.ReplayHarness`, direct transport, as fast as
+possible) from the install tree (the harness is imported first, with the install tree's ``rfi_node_common`` and
+``gnss_common``, which the node's imports then replace: a base older than the harness's imports, e.g. 4c5248c
+without ``rfi_node_common.qos.VIEW_QOS``, would break it otherwise). Every message the node publishes is flattened
+field by field and so is its final accounting; both runs must publish as many messages per topic and every field
+must agree (strings, integers and booleans exactly, floats both NaN or within ``--rtol`` relative, default 1e-9).
 
 Cases (node: bag):
 
@@ -62,9 +64,13 @@ def child(src: Path, case: str, out_path: Path) -> None:
     """Replay the case's bag through the node of the tree ``src`` and pickle the flattened outputs."""
     import importlib
 
+    import rfi_experiments.replay  # noqa: F401 - this tree's harness, with this tree's rfi_node_common and gnss_common
+
     node_key, bag = case.split(':')
     package, module_name, class_name, collect = NODES[node_key]
     packages = (package, 'gnss_common', 'rfi_node_common')
+    for name in [m for m in sys.modules if m.split('.')[0] in packages]:
+        del sys.modules[name]  # the node imports the tree's copies; the harness keeps the objects it took (its QoS)
     for pkg in reversed(packages):
         sys.path.insert(0, str(src / pkg))
     node_cls = getattr(importlib.import_module(module_name), class_name)

@@ -49,6 +49,7 @@ from scipy import fft as sp_fft
 
 from rfi_monitor.numpy_kernels import pairwise_sum
 from rfi_monitor.stft import _frames_complex
+from rfi_node_common.params import parameter
 
 NONE, CW, CHIRP, WIDEBAND, UNKNOWN = 0, 1, 2, 3, 4
 """Type codes, identical to rfi_msgs/JammerState."""
@@ -84,16 +85,39 @@ class ClassifierParams:
         confidence_slope_db: dB margin that maps to a logistic confidence of 0.73.
     """
 
-    nfft: int = 256
-    max_frames: int = 256
-    sig_sigma: float = 6.0
-    min_excess: float = 0.5
-    detect_jn_db: float = -6.0
-    cw_max_occupancy: float = 0.05
-    min_chirp_rate: float = 1e-4
-    template_smooth_bins: int = 15
-    sidelobe_db: float = 30.0
-    confidence_slope_db: float = 2.0
+    nfft: int = parameter(
+        256,
+        'Welch frame length, samples (a power of two). Sets the spectral resolution fs / nfft (149 kHz at 38.192 MHz)'
+        ' and the CW frequency resolution.', minimum=32, maximum=2**20)
+    max_frames: int = parameter(
+        256, 'At most this many Welch frames per block (evenly spaced; speed).', minimum=8, maximum=10**7)
+    sig_sigma: float = parameter(
+        6.0, 'Significance of an occupied spectral bin, standard deviations of the Welch average.',
+        minimum=1e-6, maximum=1e3)
+    min_excess: float = parameter(
+        0.5,
+        'Smallest relative excess of an occupied bin over the noise, dimensionless (guards a mismatch between the '
+        'learned noise shape and the front end).', minimum=1e-6, maximum=1e6)
+    detect_jn_db: float = parameter(
+        -6.0,
+        'J/N above which a jammer is declared, dB. Front-end spurs of real captures are at -11 to -20 dB; raise it if'
+        ' spurs are reported as CW.', minimum=-100.0, maximum=100.0)
+    cw_max_occupancy: float = parameter(
+        0.05, 'Largest occupied fraction of the band of a CW, (0, 1).', minimum=1e-6, maximum=0.999999)
+    min_chirp_rate: float = parameter(
+        1e-4,
+        '|Sweep rate| that marks a chirp before the period locks, cycles/sample^2 (1.5e11 Hz/s at 38.192 MHz is '
+        '1e-4).', minimum=1e-12, maximum=1.0)
+    template_smooth_bins: int = parameter(
+        15, 'Width of the median filter smoothing the learned noise shape, bins.',
+        minimum=1, maximum=2**20)
+    sidelobe_db: float = parameter(
+        30.0,
+        'Bins more than this below the strongest excess are not occupied, dB (Hann sidelobes of a strong CW are below'
+        ' -31 dB).', minimum=0.0, maximum=300.0)
+    confidence_slope_db: float = parameter(
+        2.0, 'J/N margin over the threshold that maps to a confidence of 0.73, dB.',
+        minimum=1e-6, maximum=100.0)
 
     def __post_init__(self) -> None:
         if self.nfft < 32 or self.nfft & (self.nfft - 1):

@@ -80,6 +80,7 @@ from rfi_monitor.sweep_shape import (
     _shape,
     phase_profiles,
 )
+from rfi_node_common.params import parameter
 
 __all__ = [
     "FINE_MIN_RETURN", "HOOKED_SAWTOOTH", "MIN_SELECT_EXCESS", "SAWTOOTH_DOWN", "SAWTOOTH_UP", "SELECT_Z",
@@ -119,20 +120,60 @@ class RidgeParams:
             always analysed whole); 0: always the whole block.
     """
 
-    min_frame_length: int = 8
-    max_frame_length: int = 128
-    select_samples: int = 8192
-    max_period_s: float = 250e-6
-    min_period_frames: int = 4
-    detect_sigma: float = 7.0
-    min_strength: float = 0.08
-    presence_nats: float = 4.6
-    noise_smooth_bins: int = 5
-    phase_bins: int = 32
-    hook_rate_ratio: float = 2.0
-    min_present_fraction: float = 0.5
-    tracking_samples: int = 16384
-    acquisition_samples: int = 16384
+    min_frame_length: int = parameter(
+        8,
+        'Shortest short-time FFT frame tried by the stft estimator, samples (power of two): the frame lengths tried '
+        'are the powers of two from ridge_min_frame_length to ridge_max_frame_length; the one where the ridge stands '
+        'highest above the noise is used (a sweep of k cycles/sample^2 is sharpest near 1/sqrt(k) samples), chosen '
+        'on the first block, every 16 blocks while no jammer is tracked, every 64 blocks while one is, and at once '
+        'when a block shows a chirp or a wideband rise at a length chosen while nothing was tracked.',
+        minimum=8, maximum=2**16)
+    max_frame_length: int = parameter(
+        128, 'Longest short-time FFT frame tried by the stft estimator, samples (power of two).',
+        minimum=8, maximum=2**16)
+    select_samples: int = parameter(
+        8192, 'Samples of a block used to choose the frame length (stft); 0: the whole block.',
+        minimum=0, maximum=2**31 - 1)
+    max_period_s: float = parameter(
+        250e-6, 'stft: longest sweep period searched, s (also at most a quarter of the analysed samples).',
+        minimum=1e-7, maximum=10.0)
+    min_period_frames: int = parameter(
+        4, 'Shortest sweep period searched (stft), frames of half the frame length.',
+        minimum=3, maximum=10**6)
+    detect_sigma: float = parameter(
+        7.0, 'stft: significance of a sweep period, standard deviations of the noise autocorrelation.',
+        minimum=1.0, maximum=100.0)
+    min_strength: float = parameter(
+        0.08, 'stft: smallest normalised autocorrelation peak-to-trough of a periodic sweep, (0, 1].',
+        minimum=1e-6, maximum=1.0)
+    presence_nats: float = parameter(
+        4.6,
+        "stft: a frame's ridge is present when its excess over the noise exceeds ln(bins) + this (nats of the "
+        'exponential; 4.6: 1 % of noise frames).', minimum=0.1, maximum=100.0)
+    noise_smooth_bins: int = parameter(
+        5, 'Width of the median across bins of the in-block noise level (stft), odd.',
+        minimum=3, maximum=10**4)
+    phase_bins: int = parameter(
+        32, 'stft: bins of the folded sweep profile (shape, swept band, rate).', minimum=8, maximum=4096)
+    hook_rate_ratio: float = parameter(
+        2.0,
+        'stft: a saw-tooth whose two steps after its flyback both exceed this times its median step is hooked (so is '
+        'one whose way back is swept over at least two profile bins).', minimum=1.0001, maximum=1e3)
+    min_present_fraction: float = parameter(
+        0.5,
+        'A non-periodic ridge must be present in at least this share of the frames (stft), (0, 1].',
+        minimum=1e-6, maximum=1.0)
+    tracking_samples: int = parameter(
+        16384,
+        'stft: while a chirp is tracked only the last this many samples of a block are analysed (speed: 16384 samples'
+        ' are 0.43 ms at 38.192 MS/s, 1.6 ms at 10 MS/s; the J/N and the CW test use the whole block; a block whose '
+        'tail shows no sweep is analysed whole). 0: always the whole block.', minimum=0, maximum=2**31 - 1)
+    acquisition_samples: int = parameter(
+        16384,
+        'stft: while nothing is tracked only the last this many samples of a block are analysed first, and the whole '
+        "block when that part shows anything (a type other than NONE, a sweep, a period): quiet blocks at the paper's"
+        " 38.192 MS/s are analysed as a 16.4 MS/s front end's 1 ms block is (speed; the J/N, the CW test and the "
+        'evidence over blocks use the whole block). 0: always the whole block.', minimum=0, maximum=2**31 - 1)
 
     @property
     def frame_lengths(self) -> tuple[int, ...]:

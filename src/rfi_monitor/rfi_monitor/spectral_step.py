@@ -86,6 +86,8 @@ import numpy as np
 from numba import njit
 from scipy import stats
 
+from rfi_node_common.params import parameter
+
 SCALES_MAX = 512
 """Most blocks summed by the longest scale (1, 4, 16, ... and all the blocks in the window, up to this)."""
 
@@ -141,17 +143,53 @@ class SpectralStepParams:
             last decision, s (0: every block; the default tests every other 1 ms block).
     """
 
-    enabled: bool = True
-    window_s: float = 1.0
-    groups: int = 64
-    false_alarm_per_block: float = 1e-4
-    min_step_db: float = 0.25
-    max_band_fraction: float = 0.5
-    reference_blocks: int = 200
-    min_reference_blocks: int = 5
-    learn_z: float = 4.5
-    relearn_after_s: float = 30.0
-    decide_interval_s: float = 0.002
+    enabled: bool = parameter(
+        True,
+        'stft: a noise jammer in part of the band behind an AGC (which hides its power): the band of the spectrum '
+        'that rose against the shape of the blocks that passed as noise (rfi_monitor.spectral_step, '
+        'docs/rfi_monitor/sensitivity.md). The sums of the last 1, 4, 16, ... blocks (and all) stamped within '
+        'spectral_step_window_s are tested; bands of 2 groups up to spectral_step_max_band_fraction of the sampled '
+        'band; z threshold from spectral_step_false_alarm_per_block under Gaussian noise (Bonferroni), and the rise '
+        "must exceed spectral_step_min_step_db (dB). WIDEBAND, frequency_hz the band's centre, frequency_std_hz its "
+        'width / sqrt(12), J/N against the learned shape.')
+    window_s: float = parameter(
+        1.0,
+        'stft: the spectral-step test sums the blocks stamped within this many seconds (1, 4, 16, ... and all of '
+        'them), s.', minimum=0.0, maximum=60.0)
+    groups: int = parameter(
+        64, 'stft: groups (of >= 2 Welch bins) the band is cut into by the spectral-step test.',
+        minimum=8, maximum=4096)
+    false_alarm_per_block: float = parameter(
+        1e-4,
+        'stft: false-alarm probability per block of the spectral-step test under Gaussian noise (Bonferroni over '
+        'bands and scales), (0, 0.1].', minimum=1e-12, maximum=0.1)
+    min_step_db: float = parameter(
+        0.25,
+        "stft: smallest rise of a band over the rest of the spectrum reported, dB (drift of the front end's shape is "
+        'no jammer).', minimum=1e-3, maximum=60.0)
+    max_band_fraction: float = parameter(
+        0.5, 'stft: widest band that rose reported, share of the sampled band, (0, 0.5].',
+        minimum=0.01, maximum=0.5)
+    reference_blocks: int = parameter(
+        200, 'stft: memory of the spectral-step reference shape, blocks (exponential).',
+        minimum=1, maximum=10**7)
+    min_reference_blocks: int = parameter(
+        5, 'stft: blocks in the reference shape before the spectral-step test runs.',
+        minimum=1, maximum=10**7)
+    learn_z: float = parameter(
+        4.5, 'stft: a block whose spectral-step z (any scale) exceeds this does not enter the reference.',
+        minimum=0.1, maximum=1e3)
+    relearn_after_s: float = parameter(
+        30.0,
+        'stft: a spectrum that differs from the spectral-step reference (z over spectral_step_learn_z) without a '
+        'break for this long makes the reference be learned again, s: a changed front end is not reported for ever; a'
+        ' partial-band noise jammer behind an AGC that stays on longer becomes the reference. 0: never.',
+        minimum=0.0, maximum=1e6)
+    decide_interval_s: float = parameter(
+        0.002,
+        'stft: the spectral-step sums are tested at most once per this many seconds of stamps (a test costs a few '
+        'times adding a block); blocks in between are added and get the last decision, s. 0: every block.',
+        minimum=0.0, maximum=10.0)
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.window_s) and self.window_s >= 0):

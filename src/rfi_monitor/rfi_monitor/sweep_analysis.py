@@ -40,6 +40,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from rfi_node_common.params import parameter
+
 
 @dataclass(frozen=True)
 class SweepAnalysisParams:
@@ -58,13 +60,32 @@ class SweepAnalysisParams:
             of periodicity (speed, ours).
     """
 
-    enabled: bool = True
-    hop_s: float = 1e-3
-    min_strength: float = 0.3
-    min_lag: int = 3
-    max_period_fraction: float = 0.25
-    min_window: int = 1024
-    skip_while_tracking: bool = True
+    enabled: bool = parameter(
+        True,
+        'Run the block-level periodicity detector of the frequency track (ours): it seeds the reset lattice and tells'
+        " the identification that the track is periodic. Set false to run Kang et al.'s method only.")
+    hop_s: float = parameter(
+        1e-3,
+        'Interval between two periodicity analyses, s (at absolute sample indices multiple of hop_s * fs, so the '
+        'result does not depend on how the stream is cut into blocks). Blocks much shorter than 2 hop_s cannot use '
+        'it. Cost: ~0.2-0.3 ms of CPU per analysis (one per ms by default).', minimum=1e-7, maximum=10.0)
+    min_strength: float = parameter(
+        0.3,
+        'Normalised autocorrelation peak-to-trough of a periodic track, (0, 1.5] (1.5: noise-free saw-tooth). Raise '
+        'it if noise is taken for a sweep.', minimum=1e-6, maximum=1.5)
+    min_lag: int = parameter(
+        3, 'Shortest period detected, decimated samples (x sweep_decimation samples).',
+        minimum=2, maximum=10**9)
+    max_period_fraction: float = parameter(
+        0.25, 'Longest period as a fraction of the analysed window, (0, 0.5].',
+        minimum=1e-6, maximum=0.5)
+    min_window: int = parameter(
+        1024, 'Fewest decimated values for an analysis (1024 x 4 samples = 107 us at 38.192 MHz).',
+        minimum=64, maximum=10**9)
+    skip_while_tracking: bool = parameter(
+        True,
+        'No periodicity analysis while in tracking mode (confirm_fits): the confirmed reset lattice is then the '
+        'evidence of a periodic sweep. false: analyse every hop (more CPU).')
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.hop_s) and self.hop_s > 0):

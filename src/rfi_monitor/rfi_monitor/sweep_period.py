@@ -47,6 +47,8 @@ from enum import IntEnum
 import numpy as np
 from numba import njit
 
+from rfi_node_common.params import parameter
+
 LPD_LAG = 6
 """Lag of the low-pass differentiator G(z) = 1 - z^-6 (Kang et al., eq. 23)."""
 AR_ORDER = 10
@@ -164,22 +166,54 @@ class SweepPeriodParams:
         lattice_voting: period by lattice voting (ours) instead of successive intervals (default).
     """
 
-    forgetting: float = 0.92
-    beta: float = 1.0
-    beta_en: float = 1e-4
-    kappa: float = 8.0
-    noise_time_constant: float = 256.0
-    decimation: int = 4
-    ar_process_var: float = 1.0
-    ar_measurement_var: float = 1.0
-    ar_transition: float = 0.2
-    delay: float = 12.0
-    min_separation: int = 12
-    tolerance: float = 0.05
-    min_consistent: int = 3
-    min_tolerance_samples: float = 3.0
-    max_period: float = 10000.0
-    lattice_voting: bool = False
+    forgetting: float = parameter(
+        0.92, 'Forgetting factor gamma of the linear prediction detector (eq. 23), [0, 1).',
+        minimum=0.0, maximum=0.999999)
+    beta: float = parameter(
+        1.0, 'Normalisation beta of eq. 23, dimensionless (scaled by the band internally).',
+        minimum=1e-12, maximum=1e6)
+    beta_en: float = parameter(
+        1e-4, 'Enhancement rate beta_en of the peak threshold, dimensionless.', minimum=0.0, maximum=1e6)
+    kappa: float = parameter(
+        8.0,
+        'Peak threshold in multiples of the running mean |zAR|, dimensionless. Lower it if the period does not lock '
+        'at low J/N (more false peaks), raise it if it locks on noise.', minimum=1e-6, maximum=1e6)
+    noise_time_constant: float = parameter(
+        256.0, 'Time constant of the running mean |zAR|, decimated steps.', minimum=1.0, maximum=1e9)
+    decimation: int = parameter(
+        4, 'Samples averaged per AR(10) step, samples (speed; 1 = full rate).', minimum=1, maximum=1000)
+    ar_process_var: float = parameter(
+        1.0, 'Diagonal of the AR process noise Q_AR (eq. 25), dimensionless.',
+        minimum=1e-12, maximum=1e12)
+    ar_measurement_var: float = parameter(
+        1.0, 'AR measurement variance sigma_AR^2 (eq. 26), dimensionless.',
+        minimum=1e-12, maximum=1e12)
+    ar_transition: float = parameter(
+        0.2, 'Diagonal of the AR transition matrix A (eq. 25; the paper: 0.2), (-1, 1).',
+        minimum=-0.999999, maximum=0.999999)
+    delay: float = parameter(
+        12.0, 'Samples from a sweep start to its detected peak (detector group delay), samples.',
+        minimum=0.0, maximum=1e6)
+    min_separation: int = parameter(
+        12,
+        'Refractory time between two detected sweep starts, samples. Sweeps shorter than this cannot lock: lower it '
+        'for very fast sweeps.', minimum=1, maximum=10**9)
+    tolerance: float = parameter(
+        0.05, 'Relative tolerance of a sweep interval to a multiple of the period, (0, 0.5).',
+        minimum=1e-6, maximum=0.499999)
+    min_consistent: int = parameter(
+        3, 'Peaks fitting the period lattice needed to lock, minus one.', minimum=1, maximum=100000)
+    min_tolerance_samples: float = parameter(
+        3.0, 'Absolute floor of the lattice tolerance, samples (matters for short periods).',
+        minimum=0.0, maximum=1e6)
+    max_period: float = parameter(
+        10000.0,
+        'Longest sweep period considered by the lattice voting, samples (10000 = 262 us at 38.192 MHz). Raise it for '
+        'slow sweeps; must exceed sweep_min_separation.', minimum=1.0, maximum=1e9)
+    lattice_voting: bool = parameter(
+        False,
+        'Period by lattice voting over all recent peaks (ours; robust to missed and false peaks) instead of the '
+        'successive intervals of the paper. Set false to reproduce the paper.')
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.forgetting < 1.0:

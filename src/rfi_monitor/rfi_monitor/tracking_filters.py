@@ -48,6 +48,8 @@ from enum import IntEnum
 import numpy as np
 from numba import njit
 
+from rfi_node_common.params import parameter
+
 MODE_KF = 0
 MODE_AKF = 1
 MODE_AFKF = 2
@@ -90,13 +92,27 @@ class TrackingFilterParams:
     """
 
     mode: int = MODE_AFKF
-    measurement_std: float = 0.08
-    process_std: float = 1e-4
-    process_rate_std: float = 1e-6
-    window: int = 16
-    initial_frequency: float = 0.25
-    initial_frequency_std: float = 0.15
-    initial_rate_std: float = 2e-3
+    measurement_std: float = parameter(
+        0.08, 'sigma_v of the IF measurement (eq. 20), cycles/sample. Raise it at low J/N.',
+        minimum=1e-9, maximum=1.0)
+    process_std: float = parameter(
+        1e-4, 'sigma_w on the frequency (eq. 19), cycles/sample.', minimum=0.0, maximum=1.0)
+    process_rate_std: float = parameter(
+        1e-6,
+        "Process noise on the sweep rate per sample, cycles/sample^2. The paper's eq. 19 has none; with 0 the rate "
+        'variance collapses before the period locks and the rate estimate freezes.', minimum=0.0, maximum=1.0)
+    window: int = parameter(
+        16, 'Innovation window M of the adaptive filters (eq. 12), samples.', minimum=2, maximum=100000)
+    initial_frequency: float = parameter(
+        0.25,
+        'Frequency of the tracking filter at start and after every reset (gaps between snapshots included), '
+        "cycles/sample. 0.25 is the paper's IF at fs/4; set to the IF / fs of another front end.",
+        minimum=-1.0, maximum=1.0)
+    initial_frequency_std: float = parameter(
+        0.15, '1-sigma of the initial frequency, cycles/sample.', minimum=1e-12, maximum=1.0)
+    initial_rate_std: float = parameter(
+        2e-3, '1-sigma of the initial sweep rate, cycles/sample^2 (1e12 Hz/s at 38.192 MHz is 6.9e-4).',
+        minimum=1e-12, maximum=1.0)
 
     def __post_init__(self) -> None:
         if self.mode not in (MODE_KF, MODE_AKF, MODE_AFKF):

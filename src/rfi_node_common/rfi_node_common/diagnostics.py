@@ -130,6 +130,13 @@ def stamp_jump_confirmations_parameter(default: int = 5) -> Any:
         minimum=1, maximum=100000)
 
 
+def diagnostics_period_parameter(minimum_s: float = 0.001) -> Any:
+    """The ``diagnostics_period_s`` parameter field (the :class:`StampTimer` of /diagnostics); ``minimum_s``: the
+    shortest period the node accepts, s."""
+    return parameter(
+        1.0, 'Period of /diagnostics in message (stamp) time, s.', minimum=minimum_s, maximum=3600.0)
+
+
 def hardware_id_parameter(default: str) -> Any:
     """The ``hardware_id`` parameter field (DiagnosticStatus.hardware_id of every report of the node)."""
     return parameter(
@@ -178,8 +185,7 @@ class NodeDiagnosticsParams:
     max_stamp_jump_s: float = max_stamp_jump_parameter(120.0)
     stamp_jump_confirmations: int = stamp_jump_confirmations_parameter(5)
     input_timeout_s: float = input_timeout_parameter()
-    diagnostics_period_s: float = parameter(
-        1.0, 'Period of /diagnostics in message (stamp) time, s.', minimum=0.001, maximum=3600.0)
+    diagnostics_period_s: float = diagnostics_period_parameter()
     warning_throttle_s: float = parameter(
         5.0, 'Shortest interval between two warnings about rejected input, s (wall time; logging only).',
         minimum=0.0, maximum=3600.0, read_only=False)

@@ -2,8 +2,9 @@
 
 Pure (no rclpy). Each parameter is written once, as a field with :func:`rfi_node_common.params.parameter`
 (default, description, range, settable or not, group): the filter's in
-:class:`uwb_gnss_fusion.fusion_params.FusionParams`, the node's (frames, re-ordering, diagnostics, the
-flattened tracking-loop values) in :class:`FusionNodeParams`, which extends it.
+:class:`uwb_gnss_fusion.fusion_params.FusionParams`, the stamp gate's, silence watch's and /diagnostics' ones shared
+by the suite's nodes in :class:`rfi_node_common.diagnostics.NodeDiagnosticsParams`, the node's (frames, re-ordering,
+the flattened tracking-loop values) in :class:`FusionNodeParams`, which extends both.
 :func:`rfi_node_common.params.declare` declares them all; :meth:`FusionNodeParams.fusion_params` gives the
 core's frozen config; ``--help`` (:func:`rfi_node_common.params.describe`) and config/fusion.yaml
 (:data:`CONFIG_FILE`, written by ``tools/generate_config.py``, checked by a test) are generated from them.
@@ -17,15 +18,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from gnss_common.jamming_weights import TrackingLoopParams
-from rfi_node_common.diagnostics import (
-    diagnostics_window_parameter,
-    hardware_id_parameter,
-    input_timeout_parameter,
-    max_stamp_jump_parameter,
-    stamp_jump_confirmations_parameter,
-    warn_lost_fraction_parameter,
-    warn_rejected_fraction_parameter,
-)
+from rfi_node_common.diagnostics import NodeDiagnosticsParams, diagnostics_period_parameter, hardware_id_parameter
 from rfi_node_common.params import USER, ConfigFile, parameter, parameter_from, validate_ranges
 from uwb_gnss_fusion.fusion_params import FRAME_EARTH, FRAME_MAP, FusionParams
 from uwb_gnss_fusion.fusion_view import FusionViewParams
@@ -38,9 +31,10 @@ _LOOP = TrackingLoopParams()
 
 
 @dataclass(frozen=True)
-class FusionNodeParams(FusionParams):
-    """Parameters of fusion_node: every parameter of :class:`FusionParams` (inherited with its default and
-    description) and the node's own below. The core's ``loop`` (:class:`TrackingLoopParams`, in gnss_common,
+class FusionNodeParams(FusionParams, NodeDiagnosticsParams):
+    """Parameters of fusion_node: every parameter of :class:`FusionParams` and of :class:`NodeDiagnosticsParams`
+    (inherited with its default and description; ``hardware_id`` and ``diagnostics_period_s`` redefined below with
+    the shared helpers) and the node's own below. The core's ``loop`` (:class:`TrackingLoopParams`, in gnss_common,
     whose defaults are used) is made of the ``loop_*`` parameters; its ``anchors`` registry is not a
     parameter: anchor positions come in each UwbRange message.
 
@@ -119,10 +113,7 @@ class FusionNodeParams(FusionParams):
     datum: tuple = parameter(
         (0.0, 0.0, 0.0), 'With local_origin datum: WGS 84 [latitude deg, longitude deg, ellipsoidal altitude m] '
         'of the origin of the local ENU frame.', group=USER)
-    hardware_id: str = hardware_id_parameter('gnss_receiver+uwb_tag')  # type: ignore[assignment]
-    diagnostics_window_s: float = diagnostics_window_parameter()  # type: ignore[assignment]
-    warn_rejected_fraction: float = warn_rejected_fraction_parameter()  # type: ignore[assignment]
-    warn_lost_fraction: float = warn_lost_fraction_parameter()  # type: ignore[assignment]
+    hardware_id: str = hardware_id_parameter('gnss_receiver+uwb_tag')
     warn_cn0_loss_db: float = parameter(
         3.0, 'WARN (inputs degraded) while the J/S in use costs more than this much C/N0 (Cao et al., eq. 4 at '
         'nominal_cn0_dbhz with jammer_quality_factor; 3 dB at about 15 dB J/S), dB.', minimum=0.0, maximum=100.0,
@@ -138,10 +129,6 @@ class FusionNodeParams(FusionParams):
         1.0, 'Process what the re-ordering buffer holds once no input has arrived for this long, s (wall '
         'time, steady clock: the end of a bag or a sensor stop; changes when, never what, is processed; '
         '0: never).', minimum=0.0, maximum=3600.0)
-    # the shared helpers return the dataclass field as an object
-    max_stamp_jump_s: float = max_stamp_jump_parameter(120.0)  # type: ignore[assignment]
-    stamp_jump_confirmations: int = stamp_jump_confirmations_parameter(5)  # type: ignore[assignment]
-    input_timeout_s: float = input_timeout_parameter()  # type: ignore[assignment]
     act_on_integrity: bool = parameter(
         True,
         'Act on /gnss/integrity (the gnss_integrity node): a DETECTED spoofing state excludes the GNSS it '
@@ -163,11 +150,8 @@ class FusionNodeParams(FusionParams):
     use_spp_reference: bool = parameter(
         True, 'Re-initialise after a divergence from the newest valid single-point (SPP) fix of the last '
         'reference_max_age_s of GNSS epochs (solved on demand).')
-    diagnostics_period_s: float = parameter(
-        1.0, 'Period of /diagnostics in message (stamp) time, s.', minimum=0.01, maximum=3600.0)
-    warning_throttle_s: float = parameter(
-        5.0, 'Shortest interval between two warnings about rejected input, s (wall time; logging only).',
-        minimum=0.0, maximum=3600.0, read_only=False)
+    # fusion_node has refused a /diagnostics period under 10 ms since its first version (the others: 1 ms); kept
+    diagnostics_period_s: float = diagnostics_period_parameter(0.01)
     # --- the filter's tracking loops (FusionParams.loop, a TrackingLoopParams, flattened) --------
     loop_dll_bandwidth_hz: float = parameter(
         _LOOP.dll_bandwidth_hz, 'Code loop (DLL) noise bandwidth of the receiver, Hz.',
@@ -235,8 +219,9 @@ class FusionNodeParams(FusionParams):
 
 CONFIG_FILE = ConfigFile('uwb_gnss_fusion', 'config/fusion.yaml', 'uwb_gnss_fusion', FusionNodeParams, """
 Parameters of fusion_node (uwb_gnss_fusion/fusion_node.py, FusionNodeParams).
-GENERATED by tools/generate_config.py from uwb_gnss_fusion/fusion_params.py (FusionParams, the filter's)
-and uwb_gnss_fusion/fusion_node_params.py (FusionNodeParams, the node's): change a default or a
+GENERATED by tools/generate_config.py from uwb_gnss_fusion/fusion_params.py (FusionParams, the filter's),
+rfi_node_common/diagnostics.py (NodeDiagnosticsParams, the stamp gate's and /diagnostics') and
+uwb_gnss_fusion/fusion_node_params.py (FusionNodeParams, the node's): change a default or a
 description there and run `python tools/generate_config.py`; a test checks this file equals it.
 Method: Cao et al., tightly-coupled GNSS/UWB cubature Kalman filter under GNSS jamming; the filter
 core is uwb_gnss_fusion/fusion_filter.py, results in docs/uwb_gnss_fusion/.
