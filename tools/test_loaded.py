@@ -11,7 +11,7 @@ With ``--cold-cache`` every run starts on a cold numba cache, as the first run a
 ``make setup`` does: the cached kernels (``*.nbi``, ``*.nbc`` under ``install/`` and ``$NUMBA_CACHE_DIR``) are
 deleted before each run, so the nodes and tests compile them again beside the hogs.
 The hogs run at the tests' own priority and are stopped (by their process ids) when the runs end, also on
-Ctrl-C. Each run's JUnit XML and output go to ``--out`` (default ``log/test_loaded``).
+Ctrl-C and on SIGTERM. Each run's JUnit XML and output go to ``--out`` (default ``log/test_loaded``).
 
 Exit status: 0 when every run passed, 1 otherwise, 2 on bad arguments.
 
@@ -113,6 +113,9 @@ def main(argv: list[str] | None = None) -> int:
           flush=True)
     failures: dict[str, list[int]] = defaultdict(list)
     passed = 0
+    # SIGTERM too ends the runs through the ``finally`` below (the pytest run is killed, the hogs stopped): a job
+    # started in the background of a non-interactive shell ignores SIGINT
+    signal.signal(signal.SIGTERM, lambda signum, _: sys.exit(128 + signum))
     hogs = start_hogs(args.hogs)
     try:
         for run in range(1, args.runs + 1):
