@@ -27,6 +27,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from rfi_monitor.monitor import RfiMonitor
 from rfi_monitor.rfi_monitor_node import MonitorNodeParams, RfiMonitorNode, decode_samples, full_scale, jammer_state_msg
 from rfi_msgs.msg import IfSamples, JammerState
+from rfi_node_common import testing
 from rfi_node_common.qos import DATA_QOS
 from rfi_node_common.stamps import ns_to_stamp, stamp_to_ns
 
@@ -37,7 +38,6 @@ BLOCK = 4000
 START = '2021-12-01T08:47:00Z'
 START_NS = 1_638_348_420_000_000_000
 FRAME_ID = 'if_source_pipe_test'
-DEADLINE_S = 90.0   # process start-up and a cold numba cache of the monitor
 
 
 def message_fields(msg, wire: bool = True) -> tuple:
@@ -136,10 +136,13 @@ class Monitor:
         proc = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         thread = threading.Thread(target=writer, args=(proc.stdin,), daemon=True)
         thread.start()
-        deadline = time.monotonic() + DEADLINE_S
+        # bounded by progress: a block or a state received, or CPU spent by if_source (its start-up compiles its
+        # kernels on a cold numba cache); a fixed 90 s failed beside a CPU hog after a reinstall
+        watch = testing.Stall(lambda: (len(self.blocks), len(self.states), self.final is None,
+                                       testing.process_cpu_s(proc.pid)), 'if_source did not finish', look_every_s=0.5)
         try:
             while proc.poll() is None or self.final is None:
-                assert time.monotonic() < deadline, 'if_source did not finish'
+                watch.check()
                 self.executor.spin_once(timeout_sec=0.05)
         finally:
             if proc.poll() is None:
@@ -152,11 +155,16 @@ class Monitor:
         return subprocess.CompletedProcess(command, proc.returncode, out, err)
 
     def settle(self, n_states: int) -> None:
-        deadline = time.monotonic() + DEADLINE_S
+        def progress() -> tuple[int, int]:
+            return len(self.states), self.node.accounting()['blocks_received']
+
+        watch = testing.Stall(progress, 'the monitor did not take every block')
         while len(self.states) < n_states or self.node.accounting()['blocks_received'] < len(self.blocks):
-            assert time.monotonic() < deadline, \
-                f'the monitor did not take every block: {len(self.states)} states, {len(self.blocks)} blocks, ' \
-                f'{self.node.accounting()}'
+            try:
+                watch.check()
+            except AssertionError as e:
+                raise AssertionError(f'{e}: {len(self.states)} states, {len(self.blocks)} blocks, '
+                                     f'{self.node.accounting()}') from None
             self.executor.spin_once(timeout_sec=0.05)
 
     def close(self) -> None:
@@ -208,7 +216,7 @@ def test_a_pause_of_the_writer_is_a_counted_gap_and_a_truncated_end_is_counted(m
     def write(stdin) -> None:
         stdin.write(before)
         stdin.flush()
-        monitor.got_blocks.wait(DEADLINE_S)   # the first three blocks are out: the reader has caught up
+        monitor.got_blocks.wait(testing.LIMIT_S)   # the first three blocks are out: the reader has caught up
         time.sleep(1.0)                       # the stimulus: 1 s of samples that never arrive
         # the rest in one write: then it all waits in the pipe (which if_source counts as received), so the writer's
         # pause is the only gap, however long this thread or if_source are descheduled while the monitor analyses
@@ -256,8 +264,7 @@ def test_misspelt_parameter_is_refused_before_the_input_is_read():
     os.write(w, CAPTURE.read_bytes()[:8000])
     os.close(w)
     try:
-        done = subprocess.run(source_command('sampling_frequency:=4000000.0'), stdin=r, capture_output=True,
-                              text=True, timeout=60)
+        done = testing.run_process(source_command('sampling_frequency:=4000000.0'), stdin=r, text=True)
         left = len(os.read(r, 100_000))
     finally:
         os.close(r)
@@ -268,8 +275,8 @@ def test_misspelt_parameter_is_refused_before_the_input_is_read():
 
 
 def test_bad_format_is_refused_with_one_line():
-    done = subprocess.run(source_command('intermediate_frequency_hz:=3000000.0'), stdin=subprocess.DEVNULL,
-                          capture_output=True, text=True, timeout=60)
+    done = testing.run_process(source_command('intermediate_frequency_hz:=3000000.0'), stdin=subprocess.DEVNULL,
+                               text=True)
     assert done.returncode == 2 and 'Traceback' not in done.stderr
     assert done.stderr.strip().endswith('must be below fs/2 = 2000000.0 Hz for complex samples'), done.stderr
 

@@ -29,6 +29,10 @@ import uuid
 import pytest
 from test_run_processes import BAG, PARAMS, WINDOW, assert_outputs_equal, outputs
 
+from rfi_node_common import testing
+
+pytestmark = pytest.mark.usefixtures('warm_kernels')   # the nodes load their kernels from the cache (conftest.py)
+
 NODES_ADDRESS = '10.200.0.1/24'
 REPLAY_ADDRESS = '10.200.0.2/24'
 INPUTS = {'rfi_monitor': ('/rfi/if_samples',),
@@ -40,7 +44,6 @@ EXECUTABLES = {'rfi_monitor': ('rfi_monitor', 'rfi_monitor_node'),
                'gnss_integrity': ('gnss_integrity', 'gnss_integrity_node'),
                'uwb_gnss_fusion': ('uwb_gnss_fusion', 'fusion_node'),
                'imm_carrier': ('imm_carrier', 'imm_carrier_node')}
-RUN_TIMEOUT_S = 150.0
 
 
 def ip(*args: str) -> subprocess.CompletedProcess:
@@ -143,10 +146,11 @@ def runs(hosts, tmp_path_factory):
                                                stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, env=env)
         # while the nodes start (imports, numba caches): the reference, the suite in one process with
         # no middleware (it reads the same install tree, so its outputs do not depend on this overlap)
-        direct = subprocess.run(
+        # (both runs bounded by progress, the CPU they spend, not by a fixed 150 s: testing.communicate)
+        direct = testing.run_process(
             [sys.executable, '-m', 'rfi_experiments.run', str(BAG), '--out', str(tmp / 'direct'), '--params-file',
              str(PARAMS), '--transport', 'direct', *WINDOW, '--no-progress', '--no-report', '--record-outputs',
-             str(tmp / 'direct' / 'outputs')], capture_output=True, text=True, timeout=RUN_TIMEOUT_S)
+             str(tmp / 'direct' / 'outputs')], 'the direct replay did not end', text=True)
         assert direct.returncode == 0, direct.stderr
         before = hosts.link_bytes(hosts.nodes)
         proc = subprocess.Popen(
@@ -154,11 +158,8 @@ def runs(hosts, tmp_path_factory):
              '--out', str(tmp / 'replay'), '--transport', 'processes', '--external-nodes', *WINDOW, '--no-progress',
              '--no-report', '--timeout', '90', '--record-outputs', str(tmp / 'replay' / 'outputs')],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-        try:
-            out, err = proc.communicate(timeout=RUN_TIMEOUT_S)
-        except subprocess.TimeoutExpired:  # SIGINT: run stops play before it exits
-            proc.send_signal(signal.SIGINT)
-            out, err = proc.communicate(timeout=30)
+        # on a stall SIGINT: run stops play before it exits
+        out, err = testing.communicate(proc, 'the replay across the link did not end', stop_signal=signal.SIGINT)
         replay = subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
         carried = hosts.link_bytes(hosts.nodes) - before
         alive = {name: proc.poll() is None for name, proc in nodes.items()}

@@ -29,6 +29,7 @@ from rfi_experiments.ubx_decode import EpochOutput
 from rfi_experiments.ubx_messages import report_to_msg
 from rfi_experiments.ubx_synth import ephemeris_frames, mon_hw_frame, rawx_frame
 from rfi_msgs.msg import GnssMeasurementArray, ReceiverInterference
+from rfi_node_common import testing
 from rfi_node_common.conversions import epoch_to_msg
 from rfi_node_common.qos import DATA_QOS
 from rfi_sim.gnss_uwb import BroadcastGeometry, GnssUwbScenario, simulate
@@ -94,7 +95,7 @@ class Probe:
                                       lambda m: self.reports.append(m) if m.header.frame_id == FRAME_ID else None,
                                       DATA_QOS)
         self.node.create_subscription(DiagnosticArray, '/diagnostics', self._diag, DATA_QOS)
-        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor = testing.CountingExecutor(context=self.context)
         self.executor.add_node(self.node)
 
     def _diag(self, msg: DiagnosticArray) -> None:
@@ -106,10 +107,12 @@ class Probe:
 
     def run(self, cmd: list[str]) -> subprocess.CompletedProcess:
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-        deadline = time.monotonic() + DEADLINE_S
+        # bounded by progress (a message taken, CPU spent by ubx_source), not by a fixed DEADLINE_S
+        watch = testing.Stall(lambda: (self.executor.messages_taken, testing.process_cpu_s(proc.pid)),
+                              'ubx_source did not finish', look_every_s=0.5)
         try:
             while proc.poll() is None or self.final is None:
-                assert time.monotonic() < deadline, 'ubx_source did not finish'
+                watch.check()
                 self.executor.spin_once(timeout_sec=0.05)
         finally:
             if proc.poll() is None:

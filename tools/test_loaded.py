@@ -7,14 +7,18 @@ whatever pytest arguments follow ``--`` (every test by default), and prints one 
 the ids of the failing tests) and a tally: runs passed, and each failing test with the runs it failed in.
 ``{run}`` in a pytest argument is replaced by the run's number (``--basetemp=/tmp/loaded/run{run}`` keeps each
 run's temporary files apart).
+With ``--cold-cache`` every run starts on a cold numba cache, as the first run after a source edit and
+``make setup`` does: the cached kernels (``*.nbi``, ``*.nbc`` under ``install/`` and ``$NUMBA_CACHE_DIR``) are
+deleted before each run, so the nodes and tests compile them again beside the hogs.
 The hogs run at the tests' own priority and are stopped (by their process ids) when the runs end, also on
-Ctrl-C. Each run's JUnit XML and output go to ``--out`` (default ``log/test_loaded``).
+Ctrl-C and on SIGTERM. Each run's JUnit XML and output go to ``--out`` (default ``log/test_loaded``).
 
 Exit status: 0 when every run passed, 1 otherwise, 2 on bad arguments.
 
 Example (the candidates of a flaky failure, 5 times beside 2 hogs)::
 
     tools/test_loaded.py --runs 5 --hogs 2 -- test/test_two_suites.py -x -q
+    tools/test_loaded.py --runs 3 --hogs 2 --cold-cache -- test/test_executables.py -k starts -q
 """
 
 from __future__ import annotations
@@ -30,6 +34,27 @@ from collections import defaultdict
 from pathlib import Path
 
 HOG = 'while True: pass'
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def cache_dirs() -> list[Path]:
+    """Where the suite's numba caches are: the install tree (``__pycache__`` beside each module) and
+    ``$NUMBA_CACHE_DIR`` when it is set."""
+    dirs = [ROOT / 'install']
+    if os.environ.get('NUMBA_CACHE_DIR'):
+        dirs.append(Path(os.environ['NUMBA_CACHE_DIR']))
+    return dirs
+
+
+def drop_numba_caches(dirs: list[Path]) -> int:
+    """Delete every numba cache file (``*.nbi`` index, ``*.nbc`` data) under ``dirs``; return how many."""
+    n = 0
+    for d in dirs:
+        if d.is_dir():
+            for path in [*d.rglob('*.nbi'), *d.rglob('*.nbc')]:
+                path.unlink(missing_ok=True)
+                n += 1
+    return n
 
 
 def start_hogs(n: int) -> list[subprocess.Popen]:
@@ -77,19 +102,28 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--runs', type=int, default=10, help='times to run the tests (default 10)')
     parser.add_argument('--hogs', type=int, default=1, help='busy loops beside them (default 1)')
     parser.add_argument('--out', type=Path, default=Path('log/test_loaded'), help='JUnit XML and logs of each run')
+    parser.add_argument('--cold-cache', action='store_true',
+                        help='delete the numba caches before each run (each run compiles every kernel anew)')
     args = parser.parse_args(argv)
     if args.runs < 1 or args.hogs < 0:
         parser.error('--runs must be >= 1 and --hogs >= 0')
     args.out.mkdir(parents=True, exist_ok=True)
     print(f'test_loaded: {args.runs} runs of pytest {" ".join(pytest_args) or "(every test)"} beside {args.hogs} '
-          f'busy loop(s) on {os.cpu_count()} CPUs; logs in {args.out}', flush=True)
+          f'busy loop(s) on {os.cpu_count()} CPUs{", cold numba cache" if args.cold_cache else ""}; logs in {args.out}',
+          flush=True)
     failures: dict[str, list[int]] = defaultdict(list)
     passed = 0
+    # SIGTERM too ends the runs through the ``finally`` below (the pytest run is killed, the hogs stopped): a job
+    # started in the background of a non-interactive shell ignores SIGINT
+    signal.signal(signal.SIGTERM, lambda signum, _: sys.exit(128 + signum))
     hogs = start_hogs(args.hogs)
     try:
         for run in range(1, args.runs + 1):
             junit = args.out / f'run{run}.xml'
             junit.unlink(missing_ok=True)
+            if args.cold_cache:
+                print(f'run {run}/{args.runs}: {drop_numba_caches(cache_dirs())} numba cache files deleted',
+                      flush=True)
             t0 = time.monotonic()
             done = subprocess.run([sys.executable, '-m', 'pytest', f'--junitxml={junit}',
                                    *(a.replace('{run}', str(run)) for a in pytest_args)],

@@ -23,9 +23,6 @@ DATA = Path(__file__).resolve().parent / 'data'
 FS = 4e6
 BLOCK = 40_000  # 10 ms
 T0_NS = 1_700_000_000 * NS_PER_S
-SPIN_S = 180.0
-"""Bound of each spin, s: the acquisition runs in the callback (seconds on a loaded machine), and a cold numba
-cache compiles the tracking kernel first."""
 
 
 class CorrelatorRig(NodeRig):
@@ -34,7 +31,7 @@ class CorrelatorRig(NodeRig):
             return GnssCorrelatorNode(context=context, parameter_overrides=overrides)
         super().__init__(make, inputs={'/rfi/if_samples': (IfSamples, DATA_QOS)},
                          outputs={'/gnss/correlators': CorrelatorArray, '/diagnostics': DiagnosticArray},
-                         params={'spectrum_inverted': True, **(params or {})}, spin_deadline_s=SPIN_S)
+                         params={'spectrum_inverted': True, **(params or {})})
         self.sent = 0
 
     @property

@@ -49,7 +49,7 @@ class Rig(NodeRig):
         super().__init__(lambda context, overrides: GnssIntegrityNode(context=context, parameter_overrides=overrides),
                          inputs={t: (c, DATA_QOS) for t, c in TOPICS.items()},
                          outputs={'/gnss/integrity': GnssIntegrity, '/diagnostics': DiagnosticArray},
-                         params=params, args=args, name='gnss_integrity_test_io', spin_deadline_s=60.0)
+                         params=params, args=args, name='gnss_integrity_test_io')
         self.sent = 0
 
     def send(self, topic: str, msg) -> None:

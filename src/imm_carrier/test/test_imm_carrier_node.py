@@ -31,9 +31,6 @@ CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'imm_carrier.yaml'
 START_NS = gps_to_ros_stamp_ns(2300, 345600.0)  # on the 20 ms GPS bit grid (ROS = GPS - 18 s)
 T_S = 0.02
 T_NS = 20_000_000
-SPIN_DEADLINE_S = 60.0
-"""Bound of each spin of the rig, s. On a cold numba cache (a fresh clone) the node's first array
-compiles the trackers and the codec: over 20 s on the shared 2-core machine."""
 TOPIC = '/gnss/correlators'
 
 
@@ -54,7 +51,7 @@ class Rig(NodeRig):
         super().__init__(lambda context, overrides: ImmCarrierNode(context=context, parameter_overrides=overrides),
                          inputs={TOPIC: (CorrelatorArray, publisher_qos)},
                          outputs={'/carrier/estimates': CarrierPhaseArray, '/diagnostics': DiagnosticArray},
-                         params=params, args=args, name='imm_carrier_test_io', spin_deadline_s=SPIN_DEADLINE_S)
+                         params=params, args=args, name='imm_carrier_test_io')
         self.pub = self.pubs[TOPIC]
         self.estimates: list[CarrierPhaseArray] = self.out['/carrier/estimates']
         self.diagnostics: list[DiagnosticArray] = self.out['/diagnostics']

@@ -13,7 +13,6 @@ import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message, serialize_message
@@ -29,6 +28,7 @@ from rfi_monitor.rfi_monitor_node import (
     jammer_state_msg,
 )
 from rfi_msgs.msg import IfSamples, JammerState
+from rfi_node_common import testing
 from rfi_node_common.qos import DATA_QOS
 from rfi_node_common.stamps import ns_to_stamp, stamp_to_ns
 
@@ -38,7 +38,6 @@ SHARED_12MHZ = Path(__file__).resolve().parents[4] / 'shared' / 'data' / 'iq_cle
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'if_source.yaml'
 FRAME_ID = 'if_source_node_test'
 START_NS = 1_638_434_820_000_000_000
-SPIN_DEADLINE_S = 60.0  # a cold numba cache compiles the monitor's kernels on the first block
 
 # file, source parameters, direct read dtype, block samples, complex, fs, IF, bits
 CASES = [
@@ -125,7 +124,7 @@ class Chain:
                   'wait_for_subscribers': 2, 'wait_timeout_s': 20.0, **source_params}
         self.source = IfSourceNode(context=self.context,
                                    parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
-        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor = testing.CountingExecutor(context=self.context)
         for node in (self.monitor, self.probe, self.source):
             self.executor.add_node(node)
 
@@ -144,10 +143,11 @@ class Chain:
         return {kv.key: kv.value for kv in final[0].status[0].values}
 
     def spin_until(self, done, what: str) -> None:
-        deadline = time.monotonic() + SPIN_DEADLINE_S
-        while not done():
-            assert time.monotonic() < deadline, f'{what} within {SPIN_DEADLINE_S} s'
-            self.executor.spin_once(timeout_sec=0.05)
+        # bounded by progress (a message taken by the monitor or the probe; if_source's reader is a thread, so a
+        # block it publishes is one), not by a fixed total: a cold numba cache compiles the monitor's kernels on the
+        # first block
+        testing.wait_until(done, lambda: self.executor.spin_once(timeout_sec=0.05),
+                           lambda: self.executor.messages_taken, f'{what}: not done')
 
     def close(self) -> None:
         self.executor.shutdown()

@@ -46,7 +46,6 @@ NOISE_BW_HZ = 2.0e6
 JS_DB = 40.0
 JN_DB = JS_DB - 130.0 + 114.0 - 10 * math.log10(NOISE_BW_HZ / 1e6)  # 21.0 dB
 CALIBRATION = 5
-SPIN_DEADLINE_S = 30.0
 
 
 def _parameters(**overrides) -> list[Parameter]:
@@ -69,7 +68,7 @@ class Probe(NodeRig):
                          inputs={'/rfi/if_samples': (IfSamples, DATA_QOS)},
                          outputs={'/rfi/jammer_state': (JammerState, self._own_state),
                                   '/diagnostics': (DiagnosticArray, self._own_diagnostics)},
-                         params=params, name='rfi_monitor_probe', spin_deadline_s=SPIN_DEADLINE_S)
+                         params=params, name='rfi_monitor_probe')
         self.probe = self.io
         self.pub = self.pubs['/rfi/if_samples']
         self.states: list[JammerState] = self.out['/rfi/jammer_state']

@@ -120,7 +120,7 @@ class Rig(NodeRig):
         base = {'max_cpu_load': 0.0, 'input_timeout_s': 0.0, 'noise_bandwidth_hz': 2.0e6, **params}
         super().__init__(lambda context, ov: RfiMonitorNode(context=context, parameter_overrides=ov),
                          inputs={'/rfi/if_samples': (IfSamples, DATA_QOS)}, outputs=outputs, params=base,
-                         name='spectrum_topics_test_io', spin_deadline_s=30.0)
+                         name='spectrum_topics_test_io')
         self.sent = 0
 
     def send(self, msg: IfSamples) -> None:

@@ -12,13 +12,22 @@ the node has taken its inputs and every message it published has arrived::
     rig.close()
 
 Each node package's test module subclasses :class:`NodeRig` with its topics and a ``send``.
+
+Waits are bounded by progress, not by a fixed total (issue 27 item 6): a :class:`Stall` watch fails a wait
+only when nothing it counts has moved for ``stall_s`` of wall time (no message taken or collected, no CPU
+spent by the process a test waits for), so a loaded machine or a numba compile inside a callback makes a wait
+longer but never fails it, and a node that hangs still fails within ``stall_s``. A far larger ``limit_s``
+ends a wait that keeps progressing without ever getting there (a livelock, a timer that publishes forever).
 """
 
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
 import time
 from collections import Counter
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Hashable, Iterator, Mapping
 from contextlib import contextmanager
 from typing import Any, TypeVar
 
@@ -28,11 +37,166 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
+from rclpy.subscription import Subscription
 
 from rfi_node_common.qos import DATA_QOS
 
-SPIN_DEADLINE_S = 10.0
-"""Longest a rig spins for one condition before the test fails, s (wall clock)."""
+STALL_S = 60.0
+"""Longest a wait goes on with nothing progressing before the test fails, s (wall clock). A bound on a hang,
+not on speed: one message delivered, one callback run, one CPU tick of the awaited process resets it."""
+LIMIT_S = 600.0
+"""Longest a wait goes on even while it progresses, s (wall clock): the bound on a livelock only."""
+SPIN_DEADLINE_S = STALL_S
+"""Default ``spin_deadline_s`` of a rig: how long its spins may go without progress, s (:data:`STALL_S`)."""
+
+
+class Stall:
+    """A deadline that moves with progress: :meth:`check` fails once ``progress()`` has returned the same value
+    for ``stall_s``, or once ``limit_s`` has passed in all.
+
+    Args:
+        progress: a value that changes whenever the awaited work moves (a count of messages, a tuple of counts,
+            a process's CPU ticks); compared with ``==``.
+        what: what is awaited, for the failure message.
+        stall_s: wall time without a change of ``progress()`` that fails, s.
+        limit_s: wall time that fails in any case, s.
+        look_every_s: ``progress()`` is called at most this often (it may read ``/proc``), and always before a
+            failure, s.
+
+    ::
+
+        watch = Stall(lambda: len(received), 'the blocks')
+        while len(received) < 10:
+            watch.check()
+            executor.spin_once(timeout_sec=0.05)
+    """
+
+    def __init__(self, progress: Callable[[], Hashable], what: str = 'the wait', *, stall_s: float = STALL_S,
+                 limit_s: float = LIMIT_S, look_every_s: float = 0.2) -> None:
+        if not 0.0 < stall_s <= limit_s:
+            raise ValueError(f'need 0 < stall_s <= limit_s, got stall_s={stall_s}, limit_s={limit_s}')
+        self.progress, self.what, self.stall_s, self.limit_s = progress, what, stall_s, limit_s
+        self.look_every_s = look_every_s
+        self.start = self.moved = self.looked = time.monotonic()
+        self.last = progress()
+        self.changes = 0
+
+    def check(self) -> None:
+        """Note progress; raise AssertionError if none for ``stall_s``, or if ``limit_s`` has passed."""
+        now = time.monotonic()
+        if now - self.looked >= self.look_every_s or now - self.moved >= self.stall_s:
+            self.looked = now
+            value = self.progress()
+            if value != self.last:
+                self.last, self.moved = value, now
+                self.changes += 1
+        assert now - self.moved < self.stall_s, \
+            f'{self.what}: nothing progressed for {self.stall_s} s ({self.changes} steps of progress before, ' \
+            f'last {self.last!r})'
+        assert now - self.start < self.limit_s, \
+            f'{self.what}: not done within {self.limit_s} s although it progressed ({self.changes} steps)'
+
+
+def wait_until(done: Callable[[], bool], step: Callable[[], object], progress: Callable[[], Hashable],
+               what: str = 'the wait', *, stall_s: float = STALL_S, limit_s: float = LIMIT_S) -> None:
+    """Call ``step()`` (one ``spin_once``, a short poll) until ``done()``, failing as :class:`Stall` does."""
+    watch = Stall(progress, what, stall_s=stall_s, limit_s=limit_s)
+    while not done():
+        watch.check()
+        step()
+
+
+_TICK_S = 1.0 / os.sysconf('SC_CLK_TCK') if hasattr(os, 'sysconf') else 0.01
+
+
+def process_cpu_s(pid: int, *, descendants: bool = True) -> float:
+    """CPU time (user + system) that process ``pid`` has used so far, s, with that of its live descendants
+    (the nodes a ``run`` or a launch started) unless ``descendants`` is False; 0.0 for a process that has
+    ended. Read from ``/proc`` (Linux); where there is no ``/proc``, always 0.0 (no progress is seen, so a wait
+    on it is bounded by its stall time).
+
+    A process that compiles kernels or analyses blocks spends CPU and so progresses however slowly a loaded
+    machine lets it; one that waits for input it will never get spends none."""
+    stats: dict[int, tuple[int, float]] = {}
+    try:
+        names = os.listdir('/proc') if descendants else [str(pid)]
+    except OSError:
+        return 0.0
+    for name in names:
+        if not name.isdigit():
+            continue
+        try:
+            with open(f'/proc/{name}/stat', 'rb') as f:
+                raw = f.read()
+        except OSError:
+            continue
+        fields = raw[raw.rfind(b')') + 2:].split()   # after "pid (comm) ": state ppid ... utime(12) stime(13)
+        stats[int(name)] = (int(fields[1]), (int(fields[11]) + int(fields[12])) * _TICK_S)
+    total, todo, seen = 0.0, [pid], set()
+    while todo:
+        p = todo.pop()
+        if p in seen or p not in stats:
+            continue
+        seen.add(p)
+        total += stats[p][1]
+        if descendants:
+            todo.extend(child for child, (parent, _) in stats.items() if parent == p)
+    return total
+
+
+def communicate(proc: subprocess.Popen, what: str, *, input: Any = None, stall_s: float = STALL_S,
+                limit_s: float = LIMIT_S, stop_signal: int = signal.SIGKILL) -> tuple[Any, Any]:
+    """``proc.communicate(input)`` bounded by progress: it fails once the process and its descendants have spent
+    no CPU for ``stall_s`` (:func:`process_cpu_s`), or after ``limit_s``, not after a fixed time. Returns
+    (stdout, stderr) as ``communicate`` does.
+
+    On failure ``proc`` gets ``stop_signal`` (SIGINT for a ``run`` that must stop its node processes itself),
+    then SIGKILL if it has not ended 60 s later; the AssertionError ends with the last 3000 characters of its
+    stderr."""
+    watch = Stall(lambda: process_cpu_s(proc.pid), what, stall_s=stall_s, limit_s=limit_s, look_every_s=0.5)
+    while True:
+        try:
+            return proc.communicate(input, timeout=0.5)   # a retry loses no output (subprocess docs)
+        except subprocess.TimeoutExpired:
+            pass
+        try:
+            watch.check()
+        except AssertionError as e:
+            proc.send_signal(stop_signal)
+            try:
+                _, err = proc.communicate(timeout=60.0)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                _, err = proc.communicate()
+            tail = err[-3000:] if err else ''
+            raise AssertionError(f'{e}; stderr:\n{tail!s}') from None
+
+
+def run_process(args: list[str], what: str | None = None, *, input: Any = None, stall_s: float = STALL_S,
+                limit_s: float = LIMIT_S, **popen: Any) -> subprocess.CompletedProcess:
+    """``subprocess.run(args, capture_output=True, input=input, **popen)``, bounded by progress as
+    :func:`communicate` is instead of by a ``timeout``: a process that compiles numba kernels on a cold cache
+    beside a CPU hog takes as long as it takes, one that hangs fails after ``stall_s``."""
+    stdin = subprocess.PIPE if input is not None else popen.pop('stdin', None)
+    with subprocess.Popen(args, stdin=stdin, stdout=subprocess.PIPE, stderr=subprocess.PIPE, **popen) as proc:
+        out, err = communicate(proc, what or f'{os.path.basename(str(args[0]))} did not end', input=input,
+                               stall_s=stall_s, limit_s=limit_s)
+    return subprocess.CompletedProcess(args, proc.returncode, out, err)
+
+
+class CountingExecutor(SingleThreadedExecutor):
+    """A SingleThreadedExecutor that counts the subscription callbacks it has taken (the progress of a rig:
+    a message taken by the node or by the test node; timers do not count)."""
+
+    def __init__(self, *, context: Context) -> None:
+        super().__init__(context=context)
+        self.messages_taken = 0
+
+    def wait_for_ready_callbacks(self, *args: Any, **kwargs: Any) -> Any:
+        ready: Any = super().wait_for_ready_callbacks(*args, **kwargs)
+        if isinstance(ready[1], Subscription):
+            self.messages_taken += 1
+        return ready
 
 NodeFactory = Callable[[Context, list[Parameter]], Node]
 """Builds the node under test in the given context with the given parameter overrides."""
@@ -54,7 +218,9 @@ class NodeRig:
         inputs: input topic -> (message type, QoS of the test's publisher).
         outputs: output topic -> message type, or (type, accept).
         name: name of the test node.
-        spin_deadline_s: bound of each :meth:`spin_until`, s.
+        spin_deadline_s: how long each :meth:`spin_until` may go without progress (no message taken by either
+            node, nothing published by the node under test) before the test fails, s.
+        spin_limit_s: bound of each :meth:`spin_until` even while it progresses, s.
 
     Attributes:
         node: the node under test; ``io``: the test node; ``pubs``: input topic -> publisher;
@@ -65,8 +231,9 @@ class NodeRig:
     def __init__(self, make_node: NodeFactory, *, inputs: Mapping[str, tuple[type, QoSProfile]],
                  outputs: Mapping[str, Output], params: Mapping[str, Any] | None = None,
                  args: list[str] | None = None, name: str = 'node_test_io',
-                 spin_deadline_s: float = SPIN_DEADLINE_S) -> None:
+                 spin_deadline_s: float = SPIN_DEADLINE_S, spin_limit_s: float = LIMIT_S) -> None:
         self.spin_deadline_s = spin_deadline_s
+        self.spin_limit_s = max(spin_limit_s, spin_deadline_s)
         self.context = Context()
         rclpy.init(args=args, context=self.context)
         overrides = [Parameter(k, value=v) for k, v in (params or {}).items()]
@@ -88,7 +255,7 @@ class NodeRig:
         assert not missing, f'the node does not publish {sorted(missing)}'
         for pub in self._node_pubs:
             pub.publish = self._counting(pub.publish, pub.topic_name)  # type: ignore[method-assign,assignment]
-        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor = CountingExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.executor.add_node(self.io)
         self.spin_until(lambda: all(p.get_subscription_count() >= 1 for p in self.pubs.values())
@@ -110,12 +277,17 @@ class NodeRig:
             publish(msg)
         return counted
 
+    def progress(self) -> tuple[int, int]:
+        """(messages taken by the node under test and the test node, messages the node published): what a
+        spin waits on moves only when one of them does (discovery aside: see :meth:`spin_until`)."""
+        return self.executor.messages_taken, sum(self.published.values())
+
     def spin_until(self, done: Callable[[], bool], what: str = 'the graph') -> None:
-        """Spin the executor until ``done()``; fail the test after ``spin_deadline_s``."""
-        deadline = time.monotonic() + self.spin_deadline_s
-        while not done():
-            assert time.monotonic() < deadline, f'{what} did not settle within {self.spin_deadline_s} s'
-            self.executor.spin_once(timeout_sec=0.05)
+        """Spin the executor until ``done()``; fail the test once nothing has progressed (:meth:`progress`) for
+        ``spin_deadline_s``, or after ``spin_limit_s`` in all. (Discovery and graph changes are no message: a
+        wait for them alone is bounded by ``spin_deadline_s`` from its start.)"""
+        wait_until(done, lambda: self.executor.spin_once(timeout_sec=0.05), self.progress, f'{what} did not settle',
+                   stall_s=self.spin_deadline_s, limit_s=self.spin_limit_s)
 
     def outputs_arrived(self) -> bool:
         """Every message the node published on an output topic has been collected."""

@@ -4,13 +4,11 @@ against the profiles the ROS 2 diagnostics stack uses."""
 from __future__ import annotations
 
 import copy
-import time
 
 import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import (
     DurabilityPolicy,
     HistoryPolicy,
@@ -34,6 +32,7 @@ from rfi_node_common.diagnostics import (
     publish_status,
 )
 from rfi_node_common.qos import DIAGNOSTICS_QOS, LATCHED_QOS
+from rfi_node_common.testing import CountingExecutor, wait_until
 
 S = 1_000_000_000
 
@@ -118,16 +117,17 @@ def test_diagnostics_reach_a_system_default_subscription_through_the_middleware(
                                  QoSProfile(depth=1000, reliability=qos_profile_system_default.reliability,
                                             durability=qos_profile_system_default.durability))
         pub = node.create_publisher(DiagnosticArray, '/test_diagnostics_qos', DIAGNOSTICS_QOS)
-        executor = SingleThreadedExecutor(context=context)
+        executor = CountingExecutor(context=context)
         executor.add_node(node)
-        deadline = time.monotonic() + 10.0
-        while pub.get_subscription_count() < 1:
-            assert time.monotonic() < deadline, 'no match'
+
+        def spin() -> None:
             executor.spin_once(timeout_sec=0.05)
+
+        # bounded by progress, not by a fixed 10 s (a match and one message: nothing to count before, so this is
+        # testing.STALL_S in all)
+        wait_until(lambda: pub.get_subscription_count() >= 1, spin, lambda: executor.messages_taken, 'no match')
         pub.publish(diagnostic_array(S, 'n', 'h', OK, 'x', {}))
-        while not got:
-            assert time.monotonic() < deadline, 'not received'
-            executor.spin_once(timeout_sec=0.05)
+        wait_until(lambda: bool(got), spin, lambda: executor.messages_taken, 'not received')
         assert got[0].status[0].hardware_id == 'h'
         executor.shutdown()
         node.destroy_node()

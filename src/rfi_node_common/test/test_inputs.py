@@ -8,13 +8,13 @@ import time
 import pytest
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import ReliabilityPolicy, qos_profile_sensor_data
 from std_msgs.msg import String
 
 from rfi_node_common.inputs import InputHealth, StaleInputWatch, subscribe_input
 from rfi_node_common.qos import DATA_QOS, INPUT_QOS, best_available_reliability
+from rfi_node_common.testing import CountingExecutor, wait_until
 
 TOPIC = '/test_inputs/chatter'
 
@@ -27,11 +27,11 @@ def context():
     rclpy.try_shutdown(context=ctx)
 
 
-def spin_until(executor, done, timeout_s=10.0):
-    end = time.monotonic() + timeout_s
-    while not done():
-        assert time.monotonic() < end, 'timed out'
-        executor.spin_once(timeout_sec=0.05)
+def spin_until(executor, done):
+    """Spin until ``done()``; fail once nothing progressed (no message taken, when the executor counts them:
+    ``testing.CountingExecutor``) for ``testing.STALL_S``, not after a fixed 10 s."""
+    wait_until(done, lambda: executor.spin_once(timeout_sec=0.05), lambda: getattr(executor, 'messages_taken', 0),
+               'timed out')
 
 
 def test_best_effort_and_reliable_publishers_are_both_received_and_a_raising_handler_is_counted(context):
@@ -50,7 +50,7 @@ def test_best_effort_and_reliable_publishers_are_both_received_and_a_raising_han
     io = rclpy.create_node('io', context=context)
     sensor = io.create_publisher(String, TOPIC, qos_profile_sensor_data)
     reliable = io.create_publisher(String, TOPIC, DATA_QOS)
-    executor = SingleThreadedExecutor(context=context)
+    executor = CountingExecutor(context=context)
     executor.add_node(node)
     executor.add_node(io)
     # the driver that appeared later makes the input best effort (REP 2003: it is still received)
@@ -101,7 +101,7 @@ def test_an_input_made_after_a_driver_started_is_best_effort_and_one_after_a_pla
     io.create_publisher(String, TOPIC + '_driver', qos_profile_sensor_data)
     io.create_publisher(String, TOPIC + '_play', DATA_QOS)
     node = rclpy.create_node('inputs_under_test', context=context)
-    executor = SingleThreadedExecutor(context=context)
+    executor = CountingExecutor(context=context)
     executor.add_node(io)
     executor.add_node(node)
     spin_until(executor, lambda: node.get_publishers_info_by_topic(TOPIC + '_driver')
@@ -158,7 +158,7 @@ def test_queued_s_is_the_time_a_message_waited_since_the_middleware_received_it(
     subscribe_input(node, String, TOPIC + '_queue', lambda msg: seen.append(health.queued_s()), health)
     io = rclpy.create_node('io_queue', context=context)
     pub = io.create_publisher(String, TOPIC + '_queue', DATA_QOS)
-    executor = SingleThreadedExecutor(context=context)
+    executor = CountingExecutor(context=context)
     executor.add_node(node)
     executor.add_node(io)
     spin_until(executor, lambda: pub.get_subscription_count() and health.publishers[TOPIC + '_queue'] >= 1)

@@ -39,7 +39,6 @@ from uwb_gnss_fusion.fusion_node import ORIENTATION_UNKNOWN_VARIANCE_RAD2, Fusio
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'fusion.yaml'
 NAV_FILE = Path(__file__).resolve().parents[2] / 'gnss_common' / 'test' / 'data' / 'arlm2000.15n'
 """ARL1 broadcast ephemeris, 2015-07-19 (the copy of the gnss_common tests)."""
-SPIN_DEADLINE_S = 10.0
 GOAL_HORIZONTAL_RMS_M = 0.2
 """Issue goal (Cao et al. scenario, 3 anchors): horizontal RMS below 0.2 m."""
 CONVERGED_S = 10.0
@@ -78,7 +77,7 @@ class Rig(NodeRig):
                          outputs={'/fusion/odometry': Odometry, '/fusion/fix': NavSatFix,
                                   '/fusion/status': FusionStatus, '/diagnostics': DiagnosticArray,
                                   '/fusion/local_odometry': Odometry, '/fusion/datum': NavSatFix},
-                         params=params, args=args, name='fusion_test_io', spin_deadline_s=SPIN_DEADLINE_S)
+                         params=params, args=args, name='fusion_test_io')
         self.sent: Counter[str] = Counter()
 
     def send(self, msg, cls=None) -> None:

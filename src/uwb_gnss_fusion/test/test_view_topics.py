@@ -85,7 +85,7 @@ class Rig(NodeRig):
         super().__init__(lambda context, ov: FusionNode(context=context, parameter_overrides=ov),
                          inputs={'/gnss/measurements': (GnssMeasurementArray, DATA_QOS),
                                  '/uwb/ranges': (UwbRange, DATA_QOS)},
-                         outputs=outputs, params=base, name='fusion_view_test_io', spin_deadline_s=30.0)
+                         outputs=outputs, params=base, name='fusion_view_test_io')
         self.sent: Counter[str] = Counter()
 
     def send(self, msg) -> None:
