@@ -15,6 +15,7 @@ when the install tree is not sourced (the benchmarks run with ``PYTHONPATH=src/<
 
 from __future__ import annotations
 
+import argparse
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -31,7 +32,7 @@ except ImportError:  # not on the path: the source tree's copy (the module is pu
         del sys.modules[_name]       # a failed partial import must not be reused
     from rfi_experiments.progress import CaseLog, add_quiet_argument
 
-__all__ = ['CaseLog', 'add_quiet_argument', 'case_log', 'quiet_requested']
+__all__ = ['CaseLog', 'add_quiet_argument', 'answer_help', 'case_log', 'quiet_requested']
 
 
 def quiet_requested(argv: Sequence[str] | None = None) -> bool:
@@ -39,7 +40,20 @@ def quiet_requested(argv: Sequence[str] | None = None) -> bool:
     return any(a in ('-q', '--quiet') for a in (sys.argv[1:] if argv is None else argv))
 
 
+def answer_help(script: str) -> None:
+    """For the benchmarks that read ``sys.argv`` directly: ``-h``/``--help`` prints the script's docstring and
+    its ``-q`` option and exits, instead of running the benchmark and rewriting its document; other arguments
+    are left to the script."""
+    main = sys.modules.get('__main__')
+    parser = argparse.ArgumentParser(prog=Path(script).name, description=getattr(main, '__doc__', None),
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_quiet_argument(parser)
+    parser.parse_known_args()
+
+
 def case_log(script: str, total: int | None = None, *, quiet: bool | None = None) -> CaseLog:
     """The case log of a benchmark script (``__file__``; its stem names the lines). ``quiet``: default
-    :func:`quiet_requested`."""
+    :func:`quiet_requested` (and then ``--help`` answered first: :func:`answer_help`)."""
+    if quiet is None:
+        answer_help(script)
     return CaseLog(Path(script).stem, total, quiet=quiet_requested() if quiet is None else quiet)

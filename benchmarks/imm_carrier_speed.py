@@ -12,6 +12,7 @@ import sys
 import time
 
 import numpy as np
+from bench_progress import answer_help
 
 from imm_carrier.imm import ImmCarrierFilter, ImmParams
 from imm_carrier.measurement_model import CorrelatorSample
@@ -33,6 +34,7 @@ def _median_rate(fn, n_updates: int) -> float:
 
 
 def main() -> int:
+    answer_help(__file__)
     rng = np.random.default_rng(0)
     n = 200_000
     zi = 1.0 + 0.1 * rng.standard_normal(n)

@@ -19,6 +19,7 @@ A,B``: only these of STAGE_CASES (front end:phase).
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import json
 import math
@@ -520,13 +521,23 @@ def main() -> None:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     except (AttributeError, OSError):
         pass
-    stages_only = "--stages" in sys.argv[1:]
-    log = case_log(__file__, total=1 if stages_only else 3 + LIVE_RUNS)
-    stage_runs = int(sys.argv[sys.argv.index("--runs") + 1]) if "--runs" in sys.argv[1:] else STAGE_RUNS
-    cases = (tuple(sys.argv[sys.argv.index("--cases") + 1].split(",")) if "--cases" in sys.argv[1:]
-             else STAGE_CASES)
-    if not set(cases) <= set(STAGE_CASES):
-        raise SystemExit(f"--cases: each of {', '.join(STAGE_CASES)}")
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     epilog=f"writes {OUT / 'speed.md'} (about 15 minutes; --stages: 10)")
+    parser.add_argument("--stages", action="store_true",
+                        help="only the stage table of issue 26 item 2, written into its section of speed.md")
+    parser.add_argument("--runs", type=int, default=STAGE_RUNS,
+                        help=f"runs of every (case, version) child of the stage table (default {STAGE_RUNS})")
+    parser.add_argument("--cases", default=",".join(STAGE_CASES),
+                        help="comma-separated stage cases (front end:phase), default all: " + ",".join(STAGE_CASES))
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress lines, tables or summary")
+    a = parser.parse_args()
+    stages_only = a.stages
+    log = case_log(__file__, total=1 if stages_only else 3 + LIVE_RUNS, quiet=a.quiet)
+    stage_runs = a.runs
+    cases = tuple(a.cases.split(","))
+    if not set(cases) <= set(STAGE_CASES) or stage_runs < 1:
+        parser.error(f"--cases: each of {', '.join(STAGE_CASES)}; --runs >= 1")
     section = stage_section(stage_measurements(stage_runs, cases))
     log.done("stage table")
     log.say(section)

@@ -22,6 +22,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from bench_progress import answer_help  # noqa: E402
 
 from gnss_common.coordinates import ecef_to_enu  # noqa: E402
 from gnss_common.measurements import build_epochs  # noqa: E402
@@ -104,6 +105,7 @@ def timing_many_satellites() -> tuple[int, float]:
 
 
 def main() -> None:
+    answer_help(__file__)
     OUT.mkdir(parents=True, exist_ok=True)
     rows = [run_station(*s) for s in STATIONS]
     n_sat, t_many = timing_many_satellites()

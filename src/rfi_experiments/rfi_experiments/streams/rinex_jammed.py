@@ -361,7 +361,8 @@ def uwb_ranges(receiver_ecef_m: np.ndarray, t0_ns: int, duration_s: float, secti
     n_u = int(round(duration_s * section.uwb_rate_hz))
     offsets_ns = [int(round(j / (k_a * section.uwb_rate_hz) * 1e9)) for j in range(k_a)]
     noise = section.uwb_noise_std_m * rng.standard_normal((n_u, k_a))
-    reported_std_m = math.nan if section.uwb_reported_std_m is None else section.uwb_reported_std_m  # checked: never None
+    # checked when the section is read: never None here
+    reported_std_m = math.nan if section.uwb_reported_std_m is None else section.uwb_reported_std_m
     out = []
     for m in range(n_u):
         base = t0_ns + int(round(m / section.uwb_rate_hz * 1e9))
