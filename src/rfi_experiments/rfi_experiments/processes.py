@@ -35,14 +35,14 @@ import math
 import os
 import re
 import signal
-import subprocess
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 
 from rfi_experiments.bag_io import BagReader
+from rfi_experiments.child_processes import ChildProcesses, RunError, executable_path
 from rfi_experiments.play import window_ns, window_s
 
 PROCESSES_DEFAULT_RATE = 1.0
@@ -194,10 +194,6 @@ def namespace_arguments(namespace: str, topics: Sequence[str]) -> list[str]:
     return out
 
 
-class RunError(RuntimeError):
-    """A replay could not be completed; the message says what is missing and where to look."""
-
-
 def ros_arguments(argv: Sequence[str]) -> list[str]:
     """The ``--ros-args ... [--]`` parts of ``argv`` (remaps, parameters), to pass on to other processes."""
     out: list[str] = []
@@ -227,91 +223,6 @@ def reliable_input_arguments(topics: Sequence[str], resolve: Any = None) -> list
     for name in names:
         out += ['-p', f'qos_overrides.{name}.subscription.reliability:={RELIABLE_INPUTS}']
     return out
-
-
-def executable_path(package: str, name: str) -> str:
-    """Where ``ros2 run package name`` looks: ``<prefix of package>/lib/<package>/<name>`` (as tools/ros2_run).
-
-    Raises:
-        RunError: the package is not in the ament index or has no such executable.
-    """
-    from ament_index_python.packages import PackageNotFoundError, get_package_prefix
-
-    try:
-        prefix = get_package_prefix(package)
-    except PackageNotFoundError:
-        raise RunError(f'package {package!r} not found (is install/setup.bash sourced?)') from None
-    path = os.path.join(prefix, 'lib', package, name)
-    if not os.access(path, os.X_OK):
-        raise RunError(f'no executable {name!r} in package {package!r} ({path})')
-    return path
-
-
-class ChildProcesses:
-    """The processes a ``processes`` run starts: each in its own session (a Ctrl-C reaches only this
-    process, which then stops them in order), its output in ``log_dir/<name>.log``."""
-
-    def __init__(self, log_dir: Path) -> None:
-        self.log_dir = log_dir
-        self.procs: dict[str, subprocess.Popen] = {}
-        self._logs: dict[str, TextIO] = {}
-
-    def start(self, name: str, command: list[str], *, stderr_to_terminal: bool = False,
-              inherit_stdin: bool = False) -> subprocess.Popen:
-        """Start ``command``; its standard input is this process's with ``inherit_stdin`` (if_source reading
-        ``-``), else none."""
-        self.log_dir.mkdir(parents=True, exist_ok=True)
-        log = open(self.log_dir / f'{name}.log', 'w')  # noqa: SIM115 (closed in stop())
-        self._logs[name] = log
-        log.write('$ ' + ' '.join(command) + '\n')
-        log.flush()
-        proc = subprocess.Popen(command, stdin=None if inherit_stdin else subprocess.DEVNULL, stdout=log,
-                                stderr=None if stderr_to_terminal else subprocess.STDOUT, start_new_session=True)
-        self.procs[name] = proc
-        return proc
-
-    def log_tail(self, name: str, lines: int = 8) -> str:
-        try:
-            text = (self.log_dir / f'{name}.log').read_text(errors='replace').splitlines()
-        except OSError:
-            return ''
-        return '\n'.join('    ' + line for line in text[-lines:])
-
-    def check_alive(self, names: Sequence[str]) -> None:
-        """Raise RunError if one of ``names`` has exited (with the end of its log)."""
-        for name in names:
-            code = self.procs[name].poll()
-            if code is not None:
-                raise RunError(f'{name} exited early with code {code}; the end of {self.log_dir / name}.log:\n'
-                               + self.log_tail(name))
-
-    def stop(self, timeout_s: float = 10.0, while_waiting: Any = None) -> dict[str, int]:
-        """SIGINT to every process still running, then SIGKILL to those not gone after ``timeout_s``;
-        return each process's exit code (negative: killed by that signal). ``while_waiting()`` is called
-        repeatedly until they have exited (e.g. to keep recording what they publish while stopping)."""
-        for proc in self.procs.values():
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-        deadline = time.monotonic() + timeout_s
-        codes: dict[str, int] = {}
-        try:
-            while while_waiting is not None and time.monotonic() < deadline and any(
-                    p.poll() is None for p in self.procs.values()):
-                while_waiting()
-            for name, proc in self.procs.items():
-                try:
-                    codes[name] = proc.wait(timeout=max(0.0, deadline - time.monotonic()))
-                except subprocess.TimeoutExpired:
-                    proc.kill()
-                    codes[name] = proc.wait()
-        finally:  # also on a second Ctrl-C while waiting: no process is left behind
-            for name, proc in self.procs.items():
-                if proc.poll() is None:
-                    proc.kill()
-                    codes[name] = proc.wait()
-            for log in self._logs.values():
-                log.close()
-        return codes
 
 
 @dataclass
@@ -425,54 +336,28 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
     executor.add_node(node)
     recorded: dict[str, list[tuple[int, bytes]]] = {t: [] for t in types}
     received: dict[str, Any] = {'n': 0, 'at': time.monotonic()}  # messages so far, time of the last
-
-    def recorder(topic: str):
-        messages = recorded[topic]
-
-        def on_message(raw: bytes) -> None:
-            received['n'] += 1
-            received['at'] = time.monotonic()
-            messages.append((received['n'], raw))
-        return on_message
-
     previous = {sig: signal.signal(sig, _raise_interrupt) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
     exit_codes: dict[str, int] = {}
     try:
-        subs = {t: node.create_subscription(message_class(m), suite_topic(namespace, t), recorder(t), RECORDER_QOS,
+        subs = {t: node.create_subscription(message_class(m), suite_topic(namespace, t),
+                                            _recorder(recorded[t], received), RECORDER_QOS,
                                             raw=True)
                 for t, m in types.items()}
         params_files = [str(namespaced_params_file(Path(f), namespace, out / 'logs')) for f in args.params_file]
         for name, path in paths.items():
-            command = [path, '--ros-args']
-            for params_file in params_files:
-                command += ['--params-file', params_file]
-            if name == 'imm_carrier':  # run's default, unless a parameters file sets it
-                command += ['-p', f'method:={params["imm_carrier"]["method"]}']
-            # the names the node resolves its inputs to (the override is declared under those; another
-            # name would be refused as an unknown parameter)
-            command += reliable_input_arguments(
-                [node.resolve_topic_name(suite_topic(namespace, t)) for t in NODE_ENDPOINTS[name][0]])
-            command += namespace_arguments(namespace, ['/diagnostics'])
-            command += forwarded[1:] if forwarded else []  # after ours: the caller's own -p wins
-            children.start(name, command)
+            children.start(name, _node_command(name, path, params_files, params, namespace, forwarded,
+                                               node.resolve_topic_name))
         _wait_for_graph(node, executor, subs, children, args.timeout, namespace, external, endpoints)
         node_names = list(paths)
         wall_start = time.monotonic()
         quiet = args.no_progress or args.quiet  # play's summary goes to its log either way
         if seg is not None:
-            feeder_name = 'play'
             player = children.start('play', _play_command(args, feeder, inputs, seg, rate, namespace, forwarded,
                                                           endpoints, types), stderr_to_terminal=not quiet)
         else:
-            feeder_name = 'if_source'
             player = children.start('if_source', _if_source_command(args, feeder, params_files, namespace, forwarded,
                                                                     endpoints), inherit_stdin=args.if_input == '-')
-        while player.poll() is None:
-            executor.spin_once(timeout_sec=0.05)
-            children.check_alive(node_names)
-        if player.returncode != 0:
-            raise RunError(f'{feeder_name} exited with code {player.returncode}; the end of '
-                           f'{children.log_dir}/{feeder_name}.log:\n' + children.log_tail(feeder_name))
+        _record_until_done(player, 'play' if seg is not None else 'if_source', executor, children, node_names)
         if seg is None:
             seg = if_source_segment(executor, recorded, children, node_names, args.timeout)
         last_input = dict(seg.last_input)
@@ -498,6 +383,45 @@ def run_processes(args: argparse.Namespace, argv: Sequence[str], inputs: list[st
                           inputs={t: n for t, n in seg.counts.items() if n}, wall_time_s=wall_time_s,
                           bag_duration_s=(seg.last_ns - seg.first_ns) * 1e-9)
     return result, ProcessesRun(exit_codes=exit_codes, completion=completion)
+
+
+def _recorder(messages: list[tuple[int, bytes]], received: dict[str, Any]) -> Any:
+    """The raw callback of one recorded topic: each message appended with its arrival number over all topics;
+    ``received`` holds that count (``n``) and the wall time of the last (``at``)."""
+    def on_message(raw: bytes) -> None:
+        received['n'] += 1
+        received['at'] = time.monotonic()
+        messages.append((received['n'], raw))
+    return on_message
+
+
+def _record_until_done(player: Any, feeder_name: str, executor: Any, children: ChildProcesses,
+                       node_names: list[str]) -> None:
+    """Spin the recorder until the feeder (play or if_source) exits; RunError if a node died or the feeder
+    failed (with the end of its log)."""
+    while player.poll() is None:
+        executor.spin_once(timeout_sec=0.05)
+        children.check_alive(node_names)
+    if player.returncode != 0:
+        raise RunError(f'{feeder_name} exited with code {player.returncode}; the end of '
+                       f'{children.log_dir}/{feeder_name}.log:\n' + children.log_tail(feeder_name))
+
+
+def _node_command(name: str, path: str, params_files: list[str], params: dict[str, dict[str, object]],
+                  namespace: str, forwarded: list[str], resolve: Any) -> list[str]:
+    """The command line of node ``name``'s executable: the parameters files, run's imm_carrier method, reliable
+    inputs, the namespace, then the caller's own ``--ros-args`` (last: the caller's ``-p`` wins)."""
+    command = [path, '--ros-args']
+    for params_file in params_files:
+        command += ['--params-file', params_file]
+    if name == 'imm_carrier':  # run's default, unless a parameters file sets it
+        command += ['-p', f'method:={params["imm_carrier"]["method"]}']
+    # the names the node resolves its inputs to (the override is declared under those; another
+    # name would be refused as an unknown parameter)
+    command += reliable_input_arguments([resolve(suite_topic(namespace, t)) for t in NODE_ENDPOINTS[name][0]])
+    command += namespace_arguments(namespace, ['/diagnostics'])
+    command += forwarded[1:] if forwarded else []
+    return command
 
 
 def _if_source_command(args: argparse.Namespace, source: str, params_files: list[str], namespace: str,

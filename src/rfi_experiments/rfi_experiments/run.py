@@ -252,6 +252,73 @@ def carrier_summary(messages: list) -> list[str]:
     return lines
 
 
+def argument_problem(args: argparse.Namespace, argv: Sequence[str]) -> str | None:
+    """What is wrong with run's command line (the message for :func:`fail`), None when nothing is."""
+    if args.rate is not None and not (math.isfinite(args.rate) and args.rate > 0):
+        return f'--rate must be a finite number > 0 (got {args.rate})'
+    for name in ('timeout', 'settle', 'warmup', 'warmup_rate'):
+        value = getattr(args, name)
+        if not (math.isfinite(value) and (value > 0 or (name == 'warmup' and value == 0))):
+            return f'--{name.replace("_", "-")} must be a finite number > 0 (got {value})'
+    if args.transport != 'processes' and (args.namespace != '/' or args.external_nodes or args.with_correlator
+                                          or args.if_input is not None):
+        return '--namespace, --external-nodes, --with-correlator and --if-input apply to --transport processes only'
+    if (args.bag is None) == (args.if_input is None):
+        return 'give a bag or --if-input FILE (not both)'
+    if args.if_input is not None and (args.start != 0.0 or args.duration is not None):
+        return '--start and --duration select a window of a bag; with --if-input cut the capture instead'
+    if args.external_nodes and args.params_file:
+        return ('--params-file sets the parameters of the nodes run starts; with --external-nodes give it to the '
+                'nodes themselves (--ros-args --params-file FILE)')
+    if any(a.startswith('__ns:=') for a in ros_arguments(argv)):
+        return ('give the namespace as --namespace NS (run moves play and its recorder there too), '
+                'not as --ros-args -r __ns:=NS')
+    return None
+
+
+def write_replay_document(args: argparse.Namespace, result: Any, inputs: list[str],
+                          topics: dict[str, tuple[str, int]], window: tuple[float, float] | None, how: str,
+                          notes: list[str], out: Path) -> tuple[str, list[str]]:
+    """``out/replay.md``: what was replayed, the message counts per topic, the correlator's carrier phases and
+    the nodes' last diagnostics. Returns the one-line account of the replay and the carrier-phase table's lines
+    (empty without the correlator)."""
+    diagnostics = diagnostics_summary(result.messages('/diagnostics')) if '/diagnostics' in result.outputs else {}
+    window_text = '' if window is None else (
+        f' (window {window[0]:g}-{"end" if math.isinf(window[1]) else f"{window[1]:g}"} s of the bag)')
+    if args.if_input is not None:
+        names = 'rfi_monitor' + (', gnss_correlator and imm_carrier' if args.with_correlator else '')
+        replay_line = (f'{sum(result.inputs.values())} IF blocks of {args.if_input} through {names} ({how}): '
+                       f'{result.bag_duration_s:.3f} s of stream (first to last block stamp) in '
+                       f'{result.wall_time_s:.1f} s.')
+    else:
+        names = ('rfi_monitor, gnss_integrity, uwb_gnss_fusion, ' + ('gnss_correlator ' if args.with_correlator
+                                                                     else '') + 'and imm_carrier')
+        replay_line = (f'{sum(result.inputs.values())} input messages{window_text} replayed through {names} '
+                       f'({how}): {result.bag_duration_s:.1f} s of data in {result.wall_time_s:.1f} s, '
+                       f'{result.real_time_factor:.1f}x real time.')
+    lines = [f'# Replay of {args.bag or args.if_input}', '', replay_line, '']
+    if notes:
+        lines += [' '.join(notes), '']
+    lines += ['| topic | direction | messages |', '|---|---|---|']
+    for t in inputs:
+        lines.append(f'| {t} | in | {result.inputs.get(t, 0)} |')
+    for t in sorted(result.outputs):
+        lines.append(f'| {t} | out | {len(result.outputs[t])} |')
+    for t in sorted(set(topics) - set(inputs)):
+        lines.append(f'| {t} | truth (not replayed) | {topics[t][1]} |')
+    carrier = carrier_summary(result.messages('/carrier/estimates')) if (
+        args.with_correlator and '/carrier/estimates' in result.outputs) else []
+    if carrier:
+        lines += ['', '## Carrier phase from the correlator', '',
+                  'Per satellite that gnss_correlator tracked and method of imm_carrier (stamps from the IF stamps, '
+                  's after the first estimate; the estimates themselves: --record-outputs):', '', *carrier]
+    for name, values in diagnostics.items():
+        lines += ['', f'## Diagnostics of {name}', '', '| key | value |', '|---|---|']
+        lines += [f'| {k} | {v} |' for k, v in values.items()]
+    (out / 'replay.md').write_text('\n'.join(lines) + '\n')
+    return replay_line, carrier
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     from rclpy.utilities import remove_ros_args
 
@@ -261,26 +328,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(remove_ros_args(argv)[1:])
     # Synchronous publication: about 3x lower latency per hop for the in-process replay.
     os.environ.setdefault('RMW_FASTRTPS_PUBLICATION_MODE', 'SYNCHRONOUS')
-    if args.rate is not None and not (math.isfinite(args.rate) and args.rate > 0):
-        return fail(f'--rate must be a finite number > 0 (got {args.rate})')
-    for name in ('timeout', 'settle', 'warmup', 'warmup_rate'):
-        value = getattr(args, name)
-        if not (math.isfinite(value) and (value > 0 or (name == 'warmup' and value == 0))):
-            return fail(f'--{name.replace("_", "-")} must be a finite number > 0 (got {value})')
-    if args.transport != 'processes' and (args.namespace != '/' or args.external_nodes or args.with_correlator
-                                          or args.if_input is not None):
-        return fail('--namespace, --external-nodes, --with-correlator and --if-input apply to --transport processes '
-                    'only')
-    if (args.bag is None) == (args.if_input is None):
-        return fail('give a bag or --if-input FILE (not both)')
-    if args.if_input is not None and (args.start != 0.0 or args.duration is not None):
-        return fail('--start and --duration select a window of a bag; with --if-input cut the capture instead')
-    if args.external_nodes and args.params_file:
-        return fail('--params-file sets the parameters of the nodes run starts; with --external-nodes give it to the '
-                    'nodes themselves (--ros-args --params-file FILE)')
-    if any(a.startswith('__ns:=') for a in ros_arguments(argv)):
-        return fail('give the namespace as --namespace NS (run moves play and its recorder there too), '
-                    'not as --ros-args -r __ns:=NS')
+    problem = argument_problem(args, argv)
+    if problem is not None:
+        return fail(problem)
     try:
         window = window_s(args.start, args.duration)
         params = load_params_files(args.params_file)
@@ -349,43 +399,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             write_outputs_bag(result, args.record_outputs)
         except BagError as err:
             return fail(str(err))
-    diagnostics = diagnostics_summary(result.messages('/diagnostics')) if '/diagnostics' in result.outputs else {}
     # the correlator's satellites are not the bag's simulated ones: its carrier phases are listed, not scored
     outputs = {t: result.messages(t) for t in REPORT_TOPICS
                if t in result.outputs and not (args.with_correlator and t == '/carrier/estimates')}
-    window_text = '' if window is None else (
-        f' (window {window[0]:g}-{"end" if math.isinf(window[1]) else f"{window[1]:g}"} s of the bag)')
-    if args.if_input is not None:
-        names = 'rfi_monitor' + (', gnss_correlator and imm_carrier' if args.with_correlator else '')
-        replay_line = (f'{sum(result.inputs.values())} IF blocks of {args.if_input} through {names} ({how}): '
-                       f'{result.bag_duration_s:.3f} s of stream (first to last block stamp) in '
-                       f'{result.wall_time_s:.1f} s.')
-    else:
-        names = ('rfi_monitor, gnss_integrity, uwb_gnss_fusion, ' + ('gnss_correlator ' if args.with_correlator
-                                                                     else '') + 'and imm_carrier')
-        replay_line = (f'{sum(result.inputs.values())} input messages{window_text} replayed through {names} '
-                       f'({how}): {result.bag_duration_s:.1f} s of data in {result.wall_time_s:.1f} s, '
-                       f'{result.real_time_factor:.1f}x real time.')
-    lines = [f'# Replay of {args.bag or args.if_input}', '', replay_line, '']
-    if notes:
-        lines += [' '.join(notes), '']
-    lines += ['| topic | direction | messages |', '|---|---|---|']
-    for t in inputs:
-        lines.append(f'| {t} | in | {result.inputs.get(t, 0)} |')
-    for t in sorted(result.outputs):
-        lines.append(f'| {t} | out | {len(result.outputs[t])} |')
-    for t in sorted(set(topics) - set(inputs)):
-        lines.append(f'| {t} | truth (not replayed) | {topics[t][1]} |')
-    carrier = carrier_summary(result.messages('/carrier/estimates')) if (
-        args.with_correlator and '/carrier/estimates' in result.outputs) else []
-    if carrier:
-        lines += ['', '## Carrier phase from the correlator', '',
-                  'Per satellite that gnss_correlator tracked and method of imm_carrier (stamps from the IF stamps, '
-                  's after the first estimate; the estimates themselves: --record-outputs):', '', *carrier]
-    for name, values in diagnostics.items():
-        lines += ['', f'## Diagnostics of {name}', '', '| key | value |', '|---|---|']
-        lines += [f'| {k} | {v} |' for k, v in values.items()]
-    (out / 'replay.md').write_text('\n'.join(lines) + '\n')
+    replay_line, carrier = write_replay_document(args, result, inputs, topics, window, how, notes, out)
     say = summary_printer(args.quiet)  # the warnings are on stderr already
     if args.if_input is not None:
         say(replay_line)

@@ -145,26 +145,9 @@ _AR_FASTMATH = {"nsz", "arcp", "contract", "reassoc"}
 
 @dataclass(frozen=True)
 class SweepPeriodParams:
-    """Design parameters of the sweep-period estimator (Kang et al. give no values; these are ours).
-
-    Attributes:
-        forgetting: gamma of eq. 23, in [0, 1).
-        beta: normalisation beta of eq. 23, > 0.
-        beta_en: enhancement rate beta_en of the peak threshold, >= 0.
-        kappa: noise-relative threshold factor (multiples of the mean |zAR| outside peaks), > 0.
-        noise_time_constant: decimated steps of the EWMA of |zAR|, >= 1.
-        decimation: D, samples averaged per AR step, >= 1.
-        ar_process_var: diagonal of Q_AR (eq. 25), > 0.
-        ar_measurement_var: sigma_AR^2 (eq. 26), > 0.
-        ar_transition: diagonal of A (eq. 25; the paper: 0.2).
-        delay: samples from a sweep start to its detected peak (group delay), >= 0.
-        min_separation: minimum samples between two peaks (refractory), >= 1.
-        tolerance: relative tolerance of a peak to the period lattice, in (0, 0.5).
-        min_consistent: peaks fitting the lattice needed to lock, minus one, >= 1.
-        min_tolerance_samples: absolute floor of the lattice tolerance, samples, >= 0.
-        max_period: longest period considered by the voting, samples (> min_separation).
-        lattice_voting: period by lattice voting (ours) instead of successive intervals (default).
-    """
+    """Design parameters of the sweep-period estimator (Kang et al. give no values; these are ours). Each field
+    is described once, with its equation, unit and range, on its definition below (the node's ``sweep_*``
+    parameters are these)."""
 
     forgetting: float = parameter(
         0.92, 'Forgetting factor gamma of the linear prediction detector (eq. 23), [0, 1).',
