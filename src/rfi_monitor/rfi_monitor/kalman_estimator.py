@@ -52,7 +52,7 @@ from rfi_monitor.if_measurement import (
 from rfi_monitor.params import RfiMonitorParams
 from rfi_monitor.sweep_analysis import SweepAnalysis, analyse
 from rfi_monitor.sweep_period import SweepFloat, SweepInt
-from rfi_monitor.tracker import MAX_ABS_RATE, lattice_init, track_block
+from rfi_monitor.tracker import track_block
 from rfi_monitor.tracker_state import (
     DEC_HISTORY,
     LAT_COARSE,
@@ -62,6 +62,7 @@ from rfi_monitor.tracker_state import (
     new_trace_buffers,
     new_tracker_state,
 )
+from rfi_monitor.tracker_steps import MAX_ABS_RATE, lattice_init
 from rfi_monitor.tracking_filters import FilterFloat
 
 _STATUS_NAMES = {STATUS_OK: "measurements_ok", STATUS_NEAR_ZERO: "rejected_near_zero",

@@ -36,7 +36,7 @@ from rfi_monitor.ridge import RidgeParams
 from rfi_monitor.spectral_step import SpectralStepParams
 from rfi_monitor.sweep_analysis import SweepAnalysisParams
 from rfi_monitor.sweep_period import SweepPeriodParams
-from rfi_monitor.tracker import MAX_REFINE_WINDOW
+from rfi_monitor.tracker_steps import MAX_REFINE_WINDOW
 from rfi_monitor.tracking_filters import MODE_AFKF, TrackingFilterParams
 from rfi_node_common.params import USER, parameter
 

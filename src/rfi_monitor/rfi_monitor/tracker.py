@@ -56,7 +56,7 @@ Additions on top ("ours", switchable, reported separately in the benchmarks):
   fit: with slope df (the filter's) and jump ``B = df T``, ``h_i = z_i - df i`` is ``a + B [i < k]``
   around a start at window index k; the k minimising the squared error (prefix sums, O(W)) is the
   measured start. The lattice (start of the current sweep, period) is then a two-state Kalman
-  filter: predicted by one period at each reset (process noise ``LATTICE_PHASE_Q`` on the start,
+  filter: predicted by one period at each reset (process noise ``tracker_steps.LATTICE_PHASE_Q`` on the start,
   a relative random walk ``lattice_period_drift`` on the period), updated by the measured start
   with the variance ``2 s^2 / B^2 + 1/12`` samples^2 (s^2 the fit's residual variance, 1/12 the
   integer start), so that its gains shrink as sweeps accumulate (at J/N 11 dB the reset falls one
@@ -74,7 +74,7 @@ Additions on top ("ours", switchable, reported separately in the benchmarks):
   (``MonitorInt.TRACK``) the LPD / AR(10) / peak pass is suspended; only the decimated history of the
   periodicity detector (``zdec``) is kept up, and the monitor skips that detector too
   (``SweepAnalysisParams.skip_while_tracking``). ``RESUME_MISSES`` = 2 failed fits in a row end
-  the tracking mode: the pass resumes with a warm restart (``_period_search_resume``: peaks,
+  the tracking mode: the pass resumes with a warm restart (``tracker_steps.period_search_resume``: peaks,
   lock and period forgotten, the LPD delay line restarted, the AR(10) filter and the zAR noise
   level kept, so that peaks are found at once), and has run for two sweeps when the fourth miss
   drops the lattice. The per-sample frequency track does not change while the lattice is held;
@@ -99,24 +99,8 @@ import math
 import numpy as np
 from numba import njit
 
-from rfi_monitor.if_measurement import (
-    STATUS_CORRECTION,
-    STATUS_DOMAIN,
-    STATUS_NEAR_ZERO,
-    STATUS_NON_FINITE,
-    STATUS_OK,
-    measure_complex_sq,
-    measure_real_sq,
-)
-from rfi_monitor.sweep_period import (
-    _AR_FASTMATH,
-    LPD_LAG,
-    SweepFloat,
-    SweepInt,
-    SweepParam,
-    ar_step,
-    peak_step,
-)
+from rfi_monitor.if_measurement import N_STATUS, STATUS_OK, measure_complex_sq, measure_real_sq
+from rfi_monitor.sweep_period import _AR_FASTMATH, LPD_LAG, SweepFloat, SweepInt, SweepParam, ar_step, peak_step
 from rfi_monitor.tracker_state import (
     CHUNK,
     MonitorFloat,
@@ -125,129 +109,29 @@ from rfi_monitor.tracker_state import (
     TraceBuffers,
     TrackerState,
 )
-from rfi_monitor.tracking_filters import FilterFloat, FilterInt, filter_step, kf_sweep_reset
+from rfi_monitor.tracker_steps import (
+    MAX_ABS_RATE,
+    MIN_KAPPA,
+    FilterState,
+    LatticeState,
+    LoopControl,
+    SearchState,
+    apply_peaks,
+    extended_window,
+    hold_trace,
+    lattice_fit,
+    loop_params,
+    lpd_sample,
+    queue_peak,
+    sweep_reset,
+    switch_period_search,
+)
+from rfi_monitor.tracking_filters import FilterFloat, FilterInt, filter_step
 
 MF, MI, MP = MonitorFloat, MonitorInt, MonitorParam
 SF, SI, SQ = SweepFloat, SweepInt, SweepParam
 FF, FI = FilterFloat, FilterInt
 """Short names of the packed layouts (tracker_state, sweep_period, tracking_filters) in the kernel."""
-
-MAX_ABS_RATE = 0.02
-"""Clamp of |df| used inside the chirp correction, cycles/sample^2 (guards a diverged estimate)."""
-MAX_REFINE_WINDOW = 24
-"""Largest half-window W of the sweep-start fit, samples."""
-MAX_MISSES = 4
-"""Consecutive failed sweep-start fits that drop the lattice."""
-RESUME_MISSES = 2
-"""Consecutive failed sweep-start fits that end the tracking mode (the period search resumes, so
-that it has run for MAX_MISSES - RESUME_MISSES sweeps when the lattice drops)."""
-LATTICE_PHASE_Q = 0.01 ** 2
-"""Process noise of the sweep-start lattice filter on the start, samples^2 per sweep (jitter of a
-jammer's sweep start that does not accumulate)."""
-
-
-@njit(cache=True, inline="always")
-def lattice_init(period: float, half_window: float) -> tuple[float, float, float]:
-    """Initial covariance (start, period) of the lattice filter at acquisition, samples^2."""
-    return (0.25 * half_window) ** 2, 0.0, (5e-3 * period) ** 2
-
-
-LATTICE_GATE = 16.0
-"""Gate of the lattice filter on the normalised squared start innovation (4 sigma)."""
-STEP_FALSE_ALARM = 0.01
-"""Probability that the step fit declares a sweep start in a window of noise (a lattice locked on
-something that is not a chirp): such a fit is a miss (``step_threshold``)."""
-
-
-@njit(cache=True, inline="always")
-def step_threshold(n: int) -> float:
-    """Threshold on the step fit's significance for a window of n samples.
-
-    Without a step the drop of the squared error at a fixed position is chi-square(1) in units of
-    the residual variance; the fit takes the best of ~n positions, so the threshold t solves
-    ``n P(chi2_1 > t) = STEP_FALSE_ALARM`` with the tail ``sqrt(2 / (pi t)) exp(-t / 2)``:
-    ``t = 2 ln(n / a) - ln(pi ln(n / a))`` (13.7 for n = 48, 11.6 for n = 16).
-    """
-    u = math.log(n / STEP_FALSE_ALARM)
-    return 2.0 * u - math.log(math.pi * u)
-
-
-MIN_KAPPA = 0.8
-"""Smallest tone power fraction kappa = 1 - N / P (J/N = 6 dB) at which the noise compensation is
-applied; below it the measurement is mostly noise, the compensation would only push more ratios
-out of the arccos domain (measured on bags/default: with a floor of 0.5 instead, 14 fewer of the
-chirp snapshots at J/N < 0 dB were identified as chirps), and the ratio is used as it is."""
-
-
-@njit(cache=True, inline="always")
-def _step_fit(zring: np.ndarray, c: int, w: int, df: float, period: float,
-              wrap: bool) -> tuple[float, float, float]:
-    """Least-squares start of the sweep around sample c from zring[c - w .. c + w - 1] (module doc).
-
-    Returns the estimated first sample of the new sweep (absolute index), the residual variance
-    of the measurements about the fitted step (cycles^2/sample^2) and the significance of the step:
-    the drop of the squared error against a fit without a step, in units of that variance.
-    """
-    mask = zring.size - 1
-    b = df * period                       # z is higher by b before the start (up-chirp: b > 0)
-    n0 = c - w
-    ref = zring[n0 & mask]
-    L = 2 * w
-    tot = 0.0
-    for i in range(L):
-        h = zring[(n0 + i) & mask] - ref - df * i
-        if wrap:
-            h = h - math.floor(h + 0.5)
-        tot += h
-    best = 1e300
-    best_k = w
-    best_pk = 0.0
-    pk = 0.0
-    for k in range(1, L):
-        h = zring[(n0 + k - 1) & mask] - ref - df * (k - 1)
-        if wrap:
-            h = h - math.floor(h + 0.5)
-        pk += h
-        u = tot - b * k
-        sse = -2.0 * b * pk + b * b * k - u * u / L
-        if sse < best:
-            best = sse
-            best_k = k
-            best_pk = pk
-    # Significance of a step at best_k with its height fitted freely (a wrong df scales b but does
-    # not move the step): drop of the squared error against no step, in residual variances; a step
-    # of the wrong sign counts as none.
-    tot2 = 0.0
-    for i in range(L):
-        h = zring[(n0 + i) & mask] - ref - df * i
-        if wrap:
-            h = h - math.floor(h + 0.5)
-        tot2 += h * h
-    n1 = float(best_k)
-    n2 = float(L - best_k)
-    s2 = tot - best_pk
-    fit = best_pk * best_pk / n1 + s2 * s2 / n2
-    var = max(tot2 - fit, 0.0) / (L - 2)
-    gain = fit - tot * tot / L
-    if (best_pk / n1 - s2 / n2) * b <= 0.0:
-        gain = 0.0
-    return float(n0 + best_k), var, gain / max(var, 1e-300)
-
-
-@njit(cache=True)
-def _period_search_resume(sf: np.ndarray, si: np.ndarray, peaks: np.ndarray) -> None:
-    """Warm restart of the period search after a suspension (tracking mode, module doc): the peak
-    history, the period lock and the peak in progress are forgotten (the jammer may have changed);
-    the AR(10) coefficients and covariance, the zAR noise level and the warm-up count are kept, so
-    that peaks are detected at once. (The LPD delay line is restarted by the caller.)"""
-    noise, ndec = sf[SF.NOISE], si[SI.NDEC]
-    sf[:] = 0.0
-    sf[SF.PERIOD] = math.nan
-    sf[SF.CAND] = math.nan
-    sf[SF.NOISE] = noise
-    si[:] = 0
-    si[SI.NDEC] = ndec
-    peaks[:] = 0
 
 
 _NO_TRACES = TraceBuffers(np.empty(1, dtype=np.int64), np.empty(1), np.empty(1), np.empty(1), np.empty(1),
@@ -279,68 +163,16 @@ def _track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: 
                 dfring: np.ndarray, zring: np.ndarray, zdec: np.ndarray, lev: np.ndarray, pdev: np.ndarray,
                 store: bool, o_idx: np.ndarray, o_z: np.ndarray, o_f: np.ndarray, o_df: np.ndarray,
                 o_p11: np.ndarray, o_zar: np.ndarray, o_reset: np.ndarray) -> int:
-    """The compiled loop of ``track_block``: the fields of TrackerState and TraceBuffers unpacked, in order."""
-    mode = int(tpar[0])
-    r, q_f, q_df = tpar[1], tpar[2], tpar[3]
-    chirp_corr = mpar[MP.CHIRP_CORR] > 0.5
-    min_abs_ratio = mpar[MP.MIN_ABS]
-    margin = mpar[MP.DOMAIN]
-    lam = mpar[MP.POW_LAMBDA]
-    reset_on = mpar[MP.RESET] > 0.5
-    phase_gain = mpar[MP.PHASE_GAIN]
-    wrap = mpar[MP.WRAP] > 0.5
-    refine_w = int(mpar[MP.REFINE_W])
-    lat_drift = mpar[MP.LAT_DRIFT]
-    reset_cross = mpar[MP.RESET_CROSS] > 0.5
-    confirm_n = int(mpar[MP.CONFIRM]) if refine_w > 0 else 0
-    # noise compensation (if_measurement): kappa = 1 - floor / running power, floor 0 (unknown) -> 1
-    floor = mst[MF.FLOOR] if (mpar[MP.NOISE_COMP] > 0.5 and not is_complex) else 0.0
-    tol = spar[SQ.TOL]
-    gamma, norm, dec = spar[SQ.GAMMA], spar[SQ.NORM], int(spar[SQ.DEC])
-    a_ar, q_ar, r_ar, k_ar = spar[SQ.A], spar[SQ.QAR], spar[SQ.RAR], int(spar[SQ.ARK])
-    lpd_scale = (1.0 - gamma) / norm
-    inv_dec = 1.0 / dec
-    min_abs_ratio2 = min_abs_ratio * min_abs_ratio
-    # running power per aligned window (module doc, "Speed"): weights lam (1 - lam)^(CHUNK - 1 - j)
-    pwt = np.empty(CHUNK)
-    wj = lam
-    for j in range(CHUNK - 1, -1, -1):
-        pwt[j] = wj
-        wj *= 1.0 - lam
-    n_ok = 0
-    n_near = 0
-    n_dom = 0
-    n_nonfin = 0
-    n_corr = 0
-    # ---- load the hot state into locals ---------------------------------------------------------
-    f, df, p11, p12, p22, wsum = fst[FF.F], fst[FF.DF], fst[FF.P11], fst[FF.P12], fst[FF.P22], fst[FF.WSUM]
-    wcount, wpos = ist[FI.WCOUNT], ist[FI.WPOS]
-    re2, im2, re1, im1 = mst[MF.RE2], mst[MF.IM2], mst[MF.RE1], mst[MF.IM1]
-    pw = mst[MF.POW]
-    ikap_w = mst[MF.IKAP]
-    nxt, tlat, ppred = mst[MF.NEXT], mst[MF.TLAT], mst[MF.PPRED]
-    l11, l12, l22 = mst[MF.L11], mst[MF.L12], mst[MF.L22]
-    zg, acc, zacc = mst[MF.ZG], mst[MF.ACC], mst[MF.ZACC]
-    nbuf, last_start, nresets, started = mist[MI.NBUF], mist[MI.LAST_START], mist[MI.NRESETS], mist[MI.STARTED]
-    fitat, misses, decn, latsrc, ndec = mist[MI.FITAT], mist[MI.MISSES], mist[MI.DECN], mist[MI.LATSRC], mist[MI.NDEC]
-    zpos = mist[MI.ZPOS]
-    nmeas = mist[MI.NMEAS]
-    nlev = mist[MI.NLEV]
-    ncons, trk, swat, swmode, lpdoff = mist[MI.NCONS], mist[MI.TRACK], mist[MI.SWAT], mist[MI.SWMODE], mist[MI.LPDOFF]
-    zmask = zring.size - 1
-    dmask = zdec.size - 1
-    dfmask = dfring.size - 1
-    n_out = 0
-    m_win = ring.size
+    """The compiled entry of ``track_block`` (the fields of TrackerState and TraceBuffers unpacked, in order): the
+    hot state loaded from its arrays into the tuples of tracker_steps, the loop run once over the block
+    (``_track_loop``), the state stored back."""
+    filt = (fst[FF.F], fst[FF.DF], fst[FF.P11], fst[FF.P12], fst[FF.P22], fst[FF.WSUM], ist[FI.WCOUNT], ist[FI.WPOS])
+    lat = (mst[MF.NEXT], mst[MF.TLAT], mst[MF.PPRED], mst[MF.L11], mst[MF.L12], mst[MF.L22], mist[MI.LAST_START],
+           mist[MI.NRESETS], mist[MI.FITAT], mist[MI.MISSES], mist[MI.NCONS], mist[MI.TRACK], mist[MI.LATSRC])
+    search = (mist[MI.ZPOS], mst[MF.ZG], mst[MF.ACC], mst[MF.ZACC], mist[MI.DECN], mist[MI.NDEC], mist[MI.NLEV])
+    pw, nbuf = mst[MF.POW], mist[MI.NBUF]
     n = xr.size
-    # extended window: the two carried samples, then the block (sample k of the block is xe[k + 2])
-    xe = np.empty(n + 2)
-    xe[0], xe[1] = re2, re1
-    xe[2:] = xr
-    xie = np.empty(n + 2 if is_complex else 1)
-    if is_complex:
-        xie[0], xie[1] = im2, im1
-        xie[2:] = xi
+    xe, xie = extended_window(xr, xi, is_complex, mst)
     j0 = 0
     while nbuf < 2 and j0 < n:                      # stream start: fill the 3-sample window
         p0 = xe[j0 + 2] * xe[j0 + 2] + (xie[j0 + 2] * xie[j0 + 2] if is_complex else 0.0)
@@ -348,299 +180,146 @@ def _track_block(xr: np.ndarray, xi: np.ndarray, is_complex: bool, first_index: 
             pw = p0
         nbuf += 1
         j0 += 1
-    zbuf = np.empty(2 * CHUNK)
-    zlb = np.empty(2 * CHUNK)                       # z (or the prior if rejected) of two chunks, for the LPD
-    sgb = np.empty(2 * CHUNK)                       # the filter's df after each sample (its sign: LPD sum)
-    qh, lq, mq0, qbase = 0, 0, 0, 0                 # LPD queue: half, length, first sample, first output
-    zprev = sf[SF.ZAR]
-    o0 = 0
-    sbuf = np.empty(2 * CHUNK, dtype=np.int64)
-    dfc = np.empty(CHUNK)
-    # Software pipeline over chunks of samples inside aligned CHUNK windows: the measurements of
-    # chunk c + 1 are computed (a loop the compiler vectorises) before the serial part of chunk c
-    # runs, so that the CPU overlaps them with the filter's serial chain. They need only the
-    # samples, the running power and df of DF_LAG = 2 CHUNK samples ago (already known), so their
-    # values do not depend on where blocks or chunks start.
-    jf = j0                                        # next chunk to measure (block index)
-    jp = j0                                        # chunk to run (already measured)
-    lp = 0
-    slot = 0
+    ctrl = (mist[MI.SWAT], mist[MI.SWMODE], mist[MI.LPDOFF], mist[MI.NMEAS], sf[SF.ZAR], pw, mst[MF.IKAP])
+    filt, lat, search, ctrl, o0 = _track_loop(
+        xe, xie, is_complex, first_index, j0, filt, lat, search, ctrl, tpar, spar, mpar,
+        (ring, dfring, zring, zhist, zdec, gam, pmat, hist, sf, si, peaks, lev, mst, mist, pdev, counters),
+        store, (o_idx, o_z, o_f, o_df, o_p11, o_zar, o_reset))
+    n_out = ctrl[3] - mist[MI.NMEAS]                # the estimates of this block (one per measurement)
+    if store:
+        hold_trace(o_zar, o0, n_out, ctrl[4])       # zAR trace: held after the last decimated step
+
+    # ---- store the state -------------------------------------------------------------------------
+    mst[MF.RE2], mst[MF.RE1] = xe[n], xe[n + 1]
+    if is_complex:
+        mst[MF.IM2], mst[MF.IM1] = xie[n], xie[n + 1]
+    fst[FF.F], fst[FF.DF], fst[FF.P11], fst[FF.P12], fst[FF.P22], fst[FF.WSUM], ist[FI.WCOUNT], ist[FI.WPOS] = filt
+    (mst[MF.NEXT], mst[MF.TLAT], mst[MF.PPRED], mst[MF.L11], mst[MF.L12], mst[MF.L22], mist[MI.LAST_START],
+     mist[MI.NRESETS], mist[MI.FITAT], mist[MI.MISSES], mist[MI.NCONS], mist[MI.TRACK], mist[MI.LATSRC]) = lat
+    mist[MI.ZPOS], mst[MF.ZG], mst[MF.ACC], mst[MF.ZACC], mist[MI.DECN], mist[MI.NDEC], mist[MI.NLEV] = search
+    mist[MI.SWAT], mist[MI.SWMODE], mist[MI.LPDOFF], mist[MI.NMEAS], sf[SF.ZAR], mst[MF.POW], mst[MF.IKAP] = ctrl
+    mist[MI.NBUF] = nbuf
+    return n_out
+
+
+@njit(cache=True, fastmath=_AR_FASTMATH, error_model="numpy")
+def _track_loop(xe: np.ndarray, xie: np.ndarray, is_complex: bool, first_index: int, j0: int, filt: FilterState,
+                lat: LatticeState, search: SearchState, ctrl: LoopControl, tpar: np.ndarray, spar: np.ndarray,
+                mpar: np.ndarray, arrays: tuple, store: bool,
+                outs: tuple) -> tuple[FilterState, LatticeState, SearchState, LoopControl, int]:
+    """The loop over the block xe[2:] from index j0 (module doc: software pipeline over aligned CHUNK windows); arrays =
+    the state arrays, outs = the traces, ctrl: ``tracker_steps.LoopControl``. Steps inside take scalars only: an array
+    argument of an inlined call costs reference counting per call (measured: +40 % per block)."""
+    ring, dfring, zring, zhist, zdec, gam, pmat, hist, sf, si, peaks, lev, mst, mist, pdev, counters = arrays
+    o_idx, o_z, o_f, o_df, o_p11, o_zar, o_reset = outs
+    swat, swmode, lpdoff, nmeas, zprev, pw, ikap_w = ctrl
+    (mode, r, q_f, q_df, reset_on, wrap, chirp_corr, margin, refine_w, drift, cross, confirm_n, floor, near_sq,
+     gamma, dec, lpd_scale, inv_dec, a_ar, q_ar, r_ar, k_ar, pwt) = loop_params(tpar, spar, mpar, mst, is_complex)
+    zmask, dmask, dfmask, m_win, n = zring.size - 1, zdec.size - 1, dfring.size - 1, ring.size, xe.size - 2
+    f, df, p11, p12, p22, wsum, wcount, wpos = filt
+    nxt, tlat, ppred, l11, l12, l22, last_start, nresets, fitat, misses, ncons, trk, latsrc = lat
+    zpos, zg, acc, zacc, decn, ndec, nlev = search
+    zbuf, zlb, sgb, dfc, sbuf = (np.empty(2 * CHUNK), np.empty(2 * CHUNK), np.empty(2 * CHUNK), np.empty(CHUNK),
+                                 np.empty(2 * CHUNK, dtype=np.int64))
+    qh, lq, mq0, qbase = 0, 0, 0, 0       # LPD queue (zlb: z or the prior, sgb: df after it): half, length, ...
+    o0, n_out, jf, jp, lp, slot = 0, 0, j0, j0, 0, 0   # jf: next chunk to measure, jp: chunk to run (measured)
     while True:
         lf = 0
-        if jf < n:
-            m0 = first_index + jf - 1
-            lf = min(CHUNK - (m0 & (CHUNK - 1)), n - jf)
-            o_w = m0 & (CHUNK - 1)
-            if o_w == 0:
-                # noise compensation factor, once per aligned window (the running power changes
-                # little over CHUNK samples; aligned, so that block splitting cannot change it)
+        if jf < n:     # measure chunk jf (the filter's df of DF_LAG samples ago suffices: module doc, "Speed")
+            m0, b0, o_w = first_index + jf - 1, slot * CHUNK, (first_index + jf - 1) & (CHUNK - 1)
+            lf = min(CHUNK - o_w, n - jf)
+            if o_w == 0:   # noise compensation factor, once per aligned window (block splitting cannot change it)
                 kap = 1.0 - floor / pw if pw > 0.0 else 1.0
                 ikap_w = 1.0 / kap if kap >= MIN_KAPPA else 1.0
-            # running power: constant inside an aligned window (the near-zero guard's threshold),
-            # updated at the window's end from the deviations of its samples (module doc)
-            thr_w = min_abs_ratio2 * pw
+            thr_w, packed = near_sq * pw, 0   # running power: constant in an aligned window (module doc)
             for i in range(lf):
-                k = jf + i + 1                      # middle sample in xe
-                p_m = xe[k] * xe[k] + (xie[k] * xie[k] if is_complex else 0.0)
+                p_m = xe[jf + i + 1] * xe[jf + i + 1] + (xie[jf + i + 1] * xie[jf + i + 1] if is_complex else 0.0)
                 pdev[o_w + i] = p_m - pw if math.isfinite(p_m) else 0.0
                 dfc[i] = min(MAX_ABS_RATE, max(-MAX_ABS_RATE, dfring[(m0 + i) & dfmask]))
             if o_w + lf == CHUNK:
                 u = 0.0
                 for j in range(CHUNK):              # fixed order: block splitting cannot change it
-                    u += pwt[j] * pdev[j]
-                    pdev[j] = 0.0
+                    u, pdev[j] = u + pwt[j] * pdev[j], 0.0
                 pw = pw + u
-            b0 = slot * CHUNK
             if is_complex:
-                for i in range(lf):
-                    k = jf + i + 1
+                for i, k in enumerate(range(jf + 1, jf + lf + 1)):
                     zbuf[b0 + i], sbuf[b0 + i] = measure_complex_sq(xe[k - 1], xie[k - 1], xe[k], xie[k],
                                                                     xe[k + 1], xie[k + 1], thr_w)
             else:
-                for i in range(lf):
-                    k = jf + i + 1
-                    zbuf[b0 + i], sbuf[b0 + i] = measure_real_sq(xe[k - 1], xe[k], xe[k + 1], dfc[i], chirp_corr,
-                                                                 thr_w, margin, ikap_w)
-            # status counters (off the serial loop): one byte per status code, packed in one integer
-            packed = 0
+                for i, k in enumerate(range(jf + 1, jf + lf + 1)):
+                    zbuf[b0 + i], sbuf[b0 + i] = measure_real_sq(xe[k - 1], xe[k], xe[k + 1], dfc[i],
+                                                                 chirp_corr, thr_w, margin, ikap_w)
             for i in range(lf):
                 packed += 1 << (8 * sbuf[b0 + i])
-            n_ok += (packed >> (8 * STATUS_OK)) & 0xFF
-            n_near += (packed >> (8 * STATUS_NEAR_ZERO)) & 0xFF
-            n_dom += (packed >> (8 * STATUS_DOMAIN)) & 0xFF
-            n_nonfin += (packed >> (8 * STATUS_NON_FINITE)) & 0xFF
-            n_corr += (packed >> (8 * STATUS_CORRECTION)) & 0xFF
-        bp = (1 - slot) * CHUNK
-        m0 = first_index + jp - 1
-        ch = CHUNK - qh                             # half of zlb / sgb for this chunk's LPD inputs
-        base = n_out
-        # Tracking mode (module doc): the period search is suspended / resumed from the aligned window
-        # swat on (decided at the end of the window before it, which the LPD pass never reached yet).
-        if lq > 0 and mq0 >= swat >= 0 and lpdoff != swmode:
-            if lpdoff == 1:                         # resume (warm restart)
-                _period_search_resume(sf, si, peaks)
-                zpos = 0
-                zg = 0.0
-            else:
-                mist[MI.NSUSP] += 1
-            acc = 0.0
+            for code in range(N_STATUS):   # statuses counted off the serial loop: one byte per code
+                counters[code] += (packed >> (8 * code)) & 0xFF
+        m0, bp, ch, base = first_index + jp - 1, (1 - slot) * CHUNK, CHUNK - qh, n_out
+        if lq > 0 and mq0 >= swat >= 0 and lpdoff != swmode:    # tracking mode switched (module doc)
+            zpos, zg, acc, zacc, decn, ndec, nlev = switch_period_search(
+                lpdoff, (zpos, zg, acc, zacc, decn, ndec, nlev), sf, si, peaks, mist)
             lpdoff = swmode
-        lpd_on = lpdoff == 0
-        # The filter over this chunk, interleaved with the LPD / AR(10) / peak pass over the previous
-        # chunk (its inputs are queued in the other half of zlb / sgb): the two serial recursions are
-        # independent, so the CPU overlaps them (module doc, "Speed").
         for i in range(max(lp, lq)):
-            if i < lp:
-                m = m0 + i                          # index of the middle sample
-                z = zbuf[bp + i]
-                status = sbuf[bp + i]
-                # --- scheduled sweep reset (the state is the prior of sample m) --------------------
-                did_reset = False
-                if reset_on and nxt >= 0.0 and m >= nxt:
-                    # back to the posterior at T - 1, then eq. 21-22
-                    f, p11, p12 = kf_sweep_reset(f - df, df, p11, p12, p22, float(m - 1 - last_start),
-                                                 reset_cross)
-                    if wrap:
-                        f = f - math.floor(f + 0.5)
-                    mst[MF.F0] = f
-                    mst[MF.P11_0] = p11
-                    last_start = m
-                    nresets += 1
-                    ppred = nxt
-                    nxt += tlat
-                    # lattice filter: predict [start, period] to this sweep
-                    l11 = l11 + 2.0 * l12 + l22 + LATTICE_PHASE_Q
-                    l12 = l12 + l22
-                    l22 = l22 + (lat_drift * tlat) ** 2
-                    did_reset = True
-                    w = min(refine_w, int((tlat - 2.0) * 0.5))
-                    fitat = m + w if w >= 4 else -1
+            if i < lp:     # the filter over sample m, interleaved with the period search of the chunk before
+                m, z, valid = m0 + i, zbuf[bp + i], sbuf[bp + i] == STATUS_OK
+                did_reset = reset_on and nxt >= 0.0 and m >= nxt
+                if did_reset:      # scheduled sweep reset (the state is the prior of sample m), eq. 21-22
+                    f, p11, p12, ppred, nxt, l11, l12, l22, fitat = sweep_reset(
+                        m, f, df, p11, p12, p22, last_start, cross, wrap, nxt, tlat, l11, l12, l22, drift,
+                        refine_w, mst)
+                    last_start, nresets = m, nresets + 1
                 prior_f = f
                 dfring[m & dfmask] = df             # read by the measurement of m + DF_LAG
-                valid = status == STATUS_OK
-                # --- filter: update with z (K = 0 if rejected), predict sample m + 1 -----------------
-                wp0 = wpos
+                wp0 = wpos         # filter: update with z (K = 0 if rejected), predict sample m + 1
                 (f_post, df_post, p11_post, f, df, p11, p12, p22, ring[wp0], wpos, wcount,
                  wsum) = filter_step(mode, f, df, p11, p12, p22, z, valid, wrap, ring[wpos], wpos, wcount,
                                      m_win, wsum, r, q_f, q_df)
                 zl = z if valid else prior_f
                 nmeas += 1
                 zring[m & zmask] = zl
-                zlb[ch + i] = zl                    # LPD input (pass during the next chunk)
-                sgb[ch + i] = df
-                # --- sweep-start fit (ours) -----------------------------------------------------------
-                if refine_w > 0:
-                    if fitat >= 0 and m == fitat:
-                        fitat = -1
-                        w = m - int(math.ceil(ppred))
-                        if nxt >= 0.0 and w >= 4:
-                            s_hat, sz2, sig = _step_fit(zring, m - w, w, df, tlat, wrap)
-                            e = s_hat - ppred - 0.5          # E[ceil(t) - t] = 0.5
-                            bj = df * tlat
-                            rr = 2.0 * sz2 / max(bj * bj, 1e-12) + 1.0 / 12.0
-                            s11 = l11 + rr
-                            if abs(e) <= 0.5 * w and e * e <= LATTICE_GATE * s11 and sig >= step_threshold(2 * w):
-                                k1 = l11 / s11
-                                k2 = l12 / s11
-                                nxt += (k1 + k2) * e
-                                tlat += k2 * e
-                                l11, l12, l22 = l11 - k1 * l11, l12 - k1 * l12, l22 - k2 * l12
-                                misses = 0
-                                mist[MI.NFIT] += 1
-                                ncons += 1
-                                if confirm_n > 0 and ncons >= confirm_n:
-                                    trk = 1
-                            else:
-                                misses += 1
-                                ncons = 0
-                                if misses >= RESUME_MISSES:
-                                    trk = 0              # resume the period search (tracking mode)
-                                if misses >= MAX_MISSES:
-                                    nxt = -1.0
-                                    latsrc = 0
-                                    trk = 0
+                zlb[ch + i], sgb[ch + i] = zl, df   # LPD input (pass during the next chunk)
+                if refine_w > 0 and fitat >= 0 and m == fitat:    # sweep-start fit (ours)
+                    fitat = -1
+                    nxt, tlat, l11, l12, l22, misses, ncons, trk, latsrc = lattice_fit(
+                        zring, m, ppred, nxt, tlat, df, wrap, l11, l12, l22, misses, ncons, trk, latsrc, confirm_n,
+                        mist)
                 if store:
-                    o_idx[n_out] = m
-                    o_z[n_out] = z
-                    o_f[n_out] = f_post
-                    o_df[n_out] = df_post
-                    o_p11[n_out] = p11_post
-                    o_reset[n_out] = did_reset
+                    o_idx[n_out], o_z[n_out], o_f[n_out], o_df[n_out] = m, z, f_post, df_post
+                    o_p11[n_out], o_reset[n_out] = p11_post, did_reset
                 n_out += 1
-            if i < lq and not lpd_on:
-                # --- tracking mode: only the decimated history of the periodicity detector -------------
-                zacc += zlb[qh + i]
-                decn += 1
-                if decn >= dec:
-                    zdec[ndec & dmask] = zacc * inv_dec
-                    ndec += 1
-                    zacc = 0.0
-                    decn = 0
-                    if store:
-                        for j in range(o0, qbase + i):
-                            o_zar[j] = zprev
-                        o0 = qbase + i
-                    zprev = math.nan
-            elif i < lq:
-                # --- LPD (eq. 23), decimation, AR(10) step (eq. 24-27), peaks: sample mq0 + i -----------
+            if i < lq:     # the period search over sample mq0 + i: LPD (eq. 23) unless suspended, decimation
                 zl = zlb[qh + i]
-                # zpos counts 0..2 LPD_LAG - 1: >= LPD_LAG once the history is full
-                hpos = zpos - LPD_LAG if zpos >= LPD_LAG else zpos
-                if zpos >= LPD_LAG:
-                    dz = zl - zhist[hpos]
-                    if wrap:
-                        dz = dz - math.floor(dz + 0.5)
-                else:
-                    dz = 0.0
-                zhist[hpos] = zl
-                zpos = zpos + 1 if zpos + 1 < 2 * LPD_LAG else LPD_LAG
-                zg = gamma * zg - lpd_scale * dz
-                acc += zg if sgb[qh + i] >= 0.0 else -zg
-                zacc += zl
-                decn += 1
-                if decn >= dec:
-                    zdec[ndec & dmask] = zacc * inv_dec
-                    ndec += 1
-                    zar = ar_step(acc * inv_dec, gam, pmat, hist, a_ar, q_ar, r_ar, k_ar)
-                    acc = 0.0
-                    zacc = 0.0
-                    decn = 0
-                    start = peak_step(mq0 + i, zar, sf, si, peaks, spar)
-                    if start >= 0 and nlev < CHUNK:    # (at most one peak per two decimated steps)
-                        lev[4 * nlev] = start
-                        lev[4 * nlev + 1] = sf[SF.PERIOD]
-                        lev[4 * nlev + 2] = si[SI.LOCKED]
-                        lev[4 * nlev + 3] = mq0 + i
-                        nlev += 1
+                if lpdoff == 0:
+                    hpos = zpos - LPD_LAG if zpos >= LPD_LAG else zpos   # zpos counts 0 .. 2 LPD_LAG - 1
+                    zg, acc = lpd_sample(zl, zhist[hpos], zpos >= LPD_LAG, sgb[qh + i], zg, acc, wrap, gamma,
+                                         lpd_scale)
+                    zhist[hpos] = zl
+                    zpos = zpos + 1 if zpos + 1 < 2 * LPD_LAG else LPD_LAG
+                zacc, decn = zacc + zl, decn + 1
+                if decn >= dec:    # decimated step: AR(10) step (eq. 24-27) and peaks unless suspended
+                    zdec[ndec & dmask], zar = zacc * inv_dec, math.nan
+                    if lpdoff == 0:
+                        zar = ar_step(acc * inv_dec, gam, pmat, hist, a_ar, q_ar, r_ar, k_ar)
+                        start = peak_step(mq0 + i, zar, sf, si, peaks, spar)
+                        if start >= 0 and nlev < CHUNK:    # (at most one peak per two decimated steps)
+                            nlev = queue_peak(lev, nlev, start, sf[SF.PERIOD], si[SI.LOCKED], mq0 + i)
+                    ndec, acc, zacc, decn = ndec + 1, (0.0 if lpdoff == 0 else acc), 0.0, 0
                     if store:                            # zAR trace: held between decimated steps
-                        for j in range(o0, qbase + i):
-                            o_zar[j] = zprev
-                        o0 = qbase + i
+                        o0 = hold_trace(o_zar, o0, qbase + i, zprev)
                     zprev = zar
         if store and lq > 0:                    # zAR trace of the previous chunk: held after its last step
-            for j in range(o0, qbase + lq):
-                o_zar[j] = zprev
-            o0 = qbase + lq
-        # ---- the reset lattice --------------------------------------------------------------------------
-        # Peaks found in the aligned CHUNK window V (queued in lev with the sample that completed them)
-        # act on the lattice at the end of window V + 1, whatever the block split (module doc).
-        m_end = m0 + lp - 1
-        if lp > 0 and nlev > 0 and (m_end & (CHUNK - 1)) == CHUNK - 1:
-            m_app = m_end + 1                        # first sample the lattice acts on
-            n_app = 0
-            while n_app < nlev and lev[4 * n_app + 3] < m_app - CHUNK:
-                n_app += 1
-            for j in range(n_app):
-                start = int(lev[4 * j])
-                per = lev[4 * j + 1]
-                lpd_locked = lev[4 * j + 2] > 0.5 and per > 0.0
-                if refine_w == 0:
-                    # paper method: the lattice exists while the LPD period is locked
-                    if not lpd_locked:
-                        nxt = -1.0
-                        latsrc = 0
-                    else:
-                        tlat = per
-                        if nxt < 0.0:
-                            kp = math.ceil((m_app - start) / per)
-                            nxt = start + kp * per
-                            latsrc = 1
-                            if nresets == 0:
-                                last_start = start
-                        else:
-                            u = (start - nxt) / per
-                            e = (u - math.floor(u + 0.5)) * per
-                            if abs(e) <= 2.0 * tol * per:
-                                nxt += phase_gain * e
-                elif nxt < 0.0 and lpd_locked:
-                    # ours: acquire from the LPD (or the monitor's coarse detector), then the step-fit loop
-                    kp = math.ceil((m_app - start) / per)
-                    nxt = start + kp * per
-                    tlat = per
-                    latsrc = 1
-                    misses = 0
-                    ncons = 0
-                    l11, l12, l22 = lattice_init(per, float(refine_w))
-                    if nresets == 0:
-                        last_start = start
-            for j in range(4 * (nlev - n_app)):     # keep the entries of window V + 1
-                lev[j] = lev[4 * n_app + j]
-            nlev -= n_app
-        if confirm_n > 0 and lp > 0 and (m_end & (CHUNK - 1)) == CHUNK - 1 and trk != swmode:
-            swmode = trk                             # tracking mode from the next aligned window on
-            swat = m_end + 1
+            o0 = hold_trace(o_zar, o0, qbase + lq, zprev)
+        m_end = m0 + lp - 1   # the reset lattice: the peaks of window V act at the end of window V + 1 (module doc)
+        if lp > 0 and (m_end & (CHUNK - 1)) == CHUNK - 1:
+            if nlev > 0:
+                nlev, nxt, tlat, latsrc, misses, ncons, l11, l12, l22, last_start = apply_peaks(
+                    lev, nlev, m_end + 1, refine_w, spar[SQ.TOL], mpar[MP.PHASE_GAIN], nxt, tlat, latsrc, misses, ncons,
+                    l11, l12, l22, nresets, last_start)
+            if confirm_n > 0 and trk != swmode:
+                swmode, swat = trk, m_end + 1        # tracking mode from the next aligned window on
         qh, lq, mq0, qbase = ch, lp, m0, base
         if lf == 0 and lq == 0:
             break
-        # (after the last chunk, one more pass with lp = 0 runs the LPD over it: its peaks wait in lev
-        # for the end of the next window)
-        jp, lp, jf, slot = jf, lf, jf + lf, 1 - slot
-    if store:
-        for j in range(o0, n_out):
-            o_zar[j] = zprev
-    re2, re1 = xe[n], xe[n + 1]
-    if is_complex:
-        im2, im1 = xie[n], xie[n + 1]
-    # ---- store the state -------------------------------------------------------------------------
-    fst[FF.F], fst[FF.DF], fst[FF.P11], fst[FF.P12], fst[FF.P22], fst[FF.WSUM] = f, df, p11, p12, p22, wsum
-    ist[FI.WCOUNT], ist[FI.WPOS] = wcount, wpos
-    mst[MF.RE2], mst[MF.IM2], mst[MF.RE1], mst[MF.IM1] = re2, im2, re1, im1
-    mst[MF.POW] = pw
-    mst[MF.IKAP] = ikap_w
-    mst[MF.NEXT], mst[MF.TLAT], mst[MF.PPRED] = nxt, tlat, ppred
-    mst[MF.L11], mst[MF.L12], mst[MF.L22] = l11, l12, l22
-    mst[MF.ZG], mst[MF.ACC], mst[MF.ZACC] = zg, acc, zacc
-    mist[MI.NBUF], mist[MI.LAST_START], mist[MI.NRESETS], mist[MI.STARTED] = nbuf, last_start, nresets, started
-    mist[MI.FITAT], mist[MI.MISSES], mist[MI.DECN], mist[MI.LATSRC], mist[MI.NDEC] = fitat, misses, decn, latsrc, ndec
-    mist[MI.ZPOS] = zpos
-    mist[MI.NMEAS] = nmeas
-    mist[MI.NLEV] = nlev
-    sf[SF.ZAR] = zprev                                # the held zAR trace value (NaN while suspended)
-    mist[MI.NCONS], mist[MI.TRACK], mist[MI.SWAT], mist[MI.SWMODE], mist[MI.LPDOFF] = ncons, trk, swat, swmode, lpdoff
-    counters[STATUS_OK] += n_ok
-    counters[STATUS_NEAR_ZERO] += n_near
-    counters[STATUS_DOMAIN] += n_dom
-    counters[STATUS_NON_FINITE] += n_nonfin
-    counters[STATUS_CORRECTION] += n_corr
-    return n_out
-
+        jp, lp, jf, slot = jf, lf, jf + lf, 1 - slot   # (after the last chunk, a pass with lp = 0: its LPD)
+    return ((f, df, p11, p12, p22, wsum, wcount, wpos),
+            (nxt, tlat, ppred, l11, l12, l22, last_start, nresets, fitat, misses, ncons, trk, latsrc),
+            (zpos, zg, acc, zacc, decn, ndec, nlev), (swat, swmode, lpdoff, nmeas, zprev, pw, ikap_w), o0)

@@ -8,8 +8,8 @@ import pytest
 from rfi_monitor.if_measurement import acos_fast
 from rfi_monitor.sweep_analysis import SweepAnalysisParams, analyse
 from rfi_monitor.sweep_period import SweepPeriodParams, estimate_sweep_period
-from rfi_monitor.tracker import STEP_FALSE_ALARM, _step_fit, step_threshold
 from rfi_monitor.tracker_state import Z_RING
+from rfi_monitor.tracker_steps import STEP_FALSE_ALARM, step_fit, step_threshold
 
 
 def _decimated_saw(T, s, n_dec, dec, sign=1.0, noise=0.0, seed=0):
@@ -71,15 +71,15 @@ def test_step_fit_finds_the_start_of_a_noise_free_sweep(start):
     m = np.arange(start - 30, start + 30)
     z = np.where(m >= start, 0.18 + df * (m - start), 0.18 + df * (m - start + T))
     ring[m & (Z_RING - 1)] = z
-    s_hat, _, sig = _step_fit(ring, start + 2, 20, df, T, False)
+    s_hat, _, sig = step_fit(ring, start + 2, 20, df, T, False)
     assert s_hat == start and sig > step_threshold(40)
     # down-chirp: negative df, the track jumps up at the start
     z = np.where(m >= start, 0.32 - df * (m - start), 0.32 - df * (m - start + T))
     ring[m & (Z_RING - 1)] = z
-    s_hat, _, sig = _step_fit(ring, start - 3, 20, -df, T, False)
+    s_hat, _, sig = step_fit(ring, start - 3, 20, -df, T, False)
     assert s_hat == start and sig > step_threshold(40)
     # the same track read as an up-chirp: a step of the wrong sign is no sweep start
-    assert _step_fit(ring, start - 3, 20, df, T, False)[2] == 0.0
+    assert step_fit(ring, start - 3, 20, df, T, False)[2] == 0.0
 
 
 def test_step_fit_significance_on_noise_and_on_a_noisy_start():
@@ -92,13 +92,13 @@ def test_step_fit_significance_on_noise_and_on_a_noisy_start():
     false_alarms = 0
     for _ in range(2000):
         ring[m & (Z_RING - 1)] = 0.25 + df * (m - 100) + rng.normal(0.0, 0.055, m.size)
-        false_alarms += _step_fit(ring, 100, w, df, T, False)[2] >= step_threshold(2 * w)
+        false_alarms += step_fit(ring, 100, w, df, T, False)[2] >= step_threshold(2 * w)
     assert false_alarms / 2000 <= 2 * STEP_FALSE_ALARM
     found = 0
     for _ in range(200):
         z = np.where(m >= 100, 0.18 + df * (m - 100), 0.18 + df * (m - 100 + T))
         ring[m & (Z_RING - 1)] = z + rng.normal(0.0, 0.055, m.size)
-        s_hat, _, sig = _step_fit(ring, 100, w, df, T, False)
+        s_hat, _, sig = step_fit(ring, 100, w, df, T, False)
         found += abs(s_hat - 100) <= 1 and sig >= step_threshold(2 * w)
     assert found >= 180
 
