@@ -36,6 +36,7 @@ from numba import njit
 
 from gnss_common.constants import GPS_CA_CODE_LENGTH_CHIPS
 from gnss_common.gps_ca import ca_code
+from gnss_common.moments import m2m4_powers
 
 WRAP_THRESHOLD_RAD = 0.5 * math.pi
 """A change of the Costas discriminator atan(Q/I) by more than this from one period to the next is a half-cycle
@@ -86,16 +87,22 @@ def window_quality(ring: np.ndarray, noise_ring: np.ndarray, t_s: float) -> tupl
     m4 /= w
     mn /= w
     lock = d / w / m2 if m2 > 0 else math.nan
-    cn0_m2m4 = math.nan
-    disc = 2.0 * m2 * m2 - m4
-    if disc > 0:
-        ps = math.sqrt(disc)
-        if m2 - ps > 0:
-            cn0_m2m4 = 10.0 * math.log10(ps / (m2 - ps) / t_s)
+    cn0_m2m4 = moments_cn0_dbhz(m2, m4, t_s)
     if not mn > 0:
         return math.nan, cn0_m2m4, lock, math.nan
     ps_ref = max(m2 - mn, CN0_FLOOR_SIGMAS * math.sqrt(2.0 / w) * mn)
     return 10.0 * math.log10(ps_ref / mn / t_s), cn0_m2m4, lock, mn
+
+
+@njit(cache=True, nogil=True)
+def moments_cn0_dbhz(m2: float, m4: float, t_s: float) -> float:
+    """C/N0 (dB-Hz) of the moments estimator from the prompts' M2 = mean |P|^2 and M4 = mean |P|^4 over a window
+    of prompts of T = ``t_s`` each: ``P_s / P_n / T`` with ``(P_s, P_n)`` of ``gnss_common.moments.m2m4_powers``;
+    NaN when the moments give no signal power (2 M2^2 <= M4) or no noise power."""
+    ps, pn = m2m4_powers(m2, m4)
+    if ps > 0.0 and pn > 0.0:
+        return 10.0 * math.log10(ps / pn / t_s)
+    return math.nan
 
 
 @njit(cache=True, nogil=True)
@@ -116,7 +123,8 @@ def lock_window(err_ring: np.ndarray) -> tuple[float, float]:
 
 def m2m4_cn0_dbhz(prompts: np.ndarray, integration_time_s: float) -> float:
     """C/N0 from coherent prompts by the moments estimator (Pauluzzi & Beaulieu 2000, eq. 14 for
-    complex samples): ``P_s = sqrt(2 M2^2 - M4)``, ``P_n = M2 - P_s``, ``C/N0 = P_s / P_n / T``.
+    complex samples; ``gnss_common.moments``): ``P_s = sqrt(2 M2^2 - M4)``, ``P_n = M2 - P_s``,
+    ``C/N0 = P_s / P_n / T`` (:func:`moments_cn0_dbhz`, the tracking kernel's too).
 
     Args:
         prompts: complex prompts, shape (n,), n >= 2.
@@ -126,13 +134,4 @@ def m2m4_cn0_dbhz(prompts: np.ndarray, integration_time_s: float) -> float:
         dB-Hz; NaN when the moments give no signal power (2 M2^2 <= M4) or no noise power.
     """
     p2 = np.abs(prompts) ** 2
-    m2 = float(np.mean(p2))
-    m4 = float(np.mean(p2 * p2))
-    disc = 2.0 * m2 * m2 - m4
-    if not disc > 0:
-        return math.nan
-    ps = math.sqrt(disc)
-    pn = m2 - ps
-    if not pn > 0:
-        return math.nan
-    return 10.0 * math.log10(ps / pn / integration_time_s)
+    return moments_cn0_dbhz(float(np.mean(p2)), float(np.mean(p2 * p2)), float(integration_time_s))

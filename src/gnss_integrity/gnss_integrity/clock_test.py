@@ -69,8 +69,6 @@ class ClockTestParams:
     its default, description and range are written here once).
 
     Attributes:
-        oscillator: name of a ``gnss_common.clock_model.PRESETS`` entry (default "tcxo": the
-            Van Dierendonck TCXO of Kaplan & Hegarty), or ``custom`` with ``h0``, ``h_minus2``.
         h0, h_minus2: h-coefficients when ``oscillator`` is "custom" (s and 1/s).
         process_noise_factor: multiplies the model's process noise (temperature and flicker terms
             the two-state model lacks), >= 1.
@@ -90,7 +88,8 @@ class ClockTestParams:
     oscillator: str = parameter(
         "tcxo",
         "Receiver oscillator whose h-coefficients bound the clock tests (gnss_common.clock_model presets): tcxo "
-        "(u-blox and most COTS receivers), ocxo, ocxo_brown_hwang, compensated_crystal_brown_hwang, rubidium. A "
+        "(Van Dierendonck's TCXO in Kaplan & Hegarty: u-blox and most COTS receivers), ocxo, ocxo_brown_hwang, "
+        "compensated_crystal_brown_hwang, rubidium. A "
         "more stable class makes the clock tests more sensitive; a class more stable than the real one "
         "false-alarms.",
         choices=(*PRESETS, "custom"), group=USER)

@@ -48,8 +48,6 @@ class StateParams:
 
     Attributes:
         min_categories_for_detection: SUSPECT tests in this many categories at once make DETECTED.
-        persistence_s: a test SUSPECT this long without a break makes DETECTED, s.
-        clean_period_s: NONE for this long ends an episode, s.
     """
 
     min_categories_for_detection: int = 2

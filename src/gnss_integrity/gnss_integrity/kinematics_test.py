@@ -70,11 +70,9 @@ class KinematicsTestParams:
     ``uwb_std_m``; :func:`rfi_node_common.params.parameter`: default, description and range written here once).
 
     Attributes:
-        error_std_m: horizontal 1-sigma of the clean GNSS snapshot position error, m.
         vertical_factor: vertical 1-sigma over horizontal.
         error_tau_s: correlation time of the clean GNSS position error, s.
         white_std_m: epoch-to-epoch (white) 1-sigma of the snapshot position per axis, m.
-        uwb_std_m: 1-sigma of a UWB range, m (when the range carries none).
         max_range_age_s: a UWB range older than this at the GNSS epoch is not used, s.
         tag_speed_allowance_mps: tag speed allowed for the range's age (adds speed x age to the
             range's 1-sigma), m/s.

@@ -28,6 +28,7 @@ from imm_carrier.layout import IMM_OUT_LEN, IMM_STATE_LEN, ImmOut, ImmState
 from imm_carrier.measurement_model import (
     IQ_SCALINGS,
     CompiledChannelLoop,
+    amp_sigma,
     check_positive_finite,
     check_step_inputs,
 )
@@ -323,14 +324,6 @@ def imm_step(st, zi, zq, amp, sig, t, dphi, p_change, prior_plus, q_f, q_g, form
 
 
 @njit(cache=True)
-def amp_sigma(cn0_dbhz: float, t: float, unit_noise: bool) -> tuple[float, float]:
-    ratio = math.sqrt(2.0 * t * 10.0 ** (cn0_dbhz / 10.0))
-    if unit_noise:
-        return ratio, 1.0
-    return 1.0, 1.0 / ratio
-
-
-@njit(cache=True)
 def _imm_run(st, zi, zq, cn0, t, dphi, p_change, prior_plus, q_f, q_g, form_code, unit_noise, out):
     """Batch of IMM steps for one channel; out: float64[n, 11]."""
     row = np.empty(IMM_OUT_LEN)
@@ -420,12 +413,13 @@ class ImmCarrierFilter(CompiledChannelLoop):
     """
 
     NOT_INITIALISED = "filter not initialised: call initialize() or initialize_from_correlator()"
+    PARAMS_TYPE = ImmParams
+    STATE_LEN = IMM_STATE_LEN
+    OUT_LEN = IMM_OUT_LEN
+    params: ImmParams
 
     def __init__(self, params: ImmParams) -> None:
-        if not isinstance(params, ImmParams):
-            raise ValueError("params must be an ImmParams")
-        super().__init__(IMM_STATE_LEN, IMM_OUT_LEN)
-        self.params = params
+        super().__init__(params)
         self._q_f, self._q_g = params.q_phase
         self._form_code = PROCESS_NOISE_FORMS.index(params.process_noise_form)
         self._unit_noise = params.iq_scaling == "unit_noise"

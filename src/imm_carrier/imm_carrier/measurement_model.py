@@ -17,8 +17,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from numba import njit
 
 CN0_MIN_DBHZ = 0.0
 """Lowest C/N0 accepted as physical, dB-Hz."""
@@ -70,12 +72,20 @@ def iq_amplitude_and_noise_std(
         raise ValueError(f"integration_time_s must be finite and > 0, got {integration_time_s!r}")
     if not math.isfinite(cn0_dbhz):
         raise ValueError(f"cn0_dbhz must be finite, got {cn0_dbhz!r}")
-    ratio = math.sqrt(2.0 * integration_time_s * 10.0 ** (cn0_dbhz / 10.0))  # A / sigma_v
-    if iq_scaling == "unit_amplitude":
-        return 1.0, 1.0 / ratio
-    if iq_scaling == "unit_noise":
+    if iq_scaling not in IQ_SCALINGS:
+        raise ValueError(f"iq_scaling must be one of {IQ_SCALINGS}, got {iq_scaling!r}")
+    return amp_sigma(float(cn0_dbhz), float(integration_time_s), iq_scaling == "unit_noise")
+
+
+@njit(cache=True)
+def amp_sigma(cn0_dbhz: float, t: float, unit_noise: bool) -> tuple[float, float]:
+    """(A, sigma_v) of :func:`iq_amplitude_and_noise_std` without its checks, for compiled kernels: the one
+    computation of ``A / sigma_v = sqrt(2 T C/N0)`` (Zhao et al., eq. 4-5) that the IMM, the PLL and the tracker
+    use. ``cn0_dbhz`` dB-Hz, ``t`` = T in s, ``unit_noise``: sigma_v = 1 (else A = 1)."""
+    ratio = math.sqrt(2.0 * t * 10.0 ** (cn0_dbhz / 10.0))
+    if unit_noise:
         return ratio, 1.0
-    raise ValueError(f"iq_scaling must be one of {IQ_SCALINGS}, got {iq_scaling!r}")
+    return 1.0, 1.0 / ratio
 
 
 def expected_iq(
@@ -260,17 +270,28 @@ def correlator_batch(
 
 
 class CompiledChannelLoop:
-    """What the IMM and the PLL share: the state and output arrays their compiled step and run kernels update
-    in place, whether a state has been set, and the start of a batch.
+    """What the IMM and the PLL share: their checked parameters, the state and output arrays their compiled step
+    and run kernels update in place, whether a state has been set, and the start of a batch.
 
-    Subclasses set :attr:`NOT_INITIALISED` (the message of a step before ``initialize``).
+    Subclasses set :attr:`NOT_INITIALISED` (the message of a step before ``initialize``), :attr:`PARAMS_TYPE`
+    (the parameter dataclass they take) and :attr:`STATE_LEN`, :attr:`OUT_LEN` (their kernels' array lengths).
+
+    Raises:
+        ValueError: ``params`` not a :attr:`PARAMS_TYPE`.
     """
 
     NOT_INITIALISED = "not initialised"
+    PARAMS_TYPE: type = object
+    STATE_LEN = 0
+    OUT_LEN = 0
 
-    def __init__(self, state_len: int, out_len: int) -> None:
-        self._st = np.zeros(state_len)
-        self._out = np.zeros(out_len)
+    def __init__(self, params: Any) -> None:
+        if not isinstance(params, self.PARAMS_TYPE):
+            name = self.PARAMS_TYPE.__name__
+            raise ValueError(f"params must be {'an' if name[0] in 'AEIOU' else 'a'} {name}")
+        self.params = params
+        self._st = np.zeros(self.STATE_LEN)
+        self._out = np.zeros(self.OUT_LEN)
         self._initialized = False
 
     @property

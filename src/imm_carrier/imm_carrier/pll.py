@@ -17,6 +17,7 @@ from imm_carrier.layout import PLL_OUT_LEN, PLL_STATE_LEN, PllOut, PllState
 from imm_carrier.measurement_model import (
     IQ_SCALINGS,
     CompiledChannelLoop,
+    amp_sigma,
     check_positive_finite,
     check_step_inputs,
 )
@@ -171,11 +172,12 @@ def pll_step(st, zi, zq, tk, dphi, bn, amp, alpha, out):
 
 
 @njit(cache=True)
-def _pll_run(st, zi, zq, t, dphi, bn, amp, alpha, out):
-    """Costas PLL over a batch (:func:`pll_step` per sample); out: float64[n, 5]."""
+def _pll_run(st, zi, zq, t, dphi, bn, cn0, unit_noise, alpha, out):
+    """Costas PLL over a batch (:func:`pll_step` per sample, the amplitude from C/N0 by ``amp_sigma``); out:
+    float64[n, 5]."""
     row = np.empty(PLL_OUT_LEN)
     for k in range(zi.shape[0]):
-        pll_step(st, zi[k], zq[k], t[k], dphi[k], bn[k], amp[k], alpha[k], row)
+        pll_step(st, zi[k], zq[k], t[k], dphi[k], bn[k], amp_sigma(cn0[k], t[k], unit_noise)[0], alpha[k], row)
         for m in range(PLL_OUT_LEN):
             out[k, m] = row[m]
 
@@ -219,12 +221,10 @@ class CostasPll(CompiledChannelLoop):
     """
 
     NOT_INITIALISED = "PLL not initialised"
-
-    def __init__(self, params: PllParams) -> None:
-        if not isinstance(params, PllParams):
-            raise ValueError("params must be a PllParams")
-        super().__init__(PLL_STATE_LEN, PLL_OUT_LEN)
-        self.params = params
+    PARAMS_TYPE = PllParams
+    STATE_LEN = PLL_STATE_LEN
+    OUT_LEN = PLL_OUT_LEN
+    params: PllParams
 
     @property
     def elapsed_s(self) -> float:
@@ -298,11 +298,10 @@ class CostasPll(CompiledChannelLoop):
                 self.params.end_bandwidth_hz,
                 self.params.tightening_duration_s,
             )
-            ratio = np.sqrt(2.0 * ta * 10.0 ** (cn0[idx] / 10.0))
-            amp = ratio if self.params.iq_scaling == "unit_noise" else np.ones_like(ratio)
             alpha = np.minimum(ta / self.params.lock_time_constant_s, 1.0)
             sub = np.empty((idx.size, PLL_OUT_LEN))
-            _pll_run(self._st, np.ascontiguousarray(zi[idx]), zq[idx], ta, dphi[idx], bn, amp, alpha, sub)
+            _pll_run(self._st, np.ascontiguousarray(zi[idx]), zq[idx], ta, dphi[idx], bn, cn0[idx],
+                     self.params.iq_scaling == "unit_noise", alpha, sub)
             raw[idx] = sub
         finite = np.isfinite(raw[:, 0]) & np.isfinite(raw[:, 1])
         return PllBatchResult(
@@ -339,7 +338,7 @@ class CostasPll(CompiledChannelLoop):
         bn = scheduled_bandwidth_hz(
             self._st[PllState.ELAPSED], p.start_bandwidth_hz, p.end_bandwidth_hz, p.tightening_duration_s
         )
-        amp = math.sqrt(2.0 * t * 10.0 ** (cn0_dbhz / 10.0)) if p.iq_scaling == "unit_noise" else 1.0
+        amp = amp_sigma(float(cn0_dbhz), t, p.iq_scaling == "unit_noise")[0]
         alpha = min(t / p.lock_time_constant_s, 1.0)
         out = self._out
         pll_step(

@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit
 
 from gnss_common.clock_model import PROCESS_NOISE_FORMS
-from imm_carrier.imm import amp_sigma, imm_step, wrap_phase
+from imm_carrier.imm import imm_step, wrap_phase
 from imm_carrier.layout import (
     BATCH_COLUMNS,
     COUNTER_KEYS,
@@ -50,6 +50,7 @@ from imm_carrier.measurement_model import (
     METHOD_PLL,
     CarrierPhaseEstimate,
     CorrelatorSample,
+    amp_sigma,
 )
 from imm_carrier.pll import pll_step, scheduled_bandwidth_hz
 from imm_carrier.tracker_params import TrackerParams

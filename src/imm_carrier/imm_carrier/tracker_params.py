@@ -29,19 +29,6 @@ class TrackerParams:
         method: "imm" or "pll".
         imm: IMM parameters.
         pll: PLL parameters.
-        bit_period_s: navigation data-bit duration, s (GPS L1 C/A: 0.02). When the integration time
-            is shorter, the IMM's bit-transition probability is used only on intervals that start on
-            a bit edge (stamps on the GPS bit grid; ROS stamps from GPS time are, GPS - UTC being whole
-            seconds) and is 0 inside a bit; 0 disables this.
-        min_integration_time_s, max_integration_time_s: the receiver's range of coherent
-            integration times T, s, 0 < min < max; a correlator with T outside it is rejected
-            (``rejected_integration_time``). Defaults 0.1 ms and 100 ms (Zhao et al.: 1-20 ms).
-        max_iq_magnitude_ratio: a correlator whose magnitude sqrt(I^2 + Q^2) exceeds this many times
-            its expected RMS sqrt(A^2 + 2 sigma_v^2) (A, sigma_v from its C/N0 and T, eq. 4-5) is
-            rejected (``rejected_iq_magnitude``), dimensionless, > 1. The magnitude of a correlator
-            that follows the model exceeds 10 RMS with probability below 1e-40; one EKF update moves the
-            phase by up to about the correlator's magnitude (in units of A), so larger values could
-            only throw the channel off.
     """
 
     method: str = "imm"
@@ -60,9 +47,9 @@ class TrackerParams:
     )
     bit_period_s: float = parameter(
         0.02,
-        'Known data-bit timing: with T shorter than this, bit changes are allowed only on intervals starting '
-        'on a bit edge of the GPS time grid (ROS stamps converted from GPS time are on it: GPS - UTC is '
-        'whole seconds), s; 0 = edges unknown.',
+        'Known data-bit timing (GPS L1 C/A: 0.02): with T shorter than this, bit changes are allowed only on '
+        'intervals starting on a bit edge of the GPS time grid (ROS stamps converted from GPS time are on it: '
+        'GPS - UTC is whole seconds), s; 0 = edges unknown.',
         minimum=0.0, maximum=1.0,
     )
     min_integration_time_s: float = parameter(
@@ -83,7 +70,10 @@ class TrackerParams:
     max_iq_magnitude_ratio: float = parameter(
         100.0,
         'A correlator whose magnitude sqrt(I^2 + Q^2) exceeds this many times the RMS expected from its C/N0 '
-        'and T is rejected (rejected_iq_magnitude), dimensionless.',
+        'and T, sqrt(A^2 + 2 sigma_v^2) (Zhao et al., eq. 4-5), is rejected (rejected_iq_magnitude), '
+        'dimensionless. A correlator that follows the model exceeds 10 RMS with probability below 1e-40; '
+        "one EKF update moves the phase by up to about the correlator's magnitude (in units of A), so a "
+        'larger one could only throw the channel off.',
         minimum=2.0, maximum=1000000.0,
     )
 

@@ -133,21 +133,12 @@ def header_stamp_ns(week: int, tow_s: float) -> int:
 class UbxDecoderParams:
     """Parameters of :class:`UbxDecoder`.
 
+    Fields written with :func:`rfi_node_common.params.parameter` are also parameters of ubx_source: their
+    default, description and range are there, once.
+
     Attributes:
-        min_satellites: an epoch is published only with at least this many modelled satellites
-            (4: enough for a position); fewer are withheld and counted.
-        use_receiver_std: put the receiver's prStdev / doStdev into the measurement's std fields
-            (else NaN: the filter decides from C/N0).
-        use_sfrbx: decode ephemerides (GPS LNAV, Galileo I/NAV) and the GPS Klobuchar parameters
-            from RXM-SFRBX.
         max_ephemerides_per_satellite: records kept per PRN (the store picks the nearest t_oe).
         builder: parameters of :class:`GnssEpochBuilder` (observable codes, plausibility limits).
-        publish_without_ephemeris: publish satellites without a usable ephemeris with NaN
-            satellite states (and their real pseudorange, rate and C/N0) instead of skipping them;
-            ``min_satellites`` then counts them too.
-
-    The first four are also parameters of ubx_source (:func:`rfi_node_common.params.parameter`: default,
-    description and range written here once).
     """
 
     min_satellites: int = parameter(

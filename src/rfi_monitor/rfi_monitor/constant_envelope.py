@@ -5,7 +5,8 @@ added to them does not. The second and fourth moments of the block tell the two 
 signal-to-noise ratio, Pauluzzi & Beaulieu 2000, IEEE Trans. Commun. 48(10), eq. 36-37; Matzner 1993):
 
 * complex samples x = J + n, |J|^2 = P, n circular Gaussian of power N:
-  ``M2 = E|x|^2 = P + N``, ``M4 = E|x|^4 = P^2 + 4 P N + 2 N^2``, hence ``N = M2 - sqrt(2 M2^2 - M4)``.
+  ``M2 = E|x|^2 = P + N``, ``M4 = E|x|^4 = P^2 + 4 P N + 2 N^2``, hence ``N = M2 - sqrt(2 M2^2 - M4)``
+  (``gnss_common.moments.m2m4_powers``; the moment sums are taken here).
 * real samples are made analytic first (a real tone becomes a complex exponential of constant magnitude, real
   band-pass Gaussian noise circular Gaussian noise of twice the power), then as above. The analytic signal is
   ``x + j H(x)``, its squared magnitude ``x^2 + H(x)^2``: only the Hilbert transform ``H(x)`` is computed, by a real
@@ -36,6 +37,8 @@ import math
 import numpy as np
 from numba import njit
 from scipy import fft as sp_fft
+
+from gnss_common.moments import m2m4_powers
 
 
 @njit(cache=True, nogil=True)
@@ -112,7 +115,7 @@ def constant_envelope_noise(x: np.ndarray, cplx: bool) -> tuple[float, float]:
         m2, m4 = _moments_analytic(xr, hilbert_transform(xr), EDGE_SAMPLES, xr.size - EDGE_SAMPLES)
     if not m2 > 0.0:
         return math.nan, 0.0
-    noise = m2 - math.sqrt(max(2.0 * m2 * m2 - m4, 0.0))
+    noise = m2m4_powers(m2, m4)[1]
     return max(noise, 0.0), m2
 
 
