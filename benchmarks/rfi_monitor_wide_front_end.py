@@ -242,24 +242,55 @@ def write_noise(path: Path, rate_hz: float, seconds: float) -> int:
     return int(round(seconds / BLOCK_S))
 
 
-def write_band(path: Path, band: Band, rate_hz: float, seconds: float, seed: int) -> int:
-    """One band's int8 I/Q stream from rfi_sim (noise and GPS PRN 1, the chirp from its switch-on); returns the
-    number of blocks."""
+def band_simulator(band: Band, rate_hz: float, seconds: float, seed: int):
+    """rfi_sim's 8-bit I/Q front end for one band (noise and GPS PRN 1; the chirp from its switch-on, if any)."""
     from rfi_sim.if_signal import ChirpJammer, FrontEndConfig, IfSimulator, js_for_jn_db
     fe = FrontEndConfig(sample_rate_hz=rate_hz, intermediate_frequency_hz=0.0, is_complex=True, bits=8)
-    jammers = ()
+    jammers: tuple = ()
     if band.chirp_on_fraction is not None:
         width = CHIRP_BAND_FRACTION * rate_hz
         jammers = (ChirpJammer(start_frequency_hz=-width / 2, sweep_rate_hz_per_s=width / CHIRP_PERIOD_S,
                                sweep_period_s=CHIRP_PERIOD_S, js_db=js_for_jn_db(fe, JN_DB),
                                on_time_s=band.chirp_on_fraction * seconds),)
-    sim = IfSimulator(fe, jammers, seed=seed)
+    return IfSimulator(fe, jammers, seed=seed)
+
+
+def write_band(path: Path, band: Band, rate_hz: float, seconds: float, seed: int) -> int:
+    """One band's int8 I/Q stream (:func:`band_simulator`) to a file; returns the number of blocks."""
+    sim = band_simulator(band, rate_hz, seconds, seed)
     n = int(round(rate_hz * seconds))
     chunk = int(round(rate_hz * BLOCK_S)) * 100
     with open(path, "wb") as fh:
         for start in range(0, n, chunk):
             sim.generate(min(chunk, n - start)).counts.astype(np.int8).tofile(fh)
     return int(round(seconds / BLOCK_S))
+
+
+# ------------------------------------------------------------------------------------------ the analysis alone
+ANALYSIS_BLOCKS = 120
+"""Blocks per case of the in-process measurement (the first ANALYSIS_SKIP not counted: calibration, the switch-on)."""
+ANALYSIS_SKIP = 20
+
+
+def analysis_cost_ms(rate_hz: float, chirp: bool) -> tuple[float, float]:
+    """(full, light) mean thread CPU ms per 1 ms block of ``RfiMonitor.process`` in this process, fed as the node
+    feeds it (rfi_monitor_real_jammers.NodeLikeMonitor, shipped settings), at ``rate_hz`` complex: noise, or the
+    chirp from the first block. No transport, no rclpy: what the analysis alone costs a node."""
+    from rfi_monitor_real_jammers import NodeLikeMonitor
+    band = Band("x", 0.0, 0.0 if chirp else None)
+    n = int(round(rate_hz * BLOCK_S))
+    out = []
+    for light in (False, True):
+        sim, mon = band_simulator(band, rate_hz, 1.0, seed=NOISE_SEED), NodeLikeMonitor(None)
+        cpu = []
+        for k in range(ANALYSIS_BLOCKS):
+            blk = sim.generate(n)
+            t0 = time.thread_time()
+            mon.process(blk.counts, float(blk.scale), rate_hz, 0.0, True, 8, k * n, 10**9 + k * 10**6,
+                        light=light and k >= ANALYSIS_SKIP)
+            cpu.append(time.thread_time() - t0)
+        out.append(float(np.mean(cpu[ANALYSIS_SKIP:])) * 1e3)
+    return out[0], out[1]
 
 
 # --------------------------------------------------------------------------------------------------- transport
@@ -468,6 +499,28 @@ def bands_table(rows: Sequence[tuple[float, Sequence[BandResult]]]) -> str:
     return "\n".join([head, *lines])
 
 
+def analysis_table(costs: dict[float, tuple[tuple[float, float], tuple[float, float]]],
+                   transport: Sequence[TransportResult]) -> str:
+    """The analysis alone per rate, and what three bands need on idle cores: 3 x (the full analysis of a block, the
+    dearer of noise and chirp, per 1 ms) + 3 x (source + a Python subscriber) of the transport, interpolated in rate
+    between the measured transport rates."""
+    head = ("| rate per band | full analysis ms per 1 ms block: noise / chirp | light: noise / chirp | three bands' "
+            "full analysis alone, cores | + three transports (source + subscriber, median, interpolated), cores | "
+            "fits 2 cores |\n|---|---|---|---|---|---|")
+    by_rate: dict[float, list[float]] = {}
+    for t in transport:
+        by_rate.setdefault(t.rate_hz, []).append(t.source_cpu_per_s + t.subscriber_cpu_per_s)
+    rates = sorted(by_rate)
+    per_transport = [float(np.median(by_rate[r])) for r in rates]
+    lines = []
+    for rate, ((full_q, light_q), (full_c, light_c)) in sorted(costs.items()):
+        analysis = 3 * max(full_q, full_c) / (BLOCK_S * 1e3)
+        moving = 3 * float(np.interp(rate, rates, per_transport)) if rates else math.nan
+        lines.append(f"| {fmt_rate(rate)} | {full_q:.2f} / {full_c:.2f} | {light_q:.2f} / {light_c:.2f} | "
+                     f"{analysis:.2f} | {analysis + moving:.2f} | {'yes' if analysis + moving < 2.0 else 'no'} |")
+    return "\n".join([head, *lines])
+
+
 def cpu_model() -> str:
     for line in Path("/proc/cpuinfo").read_text().splitlines():
         if line.startswith("model name"):
@@ -475,15 +528,28 @@ def cpu_model() -> str:
     return "unknown"
 
 
-def findings(transport: Sequence[TransportResult], runs: Sequence[BandRun]) -> str:
+def extrapolated_full_ms(costs: dict[float, tuple[tuple[float, float], tuple[float, float]]],
+                         rate_hz: float) -> float:
+    """The full analysis of a 1 ms block at ``rate_hz``, ms of CPU, on the straight line (fixed cost + cost per MS/s)
+    through the dearer case (noise or chirp) at the lowest and the highest measured rates; NaN with fewer than two."""
+    if len(costs) < 2:
+        return math.nan
+    lo, hi = min(costs), max(costs)
+    y0, y1 = max(costs[lo][0][0], costs[lo][1][0]), max(costs[hi][0][0], costs[hi][1][0])
+    return y0 + (y1 - y0) * (rate_hz - lo) / (hi - lo)
+
+
+def findings(transport: Sequence[TransportResult], runs: Sequence[BandRun], costs: dict) -> str:
     """The page's conclusions, from the numbers: which goal is met and which is not."""
     out = []
     for t in transport:
         kept = t.received == t.blocks and t.carried_hz >= 0.98 * t.rate_hz and t.latency_ms[2] < LATENCY_GOAL_MS
+        cost = t.source_cpu_per_s + t.subscriber_cpu_per_s
         out.append(f"- Transport alone at {fmt_rate(t.rate_hz)}: {'carried' if kept else '**not carried**'} "
                    f"({t.carried_hz / 1e6:.1f} MS/s, {t.received} of {t.blocks} blocks, latency max "
-                   f"{t.latency_ms[2]:.0f} ms), the source {t.source_cpu_per_s:.2f} and the counter "
-                   f"{t.subscriber_cpu_per_s:.2f} of a core, the machine {t.machine_cores_busy:.2f} cores busy of 2.")
+                   f"{t.latency_ms[2]:.0f} ms); it cost the source {t.source_cpu_per_s:.2f} and the counter "
+                   f"{t.subscriber_cpu_per_s:.2f} CPU s per stream s ({cost:.2f} of the 2 cores), while the whole "
+                   f"machine was {t.machine_cores_busy:.2f} of 2 cores busy.")
     best = highest_rate_in_full([(r.rate_hz, r.results) for r in runs])
     if best is None:
         out.append("- Three bands: **at no rate of the ladder** did every node analyse every block in full with every "
@@ -498,16 +564,32 @@ def findings(transport: Sequence[TransportResult], runs: Sequence[BandRun]) -> s
     for r in runs:
         node = sum(b.node_cpu_per_s for b in r.results)
         src = sum(b.source_cpu_per_s for b in r.results)
-        per_ms = [b.node_cpu_per_s / (r.rate_hz / 1e6) for b in r.results if math.isfinite(b.node_cpu_per_s)]
-        out.append(f"- {fmt_rate(r.rate_hz)} per band: the three nodes {node:.2f} cores, the three sources {src:.2f}, "
-                   f"the probe {r.probe_cpu_per_s:.2f}; the whole machine {r.machine_cores_busy:.2f} of 2 cores busy "
-                   f"(the rest: other workers); a node {min(per_ms, default=math.nan) * 1e3:.0f}-"
-                   f"{max(per_ms, default=math.nan) * 1e3:.0f} ms of CPU per second of stream per MS/s.")
+        full = sum(b.full for b in r.results)
+        blocks = sum(b.blocks for b in r.results)
+        ours = node + src + r.probe_cpu_per_s
+        out.append(f"- {fmt_rate(r.rate_hz)} per band: {full} of {blocks} blocks in full; CPU s per stream s: the "
+                   f"three nodes {node:.2f}, the three sources {src:.2f}, the probe {r.probe_cpu_per_s:.2f} (together "
+                   f"{ours:.2f} of 2 cores); the whole machine {r.machine_cores_busy:.2f} of 2 cores busy over the "
+                   "stream, the other workers included.")
+    for rate, ((full_q, _), (full_c, _)) in sorted(costs.items()):
+        need = 3 * max(full_q, full_c) / (BLOCK_S * 1e3)
+        out.append(f"- The analysis alone (c), {fmt_rate(rate)} per band: {max(full_q, full_c):.2f} ms of CPU per 1 ms "
+                   f"block, so three bands need {need:.2f} cores for it "
+                   f"({'within' if need < 2 else '**more than**'} the 2 cores, before any transport).")
+    x81 = extrapolated_full_ms(costs, 81e6)
+    if math.isfinite(x81):
+        t81 = [t for t in transport if t.rate_hz == 81e6]
+        carried = bool(t81) and t81[0].received == t81[0].blocks and t81[0].carried_hz >= 0.98 * 81e6
+        out.append(f"- One node for the whole 81 MS/s stream: on the line through (c)'s lowest and highest rates, "
+                   f"about {x81:.1f} ms of CPU per 1 ms block on the node's one analysis thread ({x81:.1f} cores' "
+                   "worth on one thread): not possible with this analysis"
+                   + ("; the transport alone carried 81 MS/s (a), so it is not the limit." if carried else
+                      "; the transport alone fell short of 81 MS/s too (a)."))
     return "\n".join(out)
 
 
-def write_doc(transport: Sequence[TransportResult], runs: Sequence[BandRun], seconds: float, loads: tuple[float, float],
-              elapsed_s: float) -> None:
+def write_doc(transport: Sequence[TransportResult], runs: Sequence[BandRun], costs: dict, seconds: float,
+              loads: tuple[float, float], elapsed_s: float) -> None:
     OUT.write_text(
         "# Wider front ends with both cores (issue 26 item 4)\n\n"
         "From `benchmarks/rfi_monitor_wide_front_end.py` (its docstring says how). Every process is its own: "
@@ -517,14 +599,21 @@ def write_doc(transport: Sequence[TransportResult], runs: Sequence[BandRun], sec
         f"this machine: 1-minute load average {loads[0]:.2f} at the start and {loads[1]:.2f} at the end; "
         f"the run took {elapsed_s / 60:.1f} min. CPU per stream second is from /proc over the stream (a core = 1.00); "
         "\"machine\" counts every process on the machine, ours and the other workers'.\n\n"
-        "## What was found\n\n" + findings(transport, runs) + "\n\n"
+        "## What was found\n\n" + findings(transport, runs, costs) + "\n\n"
         "## (a) The transport alone: if_source into a subscriber that only counts\n\n"
         + transport_table(transport) + "\n\n"
         "## (b) Three bands (L1, L2, L5), one if_source and one rfi_monitor_node each\n\n"
         "L1: the chirp (J/N 10 dB, 75 % of the band in 20 us) on after 25 % of the stream; L2 clean; L5 the chirp "
         "after 50 %. Fully analysed = published and not light; latency = arrival at the probe minus the end of the "
         "block's samples (an upper bound: the probe's own lag is in it).\n\n"
-        + bands_table([(r.rate_hz, r.results) for r in runs]) + "\n\n" + NOTES)
+        + bands_table([(r.rate_hz, r.results) for r in runs]) + "\n\n"
+        "## (c) The analysis alone, in process, and what three bands would need on two idle cores\n\n"
+        f"``RfiMonitor.process`` fed as the node feeds it, shipped settings, {ANALYSIS_BLOCKS} blocks of 1 ms per case "
+        f"(the first {ANALYSIS_SKIP} not counted), thread CPU time, mean; noise, or the chirp of (b) from the first "
+        "block; light = the light analysis after the full one of the first blocks (a block that disagrees with the "
+        "last full analysis is escalated to the full one, as in the node). A node's own receiving adds about what "
+        "the counting subscriber of (a) costs.\n\n"
+        + analysis_table(costs, transport) + "\n\n" + NOTES)
 
 
 OUT = ROOT / "docs" / "rfi_monitor" / "wide_front_end.md"
@@ -532,22 +621,41 @@ NOTES = """## Why one node per band
 
 The full analysis of a block runs on one thread of one node (``RfiMonitor.process``); ``analysis_worker`` moves only
 the ridge analysis into a child process, and on this 2-vCPU machine that made the node slower (live_stream.md).
-An 81 MS/s stream in one node would need the per-MS/s cost above times 81 on one thread, several cores' worth.
-One node per band needs no change to the node: each band is its own stream with its own centre frequency, the
-nodes are separate processes that the kernel spreads over both cores, and each answers for its band on
-``/<ns>/rfi/jammer_state``. It is both the simpler and the faster way here.
+An 81 MS/s stream in one node would need (c)'s cost on one thread, several cores' worth (the findings above). One
+node per band needs no change to the node: each band is its own stream with its own centre frequency, the nodes are
+separate processes that the kernel spreads over both cores, and each answers for its band on
+``/<ns>/rfi/jammer_state``. It is both the simpler and the faster way; it cannot make the analysis itself cheaper,
+and (c) shows that the analysis, not the transport, is what does not fit.
 
-## Running N bands by hand
+## Reading it
 
-Each band: one source and one monitor in the band's namespace (topics relative, so ``-r __ns:=/l1`` moves
-``rfi/if_samples`` and ``rfi/jammer_state``; /diagnostics stays global, told apart by ``hardware_id``):
+- CPU per stream second is the cost: CPU seconds spent on the stream over its length, whatever the wall time it
+  took; "share of a core while streaming" is what the process got. The other workers of this shared machine kept it
+  busy during every run (the machine column), so a process got less than a core when it needed one, and a node that
+  fell behind took the light analysis or shed (its safety net, counted), which changes its cost.
+- In (b), a node behind its stream answers late: the age limit (``max_block_age_s``, 50 ms) compares a block's stamp
+  with its *reception* by the middleware (``load_policy``), so a block that arrived on time and then waited in the
+  node's own input queue (depth 1000, one second of blocks) is not shed by age; it gets the light analysis (queued
+  over 10 ms) and its answer comes as late as the queue is long. Blocks beyond the queue are lost before the node
+  (counted by its input). What the node would need to keep its answers under 100 ms when it falls behind: the age
+  judged against the time the block is handled (reception plus time queued), not only the reception.
+- The probe runs rclpy's EventsExecutor (its own cost per answer low); the counting subscriber of (a) and the nodes
+  run the default SingleThreadedExecutor, as a Python node does.
+- (c)'s "fits 2 cores" adds what (a) measured for the transport to three bands' full analysis; it leaves out the
+  node's own receiving and the probe, so it is the most favourable case.
+
+## Running N bands
+
+``ros2 launch rfi_experiments bands.launch.xml`` starts one monitor per band in namespaces l1, l2, l5 (and, with
+``with_if_source:=true``, one if_source each with its own parameters file). By hand, each band: one source and one
+monitor in the band's namespace (topics relative, so ``-r __ns:=/l1`` moves ``rfi/if_samples`` and
+``rfi/jammer_state``; /diagnostics stays global, told apart by ``hardware_id``):
 
     ros2 run rfi_monitor rfi_monitor_node --ros-args -r __ns:=/l1 -p hardware_id:=l1
     ros2 run rfi_experiments if_source --ros-args -r __ns:=/l1 -p input:=l1.i8 -p item_type:=ibyte \\
         -p sampling_frequency_hz:=2500000.0 -p center_frequency_hz:=1575420000.0 -p wait_for_subscribers:=1
 
-and the same with ``l2`` (1227.60 MHz) and ``l5`` (1176.45 MHz); or the launch files with ``namespace:=l1``
-(``rfi_monitor.launch.xml``, ``if_source.launch.xml``).
+and the same with ``l2`` (1227.60 MHz) and ``l5`` (1176.45 MHz).
 """
 
 
@@ -558,6 +666,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help=f"{fmt_rate(QUICK_TRANSPORT_RATES_HZ[0])} transport only, "
                     "the ladder " + ", ".join(fmt_rate(r) for r in QUICK_BAND_RATES_HZ) + ", 1 s streams")
     ap.add_argument("--repeat", type=int, default=1, help="runs of each rate of the three-band ladder (default 1)")
+    ap.add_argument("--transport-repeat", type=int, default=2,
+                    help="runs of each transport rate, alternated (default 2; --quick 1)")
     ap.add_argument("--seconds", type=float, default=None, help=f"stream length, s (default {STREAM_S:g}; --quick 1)")
     ap.add_argument("--count-subscriber", metavar="NS", help=argparse.SUPPRESS)
     ap.add_argument("--blocks", type=int, default=0, help=argparse.SUPPRESS)
@@ -567,16 +677,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         count_subscriber(args.count_subscriber, args.blocks, timeout_s=180.0)
         return 0
     seconds = args.seconds or (1.0 if args.quick else STREAM_S)
-    t_rates = QUICK_TRANSPORT_RATES_HZ if args.quick else TRANSPORT_RATES_HZ
+    t_rates = [r for _ in range(1 if args.quick else max(1, args.transport_repeat))
+               for r in (QUICK_TRANSPORT_RATES_HZ if args.quick else TRANSPORT_RATES_HZ)]
     b_rates = [r for _ in range(max(1, args.repeat)) for r in (QUICK_BAND_RATES_HZ if args.quick else BAND_RATES_HZ)]
-    log = case_log(__file__, total=len(t_rates) + len(b_rates), quiet=args.quiet)
+    log = case_log(__file__, total=len(t_rates) + len(b_rates) + len(set(b_rates)), quiet=args.quiet)
     load0 = os.getloadavg()[0]
     tmp = Path(tempfile.mkdtemp(prefix="rfi_wide_"))
     subprocess.run([sys.executable, "-c", WARM_UP], check=True, timeout=1800)
     transport = [run_transport(r, seconds, tmp) for r in log.cases_of(t_rates, lambda r: f"transport {fmt_rate(r)}")]
     runs = [run_bands(r, seconds, tmp) for r in log.cases_of(b_rates, lambda r: f"3 bands at {fmt_rate(r)}")]
-    log.say(transport_table(transport) + "\n\n" + bands_table([(r.rate_hz, r.results) for r in runs]))
-    write_doc(transport, runs, seconds, (load0, os.getloadavg()[0]), log.elapsed_s)
+    costs = {r: (analysis_cost_ms(r, chirp=False), analysis_cost_ms(r, chirp=True))
+             for r in log.cases_of(sorted(set(b_rates)), lambda r: f"analysis alone at {fmt_rate(r)}")}
+    log.say(transport_table(transport) + "\n\n" + bands_table([(r.rate_hz, r.results) for r in runs]) + "\n\n"
+            + analysis_table(costs, transport))
+    write_doc(transport, runs, costs, seconds, (load0, os.getloadavg()[0]), log.elapsed_s)
     log.finish(f"wrote {OUT.relative_to(ROOT)}")
     return 0
 

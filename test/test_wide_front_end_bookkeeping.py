@@ -54,3 +54,9 @@ def test_cpu_between_interpolates_and_holds_after_the_process_ended():
     assert wide.cpu_between(samples, 11.0, 20.0) == pytest.approx(1.0)     # ended at 12 s: its last reading holds
     assert math.isnan(wide.cpu_between(samples[:1], 10.0, 11.0))
     assert math.isnan(wide.cpu_between(samples, 11.0, 11.0))
+
+
+def test_the_81_ms_s_extrapolation_follows_the_dearer_case_on_a_straight_line():
+    costs = {2.5e6: ((1.0, 0.1), (0.5, 0.2)), 10e6: ((9.0, 0.0), (9.0, 0.0)), 20e6: ((2.0, 0.3), (3.0, 0.3))}
+    assert wide.extrapolated_full_ms(costs, 81e6) == pytest.approx(1.0 + 2.0 * (81 - 2.5) / (20 - 2.5))
+    assert math.isnan(wide.extrapolated_full_ms({2.5e6: ((1.0, 0.1), (0.5, 0.2))}, 81e6))
