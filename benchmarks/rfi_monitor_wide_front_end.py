@@ -543,9 +543,9 @@ def findings(transport: Sequence[TransportResult], runs: Sequence[BandRun], cost
     """The page's conclusions, from the numbers: which goal is met and which is not."""
     out = []
     for t in transport:
-        kept = t.received == t.blocks and t.carried_hz >= 0.98 * t.rate_hz and t.latency_ms[2] < LATENCY_GOAL_MS
+        kept = t.received == t.blocks and t.carried_hz >= 0.98 * t.rate_hz
         cost = t.source_cpu_per_s + t.subscriber_cpu_per_s
-        out.append(f"- Transport alone at {fmt_rate(t.rate_hz)}: {'carried' if kept else '**not carried**'} "
+        out.append(f"- Transport alone at {fmt_rate(t.rate_hz)}: {'carried' if kept else '**fell behind**'} "
                    f"({t.carried_hz / 1e6:.1f} MS/s, {t.received} of {t.blocks} blocks, latency max "
                    f"{t.latency_ms[2]:.0f} ms); it cost the source {t.source_cpu_per_s:.2f} and the counter "
                    f"{t.subscriber_cpu_per_s:.2f} CPU s per stream s ({cost:.2f} of the 2 cores), while the whole "
@@ -579,12 +579,14 @@ def findings(transport: Sequence[TransportResult], runs: Sequence[BandRun], cost
     x81 = extrapolated_full_ms(costs, 81e6)
     if math.isfinite(x81):
         t81 = [t for t in transport if t.rate_hz == 81e6]
-        carried = bool(t81) and t81[0].received == t81[0].blocks and t81[0].carried_hz >= 0.98 * 81e6
+        ok81 = sum(t.received == t.blocks and t.carried_hz >= 0.98 * 81e6 for t in t81)
         out.append(f"- One node for the whole 81 MS/s stream: on the line through (c)'s lowest and highest rates, "
                    f"about {x81:.1f} ms of CPU per 1 ms block on the node's one analysis thread ({x81:.1f} cores' "
-                   "worth on one thread): not possible with this analysis"
-                   + ("; the transport alone carried 81 MS/s (a), so it is not the limit." if carried else
-                      "; the transport alone fell short of 81 MS/s too (a)."))
+                   f"worth on one thread): not possible with this analysis. The transport alone carried 81 MS/s in "
+                   f"{ok81} of {len(t81)} runs (a), at about "
+                   f"{np.median([t.source_cpu_per_s + t.subscriber_cpu_per_s for t in t81]) if t81 else math.nan:.2f} "
+                   f"of the 2 cores, where the full analysis alone of three bands at {fmt_rate(min(costs))} needs "
+                   f"{3 * max(costs[min(costs)][0][0], costs[min(costs)][1][0]) / (BLOCK_S * 1e3):.2f} (c).")
     return "\n".join(out)
 
 
