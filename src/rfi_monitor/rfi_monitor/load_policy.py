@@ -20,14 +20,16 @@ a replay at 1x (time comes from the stamps).
 
 A live block (the safety net; the node's module docstring, "Load shedding"):
 
-1. ``max_block_age_s`` > 0 and stamped more than that behind the receive clock: SHED (``shed_stale``);
+1. ``max_block_age_s`` > 0 and stamped more than that behind the clock when it is handled (the receive clock plus
+   the time it waited in the node's input queue): SHED (``shed_stale``). Judged at handling, not at reception: a
+   block that arrived on time but then waited behind a slow analysis would be answered late whatever it gets;
 2. ``max_cpu_load`` 0: FULL;
 3. every block earns ``max_cpu_load`` times the stream time it covers (its duration, or the time since the last
    block when longer); the node charges the CPU time it spends (:meth:`LoadPolicy.spend`). In credit: FULL,
    unless (light analysis allowed) the block waited more than :data:`LIGHT_QUEUE_S` in the input queue or is
-   stamped more than :data:`LIGHT_LAG_FRACTION` of ``max_block_age_s`` behind the clock: LIGHT. In debt: LIGHT
-   while the debt is at most ``light_analysis_debt_s`` (light analysis allowed), else SHED. Credit and debt are
-   capped at :data:`SHED_CREDIT_CAP_S`.
+   stamped more than :data:`LIGHT_LAG_FRACTION` of ``max_block_age_s`` behind the clock at handling: LIGHT.
+   In debt: LIGHT while the debt is at most ``light_analysis_debt_s`` (light analysis allowed), else SHED. Credit
+   and debt are capped at :data:`SHED_CREDIT_CAP_S`.
 
 Every decision is counted (:attr:`LoadPolicy.counts`: ``full``, ``light``, ``shed``, ``shed_stale`` of them,
 and ``not_live`` for the blocks judged not live), and the node puts the counts on /diagnostics.
@@ -53,7 +55,7 @@ callback), s, gets the light analysis even when the CPU budget allows the full o
 thread's CPU time, not what the machine leaves it, so the queue is what shows that the node does not get the core it
 is budgeted. Never a replay's block (replays queue up by design)."""
 LIGHT_LAG_FRACTION = 0.2
-"""... and so does a live block stamped more than this share of ``max_block_age_s`` behind the receive clock (the
+"""... and so does a live block stamped more than this share of ``max_block_age_s`` behind the clock at handling (the
 same for a middleware that does not report reception times)."""
 SHED_CREDIT_CAP_S = 0.1
 """CPU credit saved while idle, and CPU debt, are capped at this much (credit: times max_cpu_load), s: a burst of
@@ -70,7 +72,7 @@ class LoadPolicyParams:
             0: every live block in full (only the age limit sheds).
         light_analysis_debt_s: CPU debt, s, up to which an over-budget live block gets the light analysis
             instead of being shed; 0: no light analysis.
-        max_block_age_s: a live block stamped more than this behind the receive clock is shed, s; 0: off.
+        max_block_age_s: a live block stamped more than this behind the clock when handled is shed, s; 0: off.
         light_allowed: the estimator has a light analysis (stft).
         live_bound_s: :data:`LIVE_BOUND_S`.
     """
@@ -155,7 +157,7 @@ class LoadPolicy:
             covered_s = max(covered_s, (stamp_ns - self._last_stamp_ns) / NS_PER_S)
         if self._last_stamp_ns is None or stamp_ns > self._last_stamp_ns:
             self._last_stamp_ns = stamp_ns
-        behind_ns = receive_ns - stamp_ns
+        behind_ns = receive_ns - stamp_ns + (round(queued_s * NS_PER_S) if queued_s is not None else 0)   # handled now
         age = p.max_block_age_s
         if age > 0 and behind_ns > age * NS_PER_S:
             self.counts['shed_stale'] += 1

@@ -119,3 +119,13 @@ def test_liveness_is_judged_again_after_a_stamp_restart():
 def test_invalid_settings_raise(name, value):
     with pytest.raises(ValueError, match=name):
         LoadPolicyParams(**{name: value})
+
+
+def test_a_live_block_received_on_time_but_queued_past_the_age_limit_is_shed():
+    """The age limit bounds the answer's lag: it is judged when the block is handled (reception + time queued), so a
+    block that arrived on time and then waited behind slow analyses is shed, not analysed late (before: light)."""
+    policy = LoadPolicy(LoadPolicyParams(max_cpu_load=0.9, light_analysis_debt_s=0.02, max_block_age_s=0.05))
+    assert policy.decide(NOW_NS, NOW_NS, 1e-3, queued_s=0.0) == FULL
+    assert policy.decide(NOW_NS + MS, NOW_NS + MS, 1e-3, queued_s=0.2) == SHED
+    assert policy.counts['shed_stale'] == 1
+    assert policy.decide(NOW_NS + 2 * MS, NOW_NS + 2 * MS, 1e-3, queued_s=0.03) == LIGHT   # 30 ms: light, not shed
