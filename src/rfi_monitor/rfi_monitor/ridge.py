@@ -86,7 +86,7 @@ __all__ = [
     "FINE_MIN_RETURN", "HOOKED_SAWTOOTH", "MIN_SELECT_EXCESS", "SAWTOOTH_DOWN", "SAWTOOTH_UP", "SELECT_Z",
     "SHAPE_NAMES", "SHAPE_UNKNOWN", "TRIANGLE", "FineProfile", "RidgeParams", "RidgeResult", "analyse",
     "analytic_signal", "choose_frame_length", "estimator_gain", "fine_profile", "fine_return", "folded_shape",
-    "joined_span", "noise_lag_product", "noise_levels", "null_peak_excess", "stft_power",
+    "frequency_at_period", "joined_span", "noise_lag_product", "noise_levels", "null_peak_excess", "stft_power",
 ]
 
 
@@ -310,6 +310,33 @@ def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length
     return RidgeResult(L, hop, noise, rd.peak_excess, rd.present_fraction, periodic,
                        float(per_fr * hop) if periodic else math.nan, float(strength), sw.sweeping, int(shape),
                        sw.in_band_fraction, sw.low, sw.high, sw.start, sw.rate, freq, fstd, sw.hook_checked)
+
+
+def frequency_at_period(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, period_samples: float,
+                        rr: RidgeResult, tolerance: float) -> tuple[float, float, bool]:
+    """A sweep whose period is known from elsewhere (the evidence over blocks, ``rfi_monitor.integration``) while this
+    block's analysis rr did not call it a sweep (a swept band under 4 bins of the frame, or a frame too long for the
+    period): (frequency at the block's last sample, its 1-sigma, cycles/sample; whether the block was analysed again).
+
+    The frequency is stage 6's (``_block_end_frequency``: the sweep law, else the folded profile, else the last
+    ridge) of an analysis that resolves the period: rr itself when its frame's hop fits ``min_period_frames`` times in
+    the period, else the block analysed again at the longest frame that does (a frame longer than the period sees the
+    sweep's comb lines, not its ridge). It is published only when that analysis found the period itself, within
+    ``tolerance`` (relative; a multiple, a sub-multiple or no period: (NaN, NaN)): what the block's own frames show,
+    with stage 6's 1-sigma, not a value read on a period the block does not show. NaN also when the jammer is out of
+    band at the block end, or when no allowed frame length resolves the period."""
+    nan = math.nan
+    if not (math.isfinite(period_samples) and period_samples > 0):
+        return nan, nan, False
+    fit = [L for L in par.frame_lengths if par.min_period_frames * (L // 2) <= period_samples]
+    if not fit:
+        return nan, nan, False
+    again = rr.frame_length not in fit
+    if again:
+        rr = analyse(x, cplx, fs, par, fit[-1], fine_hook=False)
+    if not (rr.periodic and abs(rr.period_samples - period_samples) <= tolerance * period_samples):
+        return nan, nan, again
+    return rr.frequency, rr.frequency_std, again
 
 
 def _periodic_sweep(x: np.ndarray, cplx: bool, S: np.ndarray, freqs: np.ndarray, lvl: np.ndarray, noise: float,
