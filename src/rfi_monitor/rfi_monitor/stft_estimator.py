@@ -537,8 +537,8 @@ class StftEstimator:
         is this block's own measurement (mostly its resolution: such a jammer is below what one block measures),
         flagged as a lower bound; a chirp's frequency at the block end from this block's own frames where they show
         the window's period (``ridge.frequency_at_period``: rr, the block's analysis, or the block analysed again at
-        a frame that resolves the period; counted in ``integrated_frequencies`` and ``integrated_frequency_reanalyses``),
-        NaN where they do not (issue 26 item 3); the other fields NaN."""
+        a frame that resolves the period; counted in ``integrated_frequencies`` and
+        ``integrated_frequency_reanalyses``), NaN where they do not (issue 26 item 3); the other fields NaN."""
         p = self.params
         fs, fif, cplx = block.fs, block.fif, block.cplx
         nan = math.nan
