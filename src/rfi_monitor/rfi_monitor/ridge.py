@@ -65,7 +65,7 @@ from rfi_monitor.frame_length import MIN_SELECT_EXCESS, SELECT_Z, choose_frame_l
 from rfi_monitor.ridge_extraction import FrameRidges, frame_ridges, joined_span
 from rfi_monitor.ridge_periodicity import _periodicity
 from rfi_monitor.stft import _noise_power, estimator_gain, noise_levels, stft_power
-from rfi_monitor.sweep_law import _sawtooth_law, bin_mean_phase, profile_abscissa_bias, read_law
+from rfi_monitor.sweep_law import _sawtooth_law, bin_mean_phase, phase_drift, profile_abscissa_bias, read_law
 from rfi_monitor.sweep_shape import (
     HOOKED_SAWTOOTH,
     MIN_RETURN_BINS,
@@ -267,6 +267,8 @@ class _Sweep:
     inband: np.ndarray | None = None
     se: np.ndarray | None = None
     phase_mean: np.ndarray | None = None
+    used: np.ndarray | None = None
+    """the frames whose ridge entered prof (bool, shape (frames,))"""
     """the mean phase of the frames in each bin of prof (``sweep_law.bin_mean_phase``): where the law is fitted and the
     profile read"""
 
@@ -305,7 +307,7 @@ def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length
         sw = _track_sweep(rd, L)
     else:
         sw = _Sweep()
-    freq, fstd = _block_end_frequency(x.size, sw, rd, periodic, per_fr, L, freqs)
+    freq, fstd = _block_end_frequency(x.size, sw, rd, periodic, per_fr, L, freqs, cplx)
     shape = sw.shape_fold if sw.shape == SHAPE_UNKNOWN else sw.shape
     return RidgeResult(L, hop, noise, rd.peak_excess, rd.present_fraction, periodic,
                        float(per_fr * hop) if periodic else math.nan, float(strength), sw.sweeping, int(shape),
@@ -354,7 +356,7 @@ def _periodic_sweep(x: np.ndarray, cplx: bool, S: np.ndarray, freqs: np.ndarray,
     fuse = present & (rd.bin > 0) & (rd.bin < B - 1) if cplx else present
     pp = phase_profiles(f, present, fuse, per_fr, int(par.phase_bins), binw)
     sw = _Sweep(in_band_fraction=pp.in_band_fraction, prof=pp.prof, inband=pp.inband, se=pp.se,
-                phase_mean=bin_mean_phase(fuse, per_fr, pp.prof.size))
+                phase_mean=bin_mean_phase(fuse, per_fr, pp.prof.size), used=fuse)
     shape, low, high, start, step, p_dir = _shape(pp.prof_s, pp.inband_s, par.hook_rate_ratio, pp.se_s)
     if shape in (SAWTOOTH_UP, SAWTOOTH_DOWN) and pp.prof.size > pp.shape_bins and \
             _return_bins(pp.prof, pp.inband, shape == SAWTOOTH_UP)[0] >= MIN_RETURN_BINS:
@@ -416,7 +418,7 @@ def _track_sweep(rd: FrameRidges, L: int) -> _Sweep:
 
 
 def _block_end_frequency(n: int, sw: _Sweep, rd: FrameRidges, periodic: bool, per_fr: float, L: int,
-                         freqs: np.ndarray) -> tuple[float, float]:
+                         freqs: np.ndarray, cplx: bool) -> tuple[float, float]:
     """Stage 6 (module docstring): (frequency at the block's last sample, its 1-sigma), cycles/sample; a saw-tooth's
     law also sets sw's band, start and rate. n: the block's samples."""
     hop = L // 2
@@ -445,7 +447,13 @@ def _block_end_frequency(n: int, sw: _Sweep, rd: FrameRidges, periodic: bool, pe
     if law is not None and inband_k is not None:
         # saw-tooth: the sweep law fitted away from the flyback (where frames straddle it) gives the
         # swept band's ends, the mean rate and the frequency at the block end
-        sw.low, sw.high, sw.start, sw.rate, freq, fstd = read_law(law, inband_k, per_fr, L, t_end)
+        sw.low, sw.high, sw.start, sw.rate, freq, fstd = read_law(law, inband_k, per_fr, L, t_end, cplx)
+        if math.isfinite(freq) and sw.used is not None and prof_k is not None:
+            # the period's own error moves the block end's phase (sweep_law.phase_drift): corrected, and its standard
+            # error added
+            dfreq, dstd = phase_drift(law, f, sw.used, per_fr, L, prof_k.size, t_end)
+            freq += dfreq
+            fstd = math.hypot(fstd, dstd)
     elif periodic and prof_k is not None and inband_k is not None and sw.se is not None:
         # read from one or two profile bins; the 1-sigma stays the frames' scatter around the profile (the sweep at
         # the block end deviates from a bin's median as its frames do; the bins' standard errors alone, tried for
