@@ -326,13 +326,17 @@ def frequency_at_period(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, 
     sweep's comb lines, not its ridge). It is published only when that analysis found the period itself, within
     ``tolerance`` (relative; a multiple, a sub-multiple or no period: (NaN, NaN)): what the block's own frames show,
     with stage 6's 1-sigma, not a value read on a period the block does not show. NaN also when the jammer is out of
-    band at the block end, or when no allowed frame length resolves the period."""
+    band at the block end, when no allowed frame length resolves the period, or when rr's ridge is present in fewer
+    than ``min_present_fraction`` of its frames (a jammer too weak for the block's frames: not analysed again)."""
     nan = math.nan
     if not (math.isfinite(period_samples) and period_samples > 0):
         return nan, nan, False
     fit = [L for L in par.frame_lengths if par.min_period_frames * (L // 2) <= period_samples]
     if not fit:
         return nan, nan, False
+    if rr.present_fraction < par.min_present_fraction:
+        return nan, nan, False           # the block's frames hardly show the jammer: nothing to read (and no second
+                                         # analysis on every block of a jammer found only over blocks)
     again = rr.frame_length not in fit
     if again:
         rr = analyse(x, cplx, fs, par, fit[-1], fine_hook=False)
