@@ -140,7 +140,8 @@ _COUNTERS = ("blocks", "blocks_rejected", "gaps", "rate_changes", "non_finite_sa
              "tracker_resets_invalid", "integrated_reports", "integration_window_blocks", "integration_blocks_thinned",
              "integration_switch_offs", "integration_submultiple_periods", "integration_ambiguous_periods",
              "worker_blocks", "worker_failures", "block_periods_from_integration", "block_periods_unconfirmed",
-             "jn_from_envelope", "spectral_step_reports", "light_blocks", "light_escalations")
+             "jn_from_envelope", "spectral_step_reports", "light_blocks", "light_escalations", "integrated_frequencies",
+             "integrated_frequency_reanalyses")
 """The monitor's cumulative counters (``JammerEstimate.counters``; the estimator adds its own,
 ``estimate.TRACKER_COUNTERS`` and ``estimate.SPECTRAL_STEP_COUNTERS``)."""
 

@@ -65,7 +65,7 @@ from rfi_monitor.frame_length import MIN_SELECT_EXCESS, SELECT_Z, choose_frame_l
 from rfi_monitor.ridge_extraction import FrameRidges, frame_ridges, joined_span
 from rfi_monitor.ridge_periodicity import _periodicity
 from rfi_monitor.stft import _noise_power, estimator_gain, noise_levels, stft_power
-from rfi_monitor.sweep_law import _sawtooth_law, bin_mean_phase, profile_abscissa_bias, read_law
+from rfi_monitor.sweep_law import _sawtooth_law, bin_mean_phase, phase_drift, profile_abscissa_bias, read_law
 from rfi_monitor.sweep_shape import (
     HOOKED_SAWTOOTH,
     MIN_RETURN_BINS,
@@ -86,7 +86,7 @@ __all__ = [
     "FINE_MIN_RETURN", "HOOKED_SAWTOOTH", "MIN_SELECT_EXCESS", "SAWTOOTH_DOWN", "SAWTOOTH_UP", "SELECT_Z",
     "SHAPE_NAMES", "SHAPE_UNKNOWN", "TRIANGLE", "FineProfile", "RidgeParams", "RidgeResult", "analyse",
     "analytic_signal", "choose_frame_length", "estimator_gain", "fine_profile", "fine_return", "folded_shape",
-    "joined_span", "noise_lag_product", "noise_levels", "null_peak_excess", "stft_power",
+    "frequency_at_period", "joined_span", "noise_lag_product", "noise_levels", "null_peak_excess", "stft_power",
 ]
 
 
@@ -267,6 +267,8 @@ class _Sweep:
     inband: np.ndarray | None = None
     se: np.ndarray | None = None
     phase_mean: np.ndarray | None = None
+    used: np.ndarray | None = None
+    """the frames whose ridge entered prof (bool, shape (frames,))"""
     """the mean phase of the frames in each bin of prof (``sweep_law.bin_mean_phase``): where the law is fitted and the
     profile read"""
 
@@ -305,11 +307,42 @@ def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length
         sw = _track_sweep(rd, L)
     else:
         sw = _Sweep()
-    freq, fstd = _block_end_frequency(x.size, sw, rd, periodic, per_fr, L, freqs)
+    freq, fstd = _block_end_frequency(x.size, sw, rd, periodic, per_fr, L, freqs, cplx)
     shape = sw.shape_fold if sw.shape == SHAPE_UNKNOWN else sw.shape
     return RidgeResult(L, hop, noise, rd.peak_excess, rd.present_fraction, periodic,
                        float(per_fr * hop) if periodic else math.nan, float(strength), sw.sweeping, int(shape),
                        sw.in_band_fraction, sw.low, sw.high, sw.start, sw.rate, freq, fstd, sw.hook_checked)
+
+
+def frequency_at_period(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, period_samples: float,
+                        rr: RidgeResult, tolerance: float) -> tuple[float, float, bool]:
+    """A sweep whose period is known from elsewhere (the evidence over blocks, ``rfi_monitor.integration``) while this
+    block's analysis rr did not call it a sweep (a swept band under 4 bins of the frame, or a frame too long for the
+    period): (frequency at the block's last sample, its 1-sigma, cycles/sample; whether the block was analysed again).
+
+    The frequency is stage 6's (``_block_end_frequency``: the sweep law, else the folded profile, else the last
+    ridge) of an analysis that resolves the period: rr itself when its frame's hop fits ``min_period_frames`` times in
+    the period, else the block analysed again at the longest frame that does (a frame longer than the period sees the
+    sweep's comb lines, not its ridge). It is published only when that analysis found the period itself, within
+    ``tolerance`` (relative; a multiple, a sub-multiple or no period: (NaN, NaN)): what the block's own frames show,
+    with stage 6's 1-sigma, not a value read on a period the block does not show. NaN also when the jammer is out of
+    band at the block end, when no allowed frame length resolves the period, or when rr's ridge is present in fewer
+    than ``min_present_fraction`` of its frames (a jammer too weak for the block's frames: not analysed again)."""
+    nan = math.nan
+    if not (math.isfinite(period_samples) and period_samples > 0):
+        return nan, nan, False
+    fit = [L for L in par.frame_lengths if par.min_period_frames * (L // 2) <= period_samples]
+    if not fit:
+        return nan, nan, False
+    if rr.present_fraction < par.min_present_fraction:
+        return nan, nan, False           # the block's frames hardly show the jammer: nothing to read (and no second
+                                         # analysis on every block of a jammer found only over blocks)
+    again = rr.frame_length not in fit
+    if again:
+        rr = analyse(x, cplx, fs, par, fit[-1], fine_hook=False)
+    if not (rr.periodic and abs(rr.period_samples - period_samples) <= tolerance * period_samples):
+        return nan, nan, again
+    return rr.frequency, rr.frequency_std, again
 
 
 def _periodic_sweep(x: np.ndarray, cplx: bool, S: np.ndarray, freqs: np.ndarray, lvl: np.ndarray, noise: float,
@@ -327,7 +360,7 @@ def _periodic_sweep(x: np.ndarray, cplx: bool, S: np.ndarray, freqs: np.ndarray,
     fuse = present & (rd.bin > 0) & (rd.bin < B - 1) if cplx else present
     pp = phase_profiles(f, present, fuse, per_fr, int(par.phase_bins), binw)
     sw = _Sweep(in_band_fraction=pp.in_band_fraction, prof=pp.prof, inband=pp.inband, se=pp.se,
-                phase_mean=bin_mean_phase(fuse, per_fr, pp.prof.size))
+                phase_mean=bin_mean_phase(fuse, per_fr, pp.prof.size), used=fuse)
     shape, low, high, start, step, p_dir = _shape(pp.prof_s, pp.inband_s, par.hook_rate_ratio, pp.se_s)
     if shape in (SAWTOOTH_UP, SAWTOOTH_DOWN) and pp.prof.size > pp.shape_bins and \
             _return_bins(pp.prof, pp.inband, shape == SAWTOOTH_UP)[0] >= MIN_RETURN_BINS:
@@ -389,7 +422,7 @@ def _track_sweep(rd: FrameRidges, L: int) -> _Sweep:
 
 
 def _block_end_frequency(n: int, sw: _Sweep, rd: FrameRidges, periodic: bool, per_fr: float, L: int,
-                         freqs: np.ndarray) -> tuple[float, float]:
+                         freqs: np.ndarray, cplx: bool) -> tuple[float, float]:
     """Stage 6 (module docstring): (frequency at the block's last sample, its 1-sigma), cycles/sample; a saw-tooth's
     law also sets sw's band, start and rate. n: the block's samples."""
     hop = L // 2
@@ -418,7 +451,13 @@ def _block_end_frequency(n: int, sw: _Sweep, rd: FrameRidges, periodic: bool, pe
     if law is not None and inband_k is not None:
         # saw-tooth: the sweep law fitted away from the flyback (where frames straddle it) gives the
         # swept band's ends, the mean rate and the frequency at the block end
-        sw.low, sw.high, sw.start, sw.rate, freq, fstd = read_law(law, inband_k, per_fr, L, t_end)
+        sw.low, sw.high, sw.start, sw.rate, freq, fstd = read_law(law, inband_k, per_fr, L, t_end, cplx)
+        if math.isfinite(freq) and sw.used is not None and prof_k is not None:
+            # the period's own error moves the block end's phase (sweep_law.phase_drift): corrected, and its standard
+            # error added
+            dfreq, dstd = phase_drift(law, f, sw.used, per_fr, L, prof_k.size, t_end)
+            freq += dfreq
+            fstd = math.hypot(fstd, dstd)
     elif periodic and prof_k is not None and inband_k is not None and sw.se is not None:
         # read from one or two profile bins; the 1-sigma stays the frames' scatter around the profile (the sweep at
         # the block end deviates from a bin's median as its frames do; the bins' standard errors alone, tried for

@@ -60,7 +60,7 @@ from rfi_monitor.light_analysis import LastFull, light_estimate
 from rfi_monitor.noise_reference import NoiseReference
 from rfi_monitor.params import RfiMonitorParams
 from rfi_monitor.spectral_step import SpectralStep, StepDecision
-from rfi_monitor.sweep_consistency import PERIOD_CONFIRM_MARGIN_DB, SweepMemory, multiple
+from rfi_monitor.sweep_consistency import PERIOD_CONFIRM_MARGIN_DB, SUBHARMONIC_TOLERANCE, SweepMemory, multiple
 
 RESELECT_BLOCKS = 64
 """The "stft" estimator chooses its frame length again every this many blocks while it reports a CW or a
@@ -266,7 +266,7 @@ class StftEstimator:
         if integrated is not None:
             if self._full_levels is not None:
                 self._full_levels = self._full_levels[:3] + (True,)
-            return self._integrated_estimate(integrated, v.jn, block, v.ref)
+            return self._integrated_estimate(integrated, v.jn, block, v.ref, rr)
         self._jn_beside_agc_and_envelope(block, rr, v)
         if v.jtype == NONE:
             # the floor learns only from blocks that pass as noise inside the block too
@@ -528,13 +528,17 @@ class StftEstimator:
             self._sweep.add_block_period(rr.period_samples, stamp_ns)
         return freq, fstd, rate, per, f0, bw, inb, int(shape)
 
-    def _integrated_estimate(self, d: IntegratedDecision, jn: float, block: Block, ref: int) -> JammerEstimate:
+    def _integrated_estimate(self, d: IntegratedDecision, jn: float, block: Block, ref: int, rr: rg.RidgeResult
+                             ) -> JammerEstimate:
         """A CW or chirp found only by the evidence over blocks (integration module). Type, confidence (0.5 at the
         threshold) and, for a CW, its frequency; a chirp's sweep period from the comb, and its sweep shape and
         in-band fraction from this block's short-time spectrum folded on that period (``ridge.folded_shape``:
         synchronous averaging over the block's periods; unknown / NaN when the block does not show it); the J/N
         is this block's own measurement (mostly its resolution: such a jammer is below what one block measures),
-        flagged as a lower bound; the other fields NaN."""
+        flagged as a lower bound; a chirp's frequency at the block end from this block's own frames where they show
+        the window's period (``ridge.frequency_at_period``: rr, the block's analysis, or the block analysed again at
+        a frame that resolves the period; counted in ``integrated_frequencies`` and
+        ``integrated_frequency_reanalyses``), NaN where they do not (issue 26 item 3); the other fields NaN."""
         p = self.params
         fs, fif, cplx = block.fs, block.fif, block.cplx
         nan = math.nan
@@ -553,6 +557,12 @@ class StftEstimator:
         else:
             conf = logistic(d.chirp_z - d.chirp_threshold, 1.0)
             per = d.period_samples / fs
+            f_dig, fstd_dig, again = rg.frequency_at_period(block.samples, cplx, fs, p.ridge, d.period_samples, rr,
+                                                            SUBHARMONIC_TOLERANCE)
+            self._counts["integrated_frequency_reanalyses"] += int(again)
+            if math.isfinite(f_dig) and (-0.5 if cplx else 0.0) <= f_dig <= 0.5:
+                freq, fstd = relative_frequency_hz(f_dig, fs, fif, cplx), fstd_dig * fs
+                self._counts["integrated_frequencies"] += 1
             shape, inb, _, _ = rg.folded_shape(block.samples, cplx, d.period_samples, p.ridge)
             if (not cplx) and fif < 0 and shape in (rg.SAWTOOTH_UP, rg.SAWTOOTH_DOWN):
                 # spectral inversion: the IF runs against RF (as in _chirp_fields)

@@ -27,6 +27,8 @@ import numpy as np
 from numba import njit
 
 from rfi_monitor.numpy_kernels import pairwise_sum, polyfit, polyval
+from rfi_monitor.ridge_extraction import frame_ridges
+from rfi_monitor.stft import stft_power
 
 
 def _sawtooth_law(prof: np.ndarray, inband: np.ndarray, period_samples: float, L: int, span: float,
@@ -109,6 +111,42 @@ def prediction_std(ee: np.ndarray, deg: int, e: float, rms: float) -> float:
     return rms * math.sqrt(1.0 + max(lev, 0.0))
 
 
+INTERP_OFFSETS = 16
+"""Sub-bin offsets (uniform over one bin) at which ``interpolation_error_rms`` evaluates the ridge's interpolation."""
+
+_INTERP_CACHE: dict[tuple[int, float, bool], float] = {}
+
+
+def interpolation_error_rms(L: int, rate: float, cplx: bool) -> float:
+    """RMS error of the per-frame ridge frequency (``ridge_extraction.frame_ridges``: a parabola through the log powers
+    of the strongest bin and its neighbours, Hann frames of L) for a noiseless linear chirp of ``rate``
+    (cycles/sample^2) whose frequency at the frame's centre is uniform over one bin: INTERP_OFFSETS frames at offsets
+    j / INTERP_OFFSETS of a bin, read by the monitor's own stft_power and frame_ridges; cycles/sample. Cached per
+    (L, rate to 3 significant digits, cplx).
+
+    Why (issue 26 item 3): this error is a function of where the chirp falls between the bins, so it is the same for
+    every frame of a profile bin (those frames see the same segment of the sweep when the period is near a whole
+    number of hops), and when the sweep moves nearly a whole number of bins from one profile bin to the next it is
+    smooth along the sweep: the law follows it, its residual does not show it, and the law at the block end carries
+    it (measured: 8 MHz / 20 us at 10 MS/s complex, 32-sample frames, 1.024 bins per phase step: the frames' error
+    per phase from -4.9 to +5.3 kHz in sweep order; this function gives an RMS of 3.5 kHz, at most 4.8 kHz there)."""
+    rate_key = float(f"{abs(rate):.3g}") if math.isfinite(rate) else 0.0
+    key = (int(L), rate_key, bool(cplx))
+    v = _INTERP_CACHE.get(key)
+    if v is not None:
+        return v
+    u = np.arange(L) - (L - 1) / 2.0
+    fc = (0.1 if cplx else 0.25) + np.arange(INTERP_OFFSETS) / INTERP_OFFSETS / L
+    ph = 2.0 * np.pi * (fc[:, None] * u[None, :] + 0.5 * rate_key * u[None, :] ** 2)
+    x = (np.exp(1j * ph) if cplx else np.cos(ph)).ravel()      # frame 2j of x is segment j exactly
+    S, freqs = stft_power(x, L, cplx)
+    rd = frame_ridges(S, freqs, np.ones(S.shape[1]), cplx, 0.0)
+    e = rd.frequency[0::2][:INTERP_OFFSETS] - fc
+    v = float(np.sqrt(np.mean(e * e)))
+    _INTERP_CACHE[key] = v
+    return v
+
+
 def bin_mean_phase(used: np.ndarray, period_frames: float, K: int) -> np.ndarray:
     """The phase (fraction of the period, in [0, 1)) each of the K profile bins really stands for: the mean phase of
     its used frames (frame t at phase ``t / period_frames mod 1``, binned as ``sweep_shape._phase_bins`` bins it); the
@@ -173,8 +211,51 @@ def profile_abscissa_bias(prof: np.ndarray, inband: np.ndarray, phase_mean: np.n
     return float(slope * min(max(x - ak, -2.0 / K), 2.0 / K))
 
 
+def phase_drift(law: tuple[float, np.ndarray, float, np.ndarray], f: np.ndarray, used: np.ndarray, period_frames: float,
+                L: int, K: int, t_end: float) -> tuple[float, float]:
+    """The error of the law at the block end that an error in the period makes, and its 1-sigma, cycles/sample: (the
+    correction to add to the law's frequency there, its standard error).
+
+    The frames are folded at t / period_frames; a period off by a small relative error eps puts frame t at a phase off
+    by eps t / period_frames. The law, fitted to frames spread over the block, absorbs the mean of that shift, so at a
+    frame t it is off by slope(e_t) eps (t - t_mean) / period_frames (slope: d frequency / d elapsed fraction), and at
+    the block end, half a block after the frames' mean, by the most (measured: 8 MHz / 20 us at 10 MS/s complex,
+    12.5 frames per period, 50 periods per block: a period 0.0003 frames off, the estimate's own scatter there, moves
+    the block end 4.5 kHz). eps is the least-squares slope of the frames' residuals about the law on
+    slope(e_t) (t - t_mean) / period_frames over the frames the law was fitted on (their elapsed fraction outside the
+    flyback guard; residuals beyond 5 scaled MADs left out); its standard error from their scatter. f: the frames'
+    ridge, cycles/sample; used: the frames whose ridge entered the profile; K: the profile's bins; t_end: the block's
+    last sample in frame units. (0, 0) when fewer than 8 frames remain."""
+    phi_j, coef, _, _ = law
+    deg = coef.size - 1
+    t = np.flatnonzero(used).astype(np.float64)
+    e = np.mod(t / period_frames - phi_j, 1.0)
+    guard = 0.5 * L / (period_frames * (L // 2)) + 1.0 / K
+    keep = (e > guard) & (e < 1.0 - guard)
+    t, e = t[keep], e[keep]
+    if t.size < 8:
+        return 0.0, 0.0
+    r = f[t.astype(np.int64)] - np.polyval(coef, e)
+    dcoef = np.polyder(coef) if deg > 0 else np.zeros(1)
+    tm = float(t.mean())
+    x = np.polyval(dcoef, e) * (t - tm) / period_frames
+    med = float(np.median(r))
+    mad = 1.4826 * float(np.median(np.abs(r - med)))
+    ok = np.abs(r - med) <= 5.0 * mad if mad > 0 else np.ones(r.size, dtype=bool)
+    x, r = x[ok], r[ok] - med
+    sxx = float(np.dot(x, x))
+    if x.size < 8 or not sxx > 0:
+        return 0.0, 0.0
+    eps = float(np.dot(x, r)) / sxx
+    res = r - eps * x
+    se = math.sqrt(float(np.dot(res, res)) / (x.size - 2) / sxx)
+    e_end = (float(np.mod(t_end / period_frames, 1.0)) - phi_j) % 1.0
+    lever = float(np.polyval(dcoef, e_end)) * (t_end - tm) / period_frames
+    return eps * lever, abs(se * lever)
+
+
 def read_law(law: tuple[float, np.ndarray, float, np.ndarray], inband: np.ndarray, period_frames: float, L: int,
-             t_end: float) -> tuple[float, float, float, float, float, float]:
+             t_end: float, cplx: bool = True) -> tuple[float, float, float, float, float, float]:
     """What a saw-tooth's law (``_sawtooth_law`` of the fine profile whose in-band bins are inband, fitted away from
     the flyback, where frames straddle it, with each bin at the mean phase of its frames) gives: (low, high: the swept
     band; the frequency at the sweep start; the mean rate, cycles/sample^2; the frequency at the block's last sample,
@@ -183,7 +264,11 @@ def read_law(law: tuple[float, np.ndarray, float, np.ndarray], inband: np.ndarra
 
     The 1-sigma is the law's prediction interval at the block end's phase (``prediction_std``: the residual RMS of
     the profile around the law, which the sweep at that moment may deviate by as any profile bin does, with the law's
-    own standard error there). No abscissa bias is added: the law is fitted where the frames are (module docstring).
+    own standard error there). The scatter of a bin about the law is at least the ridge's interpolation error at the
+    law's rate there (``interpolation_error_rms``; cplx: complex samples): a profile whose bins carry that error
+    coherently (smooth along the sweep) fits the law with a residual that does not show it, and the law carries it to
+    the block end (issue 26 item 3: the 8 MHz / 20 us rows at 10 MS/s complex, 0-7 % within 2 sigma before).
+    No abscissa bias is added: the law is fitted where the frames are (module docstring).
     Issue 26 item 3: twice the RMS, before, covered 89 % of the errors over the rows of
     docs/rfi_monitor/real_jammers.md (median |error| / std 0.14 on the simulated ones); the law's standard error alone
     covered 52 % (0-17 % on the 2-bit real captures); docs/rfi_monitor/frequency_std.md gives the coverage now."""
@@ -193,7 +278,10 @@ def read_law(law: tuple[float, np.ndarray, float, np.ndarray], inband: np.ndarra
     rate = (f1 - f0) / (period_frames * hop)
     ph_end = float(np.mod(t_end / period_frames, 1.0))
     e_end = (ph_end - phi_j) % 1.0
-    fstd = max(prediction_std(ee, coef.size - 1, e_end, rms), 1e-4 / L)
+    deg = coef.size - 1
+    slope = sum((deg - i) * float(coef[i]) * e_end ** (deg - i - 1) for i in range(deg))   # d frequency / d e
+    scatter = max(rms, interpolation_error_rms(L, slope / (period_frames * hop), cplx))
+    fstd = max(prediction_std(ee, deg, e_end, scatter), 1e-4 / L)
     freq = math.nan
     if inband[min(int(ph_end * inband.size), inband.size - 1)]:
         freq = polyval(coef, e_end)

@@ -139,11 +139,47 @@ def _last_block_z(fe: FrontEndConfig, jam: ChirpJammer, seed: int) -> float:
 
 
 @pytest.fixture(scope="module")
-def coverage_z():
-    z = np.array([_last_block_z(*s) for s in _streams()])
-    z = z[np.isfinite(z)]
+def streams_z():
+    """The normalised error of every stream's scored block (NaN where no frequency was published)."""
+    return np.array([_last_block_z(*s) for s in _streams()])
+
+
+@pytest.fixture(scope="module")
+def coverage_z(streams_z):
+    z = streams_z[np.isfinite(streams_z)]
     assert z.size >= N_STREAMS // 2      # enough published frequencies for the binomial bands below to mean anything
     return z
+
+
+def test_every_in_band_block_publishes_a_frequency(streams_z):
+    # every stream's chirp is inside the sampled band at every instant (a swept band of at most 70 % of half the band,
+    # centred): its scored block must carry a frequency and a 1-sigma (issue 26 item 3). 6 of the 48 published none
+    # before (blocks reported CHIRP by the evidence over blocks alone: a swept band under 4 bins of the frame, or a
+    # frame too long for the period)
+    assert np.all(np.isfinite(streams_z)), np.flatnonzero(~np.isfinite(streams_z))
+
+
+@pytest.mark.parametrize("per_s, jn_db", [(8e-6, 10.5), (12e-6, 16.0), (10e-6, 13.0)])
+def test_narrow_sweep_reported_from_the_window_gets_a_frequency(per_s, jn_db):
+    # a saw-tooth over 0.8 MHz at 4 MS/s complex: under 4 bins of the monitor's frame, reported CHIRP by the evidence
+    # over blocks; its period is 2-4 hops of the frame the stream picked (8 us at L = 128: the frame sees comb lines).
+    # The block's own frames, at a frame that resolves the period, give the frequency (it was NaN) within 3 sigma
+    fs = 4e6
+    fe = FrontEndConfig(sample_rate_hz=fs, intermediate_frequency_hz=0.0, is_complex=True, bits=8)
+    span = 0.83e6
+    jam = ChirpJammer(start_frequency_hz=-span / 2, sweep_rate_hz_per_s=span / per_s, sweep_period_s=per_s,
+                      js_db=js_for_jn_db(fe, jn_db), time_offset_s=0.3 * per_s)
+    mon = RfiMonitor(RfiMonitorParams())
+    sim = IfSimulator(fe, (jam,), seed=7)
+    for k in range(3):
+        b = sim.generate(4000)
+        e = mon.process(b.values(), fs, 0.0, b.first_sample_index, 1_000_000_000 + k * 1_000_000, is_complex=True,
+                        bits=8)
+        assert e.valid and int(e.type) == CHIRP
+        truth = float(b.truth.frequency_hz[0][-1])
+        assert math.isfinite(e.frequency_hz) and e.frequency_std_hz > 0, (k, e)
+        assert abs(e.frequency_hz - truth) <= 3 * e.frequency_std_hz, (k, e.frequency_hz, truth, e.frequency_std_hz)
+        assert e.frequency_std_hz < span / 2      # a value, not a band: the 1-sigma is below half the swept band
 
 
 def _band(p: float, n: int) -> tuple[float, float]:
