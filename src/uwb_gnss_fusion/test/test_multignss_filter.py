@@ -253,7 +253,8 @@ def test_glonass_per_channel_wavelengths_in_doppler_and_weights():
     for k in range(10):
         out = f.process_gnss(_epoch(k, systems=(GLONASS,), rx=RX + vel * k, rx_vel=vel))
     np.testing.assert_allclose(out.velocity_mps, vel, atol=1e-3)
-    assert f.reference_system == "glonass" and f.state_dimension == 8
+    # GLONASS is the reference (no inter-system bias); a code-bias state per GLONASS satellite
+    assert f.reference_system == "glonass" and f.state_dimension == 8 + sum(1 for sky in SKY if sky[0] == GLONASS)
     # weights per channel
     ep = _epoch(0, systems=(GLONASS,))
     p = _params()
