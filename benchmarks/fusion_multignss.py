@@ -362,7 +362,8 @@ def main() -> None:
         "obstructed or partly jammed sky. *Fix*: the epoch's update applied at least 3 + (systems in",
         "use above the mask) pseudoranges. Single-system snapshot positions of the same data:",
         "docs/gnss_common/multignss_spp.md.",
-        f"Machine: {cpu_model()}, Python {platform.python_version()}.",
+        f"Machine: {cpu_model()}, Python {platform.python_version()}. `ms / epoch` is the wall time of one",
+        "process on a shared machine: compare rows of one run only, not runs.",
         "",
     ]
     sections = [("one hour (test data cut, 2020-06-25 00:00-01:00 GPST, 120 epochs)", CUT)]
