@@ -143,9 +143,9 @@ def jam(epochs: list[GnssEpoch], js_db: float, seed: int) -> list[GnssEpoch]:
 
 
 def run(epochs: list[GnssEpoch], mask_deg: float, multi: bool, js_db: float = math.nan,
-        **params: object) -> dict[str, object]:
+        params: dict[str, object] | None = None) -> dict[str, object]:
     f = FusionFilter(FusionParams(use_uwb=False, multi_gnss=multi, elevation_mask_deg=mask_deg,
-                                  **params))  # type: ignore[arg-type]
+                                  **(params or {})))  # type: ignore[arg-type]
     lat, lon, _ = ecef_to_geodetic(TRUTH_ECEF_M)
     rot = ecef_to_enu_rotation(lat, lon)
     enu, fixes, n_sats = [], 0, []
@@ -279,7 +279,7 @@ def ladder(epochs: list[GnssEpoch], log: CaseLog) -> list[str]:
         if prev is not None and (round(cur[0], 2) > round(prev[0], 2) or round(cur[1], 2) > round(prev[1], 2)):
             never_worse = False
         prev = cur
-    r = run(epochs, 10.0, True, **GLONASS_BEFORE)
+    r = run(epochs, 10.0, True, params=GLONASS_BEFORE)
     lines.append(f"| every system, GLONASS weighted as GPS (before: {GLONASS_BEFORE_LABEL}) | {r['sats']:.0f} | "
                  f"{r['estimates']} / {n} | {r['h_rms']:.2f} | {r['rms']:.2f} | - |")
     log.done("ladder: GLONASS as before")
