@@ -139,7 +139,7 @@ class StaticModelParams:
         'GLONASS pseudorange 1-sigmas are multiplied by this (the FDMA inter-frequency code biases and the '
         "broadcast orbit/clock; RTKLIB's EFACT_GLO convention, 1.5). 1: weighted as the CDMA systems "
         '(docs/uwb_gnss_fusion/fusion_multignss.md).',
-        minimum=1.0, maximum=100.0, read_only=False,
+        minimum=1.0, maximum=100.0,
     )
     jammer_quality_factor: float = parameter(
         1.0,
