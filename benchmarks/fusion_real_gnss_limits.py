@@ -1,6 +1,6 @@
 """What limits the GNSS-only filter on the real stations (issue 27 item 4), measured.
 
-Used by benchmarks/fusion_real_gnss.py, whose document gets the section this module writes. Four
+Used by benchmarks/fusion_real_gnss.py, whose document gets the section this module writes. Five
 measurements, each on the stations' epochs as ``rinex_to_bag.convert_rinex`` builds them:
 
 1. **Error spectrum of SPP.** Our SPP's horizontal error (ENU at the surveyed truth) split into a
@@ -23,6 +23,10 @@ measurements, each on the stations' epochs as ``rinex_to_bag.convert_rinex`` bui
    ``C1``: C/A with P2, which the conversion refuses, formed here to show why: T_GD refers to
    P1/P2, so each satellite's P1-C1 code bias (a few dm, in no broadcast message) stays, amplified
    by f1^2 / (f1^2 - f2^2) = 2.55. ARL1 has P1 and C1 (both shown); GEONET only C1 and P2.
+5. **The slow error as a state.** The filter core with one first-order Gauss-Markov error state per
+   satellite (``pseudorange_correlated_std_m`` / ``pseudorange_correlated_tau_s``, Brown & Hwang sec.
+   4.2; off in the shipped defaults) for a few (sigma, tau) around the correlation times section 1 shows:
+   whether estimating the slow per-satellite error, rather than averaging it as white, gains.
 
 Run through benchmarks/fusion_real_gnss.py (no command line of its own).
 """
@@ -52,6 +56,8 @@ EPOCH_S = 30.0
 """Observation interval of the three stations, s."""
 SLOW_WINDOWS_MIN = (5.0, 10.0, 20.0)
 """Moving-average windows of the spectrum split, min."""
+CORRELATED_SCAN = ((0.0, 60.0), (0.3, 600.0), (0.5, 600.0), (1.0, 600.0), (1.0, 1800.0))
+"""(sigma m, tau s) of the per-satellite Gauss-Markov error states tried in section 5 (0: off, shipped)."""
 STATIC_PSD_SCAN_M2PS3 = (1.0e-10, 1.0e-9, 1.0e-8, 1.0e-7, 1.0e-6)
 """Static white-acceleration PSDs tried, m^2/s^3 (1e-8 is the shipped ``static_accel_psd_m2ps3``)."""
 
@@ -144,7 +150,7 @@ def ionosphere_free_epochs(station: StationData, l1_code: str) -> tuple[tuple[Gn
 
 
 def limits_section(stations: Sequence[StationData], goal_gain: float) -> tuple[str, dict[str, object]]:
-    """The Markdown section of the four measurements (module docstring) and its figures."""
+    """The Markdown section of the five measurements (module docstring) and its figures."""
     figures: dict[str, object] = {}
     spp_err = {s.name: spp_errors(s.epochs, s.truth_ecef_m) for s in stations}
     spp_rms = {n: rms_h_3d(e[np.isfinite(e[:, 0])]) for n, e in spp_err.items()}
@@ -215,4 +221,19 @@ def limits_section(stations: Sequence[StationData], goal_gain: float) -> tuple[s
             figures[f"if_{s.name}_{code}"] = (h, d, hf, df)
             lines.append(f"| {s.name} | {code} | {dropped} | {h:.2f} / {d:.2f} | {hf:.2f} / {df:.2f} "
                          f"| {100 * (1 - hf / h_spp):.0f} % |")
+    lines += ["", "### 5. The slow error as a state of the filter", "",
+              "Filter core with a first-order Gauss-Markov error state per satellite "
+              "(`pseudorange_correlated_std_m`, `pseudorange_correlated_tau_s`; off in the shipped defaults), "
+              "horizontal / 3D RMS m (horizontal gain over SPP).", "",
+              "| station | " + " | ".join(f"sigma {sd:g} m, tau {tau:g} s" for sd, tau in CORRELATED_SCAN) + " |",
+              "|---|" + "---|" * len(CORRELATED_SCAN)]
+    for s in stations:
+        h_spp = spp_rms[s.name][0]
+        cells = []
+        for sd, tau in CORRELATED_SCAN:
+            params = {"pseudorange_correlated_std_m": sd, "pseudorange_correlated_tau_s": tau} if sd > 0 else {}
+            h, d = rms_h_3d(filter_errors(s.epochs, s.truth_ecef_m, **params))
+            figures[f"gm_{s.name}_{sd:g}_{tau:g}"] = (h, d)
+            cells.append(f"{h:.2f} / {d:.2f} ({100 * (1 - h / h_spp):.0f} %)")
+        lines.append(f"| {s.name} | " + " | ".join(cells) + " |")
     return "\n".join(lines), figures

@@ -16,8 +16,9 @@ import pytest
 from gnss_common.clock_model import clock_process_noise_m
 from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic, enu_to_ecef
 from gnss_common.earth_rotation import sagnac_range_correction_m
-from gnss_common.observations import GPS, GnssEpoch, SatelliteObservation
+from gnss_common.observations import GLONASS, GPS, GnssEpoch, SatelliteObservation
 from uwb_gnss_fusion.fusion_filter import CORRELATED_ERROR_MAX_GAP_TAU, FusionFilter, FusionParams
+from uwb_gnss_fusion.fusion_params import GLONASS_BIAS_MAX_GAP_S
 from uwb_gnss_fusion.measurement_models import STATE_DIM, white_acceleration_noise
 
 RX = np.array([3582105.2910, 532589.7313, 5232754.8054])
@@ -226,3 +227,49 @@ def test_consistent_on_the_simulator_with_60s_correlated_errors():
     modelled = _consistency(0.7)
     assert np.all(white > 3.0)
     assert np.all(modelled < 2.0) and np.all(modelled > 0.25)
+
+
+def _with_glonass(ep: GnssEpoch, svids, bias_m: float) -> GnssEpoch:
+    """The epoch with GLONASS satellites ``svids`` at the positions of GPS satellites 1.. scaled by 1.03
+    (distinct satellites), each with ``bias_m`` of code bias on top of a 40 m inter-system bias."""
+    extra = []
+    for j, svid in enumerate(svids):
+        sp = SAT_POS[j] * 1.03
+        pr = float(np.linalg.norm(sp - RX) + sagnac_range_correction_m(sp, RX)) + CLOCK_M + 40.0 + bias_m
+        extra.append(SatelliteObservation(
+            constellation=GLONASS, svid=svid, pseudorange_m=pr, pseudorange_rate_mps=math.nan, cn0_dbhz=45.0,
+            satellite_position_ecef_m=sp, satellite_velocity_ecef_mps=np.zeros(3), satellite_clock_bias_m=0.0,
+            satellite_clock_drift_mps=0.0, pseudorange_std_m=SIGMA_PR, carrier_frequency_hz=1_602.0e6))
+    return GnssEpoch(ep.stamp_ns, ep.gps_week, ep.gps_time_of_week_s, ep.observations + tuple(extra))
+
+
+def test_glonass_code_bias_states_only_for_glonass_and_constant():
+    """With the correlated errors off, ``glonass_satellite_bias_std_m`` gives each GLONASS satellite (and
+    no other) a state with that prior sigma and no process noise (a random constant: its variance never
+    grows); a GLONASS satellite unseen for GLONASS_BIAS_MAX_GAP_S loses it."""
+    rng = np.random.default_rng(4)
+    f = FusionFilter(_params(pseudorange_correlated_std_m=0.0, glonass_satellite_bias_std_m=1.0))
+    zero = np.zeros(len(SKY))
+    for k in range(2):  # the first epoch initialises the filter, the second allocates the states
+        f.process_gnss(_with_glonass(_epoch(k, zero, rng, range(8)), (3, 9), 0.0))
+    # 8 + the GLONASS inter-system bias + two code-bias states
+    assert f.state_dimension == STATE_DIM + 1 + 2
+    errs = f.correlated_errors_m
+    assert sorted(errs) == [GLONASS * 1000 + 3, GLONASS * 1000 + 9]
+    assert all(0.0 < s <= 1.0 for _, s in errs.values())  # from the prior 1-sigma, one update applied
+    sigmas = []
+    for k in range(2, 40):
+        f.process_gnss(_with_glonass(_epoch(k, zero, rng, range(8)), (3, 9), 0.0))
+        sigmas.append([s for _, s in f.correlated_errors_m.values()])
+    sig = np.array(sigmas)
+    assert (np.diff(sig, axis=0) <= 1e-12).all()  # no process noise: never grows
+    # GLONASS 9 leaves; after the gap its state is removed, GLONASS 3's kept
+    k = 40
+    for t in range(k, k + int(GLONASS_BIAS_MAX_GAP_S) + 200, 100):  # 100 s steps: no time-gap reset
+        f.process_gnss(_with_glonass(_epoch(t, zero, rng, range(8)), (3,), 0.0))
+    assert sorted(f.correlated_errors_m) == [GLONASS * 1000 + 3]
+    assert f.rejection_counts["correlated_error_removed"] == 1
+    with pytest.raises(ValueError):
+        FusionParams(glonass_satellite_bias_std_m=-1.0)
+    with pytest.raises(ValueError):
+        FusionParams(glonass_pseudorange_error_factor=0.5)

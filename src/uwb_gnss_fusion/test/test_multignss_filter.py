@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from gnss_common.constants import GPS_CA_CHIP_RATE_HZ, GPS_L1_FREQUENCY_HZ, SPEED_OF_LIGHT_MPS
-from gnss_common.coordinates import enu_to_ecef
+from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic, enu_to_ecef
 from gnss_common.earth_rotation import sagnac_range_correction_m, sagnac_range_rate_correction_mps
 from gnss_common.glonass import glonass_g1_frequency_hz
 from gnss_common.jamming_weights import TrackingLoopParams, dll_jitter_m, fll_jitter_mps, measurement_sigmas
@@ -117,7 +117,9 @@ def test_injected_inter_system_biases_are_estimated_and_do_not_move_the_position
         if k:
             np.testing.assert_allclose(a.position_m, b.position_m, rtol=0, atol=1e-5)
             np.testing.assert_allclose(a.clock_bias_m, b.clock_bias_m, rtol=0, atol=1e-5)
-    assert fa.state_dimension == 11 and fa.reference_system == "gps"
+    # 8 + 3 inter-system biases + a code-bias state per GLONASS satellite (glonass_satellite_bias_std_m)
+    n_glonass = sum(1 for sky in SKY if sky[0] == GLONASS)
+    assert fa.state_dimension == 11 + n_glonass and fa.reference_system == "gps"
     ba, bb = fa.inter_system_biases_m, fb.inter_system_biases_m
     for system, name in ((GALILEO, "galileo"), (BEIDOU, "beidou"), (GLONASS, "glonass")):
         assert ba[name][0] - bb[name][0] == pytest.approx(inj[system], abs=1e-5)
@@ -251,7 +253,8 @@ def test_glonass_per_channel_wavelengths_in_doppler_and_weights():
     for k in range(10):
         out = f.process_gnss(_epoch(k, systems=(GLONASS,), rx=RX + vel * k, rx_vel=vel))
     np.testing.assert_allclose(out.velocity_mps, vel, atol=1e-3)
-    assert f.reference_system == "glonass" and f.state_dimension == 8
+    # GLONASS is the reference (no inter-system bias); a code-bias state per GLONASS satellite
+    assert f.reference_system == "glonass" and f.state_dimension == 8 + sum(1 for sky in SKY if sky[0] == GLONASS)
     # weights per channel
     ep = _epoch(0, systems=(GLONASS,))
     p = _params()
@@ -343,3 +346,73 @@ def test_real_multi_gnss_hour_beats_gps_alone(esbc_epochs):
     assert masked_multi < 5.0 < masked_gps
     assert n_multi == len(esbc_epochs) - 1 >= n_gps
 
+
+
+def _noisy_biased_epoch(k: int, systems, noise: np.ndarray, bias_m: dict[int, float]) -> GnssEpoch:
+    """Epoch k (30 s apart) of ``systems``: SKY turned about the receiver's vertical by 0.25 deg per
+    epoch (30 deg an hour, a satellite's pace across the sky: per-satellite biases become separable
+    from the position), white noise ``noise[k, i]`` times the filter's 1-sigma of SKY satellite i (the
+    same draw whichever systems are kept) and a constant code bias on each GLONASS satellite (by svid)."""
+    lat, lon, _ = ecef_to_geodetic(RX)
+    up = ecef_to_enu_rotation(lat, lon)[2]
+    ang = math.radians(0.25 * k)
+    # Rodrigues' rotation of each satellite's offset from the receiver about the local vertical
+    d0 = SAT_POS - RX
+    d = (d0 * math.cos(ang) + np.cross(up, d0) * math.sin(ang) + np.outer(d0 @ up, up) * (1.0 - math.cos(ang)))
+    scale = _noise_sigmas()
+    obs = []
+    for i, (system, svid, _, _, ch) in enumerate(SKY):
+        if system not in systems:
+            continue
+        sp = RX + d[i]
+        rho = np.linalg.norm(d[i]) + float(sagnac_range_correction_m(sp, RX))
+        pr = rho + CLOCK_M + scale[i] * noise[k, i] + (bias_m[svid] if system == GLONASS else 0.0)
+        obs.append(SatelliteObservation(
+            constellation=system, svid=svid, pseudorange_m=float(pr), pseudorange_rate_mps=math.nan, cn0_dbhz=45.0,
+            satellite_position_ecef_m=sp, satellite_velocity_ecef_mps=np.zeros(3),
+            satellite_clock_bias_m=0.0, satellite_clock_drift_mps=0.0, carrier_frequency_hz=_carrier(system, ch),
+        ))
+    return GnssEpoch(stamp_ns=T0 + k * 30 * NS, gps_week=2111, gps_time_of_week_s=30.0 * k, observations=tuple(obs))
+
+
+def _rms_biased_glonass(systems, seed: int, **kw) -> tuple[float, float]:
+    """Horizontal and 3D RMS (m) after convergence of the static receiver's filter on ``systems``, each
+    GLONASS satellite with a seeded constant code bias (1.5 m 1-sigma: ESBC00DNK's measured spread of
+    per-satellite GLONASS means is 1.26 m, docs/uwb_gnss_fusion/fusion_multignss.md)."""
+    rng = np.random.default_rng(seed)
+    bias = {svid: 1.5 * float(rng.standard_normal()) for s, svid, *_ in SKY if s == GLONASS}
+    noise = rng.standard_normal((120, len(SKY)))
+    f = FusionFilter(_params(**kw))
+    rot = ecef_to_enu_rotation(*ecef_to_geodetic(RX)[:2])
+    h, d = [], []
+    for k in range(120):
+        out = f.process_gnss(_noisy_biased_epoch(k, systems, noise, bias))
+        if k >= 20:
+            e = rot @ (out.position_m - RX)
+            h.append(e[0] ** 2 + e[1] ** 2)
+            d.append(e @ e)
+    return math.sqrt(np.mean(h)), math.sqrt(np.mean(d))
+
+
+GLONASS_BIAS_SEEDS = (1, 2, 3, 8, 21)
+
+
+def _pooled_rms(systems, **kw) -> tuple[float, float]:
+    """Horizontal and 3D RMS (m) pooled over :data:`GLONASS_BIAS_SEEDS` (each seed its biases and noise)."""
+    runs = np.array([_rms_biased_glonass(systems, seed, **kw) for seed in GLONASS_BIAS_SEEDS])
+    return float(np.sqrt(np.mean(runs[:, 0] ** 2))), float(np.sqrt(np.mean(runs[:, 1] ** 2)))
+
+
+def test_adding_biased_glonass_never_worsens():
+    """Issue 27 item 4: GLONASS code carries a constant bias per satellite (the FDMA channel's receiver
+    inter-frequency bias, the untransmitted equipment delay) that one inter-system bias cannot absorb.
+    With the shipped per-satellite GLONASS code-bias states adding GLONASS to GPS + Galileo + BeiDou does
+    not worsen horizontal or 3D RMS (pooled over five seeded skies); without them
+    (``glonass_satellite_bias_std_m`` 0, ``glonass_pseudorange_error_factor`` 1: the filter before) the
+    biased satellites pull the solution off (3D RMS worse than with the states, and than without GLONASS)."""
+    base = (GPS, GALILEO, BEIDOU)
+    without = _pooled_rms(base)
+    with_glo = _pooled_rms((*base, GLONASS))
+    assert with_glo[0] <= without[0] and with_glo[1] <= without[1]
+    before = _pooled_rms((*base, GLONASS), glonass_satellite_bias_std_m=0.0, glonass_pseudorange_error_factor=1.0)
+    assert before[1] > without[1] and before[1] > with_glo[1]

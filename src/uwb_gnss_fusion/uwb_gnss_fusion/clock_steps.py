@@ -54,7 +54,7 @@ def clock_free_innovations(
     nu = prep.pr - hx(nominal[None, :])[0]
     var = prep.sigma_pr**2 + projected_variance(los, p[0:3, 0:3])
     if error_column is not None:
-        var = var + np.diag(p)[error_column]
+        var = var + np.where(error_column >= 0, np.diag(p)[np.maximum(error_column, 0)], 0.0)
     if bias_column is not None:
         has = bias_column >= 0
         if has.any():

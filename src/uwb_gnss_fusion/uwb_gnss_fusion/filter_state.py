@@ -11,7 +11,10 @@ State vector: nominal ``[p (3), v (3), c*dt, c*ddt]`` in m, m/s, m, m/s (ECEF, f
 the anchors' local frame "map" in UWB-only mode, where the clock states are frozen and unused);
 then one inter-system bias ``b_sys`` (m, a random walk) per system other than the reference seen,
 in the order they appear; then one first-order Gauss-Markov pseudorange error ``e_sat`` (m) per
-tracked satellite when ``pseudorange_correlated_std_m`` > 0. The CKF estimates the error state
+tracked satellite when ``pseudorange_correlated_std_m`` > 0, or else, with
+``glonass_satellite_bias_std_m`` > 0, one random-constant code bias per GLONASS satellite (its FDMA
+channel's inter-frequency bias and untransmitted equipment delay; removed after
+``GLONASS_BIAS_MAX_GAP_S`` unseen). The CKF estimates the error state
 (eq. 8), folded into the nominal after every update (eq. 25, :meth:`FilterState.correct`).
 """
 
@@ -25,7 +28,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from gnss_common.observations import GPS
+from gnss_common.observations import GLONASS, GPS
 
 from .ckf import CubatureKalmanFilter
 from .divergence import GatedWindow
@@ -33,6 +36,7 @@ from .fusion_output import FusionOutput
 from .fusion_params import (
     CORRELATED_ERROR_MAX_GAP_TAU,
     FRAME_EARTH,
+    GLONASS_BIAS_MAX_GAP_S,
     INTER_SYSTEM_BIAS_INIT_STD_M,
     INTER_SYSTEM_BIAS_MAX_GAP_S,
     INTER_SYSTEM_BIAS_PSD_M2PS,
@@ -74,8 +78,9 @@ class FilterState:
     bias_seen_ns: dict[int, int] = field(default_factory=dict)
     err_sats: list[int] = field(default_factory=list)  # satellite key of correlated-error column err_base() + i
     err_seen_ns: dict[int, int] = field(default_factory=dict)
-    transition_cache: dict[tuple[int, bool, int, int, bool], tuple[np.ndarray, np.ndarray]] = field(
-        default_factory=dict)
+    err_model: list[tuple[float, float]] = field(default_factory=list)  # (std m, tau s; inf: constant) per column
+    transition_cache: dict[tuple[int, bool, int, tuple[tuple[float, float], ...], bool],
+                           tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     # ---- inputs remembered: jammer J/S, the caller's reference solution, recent ranges and epochs
     js_db: float = math.nan
     js_stamp_ns: int | None = None
@@ -158,6 +163,7 @@ class FilterState:
         self.bias_seen_ns = {}
         self.err_sats = []
         self.err_seen_ns = {}
+        self.err_model = []
 
     def remember_drift(self) -> None:
         """Keep the clock drift of a state about to be replaced (reinitialisation, reset)."""
@@ -193,12 +199,16 @@ class FilterState:
         nb = len(self.bias_systems)
         ne = len(self.err_sats)
         static = self.motion.static
-        key = (dt_ns, self.frame == FRAME_EARTH, nb, ne, static)
+        key = (dt_ns, self.frame == FRAME_EARTH, nb, tuple(self.err_model), static)
         cached = self.transition_cache.get(key)
         if cached is None:
             dt = dt_ns / _NS
-            tau = params.pseudorange_correlated_tau_s
-            phi = constant_velocity_transition(dt, nb, ne, tau)
+            phi = constant_velocity_transition(dt, nb)
+            if ne:
+                phi = np.pad(phi, ((0, ne), (0, ne)))
+                idx = np.arange(STATE_DIM + nb, STATE_DIM + nb + ne)
+                # Gauss-Markov decay exp(-dt/tau) (Brown & Hwang, 4th ed., eq. 4.2.11); 1 for a constant
+                phi[idx, idx] = [math.exp(-dt / tau) for _, tau in self.err_model]
             q = np.zeros((STATE_DIM + nb + ne, STATE_DIM + nb + ne))
             psd = params.static_accel_psd_m2ps3 if static else params.accel_psd_m2ps3
             q[0:6, 0:6] = white_acceleration_noise(psd, dt)
@@ -209,9 +219,9 @@ class FilterState:
                 q[isb, isb] = np.eye(nb) * (INTER_SYSTEM_BIAS_PSD_M2PS * dt)
                 if ne:
                     # Gauss-Markov: x_k+1 = exp(-dt/tau) x_k + w, var(w) = sigma^2 (1 - exp(-2 dt/tau))
-                    # (Brown & Hwang, 4th ed., eq. 4.2.11-4.2.12)
+                    # (Brown & Hwang, 4th ed., eq. 4.2.11-4.2.12); a random constant (tau inf): 0
                     idx = np.arange(STATE_DIM + nb, STATE_DIM + nb + ne)
-                    q[idx, idx] = params.pseudorange_correlated_std_m**2 * (1.0 - math.exp(-2.0 * dt / tau))
+                    q[idx, idx] = [std**2 * (1.0 - math.exp(-2.0 * dt / tau)) for std, tau in self.err_model]
             cached = (phi, q)
             if len(self.transition_cache) >= 64:  # the few distinct steps of a stream recur
                 self.transition_cache.clear()
@@ -300,53 +310,65 @@ class FilterState:
 
     # ------------------------------------------------------------------ correlated errors
     def error_columns(self, prep: PreparedEpoch) -> np.ndarray | None:
-        """State column of each satellite's correlated pseudorange error, or None when not modelled."""
+        """State column of each satellite's correlated pseudorange error (-1: the satellite has none),
+        or None when no satellite of the epoch has one."""
         if not self.err_sats or prep.sat_id is None:
             return None
         base = self.err_base()
         index = {sat: base + i for i, sat in enumerate(self.err_sats)}
-        return np.array([index[s] for s in prep.sat_id.tolist()], dtype=np.int64)
+        cols = np.array([index.get(s, -1) for s in prep.sat_id.tolist()], dtype=np.int64)
+        return cols if (cols >= 0).any() else None
 
     def update_error_states(self, stamp_ns: int, prep: PreparedEpoch, params: FusionParams,
                             count: Count) -> np.ndarray | None:
         """Free the correlated-error states of satellites unseen for more than
-        ``CORRELATED_ERROR_MAX_GAP_TAU`` correlation times, allocate one for each satellite of the
-        epoch without one; return the error columns of the epoch's satellites.
+        ``CORRELATED_ERROR_MAX_GAP_TAU`` correlation times (a GLONASS code bias: ``GLONASS_BIAS_MAX_GAP_S``),
+        allocate one for each satellite of the epoch without one that should have one; return the error
+        columns of the epoch's satellites (:meth:`error_columns`).
 
-        Removing a state (its row and column of P) is the exact marginalisation of a Gaussian; a
-        new state starts at zero with the stationary variance ``sigma^2`` and no correlation (the
-        error of a satellite just acquired is unknown). Counted: ``correlated_error_added``,
-        ``correlated_error_removed``.
+        Which satellites: every one when ``pseudorange_correlated_std_m`` > 0 (a Gauss-Markov state;
+        a GLONASS satellite's stationary sigma also holds ``glonass_satellite_bias_std_m``, root-sum-
+        squared); otherwise the GLONASS satellites when ``glonass_satellite_bias_std_m`` > 0 (a random
+        constant with that prior sigma). Removing a state (its row and column of P) is the exact
+        marginalisation of a Gaussian; a new state starts at zero with its prior variance and no
+        correlation (the error of a satellite just acquired is unknown). Counted:
+        ``correlated_error_added``, ``correlated_error_removed``.
         """
         p = params
-        if p.pseudorange_correlated_std_m <= 0.0 or self.frame != FRAME_EARTH or prep.sat_id is None:
+        gm = p.pseudorange_correlated_std_m > 0.0
+        glo = p.glonass_satellite_bias_std_m > 0.0
+        if not (gm or glo) or self.frame != FRAME_EARTH or prep.sat_id is None:
             return None
         base = self.err_base()
-        limit_ns = CORRELATED_ERROR_MAX_GAP_TAU * p.pseudorange_correlated_tau_s * _NS
-        stale = [i for i, sat in enumerate(self.err_sats) if stamp_ns - self.err_seen_ns[sat] > limit_ns]
+        stale = [i for i, sat in enumerate(self.err_sats) if stamp_ns - self.err_seen_ns[sat] > _max_gap_ns(
+            self.err_model[i][1])]
         if stale:
             keep = np.ones(self.nominal.size, dtype=bool)
             keep[[base + i for i in stale]] = False
             for i in reversed(stale):
                 del self.err_seen_ns[self.err_sats.pop(i)]
+                self.err_model.pop(i)
             self.nominal = self.nominal[keep]
             self.ckf = CubatureKalmanFilter(np.zeros(self.nominal.size), self.ckf.p[np.ix_(keep, keep)])
             count("correlated_error_removed", len(stale))
         known = set(self.err_sats)
-        new = [sat for sat in prep.sat_id.tolist() if sat not in known]
+        new = [sat for sat in prep.sat_id.tolist() if sat not in known and (gm or sat // 1000 == GLONASS)]
         if new:
+            models = [_error_model(sat, p) for sat in new]
             n = self.nominal.size
             k = len(new)
             cov = np.zeros((n + k, n + k))
             cov[:n, :n] = self.ckf.p
             idx = np.arange(n, n + k)
-            cov[idx, idx] = p.pseudorange_correlated_std_m**2
+            cov[idx, idx] = [std**2 for std, _ in models]
             self.nominal = np.concatenate([self.nominal, np.zeros(k)])
             self.ckf = CubatureKalmanFilter(np.zeros(n + k), cov)
             self.err_sats.extend(new)
+            self.err_model.extend(models)
             count("correlated_error_added", k)
         for sat in prep.sat_id.tolist():
-            self.err_seen_ns[sat] = stamp_ns
+            if sat in self.err_seen_ns or sat in new:
+                self.err_seen_ns[sat] = stamp_ns
         return self.error_columns(prep)
 
 
@@ -390,3 +412,16 @@ class FilterFacade(Protocol):
 
     def supply_reference_solution(self, stamp_ns: int, position_m: np.ndarray, position_std_m: float,
                                   clock_bias_m: float = math.nan) -> None: ...
+
+
+def _error_model(sat: int, p: FusionParams) -> tuple[float, float]:
+    """(prior / stationary 1-sigma m, correlation time s; inf: a random constant) of a satellite's error state."""
+    glo = p.glonass_satellite_bias_std_m if sat // 1000 == GLONASS else 0.0
+    if p.pseudorange_correlated_std_m > 0.0:
+        return math.hypot(p.pseudorange_correlated_std_m, glo), p.pseudorange_correlated_tau_s
+    return glo, math.inf
+
+
+def _max_gap_ns(tau_s: float) -> float:
+    """How long an error state survives its satellite unseen, ns."""
+    return (GLONASS_BIAS_MAX_GAP_S if math.isinf(tau_s) else CORRELATED_ERROR_MAX_GAP_TAU * tau_s) * _NS

@@ -15,7 +15,9 @@ system) and each other system seen gets an inter-system bias state ``b_sys`` (m,
 appended after the clock, in the order the systems appear: a GPS-only stream keeps 8 states.
 With ``FusionParams.pseudorange_correlated_std_m`` > 0, each tracked satellite has a first-order
 Gauss-Markov pseudorange-error state ``e_sat`` (m) after the inter-system biases, allocated when
-the satellite appears and removed (marginalised) when it has been unseen for a while.
+the satellite appears and removed (marginalised) when it has been unseen for a while; otherwise,
+with ``FusionParams.glonass_satellite_bias_std_m`` > 0 (the default), each GLONASS satellite has a
+random-constant code-bias state there (its FDMA channel's inter-frequency bias).
 
 :class:`FusionFilter` is the facade: it holds the parameters, the counts and one
 :class:`.filter_state.FilterState`, and hands each message to the module of its kind. By lifecycle

@@ -17,7 +17,17 @@ from rfi_node_common.params import USER, internal, parameter
 
 @dataclass(frozen=True)
 class SensorModelParams:
-    """FusionParams, sensors and models (.measurement_models, .gnss_update, .uwb_update)."""
+    """FusionParams, sensors and models (.measurement_models, .gnss_update, .uwb_update).
+
+    Design notes (why, and the evidence; the meaning is in each field's description):
+        glonass_pseudorange_error_factor: the sigma of a GLONASS pseudorange from its C/N0 (or
+            elevation, or the receiver's std) times this: GLONASS code has larger errors than the
+            CDMA systems' (FDMA inter-frequency biases, broadcast orbit and clock; ESBC00DNK's mean
+            within-satellite residual std 1.03 m against 0.45-0.54 m for GPS, Galileo, BeiDou).
+            1.5 is RTKLIB's convention (``EFACT_GLO`` in ``pntpos.c``, ``varerr``; SBAS 3.0, which the
+            filter skips), not a value fitted here; the constant part of the GLONASS error is the
+            per-satellite bias state's (``glonass_satellite_bias_std_m``).
+    """
 
     use_gnss: bool = parameter(
         True,
@@ -123,6 +133,13 @@ class StaticModelParams:
         45.0,
         'Jammer-free C/N0 to which eq. 4 applies the received J/S, dB-Hz (typical open sky: 45).',
         minimum=0.0, maximum=70.0, read_only=False, group=USER,
+    )
+    glonass_pseudorange_error_factor: float = parameter(
+        1.5,
+        'GLONASS pseudorange 1-sigmas are multiplied by this (the FDMA inter-frequency code biases and the '
+        "broadcast orbit/clock; RTKLIB's EFACT_GLO convention, 1.5). 1: weighted as the CDMA systems "
+        '(docs/uwb_gnss_fusion/fusion_multignss.md).',
+        minimum=1.0, maximum=100.0,
     )
     jammer_quality_factor: float = parameter(
         1.0,
@@ -334,7 +351,21 @@ class CorrelatedErrorParams:
             removed after :data:`CORRELATED_ERROR_MAX_GAP_TAU` correlation times unseen. Treated
             as white, such errors are averaged over every epoch of a correlation time and the
             filter becomes overconfident (docs/uwb_gnss_fusion/fusion_never_worse.md).
-            Std 0: off (white pseudorange errors, the 8-state filter).
+            Std 0: off (white pseudorange errors, the 8-state filter). On the real 30 s stations a
+            sigma of 0.3 m with tau 600 s reaches 20 % horizontal gain over SPP on all three but
+            costs 3D RMS on GEONET; it stays off (docs/uwb_gnss_fusion/fusion_real_gnss.md, section 5).
+        glonass_satellite_bias_std_m: GLONASS (FDMA) code carries a bias per satellite that one
+            inter-system bias cannot absorb: the receiver's inter-frequency code bias of each
+            frequency channel (it depends on the receiver's RF front end and differs between brands;
+            Wanninger & Wallstab-Freitag 2007) and the satellite's equipment group delay, up to 2 ns
+            (0.6 m) for GLONASS-M and not in the broadcast message (GLONASS ICD 2008). A random-constant
+            state per GLONASS satellite with this prior 1-sigma (1 m: the order of both together;
+            ESBC00DNK measures a 1.26 m spread of the per-satellite GLONASS means against GPS's 0.63 m,
+            docs/uwb_gnss_fusion/fusion_multignss.md) absorbs it as the geometry changes. Removed after
+            :data:`GLONASS_BIAS_MAX_GAP_S` unseen. With ``pseudorange_correlated_std_m`` > 0 every
+            satellite has a Gauss-Markov state and a GLONASS satellite's sigma is the root-sum-square
+            of both. 0: no such states (before issue 27 item 4: adding GLONASS worsened ESBC00DNK's
+            whole-day 3D RMS from 1.22 to 1.26 m).
     """
 
     pseudorange_correlated_std_m: float = parameter(
@@ -347,6 +378,14 @@ class CorrelatedErrorParams:
         60.0,
         'Correlation time of that error, s.',
         minimum=0.1, maximum=86400.0,
+    )
+    glonass_satellite_bias_std_m: float = parameter(
+        1.0,
+        'Prior 1-sigma of a constant code bias state per GLONASS satellite, m: the FDMA channel\'s receiver '
+        'inter-frequency code bias and the satellite equipment delay the broadcast message does not give '
+        '(0: none; with pseudorange_correlated_std_m > 0 it is added to the GLONASS satellites\' '
+        'Gauss-Markov sigma instead).',
+        minimum=0.0, maximum=100.0,
     )
 
 

@@ -55,6 +55,9 @@ UWB_FIX_CONSISTENT_SIGMA = 4.0
 """A multilateration fix explains the ranges when every residual is within this many range
 1-sigmas (``FusionParams.uwb_gated_anchor_reinit``)."""
 
+GLONASS_BIAS_MAX_GAP_S = 3600.0
+"""A GLONASS satellite unseen for longer than this has its code-bias state removed, s (a satellite
+that set: a pass lasts hours, and the state of one no longer seen only costs computation)."""
 CORRELATED_ERROR_MAX_GAP_TAU = 2.0
 """A satellite unseen for longer than this many correlation times has its correlated-error state
 removed (marginalised, exact); if it returns it gets a fresh state with the stationary variance
@@ -122,6 +125,15 @@ class FusionParams(RangeNoiseParams, MirrorAmbiguityParams, CorrelatedErrorParam
         if not (math.isfinite(self.pseudorange_correlated_std_m) and self.pseudorange_correlated_std_m >= 0.0):
             raise ValueError(
                 f"FusionParams.pseudorange_correlated_std_m must be >= 0, got {self.pseudorange_correlated_std_m!r}"
+            )
+        if not (math.isfinite(self.glonass_satellite_bias_std_m) and self.glonass_satellite_bias_std_m >= 0.0):
+            raise ValueError(
+                f"FusionParams.glonass_satellite_bias_std_m must be >= 0, got {self.glonass_satellite_bias_std_m!r}"
+            )
+        if not (math.isfinite(self.glonass_pseudorange_error_factor) and self.glonass_pseudorange_error_factor >= 1.0):
+            raise ValueError(
+                "FusionParams.glonass_pseudorange_error_factor must be finite and >= 1, "
+                f"got {self.glonass_pseudorange_error_factor!r}"
             )
         if not (0.0 < self.gate_probability <= 1.0):
             raise ValueError(

@@ -182,6 +182,12 @@ def prepare_epoch(
     ok_rate = np.isfinite(given_rate) & (given_rate > 0.0)
     s_pr = np.where(ok_pr, np.maximum(given_pr, s_pr) if math.isfinite(js_db) else given_pr, s_pr)
     s_rate = np.where(ok_rate, np.maximum(given_rate, s_rate) if math.isfinite(js_db) else given_rate, s_rate)
+    if system is not None and p.glonass_pseudorange_error_factor != 1.0:
+        # GLONASS code carries what its sigma from C/N0 does not: each FDMA channel's receiver
+        # inter-frequency code bias and a poorer broadcast orbit/clock (ESBC00DNK: spread of the
+        # per-satellite means 1.26 m against GPS's 0.63 m). RTKLIB's convention (EFACT_GLO 1.5,
+        # pntpos.c varerr) scales the sigma (the model's, the jammer's or the receiver's).
+        s_pr = np.where(system == GLONASS, s_pr * p.glonass_pseudorange_error_factor, s_pr)
     rate = np.array([r[0].pseudorange_rate_mps if r[3] else math.nan for r in rows])
     return PreparedEpoch(
         sat_pos=np.array([r[1] for r in rows]),

@@ -52,7 +52,8 @@ def pseudorange_model(
         bias_column: for each satellite the state column (>= 8) of its system's inter-system
             clock bias, or -1 for the reference system (GPS), int, shape (k,); None: all GPS.
         error_column: for each satellite the state column of its time-correlated pseudorange
-            error (first-order Gauss-Markov, added to the range), int, shape (k,); None: none.
+            error (first-order Gauss-Markov or a constant code bias, added to the range), or -1
+            for a satellite without one, int, shape (k,); None: none.
 
     Returns:
         hx mapping states (m, n) to pseudoranges (m, k), m.
@@ -76,9 +77,17 @@ def pseudorange_model(
     )
     if error_column is not None:
         err = np.asarray(error_column, dtype=np.int64)
-        if err.shape != const.shape or (err < STATE_DIM).any():
-            raise ValueError(f"error_column must be (k,) with columns >= {STATE_DIM}, got {error_column!r}")
+        if err.shape != const.shape or ((err < STATE_DIM) & (err != -1)).any():
+            raise ValueError(f"error_column must be (k,) with -1 or columns >= {STATE_DIM}, got {error_column!r}")
         base = pseudorange_model(sat_pos_ecef_m, sat_clock_bias_m, iono_delay_m, tropo_delay_m, bias_column)
+        if (err < 0).any():
+            has_err = err >= 0
+            take_err = np.where(has_err, err, 6)  # rows without a state read a column and are masked to zero
+
+            def hx_some(states: np.ndarray) -> np.ndarray:
+                return base(states) + np.where(has_err[None, :], states[:, take_err], 0.0)
+
+            return hx_some
 
         def hx_err(states: np.ndarray) -> np.ndarray:
             return base(states) + states[:, err]

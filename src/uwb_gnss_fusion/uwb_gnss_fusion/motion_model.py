@@ -226,7 +226,7 @@ def static_exit_statistic(
                                      error_column)(x)[0]
     var = prep.sigma_pr**2
     if error_column is not None:
-        var = var + np.diag(p)[error_column]
+        var = var + np.where(error_column >= 0, np.diag(p)[np.maximum(error_column, 0)], 0.0)
     groups = np.zeros(nu.size, dtype=np.int64) if bias_column is None else np.asarray(bias_column)
     out = []
     parts = [(nu, p[0:3, 0:3], var, groups)]
