@@ -173,7 +173,7 @@ def real_captures() -> list[str]:
         x = x.astype(np.complex128 if np.iscomplexobj(x) else np.float64)
         blk = int(fs * 1e-3) // 2 if name.startswith("gnss") else int(fs * 1e-3)
         nb = x.size // blk
-        mon = RfiMonitor()
+        mon = RfiMonitor(RfiMonitorParams(estimator="kalman"))   # this page's "ours": the per-sample tracker
         types = [mon.process(x[k * blk:(k + 1) * blk], fs, fif, k * blk, 0).type for k in range(nb)]
         fa = sum(t in (CW, CHIRP, WIDEBAND) for t in types[5:])
         # half-simulated: chirp at J/N 10 dB added to the second half
@@ -187,7 +187,7 @@ def real_captures() -> list[str]:
         half = nb // 2
         sim.generate(half * blk, add_to=np.zeros(half * blk, dtype=x.dtype))
         y = sim.generate((nb - half) * blk, add_to=x[half * blk: nb * blk]).values()
-        mon2 = RfiMonitor()
+        mon2 = RfiMonitor(RfiMonitorParams(estimator="kalman"))  # (the "stft" default has no tracker period)
         for k in range(half):
             mon2.process(x[k * blk:(k + 1) * blk], fs, fif, k * blk, 0)
         ests = [mon2.process(y[k * blk:(k + 1) * blk], fs, fif, (half + k) * blk, 0) for k in range(nb - half)]
