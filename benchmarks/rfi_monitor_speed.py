@@ -343,14 +343,56 @@ def stage_measurements(runs: int = STAGE_RUNS, cases: tuple[str, ...] = STAGE_CA
     return res
 
 
-ISSUE26_NOTES = """Issue 26 item 2, third round (2026-12-07, evening: the stages outside the ridge; behaviour
-changes allowed): **the goal is not met.** The run above is a reduced one (``--runs 1``, 5 of the 9 cases: four
-sessions shared the 2 cores, load 15, and the bare STFT itself read 0.20-0.31 ms across the children, so each ratio
-carries about +-15 %): at 38.192 MS/s the full analysis costs 8.5 (acquisition), 6.1 (tracking) and 6.3 (switch)
-bare STFTs of its block against 9.6, 8.7 and 8.2 for 93ea8b7 in the same run (goal: about 3-4); at 10 MS/s complex
-17.4 (acquisition; 24.6 before), at 24 MS/s real 9.7 (tracking; 13.2 before). Real-time factor on this loaded machine
-0.51-0.66x (the earlier, quieter run of the second round read 0.82-1.01x at 38.192 MS/s); p99 2.8-4.9 ms, within the
-goal of 5 ms, set by the blocks that test the integration's sums.
+ISSUE26_NOTES = """Issue 26 item 2, fourth round (2026-12-07, night: fewer calls at the small blocks, no behaviour
+change): **the goal is not met, and the totals did not move beyond this machine's noise.** The run above: 1 run of all
+9 cases (``--runs 1``), 8 workers sharing the 2 cores (load average 13 falling to 5 during the run, 16-18 during the
+work). At 38.192 MS/s the full analysis costs 9.8 (acquisition), 8.6 (tracking) and 8.7 (switch) bare STFTs of its block
+against 12.4, 9.6 and 10.1 for 93ea8b7 in the same run (goal: about 3-4), 0.70-0.87x real time; at 10 MS/s complex
+18.7 / 14.2 / 17.9 (26.5 / 19.5 / 23.1 before), 0.59-0.85x; at 24 MS/s real 12.7 / 11.6 / 13.0 (16.1 / 13.3 / 14.1
+before), 0.60-0.88x; p99 at most 3.6 ms. Now over before in the same run: 0.79 / 0.90 / 0.86, 0.71 / 0.73 / 0.77,
+0.79 / 0.87 / 0.92, where the third round's run read 0.81 / 0.85 / 0.79, 0.71 / 0.70 / 0.90, 0.77 / 0.99 / 0.86: the
+same within the +-10-15 % that one run carries. A first run of the same tree, started right after the edits, read
+71.1 bare STFTs at 38.192 MS/s switch (mean 11.1 ms, p99 3.1 ms: one block of about 1.7 s, presumably numba
+compiling a changed module's kernel on first use; not seen in the second run, whose table is above).
+
+Done this round (src/rfi_monitor: stft.py, classifier.py, spectral_autocorrelation.py, constant_envelope.py;
+bit-identical: split_reference.py --check, all 900 fields of its 12 streams; real_jammers.md's table unchanged):
+scipy's pocketfft binding called directly (as ``stft.fft_inplace`` already did for the ridge: ``rfft_rows``,
+``irfft_rows``, ``irfft_real``; no scipy.fft dispatch, 5-15 us a call) in the classifier's Welch PSD, the
+integration's spectral autocorrelation (its STFT, the amplitudes' rfft and the irfft) and the envelope's Hilbert
+transform; the noise level's compiled selection (``column_order_statistic``) also below 768 frames up to 32,768
+cells (155 x 128 at 10 MS/s acquisition: 60 vs 110 us for np.partition of the transposed copy; 255 x 65: 57 vs 77;
+numpy kept above, where it won at 255 x 129, 154 vs 310 us); the STFT's bin frequencies and the window energy of the
+Parseval sum cached per frame length. In bare STFTs, this run against the third round's: welch + features 1.04 /
+1.64 / 1.22 -> 0.92 / 1.55 / 1.00 (10 MS/s complex), 1.01 / 1.30 / 1.05 -> 0.77 / 1.10 / 0.90 (24 MS/s real);
+integration 6.72 -> 6.02 (10 MS/s acquisition), 5.09 -> 3.73 (24 MS/s); envelope J/N 1.49 -> 1.16 (24 MS/s
+tracking). In an A/B against the third round's tree (60afe7c, 2 runs alternated, load 16-18) the same stages moved
+the same way (welch + features 1.71 -> 1.37, 1.19 -> 0.94, 1.20 -> 1.04; integration 6.61 -> 5.87; envelope
+1.45 -> 1.14) and the totals by -7 to +4 %: noise. Measured and not done: a radix selection (histogram of the
+float32 keys) and a sampled two-pivot filter for the long columns (1,249 x 16 at 10 MS/s tracking: 54 -> 46 us, the
+selection proper is already ~2 ns a value; the column gather 15 us of it): not worth their code.
+
+What remains at the small blocks (10 MS/s complex tracking, cProfile by thread time, 100 blocks, the loaded machine:
+about 2.7 ms a block in all, 300 Python-level calls): the ridge 1.8 ms (its STFT of 1,249 16-point frames 0.2, the
+noise levels 0.28 of which the selection 0.19, the frame ridges 0.21, the period search 0.25, the profiles, shape
+and fold residuals 0.38, the block-end frequency 0.40 of which the saw-tooth law's fit and prediction interval in
+sweep_law.py 0.29, another helper's file this round), the Welch PSD and features 0.44, the rest 0.5. Each stage is
+already one or two compiled kernels; what is left per stage is its arithmetic on 1,249 frames x 16 bins and 5-30 us
+of call overhead, so the goal needs fewer passes over the block, i.e. the behaviour changes listed below for the
+third round (hop L instead of L / 2, a shared spectrum for the classifier and the CW statistic, the envelope over
+fewer samples) or the ridge's own: its noise quantile, frame ridges and period phasor from one pass over a shared
+spectrogram (the classifier's 256-point frames are 16 times the ridge's 16-point ones at 10 MS/s; one spectrogram
+for both would change the ridge's time resolution or the classifier's frequency resolution).
+
+Issue 26 item 2, third round (2026-12-07, evening: the stages outside the ridge; behaviour
+changes allowed): **the goal is not met.** Its run (2 runs of all 9 cases, the machine otherwise running one
+test process, load about 1-2 on 2 cores): at 38.192 MS/s the full analysis cost 10.0 (acquisition), 7.5 (tracking)
+and 7.7 (switch) bare STFTs of its block against 12.3, 8.8 and 9.7 for 93ea8b7 in the same run (goal: about 3-4),
+0.78-1.07x real time; at 10 MS/s complex 17.2 / 13.7 / 17.3 (24.2 / 19.5 / 19.3 before), 0.64-0.82x; at 24 MS/s real
+13.1 / 12.5 / 12.5 (17.0 / 12.6 / 14.5 before), 0.86-0.98x; p99 at most 3.6 ms (goal <= 5 ms: met). The same tree in a
+reduced run during the work (``--runs 1``, 5 of the 9 cases, load 15, the bare STFT itself 0.20-0.31 ms across the
+children) read 8.5 / 6.1 / 6.3 at 38.192 MS/s against 9.6 / 8.7 / 8.2 before: the ratios carry about +-15-20 % between
+runs; the ratio to 93ea8b7 in the same run (0.79-0.85 of its bare STFTs at 38.192 MS/s here) is the steadier figure.
 
 Done this round (src/rfi_monitor: constant_envelope.py, cw_statistic.py, chirp_comb.py, integration.py):
 
@@ -365,7 +407,8 @@ Done this round (src/rfi_monitor: constant_envelope.py, cw_statistic.py, chirp_c
   the shorter period is taken first, where numpy's partition left the order to its implementation; no field of
   split_reference's 12 streams moved, real_jammers.md and the integration tests unchanged.
 
-What is left, and what the goal would need (38.192 MS/s quiet block, this run, bare STFTs): ridge 2.3, integration
+What is left, and what the goal would need (38.192 MS/s quiet block, the reduced run, bare STFTs): ridge 2.3,
+integration
 2.7, the classifier's Welch PSD and features 0.9, spectral step 0.7, frame length 0.3, the rest 1.6. Without the ridge
 (another round's) and the rest, the stages here would have to cost nothing to reach 4. The integration's cost is its
 statistic: an added block (43 % of them at 38.192 MS/s under the 16.5 MS/s budget) pays 5-6 bare STFTs in the
