@@ -11,8 +11,13 @@ against 12.4, 9.6 and 10.1 for 93ea8b7 in the same run (goal: about 3-4), 0.70-0
 before), 0.60-0.88x; p99 at most 3.6 ms. Now over before in the same run: 0.79 / 0.90 / 0.86, 0.71 / 0.73 / 0.77,
 0.79 / 0.87 / 0.92, where the third round's run read 0.81 / 0.85 / 0.79, 0.71 / 0.70 / 0.90, 0.77 / 0.99 / 0.86: the
 same within the +-10-15 % that one run carries. A first run of the same tree, started right after the edits, read
-71.1 bare STFTs at 38.192 MS/s switch (mean 11.1 ms, p99 3.1 ms: one block of about 1.7 s, presumably numba
-compiling a changed module's kernel on first use; not seen in the second run, whose table is above).
+71.1 bare STFTs at 38.192 MS/s switch (mean 11.1 ms, p99 3.1 ms: one block of about 1.7 s, the switch-on block).
+Found and fixed after the run: on a cold numba cache, the noise level's quantile from np.partition (a strided
+column) compiled a second version of ``_noise_levels_kernel`` (1.1-1.6 s) on the first block that took that path
+(presumably the whole 38.192 MS/s block at L = 128: 595 x 65 cells, above the new limit), a version warm_up no
+longer compiled now that the shorter columns take the compiled selection; the quantile is made contiguous on both
+paths (one version; the switch-on block on a cold cache 1,109 -> 13 ms, as at 60afe7c: 14 ms). The table above was
+measured before that fix, which changes no value and no time on a warm cache.
 
 Done this round (src/rfi_monitor: stft.py, classifier.py, spectral_autocorrelation.py, constant_envelope.py;
 bit-identical: split_reference.py --check, all 900 fields of its 12 streams; real_jammers.md's table unchanged):
@@ -21,8 +26,10 @@ scipy's pocketfft binding called directly (as ``stft.fft_inplace`` already did f
 integration's spectral autocorrelation (its STFT, the amplitudes' rfft and the irfft) and the envelope's Hilbert
 transform; the noise level's compiled selection (``column_order_statistic``) also below 768 frames up to 32,768
 cells (155 x 128 at 10 MS/s acquisition: 60 vs 110 us for np.partition of the transposed copy; 255 x 65: 57 vs 77;
-numpy kept above, where it won at 255 x 129, 154 vs 310 us); the STFT's bin frequencies and the window energy of the
-Parseval sum cached per frame length. In bare STFTs, this run against the third round's: welch + features 1.04 /
+numpy kept above, where it won at 255 x 129, 154 vs 310 us); the window energy of the Parseval sum cached per frame
+length (the bin frequencies were too, as read-only arrays, and are computed again: a read-only array is another type
+to numba, which a kernel warmed with a writable one would compile again, for ~2 us). In bare STFTs, this run against
+the third round's: welch + features 1.04 /
 1.64 / 1.22 -> 0.92 / 1.55 / 1.00 (10 MS/s complex), 1.01 / 1.30 / 1.05 -> 0.77 / 1.10 / 0.90 (24 MS/s real);
 integration 6.72 -> 6.02 (10 MS/s acquisition), 5.09 -> 3.73 (24 MS/s); envelope J/N 1.49 -> 1.16 (24 MS/s
 tracking). In an A/B against the third round's tree (60afe7c, 2 runs alternated, load 16-18) the same stages moved

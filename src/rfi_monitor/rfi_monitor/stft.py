@@ -91,25 +91,14 @@ def stft_power(x: np.ndarray, frame_length: int, cplx: bool) -> tuple[np.ndarray
         fw = np.empty((nfr, L), dtype=np.complex64)
         _frames_complex(xc.view(np.float64), hop, w, fw)
         spec = fft_inplace(fw, True)
-        return _power_shifted(spec, L // 2), _freqs(L, True)
+        freqs = (np.arange(L) - L // 2) / L
+        return _power_shifted(spec, L // 2), freqs
     xr = np.ascontiguousarray(x, dtype=np.float64)
     fr32 = np.empty((nfr, L), dtype=np.float32)
     _frames_real(xr, hop, w, fr32)
     spec = rfft_rows(fr32)
-    return _power_real(spec), _freqs(L, False)
-
-
-_FREQS: dict[tuple[int, bool], np.ndarray] = {}
-
-
-def _freqs(L: int, cplx: bool) -> np.ndarray:
-    """stft_power's bin frequencies, cycles/sample (read-only, one array per frame length and kind)."""
-    f = _FREQS.get((L, cplx))
-    if f is None:
-        f = (np.arange(L) - L // 2) / L if cplx else np.arange(L // 2 + 1) / L
-        f.flags.writeable = False
-        _FREQS[(L, cplx)] = f
-    return f
+    freqs = np.arange(L // 2 + 1) / L
+    return _power_real(spec), freqs
 
 
 def rfft_rows(a: np.ndarray) -> np.ndarray:
@@ -206,9 +195,11 @@ def noise_levels(S: np.ndarray, smooth_bins: int, cplx: bool) -> np.ndarray:
     S = np.ascontiguousarray(S, dtype=np.float32)
     nfr, B = S.shape
     k = max(0, min(nfr - 1, int(_Q_LOW * nfr)))
-    # the same quantile either way; which is faster depends on the shape (LONG_COLUMN_FRAMES, COMPILED_SELECT_CELLS)
+    # the same quantile either way; which is faster depends on the shape (LONG_COLUMN_FRAMES, COMPILED_SELECT_CELLS);
+    # contiguous either way, so that _noise_levels_kernel has one compiled version, the one warm_up compiles (a
+    # strided q from np.partition compiled a second one, 1.1-1.6 s, on the first block that took that path)
     q = (column_order_statistic(S, k) if nfr >= LONG_COLUMN_FRAMES or nfr * B <= COMPILED_SELECT_CELLS
-         else np.partition(np.ascontiguousarray(S.T), k, axis=1)[:, k])
+         else np.ascontiguousarray(np.partition(np.ascontiguousarray(S.T), k, axis=1)[:, k]))
     w = min(int(smooth_bins), B - (1 - B % 2))
     return _noise_levels_kernel(S, q, w, bool(cplx), bool(cplx), (B // 3) | 1)
 
