@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 from bench_progress import case_log
+from rfi_monitor_speed_notes import ISSUE26_NOTES
 
 from rfi_monitor.classifier import ClassifierParams, block_features
 from rfi_monitor.if_measurement import measure_if
@@ -341,110 +342,6 @@ def stage_measurements(runs: int = STAGE_RUNS, cases: tuple[str, ...] = STAGE_CA
                 for name, pkg in versions:
                     res.setdefault((case, name), []).append(_stage_run(pkg, case))
     return res
-
-
-ISSUE26_NOTES = """Issue 26 item 2, third round (2026-12-07, evening: the stages outside the ridge; behaviour
-changes allowed): **the goal is not met.** The run above is a reduced one (``--runs 1``, 5 of the 9 cases: four
-sessions shared the 2 cores, load 15, and the bare STFT itself read 0.20-0.31 ms across the children, so each ratio
-carries about +-15 %): at 38.192 MS/s the full analysis costs 8.5 (acquisition), 6.1 (tracking) and 6.3 (switch)
-bare STFTs of its block against 9.6, 8.7 and 8.2 for 93ea8b7 in the same run (goal: about 3-4); at 10 MS/s complex
-17.4 (acquisition; 24.6 before), at 24 MS/s real 9.7 (tracking; 13.2 before). Real-time factor on this loaded machine
-0.51-0.66x (the earlier, quieter run of the second round read 0.82-1.01x at 38.192 MS/s); p99 2.8-4.9 ms, within the
-goal of 5 ms, set by the blocks that test the integration's sums.
-
-Done this round (src/rfi_monitor: constant_envelope.py, cw_statistic.py, chirp_comb.py, integration.py):
-
-* Constant-envelope J/N: the Hilbert transform by a real FFT and its inverse (``hilbert_transform``) instead of the
-  complex inverse FFT of the doubled spectrum, the moments from x^2 + H(x)^2 in one compiled pass: per call 144-160
-  -> 95 us (8,192 samples); the stage 1.41 -> 0.96 bare STFTs (38.192 MS/s tracking), 2.28 -> 1.54 (24 MS/s). The
-  same J/N to 5e-13 dB (rounding; split_reference regenerated), real_jammers.md unchanged.
-* The integration's decisions: the CW test's running median and scores in one kernel (per tested sum 38-87 -> 13-14
-  us), the comb's coarse selection (argpartition, argsort, separation) and its fine comb with the best candidate's
-  terms in two kernels (per sum 253-348 -> 185-199 us); a decision on a full window (4 sums) 1.81-1.95 -> 1.20-1.41
-  ms, in one process, alternated. One change of behaviour: among equal coarse combs (flat plateaus of rounded lags)
-  the shorter period is taken first, where numpy's partition left the order to its implementation; no field of
-  split_reference's 12 streams moved, real_jammers.md and the integration tests unchanged.
-
-What is left, and what the goal would need (38.192 MS/s quiet block, this run, bare STFTs): ridge 2.3, integration
-2.7, the classifier's Welch PSD and features 0.9, spectral step 0.7, frame length 0.3, the rest 1.6. Without the ridge
-(another round's) and the rest, the stages here would have to cost nothing to reach 4. The integration's cost is its
-statistic: an added block (43 % of them at 38.192 MS/s under the 16.5 MS/s budget) pays 5-6 bare STFTs in the
-spectral autocorrelation (its 2,386-frame 32-point STFT ~1, the 15 x 4,320-point FFT of the amplitudes ~1.5, the bin
-covariances ~0.7, the amplitudes and lag terms the rest) and ~0.7 in the 1024-point Welch PSD. Measured and not
-done, each a loss to weigh: (1) hop L instead of L / 2 halves the frames and the FFT lengths (47 instead of 96
-us, 75 instead of 158 us), but Hann frames at hop L / 2 are nearly independent (complex correlation of white noise
-0.19), so the comb's z for the same blocks falls by about sqrt 2: the same detection needs twice the blocks, the
-trade that halving ``integration_max_samples_per_s`` already makes, at the same cost per frame;
-(2) the CW statistic on the sum of the classifier's 256-point PSDs instead of its own 1024-point one would drop the
-1024-point Welch PSD (~0.3 bare STFTs per 38.192 MS/s block, ~1 at 10 MS/s complex, where every block is added);
-a tone at the reporting floor (the classifier's detect_jn_db, -6 dB) stays significant by orders of magnitude, but
-the 31-bin running median would span a quarter of a real 256-bin band and no longer follow a 2 MHz pass band in a
-19 MHz one: the smoothing width and the false alarms on the real clean captures would have to be derived again;
-(3) the envelope moments over 4,096 samples instead of 8,192: ~0.5 bare STFTs per tracking block, their scatter
-1.4 % instead of 1 % (the J/N column of real_jammers.md would scatter more); (4) decisions spread over blocks would
-lower the p99 (a full-window decision, 1.2-1.4 ms, lands on one block), not the mean. The classifier's Welch PSD
-(one 256-point Hann PSD of the block) is a bare STFT by construction: cheaper only shared with another stage's
-spectrum, whose frame length and overlap differ (the ridge: L = 64-256 at hop L / 2 on the block's tail).
-
-The second round (earlier the same day; its run, 2 runs of all 9 cases on a quieter machine, read 7.1-9.0 bare STFTs
-at 38.192 MS/s, 0.82-1.01x real time; 10 MS/s complex 15.7-18.8, 0.74-0.86x; 24 MS/s real 12.1-13.7, 0.87-1.04x; at
-the start of the day 9.2-10.0, 18.6-24.1 and 13.6-15.4; p99 <= 2.9 ms once the compiled functions are warmed up as
-the node does; the cold first blocks of a stream cost 70-340 ms: numba loading its cache):
-
-Where the time goes: four different spectrograms of every block, each with its own frame length, window and
-overlap, and 100+ numpy calls of 2-20 us each. Quiet 38.192 MS/s block: the integration over blocks 34 % (its own
-32-sample STFT at hop 16 of the whole block, 2,386 frames, about 1.5 bare STFTs; its 1024-point Welch PSD; the comb
-decision every 10 ms of stamps, 1-2 ms each, which sets the p99), the ridge analysis 33 % (its STFT of the last 16,384
-samples at hop L/2, noise levels, excess pass, periodicity FFT), the classifier's 256-point Welch PSD and features
-11 %, the spectral-step test 6 %. Tracking block: the ridge 57 %, Welch 17 %, the constant-envelope J/N 15 % (the
-analytic signal, an FFT of 8,192 samples). At 10 MS/s complex the block is small (10,000 samples) and the fixed cost
-of the numpy calls dominates: 19-24 bare STFTs.
-
-Done (bit-identical: every JammerEstimate field of 160-block streams at the three front ends, acquisition and
-switch-on, equal to those of 93ea8b7; test_ridge_speed_equivalence.py passes): stft_power's framing, float32
-conversion, window and |X|^2 compiled (no temporaries); the integration's fine comb summed from the candidate periods
-directly (no lag and mask arrays of a few hundred candidates x 128 multiples) and its candidate separation compiled.
-Gain 0-5 % of a block, within this machine's noise.
-
-Done, the ridge analysis, second pass (bit-identical: split_reference.py --check, all 900 fields of its 12 streams;
-real_jammers.md's table unchanged): the frame ridges' interpolation, presence flags and means fused into the excess
-pass (two kernels and one np.log instead of ~15 numpy calls; the noise divisors, the complex phasor, the cos/sin tables
-cached per bin count); phase_profiles in one kernel; scipy's pocketfft binding called directly for the STFT's FFT and
-the period search's two FFTs (the same transforms to the bit, without scipy.fft's or numpy.fft's dispatch); the lower
-noise quantile by a compiled selection on long columns (>= 768 frames: 1249 x 16 at 10 MS/s with 16-sample frames,
-where np.partition took 115 us and the selection 48). The ridge stage in bare STFTs, the run above against the
-previous one ('now' of each): 38.192 MS/s 3.3 -> 2.4 (acquisition), 5.2 -> 4.2 (tracking), 4.9 -> 4.0 (switch);
-10 MS/s complex 7.4 -> 5.1, 13.1 -> 11.0, 10.1 -> 9.0; 24 MS/s real 5.0 -> 3.5, 8.7 -> 7.6, 7.8 -> 6.9. What is left
-in it (thread time, a 38.192 MS/s tracking block, the last 16,384 samples at L = 64): the STFT 70 us, the noise levels
-65 us (np.partition 35-45 of it: numpy's selection beats a compiled one on columns of 255-511 frames), the frame
-ridges 45 us, the period search 30 us (its FFTs), the profiles, shape and residuals 40 us, the block-end frequency
-30 us (numpy's linalg in the law's prediction interval, kept for its bits), and the sample-resolution hook test
-(``fine_hook``): 1.5 ms on the 1 block in 20 that runs it (the analytic signal's FFTs of the block), 75-95 us a block
-on average.
-
-What the goal needs (not done): one spectrogram per block shared by the Welch features, the ridge and the
-integration, and the per-block glue in compiled passes. The shared spectrogram changes the statistics (the
-integration's comb and the ridge's noise-only peak excess are calibrated on their own frame lengths and overlaps), so
-the thresholds and the accuracy documents (real_jammers.md, sensitivity.md, stft_shapes.md) must be measured again
-with it; that did not fit in this session. The paper's "kalman" estimator is untouched.
-
-The stages around the ridge (2026-12-07, later; bit-identical: split_reference.py --check, all 900 fields of 12
-streams equal to the bit; the real-jammer table unchanged): the integration's spectral autocorrelation takes the
-|X|^2, amplitudes, normalisations and FFT padding from the spectrum in one compiled pass and its noise moments in
-another (per call 622 -> 523 us at 38.192 MS/s, 357 -> 245 us at 10 MS/s complex); its sums over the window and the
-sub-windows are stacked (one add per statistic); the comb's fine candidates are compiled (36 -> 3 us); the complex
-Welch PSD is compiled like the real one (82 -> 50 us per call at 10 MS/s); the noise template's running median is
-compiled (20 -> 7 us, every block while no template is learned); interleaved I/Q become complex samples without
-temporaries. In the run above, same process, alternated: integration 0.590 -> 0.448 ms (38.192 MS/s quiet), 0.888 ->
-0.642 ms (10 MS/s quiet); Welch + features 0.22 -> 0.14 ms (tracking, both front ends). The ratio to the bare STFT
-moved clearly only at 10 MS/s complex (27.2 -> 22.3 quiet, 19.2 -> 17.7 tracking); at 38.192 MS/s the bare STFT
-itself read 0.12-0.16 ms across the children, more than these gains. What is left in these stages is FFTs and the
-comb's decisions: a quiet 38.192 MS/s block added to the window costs about 4 bare STFTs (its 2,386-frame 32-point
-STFT, the 15 x 4,320-point FFT of the amplitudes, the 1024-point Welch PSD), and a decision about 0.3 ms per distinct
-window length (1.2 ms with the window full, every 10 ms of stamps). Cheaper only with a change of behaviour:
-integrating at hop L instead of L / 2 (half the frames and FFT length; the noise model of the comb measured again),
-deciding on fewer window lengths, or the constant-envelope moments over 4,096 samples instead of 8,192
-(measured per call 129 -> 71 us; 1.4 bare STFTs per tracking block now; their scatter 1.4 % instead of 1 %)."""
 
 
 def stage_section(res: dict[tuple[str, str], list[dict]]) -> str:

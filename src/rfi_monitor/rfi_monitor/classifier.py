@@ -48,7 +48,7 @@ from numba import njit
 from scipy import fft as sp_fft
 
 from rfi_monitor.numpy_kernels import pairwise_sum
-from rfi_monitor.stft import _frames_complex
+from rfi_monitor.stft import _frames_complex, fft_inplace, rfft_rows
 from rfi_node_common.params import parameter
 
 NONE, CW, CHIRP, WIDEBAND, UNKNOWN = 0, 1, 2, 3, 4
@@ -178,10 +178,10 @@ def welch_psd(x: np.ndarray, nfft: int, max_frames: int) -> tuple[np.ndarray, in
             xv = xc.view(np.float64)
             fwc = np.empty((nfr, nfft), dtype=np.complex64)
             _frames_complex(xv, nfft, _hann32(nfft), fwc)
-            return _complex_psd(sp_fft.fft(fwc, axis=1, overwrite_x=True), xv), nfr
+            return _complex_psd(fft_inplace(fwc, True), xv), nfr
         fw32 = np.empty((nfr, nfft), dtype=np.float32)
         _window_frames(xc, _hann32(nfft), fw32)
-        return _real_psd(sp_fft.rfft(fw32, axis=1, overwrite_x=True), xc), nfr
+        return _real_psd(rfft_rows(fw32), xc), nfr
     # single precision FFT (scipy's pocketfft; numpy's float32 path is slower than its float64 one):
     # the PSD needs ~1e-3 relative accuracy (it is smoothed and thresholded in dB), float32 gives
     # 1e-7; 53 us instead of 74 us for 149 frames of 256 on the development machine

@@ -39,6 +39,7 @@ from numba import njit
 from scipy import fft as sp_fft
 
 from gnss_common.moments import m2m4_powers
+from rfi_monitor.stft import irfft_rows, rfft_rows
 
 
 @njit(cache=True, nogil=True)
@@ -84,9 +85,11 @@ def hilbert_transform(x: np.ndarray) -> np.ndarray:
     (``ridge.analytic_signal``, the same padding), float64, shape (n,)."""
     n = x.size
     m = sp_fft.next_fast_len(n, real=True)
-    X = sp_fft.rfft(x, m)
+    xp = np.zeros(m)
+    xp[:n] = x
+    X = rfft_rows(xp)                            # scipy.fft.rfft(x, m) (its zero padding) without the dispatch
     _quadrature(X, m % 2 == 0)
-    return sp_fft.irfft(X, m, overwrite_x=True)[:n]
+    return irfft_rows(X, m)[:n]
 
 
 ENVELOPE_MAX_SAMPLES = 8192

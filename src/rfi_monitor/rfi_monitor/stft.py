@@ -46,7 +46,12 @@ _TRUNC_MEAN = 1.0 - _CUT * math.exp(-_CUT) / (1.0 - math.exp(-_CUT))
 
 LONG_COLUMN_FRAMES = 768
 """noise_levels: from this many frames on, the lower quantile of each bin is taken by the compiled selection
-(``numpy_kernels.column_order_statistic``), else by np.partition (speed only: the same value)."""
+(``numpy_kernels.column_order_statistic``) whatever the bins; below it, by the compiled selection up to
+``COMPILED_SELECT_CELLS`` values, else by np.partition (speed only: the same value)."""
+COMPILED_SELECT_CELLS = 1 << 15
+"""noise_levels: the compiled selection below LONG_COLUMN_FRAMES frames for up to this many frames x bins (measured,
+thread time, loaded machine, median of 9 x 50 calls: 155 x 128 60 vs 110 us for np.partition of the transposed copy,
+255 x 65 57 vs 77, 511 x 33 49 vs 82, 31 x 128 17 vs 19; at 255 x 129 it lost, 310 vs 154)."""
 
 _WIN: dict[int, np.ndarray] = {}
 
@@ -91,9 +96,33 @@ def stft_power(x: np.ndarray, frame_length: int, cplx: bool) -> tuple[np.ndarray
     xr = np.ascontiguousarray(x, dtype=np.float64)
     fr32 = np.empty((nfr, L), dtype=np.float32)
     _frames_real(xr, hop, w, fr32)
-    spec = _pfft.r2c(fr32, (1,), True, 0, None, 1) if _pfft is not None else sp_fft.rfft(fr32, axis=1)
+    spec = rfft_rows(fr32)
     freqs = np.arange(L // 2 + 1) / L
     return _power_real(spec), freqs
+
+
+def rfft_rows(a: np.ndarray) -> np.ndarray:
+    """``scipy.fft.rfft(a, axis=-1)`` of a real float32 or float64 C-contiguous array: scipy's own pocketfft call
+    without its dispatch (5-15 us a call; issue 26 item 2), the same transform to the bit."""
+    if _pfft is not None:
+        return _pfft.r2c(a, (a.ndim - 1,), True, 0, None, 1)
+    return sp_fft.rfft(a, axis=-1)
+
+
+def irfft_rows(X: np.ndarray, n: int) -> np.ndarray:
+    """``scipy.fft.irfft(X, n, axis=-1)`` of a complex C-contiguous array of n // 2 + 1 values along its last axis:
+    scipy's own pocketfft call (scaled by 1 / n) without its dispatch."""
+    if _pfft is not None and X.shape[-1] == n // 2 + 1 and np.iscomplexobj(X):
+        return _pfft.c2r(X, (X.ndim - 1,), int(n), False, 2, None, 1)
+    return sp_fft.irfft(X, n, axis=-1)
+
+
+def irfft_real(p: np.ndarray, n: int) -> np.ndarray:
+    """``scipy.fft.irfft(p, n)`` of a real float64 vector p of n // 2 + 1 values (a spectrum whose imaginary part is
+    zero): scipy's own pocketfft call (as scipy makes it: p + 0j, scaled by 1 / n) without its dispatch."""
+    if _pfft is not None and p.ndim == 1 and p.size == n // 2 + 1:
+        return _pfft.c2r(p + 0j, (0,), int(n), False, 2, None, 1)
+    return sp_fft.irfft(p, n)
 
 
 def fft_inplace(a: np.ndarray, forward: bool) -> np.ndarray:
@@ -166,10 +195,11 @@ def noise_levels(S: np.ndarray, smooth_bins: int, cplx: bool) -> np.ndarray:
     S = np.ascontiguousarray(S, dtype=np.float32)
     nfr, B = S.shape
     k = max(0, min(nfr - 1, int(_Q_LOW * nfr)))
-    # the same quantile either way; numpy's partition is faster on short columns, the compiled selection on long ones
-    # (measured: 35-40 vs 48 us at 255-511 frames x 33-65 bins; 95-120 vs 45-48 us at 1023-1249 frames x 16-17 bins)
-    q = (column_order_statistic(S, k) if nfr >= LONG_COLUMN_FRAMES
-         else np.partition(np.ascontiguousarray(S.T), k, axis=1)[:, k])
+    # the same quantile either way; which is faster depends on the shape (LONG_COLUMN_FRAMES, COMPILED_SELECT_CELLS);
+    # contiguous either way, so that _noise_levels_kernel has one compiled version, the one warm_up compiles (a
+    # strided q from np.partition compiled a second one, 1.1-1.6 s, on the first block that took that path)
+    q = (column_order_statistic(S, k) if nfr >= LONG_COLUMN_FRAMES or nfr * B <= COMPILED_SELECT_CELLS
+         else np.ascontiguousarray(np.partition(np.ascontiguousarray(S.T), k, axis=1)[:, k]))
     w = min(int(smooth_bins), B - (1 - B % 2))
     return _noise_levels_kernel(S, q, w, bool(cplx), bool(cplx), (B // 3) | 1)
 
@@ -277,13 +307,19 @@ def _noise_levels_kernel(S: np.ndarray, q: np.ndarray, w: int, wrap: bool, cplx:
     return lvl1
 
 
+_ENERGY: dict[int, float] = {}
+
+
 def _parseval(levels: np.ndarray, L: int, cplx: bool) -> float:
-    w = _window(L).astype(np.float64)
+    e = _ENERGY.get(L)
+    if e is None:
+        w = _window(L).astype(np.float64)
+        e = _ENERGY[L] = L * float(np.dot(w, w))         # per frame length (it does not change between blocks)
     if cplx:
         tot = float(levels.sum())
     else:
         tot = float(levels[0] + levels[-1] + 2.0 * levels[1:-1].sum())
-    return tot / (L * float(np.dot(w, w)))
+    return tot / e
 
 
 _BIAS: dict[tuple[int, bool, int], float] = {}
