@@ -25,6 +25,11 @@ are processed then; and once the input has been silent that long after a block, 
 with the last block's stamp) gives the counters of the whole stream. A block that does not continue the
 gathered ones (a gap, a format change, a stamp-gate restart) first has them processed.
 
+First acquisition: it runs in the receiver's worker thread (:mod:`gnss_correlator.receiver`), so the callback
+returns and the input keeps being taken; the receiver holds the blocks meanwhile (up to ``acquisition_hold_s`` of
+stream; ``blocks_held_for_acquisition``) and, when the worker triggers a guard condition, answers them all, the same
+intervals as a search in the callback would have given. The end-of-stream report waits for it.
+
 Diagnostics (every ``diagnostics_period_s`` of accepted stamp time): the counters, the tracked PRNs;
 ERROR after a core error since the last report, WARN when more than ``warn_rejected_fraction`` of the
 blocks of the last ``diagnostics_window_s`` were rejected, else OK; STALE (node clock) when no block
@@ -122,7 +127,9 @@ class GnssCorrelatorNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('gnss_correlator', **kwargs)
         self.params = declare(self, CorrelatorNodeParams)
-        self.receiver = Receiver(self.params.receiver())
+        # the first acquisition of a stream runs in the receiver's worker thread; it triggers this when done
+        self._search_done = self.create_guard_condition(self._poll_receiver)
+        self.receiver = self._new_receiver()
         self.counts: Counter[str] = Counter()
         for key in ('blocks_received', 'blocks_processed', 'core_errors', 'stamp_restarts', 'arrays_published'):
             self.counts[key] += 0
@@ -142,6 +149,7 @@ class GnssCorrelatorNode(Node):
                                             warning_throttle_s=self.params.warning_throttle_s)
         self.stale_watch = StaleInputWatch(self, self.health, self.params.input_timeout_s, self._publish_stale)
         self._pending: list[IfBlock] = []  # accepted blocks gathered for the receiver (module docstring)
+        self._blocks_in_search = 0  # blocks handed to the receiver while its first acquisition runs (it holds them)
         self._pending_samples = 0
         self._last_block_at = time.monotonic()
         self._idle_report_ns: int | None = None  # stamp of the last block accepted since the last idle report
@@ -188,7 +196,7 @@ class GnssCorrelatorNode(Node):
             self._flush()  # the blocks before the jump belong to the old time line
             self.counts['stamp_restarts'] += 1
             self.receiver.close()
-            self.receiver = Receiver(self.params.receiver())
+            self.receiver = self._new_receiver()
         counts = decode_counts(msg).astype('float64') * msg.scale
         samples = counts[0::2] + 1j * counts[1::2] if msg.is_complex else counts
         block = IfBlock(stamp_ns=stamp_ns, sample_rate_hz=msg.sample_rate_hz,
@@ -205,6 +213,9 @@ class GnssCorrelatorNode(Node):
         if self._diag_timer.due(stamp_ns):
             self.diag_pub.publish(self.diagnostics(stamp_ns))
 
+    def _new_receiver(self) -> Receiver:
+        return Receiver(self.params.receiver(), on_search_done=self._search_done.trigger)
+
     def _flush(self) -> None:
         """Hand the gathered blocks to the receiver as one, publish the completed intervals."""
         if not self._pending:
@@ -218,14 +229,36 @@ class GnssCorrelatorNode(Node):
                 intermediate_frequency_hz=first.intermediate_frequency_hz, is_complex=first.is_complex,
                 first_sample_index=first.first_sample_index, samples=samples))
         except Exception as err:  # noqa: BLE001 - a core fault must not end the node (module docstring)
-            self.counts['core_errors'] += len(blocks)
-            self.get_logger().error(f'receiver failed on {len(blocks)} blocks ({type(err).__name__}: {err}); '
-                                    'restarted')
-            self.receiver.close()
-            self.receiver = Receiver(self.params.receiver())
-            intervals = []
-        else:
-            self.counts['blocks_processed'] += len(blocks)
+            self._core_failed(err, len(blocks))
+            return
+        self.counts['blocks_processed'] += len(blocks)
+        self._blocks_in_search = self._blocks_in_search + len(blocks) if self.receiver.acquiring else 0
+        self._publish(intervals)
+
+    def _poll_receiver(self) -> None:
+        """The receiver's first acquisition ended (its worker triggered the guard condition): the intervals of
+        the blocks it held."""
+        try:
+            intervals = self.receiver.poll()
+        except Exception as err:  # noqa: BLE001 - a core fault must not end the node (module docstring)
+            self._core_failed(err, 0)
+            return
+        if not self.receiver.acquiring:
+            self._blocks_in_search = 0
+        self._publish(intervals)
+
+    def _core_failed(self, err: Exception, blocks: int) -> None:
+        """A receiver fault on ``blocks`` blocks handed in now: counted with those it held for its first
+        acquisition (counted processed when handed in), logged, the receiver rebuilt."""
+        self.counts['blocks_processed'] -= self._blocks_in_search
+        blocks += self._blocks_in_search
+        self._blocks_in_search = 0
+        self.counts['core_errors'] += blocks
+        self.get_logger().error(f'receiver failed on {blocks} blocks ({type(err).__name__}: {err}); restarted')
+        self.receiver.close()
+        self.receiver = self._new_receiver()
+
+    def _publish(self, intervals: list[CorrelatorInterval]) -> None:
         for interval in intervals:
             self.publisher.publish(correlator_array(interval, self.params.frame_id))
             self.counts['arrays_published'] += 1
@@ -235,6 +268,8 @@ class GnssCorrelatorNode(Node):
         idle_s = time.monotonic() - self._last_block_at
         if self._idle_report_ns is not None and idle_s >= self.params.idle_flush_ms * 1e-3:
             self._flush()
+            if self.receiver.acquiring:  # the blocks it holds are answered when the search ends: report then
+                return
             self.diag_pub.publish(self.diagnostics(self._idle_report_ns))
             self._idle_report_ns = None
 
@@ -257,6 +292,7 @@ class GnssCorrelatorNode(Node):
         values.update(self.health.values())
         rejected = sum(v for k, v in self.counts.items() if k.startswith('rejected_'))
         values['blocks_pending'] = len(self._pending)
+        values['blocks_held_for_acquisition'] = self._blocks_in_search
         # every block that reached the subscription reached the handler, and each was processed, rejected (with
         # its reason), failed in the receiver (counted, restarted) or is gathered for the next call
         values['accounting_ok'] = (
