@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 import rclpy
 from bench_progress import add_quiet_argument, case_log
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.executors import SingleThreadedExecutor
 
 from rfi_msgs.msg import CorrelatorArray
@@ -46,9 +46,27 @@ ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "docs" / "gnss_correlator" / "live_stream.md"
 POWER_DBM = -128.0
 """Each satellite's power: C/N0 46 dB-Hz over the front end's -114 dBm/MHz (174 - 128)."""
+FINAL_REPORT_WAIT_S = 120.0
+"""Longest wait for the node's report of the whole stream after the source ends, s."""
 PAUSE_S = 2.0
 """Pause before each run, s: the previous run's processes end."""
 CLK_TCK = os.sysconf("SC_CLK_TCK")
+CHILDREN: list[subprocess.Popen] = []
+"""The node and source processes started: any still running when the benchmark ends (an interruption, an error)
+are stopped, not left publishing into the next run or the next user of the ROS domain."""
+
+
+def stop_children() -> None:
+    """SIGINT to every child still running, then SIGKILL after 10 s."""
+    for proc in CHILDREN:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+    for proc in CHILDREN:
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
 
 
 @dataclass(frozen=True)
@@ -105,6 +123,26 @@ def stamp_of(raw: bytes) -> int:
     return sec * 1_000_000_000 + nsec
 
 
+def status_values(status: DiagnosticStatus) -> dict[str, str]:
+    """A gnss_correlator status as this probe keeps it: its values by key, and ``level`` as a decimal number
+    (rclpy gives the ``byte`` field as a bytes object: ``str(status.level)`` is ``"b'\\x03'"``, never ``"3"``, which
+    made every run wait out the 120-s bound for the node's final report)."""
+    level = status.level
+    number = int.from_bytes(level, "little") if isinstance(level, bytes) else int(level)
+    return {kv.key: kv.value for kv in status.values} | {"level": str(number)}
+
+
+STALE_LEVEL = str(int.from_bytes(DiagnosticStatus.STALE, "little"))
+
+
+def stream_reported(last: dict[str, str], blocks: int) -> bool:
+    """Whether ``last`` (:func:`status_values`) is the node's report of the whole stream: STALE (the input silent for
+    input_timeout_s), every block received or counted lost, none held for a first acquisition still running."""
+    return (last.get("level") == STALE_LEVEL
+            and int(last.get("blocks_received", 0)) + int(last.get("input./rfi/if_samples.lost", 0)) >= blocks
+            and last.get("blocks_held_for_acquisition", "0") == "0")
+
+
 def run_once(case: Case, data: Path, n: int, tmp: Path) -> dict[str, object]:
     """One run of the stream through a fresh node; the row's values."""
     time.sleep(PAUSE_S)
@@ -113,6 +151,7 @@ def run_once(case: Case, data: Path, n: int, tmp: Path) -> dict[str, object]:
     node_proc = subprocess.Popen([ros2_run, "gnss_correlator", "gnss_correlator_node", "--ros-args",
                                   "-p", "diagnostics_period_s:=0.5", "-p", "input_timeout_s:=1.0"],
                                  stdout=subprocess.DEVNULL, stderr=open(tmp / "node.log", "w"))
+    CHILDREN.append(node_proc)
     rclpy.init()
     probe = rclpy.create_node("correlator_live_probe")
     arrivals: list[tuple[float, int]] = []
@@ -128,7 +167,7 @@ def run_once(case: Case, data: Path, n: int, tmp: Path) -> dict[str, object]:
     def on_diag(m: DiagnosticArray) -> None:
         for st in m.status:
             if st.name == "gnss_correlator":
-                diags.append({kv.key: kv.value for kv in st.values} | {"level": str(st.level)})
+                diags.append(status_values(st))
 
     probe.create_subscription(CorrelatorArray, "/gnss/correlators", on_array, DATA_QOS, raw=True)
     probe.create_subscription(DiagnosticArray, "/diagnostics", on_diag, DIAGNOSTICS_QOS)
@@ -150,6 +189,7 @@ def run_once(case: Case, data: Path, n: int, tmp: Path) -> dict[str, object]:
                                "-p", "pace:=real_time", "-p", "wait_for_subscribers:=1",
                                "-p", "wait_timeout_s:=60.0"],
                               stdout=subprocess.DEVNULL, stderr=open(tmp / "source.log", "w"))
+    CHILDREN.append(source)
     source_cpu = 0.0
     stream_s = n / case.fs_hz
     deadline = time.time() + stream_s + 180
@@ -159,13 +199,13 @@ def run_once(case: Case, data: Path, n: int, tmp: Path) -> dict[str, object]:
         source_cpu = c if math.isfinite(c) else source_cpu
     blocks = n // int(round(case.fs_hz * case.block_s))
     # the node's last report: STALE after input_timeout_s of silence, once it has taken every block
-    end = time.time() + 120
+    end = time.time() + FINAL_REPORT_WAIT_S
+    reported = False
     while time.time() < end:
         ex.spin_once(timeout_sec=0.05)
         last = diags[-1] if diags else {}
-        if last.get("level") == "3" and int(last.get("blocks_received", 0)) + int(
-                last.get("input./rfi/if_samples.lost", 0)) >= blocks and (
-                not arrivals or time.time() - arrivals[-1][0] > 1.0):
+        if stream_reported(last, blocks) and (not arrivals or time.time() - arrivals[-1][0] > 1.0):
+            reported = True
             break
     node_cpu1 = cpu_s(node_proc.pid)
     load_end = os.getloadavg()[0]
@@ -211,6 +251,7 @@ def run_once(case: Case, data: Path, n: int, tmp: Path) -> dict[str, object]:
         "after it, per second of stream answered (arrays' stamps)": f"{steady:.2f}",
         "source (if_source) CPU, s (ratio)": f"{source_cpu:.2f} ({source_cpu / stream_s:.2f})",
         "load average at start / end": f"{load_start:.1f} / {load_end:.1f}",
+        "node's report of the whole stream seen": "yes" if reported else f"no (waited {FINAL_REPORT_WAIT_S:g} s)",
         "_node_cpu_ratio": (node_cpu1 - node_cpu0) / stream_s,
         "_steady": steady,
         "_answered": answered,
@@ -326,9 +367,12 @@ def main() -> None:
     repeats = max(1, args.repeat)
     log = case_log(__file__, total=repeats * len(CASES), quiet=args.quiet)
     runs: list[list[dict[str, object]]] = [[] for _ in CASES]
-    for _ in range(repeats):
-        for i, case in enumerate(log.cases_of(CASES, lambda c: c.label)):
-            runs[i].append(run_once(case, *streams[i], tmp))
+    try:
+        for _ in range(repeats):
+            for i, case in enumerate(log.cases_of(CASES, lambda c: c.label)):
+                runs[i].append(run_once(case, *streams[i], tmp))
+    finally:
+        stop_children()
     keys = [k for k in runs[0][0] if not k.startswith("_")]
     table = ("| quantity | " + " | ".join(c.label for c in CASES) + " |\n|---|" + "---|" * len(CASES) + "\n"
              + "\n".join(f"| {k} | " + " | ".join(" ; ".join(str(r[k]) for r in rs) for rs in runs) + " |"
