@@ -20,15 +20,18 @@ Writes docs/gnss_correlator/live_stream.md. Run (workspace sourced):
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import platform
+import shlex
 import signal
 import struct
 import subprocess
 import sys
 import tempfile
 import time
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -116,6 +119,22 @@ def cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / CLK_TCK
 
 
+def thread_cpu_s(pid: int) -> Counter[str]:
+    """User + system CPU time of each thread of a process so far, summed by thread name with its digits dropped
+    (``dds.rx.7411`` -> ``dds.rx.``; ``main``: the executor's; the kernel keeps 15 characters of a name:
+    ``gnss_correlator``, the acquisition worker), s."""
+    out: Counter[str] = Counter()
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            stat = (task / "stat").read_text()
+        except OSError:
+            continue
+        name = "main" if task.name == str(pid) else stat[stat.index("(") + 1:stat.rindex(")")]
+        fields = stat.rsplit(")", 1)[1].split()
+        out[name.rstrip("0123456789") or name] += (int(fields[11]) + int(fields[12])) / CLK_TCK
+    return out
+
+
 def stamp_of(raw: bytes) -> int:
     """header.stamp of a serialised message (CDR: 4 bytes of encapsulation, then int32 sec, uint32 nanosec), ns."""
     little = raw[1] == 1
@@ -143,13 +162,15 @@ def stream_reported(last: dict[str, str], blocks: int) -> bool:
             and last.get("blocks_held_for_acquisition", "0") == "0")
 
 
-def run_once(case: Case, data: Path, n: int, tmp: Path) -> dict[str, object]:
-    """One run of the stream through a fresh node; the row's values."""
+def run_once(case: Case, data: Path, n: int, tmp: Path, node_params: tuple[str, ...] = ()) -> dict[str, object]:
+    """One run of the stream through a fresh node (its shipped parameters, then ``node_params``: ``name:=value``
+    each); the row's values."""
     time.sleep(PAUSE_S)
     ros2_run = str(ROOT / "tools" / "ros2_run")
     load_start = os.getloadavg()[0]
     node_proc = subprocess.Popen([ros2_run, "gnss_correlator", "gnss_correlator_node", "--ros-args",
-                                  "-p", "diagnostics_period_s:=0.5", "-p", "input_timeout_s:=1.0"],
+                                  "-p", "diagnostics_period_s:=0.5", "-p", "input_timeout_s:=1.0",
+                                  *[a for v in node_params for a in ("-p", v)]],
                                  stdout=subprocess.DEVNULL, stderr=open(tmp / "node.log", "w"))
     CHILDREN.append(node_proc)
     rclpy.init()
@@ -181,6 +202,7 @@ def run_once(case: Case, data: Path, n: int, tmp: Path) -> dict[str, object]:
     for _ in range(10):
         ex.spin_once(timeout_sec=0.1)
     node_cpu0 = cpu_s(node_proc.pid)
+    threads0 = thread_cpu_s(node_proc.pid)
     source = subprocess.Popen([ros2_run, "rfi_experiments", "if_source", "--ros-args",
                                "-p", f"input:={data}", "-p", f"item_type:={case.item_type}",
                                "-p", f"sampling_frequency_hz:={case.fs_hz}",
@@ -208,6 +230,8 @@ def run_once(case: Case, data: Path, n: int, tmp: Path) -> dict[str, object]:
             reported = True
             break
     node_cpu1 = cpu_s(node_proc.pid)
+    threads = thread_cpu_s(node_proc.pid)
+    threads.subtract(threads0)
     load_end = os.getloadavg()[0]
     node_proc.send_signal(signal.SIGINT)
     try:
@@ -219,6 +243,7 @@ def run_once(case: Case, data: Path, n: int, tmp: Path) -> dict[str, object]:
     probe.destroy_node()
     rclpy.shutdown()
     last = diags[-1] if diags else {}
+    (tmp / "last_report.json").write_text(json.dumps(last, indent=1))  # the node's counters, to look into a run
     stamps = np.array([s for _, s in arrivals], dtype=np.int64)
     lat_ms = np.array([(t - s / 1e9) * 1e3 for t, s in arrivals]) if arrivals else np.array([math.nan])
     tail = lat_ms[len(lat_ms) // 2:] if len(lat_ms) > 1 else lat_ms
@@ -249,6 +274,8 @@ def run_once(case: Case, data: Path, n: int, tmp: Path) -> dict[str, object]:
             f"{node_cpu1 - node_cpu0:.2f} ({(node_cpu1 - node_cpu0) / stream_s:.2f})",
         "of it to the first array (first acquisition, kernel load), s": f"{first_cpu:.2f}",
         "after it, per second of stream answered (arrays' stamps)": f"{steady:.2f}",
+        "node CPU by thread over the stream, s": ", ".join(
+            f"{name} {v:.2f}" for name, v in threads.most_common() if v >= 0.05),
         "source (if_source) CPU, s (ratio)": f"{source_cpu:.2f} ({source_cpu / stream_s:.2f})",
         "load average at start / end": f"{load_start:.1f} / {load_end:.1f}",
         "node's report of the whole stream seen": "yes" if reported else f"no (waited {FINAL_REPORT_WAIT_S:g} s)",
@@ -350,31 +377,38 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=OUT, help=f"markdown to write (default {OUT.relative_to(ROOT)})")
     ap.add_argument("--in-process", action="store_true",
                     help="only the node's own work without the middleware, into live_stream_in_process.md")
+    ap.add_argument("--cases", default=",".join(str(k) for k in range(len(CASES))),
+                    help="the cases run, indices into CASES separated by commas (default all: "
+                    + "; ".join(f"{k} {c.label}" for k, c in enumerate(CASES)) + ")")
+    ap.add_argument("--node-param", action="append", default=[], metavar="NAME:=VALUE",
+                    help="a parameter of the node beyond its shipped ones (repeatable), e.g. acquisition_hold_s:=0.0 "
+                    "for the first acquisition in the callback")
     add_quiet_argument(ap)
     args = ap.parse_args()
+    cases = tuple(CASES[int(k)] for k in args.cases.split(","))
     if args.in_process:
         write_in_process(OUT.with_name("live_stream_in_process.md"))
         return
     tmp = Path(tempfile.mkdtemp(prefix="corr_live_"))
     streams = []
     made: dict[tuple[int, float], tuple[Path, int]] = {}
-    for case in CASES:  # one file per stream, whatever the block size (a whole number of 10-ms blocks)
+    for case in cases:  # one file per stream, whatever the block size (a whole number of 10-ms blocks)
         key = (case.channels, case.fs_hz)
         if key not in made:
             path = tmp / f"stream{len(made)}.i8"
             made[key] = (path, write_stream(case, round(args.seconds, 2), path))
         streams.append(made[key])
     repeats = max(1, args.repeat)
-    log = case_log(__file__, total=repeats * len(CASES), quiet=args.quiet)
-    runs: list[list[dict[str, object]]] = [[] for _ in CASES]
+    log = case_log(__file__, total=repeats * len(cases), quiet=args.quiet)
+    runs: list[list[dict[str, object]]] = [[] for _ in cases]
     try:
         for _ in range(repeats):
-            for i, case in enumerate(log.cases_of(CASES, lambda c: c.label)):
-                runs[i].append(run_once(case, *streams[i], tmp))
+            for i, case in enumerate(log.cases_of(cases, lambda c: c.label)):
+                runs[i].append(run_once(case, *streams[i], tmp, tuple(args.node_param)))
     finally:
         stop_children()
     keys = [k for k in runs[0][0] if not k.startswith("_")]
-    table = ("| quantity | " + " | ".join(c.label for c in CASES) + " |\n|---|" + "---|" * len(CASES) + "\n"
+    table = ("| quantity | " + " | ".join(c.label for c in cases) + " |\n|---|" + "---|" * len(cases) + "\n"
              + "\n".join(f"| {k} | " + " | ".join(" ; ".join(str(r[k]) for r in rs) for rs in runs) + " |"
                           for k in keys))
     medians = "\n".join(
@@ -383,7 +417,7 @@ def main() -> None:
         f"every block answered in {sum(bool(r['_answered']) for r in rs)} of {len(rs)} runs, latency (second "
         f"half) median of the runs' medians {np.median([r['_lat_tail_median'] for r in rs]):.1f} ms, load "
         f"average median {np.median([r['_load'] for r in rs]):.1f}"
-        for c, rs in zip(CASES, runs, strict=True))
+        for c, rs in zip(cases, runs, strict=True))
     cpu = "unknown"
     for line in Path("/proc/cpuinfo").read_text().splitlines():
         if line.startswith("model name"):
@@ -393,10 +427,11 @@ def main() -> None:
     log.say(medians)
     args.out.write_text(
         "# Live stream at 1x: gnss_correlator_node as its own process over DDS (issue 29, done when)\n\n"
-        f"Generated by `python benchmarks/correlator_live_stream.py --seconds {args.seconds:g} --repeat {repeats}`: "
+        f"Generated by `python benchmarks/correlator_live_stream.py {' '.join(shlex.quote(a) for a in sys.argv[1:])}`: "
         "if_source publishes a continuous simulated IF stream (rfi_sim, 2-bit, each satellite at 46 dB-Hz) at its "
         "sample rate (pace real_time, reliable, stamps from the ROS clock at the start) into the node started with "
-        "its shipped parameters (32 PRNs searched, acquisition of 10 ms in its callback at the first block); "
+        "its shipped parameters (32 PRNs searched, the first acquisition, of 10 ms, in its worker thread while the "
+        "blocks are held), and any given with --node-param; "
         "this probe records the node's /gnss/correlators and /diagnostics. "
         f"Each case was run {repeats} times, alternated; a cell gives the runs' values separated by ' ; '.\n"
         f"CPU: {cpu} ({platform.machine()}), {os.cpu_count()} logical CPUs shared with other workers' jobs; the "

@@ -38,6 +38,7 @@ arrived for ``input_timeout_s`` of wall time.
 
 from __future__ import annotations
 
+import os
 import time
 from collections import Counter
 
@@ -46,6 +47,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
+from gnss_correlator import tracking
 from gnss_correlator.acquisition import MIN_SAMPLE_RATE_HZ
 from gnss_correlator.node_params import CorrelatorNodeParams
 from gnss_correlator.receiver import CorrelatorInterval, IfBlock, Receiver
@@ -127,6 +129,7 @@ class GnssCorrelatorNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('gnss_correlator', **kwargs)
         self.params = declare(self, CorrelatorNodeParams)
+        tracking.warm_up()  # the kernel loaded now, not at the stream's first tracked block
         # the first acquisition of a stream runs in the receiver's worker thread; it triggers this when done
         self._search_done = self.create_guard_condition(self._poll_receiver)
         self.receiver = self._new_receiver()
@@ -322,7 +325,27 @@ class GnssCorrelatorNode(Node):
             f'no input on {self.subscription.topic_name} for {silent_s:.1f} s (wall clock)', self._values()))
 
 
+PROFILE_ENV = 'GNSS_CORRELATOR_PROFILE'
+"""Environment variable: a path; when set, the node's executor thread runs under cProfile (timed by the thread's CPU
+time) and its statistics are written there at exit (``python -m pstats PATH``), to see where a live stream's CPU
+goes."""
+
+
 def main(argv=None) -> int:
+    path = os.environ.get(PROFILE_ENV)
+    if not path:
+        return _run(argv)
+    import cProfile
+    profile = cProfile.Profile(time.thread_time)  # CPU time of the executor thread, not wall time
+    profile.enable()
+    try:
+        return _run(argv)
+    finally:
+        profile.disable()
+        profile.dump_stats(path)
+
+
+def _run(argv=None) -> int:
     return run_node(GnssCorrelatorNode, executable='gnss_correlator_node', params_cls=CorrelatorNodeParams,
                     topics=TOPICS, summary='GPS L1 C/A correlators (acquisition, DLL, FLL-assisted PLL) from the '
                     'front-end IF stream, for imm_carrier.', argv=argv)
