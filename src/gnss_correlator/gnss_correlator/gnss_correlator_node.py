@@ -28,7 +28,8 @@ gathered ones (a gap, a format change, a stamp-gate restart) first has them proc
 First acquisition: it runs in the receiver's worker thread (:mod:`gnss_correlator.receiver`), so the callback
 returns and the input keeps being taken; the receiver holds the blocks meanwhile (up to ``acquisition_hold_s`` of
 stream; ``blocks_held_for_acquisition``) and, when the worker triggers a guard condition, answers them all, the same
-intervals as a search in the callback would have given. The end-of-stream report waits for it.
+intervals as a search in the callback would have given, ``REPLAY_BLOCKS_PER_CALLBACK`` receiver calls per callback.
+The end-of-stream report waits for it.
 
 Diagnostics (every ``diagnostics_period_s`` of accepted stamp time): the counters, the tracked PRNs;
 ERROR after a core error since the last report, WARN when more than ``warn_rejected_fraction`` of the
@@ -81,6 +82,12 @@ BLOCK_REASONS = ('unknown_sample_format', 'bad_bits_per_sample', 'bad_sample_rat
                  'short_block', 'long_block', 'bad_first_sample_index', 'values_exceed_bits', 'blank_block',
                  'rate_below_2mhz', 'band_outside_nyquist', 'stamp_malformed', *STAMP_REASONS)
 """Why a block is rejected (``rejected_<reason>``, module docstring)."""
+
+REPLAY_BLOCKS_PER_CALLBACK = 10
+"""Blocks held during a first acquisition answered per callback after it (module docstring): the executor takes
+the input between two such callbacks, and the arrays leave at that pace, not in one burst of thousands that a
+subscriber's 1000-message queue would lose."""
+
 
 def block_problem(msg: IfSamples, doppler_max_hz: float, max_block_samples: int) -> str | None:
     """Why a block cannot be correlated (a key of :data:`BLOCK_REASONS` without the stamp ones), or None."""
@@ -242,13 +249,15 @@ class GnssCorrelatorNode(Node):
         """The receiver's first acquisition ended (its worker triggered the guard condition): the intervals of
         the blocks it held."""
         try:
-            intervals = self.receiver.poll()
+            intervals = self.receiver.poll(max_blocks=REPLAY_BLOCKS_PER_CALLBACK)
         except Exception as err:  # noqa: BLE001 - a core fault must not end the node (module docstring)
             self._core_failed(err, 0)
             return
         if not self.receiver.acquiring:
             self._blocks_in_search = 0
         self._publish(intervals)
+        if self.receiver.poll_ready:  # more held: after the input that arrived meanwhile
+            self._search_done.trigger()
 
     def _core_failed(self, err: Exception, blocks: int) -> None:
         """A receiver fault on ``blocks`` blocks handed in now: counted with those it held for its first

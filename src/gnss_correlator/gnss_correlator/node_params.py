@@ -52,7 +52,7 @@ class CorrelatorNodeParams(NodeDiagnosticsParams):
         4.0, 'Stream time held (checked, not yet tracked) while the first acquisition of a stream runs in the '
         'worker thread, s: the input keeps being taken meanwhile; past it the node waits for the search. The '
         'outputs do not depend on it. Memory: 4 bytes per real sample held, 8 per complex one (16.368 MS/s real: '
-        '65 MB per s); '
+        '65 MB per s; twice that when a scale that is not a power of two makes single precision inexact); '
         '0: the first acquisition in the callback.', minimum=0.0, maximum=60.0)
     false_alarm_probability: float = parameter(
         1e-3, 'Stated false-alarm probability of one satellite search (the threshold is derived from it).',

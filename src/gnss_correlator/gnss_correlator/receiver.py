@@ -22,7 +22,9 @@ The first acquisition of a stream (0.3-6 s of CPU at 4-16 MHz for 32 PRNs) runs 
 while the caller goes on handing in blocks: they are checked (format, gap) and held, up to
 ``acquisition_hold_s`` of stream, without being tracked (``blocks_held``); when the search is done, the next
 :meth:`Receiver.process` or :meth:`Receiver.poll` starts its channels on the window's first sample and replays the
-window and the held blocks one by one through the path a synchronous search would have taken, so the intervals
+window and the held blocks one by one through the path a synchronous search would have taken (``max_blocks`` per
+poll, two per block handed in meanwhile, so that the caller takes new input between the calls and its outputs do
+not leave in one burst), so the intervals
 are the same, whatever the search's duration (the node polls when the worker says it is done). Should the held
 blocks reach ``acquisition_hold_s``, the caller waits for the search there (``acquisition_waits``); with
 ``acquisition_hold_s`` 0 the search runs in the caller's thread (the synchronous path). Held samples are kept in
@@ -187,6 +189,7 @@ class _FirstSearch:
     start: int
     held: list[tuple[np.ndarray, int, int]] = field(default_factory=list)
     held_samples: int = 0
+    started: bool = False  # the search's channels started, its window tracked; the held blocks being replayed
 
 
 def _compact(x: np.ndarray) -> np.ndarray:
@@ -259,8 +262,14 @@ class Receiver:
 
     @property
     def acquiring(self) -> bool:
-        """Whether a first acquisition runs in the worker (blocks are held; :meth:`poll` when it is done)."""
+        """Whether a first acquisition runs in the worker or blocks are still held after it (:meth:`poll` when
+        it is done, until this is false)."""
         return self._first is not None
+
+    @property
+    def poll_ready(self) -> bool:
+        """Whether :meth:`poll` would answer now: the first acquisition is done and blocks are held."""
+        return self._first is not None and self._first.future.done()
 
     @property
     def blocks_held(self) -> int:
@@ -330,30 +339,39 @@ class Receiver:
         first.held.append((_compact(x), int(block.first_sample_index), int(block.stamp_ns)))
         first.held_samples += x.size
         self.counts['blocks_held'] += 1
-        if first.future.done():
-            return self._finish_first_search()
+        if first.future.done():  # the hold shrinks by one block more than came in
+            return self._finish_first_search(2)
         if first.held_samples >= self.config.acquisition_hold_s * fs:
             self.counts['acquisition_waits'] += 1
             return self._finish_first_search()
         return []
 
-    def poll(self, wait: bool = False) -> list[CorrelatorInterval]:
-        """The intervals of the window and the blocks held, once the first acquisition in the worker is done
-        (none before, nor when none runs; ``wait``: wait for it, as at the end of a replay). Raises what the
-        search raised."""
+    def poll(self, wait: bool = False, max_blocks: int | None = None) -> list[CorrelatorInterval]:
+        """The intervals of the window and of the blocks held, once the first acquisition in the worker is done
+        (none before, nor when none runs; ``wait``: wait for it, as at the end of a replay); at most
+        ``max_blocks`` held blocks per call (all: None), so that a caller can take new input between the calls
+        (:attr:`acquiring` stays true while blocks are held). Raises what the search raised."""
         if self._first is not None and (wait or self._first.future.done()):
-            return self._finish_first_search()
+            return self._finish_first_search(max_blocks)
         return []
 
-    def _finish_first_search(self) -> list[CorrelatorInterval]:
-        """Wait for the first acquisition, start its channels, replay its window and the blocks held."""
+    def _finish_first_search(self, max_blocks: int | None = None) -> list[CorrelatorInterval]:
+        """Wait for the first acquisition; once: start its channels, track its window; then replay up to
+        ``max_blocks`` of the blocks held (all: None), in their order."""
         first = self._first
         assert first is not None
-        results = first.future.result()  # waits only when the hold is full (process counted it)
-        self._first = None
-        out = self._first_window(first.window, first.start, results)
-        for x, index, stamp in first.held:
+        out: list[CorrelatorInterval] = []
+        if not first.started:
+            results = first.future.result()  # waits only when the hold is full (process counted it)
+            first.started = True
+            out = self._first_window(first.window, first.start, results)
+        count = len(first.held) if max_blocks is None else min(max_blocks, len(first.held))
+        replay, first.held = first.held[:count], first.held[count:]
+        for x, index, stamp in replay:
+            first.held_samples -= x.size
             out.extend(self._advance(np.asarray(x, dtype=first.window.dtype), index, stamp))
+        if not first.held:
+            self._first = None
         return out
 
     def _first_window(self, window: np.ndarray, start: int,

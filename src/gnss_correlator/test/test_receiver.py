@@ -196,8 +196,8 @@ class HeldSearch:
 
 def test_first_acquisition_in_the_worker_holds_blocks_and_gives_the_synchronous_outputs(samples, monkeypatch):
     """While the first search runs in the worker, the blocks are taken and held (none answered); once it is done
-    (the worker's notification), poll answers them all: the same intervals, value for value, as the search in the
-    caller's thread."""
+    (the worker's notification), poll answers a few and the blocks handed in after it two each: the same
+    intervals, value for value, as the search in the caller's thread."""
     _, sync = run(samples, ReceiverConfig(prns=(3, 7, 21), acquisition_ms=4, acquisition_hold_s=0.0), block=10_000)
     search = HeldSearch(monkeypatch)
     notified = threading.Event()
@@ -211,9 +211,13 @@ def test_first_acquisition_in_the_worker_holds_blocks_and_gives_the_synchronous_
             assert rx.acquiring and out == [] and rx.tracked_prns == ()
             assert rx.blocks_held == 19 and rx.counts['blocks_held'] == 19
             search.release.set()
-            assert notified.wait(timeout=60)
-            out += rx.poll()
-            assert not rx.acquiring and set(rx.tracked_prns) == {7, 21}
+            assert notified.wait(timeout=60) and rx.poll_ready
+            out += rx.poll(max_blocks=5)  # the window and 5 held blocks answered
+            assert rx.acquiring and rx.blocks_held == 14 and set(rx.tracked_prns) == {7, 21}
+        elif i > 20 * block:  # each block handed in now answers two held ones, in their order
+            assert rx.blocks_held == max(14 - (i // block - 20), 0)
+    out += rx.poll(wait=True)
+    assert not rx.acquiring
     rx.close()
     assert rx.counts['acquisition_waits'] == 0 and rx.counts['acquisitions'] == 1
     assert search.threads == ['gnss_correlator_acquisition_0']
