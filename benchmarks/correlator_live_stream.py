@@ -450,38 +450,44 @@ def main() -> None:
     log.finish(f"wrote {args.out}")
 
 
-NOTES = """Reading it: the node's CPU time is that of its process (every thread: the executor, the reacquisition worker,
-the middleware's) from the moment its subscription was in the graph to its last report, so it includes the first
-acquisition (in the callback) and, per block, the message's reception and deserialisation, the checks and decoding,
-the tracking and the publication of one CorrelatorArray per ms; the source (Python) and this probe take their own
-share of the 2 cores. "Every block answered": the node received and processed every block of the stream (none lost
-before it, none rejected), and its arrays' stamps are 1 ms apart without a gap from its first channel's first C/N0
-to the end. The latency over the whole stream includes the first acquisition (the node buffers 10 ms, searches 32
-PRNs in its callback, then works through the blocks queued meanwhile); the second half's shows whether it caught up.
+NOTES = """Reading it: the node's CPU time is that of its process (all threads) from the moment its subscription was in
+the graph to its last report; its split by thread (/proc/<pid>/task): "main" is the executor (taking and
+deserialising each block, the checks and decoding, the tracking, building and publishing one CorrelatorArray per ms),
+"gnss_correlator" the acquisition worker (Python threads keep the process's name; the first acquisition of the
+stream, 32 PRNs on 10 ms), "dds.*" the middleware's own threads. The robust figure is the executor thread's CPU per
+second of stream: it does not depend on when the first array arrived. "Every block answered": the node's final
+report seen, every block received and processed (none lost before it, none rejected, none still held for the first
+acquisition), and the arrays' stamps 1 ms apart without a gap from the first channel's first C/N0 to the end. The
+latency (arrival here minus the stamp) over the second half shows whether the node had caught up with the stream.
 
-**The done-when ("keeps up at 1x over DDS, every block answered") is not met on this machine at this load** (load
-average 13-22 on 2 shared vCPUs during the runs: four workers' tests and benchmarks; no quiet machine was available):
+**The done-when ("keeps up at 1x over DDS, every block answered") is met in 10-ms blocks and not in 1-ms blocks on
+this machine at this load** (load average 10-13 on 2 shared vCPUs during the runs: other workers' jobs):
 
-- In if_source's default 1-ms blocks, about two thirds of every stream was lost before the node (counted by its
-  input), in every run: the first acquisition runs in the node's callback (0.7-5.8 s of CPU to the first array,
-  many more seconds of wall time at this load), and meanwhile the 1000-message queues of the reliable DATA_QOS, 1 s
-  of 1-ms blocks, overflow; the node had not caught up at the end (9-24 s behind).
-- In 10-ms blocks (the same samples; the queues then hold 10 s) every block of both streams was answered in 3 of 3
-  runs, with the arrays' stamps 1 ms apart to the end, but late: after its first array the node spent 1.6 (12 ch at
-  4 MS/s complex) and 1.8 (8 ch at 16.368 MS/s real) s of CPU per second of stream, more than a core, so at 1x it
-  fell further behind (0.7-18 s at the end of 3 s). A longer stream would overflow the 10-s queue.
-- Where the CPU goes: the node's own work, measured in one process without the middleware
-  ([live_stream_in_process.md](live_stream_in_process.md)), is 0.5-0.7 ms per ms of stream at the same load (the
-  receiver 0.36-0.56 of it); the rest of the 1.6-1.8 is the middleware in the node's process (receiving 8-16 MB/s
-  of reliable IfSamples, publishing 1000 arrays per second) and the load's inflation of CPU time. The tracking
-  kernel alone is 0.21 and 0.46 of real time (tracking_speed.md).
+- In 10-ms blocks every block of both streams was answered in 3 of 3 runs, and every array reached this probe with
+  the stamps 1 ms apart. The executor thread took 0.61-0.65 s of CPU per second of stream (12 channels at 4 MS/s
+  complex) and 0.86-0.88 (8 channels at 16.368 MS/s real), under one core; the acquisition worker 0.30-0.37 and
+  1.56-1.72 s once, while the blocks were taken and held. The 4 MS/s stream caught up (0.24 s behind at the end of
+  one run, 0.8 and 4.4 s in the others); the 16.368 MS/s one did not within 5 s (4.7-12.6 s behind): at this
+  load the node does not get the core its 0.9 s/s plus the search need.
+- In 1-ms blocks (1000 messages a second) blocks were still lost before the node in 5 of 6 runs (0-2,841 of
+  5,000): while the acquisition worker runs Python code the executor thread, back from each wait for a message,
+  waits for the GIL; the 1000-message queue (1 s) overflows during the search. From a live SDR use 10-ms blocks.
+- Where the CPU went (issue: 1.6-1.8 s per second over DDS against 0.5-0.7 in one process): the middleware's
+  threads took 0.03-0.04 s per second of stream; the executor thread 0.6-0.9, against the node's own work of 0.5-0.7
+  measured in one process ([live_stream_in_process.md](live_stream_in_process.md), load 12). The 1.6-1.8 of the
+  earlier runs (load 13-22, the first acquisition in the callback) was not reproduced: with the search in the callback
+  again (`--node-param acquisition_hold_s:=0.0`, 10-ms blocks, 2 runs each, load 17-20) the CPU after the first array
+  was 0.65-0.72 and 0.81-0.85 s per second answered, the middleware's threads 0.03-0.04. What the profile of the
+  executor thread (GNSS_CORRELATOR_PROFILE, thread CPU time, 8 ch at 16.368 MS/s, 3 s, load 14) still shows beyond
+  the tracking kernel (0.50 s/s): the CorrelatorArray objects built per ms (0.32 s/s under the profiler) and rclpy's
+  publish (0.19 s/s), then the executor's own turns; the tracking kernel's first load (1.2 s of CPU) now happens when
+  the node starts (tracking.warm_up), not in the stream.
 
-Changed for this benchmark (the node file): blocks are gathered to 10 ms of stream before Receiver.process (its
-per-call cost made 1-ms blocks cost 0.92 of real time in CPU against 0.36 in 10-ms blocks, 12 ch at 4 MS/s, in
-process); the first measurement, before it, gave 1,120 and 1,010 of 3,000 1-ms blocks received and 1.27 / 2.21 s of
-CPU per second of stream (one run each, load 11-15). What would meet the goal: the first acquisition in the
-worker thread (as the reacquisitions are), so the input never stalls; fewer, larger messages (10-ms blocks from
-the source); and a core that the node does not share with three other workers.
+Changed for this document: the first acquisition runs in the receiver's worker thread while the node keeps taking
+blocks (held, bounded by acquisition_hold_s, answered 10 receiver calls per callback after the search: the same
+arrays as the synchronous path, tested); the tracking kernel is loaded at start-up; this probe waits for the node's
+final report correctly (the level of a DiagnosticStatus is bytes in rclpy: each run used to wait out its 120-s
+bound, which made a full run take half an hour), and its queue of arrays holds 20 s.
 """
 
 

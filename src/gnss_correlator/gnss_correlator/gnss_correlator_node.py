@@ -40,6 +40,7 @@ arrived for ``input_timeout_s`` of wall time.
 from __future__ import annotations
 
 import os
+import sys
 import time
 from collections import Counter
 
@@ -340,7 +341,15 @@ time) and its statistics are written there at exit (``python -m pstats PATH``), 
 goes."""
 
 
+GIL_SWITCH_INTERVAL_S = 0.0005
+"""The interpreter's switch interval in the node's process, s (Python's default 0.005): while the acquisition worker
+runs Python code, the executor thread, back from each wait for a message, waits for the GIL up to this long; at
+the default, at most ~200 messages a second were taken during a first acquisition (docs/gnss_correlator/
+live_stream.md)."""
+
+
 def main(argv=None) -> int:
+    sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
     path = os.environ.get(PROFILE_ENV)
     if not path:
         return _run(argv)
