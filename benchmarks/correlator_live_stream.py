@@ -461,19 +461,22 @@ acquisition), and the arrays' stamps 1 ms apart without a gap from the first cha
 latency (arrival here minus the stamp) over the second half shows whether the node had caught up with the stream.
 
 **The done-when ("keeps up at 1x over DDS, every block answered") is met in 10-ms blocks and not in 1-ms blocks on
-this machine at this load** (load average 10-13 on 2 shared vCPUs during the runs: other workers' jobs):
+this machine** (load average 3.4-7.7 on 2 shared vCPUs during these runs: other workers' jobs):
 
 - In 10-ms blocks every block of both streams was answered in 3 of 3 runs, and every array reached this probe with
-  the stamps 1 ms apart. The executor thread took 0.61-0.65 s of CPU per second of stream (12 channels at 4 MS/s
-  complex) and 0.86-0.88 (8 channels at 16.368 MS/s real), under one core; the acquisition worker 0.30-0.37 and
-  1.56-1.72 s once, while the blocks were taken and held. The 4 MS/s stream caught up (0.24 s behind at the end of
-  one run, 0.8 and 4.4 s in the others); the 16.368 MS/s one did not within 5 s (4.7-12.6 s behind): at this
-  load the node does not get the core its 0.9 s/s plus the search need.
-- In 1-ms blocks (1000 messages a second) blocks were still lost before the node in 5 of 6 runs (0-2,841 of
-  5,000): while the acquisition worker runs Python code the executor thread, back from each wait for a message,
-  waits for the GIL; the 1000-message queue (1 s) overflows during the search. From a live SDR use 10-ms blocks.
+  the stamps 1 ms apart. The executor thread took 0.58-0.63 s of CPU per second of stream (12 channels at 4 MS/s
+  complex) and 0.75-0.87 (8 channels at 16.368 MS/s real), under one core; the acquisition worker 0.28-0.41 and
+  1.48-1.76 s once, while the blocks were taken and held. The 4 MS/s stream kept up (13-279 ms behind over the
+  second half); the 16.368 MS/s one was still catching up after 5 s (0.5-4.0 s behind): the search's 1.5-1.8 s of
+  CPU is won back at the 0.13-0.25 s per second the core has left.
+- In 1-ms blocks (1000 messages a second) blocks were still lost before the node in 5 of 6 runs (0-268 of 5,000
+  at 4 MS/s, 158-162 at 16.368 MS/s): while the acquisition worker runs, the executor thread shares the core and the
+  GIL with it and the 1000-message queue (1 s) overflows. The node's process now switches the GIL every 0.5 ms
+  instead of 5 (GIL_SWITCH_INTERVAL_S); in 2 runs per stream before this document (load 9-10) 27-1,613 blocks were
+  lost with it, against 0-2,841 in 3 runs without it at load 10-13: not separable from the load. From a live SDR
+  use 10-ms blocks.
 - Where the CPU went (issue: 1.6-1.8 s per second over DDS against 0.5-0.7 in one process): the middleware's
-  threads took 0.03-0.04 s per second of stream; the executor thread 0.6-0.9, against the node's own work of 0.5-0.7
+  threads took 0.03-0.06 s per second of stream; the executor thread 0.6-0.9, against the node's own work of 0.5-0.7
   measured in one process ([live_stream_in_process.md](live_stream_in_process.md), load 12). The 1.6-1.8 of the
   earlier runs (load 13-22, the first acquisition in the callback) was not reproduced: with the search in the callback
   again (`--node-param acquisition_hold_s:=0.0`, 10-ms blocks, 2 runs each, load 17-20) the CPU after the first array
