@@ -20,35 +20,61 @@ Writes docs/gnss_correlator/live_stream.md. Run (workspace sourced):
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import platform
+import shlex
 import signal
 import struct
 import subprocess
 import sys
 import tempfile
 import time
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import rclpy
 from bench_progress import add_quiet_argument, case_log
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from rfi_msgs.msg import CorrelatorArray
-from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS
+from rfi_node_common.qos import DIAGNOSTICS_QOS
 from rfi_sim.if_signal import FrontEndConfig, GpsSatellite, IfSimulator
 
 ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "docs" / "gnss_correlator" / "live_stream.md"
 POWER_DBM = -128.0
 """Each satellite's power: C/N0 46 dB-Hz over the front end's -114 dBm/MHz (174 - 128)."""
+FINAL_REPORT_WAIT_S = 120.0
+"""Longest wait for the node's report of the whole stream after the source ends, s."""
 PAUSE_S = 2.0
+PROBE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=20_000, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE)
+"""This probe's subscription to the arrays: DATA_QOS with a queue of 20 s of arrays, so that the arrays the node
+publishes while it catches up are not lost in this (Python) probe's queue."""
 """Pause before each run, s: the previous run's processes end."""
 CLK_TCK = os.sysconf("SC_CLK_TCK")
+CHILDREN: list[subprocess.Popen] = []
+"""The node and source processes started: any still running when the benchmark ends (an interruption, an error)
+are stopped, not left publishing into the next run or the next user of the ROS domain."""
+
+
+def stop_children() -> None:
+    """SIGINT to every child still running, then SIGKILL after 10 s."""
+    for proc in CHILDREN:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+    for proc in CHILDREN:
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
 
 
 @dataclass(frozen=True)
@@ -98,6 +124,22 @@ def cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / CLK_TCK
 
 
+def thread_cpu_s(pid: int) -> Counter[str]:
+    """User + system CPU time of each thread of a process so far, summed by thread name with its digits dropped
+    (``dds.rx.7411`` -> ``dds.rx.``; ``main``: the executor's; the kernel keeps 15 characters of a name:
+    ``gnss_correlator``, the acquisition worker), s."""
+    out: Counter[str] = Counter()
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            stat = (task / "stat").read_text()
+        except OSError:
+            continue
+        name = "main" if task.name == str(pid) else stat[stat.index("(") + 1:stat.rindex(")")]
+        fields = stat.rsplit(")", 1)[1].split()
+        out[name.rstrip("0123456789") or name] += (int(fields[11]) + int(fields[12])) / CLK_TCK
+    return out
+
+
 def stamp_of(raw: bytes) -> int:
     """header.stamp of a serialised message (CDR: 4 bytes of encapsulation, then int32 sec, uint32 nanosec), ns."""
     little = raw[1] == 1
@@ -105,14 +147,37 @@ def stamp_of(raw: bytes) -> int:
     return sec * 1_000_000_000 + nsec
 
 
-def run_once(case: Case, data: Path, n: int, tmp: Path) -> dict[str, object]:
-    """One run of the stream through a fresh node; the row's values."""
+def status_values(status: DiagnosticStatus) -> dict[str, str]:
+    """A gnss_correlator status as this probe keeps it: its values by key, and ``level`` as a decimal number
+    (rclpy gives the ``byte`` field as a bytes object: ``str(status.level)`` is ``"b'\\x03'"``, never ``"3"``, which
+    made every run wait out the 120-s bound for the node's final report)."""
+    level = status.level
+    number = int.from_bytes(level, "little") if isinstance(level, bytes) else int(level)
+    return {kv.key: kv.value for kv in status.values} | {"level": str(number)}
+
+
+STALE_LEVEL = str(int.from_bytes(DiagnosticStatus.STALE, "little"))
+
+
+def stream_reported(last: dict[str, str], blocks: int) -> bool:
+    """Whether ``last`` (:func:`status_values`) is the node's report of the whole stream: STALE (the input silent for
+    input_timeout_s), every block received or counted lost, none held for a first acquisition still running."""
+    return (last.get("level") == STALE_LEVEL
+            and int(last.get("blocks_received", 0)) + int(last.get("input./rfi/if_samples.lost", 0)) >= blocks
+            and last.get("blocks_held_for_acquisition", "0") == "0")
+
+
+def run_once(case: Case, data: Path, n: int, tmp: Path, node_params: tuple[str, ...] = ()) -> dict[str, object]:
+    """One run of the stream through a fresh node (its shipped parameters, then ``node_params``: ``name:=value``
+    each); the row's values."""
     time.sleep(PAUSE_S)
     ros2_run = str(ROOT / "tools" / "ros2_run")
     load_start = os.getloadavg()[0]
     node_proc = subprocess.Popen([ros2_run, "gnss_correlator", "gnss_correlator_node", "--ros-args",
-                                  "-p", "diagnostics_period_s:=0.5", "-p", "input_timeout_s:=1.0"],
+                                  "-p", "diagnostics_period_s:=0.5", "-p", "input_timeout_s:=1.0",
+                                  *[a for v in node_params for a in ("-p", v)]],
                                  stdout=subprocess.DEVNULL, stderr=open(tmp / "node.log", "w"))
+    CHILDREN.append(node_proc)
     rclpy.init()
     probe = rclpy.create_node("correlator_live_probe")
     arrivals: list[tuple[float, int]] = []
@@ -128,9 +193,9 @@ def run_once(case: Case, data: Path, n: int, tmp: Path) -> dict[str, object]:
     def on_diag(m: DiagnosticArray) -> None:
         for st in m.status:
             if st.name == "gnss_correlator":
-                diags.append({kv.key: kv.value for kv in st.values} | {"level": str(st.level)})
+                diags.append(status_values(st))
 
-    probe.create_subscription(CorrelatorArray, "/gnss/correlators", on_array, DATA_QOS, raw=True)
+    probe.create_subscription(CorrelatorArray, "/gnss/correlators", on_array, PROBE_QOS, raw=True)
     probe.create_subscription(DiagnosticArray, "/diagnostics", on_diag, DIAGNOSTICS_QOS)
     ex = SingleThreadedExecutor()
     ex.add_node(probe)
@@ -142,6 +207,7 @@ def run_once(case: Case, data: Path, n: int, tmp: Path) -> dict[str, object]:
     for _ in range(10):
         ex.spin_once(timeout_sec=0.1)
     node_cpu0 = cpu_s(node_proc.pid)
+    threads0 = thread_cpu_s(node_proc.pid)
     source = subprocess.Popen([ros2_run, "rfi_experiments", "if_source", "--ros-args",
                                "-p", f"input:={data}", "-p", f"item_type:={case.item_type}",
                                "-p", f"sampling_frequency_hz:={case.fs_hz}",
@@ -150,6 +216,7 @@ def run_once(case: Case, data: Path, n: int, tmp: Path) -> dict[str, object]:
                                "-p", "pace:=real_time", "-p", "wait_for_subscribers:=1",
                                "-p", "wait_timeout_s:=60.0"],
                               stdout=subprocess.DEVNULL, stderr=open(tmp / "source.log", "w"))
+    CHILDREN.append(source)
     source_cpu = 0.0
     stream_s = n / case.fs_hz
     deadline = time.time() + stream_s + 180
@@ -159,15 +226,17 @@ def run_once(case: Case, data: Path, n: int, tmp: Path) -> dict[str, object]:
         source_cpu = c if math.isfinite(c) else source_cpu
     blocks = n // int(round(case.fs_hz * case.block_s))
     # the node's last report: STALE after input_timeout_s of silence, once it has taken every block
-    end = time.time() + 120
+    end = time.time() + FINAL_REPORT_WAIT_S
+    reported = False
     while time.time() < end:
         ex.spin_once(timeout_sec=0.05)
         last = diags[-1] if diags else {}
-        if last.get("level") == "3" and int(last.get("blocks_received", 0)) + int(
-                last.get("input./rfi/if_samples.lost", 0)) >= blocks and (
-                not arrivals or time.time() - arrivals[-1][0] > 1.0):
+        if stream_reported(last, blocks) and (not arrivals or time.time() - arrivals[-1][0] > 1.0):
+            reported = True
             break
     node_cpu1 = cpu_s(node_proc.pid)
+    threads = thread_cpu_s(node_proc.pid)
+    threads.subtract(threads0)
     load_end = os.getloadavg()[0]
     node_proc.send_signal(signal.SIGINT)
     try:
@@ -179,6 +248,7 @@ def run_once(case: Case, data: Path, n: int, tmp: Path) -> dict[str, object]:
     probe.destroy_node()
     rclpy.shutdown()
     last = diags[-1] if diags else {}
+    (tmp / "last_report.json").write_text(json.dumps(last, indent=1))  # the node's counters, to look into a run
     stamps = np.array([s for _, s in arrivals], dtype=np.int64)
     lat_ms = np.array([(t - s / 1e9) * 1e3 for t, s in arrivals]) if arrivals else np.array([math.nan])
     tail = lat_ms[len(lat_ms) // 2:] if len(lat_ms) > 1 else lat_ms
@@ -189,7 +259,8 @@ def run_once(case: Case, data: Path, n: int, tmp: Path) -> dict[str, object]:
     steps = np.diff(unique) if unique.size > 1 else np.array([], dtype=np.int64)
     lost = last.get("input./rfi/if_samples.lost", "?")
     rejected = sum(int(v) for k, v in last.items() if k.startswith("rejected_"))
-    answered = (last.get("blocks_processed") == str(blocks) and str(lost) == "0" and rejected == 0)
+    # processed counts the blocks handed to the receiver, held ones too: the final report says none is held
+    answered = (reported and last.get("blocks_processed") == str(blocks) and str(lost) == "0" and rejected == 0)
     return {
         "stream, s": f"{stream_s:g}",
         "blocks in the stream": blocks,
@@ -209,10 +280,16 @@ def run_once(case: Case, data: Path, n: int, tmp: Path) -> dict[str, object]:
             f"{node_cpu1 - node_cpu0:.2f} ({(node_cpu1 - node_cpu0) / stream_s:.2f})",
         "of it to the first array (first acquisition, kernel load), s": f"{first_cpu:.2f}",
         "after it, per second of stream answered (arrays' stamps)": f"{steady:.2f}",
+        "executor thread CPU per second of stream (receive, check, decode, track, publish)":
+            f"{threads['main'] / stream_s:.2f}",
+        "node CPU by thread over the stream, s": ", ".join(
+            f"{name} {v:.2f}" for name, v in threads.most_common() if v >= 0.05),
         "source (if_source) CPU, s (ratio)": f"{source_cpu:.2f} ({source_cpu / stream_s:.2f})",
         "load average at start / end": f"{load_start:.1f} / {load_end:.1f}",
+        "node's report of the whole stream seen": "yes" if reported else f"no (waited {FINAL_REPORT_WAIT_S:g} s)",
         "_node_cpu_ratio": (node_cpu1 - node_cpu0) / stream_s,
         "_steady": steady,
+        "_main": threads["main"] / stream_s,
         "_answered": answered,
         "_lat_tail_median": float(np.median(tail)),
         "_load": (load_start + load_end) / 2,
@@ -309,37 +386,48 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=OUT, help=f"markdown to write (default {OUT.relative_to(ROOT)})")
     ap.add_argument("--in-process", action="store_true",
                     help="only the node's own work without the middleware, into live_stream_in_process.md")
+    ap.add_argument("--cases", default=",".join(str(k) for k in range(len(CASES))),
+                    help="the cases run, indices into CASES separated by commas (default all: "
+                    + "; ".join(f"{k} {c.label}" for k, c in enumerate(CASES)) + ")")
+    ap.add_argument("--node-param", action="append", default=[], metavar="NAME:=VALUE",
+                    help="a parameter of the node beyond its shipped ones (repeatable), e.g. acquisition_hold_s:=0.0 "
+                    "for the first acquisition in the callback")
     add_quiet_argument(ap)
     args = ap.parse_args()
+    cases = tuple(CASES[int(k)] for k in args.cases.split(","))
     if args.in_process:
         write_in_process(OUT.with_name("live_stream_in_process.md"))
         return
     tmp = Path(tempfile.mkdtemp(prefix="corr_live_"))
     streams = []
     made: dict[tuple[int, float], tuple[Path, int]] = {}
-    for case in CASES:  # one file per stream, whatever the block size (a whole number of 10-ms blocks)
+    for case in cases:  # one file per stream, whatever the block size (a whole number of 10-ms blocks)
         key = (case.channels, case.fs_hz)
         if key not in made:
             path = tmp / f"stream{len(made)}.i8"
             made[key] = (path, write_stream(case, round(args.seconds, 2), path))
         streams.append(made[key])
     repeats = max(1, args.repeat)
-    log = case_log(__file__, total=repeats * len(CASES), quiet=args.quiet)
-    runs: list[list[dict[str, object]]] = [[] for _ in CASES]
-    for _ in range(repeats):
-        for i, case in enumerate(log.cases_of(CASES, lambda c: c.label)):
-            runs[i].append(run_once(case, *streams[i], tmp))
+    log = case_log(__file__, total=repeats * len(cases), quiet=args.quiet)
+    runs: list[list[dict[str, object]]] = [[] for _ in cases]
+    try:
+        for _ in range(repeats):
+            for i, case in enumerate(log.cases_of(cases, lambda c: c.label)):
+                runs[i].append(run_once(case, *streams[i], tmp, tuple(args.node_param)))
+    finally:
+        stop_children()
     keys = [k for k in runs[0][0] if not k.startswith("_")]
-    table = ("| quantity | " + " | ".join(c.label for c in CASES) + " |\n|---|" + "---|" * len(CASES) + "\n"
+    table = ("| quantity | " + " | ".join(c.label for c in cases) + " |\n|---|" + "---|" * len(cases) + "\n"
              + "\n".join(f"| {k} | " + " | ".join(" ; ".join(str(r[k]) for r in rs) for rs in runs) + " |"
                           for k in keys))
     medians = "\n".join(
         f"- {c.label}: node CPU / stream time median {np.median([r['_node_cpu_ratio'] for r in rs]):.2f} "
-        f"(after the first array, per second answered: {np.median([r['_steady'] for r in rs]):.2f}), "
+        f"(after the first array, per second answered: {np.median([r['_steady'] for r in rs]):.2f}; the executor "
+        f"thread per second of stream: {np.median([r['_main'] for r in rs]):.2f}), "
         f"every block answered in {sum(bool(r['_answered']) for r in rs)} of {len(rs)} runs, latency (second "
         f"half) median of the runs' medians {np.median([r['_lat_tail_median'] for r in rs]):.1f} ms, load "
         f"average median {np.median([r['_load'] for r in rs]):.1f}"
-        for c, rs in zip(CASES, runs, strict=True))
+        for c, rs in zip(cases, runs, strict=True))
     cpu = "unknown"
     for line in Path("/proc/cpuinfo").read_text().splitlines():
         if line.startswith("model name"):
@@ -349,10 +437,11 @@ def main() -> None:
     log.say(medians)
     args.out.write_text(
         "# Live stream at 1x: gnss_correlator_node as its own process over DDS (issue 29, done when)\n\n"
-        f"Generated by `python benchmarks/correlator_live_stream.py --seconds {args.seconds:g} --repeat {repeats}`: "
+        f"Generated by `python benchmarks/correlator_live_stream.py {' '.join(shlex.quote(a) for a in sys.argv[1:])}`: "
         "if_source publishes a continuous simulated IF stream (rfi_sim, 2-bit, each satellite at 46 dB-Hz) at its "
         "sample rate (pace real_time, reliable, stamps from the ROS clock at the start) into the node started with "
-        "its shipped parameters (32 PRNs searched, acquisition of 10 ms in its callback at the first block); "
+        "its shipped parameters (32 PRNs searched, the first acquisition, of 10 ms, in its worker thread while the "
+        "blocks are held), and any given with --node-param; "
         "this probe records the node's /gnss/correlators and /diagnostics. "
         f"Each case was run {repeats} times, alternated; a cell gives the runs' values separated by ' ; '.\n"
         f"CPU: {cpu} ({platform.machine()}), {os.cpu_count()} logical CPUs shared with other workers' jobs; the "
@@ -361,38 +450,47 @@ def main() -> None:
     log.finish(f"wrote {args.out}")
 
 
-NOTES = """Reading it: the node's CPU time is that of its process (every thread: the executor, the reacquisition worker,
-the middleware's) from the moment its subscription was in the graph to its last report, so it includes the first
-acquisition (in the callback) and, per block, the message's reception and deserialisation, the checks and decoding,
-the tracking and the publication of one CorrelatorArray per ms; the source (Python) and this probe take their own
-share of the 2 cores. "Every block answered": the node received and processed every block of the stream (none lost
-before it, none rejected), and its arrays' stamps are 1 ms apart without a gap from its first channel's first C/N0
-to the end. The latency over the whole stream includes the first acquisition (the node buffers 10 ms, searches 32
-PRNs in its callback, then works through the blocks queued meanwhile); the second half's shows whether it caught up.
+NOTES = """Reading it: the node's CPU time is that of its process (all threads) from the moment its subscription was in
+the graph to its last report; its split by thread (/proc/<pid>/task): "main" is the executor (taking and
+deserialising each block, the checks and decoding, the tracking, building and publishing one CorrelatorArray per ms),
+"gnss_correlator" the acquisition worker (Python threads keep the process's name; the first acquisition of the
+stream, 32 PRNs on 10 ms), "dds.*" the middleware's own threads. The robust figure is the executor thread's CPU per
+second of stream: it does not depend on when the first array arrived. "Every block answered": the node's final
+report seen, every block received and processed (none lost before it, none rejected, none still held for the first
+acquisition), and the arrays' stamps 1 ms apart without a gap from the first channel's first C/N0 to the end. The
+latency (arrival here minus the stamp) over the second half shows whether the node had caught up with the stream.
 
-**The done-when ("keeps up at 1x over DDS, every block answered") is not met on this machine at this load** (load
-average 13-22 on 2 shared vCPUs during the runs: four workers' tests and benchmarks; no quiet machine was available):
+**The done-when ("keeps up at 1x over DDS, every block answered") is met in 10-ms blocks and not in 1-ms blocks on
+this machine** (load average 3.4-7.7 on 2 shared vCPUs during these runs: other workers' jobs):
 
-- In if_source's default 1-ms blocks, about two thirds of every stream was lost before the node (counted by its
-  input), in every run: the first acquisition runs in the node's callback (0.7-5.8 s of CPU to the first array,
-  many more seconds of wall time at this load), and meanwhile the 1000-message queues of the reliable DATA_QOS, 1 s
-  of 1-ms blocks, overflow; the node had not caught up at the end (9-24 s behind).
-- In 10-ms blocks (the same samples; the queues then hold 10 s) every block of both streams was answered in 3 of 3
-  runs, with the arrays' stamps 1 ms apart to the end, but late: after its first array the node spent 1.6 (12 ch at
-  4 MS/s complex) and 1.8 (8 ch at 16.368 MS/s real) s of CPU per second of stream, more than a core, so at 1x it
-  fell further behind (0.7-18 s at the end of 3 s). A longer stream would overflow the 10-s queue.
-- Where the CPU goes: the node's own work, measured in one process without the middleware
-  ([live_stream_in_process.md](live_stream_in_process.md)), is 0.5-0.7 ms per ms of stream at the same load (the
-  receiver 0.36-0.56 of it); the rest of the 1.6-1.8 is the middleware in the node's process (receiving 8-16 MB/s
-  of reliable IfSamples, publishing 1000 arrays per second) and the load's inflation of CPU time. The tracking
-  kernel alone is 0.21 and 0.46 of real time (tracking_speed.md).
+- In 10-ms blocks every block of both streams was answered in 3 of 3 runs, and every array reached this probe with
+  the stamps 1 ms apart. The executor thread took 0.58-0.63 s of CPU per second of stream (12 channels at 4 MS/s
+  complex) and 0.75-0.87 (8 channels at 16.368 MS/s real), under one core; the acquisition worker 0.28-0.41 and
+  1.48-1.76 s once, while the blocks were taken and held. The 4 MS/s stream kept up (13-279 ms behind over the
+  second half); the 16.368 MS/s one was still catching up after 5 s (0.5-4.0 s behind): the search's 1.5-1.8 s of
+  CPU is won back at the 0.13-0.25 s per second the core has left.
+- In 1-ms blocks (1000 messages a second) blocks were still lost before the node in 5 of 6 runs (0-268 of 5,000
+  at 4 MS/s, 158-162 at 16.368 MS/s): while the acquisition worker runs, the executor thread shares the core and the
+  GIL with it and the 1000-message queue (1 s) overflows. The node's process now switches the GIL every 0.5 ms
+  instead of 5 (GIL_SWITCH_INTERVAL_S); in 2 runs per stream before this document (load 9-10) 27-1,613 blocks were
+  lost with it, against 0-2,841 in 3 runs without it at load 10-13: not separable from the load. From a live SDR
+  use 10-ms blocks.
+- Where the CPU went (issue: 1.6-1.8 s per second over DDS against 0.5-0.7 in one process): the middleware's
+  threads took 0.03-0.06 s per second of stream; the executor thread 0.6-0.9, against the node's own work of 0.5-0.7
+  measured in one process ([live_stream_in_process.md](live_stream_in_process.md), load 12). The 1.6-1.8 of the
+  earlier runs (load 13-22, the first acquisition in the callback) was not reproduced: with the search in the callback
+  again (`--node-param acquisition_hold_s:=0.0`, 10-ms blocks, 2 runs each, load 17-20) the CPU after the first array
+  was 0.65-0.72 and 0.81-0.85 s per second answered, the middleware's threads 0.03-0.04. What the profile of the
+  executor thread (GNSS_CORRELATOR_PROFILE, thread CPU time, 8 ch at 16.368 MS/s, 3 s, load 14) still shows beyond
+  the tracking kernel (0.50 s/s): the CorrelatorArray objects built per ms (0.32 s/s under the profiler) and rclpy's
+  publish (0.19 s/s), then the executor's own turns; the tracking kernel's first load (1.2 s of CPU) now happens when
+  the node starts (tracking.warm_up), not in the stream.
 
-Changed for this benchmark (the node file): blocks are gathered to 10 ms of stream before Receiver.process (its
-per-call cost made 1-ms blocks cost 0.92 of real time in CPU against 0.36 in 10-ms blocks, 12 ch at 4 MS/s, in
-process); the first measurement, before it, gave 1,120 and 1,010 of 3,000 1-ms blocks received and 1.27 / 2.21 s of
-CPU per second of stream (one run each, load 11-15). What would meet the goal: the first acquisition in the
-worker thread (as the reacquisitions are), so the input never stalls; fewer, larger messages (10-ms blocks from
-the source); and a core that the node does not share with three other workers.
+Changed for this document: the first acquisition runs in the receiver's worker thread while the node keeps taking
+blocks (held, bounded by acquisition_hold_s, answered 10 receiver calls per callback after the search: the same
+arrays as the synchronous path, tested); the tracking kernel is loaded at start-up; this probe waits for the node's
+final report correctly (the level of a DiagnosticStatus is bytes in rclpy: each run used to wait out its 120-s
+bound, which made a full run take half an hour), and its queue of arrays holds 20 s.
 """
 
 

@@ -25,6 +25,12 @@ are processed then; and once the input has been silent that long after a block, 
 with the last block's stamp) gives the counters of the whole stream. A block that does not continue the
 gathered ones (a gap, a format change, a stamp-gate restart) first has them processed.
 
+First acquisition: it runs in the receiver's worker thread (:mod:`gnss_correlator.receiver`), so the callback
+returns and the input keeps being taken; the receiver holds the blocks meanwhile (up to ``acquisition_hold_s`` of
+stream; ``blocks_held_for_acquisition``) and, when the worker triggers a guard condition, answers them all, the same
+intervals as a search in the callback would have given, ``REPLAY_BLOCKS_PER_CALLBACK`` receiver calls per callback.
+The end-of-stream report waits for it.
+
 Diagnostics (every ``diagnostics_period_s`` of accepted stamp time): the counters, the tracked PRNs;
 ERROR after a core error since the last report, WARN when more than ``warn_rejected_fraction`` of the
 blocks of the last ``diagnostics_window_s`` were rejected, else OK; STALE (node clock) when no block
@@ -33,6 +39,8 @@ arrived for ``input_timeout_s`` of wall time.
 
 from __future__ import annotations
 
+import os
+import sys
 import time
 from collections import Counter
 
@@ -41,6 +49,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
+from gnss_correlator import tracking
 from gnss_correlator.acquisition import MIN_SAMPLE_RATE_HZ
 from gnss_correlator.node_params import CorrelatorNodeParams
 from gnss_correlator.receiver import CorrelatorInterval, IfBlock, Receiver
@@ -74,6 +83,12 @@ BLOCK_REASONS = ('unknown_sample_format', 'bad_bits_per_sample', 'bad_sample_rat
                  'short_block', 'long_block', 'bad_first_sample_index', 'values_exceed_bits', 'blank_block',
                  'rate_below_2mhz', 'band_outside_nyquist', 'stamp_malformed', *STAMP_REASONS)
 """Why a block is rejected (``rejected_<reason>``, module docstring)."""
+
+REPLAY_BLOCKS_PER_CALLBACK = 10
+"""Blocks held during a first acquisition answered per callback after it (module docstring): the executor takes
+the input between two such callbacks, and the arrays leave at that pace, not in one burst of thousands that a
+subscriber's 1000-message queue would lose."""
+
 
 def block_problem(msg: IfSamples, doppler_max_hz: float, max_block_samples: int) -> str | None:
     """Why a block cannot be correlated (a key of :data:`BLOCK_REASONS` without the stamp ones), or None."""
@@ -122,7 +137,10 @@ class GnssCorrelatorNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('gnss_correlator', **kwargs)
         self.params = declare(self, CorrelatorNodeParams)
-        self.receiver = Receiver(self.params.receiver())
+        tracking.warm_up()  # the kernel loaded now, not at the stream's first tracked block
+        # the first acquisition of a stream runs in the receiver's worker thread; it triggers this when done
+        self._search_done = self.create_guard_condition(self._poll_receiver)
+        self.receiver = self._new_receiver()
         self.counts: Counter[str] = Counter()
         for key in ('blocks_received', 'blocks_processed', 'core_errors', 'stamp_restarts', 'arrays_published'):
             self.counts[key] += 0
@@ -142,6 +160,7 @@ class GnssCorrelatorNode(Node):
                                             warning_throttle_s=self.params.warning_throttle_s)
         self.stale_watch = StaleInputWatch(self, self.health, self.params.input_timeout_s, self._publish_stale)
         self._pending: list[IfBlock] = []  # accepted blocks gathered for the receiver (module docstring)
+        self._blocks_in_search = 0  # blocks handed to the receiver while its first acquisition runs (it holds them)
         self._pending_samples = 0
         self._last_block_at = time.monotonic()
         self._idle_report_ns: int | None = None  # stamp of the last block accepted since the last idle report
@@ -188,7 +207,7 @@ class GnssCorrelatorNode(Node):
             self._flush()  # the blocks before the jump belong to the old time line
             self.counts['stamp_restarts'] += 1
             self.receiver.close()
-            self.receiver = Receiver(self.params.receiver())
+            self.receiver = self._new_receiver()
         counts = decode_counts(msg).astype('float64') * msg.scale
         samples = counts[0::2] + 1j * counts[1::2] if msg.is_complex else counts
         block = IfBlock(stamp_ns=stamp_ns, sample_rate_hz=msg.sample_rate_hz,
@@ -205,6 +224,9 @@ class GnssCorrelatorNode(Node):
         if self._diag_timer.due(stamp_ns):
             self.diag_pub.publish(self.diagnostics(stamp_ns))
 
+    def _new_receiver(self) -> Receiver:
+        return Receiver(self.params.receiver(), on_search_done=self._search_done.trigger)
+
     def _flush(self) -> None:
         """Hand the gathered blocks to the receiver as one, publish the completed intervals."""
         if not self._pending:
@@ -218,14 +240,38 @@ class GnssCorrelatorNode(Node):
                 intermediate_frequency_hz=first.intermediate_frequency_hz, is_complex=first.is_complex,
                 first_sample_index=first.first_sample_index, samples=samples))
         except Exception as err:  # noqa: BLE001 - a core fault must not end the node (module docstring)
-            self.counts['core_errors'] += len(blocks)
-            self.get_logger().error(f'receiver failed on {len(blocks)} blocks ({type(err).__name__}: {err}); '
-                                    'restarted')
-            self.receiver.close()
-            self.receiver = Receiver(self.params.receiver())
-            intervals = []
-        else:
-            self.counts['blocks_processed'] += len(blocks)
+            self._core_failed(err, len(blocks))
+            return
+        self.counts['blocks_processed'] += len(blocks)
+        self._blocks_in_search = self._blocks_in_search + len(blocks) if self.receiver.acquiring else 0
+        self._publish(intervals)
+
+    def _poll_receiver(self) -> None:
+        """The receiver's first acquisition ended (its worker triggered the guard condition): the intervals of
+        the blocks it held."""
+        try:
+            intervals = self.receiver.poll(max_blocks=REPLAY_BLOCKS_PER_CALLBACK)
+        except Exception as err:  # noqa: BLE001 - a core fault must not end the node (module docstring)
+            self._core_failed(err, 0)
+            return
+        if not self.receiver.acquiring:
+            self._blocks_in_search = 0
+        self._publish(intervals)
+        if self.receiver.poll_ready:  # more held: after the input that arrived meanwhile
+            self._search_done.trigger()
+
+    def _core_failed(self, err: Exception, blocks: int) -> None:
+        """A receiver fault on ``blocks`` blocks handed in now: counted with those it held for its first
+        acquisition (counted processed when handed in), logged, the receiver rebuilt."""
+        self.counts['blocks_processed'] -= self._blocks_in_search
+        blocks += self._blocks_in_search
+        self._blocks_in_search = 0
+        self.counts['core_errors'] += blocks
+        self.get_logger().error(f'receiver failed on {blocks} blocks ({type(err).__name__}: {err}); restarted')
+        self.receiver.close()
+        self.receiver = self._new_receiver()
+
+    def _publish(self, intervals: list[CorrelatorInterval]) -> None:
         for interval in intervals:
             self.publisher.publish(correlator_array(interval, self.params.frame_id))
             self.counts['arrays_published'] += 1
@@ -235,6 +281,8 @@ class GnssCorrelatorNode(Node):
         idle_s = time.monotonic() - self._last_block_at
         if self._idle_report_ns is not None and idle_s >= self.params.idle_flush_ms * 1e-3:
             self._flush()
+            if self.receiver.acquiring:  # the blocks it holds are answered when the search ends: report then
+                return
             self.diag_pub.publish(self.diagnostics(self._idle_report_ns))
             self._idle_report_ns = None
 
@@ -257,6 +305,7 @@ class GnssCorrelatorNode(Node):
         values.update(self.health.values())
         rejected = sum(v for k, v in self.counts.items() if k.startswith('rejected_'))
         values['blocks_pending'] = len(self._pending)
+        values['blocks_held_for_acquisition'] = self._blocks_in_search
         # every block that reached the subscription reached the handler, and each was processed, rejected (with
         # its reason), failed in the receiver (counted, restarted) or is gathered for the next call
         values['accounting_ok'] = (
@@ -286,7 +335,35 @@ class GnssCorrelatorNode(Node):
             f'no input on {self.subscription.topic_name} for {silent_s:.1f} s (wall clock)', self._values()))
 
 
+PROFILE_ENV = 'GNSS_CORRELATOR_PROFILE'
+"""Environment variable: a path; when set, the node's executor thread runs under cProfile (timed by the thread's CPU
+time) and its statistics are written there at exit (``python -m pstats PATH``), to see where a live stream's CPU
+goes."""
+
+
+GIL_SWITCH_INTERVAL_S = 0.0005
+"""The interpreter's switch interval in the node's process, s (Python's default 0.005): while the acquisition worker
+runs Python code, the executor thread, back from each wait for a message, waits for the GIL up to this long; at
+the default, at most ~200 messages a second were taken during a first acquisition (docs/gnss_correlator/
+live_stream.md)."""
+
+
 def main(argv=None) -> int:
+    sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
+    path = os.environ.get(PROFILE_ENV)
+    if not path:
+        return _run(argv)
+    import cProfile
+    profile = cProfile.Profile(time.thread_time)  # CPU time of the executor thread, not wall time
+    profile.enable()
+    try:
+        return _run(argv)
+    finally:
+        profile.disable()
+        profile.dump_stats(path)
+
+
+def _run(argv=None) -> int:
     return run_node(GnssCorrelatorNode, executable='gnss_correlator_node', params_cls=CorrelatorNodeParams,
                     topics=TOPICS, summary='GPS L1 C/A correlators (acquisition, DLL, FLL-assisted PLL) from the '
                     'front-end IF stream, for imm_carrier.', argv=argv)

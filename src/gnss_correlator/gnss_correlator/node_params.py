@@ -48,6 +48,12 @@ class CorrelatorNodeParams(NodeDiagnosticsParams):
     acquisition_ms: int = parameter(
         10, 'Milliseconds of samples per acquisition (1-ms coherent sums added non-coherently); more finds '
         'weaker satellites and takes longer.', minimum=2, maximum=100)
+    acquisition_hold_s: float = parameter(
+        4.0, 'Stream time held (checked, not yet tracked) while the first acquisition of a stream runs in the '
+        'worker thread, s: the input keeps being taken meanwhile; past it the node waits for the search. The '
+        'outputs do not depend on it. Memory: 4 bytes per real sample held, 8 per complex one (16.368 MS/s real: '
+        '65 MB per s; twice that when a scale that is not a power of two makes single precision inexact); '
+        '0: the first acquisition in the callback.', minimum=0.0, maximum=60.0)
     false_alarm_probability: float = parameter(
         1e-3, 'Stated false-alarm probability of one satellite search (the threshold is derived from it).',
         minimum=1e-9, maximum=0.1)
@@ -124,7 +130,8 @@ class CorrelatorNodeParams(NodeDiagnosticsParams):
             reacquisition_period_s=self.reacquisition_period_s, reacquisition_lag_s=self.reacquisition_lag_s,
             tracking=tracking,
             min_cn0_dbhz=self.min_cn0_dbhz, drop_after_ms=self.drop_after_ms, iq_scaling=self.iq_scaling,
-            spectrum_inverted=self.spectrum_inverted, coherent_ms=self.coherent_ms)
+            spectrum_inverted=self.spectrum_inverted, coherent_ms=self.coherent_ms,
+            acquisition_hold_s=self.acquisition_hold_s)
 
 
 CONFIG_FILE = ConfigFile('gnss_correlator', 'config/gnss_correlator.yaml', 'gnss_correlator', CorrelatorNodeParams, """

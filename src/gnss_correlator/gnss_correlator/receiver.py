@@ -18,8 +18,18 @@ Life cycle of a stream
 * A channel whose C/N0 estimate stays below ``min_cn0_dbhz`` (or unknown) for ``drop_after_ms`` periods in a
   row after its first estimate is dropped (``channels_dropped``); its PRN can be found again.
 
-The first acquisition of a stream runs in the caller's thread (no channel is tracked yet: 0.3-2 s of CPU
-at 4-12 MHz for 32 PRNs). :meth:`Receiver.close` stops the worker.
+The first acquisition of a stream (0.3-6 s of CPU at 4-16 MHz for 32 PRNs) runs in the same worker thread
+while the caller goes on handing in blocks: they are checked (format, gap) and held, up to
+``acquisition_hold_s`` of stream, without being tracked (``blocks_held``); when the search is done, the next
+:meth:`Receiver.process` or :meth:`Receiver.poll` starts its channels on the window's first sample and replays the
+window and the held blocks one by one through the path a synchronous search would have taken (``max_blocks`` per
+poll, two per block handed in meanwhile, so that the caller takes new input between the calls and its outputs do
+not leave in one burst), so the intervals
+are the same, whatever the search's duration (the node polls when the worker says it is done). Should the held
+blocks reach ``acquisition_hold_s``, the caller waits for the search there (``acquisition_waits``); with
+``acquisition_hold_s`` 0 the search runs in the caller's thread (the synchronous path). Held samples are kept in
+single precision when that is exact (2- to 16-bit counts times a power-of-two scale always are).
+:meth:`Receiver.close` stops the worker.
 
 Output: correlator intervals and the NCO
 ----------------------------------------
@@ -65,6 +75,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -103,6 +114,8 @@ class ReceiverConfig:
         coherent_ms: 1, or 20: once a channel is bit-synchronised (:mod:`gnss_correlator.bit_sync`), one
             correlator per data bit (the 20 code periods from a bit edge summed coherently), 1-ms ones before.
         bit_sync: the decision rule of the bit synchronisation.
+        acquisition_hold_s: stream time held while the first acquisition runs in the worker, s (>= 0; 0: the
+            first acquisition in the caller's thread); module docstring.
     """
 
     prns: tuple[int, ...] = tuple(range(1, 33))
@@ -118,6 +131,7 @@ class ReceiverConfig:
     spectrum_inverted: bool = False
     coherent_ms: int = 1
     bit_sync: BitSyncConfig = field(default_factory=BitSyncConfig)
+    acquisition_hold_s: float = 4.0
 
     def __post_init__(self) -> None:
         if self.acquisition_ms < 2:
@@ -130,6 +144,8 @@ class ReceiverConfig:
             raise ValueError(f'drop_after_ms must be >= 1, got {self.drop_after_ms}')
         if self.iq_scaling not in IQ_SCALINGS:
             raise ValueError(f'iq_scaling must be one of {IQ_SCALINGS}, got {self.iq_scaling!r}')
+        if not self.acquisition_hold_s >= 0:
+            raise ValueError(f'acquisition_hold_s must be >= 0, got {self.acquisition_hold_s}')
         if self.coherent_ms not in COHERENT_MS:
             raise ValueError(f'coherent_ms must be one of {COHERENT_MS}, got {self.coherent_ms}')
         self.acquisition()  # validates the search parameters
@@ -160,6 +176,26 @@ class IfBlock:
     is_complex: bool
     first_sample_index: int
     samples: np.ndarray = field(repr=False)
+
+
+@dataclass
+class _FirstSearch:
+    """A first acquisition running in the worker: its window (first sample ``start``, the buffer when it was
+    full, tracked from its first sample once the search is done) and the blocks held since (samples, first sample
+    index, stamp in ns)."""
+
+    future: Future[list[AcquisitionResult]]
+    window: np.ndarray
+    start: int
+    held: list[tuple[np.ndarray, int, int]] = field(default_factory=list)
+    held_samples: int = 0
+    started: bool = False  # the search's channels started, its window tracked; the held blocks being replayed
+
+
+def _compact(x: np.ndarray) -> np.ndarray:
+    """``x`` in single precision when that is exact (a held block's memory halved), else ``x``."""
+    small = x.astype(np.complex64 if np.iscomplexobj(x) else np.float32)
+    return small if np.array_equal(small, x) else x
 
 
 @dataclass(frozen=True)
@@ -198,31 +234,62 @@ class CorrelatorInterval:
 class Receiver:
     """Acquisition, tracking and the 1-ms output grid of one stream (module docstring)."""
 
-    def __init__(self, config: ReceiverConfig = ReceiverConfig()) -> None:
+    def __init__(self, config: ReceiverConfig = ReceiverConfig(),
+                 on_search_done: Callable[[], None] | None = None) -> None:
+        """``on_search_done``: called (in the worker thread) when a first acquisition running in the worker
+        ends, so that the caller can :meth:`poll` (the node triggers a guard condition)."""
         self.config = config
+        self.on_search_done = on_search_done
         self.counts: Counter[str] = Counter()
         for key in ('blocks', 'samples', 'restarts_format', 'restarts_gap', 'acquisitions', 'channels_started',
                     'channels_dropped', 'intervals', 'correlators', 'correlators_withheld', 'bit_syncs',
-                    'correlators_20ms'):
+                    'correlators_20ms', 'blocks_held', 'acquisition_waits'):
             self.counts[key] += 0
         self._format: tuple[float, float, bool] | None = None
         self.tracker: Tracker | None = None
         self._pool: ThreadPoolExecutor | None = None
         self._reacquisition: tuple[Future[list[AcquisitionResult]], int, int] | None = None
+        self._first: _FirstSearch | None = None
         self._reset_stream()
 
     def close(self) -> None:
-        """Stop the reacquisition worker (a search running is abandoned)."""
+        """Stop the acquisition worker (a search running is abandoned, the blocks held dropped)."""
         if self._pool is not None:
             self._pool.shutdown(wait=False, cancel_futures=True)
             self._pool = None
         self._reacquisition = None
+        self._first = None
+
+    @property
+    def acquiring(self) -> bool:
+        """Whether a first acquisition runs in the worker or blocks are still held after it (:meth:`poll` when
+        it is done, until this is false)."""
+        return self._first is not None
+
+    @property
+    def poll_ready(self) -> bool:
+        """Whether :meth:`poll` would answer now: the first acquisition is done and blocks are held."""
+        return self._first is not None and self._first.future.done()
+
+    @property
+    def blocks_held(self) -> int:
+        """Blocks held now, waiting for the first acquisition."""
+        return len(self._first.held) if self._first is not None else 0
+
+    def _worker(self) -> ThreadPoolExecutor:
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix='gnss_correlator_acquisition')
+        return self._pool
 
     def _reset_stream(self) -> None:
         if getattr(self, '_reacquisition', None) is not None:
             self._reacquisition[0].cancel()  # type: ignore[index]
         self._reacquisition = None
+        if self._first is not None:
+            self._first.future.cancel()
+        self._first = None
         self.tracker = None
+        self._expected_index: int | None = None
         self._buffer: list[np.ndarray] = []
         self._next_index: int | None = None
         self._grid_origin = 0
@@ -258,47 +325,114 @@ class Receiver:
         if self._format is not None and fmt != self._format:
             self.counts['restarts_format'] += 1
             self._reset_stream()
-        elif self._next_index is not None and block.first_sample_index != self._next_index:
+        elif self._expected_index is not None and block.first_sample_index != self._expected_index:
             self.counts['restarts_gap'] += 1
             self._reset_stream()
         self._format = fmt
         fs = fmt[0]
         self.counts['blocks'] += 1
         self.counts['samples'] += x.size
+        self._expected_index = int(block.first_sample_index) + x.size
+        first = self._first
+        if first is None:
+            return self._advance(x, int(block.first_sample_index), int(block.stamp_ns))
+        first.held.append((_compact(x), int(block.first_sample_index), int(block.stamp_ns)))
+        first.held_samples += x.size
+        self.counts['blocks_held'] += 1
+        if first.future.done():  # the hold shrinks by one block more than came in
+            return self._finish_first_search(2)
+        if first.held_samples >= self.config.acquisition_hold_s * fs:
+            self.counts['acquisition_waits'] += 1
+            return self._finish_first_search()
+        return []
+
+    def poll(self, wait: bool = False, max_blocks: int | None = None) -> list[CorrelatorInterval]:
+        """The intervals of the window and of the blocks held, once the first acquisition in the worker is done
+        (none before, nor when none runs; ``wait``: wait for it, as at the end of a replay); at most
+        ``max_blocks`` held blocks per call (all: None), so that a caller can take new input between the calls
+        (:attr:`acquiring` stays true while blocks are held). Raises what the search raised."""
+        if self._first is not None and (wait or self._first.future.done()):
+            return self._finish_first_search(max_blocks)
+        return []
+
+    def _finish_first_search(self, max_blocks: int | None = None) -> list[CorrelatorInterval]:
+        """Wait for the first acquisition; once: start its channels, track its window; then replay up to
+        ``max_blocks`` of the blocks held (all: None), in their order."""
+        first = self._first
+        assert first is not None
+        out: list[CorrelatorInterval] = []
+        if not first.started:
+            results = first.future.result()  # waits only when the hold is full (process counted it)
+            first.started = True
+            out = self._first_window(first.window, first.start, results)
+        count = len(first.held) if max_blocks is None else min(max_blocks, len(first.held))
+        replay, first.held = first.held[:count], first.held[count:]
+        for x, index, stamp in replay:
+            first.held_samples -= x.size
+            out.extend(self._advance(np.asarray(x, dtype=first.window.dtype), index, stamp))
+        if not first.held:
+            self._first = None
+        return out
+
+    def _first_window(self, window: np.ndarray, start: int,
+                      results: list[AcquisitionResult]) -> list[CorrelatorInterval]:
+        """The first acquisition's ``results`` on ``window`` (first sample ``start``): channels started, the
+        window tracked."""
+        assert self._format is not None
+        fs, if_hz, is_complex = self._format
+        self.tracker = Tracker(fs, if_hz, is_complex, self.config.tracking)
+        self._start_channels(results, start)
+        self._next_search_index = start + round(self.config.reacquisition_period_s * fs)
+        return self._after_tracking(self.tracker.process(window, start), fs)
+
+    def _advance(self, x: np.ndarray, first_index: int, stamp_ns: int) -> list[CorrelatorInterval]:
+        """One checked block (``x`` from sample ``first_index``, stamped ``stamp_ns``) through acquisition and
+        tracking."""
+        assert self._format is not None
+        fs = self._format[0]
         if self._next_index is None:
-            self._grid_origin = int(block.first_sample_index)
-            self._next_search_index = int(block.first_sample_index)
-        self._next_index = int(block.first_sample_index) + x.size
-        self._ref_stamp_ns, self._ref_index = int(block.stamp_ns), int(block.first_sample_index)
+            self._grid_origin = first_index
+            self._next_search_index = first_index
+        self._next_index = first_index + x.size
+        self._ref_stamp_ns, self._ref_index = stamp_ns, first_index
         need = math.ceil(self.config.acquisition_ms * GRID_S * fs)
         self._buffer.append(x)
         buffered = sum(b.size for b in self._buffer)
         # keep only the latest acquisition window once tracking runs
-        out: list[CorrelatorInterval] = []
         if self.tracker is None:
             if buffered < need:
-                return out
+                return []
             window = np.concatenate(self._buffer)
             self._buffer = [window[-need:]]
-            self.tracker = Tracker(fs, fmt[1], fmt[2], self.config.tracking)
             start = self._next_index - window.size
-            self._search(window[:need], start)
-            self._next_search_index = start + round(self.config.reacquisition_period_s * fs)
-            periods = self.tracker.process(window, start)
-        else:
-            if self._reacquisition is not None and block.first_sample_index >= self._reacquisition[2]:
-                future, start, _ = self._reacquisition
-                self._reacquisition = None
-                self._start_channels(future.result(), start)
-            periods = self.tracker.process(x, block.first_sample_index)
-            if buffered > need:
-                joined = np.concatenate(self._buffer)[-need:]
-                self._buffer = [joined]
-            if self._next_index >= self._next_search_index and self._reacquisition is None:
-                untracked = tuple(p for p in self.config.prns if p not in self.tracker.prns)
-                if untracked and buffered >= need:
-                    self._reacquire(self._buffer[-1].copy(), self._next_index - need, untracked)
-                self._next_search_index = self._next_index + round(self.config.reacquisition_period_s * fs)
+            self.counts['acquisitions'] += 1
+            cfg = self._config_for(None)
+            if self.config.acquisition_hold_s > 0:
+                future = self._worker().submit(acquire, window[:need].copy(), fs, self._format[1], cfg)
+                self._first = _FirstSearch(future=future, window=window, start=start)
+                if self.on_search_done is not None:
+                    notify = self.on_search_done
+                    future.add_done_callback(lambda _: notify())
+                return []
+            return self._first_window(window, start, acquire(window[:need], fs, self._format[1], cfg))
+        assert self._next_index is not None
+        if self._reacquisition is not None and first_index >= self._reacquisition[2]:
+            future, start, _ = self._reacquisition
+            self._reacquisition = None
+            self._start_channels(future.result(), start)
+        periods = self.tracker.process(x, first_index)
+        if buffered > need:
+            joined = np.concatenate(self._buffer)[-need:]
+            self._buffer = [joined]
+        if self._next_index >= self._next_search_index and self._reacquisition is None:
+            untracked = tuple(p for p in self.config.prns if p not in self.tracker.prns)
+            if untracked and buffered >= need:
+                self._reacquire(self._buffer[-1].copy(), self._next_index - need, untracked)
+            self._next_search_index = self._next_index + round(self.config.reacquisition_period_s * fs)
+        return self._after_tracking(periods, fs)
+
+    def _after_tracking(self, periods: TrackedPeriods, fs: float) -> list[CorrelatorInterval]:
+        """Bit sync, the output queues, weak channels dropped; the intervals completed."""
         synced = {p for p in self.tracked_prns if self.bit_sync.edge(p) is not None}
         self.bit_sync.update(periods)
         self.counts['bit_syncs'] += sum(1 for p in self.tracked_prns
@@ -314,20 +448,12 @@ class Receiver:
         return AcquisitionConfig(prns=prns, noncoherent_count=cfg.noncoherent_count, doppler_max_hz=cfg.doppler_max_hz,
                                  false_alarm_probability=cfg.false_alarm_probability)
 
-    def _search(self, window: np.ndarray, start: int) -> None:
-        """Acquire on ``window`` (first sample ``start``) now; start a channel per PRN detected."""
-        assert self._format is not None
-        self.counts['acquisitions'] += 1
-        self._start_channels(acquire(window, self._format[0], self._format[1], self._config_for(None)), start)
-
     def _reacquire(self, window: np.ndarray, start: int, prns: tuple[int, ...]) -> None:
         """Search ``prns`` on ``window`` (an owned copy; first sample ``start``) in the worker thread; its
         channels start at the first block from ``start + window + lag`` on (module docstring)."""
         assert self._format is not None
-        if self._pool is None:
-            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix='gnss_correlator_acquisition')
         self.counts['acquisitions'] += 1
-        future = self._pool.submit(acquire, window, self._format[0], self._format[1], self._config_for(prns))
+        future = self._worker().submit(acquire, window, self._format[0], self._format[1], self._config_for(prns))
         apply_at = start + window.size + round(self.config.reacquisition_lag_s * self._format[0])
         self._reacquisition = (future, start, apply_at)
 

@@ -659,3 +659,14 @@ class Tracker:
             cn0_dbhz=table[order, O_CN0], cn0_m2m4_dbhz=table[order, O_CN0_M2M4], lock_indicator=table[order, O_LOCK],
             noise_power=table[order, O_NOISE], phase_error_std_rad=table[order, O_ERR_STD],
             half_cycle_wraps=table[order, O_WRAPS], locked=table[order, O_LOCKED] > 0.5)
+
+
+def warm_up() -> None:
+    """Load the tracking kernel from numba's cache (or compile it) for real and complex samples: a node calls this
+    while it starts, so that its first tracked block does not pay it (about 1 s of CPU at a warm cache, tens of
+    seconds after an edit of the suite, measured in docs/gnss_correlator/live_stream.md)."""
+    for is_complex in (False, True):
+        tracker = Tracker(4.0e6, 0.0 if is_complex else 1.0e6, is_complex, TrackingConfig())
+        tracker.add_channel(1, 0.0, 0.0, 0)
+        with np.errstate(all='ignore'):  # zeros: no signal, no noise
+            tracker.process(np.zeros(4000, dtype=np.complex128 if is_complex else np.float64), 0)

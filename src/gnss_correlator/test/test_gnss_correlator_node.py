@@ -4,6 +4,8 @@ bad blocks counted, gaps and format changes restart the receiver, nothing crashe
 from __future__ import annotations
 
 import math
+import threading
+from dataclasses import replace
 from pathlib import Path
 from typing import cast
 
@@ -13,7 +15,10 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.context import Context
 from rclpy.parameter import Parameter
 
-from gnss_correlator.gnss_correlator_node import GnssCorrelatorNode
+from gnss_correlator import receiver as receiver_module
+from gnss_correlator.gnss_correlator_node import GnssCorrelatorNode, correlator_array
+from gnss_correlator.node_params import CorrelatorNodeParams
+from gnss_correlator.receiver import IfBlock, Receiver
 from rfi_msgs.msg import CorrelatorArray, IfSamples
 from rfi_node_common.qos import DATA_QOS
 from rfi_node_common.stamps import NS_PER_S, ns_to_stamp
@@ -75,6 +80,7 @@ def test_real_capture_gives_one_array_per_ms_with_the_satellites(capture):
         n_blocks = capture.size // 2 // BLOCK
         for k in range(n_blocks):
             rig.send(block(capture, k * BLOCK))
+        rig.spin_until(lambda: not rig.cn.receiver.acquiring and rig.outputs_arrived(), 'the first acquisition')
         arrays = rig.out['/gnss/correlators']
         assert rig.cn.counts['blocks_processed'] == n_blocks
         assert rig.cn.receiver.counts['acquisitions'] == 1
@@ -146,4 +152,45 @@ def test_settable_diagnostics_parameters_are_applied_between_blocks(capture):
         assert rig.cn.params.hardware_id == 'rx_42' and rig.cn.params.diagnostics_window_s == 3.0
         assert rig.cn._window.window_ns == 3 * NS_PER_S and rig.cn.params.max_stamp_jump_s == 120.0
     finally:
+        rig.close()
+
+
+def test_replay_equals_the_core_while_the_first_acquisition_runs_in_the_worker(capture, monkeypatch):
+    """Blocks replayed into the node (5 ms each, gathered to 10 ms) while its first acquisition runs in the worker
+    thread, held there until every block has been taken: the node takes them all meanwhile, and its arrays are,
+    value for value, those of the core run in this process on the same blocks with the search in the caller's
+    thread (the synchronous path)."""
+    n = BLOCK // 2
+    n_blocks = capture.size // 2 // n
+    counts = capture[:2 * n * n_blocks].astype(np.float64)
+    x = counts[0::2] + 1j * counts[1::2]
+    config = replace(CorrelatorNodeParams(spectrum_inverted=True).receiver(), acquisition_hold_s=0.0)
+    core = Receiver(config)
+    expected = []
+    for k in range(0, n_blocks, 2):  # the node's batch_ms: 10 ms
+        expected += core.process(IfBlock(T0_NS + round(k * n / FS * NS_PER_S), FS, 0.0, True, k * n,
+                                         x[k * n:(k + 2) * n]))
+    core.close()
+    release = threading.Event()
+    original = receiver_module.acquire
+
+    def held(*args, **kwargs):
+        assert release.wait(timeout=120), 'the test never released the search'
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(receiver_module, 'acquire', held)
+    rig = CorrelatorRig()
+    try:
+        for k in range(n_blocks):
+            rig.send(block(capture, k * n, n=n))
+        assert rig.cn.receiver.acquiring and rig.out['/gnss/correlators'] == []
+        assert rig.cn.counts['blocks_received'] == n_blocks and rig.cn.receiver.blocks_held > 0
+        release.set()
+        rig.spin_until(lambda: not rig.cn.receiver.acquiring and not rig.cn._pending and rig.outputs_arrived(),
+                       'the blocks held')
+        got = rig.out['/gnss/correlators']
+        assert len(expected) >= 95 and got == [correlator_array(iv, 'gnss_receiver') for iv in expected]
+        assert rig.cn.counts['blocks_processed'] == n_blocks and rig.cn._values()['accounting_ok']
+    finally:
+        release.set()
         rig.close()

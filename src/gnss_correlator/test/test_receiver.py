@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -32,6 +33,7 @@ def run(x: np.ndarray, config: ReceiverConfig, block: int = 28_001) -> tuple[Rec
     out: list[CorrelatorInterval] = []
     for i in range(0, x.size, block):
         out += rx.process(IfBlock(T0_NS + round(i / FS * 1e9), FS, 0.0, True, i, x[i:i + block]))
+    out += rx.poll(wait=True)  # the end of the stream: the blocks held for a first acquisition still running
     return rx, out
 
 
@@ -81,7 +83,7 @@ def test_unit_noise_scaling(samples):
 
 
 def test_gap_and_format_change_restart(samples):
-    rx = Receiver(ReceiverConfig(prns=(7, 21), acquisition_ms=4))
+    rx = Receiver(ReceiverConfig(prns=(7, 21), acquisition_ms=4, acquisition_hold_s=0.0))  # synchronous
     n = 40_000
     assert rx.process(IfBlock(T0_NS, FS, 0.0, True, 0, samples[:n])) == []
     assert set(rx.tracked_prns) == {7, 21}
@@ -107,7 +109,8 @@ def test_reacquisition_runs_in_the_worker_and_outputs_do_not_depend_on_it(sample
         return original(*args, **kwargs)
 
     monkeypatch.setattr(receiver_module, 'acquire', recording_acquire)
-    config = ReceiverConfig(prns=(7, 21), acquisition_ms=4, reacquisition_period_s=0.05, reacquisition_lag_s=0.02)
+    config = ReceiverConfig(prns=(7, 21), acquisition_ms=4, reacquisition_period_s=0.05, reacquisition_lag_s=0.02,
+                            acquisition_hold_s=0.0)  # the first acquisition synchronous (its own test below)
     runs = []
     for _ in range(2):
         rx = Receiver(config)
@@ -165,3 +168,98 @@ def test_20ms_correlators_after_bit_sync():
         z = np.exp(2j * d)
         d = np.angle(z * np.conj(np.mean(z))) / 2
         assert np.sqrt(np.mean(d ** 2)) < 0.1, np.sqrt(np.mean(d ** 2))
+
+
+def table(out: list[CorrelatorInterval]) -> list[tuple]:
+    """Every value of every interval, for exact comparison (NaN compared as a string)."""
+    return [(iv.stamp_ns, iv.svid.tolist(), *(str(getattr(iv, f).tolist()) for f in (
+        'in_phase', 'quadrature', 'cn0_dbhz', 'predicted_phase_change_rad', 'integration_time_s', 'locked',
+        'phase_error_std_rad', 'half_cycle_wraps', 'pll_error_rad', 'cn0_m2m4_dbhz'))) for iv in out]
+
+
+class HeldSearch:
+    """``acquire`` replaced: the search runs only once ``release`` is set (so blocks are held meanwhile, whatever
+    the machine's speed), and the threads it ran in are recorded."""
+
+    def __init__(self, monkeypatch) -> None:
+        self.release = threading.Event()
+        self.threads: list[str] = []
+        original = receiver_module.acquire
+
+        def held(*args, **kwargs):
+            self.threads.append(threading.current_thread().name)
+            assert self.release.wait(timeout=60), 'the test never released the search'
+            return original(*args, **kwargs)
+
+        monkeypatch.setattr(receiver_module, 'acquire', held)
+
+
+def test_first_acquisition_in_the_worker_holds_blocks_and_gives_the_synchronous_outputs(samples, monkeypatch):
+    """While the first search runs in the worker, the blocks are taken and held (none answered); once it is done
+    (the worker's notification), poll answers a few and the blocks handed in after it two each: the same
+    intervals, value for value, as the search in the caller's thread."""
+    _, sync = run(samples, ReceiverConfig(prns=(3, 7, 21), acquisition_ms=4, acquisition_hold_s=0.0), block=10_000)
+    search = HeldSearch(monkeypatch)
+    notified = threading.Event()
+    rx = Receiver(ReceiverConfig(prns=(3, 7, 21), acquisition_ms=4), on_search_done=notified.set)
+    out: list[CorrelatorInterval] = []
+    block = 10_000
+    for i in range(0, samples.size, block):
+        out += rx.process(IfBlock(T0_NS + round(i / FS * 1e9), FS, 0.0, True, i, samples[i:i + block]))
+        if i == 20 * block:
+            # the 4-ms window was full at the second block (searched from there), the 19 blocks since are held
+            assert rx.acquiring and out == [] and rx.tracked_prns == ()
+            assert rx.blocks_held == 19 and rx.counts['blocks_held'] == 19
+            search.release.set()
+            assert notified.wait(timeout=60) and rx.poll_ready
+            out += rx.poll(max_blocks=5)  # the window and 5 held blocks answered
+            assert rx.acquiring and rx.blocks_held == 14 and set(rx.tracked_prns) == {7, 21}
+        elif i > 20 * block:  # each block handed in now answers two held ones, in their order
+            assert rx.blocks_held == max(14 - (i // block - 20), 0)
+    out += rx.poll(wait=True)
+    assert not rx.acquiring
+    rx.close()
+    assert rx.counts['acquisition_waits'] == 0 and rx.counts['acquisitions'] == 1
+    assert search.threads == ['gnss_correlator_acquisition_0']
+    assert len(out) > 300 and table(out) == table(sync)
+
+
+def test_a_full_hold_waits_for_the_search_and_a_gap_drops_it(samples, monkeypatch):
+    """Held blocks are bounded: at acquisition_hold_s of stream the caller waits for the search (counted), with
+    the synchronous outputs still; a gap while searching restarts the stream and drops what was held."""
+    block = 10_000
+    _, sync = run(samples[:12 * block], ReceiverConfig(prns=(7, 21), acquisition_ms=4, acquisition_hold_s=0.0),
+                  block=block)
+    search = HeldSearch(monkeypatch)
+    rx = Receiver(ReceiverConfig(prns=(7, 21), acquisition_ms=4, acquisition_hold_s=0.02))  # 8 blocks
+
+    def release_once_waiting() -> None:
+        for _ in range(60_000):
+            if rx.counts['acquisition_waits']:
+                break
+            time.sleep(0.001)
+        search.release.set()
+
+    helper = threading.Thread(target=release_once_waiting, daemon=True)
+    helper.start()
+    out: list[CorrelatorInterval] = []
+    for i in range(0, 12 * block, block):
+        out += rx.process(IfBlock(T0_NS + round(i / FS * 1e9), FS, 0.0, True, i, samples[i:i + block]))
+        if i == 8 * block:
+            assert rx.acquiring and rx.blocks_held == 7 and out == []
+    helper.join(timeout=60)
+    search.release.set()
+    assert rx.counts['acquisition_waits'] == 1 and rx.counts['blocks_held'] == 8 and not rx.acquiring
+    assert table(out) == table(sync)
+    rx.close()
+
+    search.release.clear()
+    rx = Receiver(ReceiverConfig(prns=(7, 21), acquisition_ms=4))
+    for i in (0, block, 2 * block, 3 * block + 500):  # the last one after a gap of 500 samples
+        assert rx.process(IfBlock(T0_NS + round(i / FS * 1e9), FS, 0.0, True, i, samples[i:i + block])) == []
+        if i == 2 * block:
+            assert rx.acquiring and rx.blocks_held == 1
+    assert rx.counts['restarts_gap'] == 1 and not rx.acquiring and rx.blocks_held == 0
+    search.release.set()
+    assert rx.poll(wait=True) == []
+    rx.close()
