@@ -42,6 +42,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from rfi_experiments.child_processes import stop_processes
 from rfi_msgs.msg import CorrelatorArray
 from rfi_node_common.qos import DIAGNOSTICS_QOS
 from rfi_sim.if_signal import FrontEndConfig, GpsSatellite, IfSimulator
@@ -66,15 +67,7 @@ are stopped, not left publishing into the next run or the next user of the ROS d
 
 def stop_children() -> None:
     """SIGINT to every child still running, then SIGKILL after 10 s."""
-    for proc in CHILDREN:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-    for proc in CHILDREN:
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+    stop_processes(CHILDREN)
 
 
 @dataclass(frozen=True)

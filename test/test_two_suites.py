@@ -19,6 +19,8 @@ from pathlib import Path
 import pytest
 from test_run_processes import BAG, PARAMS, WINDOW, assert_outputs_equal, outputs
 
+from rfi_experiments.child_processes import stop_processes
+
 SUITES = ('/suite_a', '/suite_b')
 SUBSCRIBERS = {'/gnss/measurements': 2, '/uwb/ranges': 2}
 """Subscribers of a suite's input topics other than one: gnss_integrity and uwb_gnss_fusion."""
@@ -142,14 +144,7 @@ def test_external_nodes_with_best_effort_inputs_are_refused(tmp_path):
              'processes', '--external-nodes', '--namespace', namespace, *WINDOW, '--no-progress', '--no-report',
              '--timeout', '90'], capture_output=True, text=True, timeout=150)
     finally:
-        for proc in nodes:
-            proc.send_signal(2)
-        for proc in nodes:
-            try:
-                proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+        stop_processes(nodes, timeout_s=30)
     assert done.returncode == 2, done.stderr
     assert 'Traceback' not in done.stderr
     for topic in ('rfi/if_samples', 'gnss/measurements', 'uwb/ranges', 'rfi/jammer_state', 'gnss/correlators'):

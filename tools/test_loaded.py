@@ -33,6 +33,8 @@ import xml.etree.ElementTree as ET
 from collections import defaultdict
 from pathlib import Path
 
+from rfi_experiments.child_processes import stop_processes
+
 HOG = 'while True: pass'
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -63,15 +65,7 @@ def start_hogs(n: int) -> list[subprocess.Popen]:
 
 
 def stop_hogs(hogs: list[subprocess.Popen]) -> None:
-    for proc in hogs:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGTERM)
-    for proc in hogs:
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+    stop_processes(hogs, sig=signal.SIGTERM)
 
 
 def failing_ids(junit: Path) -> list[str]:

@@ -34,6 +34,24 @@ def executable_path(package: str, name: str) -> str:
     return path
 
 
+def stop_processes(procs: Sequence[subprocess.Popen], timeout_s: float = 10.0,
+                   sig: int = signal.SIGINT) -> list[int]:
+    """``sig`` to every process still running, then SIGKILL to each not gone ``timeout_s`` after it; returns the
+    exit codes in order (negative: killed by that signal)."""
+    for proc in procs:
+        if proc.poll() is None:
+            proc.send_signal(sig)
+    deadline = time.monotonic() + timeout_s
+    codes = []
+    for proc in procs:
+        try:
+            codes.append(proc.wait(timeout=max(0.0, deadline - time.monotonic())))
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            codes.append(proc.wait())
+    return codes
+
+
 class ChildProcesses:
     """The processes a ``processes`` run starts: each in its own session (a Ctrl-C reaches only this
     process, which then stops them in order), its output in ``log_dir/<name>.log``."""
