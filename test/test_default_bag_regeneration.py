@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import math
 import os
-import subprocess
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -222,8 +221,10 @@ def other_cpu_environment() -> dict[str, str]:
 
 @pytest.mark.slow
 def test_regenerated_bag_matches_on_other_cpu_paths():
-    done = subprocess.run([sys.executable, __file__], env=other_cpu_environment(), capture_output=True, text=True,
-                          timeout=300)
+    from rfi_node_common import testing  # here: this file is also the subprocess's script
+
+    done = testing.run_process([sys.executable, __file__], 'the regeneration on other CPU paths did not end',
+                               env=other_cpu_environment(), text=True)
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     assert 'regenerated bag within tolerances' in done.stdout
 

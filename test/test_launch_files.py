@@ -11,7 +11,6 @@ official ``ros2 launch``.
 from __future__ import annotations
 
 import re
-import subprocess
 import xml.etree.ElementTree as ET
 from functools import cache
 from pathlib import Path
@@ -19,6 +18,8 @@ from pathlib import Path
 import pytest
 import yaml
 from ament_index_python.packages import get_package_prefix, get_package_share_directory
+
+from rfi_node_common import testing
 
 PACKAGES = ('rfi_monitor', 'gnss_integrity', 'uwb_gnss_fusion', 'imm_carrier', 'gnss_correlator', 'rfi_experiments')
 """The packages that ship launch files (test_every_node_package_ships_one checks the node packages do)."""
@@ -53,7 +54,7 @@ def _defaults(root: ET.Element) -> dict[str, str]:
 def _help(pkg: str, exe: str) -> tuple[str, str]:
     """(topics section, parameters section) of an installed executable's --help."""
     path = Path(get_package_prefix(pkg)) / 'lib' / pkg / exe
-    out = subprocess.run([str(path), '--help'], capture_output=True, text=True, timeout=120)
+    out = testing.run_process([str(path), '--help'], text=True)  # its speed is test_executables.py's to bound
     assert out.returncode == 0, out.stderr
     text = out.stdout
     topics = text.split('topics:', 1)[1].split('parameters:', 1)[0]

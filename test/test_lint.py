@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import shutil
-import subprocess
 from pathlib import Path
+
+from rfi_node_common import testing
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -12,12 +13,12 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_ruff():
     ruff = shutil.which('ruff')
     assert ruff, 'ruff is not installed in the venv'
-    done = subprocess.run([ruff, 'check', '--no-cache', '.'], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    done = testing.run_process([ruff, 'check', '--no-cache', '.'], 'ruff did not end', cwd=ROOT, text=True)
     assert done.returncode == 0, done.stdout + done.stderr
 
 
 def test_mypy():
     mypy = shutil.which('mypy')
     assert mypy, 'mypy is not installed in the venv'
-    done = subprocess.run([mypy], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    done = testing.run_process([mypy], 'mypy did not end', cwd=ROOT, text=True)  # a cold cache: minutes of CPU
     assert done.returncode == 0, done.stdout + done.stderr

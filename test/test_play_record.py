@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 
 import pytest
@@ -10,6 +11,7 @@ from ament_index_python.packages import get_package_prefix
 from sample_bag import write_sample_bag
 
 from rfi_experiments.bag_io import BagReader
+from rfi_node_common import testing
 
 
 def tool(name: str) -> str:
@@ -34,9 +36,17 @@ def test_play_into_record_across_processes_is_complete_in_order_and_identical(sa
         [tool('record'), str(out), '--topics', *types, '--max-messages', str(total), '--duration', '60',
          *[f'--type={t}={m}' for t, m in types.items()]],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    player = subprocess.run([tool('play'), str(path), *pace, '--wait-subscribers', '20', '--no-progress'],
-                            capture_output=True, text=True, timeout=120)
-    rec_out, rec_err = recorder.communicate(timeout=120)
+    # bounded by progress (the CPU of play and of the recorder it feeds), not by a fixed time; the recorder ends
+    # itself at its --max-messages, or at its --duration 60 s if a message were lost: a stall bound beyond that
+    try:
+        player = testing.run_process([tool('play'), str(path), *pace, '--wait-subscribers', '20', '--no-progress'],
+                                     'play into record did not end', also=(recorder.pid,), text=True)
+        rec_out, rec_err = testing.communicate(recorder, 'record did not end', stall_s=90.0,
+                                               stop_signal=signal.SIGINT)
+    finally:
+        if recorder.poll() is None:
+            recorder.kill()
+            recorder.communicate()
     assert player.returncode == 0, player.stderr
     assert recorder.returncode == 0, rec_err
     for topic, n in counts.items():
@@ -48,7 +58,7 @@ def test_play_into_record_across_processes_is_complete_in_order_and_identical(sa
 
 
 def run_play(*args):
-    return subprocess.run([tool('play'), *args, '--no-progress'], capture_output=True, text=True, timeout=60)
+    return testing.run_process([tool('play'), *args, '--no-progress'], text=True)
 
 
 def assert_one_line_error(done, *words):

@@ -5,12 +5,13 @@ on stderr and the replay's outputs unchanged."""
 from __future__ import annotations
 
 import os
-import subprocess
 from pathlib import Path
 
 import pytest
 from ament_index_python.packages import get_package_prefix
 from sample_bag import write_sample_bag
+
+from rfi_node_common import testing
 
 ROOT = Path(__file__).resolve().parents[1]
 BAG = ROOT / 'bags' / 'default'
@@ -27,14 +28,14 @@ def test_play_progress_summary_and_quiet(tmp_path):
     total = sum(counts.values())
     command = [tool('play'), str(path), '--max', '--wait-subscribers', '0.2']
 
-    loud = subprocess.run(command, capture_output=True, text=True, timeout=60)
+    loud = testing.run_process(command, text=True)
     assert loud.returncode == 0, loud.stderr
     progress = [line for line in loud.stderr.splitlines() if line.startswith('play: ') and '% (' in line]
     assert progress[-1].startswith(f'play: 100% ({total}/{total} msg), '), loud.stderr
     assert len(progress) == 10 and '\r' not in loud.stderr
     assert any(line.split()[0] == 'total' for line in loud.stdout.splitlines()), loud.stdout
 
-    quiet = subprocess.run([*command, '--quiet'], capture_output=True, text=True, timeout=60)
+    quiet = testing.run_process([*command, '--quiet'], text=True)
     assert quiet.returncode == 0, quiet.stderr
     assert quiet.stdout == ''
     assert '% (' not in quiet.stderr

@@ -10,7 +10,6 @@ import re
 import shutil
 import signal
 import subprocess
-import time
 
 import pytest
 import rclpy
@@ -21,6 +20,7 @@ from ros_fixtures import make_context
 from sample_bag import write_sample_bag
 
 from rfi_experiments.bag_io import BagReader
+from rfi_node_common import testing
 
 UWB = '/uwb/ranges'
 
@@ -42,8 +42,16 @@ def test_record_and_play_started_together_with_default_flags_keep_every_message(
     recorder = subprocess.Popen([tool('record'), str(out), '--topics', *counts, '--max-messages',
                                  str(sum(counts.values())), '--duration', '60'],
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    player = subprocess.run([tool('play'), str(path), '--no-progress'], capture_output=True, text=True, timeout=120)
-    rec_out, rec_err = recorder.communicate(timeout=120)
+    try:  # bounded by progress (play's CPU and that of the recorder it feeds); the recorder ends itself at its
+        # --max-messages, or at its --duration 60 s if a message were lost: a stall bound beyond that
+        player = testing.run_process([tool('play'), str(path), '--no-progress'], 'play did not end',
+                                     also=(recorder.pid,), text=True)
+        rec_out, rec_err = testing.communicate(recorder, 'record did not end', stall_s=90.0,
+                                               stop_signal=signal.SIGINT)
+    finally:
+        if recorder.poll() is None:
+            recorder.kill()
+            recorder.communicate()
     assert player.returncode == 0, player.stderr
     assert recorder.returncode == 0, rec_err
     with BagReader(out) as reader:
@@ -56,8 +64,8 @@ def test_record_and_play_started_together_with_default_flags_keep_every_message(
 
 def test_play_reports_messages_that_went_to_nobody(sample_bag):
     path, counts = sample_bag
-    done = subprocess.run([tool('play'), str(path), '--max', '--no-progress', '--wait-subscribers', '0.5'],
-                          capture_output=True, text=True, timeout=60)
+    done = testing.run_process([tool('play'), str(path), '--max', '--no-progress', '--wait-subscribers', '0.5'],
+                               text=True)
     assert done.returncode == 0, done.stderr
     assert 'playing without every subscriber' in done.stderr and 'no subscriber on any played topic' in done.stderr
     for topic, n in counts.items():
@@ -69,8 +77,8 @@ def test_play_reports_messages_that_went_to_nobody(sample_bag):
 
 def test_play_bad_expectation_is_a_one_line_error(sample_bag):
     path, _ = sample_bag
-    done = subprocess.run([tool('play'), str(path), '--no-progress', '--expect-subscribers', '/not/played:1'],
-                          capture_output=True, text=True, timeout=60)
+    done = testing.run_process([tool('play'), str(path), '--no-progress', '--expect-subscribers', '/not/played:1'],
+                               text=True)
     assert done.returncode == 2 and 'Traceback' not in done.stderr
     assert '/not/played is not played' in done.stderr
 
@@ -83,10 +91,12 @@ def test_play_names_best_effort_subscribers_and_the_override(sample_bag, tmp_pat
                                  '--max-messages', str(counts[UWB])],
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        player = subprocess.run([tool('play'), str(path), '--topics', UWB, '--no-progress',
-                                 '--expect-subscribers', '1'], capture_output=True, text=True, timeout=120)
+        player = testing.run_process([tool('play'), str(path), '--topics', UWB, '--no-progress',
+                                      '--expect-subscribers', '1'], 'play did not end', also=(recorder.pid,),
+                                     text=True)
     finally:
         recorder.terminate()
+        # a fixed bound on purpose: record must end promptly on SIGTERM (as a node on launch's escalation)
         rec_out, rec_err = recorder.communicate(timeout=60)
     assert player.returncode == 0, player.stderr
     assert f'{UWB}: best effort subscription (--reliability)' in rec_out
@@ -109,13 +119,15 @@ def test_record_accepts_a_best_effort_publisher(tmp_path):
     try:
         recorder = subprocess.Popen([tool('record'), str(out), '--topics', UWB, '--max-messages', '20',
                                      '--duration', '60'], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        deadline = time.monotonic() + 60.0
+        # until record has its 20 messages and ends, bounded by its progress (CPU: start-up, discovery, writing)
+        watch = testing.Stall(lambda: testing.process_cpu_s(recorder.pid), 'record of a best-effort driver')
         k = 0
-        while recorder.poll() is None and time.monotonic() < deadline:
+        while recorder.poll() is None:
+            watch.check()
             k += 1
             pub.publish(UwbRange(anchor_id='A1', range_m=10.0 + k * 1e-3))
             executor.spin_once(timeout_sec=0.02)  # a 50 Hz driver
-        rec_out, rec_err = recorder.communicate(timeout=30)
+        rec_out, rec_err = recorder.communicate()  # it has ended: the pipes are read to their end
     finally:
         if recorder is not None and recorder.poll() is None:
             recorder.kill()
@@ -136,11 +148,13 @@ def test_record_fails_clearly_when_its_folder_disappears(sample_bag, tmp_path):
     recorder = subprocess.Popen([tool('record'), str(out), '--topics', UWB, '/gnss/measurements', *types,
                                  '--duration', '120'], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        player = subprocess.run([tool('play'), str(path), '--topics', UWB, '/gnss/measurements', '--max',
-                                 '--no-progress'], capture_output=True, text=True, timeout=120)
+        player = testing.run_process([tool('play'), str(path), '--topics', UWB, '/gnss/measurements', '--max',
+                                      '--no-progress'], 'play did not end', also=(recorder.pid,), text=True)
         assert player.returncode == 0, player.stderr
         shutil.rmtree(out)
-        rec_out, rec_err = recorder.communicate(timeout=60)
+        # record notices the loss at its next write or check and fails (before its own --duration 120 s)
+        rec_out, rec_err = testing.communicate(recorder, 'record did not fail', stall_s=150.0,
+                                               stop_signal=signal.SIGINT)
     finally:
         if recorder.poll() is None:
             recorder.kill()
@@ -180,12 +194,13 @@ def test_play_reports_the_fusion_nodes_late_rejections(tmp_path):
     node = subprocess.Popen([fusion, '--ros-args', '-p', 'reorder_window_max_s:=0.1'],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        player = subprocess.run([tool('play'), str(bag), '--no-progress', '--rate', '2', '--expect-subscribers',
-                                 f'{UWB}:1', '--wait-subscribers', '120', '--status-timeout', '120'],
-                                capture_output=True, text=True, timeout=360)
+        # play waits (idle) for the node's start-up and its statuses: the node's CPU counts as progress too
+        player = testing.run_process([tool('play'), str(bag), '--no-progress', '--rate', '2', '--expect-subscribers',
+                                      f'{UWB}:1', '--wait-subscribers', '120', '--status-timeout', '120'],
+                                     'play into fusion_node did not end', also=(node.pid,), text=True)
     finally:
         node.send_signal(signal.SIGINT)
-        try:
+        try:  # a fixed bound on purpose: a node must end promptly on SIGINT
             node.communicate(timeout=30)
         except subprocess.TimeoutExpired:
             node.kill()

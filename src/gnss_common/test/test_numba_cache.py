@@ -68,7 +68,10 @@ def _run(root: Path, mode: str) -> dict:
     env['PYTHONPATH'] = os.pathsep.join([str(root), env.get('PYTHONPATH', '')])
     env.pop('NUMBA_CACHE_DIR', None)
     env.pop('NUMBA_DISABLE_JIT', None)
-    # -B: no .pyc, so the edited module is read anew whatever the file system's time resolution
+    # -B: no .pyc, so the edited module is read anew whatever the file system's time resolution.
+    # A fixed timeout, not rfi_node_common.testing's progress bound: gnss_common's tests may not import a package
+    # above it (test_import_direction), nor rclpy. The child imports numba and compiles two one-line kernels: one
+    # test's 3-4 children took 20-34 s in all at load 13 on 2 cores (5-10 s each), so 300 s is 30x one child.
     out = subprocess.run([sys.executable, '-B', '-c', CHILD, mode], env=env, cwd=root, check=True,
                          capture_output=True, text=True, timeout=300)
     return json.loads(out.stdout.strip().splitlines()[-1])
@@ -133,6 +136,7 @@ print(json.dumps({'kinds': sorted(kinds), 'stamps': sorted(stamps),
 
 @pytest.mark.parametrize('order', ['numba-first', 'suite-first'])
 def test_the_suite_kernels_carry_the_stamp_whatever_is_imported_first(order):
+    # a fixed timeout, as in _run (no progress bound here: the layering); 3-4 s at load 13
     out = subprocess.run([sys.executable, '-c', SUITE_CHILD, order], check=True, capture_output=True,
                          text=True, timeout=300)
     got = json.loads(out.stdout.strip().splitlines()[-1])

@@ -19,11 +19,13 @@ default, best effort once a best-effort driver is there; losses and handler erro
   from the epoch before the monitor, counted per reason (``dropped_satellites.<reason>``), and the epoch judged
   on the rest.
 * ``uwb/ranges`` (UwbRange) with anchors in ``earth_frame_id`` (ECEF): the kinematic tests. A range
-  in another frame is rejected (``uwb_frame_unsupported``: the monitor needs ECEF anchors), as is a
-  non-finite range or one outside [``UWB_RANGE_MIN_M``, ``UWB_RANGE_MAX_M``] (``uwb_invalid``), a 1-sigma that is not
-  NaN and not plausible (``invalid_range_std``) and an anchor off the Earth (``nonphysical_anchor_position``): the
-  monitor keeps each anchor's newest range, so one corrupt range made every epoch raise until the anchor was
-  heard again (found by the long fuzz: 3 of its 10 valid tail epochs unanswered).
+  in another frame is rejected (``uwb_frame_unsupported``: the monitor needs ECEF anchors), as is what
+  :func:`rfi_node_common.message_checks.uwb_range_reason` finds implausible, counted under its reason (as in the
+  fusion): a 1-sigma that is not NaN and not plausible (``invalid_range_std``), a non-finite anchor or one off the
+  Earth (``nonfinite_anchor_position``, ``nonphysical_anchor_position``), a range that is not finite, negative, or
+  outside [``UWB_RANGE_MIN_M``, ``UWB_RANGE_MAX_M``] (``nonfinite_range``, ``negative_range``, ``range_too_short``,
+  ``range_too_long``): the monitor keeps each anchor's newest range, so one corrupt range made every epoch raise
+  until the anchor was heard again (found by the long fuzz: 3 of its 10 valid tail epochs unanswered).
 * ``gnss/receiver_interference`` (ReceiverInterference): the receiver's AGC, jam indicator,
   jamming and spoofing flags.
 * ``gnss/receiver_spectrum`` (ReceiverSpectrum): a spectrum that does not fit (bins, span) is
@@ -58,7 +60,6 @@ model is learned from scratch) and is saved there at shutdown when ``save_cn0_mo
 
 from __future__ import annotations
 
-import math
 import os
 from collections import Counter
 from dataclasses import replace
@@ -96,13 +97,7 @@ from rfi_node_common.diagnostics import (
 from rfi_node_common.input_checks import STAMP_FAR_FUTURE, STAMP_NOT_POSITIVE, StampGate
 from rfi_node_common.inputs import InputHealth, InputSubscription, StaleInputWatch, subscribe_input
 from rfi_node_common.main import run_node
-from rfi_node_common.message_checks import (
-    FRAME_EARTH,
-    UWB_RANGE_MAX_M,
-    UWB_RANGE_MIN_M,
-    satellite_reason,
-    uwb_range_reason,
-)
+from rfi_node_common.message_checks import FRAME_EARTH, satellite_reason, uwb_range_reason
 from rfi_node_common.params import RuntimeParameters, changed_names, declare
 from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS
 from rfi_node_common.stamps import stamp_to_ns
@@ -253,9 +248,6 @@ class GnssIntegrityNode(Node):
         if (refused := self._side_stamp(msg.header.stamp)) is not None:
             return refused
         meas = msg_to_uwb(msg)
-        if not (math.isfinite(meas.range_m) and UWB_RANGE_MIN_M <= meas.range_m <= UWB_RANGE_MAX_M) or not all(
-                math.isfinite(float(v)) for v in meas.anchor_position_m):
-            return 'uwb_invalid'
         if (implausible := uwb_range_reason(replace(meas, frame_id=FRAME_EARTH))) is not None:
             return implausible
         self.monitor.add_uwb(meas)

@@ -140,7 +140,7 @@ def test_bad_inputs_are_counted_and_never_kill_the_node(rig_factory):
     c = rig.node.counts
     assert c['gnss_processed'] == 1 and c['gnss_rejected'] == 2
     assert rig.node.reasons['stamp_not_increasing'] == 1 and rig.node.reasons['gnss_frame_id'] == 1
-    assert rig.node.reasons['uwb_frame_unsupported'] == 1 and rig.node.reasons['uwb_invalid'] == 1
+    assert rig.node.reasons['uwb_frame_unsupported'] == 1 and rig.node.reasons['nonfinite_range'] == 1
     assert rig.node.reasons['spectrum_invalid'] == 1 and rig.node.reasons['jammer_state_unknown_type'] == 1
     assert rig.node.accounting()['accounting_ok'] and c['core_exceptions'] == 0
     assert len(rig.out['/gnss/integrity']) == 1
@@ -341,6 +341,9 @@ def test_corrupt_fields_are_rejected_before_the_monitor(rig_factory):
     msg = uwb_to_msg(last)
     msg.anchor_position.x = 1e300
     corrupt.append(msg)
+    msg = uwb_to_msg(last)
+    msg.anchor_position.y = math.nan
+    corrupt.append(msg)
     for k, msg in enumerate(corrupt):  # newer than every valid range of the anchor
         stamp = last.stamp_ns + 1000 * (k + 1)
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 10**9)
@@ -352,7 +355,7 @@ def test_corrupt_fields_are_rejected_before_the_monitor(rig_factory):
         rig.send('/gnss/measurements', epoch_to_msg(e))
     c, reasons = rig.node.counts, rig.node.reasons
     assert c['core_exceptions'] == 0 and c['published'] == len(epochs)
-    assert reasons['uwb_invalid'] == 2 and reasons['invalid_range_std'] == 3
-    assert reasons['nonphysical_anchor_position'] == 1
+    assert reasons['range_too_long'] == 1 and reasons['range_too_short'] == 1 and reasons['invalid_range_std'] == 3
+    assert reasons['nonphysical_anchor_position'] == 1 and reasons['nonfinite_anchor_position'] == 1
     assert rig.node.dropped_satellites['invalid_measurement_std'] == 1
     assert rig.node.accounting()['accounting_ok']

@@ -72,6 +72,11 @@ acknowledged them, so the publisher's history (DATA_QOS_DEPTH) never drops one a
 Not after every message: Fast DDS acknowledges on its heartbeat period (about 3 s measured here)."""
 FINAL_ACK_TIMEOUT_S = 2.0
 """At the end of the input: longest wait for reliable subscribers to acknowledge what was sent, s."""
+STOP_JOIN_S = 2.0
+"""At shutdown (Ctrl-C): longest wait for the reader to end and write its report, s. A reader still busy then
+(compiling a kernel on its first bytes with a cold numba cache, a publish that blocks) is left to die with the
+process, and the report is written from the shutdown instead, so that Ctrl-C stays prompt and the counts are
+always logged."""
 
 
 @dataclass(frozen=True)
@@ -216,6 +221,8 @@ class UbxSourceNode(Node):
         self._last_stamp_ns = 0
         self.stop = threading.Event()
         self.done = threading.Event()
+        self._report_lock = threading.Lock()
+        self._reported = False  # the end-of-input report is written once, by the reader or by the shutdown
         self._stream: Any = self._open()  # a bad path or port refuses the start (exit 2)
         self._thread = threading.Thread(target=self._run, name='ubx_source_reader', daemon=True)
         self._start_timer = self.create_timer(0.0, self._start_reading)
@@ -424,27 +431,42 @@ class UbxSourceNode(Node):
         subscribers have acknowledged the data."""
         from rfi_experiments.ubx_to_bag import summary_lines
 
+        if self._reported:
+            return
         if publish:
             for pub in (self.pub, self.interference_pub, self.spectrum_pub):  # the data out before the final report
                 self._wait_acked(pub, FINAL_ACK_TIMEOUT_S)
             self._publish_diagnostics(self._last_stamp_ns, final=True)
             self._wait_acked(self.diag_pub, FINAL_ACK_TIMEOUT_S)
-        text = (f'end of input {self.params.input}: {self.counts["epochs_sent"]} epochs, '
-                f'{self.counts["interference_sent"]} interference reports, {self.counts["spectrum_sent"]} spectra '
-                'published\n'
-                + '\n'.join(summary_lines(self.decoder)))
-        if self.context.ok():
-            self.get_logger().info(text)
-        else:  # after a shutdown (Ctrl-C) the ROS logger cannot reach /rosout any more
-            print(f'[ubx_source] {text}', file=sys.stderr)
+        self._log_end('\n'.join(summary_lines(self.decoder)))
+
+    def _end_line(self) -> str:
+        counts = dict(self.counts)
+        return (f'end of input {self.params.input}: {counts["epochs_sent"]} epochs, '
+                f'{counts["interference_sent"]} interference reports, {counts["spectrum_sent"]} spectra published')
+
+    def _log_end(self, details: str) -> None:
+        """Write the end-of-input report unless it has been written (the reader and the shutdown may both try)."""
+        with self._report_lock:
+            if self._reported:
+                return
+            self._reported = True
+            text = self._end_line() + ('\n' + details if details else '')
+            if self.context.ok():
+                self.get_logger().info(text)
+            else:  # after a shutdown (Ctrl-C) the ROS logger cannot reach /rosout any more
+                print(f'[ubx_source] {text}', file=sys.stderr, flush=True)
 
     def destroy_node(self) -> None:
         self.stop.set()
         self._start_timer.cancel()
         if self._thread.is_alive() and threading.current_thread() is not self._thread:
-            self._thread.join(timeout=2.0)
+            self._thread.join(timeout=STOP_JOIN_S)
         if self._thread.ident is None:  # stopped before the reader started: report the (empty) counters too
             self._report_end(publish=False)
+        elif self._thread.is_alive():  # still busy (STOP_JOIN_S): its report would die with the process
+            self._log_end(f'(the reader was still busy {STOP_JOIN_S} s after the stop; the decoder summary is '
+                          'not available, the counts are those published so far)')
         if not self._thread.is_alive():
             self._close()
         super().destroy_node()

@@ -5,7 +5,6 @@ outputs on the bag's blocks as on the directly read ones; bad input is refused w
 from __future__ import annotations
 
 import math
-import subprocess
 import sys
 from pathlib import Path
 
@@ -17,6 +16,7 @@ from rfi_experiments.if_to_bag import main
 from rfi_monitor.monitor import RfiMonitor
 from rfi_monitor.rfi_monitor_node import MonitorNodeParams, check_block, decode_counts, decode_samples, full_scale
 from rfi_msgs.msg import IfSamples
+from rfi_node_common import testing
 from rfi_node_common.stamps import stamp_to_ns
 
 DATA = Path(__file__).resolve().parents[2] / 'rfi_monitor' / 'test' / 'data'
@@ -133,8 +133,8 @@ def test_whole_pocketsdr_capture_from_standard_input(tmp_path):
     path = SHARED / 'iq_clean_pocketsdr' / 'L1_20211202_084700_4MHz_IQ.bin'
     out = tmp_path / 'bag'
     with path.open('rb') as f:
-        done = subprocess.run([sys.executable, '-m', 'rfi_experiments.if_to_bag', '-', str(out), *CASES[1][1]],
-                              stdin=f, capture_output=True, text=True, timeout=120)
+        done = testing.run_process([sys.executable, '-m', 'rfi_experiments.if_to_bag', '-', str(out), *CASES[1][1]],
+                                   stdin=f, text=True)
     assert done.returncode == 0, done.stderr
     msgs = read_bag(out)
     direct = np.fromfile(path, dtype=np.int8)

@@ -1,18 +1,26 @@
 """Plausibility checks of the nodes' GNSS and UWB inputs, made before their cores (no rclpy here).
 
-Shared by fusion_node (:mod:`uwb_gnss_fusion.message_checks` re-exports them) and gnss_integrity_node: one
-implementation of what a corrupt or malicious field is. The fusion's core validates what it applies and counts each
-rejection (``nonfinite_pseudorange``, ``nonphysical_satellite_position``, ``nonphysical_pseudorange``,
-``low_cn0``, ``invalid_doppler``; ``nonfinite_anchor_position``, ``nonfinite_range``,
-``negative_range``, ``nonphysical_range``, ``nonphysical_range_std``). Some values it does not check
-would be applied as if valid, so the nodes check them first and count them under their own reasons:
+Shared by fusion_node and gnss_integrity_node: one implementation of what a corrupt or malicious field is. The
+fusion's core validates what it applies and counts each rejection (``nonfinite_pseudorange``,
+``nonphysical_satellite_position``, ``nonphysical_pseudorange``, ``low_cn0``, ``invalid_doppler``;
+``nonfinite_anchor_position``, ``nonfinite_range``, ``negative_range``, ``nonphysical_range`` beyond its
+``uwb_max_range_m``, ``nonphysical_range_std``). Some values it does not check would be applied as if valid, and the
+integrity monitor checks none, so the nodes check them first and count them under their own reasons:
 
-* UWB ``range_std_m``: only NaN means "use the default" (the fusion's ``uwb_range_std_m``, the integrity
-  monitor's ``uwb_std_m``); any other value must be finite, >= :data:`UWB_RANGE_STD_MIN_M` and at most
-  :data:`UWB_RANGE_STD_MAX_M` (``invalid_range_std``). The cores took -inf (and +inf) as "use the default", and
-  the integrity monitor squared 1e300 into an OverflowError.
-* UWB anchor position, finite but off the Earth (ECEF) or beyond any local survey (map frame)
-  (``nonphysical_anchor_position``): the core would multilaterate from it.
+* A UWB range (:func:`uwb_range_reason`, every check of a range that needs no parameter, so that both nodes apply
+  the same limits; the range is rejected):
+
+  - ``range_std_m``: only NaN means "use the default" (the fusion's ``uwb_range_std_m``, the integrity
+    monitor's ``uwb_std_m``); any other value must be finite, >= :data:`UWB_RANGE_STD_MIN_M` and at most
+    :data:`UWB_RANGE_STD_MAX_M` (``invalid_range_std``). The cores took -inf (and +inf) as "use the default", and
+    the integrity monitor squared 1e300 into an OverflowError.
+  - the anchor position: not finite (``nonfinite_anchor_position``), or finite but off the Earth (ECEF) or beyond
+    any local survey (map frame) (``nonphysical_anchor_position``): the cores would multilaterate from it.
+  - ``range_m``: not finite (``nonfinite_range``), negative (``negative_range``), below :data:`UWB_RANGE_MIN_M`
+    (``range_too_short``) or above :data:`UWB_RANGE_MAX_M` (``range_too_long``). The fusion's core took a range of
+    5e-324 m as valid and counted 1e300 m only against its ``uwb_max_range_m``; the integrity monitor's residuals
+    went infinite on both.
+
 * Per satellite of a GNSS epoch (the satellite is dropped, the rest of the epoch is used):
   a C/N0 of +-inf or above :data:`CN0_MAX_DBHZ` (``nonphysical_cn0``; NaN = not reported, the core
   uses the nominal C/N0), a pseudorange or rate 1-sigma that is not NaN and not in (min, max]
@@ -23,8 +31,8 @@ would be applied as if valid, so the nodes check them first and count them under
   :data:`ATMOSPHERE_DELAY_MAX_M` (``nonphysical_atmospheric_delay``).
 
 The bounds are generous (10-1000x what GPS, GLONASS, Galileo and BeiDou produce) so that they only
-catch corrupt or malicious values. Non-finite values stay with the cores: in the fusion a non-finite clock bias,
-delay, pseudorange or satellite position drops the satellite (``nonfinite_pseudorange``), a
+catch corrupt or malicious values. Non-finite satellite values stay with the cores: in the fusion a non-finite
+clock bias, delay, pseudorange or satellite position drops the satellite (``nonfinite_pseudorange``), a
 non-finite velocity or clock drift drops its Doppler (``invalid_doppler``; NaN is "unknown" there).
 """
 
@@ -84,17 +92,19 @@ ATMOSPHERE_DELAY_MAX_M = 1.0e3
 """Largest modelled ionosphere or troposphere delay accepted, m (slant delays stay below ~150 m)."""
 
 UWB_RANGE_MAX_M = 1.0e4
-"""Largest UWB range accepted by a node that has no bound of its own (gnss_integrity_node; the fusion has
-``uwb_max_range_m``), m: two-way UWB reaches a few hundred metres; a larger finite range is a corrupt field (the
-fuzzer's 1e300 made the integrity monitor's residuals infinite, a counted core exception on every epoch until the
-anchor was heard again)."""
+"""Longest UWB range accepted, m: two-way UWB reaches a few hundred metres; a longer finite range is a corrupt field
+(the fuzzer's 1e300 made the integrity monitor's residuals infinite, a counted core exception on every epoch until the
+anchor was heard again). The fusion's ``uwb_max_range_m`` (500 m by default) rejects shorter ones in its core; set
+above this limit, it has no effect beyond it."""
 
 UWB_RANGE_MIN_M = 1.0e-3
-"""Smallest UWB range accepted by such a node, m: a tag is never within a millimetre of an anchor's antenna; the
-fuzzer's 5e-324 made the integrity monitor's second-order residual variance (|delta_perp|^2 / (2 r)) infinite."""
+"""Shortest UWB range accepted, m: a tag is never within a millimetre of an anchor's antenna; the fuzzer's 5e-324
+made the integrity monitor's second-order residual variance (|delta_perp|^2 / (2 r)) infinite, and the fusion's
+core applied it as a valid range."""
 
-UWB_REASONS = ('invalid_range_std', 'nonphysical_anchor_position')
-"""Reasons of :func:`uwb_range_reason`."""
+UWB_REASONS = ('invalid_range_std', 'nonfinite_anchor_position', 'nonphysical_anchor_position', 'nonfinite_range',
+               'negative_range', 'range_too_short', 'range_too_long')
+"""Reasons of :func:`uwb_range_reason`, in the order it checks them."""
 
 SATELLITE_REASONS = ('nonphysical_cn0', 'invalid_measurement_std', 'nonphysical_satellite_state',
                      'nonphysical_atmospheric_delay')
@@ -116,28 +126,40 @@ def uwb_range_reason(meas: UwbRangeMeasurement) -> str | None:
 
     Args:
         meas: the range; ``frame_id`` is the core's frame ("earth": ECEF anchor, "map": local),
-            ``anchor_position_m`` m (3,), ``range_std_m`` m.
+            ``anchor_position_m`` m (3,), ``range_m`` m, ``range_std_m`` m.
 
     Returns:
-        One of :data:`UWB_REASONS`, or None (the core checks the rest).
+        The first of :data:`UWB_REASONS` that applies, or None (the fusion's core checks its own
+        ``uwb_max_range_m``).
 
     Examples:
         >>> import numpy as np
         >>> m = UwbRangeMeasurement(1, 'A1', np.array([1.0, 2.0, 3.0]), 'map', 5.0, -math.inf)
         >>> uwb_range_reason(m)
         'invalid_range_std'
+        >>> uwb_range_reason(UwbRangeMeasurement(1, 'A1', np.array([1.0, 2.0, 3.0]), 'map', 1e300, math.nan))
+        'range_too_long'
     """
     if not _std_ok(float(meas.range_std_m), UWB_RANGE_STD_MAX_M, UWB_RANGE_STD_MIN_M):
         return 'invalid_range_std'
     x, y, z = (float(v) for v in meas.anchor_position_m)
     if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
-        return None  # the core counts nonfinite_anchor_position
+        return 'nonfinite_anchor_position'
     if meas.frame_id == FRAME_EARTH:
         lo, hi = ANCHOR_ECEF_RADIUS_M
-        if not lo <= math.sqrt(x * x + y * y + z * z) <= hi:
+        if not lo <= math.sqrt(x * x + y * y + z * z) <= hi:  # inf for a huge finite one
             return 'nonphysical_anchor_position'
     elif max(abs(x), abs(y), abs(z)) > ANCHOR_MAP_MAX_ABS_M:
         return 'nonphysical_anchor_position'
+    range_m = float(meas.range_m)
+    if not math.isfinite(range_m):
+        return 'nonfinite_range'
+    if range_m < 0.0:
+        return 'negative_range'
+    if range_m < UWB_RANGE_MIN_M:
+        return 'range_too_short'
+    if range_m > UWB_RANGE_MAX_M:
+        return 'range_too_long'
     return None
 
 

@@ -27,7 +27,7 @@ import signal
 import subprocess
 import time
 from collections import Counter
-from collections.abc import Callable, Hashable, Iterator, Mapping
+from collections.abc import Callable, Hashable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from typing import Any, TypeVar
 
@@ -145,15 +145,20 @@ def process_cpu_s(pid: int, *, descendants: bool = True) -> float:
 
 
 def communicate(proc: subprocess.Popen, what: str, *, input: Any = None, stall_s: float = STALL_S,
-                limit_s: float = LIMIT_S, stop_signal: int = signal.SIGKILL) -> tuple[Any, Any]:
+                limit_s: float = LIMIT_S, stop_signal: int = signal.SIGKILL,
+                also: Sequence[int] = ()) -> tuple[Any, Any]:
     """``proc.communicate(input)`` bounded by progress: it fails once the process and its descendants have spent
     no CPU for ``stall_s`` (:func:`process_cpu_s`), or after ``limit_s``, not after a fixed time. Returns
     (stdout, stderr) as ``communicate`` does.
 
+    ``also``: ids of other processes whose CPU time counts as progress too: those ``proc`` waits for (``play``
+    waiting for a node that compiles its kernels, or for a recorder's acknowledgements).
+
     On failure ``proc`` gets ``stop_signal`` (SIGINT for a ``run`` that must stop its node processes itself),
     then SIGKILL if it has not ended 60 s later; the AssertionError ends with the last 3000 characters of its
     stderr."""
-    watch = Stall(lambda: process_cpu_s(proc.pid), what, stall_s=stall_s, limit_s=limit_s, look_every_s=0.5)
+    watch = Stall(lambda: tuple(process_cpu_s(pid) for pid in (proc.pid, *also)), what, stall_s=stall_s,
+                  limit_s=limit_s, look_every_s=0.5)
     while True:
         try:
             return proc.communicate(input, timeout=0.5)   # a retry loses no output (subprocess docs)
@@ -173,14 +178,16 @@ def communicate(proc: subprocess.Popen, what: str, *, input: Any = None, stall_s
 
 
 def run_process(args: list[str], what: str | None = None, *, input: Any = None, stall_s: float = STALL_S,
-                limit_s: float = LIMIT_S, **popen: Any) -> subprocess.CompletedProcess:
+                limit_s: float = LIMIT_S, also: Sequence[int] = (), stop_signal: int = signal.SIGKILL,
+                **popen: Any) -> subprocess.CompletedProcess:
     """``subprocess.run(args, capture_output=True, input=input, **popen)``, bounded by progress as
     :func:`communicate` is instead of by a ``timeout``: a process that compiles numba kernels on a cold cache
-    beside a CPU hog takes as long as it takes, one that hangs fails after ``stall_s``."""
+    beside a CPU hog takes as long as it takes, one that hangs fails after ``stall_s``. ``also`` and
+    ``stop_signal``: as in :func:`communicate`."""
     stdin = subprocess.PIPE if input is not None else popen.pop('stdin', None)
     with subprocess.Popen(args, stdin=stdin, stdout=subprocess.PIPE, stderr=subprocess.PIPE, **popen) as proc:
         out, err = communicate(proc, what or f'{os.path.basename(str(args[0]))} did not end', input=input,
-                               stall_s=stall_s, limit_s=limit_s)
+                               stall_s=stall_s, limit_s=limit_s, also=also, stop_signal=stop_signal)
     return subprocess.CompletedProcess(args, proc.returncode, out, err)
 
 

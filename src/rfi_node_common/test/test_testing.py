@@ -127,6 +127,21 @@ def test_run_process_fails_a_process_that_hangs_and_kills_it():
                              'time.sleep(600)'], 'hangs', stall_s=1.0, text=True)
 
 
+def test_run_process_counts_the_cpu_of_the_processes_it_waits_for():
+    """A process that sleeps while another one it waits for computes (play waiting for a node's start-up) is not
+    stalled; the same sleep with nothing computing fails."""
+    busy = subprocess.Popen([sys.executable, '-c', BUSY.format(cpu_s=600)])
+    try:
+        done = testing.run_process([sys.executable, '-c', 'import time\ntime.sleep(2.5)\nprint("done")'],
+                                   stall_s=1.5, also=(busy.pid,), text=True)
+        assert done.returncode == 0 and done.stdout == 'done\n'
+    finally:
+        busy.kill()
+        busy.wait()
+    with pytest.raises(AssertionError, match='nothing progressed for 1.5 s'):
+        testing.run_process([sys.executable, '-c', 'import time\ntime.sleep(2.5)'], stall_s=1.5, text=True)
+
+
 def test_a_rig_counts_messages_taken_not_timer_callbacks():
     context = Context()
     rclpy.init(context=context)

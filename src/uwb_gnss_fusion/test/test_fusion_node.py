@@ -253,7 +253,9 @@ def test_bad_input_is_counted_and_never_published(rig_factory, clean_stream):
         assert int(values[key]) == count, reason
     assert values['accounting_ok'] == 'True'
     assert int(values['gnss_received']) == rig.sent['gnss'] and int(values['uwb_received']) == rig.sent['uwb']
-    assert int(values['gnss_rejected']) == 2 and int(values['uwb_rejected']) == 2  # frame, far past / future, 0
+    assert int(values['gnss_rejected']) == 2  # frame, far past
+    # far future, 0; negative, NaN range, NaN anchor (rfi_node_common.message_checks, before the core)
+    assert int(values['uwb_rejected']) == 5
     assert int(values['jammer_rejected']) == 1
     assert rig.last_status().initialized and rig.last_status().reinitializations == 0
     assert_no_nan_published(rig)
@@ -529,6 +531,41 @@ def _epoch_with(msg: GnssMeasurementArray, stamp_ns: int, index: int, **fields) 
         else:
             setattr(out.measurements[index], name, value)
     return out
+
+
+def test_ranges_outside_the_shared_limits_are_rejected_by_name(rig_factory, clean_stream):
+    """Issue 27: the limits gnss_integrity_node applied inline (1 mm - 10 km, a finite anchor) are the shared check's,
+    so the fusion node applies them too: a range of 1e300 m was counted by the core against uwb_max_range_m, one of
+    5e-324 m was applied as valid; now each is a named node rejection and none reaches the filter."""
+    _, inputs = clean_stream
+    rig = rig_factory({'reorder_window_s': 0.0})
+    first_half = [(s, t, m) for s, t, m in inputs if s < inputs[0][0] + 10 * 10**9]
+    for _, _, msg in first_half:
+        rig.send(msg)
+    t_ns = first_half[-1][0]
+    good_uwb = next(m for s, t, m in reversed(first_half) if t == '/uwb/ranges')
+    before = dict(rig.node.counts)
+    core_before = dict(rig.node.filter.rejection_counts)
+    cases = [('range_too_long', 'range_m', 1e300), ('range_too_short', 'range_m', 5e-324),
+             ('nonphysical_anchor_position', 'x', 1e300), ('nonphysical_anchor_position', 'z', -1e300)]
+    for k, (_, field, value) in enumerate(cases, start=1):
+        msg = restamped(good_uwb, t_ns + k * 10**6)
+        if field == 'range_m':
+            msg.range_m = value
+        else:
+            setattr(msg.anchor_position, field, value)
+        rig.send(msg)
+    assert rig.node.counts['uwb_processed'] == before['uwb_processed']   # none reached the filter
+    assert rig.node.counts['uwb_rejected'] == before['uwb_rejected'] + len(cases)
+    assert dict(rig.node.filter.rejection_counts) == core_before           # nor the core's own counts
+    values = rig.node.accounting()
+    expected = Counter(reason for reason, _, _ in cases)
+    for reason, count in expected.items():
+        assert rig.node.rejection_reasons()[reason] == count and values[f'rejected.{reason}'] == count, reason
+    assert values['accounting_ok']
+    ok = restamped(good_uwb, t_ns + (len(cases) + 1) * 10**6)
+    rig.send(ok)                                                            # a valid range after them: applied
+    assert rig.node.counts['uwb_processed'] == before['uwb_processed'] + 1 and rig.last_status().uwb_used == 1
 
 
 def test_impossible_field_values_are_rejected_and_counted_never_applied(rig_factory, clean_stream):

@@ -21,10 +21,11 @@ Input checks. Every input is subscribed raw by :func:`rfi_node_common.inputs.sub
 lost messages counted as ``input.<topic>.*``; a handler that raises is counted, not fatal). The node
 rejects and counts bytes that rclpy cannot deserialise (``malformed_message``), a frame_id that is not
 the earth / map frame (``gnss_frame_id``, ``uwb_frame_id``), an epoch whose satellites have no state
-(``no_satellite_states``), and what :mod:`.message_checks` finds implausible (a UWB range is rejected, a
-satellite dropped from its epoch); /rfi/jammer_state by :func:`.input_admission.admit_jammer_state`
-(``type`` NONE clears the J/S; a NaN, non-finite or out-of-range J/S is counted and ignored); stamps,
-duplicates and lateness by :class:`.input_admission.InputAdmission`.
+(``no_satellite_states``), and what :mod:`rfi_node_common.message_checks` finds implausible (a UWB range is
+rejected: a corrupt 1-sigma, a non-finite or impossible anchor, a range that is not finite, negative or outside
+1 mm - 10 km, each under its reason; a satellite is dropped from its epoch); /rfi/jammer_state by
+:func:`.input_admission.admit_jammer_state` (``type`` NONE clears the J/S; a NaN, non-finite or out-of-range J/S
+is counted and ignored); stamps, duplicates and lateness by :class:`.input_admission.InputAdmission`.
 
 Outputs (contents: :mod:`.output_messages`): /fusion/status (one per processed GNSS epoch or UWB
 range), /fusion/odometry and /fusion/fix (only while the filter is initialised and its state finite),
@@ -60,6 +61,7 @@ from rfi_node_common.conversions import decode_uwb_range_cdr, msg_to_observation
 from rfi_node_common.diagnostics import STALE, StampTimer, diagnostic_array
 from rfi_node_common.inputs import InputHealth, StaleInputWatch, subscribe_input
 from rfi_node_common.main import run_node
+from rfi_node_common.message_checks import checked_satellites, uwb_range_reason
 from rfi_node_common.params import RuntimeParameters, changed_names, declare
 from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS, LATCHED_QOS
 from rfi_node_common.stamps import stamp_to_ns
@@ -73,7 +75,6 @@ from uwb_gnss_fusion.fusion_output import all_finite
 from uwb_gnss_fusion.input_admission import InputAdmission, Item, admit_jammer_state, jammer_rejection_text
 from uwb_gnss_fusion.integrity_policy import verdict_of
 from uwb_gnss_fusion.local_frame import LocalFrame, LocalSolution
-from uwb_gnss_fusion.message_checks import checked_satellites, uwb_range_reason
 from uwb_gnss_fusion.view_topics import FusionView
 
 JAMMER_TYPES = frozenset((JammerState.NONE, JammerState.CW, JammerState.CHIRP, JammerState.WIDEBAND,

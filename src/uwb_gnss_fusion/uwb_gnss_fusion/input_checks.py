@@ -2,7 +2,7 @@
 
 Pure core (no rclpy). Each check counts a rejected input under its first failing reason through
 the ``count(reason, n)`` callable it is given (the filter's cumulative rejection counts), so that
-nothing is dropped unseen. The node's own message checks (:mod:`.message_checks`) run before these.
+nothing is dropped unseen. The node's own message checks (:mod:`rfi_node_common.message_checks`) run before these.
 """
 
 from __future__ import annotations

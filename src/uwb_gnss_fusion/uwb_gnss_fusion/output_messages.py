@@ -22,7 +22,7 @@ The node's outputs:
 * /fusion/status (rfi_msgs/FusionStatus): one per processed GNSS epoch or UWB range, every
   field filled; ``header.stamp`` is the stamp of the measurement processed; ``rejection_reasons``
   / ``rejection_counts`` are the cumulative counts of the node (:mod:`.fusion_node`,
-  :mod:`.input_admission`, :mod:`.message_checks`) and of the core
+  :mod:`.input_admission`, :mod:`rfi_node_common.message_checks`) and of the core
   (``fusion_filter`` reasons such as ``innovation_gate_pseudorange``, ``duplicate_svid``,
   ``negative_range``), sorted by reason.
 * /fusion/odometry (nav_msgs/Odometry), only while the filter is initialised and its state is

@@ -1,4 +1,5 @@
-"""The node's plausibility checks (message_checks): every bound, both sides, and real values pass."""
+"""The nodes' plausibility checks (message_checks, shared by fusion_node and gnss_integrity_node): every bound, both
+sides, and real values pass."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import numpy as np
 import pytest
 
 from gnss_common.observations import GPS, SatelliteObservation, UwbRangeMeasurement
-from uwb_gnss_fusion import message_checks as mc
+from rfi_node_common import message_checks as mc
 
 ARL1_ECEF_M = np.array([-740289.9, -5457071.7, 3207245.5])
 
@@ -55,8 +56,31 @@ def test_uwb_anchor_off_the_earth_or_beyond_any_local_frame(frame, position):
     assert mc.uwb_range_reason(meas) == 'nonphysical_anchor_position'
 
 
-def test_uwb_nonfinite_anchor_is_left_to_the_core():
-    assert mc.uwb_range_reason(_range(anchor_position_m=np.array([math.nan, 0.0, 0.0]))) is None
+@pytest.mark.parametrize('frame', ['earth', 'map'])
+def test_uwb_nonfinite_anchor_is_rejected(frame):
+    """The integrity monitor checks no anchor: the node must (the fusion's core counts the same reason)."""
+    for bad in (math.nan, math.inf, -math.inf):
+        meas = _range(frame_id=frame, anchor_position_m=np.array([1.0, bad, 2.0]))
+        assert mc.uwb_range_reason(meas) == 'nonfinite_anchor_position'
+
+
+@pytest.mark.parametrize('range_m, reason', [
+    (math.nan, 'nonfinite_range'), (math.inf, 'nonfinite_range'), (-math.inf, 'nonfinite_range'),
+    (-3.0, 'negative_range'), (-5e-324, 'negative_range'), (0.0, 'range_too_short'), (5e-324, 'range_too_short'),
+    (9.99e-4, 'range_too_short'), (10000.001, 'range_too_long'), (1e300, 'range_too_long'),
+])
+def test_uwb_range_outside_the_limits_is_rejected(range_m, reason):
+    """The limits 1 mm - 10 km, applied by both nodes (issue 27: the fuzzer's 1e300 and 5e-324 made the integrity
+    monitor's residuals infinite; the fusion's core applied 5e-324 as a valid range)."""
+    assert mc.uwb_range_reason(_range(range_m=range_m)) == reason
+    assert mc.uwb_range_reason(_range(frame_id='map', anchor_position_m=np.array([5.0, 3.0, 2.0]),
+                                      range_m=range_m)) == reason
+
+
+@pytest.mark.parametrize('range_m', [mc.UWB_RANGE_MIN_M, 0.3, 499.0, 2000.0, mc.UWB_RANGE_MAX_M])
+def test_uwb_range_at_or_inside_the_limits_passes(range_m):
+    """Both limits are inclusive; a range beyond the fusion's ``uwb_max_range_m`` is its core's to count."""
+    assert mc.uwb_range_reason(_range(range_m=range_m)) is None
 
 
 @pytest.mark.parametrize('fields, reason', [
@@ -96,8 +120,10 @@ def test_reasons_are_listed():
             mc.satellite_reason(replace(sat, satellite_clock_bias_m=1e9)),
             mc.satellite_reason(replace(sat, troposphere_delay_m=1e9))}
     assert seen == set(mc.SATELLITE_REASONS)
-    assert {mc.uwb_range_reason(_range(range_std_m=-1.0)),
-            mc.uwb_range_reason(_range(anchor_position_m=np.zeros(3)))} == set(mc.UWB_REASONS)
+    uwb = [_range(range_std_m=-1.0), _range(anchor_position_m=np.array([math.nan, 0.0, 0.0])),
+           _range(anchor_position_m=np.zeros(3)), _range(range_m=math.nan), _range(range_m=-1.0),
+           _range(range_m=1e-4), _range(range_m=1e5)]
+    assert [mc.uwb_range_reason(m) for m in uwb] == list(mc.UWB_REASONS)
 
 
 @pytest.mark.parametrize('field, std', [('pseudorange_std_m', 5e-324), ('pseudorange_std_m', 9e-4),
