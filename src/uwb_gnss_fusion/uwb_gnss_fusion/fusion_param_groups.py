@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass
 
 from gnss_common.jamming_weights import TrackingLoopParams
+from rfi_node_common.message_checks import UWB_RANGE_MAX_M
 from rfi_node_common.params import USER, internal, parameter
 
 
@@ -109,8 +110,9 @@ class StaticModelParams:
     )
     uwb_max_range_m: float = parameter(
         500.0,
-        'Longest physical UWB range; longer ranges are rejected, m.',
-        minimum=1.0, maximum=100000.0, read_only=False,
+        'Longest physical UWB range; longer ranges are rejected, m (at most the node\'s input check, '
+        'rfi_node_common.message_checks.UWB_RANGE_MAX_M, 10 km).',
+        minimum=1.0, maximum=UWB_RANGE_MAX_M, read_only=False,
     )
     anchors: tuple[tuple[str, float, float, float], ...] = internal(())
     gate_probability: float = parameter(
