@@ -72,8 +72,9 @@ The correlator's own carrier lock (``Correlator.carrier_lock``, e.g. gnss_correl
 reported LOST is tracked as any other, or with ``correlator_unlocked: coast`` the IMM only predicts over it
 (docs/imm_carrier/correlator_lock.md says why tracking is the default). Such correlators are counted apart, per
 tracker: ``<method>.correlator_unlocked`` (processed while the correlator's loop was unlocked),
-``<method>.locked_on_correlator_unlocked`` (estimates published locked on them), ``<method>.slips_on_correlator_unlocked``
-(slips the tracker detected on them, also in ``slips_detected``), ``imm.coasted_correlator_unlocked``, and
+``<method>.locked_on_correlator_unlocked`` (estimates published locked on them),
+``<method>.slips_on_correlator_unlocked`` (slips the tracker detected on them, also in ``slips_detected``),
+``imm.coasted_correlator_unlocked``, and
 ``<method>.correlator_lock_unknown`` (a producer that does not say, such as the simulator); the summary line
 gives the unlocked count.
 

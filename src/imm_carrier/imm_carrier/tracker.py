@@ -437,7 +437,14 @@ class CarrierTracker:
     whose state is not finite (``channels_restarted_nonfinite``) or fails these checks
     (``channels_restarted_diverged``) restarts from its next correlator, so a tracker thrown off by an
     input that passed the checks never publishes garbage for long. :meth:`reset_channels` restarts every
-    channel (the node calls it on a confirmed stamp jump). Nothing is raised for bad input; a new
+    channel (the node calls it on a confirmed stamp jump).
+
+    The producer's own carrier lock (``carrier_lock``, rfi_msgs/Correlator CARRIER_LOCK_*) changes no check: a
+    correlator reported LOST is tracked as any other (``correlator_unlocked`` "track") or, for the IMM with
+    "coast", only predicted over (its I/Q unused); either way it is counted as ``correlator_unlocked``, its
+    estimate if locked as ``locked_on_correlator_unlocked``, the slips detected on it as
+    ``slips_on_correlator_unlocked``; a correlator whose lock is UNKNOWN (or an unknown code) as
+    ``correlator_lock_unknown`` (docs/imm_carrier/correlator_lock.md). Nothing is raised for bad input; a new
     channel's first correlator only initialises it and is returned with locked = False.
     """
 
