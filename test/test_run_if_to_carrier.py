@@ -48,11 +48,12 @@ gnss_correlator:
     spectrum_inverted: true
 imm_carrier:
   ros__parameters:
-    diagnostics_period_s: 0.01
+    diagnostics_period_s: 0.02
 """
 """The user's parameters file: the capture's format for if_source, its spectral inversion for the correlator
-(docs/gnss_correlator/README.md); imm_carrier's reports every 10 ms of stamp time (the default 1 s gives one report
-over the 150 ms), for the counts of correlators that came unlocked."""
+(docs/gnss_correlator/README.md); imm_carrier's reports every 20 ms of stamp time (the default 1 s gives one report
+over the 150 ms), for the counts of correlators that came unlocked. (Every 10 ms, 100 reports in a burst, the
+pipe test's run once missed if_source's final report on /diagnostics.)"""
 
 
 def run(args: list[str], out: Path, stdin: bytes | None = None) -> subprocess.CompletedProcess:
@@ -124,7 +125,7 @@ def check_carrier_from_capture(out: Path) -> None:
         lost_until[stamp_ns(a.header)] = lost
     reports = [({kv.key: kv.value for kv in status.values}, stamp_ns(array.header)) for array in got['/diagnostics']
                for status in array.status if status.name == 'imm_carrier' and stamp_ns(array.header) in lost_until]
-    assert reports
+    assert len(reports) >= 4  # (nonzero when PRN 24, LOST from 101 ms, was acquired: it was in the runs seen)
     for values, stamp in reports:
         for method in ('imm', 'pll'):
             assert int(values[f'{method}.correlator_unlocked']) == lost_until[stamp]
