@@ -243,7 +243,8 @@ def issue_faults(topic: str, template: Any) -> list[tuple[Any, bool]]:
         out.append((with_stamp(template, 2**31 - 1), True))
         for field, value in (('integration_time_s', 1e6), ('in_phase', 1e300), ('quadrature', -1e300),
                              ('integration_time_s', 0.0), ('integration_time_s', -0.001), ('in_phase', math.nan),
-                             ('cn0_dbhz', 1e300), ('predicted_phase_change_rad', math.inf)):
+                             ('cn0_dbhz', 1e300), ('predicted_phase_change_rad', math.inf),
+                             ('carrier_lock', 255)):  # a lock code this version does not know: counted as unknown
             m = t(template)
             for c in m.correlators:
                 setattr(c, field, value)

@@ -107,9 +107,10 @@ def invalid_outputs(topic: str, msg) -> list[str]:
     elif topic == '/gnss/correlators':
         for c in msg.correlators:  # a C/N0 may be NaN (unknown), never infinite
             if not (_finite(c.in_phase, c.quadrature, c.predicted_phase_change_rad) and c.integration_time_s > 0
-                    and math.isfinite(c.integration_time_s) and not math.isinf(c.cn0_dbhz)):
+                    and math.isfinite(c.integration_time_s) and not math.isinf(c.cn0_dbhz)
+                    and c.carrier_lock in (c.CARRIER_LOCK_UNKNOWN, c.CARRIER_LOCK_LOST, c.CARRIER_LOCK_HELD)):
                 bad.append(f'sv {c.svid}: I {c.in_phase}, Q {c.quadrature}, T {c.integration_time_s}, '
-                           f'C/N0 {c.cn0_dbhz}, predicted {c.predicted_phase_change_rad}')
+                           f'C/N0 {c.cn0_dbhz}, predicted {c.predicted_phase_change_rad}, lock {c.carrier_lock}')
     elif topic == '/carrier/estimates':
         for e in msg.estimates:  # a std may be NaN (unknown: the PLL has none), never 0 or inf when locked
             if e.locked and not (_finite(e.phase_rad, e.frequency_hz)

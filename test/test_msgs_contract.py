@@ -57,7 +57,8 @@ CONTRACT = {
                         'pseudorange_std_m', 'pseudorange_rate_std_mps'],
     'GnssMeasurementArray': ['gps_time_of_week_s', 'gps_week', 'measurements'],
     'UwbRange': ['anchor_id', 'anchor_position', 'range_m', 'range_std_m'],
-    'Correlator': ['svid', 'integration_time_s', 'in_phase', 'quadrature', 'cn0_dbhz', 'predicted_phase_change_rad'],
+    'Correlator': ['svid', 'integration_time_s', 'in_phase', 'quadrature', 'cn0_dbhz', 'predicted_phase_change_rad',
+                   'carrier_lock'],
     'CarrierPhase': ['svid', 'phase_rad', 'phase_std_rad', 'frequency_hz', 'frequency_std_hz', 'data_bit',
                      'data_bit_probability', 'mode_probabilities', 'locked', 'method'],
     'FusionStatus': ['satellites_used', 'satellites_rejected', 'uwb_used', 'uwb_rejected',
@@ -72,12 +73,17 @@ def test_contract_fields_present(name):
 
 
 def test_constants_and_python_types():
-    from rfi_msgs.msg import CarrierPhase, GnssMeasurement, IfSamples, JammerState
+    from imm_carrier import measurement_model
+    from rfi_msgs.msg import CarrierPhase, Correlator, GnssMeasurement, IfSamples, JammerState
 
     assert [JammerState.NONE, JammerState.CW, JammerState.CHIRP, JammerState.WIDEBAND, JammerState.UNKNOWN] == \
         [0, 1, 2, 3, 4]
     assert {CarrierPhase.IMM, CarrierPhase.PLL, CarrierPhase.KF} == {1, 2, 3}
     assert GnssMeasurement.GPS == 1
+    # a Correlator that does not set its lock says UNKNOWN; imm_carrier's codes are the message's
+    assert Correlator().carrier_lock == Correlator.CARRIER_LOCK_UNKNOWN == measurement_model.CORRELATOR_LOCK_UNKNOWN
+    assert (Correlator.CARRIER_LOCK_LOST, Correlator.CARRIER_LOCK_HELD) == (
+        measurement_model.CORRELATOR_LOCK_LOST, measurement_model.CORRELATOR_LOCK_HELD)
     assert IfSamples.INT8 != IfSamples.INT16
     msg = GnssMeasurement(pseudorange_std_m=math.nan)
     assert math.isnan(msg.pseudorange_std_m)

@@ -118,16 +118,26 @@ def continues(previous: IfBlock, block: IfBlock) -> bool:
             and block.intermediate_frequency_hz == previous.intermediate_frequency_hz)
 
 
+def carrier_lock_codes(interval: CorrelatorInterval) -> np.ndarray:
+    """Correlator.carrier_lock of each channel of an interval: CARRIER_LOCK_HELD / _LOST by the lock rule
+    (``interval.locked``), CARRIER_LOCK_UNKNOWN while the rule's window is not full yet (its discriminator std
+    NaN: the first ``lock_window_ms`` of a channel), shape (n,), int."""
+    return np.where(~np.isfinite(interval.phase_error_std_rad), Correlator.CARRIER_LOCK_UNKNOWN,
+                    np.where(interval.locked, Correlator.CARRIER_LOCK_HELD, Correlator.CARRIER_LOCK_LOST))
+
+
 def correlator_array(interval: CorrelatorInterval, frame_id: str) -> CorrelatorArray:
-    """CorrelatorInterval -> rfi_msgs/CorrelatorArray (GPS, one Correlator per channel)."""
+    """CorrelatorInterval -> rfi_msgs/CorrelatorArray (GPS, one Correlator per channel, its carrier lock from
+    :func:`carrier_lock_codes`)."""
     msg = CorrelatorArray()
     msg.header.stamp = ns_to_stamp(interval.stamp_ns)
     msg.header.frame_id = frame_id
     msg.correlators = [
         Correlator(constellation=GnssMeasurement.GPS, svid=int(s), integration_time_s=float(t), in_phase=float(i),
-                   quadrature=float(q), cn0_dbhz=float(c), predicted_phase_change_rad=float(d))
-        for s, i, q, c, d, t in zip(interval.svid, interval.in_phase, interval.quadrature, interval.cn0_dbhz,
-                                    interval.predicted_phase_change_rad, interval.integration_time_s, strict=True)]
+                   quadrature=float(q), cn0_dbhz=float(c), predicted_phase_change_rad=float(d), carrier_lock=int(k))
+        for s, i, q, c, d, t, k in zip(interval.svid, interval.in_phase, interval.quadrature, interval.cn0_dbhz,
+                                       interval.predicted_phase_change_rad, interval.integration_time_s,
+                                       carrier_lock_codes(interval), strict=True)]
     return msg
 
 

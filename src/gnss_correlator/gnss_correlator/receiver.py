@@ -214,7 +214,8 @@ class CorrelatorInterval:
         pll_error_rad: the period's Costas discriminator atan(Q/I), rad, shape (n,): the correlator's own carrier
             phase estimate is the accumulated predicted change plus this (modulo pi).
         cn0_m2m4_dbhz: the moments estimator's C/N0 of the same window, dB-Hz, shape (n,) (for comparison).
-    Not published in CorrelatorArray (no field for them): read by the core's users and the benchmarks.
+    ``locked`` is published as Correlator.carrier_lock (gnss_correlator_node.carrier_lock_codes: UNKNOWN while
+    the window is not full); the other lock fields are not published: read by the core's users and the benchmarks.
     """
 
     stamp_ns: int

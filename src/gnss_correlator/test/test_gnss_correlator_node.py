@@ -19,7 +19,7 @@ from gnss_correlator import receiver as receiver_module
 from gnss_correlator.gnss_correlator_node import GnssCorrelatorNode, correlator_array
 from gnss_correlator.node_params import CorrelatorNodeParams
 from gnss_correlator.receiver import IfBlock, Receiver
-from rfi_msgs.msg import CorrelatorArray, IfSamples
+from rfi_msgs.msg import Correlator, CorrelatorArray, IfSamples
 from rfi_node_common.qos import DATA_QOS
 from rfi_node_common.stamps import NS_PER_S, ns_to_stamp
 from rfi_node_common.testing import NodeRig
@@ -101,6 +101,12 @@ def test_real_capture_gives_one_array_per_ms_with_the_satellites(capture):
         assert 0.8 < float(np.median(mags)) < 1.2
         # the NCO's phase change over 1 ms: 2 pi x Doppler x 1 ms (PRN 26 at +648 Hz)
         assert last[26].predicted_phase_change_rad == pytest.approx(2 * np.pi * 648.0e-3, abs=0.02)
+        # carrier_lock: UNKNOWN until the lock rule's 100-ms window is full, then HELD for the six satellites and
+        # LOST for PRN 24, the likely false alarm (measured: the window is full at 101 ms of the stream)
+        assert {c.carrier_lock for a in arrays[:40] for c in a.correlators} == {Correlator.CARRIER_LOCK_UNKNOWN}
+        assert {s: c.carrier_lock for s, c in last.items() if s != 24} == dict.fromkeys(
+            (16, 18, 26, 29, 31, 32), Correlator.CARRIER_LOCK_HELD)
+        assert 24 not in last or last[24].carrier_lock == Correlator.CARRIER_LOCK_LOST
         rig.spin_until(lambda: len(rig.out['/diagnostics']) >= 1, 'diagnostics')
         status = rig.out['/diagnostics'][-1].status[0]
         assert status.name == 'gnss_correlator' and status.level == DiagnosticStatus.OK, status.message

@@ -8,7 +8,8 @@ whose layouts come from the generated message classes: this module only names th
 stream entry is which field, found by field name in the layout) and says where each CarrierPhase
 field comes from (:data:`ESTIMATE_SOURCES`, one entry per field of rfi_msgs/CarrierPhase). A field
 added to CarrierPhase.msg without an entry there fails at import; a field added to Correlator.msg is
-decoded and ignored; no byte offset is written here.
+decoded and ignored until it is named here (``carrier_lock`` is: the correlator's own carrier lock, handed to the
+trackers); no byte offset is written here.
 
 Little-endian CDR only: ``decode_correlator_array`` returns None otherwise (the node then lets rclpy
 re-serialise the message), and for malformed bytes.
@@ -43,7 +44,7 @@ if _entries is None or _IN.fields[-1].name != "correlators":
     raise ImportError("imm_carrier.cdr expects CorrelatorArray = header, ..., Correlator[] correlators "
                       "with Correlator of fixed-size fields: update decode_correlator_array")
 _INTS_PER_ELEMENT, _FLOATS_PER_ELEMENT = _entries
-_INT_FIELDS = ("constellation", "svid")
+_INT_FIELDS = ("constellation", "svid", "carrier_lock")
 _FLOAT_FIELDS = ("integration_time_s", "in_phase", "quadrature", "cn0_dbhz", "predicted_phase_change_rad")
 _INT_AT = [_CORRELATOR.position(name)[0] for name in _INT_FIELDS]
 _FLOAT_AT = [_CORRELATOR.position(name)[1] for name in _FLOAT_FIELDS]
@@ -60,6 +61,7 @@ class DecodedCorrelatorArray:
             header ends; ``raw[:4 + header_end]`` is the encapsulation and the header, which an answer
             with the same header can copy.
         constellation, svid: int64.
+        carrier_lock: int64, rfi_msgs/Correlator CARRIER_LOCK_* (0 unknown, 1 lost, 2 held).
         integration_time_s, in_phase, quadrature, cn0_dbhz, predicted_phase_change_rad: float64.
     """
 
@@ -73,6 +75,7 @@ class DecodedCorrelatorArray:
     quadrature: np.ndarray
     cn0_dbhz: np.ndarray
     predicted_phase_change_rad: np.ndarray
+    carrier_lock: np.ndarray
 
 
 def decode_correlator_array(raw: bytes) -> DecodedCorrelatorArray | None:
@@ -109,6 +112,7 @@ def decode_correlator_array(raw: bytes) -> DecodedCorrelatorArray | None:
         quadrature=values[:, _FLOAT_AT[2]],
         cn0_dbhz=values[:, _FLOAT_AT[3]],
         predicted_phase_change_rad=values[:, _FLOAT_AT[4]],
+        carrier_lock=elements[:, _INT_AT[2]],
     )
 
 

@@ -68,6 +68,16 @@ more than ~745 in log-likelihood cannot make it divide 0 by 0), the node counts 
 (``<method>.core_faults``), drops that tracker's answer for the array (its correlators counted as
 ``<method>.dropped_core_fault``), restarts that tracker's channels, reports ERROR and keeps running.
 
+The correlator's own carrier lock (``Correlator.carrier_lock``, e.g. gnss_correlator's lock rule): a correlator
+reported LOST is tracked as any other, or with ``correlator_unlocked: coast`` the IMM only predicts over it
+(docs/imm_carrier/correlator_lock.md says why tracking is the default). Such correlators are counted apart, per
+tracker: ``<method>.correlator_unlocked`` (processed while the correlator's loop was unlocked),
+``<method>.locked_on_correlator_unlocked`` (estimates published locked on them),
+``<method>.slips_on_correlator_unlocked`` (slips the tracker detected on them, also in ``slips_detected``),
+``imm.coasted_correlator_unlocked``, and
+``<method>.correlator_lock_unknown`` (a producer that does not say, such as the simulator); the summary line
+gives the unlocked count.
+
 /rfi/jammer_state is not subscribed: the trackers take the signal level from the correlators'
 C/N0 (which already reflects the jamming), and CarrierPhase has no field a jammer state would fill.
 """
@@ -227,7 +237,8 @@ class ImmCarrierNode(Node):
             rejected_before = tracker.rejected_total
             try:
                 batch = tracker.process_arrays(stamp_ns, d.constellation, d.svid, d.integration_time_s, d.in_phase,
-                                               d.quadrature, d.cn0_dbhz, d.predicted_phase_change_rad)
+                                               d.quadrature, d.cn0_dbhz, d.predicted_phase_change_rad,
+                                               d.carrier_lock)
             except Exception as err:  # noqa: BLE001 - a core fault must not end the node (see _core_fault)
                 self._core_fault(method, n, err)
                 continue
@@ -300,8 +311,10 @@ class ImmCarrierNode(Node):
         return values
 
     def _channels_text(self, values: dict[str, object]) -> str:
-        return ', '.join(f'{m}: {values[f"{m}.channels"]} channels, {values[f"{m}.channels_locked"]} locked'
+        text = ', '.join(f'{m}: {values[f"{m}.channels"]} channels, {values[f"{m}.channels_locked"]} locked'
                          for m in self.trackers)
+        first = next(iter(self.trackers))  # every tracker sees the same correlators
+        return f'{text}; {values[f"{first}.correlator_unlocked"]} correlators came with the correlator unlocked'
 
     def diagnostics(self, stamp_ns: int) -> DiagnosticArray:
         """The /diagnostics message at ``stamp_ns`` (an accepted input stamp); levels in the module docstring."""

@@ -105,6 +105,11 @@ class Counter(IntEnum):
     LOCKED_SUPPRESSED_INVALID = 16
     CHANNELS_RESTARTED_DIVERGED = 17
     CHANNELS_RESTARTED_STAMP_JUMP = 18
+    CORRELATOR_LOCK_UNKNOWN = 19       # processed correlators whose producer did not say its carrier lock
+    CORRELATOR_UNLOCKED = 20           # processed correlators whose producer's carrier loop was not in lock
+    LOCKED_ON_CORRELATOR_UNLOCKED = 21  # of these, estimates published locked
+    SLIPS_ON_CORRELATOR_UNLOCKED = 22  # slips detected on these (also in slips_detected)
+    COASTED_CORRELATOR_UNLOCKED = 23   # of these, IMM steps that coasted (correlator_unlocked: coast)
 
 
 COUNTER_KEYS = tuple(c.name.lower() for c in Counter)
@@ -155,6 +160,7 @@ class KernelConfig(IntEnum):
     T_MIN = 16             # integration time range, s
     T_MAX = 17
     IQ_RATIO = 18          # max I/Q magnitude ratio
+    COAST_UNLOCKED = 19    # 1: the IMM coasts (prediction only) on a correlator whose carrier lock was lost
 
 
 KERNEL_CONFIG_LEN = len(KernelConfig)

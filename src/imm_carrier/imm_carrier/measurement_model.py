@@ -49,6 +49,12 @@ METHOD_IMM = 1
 METHOD_PLL = 2
 """Method codes, identical to rfi_msgs/CarrierPhase constants."""
 
+CORRELATOR_LOCK_UNKNOWN = 0
+CORRELATOR_LOCK_LOST = 1
+CORRELATOR_LOCK_HELD = 2
+"""The producer's carrier-lock codes of a correlator, identical to rfi_msgs/Correlator CARRIER_LOCK_* (0: the
+producer does not say, as the simulator's open-loop replica; 1: its carrier loop lost lock; 2: in lock)."""
+
 
 def iq_amplitude_and_noise_std(
     cn0_dbhz: float, integration_time_s: float, iq_scaling: str = "unit_amplitude"
@@ -118,6 +124,8 @@ class CorrelatorSample:
         quadrature: prompt Q, same unit.
         cn0_dbhz: receiver's C/N0 estimate, dB-Hz (NaN = unknown).
         predicted_phase_change_rad: satellite-motion phase change over the interval, rad.
+        carrier_lock: the producer's own carrier lock, CORRELATOR_LOCK_UNKNOWN (0, the default), _LOST (1) or
+            _HELD (2) (rfi_msgs/Correlator CARRIER_LOCK_*).
     """
 
     constellation: int
@@ -127,6 +135,7 @@ class CorrelatorSample:
     quadrature: float
     cn0_dbhz: float
     predicted_phase_change_rad: float
+    carrier_lock: int = 0
 
 
 @dataclass(frozen=True)

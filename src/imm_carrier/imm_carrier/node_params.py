@@ -85,6 +85,7 @@ class CarrierNodeParams(NodeDiagnosticsParams):
     min_integration_time_s: float = parameter_from(TrackerParams, 'min_integration_time_s')
     max_integration_time_s: float = parameter_from(TrackerParams, 'max_integration_time_s')
     max_iq_magnitude_ratio: float = parameter_from(TrackerParams, 'max_iq_magnitude_ratio')
+    correlator_unlocked: str = parameter_from(TrackerParams, 'correlator_unlocked')
     hardware_id: str = hardware_id_parameter('gnss_receiver')
 
     def __post_init__(self) -> None:
@@ -132,7 +133,8 @@ class CarrierNodeParams(NodeDiagnosticsParams):
                              max_gap_intervals=self.max_gap_intervals, bit_period_s=self.bit_period_s,
                              min_integration_time_s=self.min_integration_time_s,
                              max_integration_time_s=self.max_integration_time_s,
-                             max_iq_magnitude_ratio=self.max_iq_magnitude_ratio)
+                             max_iq_magnitude_ratio=self.max_iq_magnitude_ratio,
+                             correlator_unlocked=self.correlator_unlocked)
 
 
 CONFIG_FILE = ConfigFile('imm_carrier', 'config/imm_carrier.yaml', 'imm_carrier', CarrierNodeParams, """

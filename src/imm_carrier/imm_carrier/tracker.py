@@ -44,6 +44,8 @@ from imm_carrier.layout import (
 from imm_carrier.measurement_model import (
     CN0_MAX_DBHZ,
     CN0_MIN_DBHZ,
+    CORRELATOR_LOCK_HELD,
+    CORRELATOR_LOCK_LOST,
     MAX_PREDICTED_DOPPLER_HZ,
     MAX_RESIDUAL_PHASE_RAD,
     METHOD_IMM,
@@ -180,12 +182,13 @@ def _init_channel(method, st, zi, zq, dphi, cfg, row):
 
 
 @njit(cache=True)
-def _imm_update(st, i_k, q_k, amp, sig, tk, d_k, stamp_ns, cfg, imm_out, row, slot, slips, counters):
-    """One IMM step of a running channel and its output row; returns (finite, valid, locked) (see _track_epoch)."""
+def _imm_update(st, i_k, q_k, amp, sig, tk, d_k, stamp_ns, cfg, imm_out, row, slot, slips, counters, coast):
+    """One IMM step of a running channel and its output row; returns (finite, valid, locked) (see _track_epoch).
+    coast: prediction only (the measurement not used: imm_step with NaN I/Q)."""
     p = _transition_probability(stamp_ns, tk, cfg[KernelConfig.P_BIT], cfg[KernelConfig.BIT_PERIOD])
     imm_step(
-        st, i_k, q_k, amp, sig, tk, d_k, p, math.nan, cfg[KernelConfig.QF], cfg[KernelConfig.QG],
-        int(cfg[KernelConfig.FORM]), imm_out
+        st, math.nan if coast else i_k, math.nan if coast else q_k, amp, sig, tk, d_k, p, math.nan,
+        cfg[KernelConfig.QF], cfg[KernelConfig.QG], int(cfg[KernelConfig.FORM]), imm_out
     )
     phase = imm_out[ImmOut.PHI]
     omega = imm_out[ImmOut.OMEGA]
@@ -293,6 +296,7 @@ def _track_epoch(
     zq,
     cn0,
     dphi,
+    lock,
     cfg,
     slot_of_key,
     key_of_slot,
@@ -363,6 +367,10 @@ def _track_epoch(
             counters[Counter.CHANNELS_RESTARTED_GAP] += 1
             slot = -1
         counters[Counter.PROCESSED] += 1
+        if lock[k] == CORRELATOR_LOCK_LOST:
+            counters[Counter.CORRELATOR_UNLOCKED] += 1
+        elif lock[k] != CORRELATOR_LOCK_HELD:  # 0, or a code this version does not know
+            counters[Counter.CORRELATOR_LOCK_UNKNOWN] += 1
         row = values[n_out]
         n_out += 1
         row[BatchColumn.CONSTELLATION] = c
@@ -374,14 +382,22 @@ def _track_epoch(
         last_stamp[slot] = stamp_ns
         last_cn0[slot] = c0
         st = state[slot]
+        unlocked = lock[k] == CORRELATOR_LOCK_LOST
+        slips_before = slips[slot]
         if method == _M_IMM:
+            coast = unlocked and cfg[KernelConfig.COAST_UNLOCKED] > 0.5
+            if coast:
+                counters[Counter.COASTED_CORRELATOR_UNLOCKED] += 1
             finite, valid, locked = _imm_update(st, i_k, q_k, amp, sig, tk, d_k, stamp_ns, cfg, imm_out, row, slot,
-                                                slips, counters)
+                                                slips, counters, coast)
         else:
             finite, valid, locked = _pll_update(st, i_k, q_k, amp, tk, d_k, cfg, pll_out, row, slot, slips,
                                                 was_locked, counters)
         row[BatchColumn.LOCKED] = 1.0 if locked else 0.0
         row[BatchColumn.CYCLE_SLIPS] = slips[slot]
+        if unlocked:
+            counters[Counter.LOCKED_ON_CORRELATOR_UNLOCKED] += 1 if locked else 0
+            counters[Counter.SLIPS_ON_CORRELATOR_UNLOCKED] += slips[slot] - slips_before
         if not finite:  # the filter overflowed: restart on the next sample (answer published unlocked)
             slot_of_key[key] = -1
             key_of_slot[slot] = -1
@@ -422,7 +438,14 @@ class CarrierTracker:
     whose state is not finite (``channels_restarted_nonfinite``) or fails these checks
     (``channels_restarted_diverged``) restarts from its next correlator, so a tracker thrown off by an
     input that passed the checks never publishes garbage for long. :meth:`reset_channels` restarts every
-    channel (the node calls it on a confirmed stamp jump). Nothing is raised for bad input; a new
+    channel (the node calls it on a confirmed stamp jump).
+
+    The producer's own carrier lock (``carrier_lock``, rfi_msgs/Correlator CARRIER_LOCK_*) changes no check: a
+    correlator reported LOST is tracked as any other (``correlator_unlocked`` "track") or, for the IMM with
+    "coast", only predicted over (its I/Q unused); either way it is counted as ``correlator_unlocked``, its
+    estimate if locked as ``locked_on_correlator_unlocked``, the slips detected on it as
+    ``slips_on_correlator_unlocked``; a correlator whose lock is UNKNOWN (or an unknown code) as
+    ``correlator_lock_unknown`` (docs/imm_carrier/correlator_lock.md). Nothing is raised for bad input; a new
     channel's first correlator only initialises it and is returned with locked = False.
     """
 
@@ -463,6 +486,7 @@ class CarrierTracker:
         cfg[KernelConfig.T_MIN] = params.min_integration_time_s
         cfg[KernelConfig.T_MAX] = params.max_integration_time_s
         cfg[KernelConfig.IQ_RATIO] = params.max_iq_magnitude_ratio
+        cfg[KernelConfig.COAST_UNLOCKED] = 1.0 if params.correlator_unlocked == "coast" else 0.0
         self._cfg = cfg
         self._slot_of_key = np.full(_KEY_TABLE_SIZE, -1, dtype=np.int64)
         self._seen = np.zeros(_KEY_TABLE_SIZE, dtype=np.int64)
@@ -538,6 +562,7 @@ class CarrierTracker:
         quadrature: np.ndarray,
         cn0_dbhz: np.ndarray,
         predicted_phase_change_rad: np.ndarray,
+        carrier_lock: np.ndarray | None = None,
     ) -> CarrierPhaseBatch:
         """Process the correlators of one interval, given as arrays (one element per channel).
 
@@ -549,6 +574,8 @@ class CarrierTracker:
             in_phase, quadrature: prompt I and Q, correlator units, shape (n,).
             cn0_dbhz: C/N0, dB-Hz, shape (n,) (NaN: unknown).
             predicted_phase_change_rad: satellite-motion phase change over the interval, rad, shape (n,).
+            carrier_lock: the producer's carrier lock, rfi_msgs/Correlator CARRIER_LOCK_* codes (0 unknown,
+                1 lost, 2 held), shape (n,), integers; None: all unknown.
 
         Returns:
             CarrierPhaseBatch with one row per accepted correlator, in input order. Rejections are
@@ -563,7 +590,9 @@ class CarrierTracker:
         sv = np.asarray(svid, dtype=np.int64)
         t, zi, zq, cn0, dphi = (np.ascontiguousarray(a, dtype=np.float64) for a in
                                 (integration_time_s, in_phase, quadrature, cn0_dbhz, predicted_phase_change_rad))
-        if n < 0 or sv.shape != (n,) or any(a.shape != (n,) for a in (t, zi, zq, cn0, dphi)):
+        lock = (np.zeros(max(n, 0), dtype=np.int64) if carrier_lock is None
+                else np.ascontiguousarray(carrier_lock, dtype=np.int64))
+        if n < 0 or sv.shape != (n,) or any(a.shape != (n,) for a in (t, zi, zq, cn0, dphi, lock)):
             raise ValueError("the correlator arrays must be 1-D and of equal length")
         live = int(np.count_nonzero(self._key_of_slot >= 0))
         if live + n > self._key_of_slot.size:
@@ -582,6 +611,7 @@ class CarrierTracker:
             zq,
             cn0,
             dphi,
+            lock,
             self._cfg,
             self._slot_of_key,
             self._key_of_slot,
@@ -622,5 +652,6 @@ class CarrierTracker:
             np.array([s.quadrature for s in samples], dtype=np.float64),
             np.array([s.cn0_dbhz for s in samples], dtype=np.float64),
             np.array([s.predicted_phase_change_rad for s in samples], dtype=np.float64),
+            np.array([s.carrier_lock for s in samples], dtype=np.int64),
         )
         return batch.to_estimates()

@@ -16,6 +16,8 @@ from rfi_node_common.params import USER, parameter
 
 METHODS = ("imm", "pll")
 """The carrier trackers: the IMM of Zhao et al. and the reference PLL."""
+CORRELATOR_UNLOCKED_POLICIES = ("track", "coast")
+"""What the IMM does with a correlator whose producer reports its carrier lock lost (TrackerParams)."""
 
 
 @dataclass(frozen=True)
@@ -76,6 +78,15 @@ class TrackerParams:
         'larger one could only throw the channel off.',
         minimum=2.0, maximum=1000000.0,
     )
+    correlator_unlocked: str = parameter(
+        "track",
+        "What the IMM does with a correlator whose producer reports its own carrier loop unlocked (Correlator."
+        "carrier_lock LOST): track (update as any other, weighted by its C/N0: Zhao et al.'s IMM is meant to "
+        "hold the phase where a PLL loses lock; docs/imm_carrier/correlator_lock.md) or coast (prediction "
+        "only, the correlator unused). Either way such intervals are counted apart (correlator_unlocked, "
+        "locked_on_correlator_unlocked, slips_on_correlator_unlocked); the PLL baseline always tracks.",
+        choices=CORRELATOR_UNLOCKED_POLICIES,
+    )
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -94,3 +105,6 @@ class TrackerParams:
             )
         if not (math.isfinite(self.max_iq_magnitude_ratio) and self.max_iq_magnitude_ratio > 1):
             raise ValueError("max_iq_magnitude_ratio must be finite and > 1")
+        if self.correlator_unlocked not in CORRELATOR_UNLOCKED_POLICIES:
+            raise ValueError(f"correlator_unlocked must be one of {CORRELATOR_UNLOCKED_POLICIES}, "
+                             f"got {self.correlator_unlocked!r}")

@@ -24,7 +24,7 @@ def _correlator_array(rng, n, frame_id, sec=1_400_000_000, nanosec=123_456_789):
             constellation=int(rng.integers(0, 256)), svid=int(rng.integers(0, 65536)),
             integration_time_s=float(rng.uniform(1e-3, 2e-2)), in_phase=float(rng.normal()),
             quadrature=float(rng.normal()), cn0_dbhz=float(rng.choice([rng.uniform(0, 70), math.nan])),
-            predicted_phase_change_rad=float(rng.uniform(-1e3, 1e3))))
+            predicted_phase_change_rad=float(rng.uniform(-1e3, 1e3)), carrier_lock=int(rng.integers(0, 256))))
     return msg
 
 
@@ -43,7 +43,8 @@ def test_decode_equals_rclpy_deserialisation(frame_id, n):
     for name, values in (('constellation', d.constellation), ('svid', d.svid),
                          ('integration_time_s', d.integration_time_s), ('in_phase', d.in_phase),
                          ('quadrature', d.quadrature), ('cn0_dbhz', d.cn0_dbhz),
-                         ('predicted_phase_change_rad', d.predicted_phase_change_rad)):
+                         ('predicted_phase_change_rad', d.predicted_phase_change_rad),
+                         ('carrier_lock', d.carrier_lock)):
         np.testing.assert_array_equal(values, [getattr(c, name) for c in msg.correlators], err_msg=name)
 
 

@@ -125,6 +125,27 @@ def test_method_both_publishes_imm_and_pll_entries(rig_factory):
     assert values['accounting_ok'] == 'True' and rig.diagnostics[-1].status[0].level == DiagnosticStatus.OK
 
 
+def test_correlators_reported_unlocked_are_counted_in_diagnostics(rig_factory):
+    """Correlator.carrier_lock reaches the trackers through the compiled decoder: LOST ones are counted per
+    tracker (and in the summary line), UNKNOWN ones apart; tracked as any other (the default), so the level stays
+    OK and the IMM keeps its lock."""
+    rig = rig_factory({'method': 'both', 'diagnostics_period_s': 0.01})
+    rng = np.random.default_rng(5)
+    for k in range(1, 41):
+        msg = clean_array(k, rng=rng)
+        msg.correlators[0].carrier_lock = Correlator.CARRIER_LOCK_LOST if k > 30 else Correlator.CARRIER_LOCK_HELD
+        rig.send(msg)  # svid 7 leaves it unset: CARRIER_LOCK_UNKNOWN
+    values = rig.last_values()
+    for method in ('imm', 'pll'):
+        assert values[f'{method}.correlator_unlocked'] == '10'
+        assert values[f'{method}.correlator_lock_unknown'] == '40'
+    assert values['imm.locked_on_correlator_unlocked'] == '10'  # the IMM held lock through them
+    assert values['imm.coasted_correlator_unlocked'] == '0'
+    status = rig.diagnostics[-1].status[0]
+    assert status.level == DiagnosticStatus.OK and '10 correlators came with the correlator unlocked' in status.message
+    assert all(e.locked for e in rig.estimates[-1].estimates)
+
+
 def test_bad_input_is_counted_in_diagnostics_and_never_locked_nan(rig_factory):
     rig = rig_factory({'method': 'both', 'diagnostics_period_s': 0.01})
     k = 0
@@ -235,7 +256,7 @@ def test_tracker_parameters_are_defined_once_in_the_core():
     pairs += [('carrier_frequency_hz' if f.name == 'carrier_hz' else f.name, f)
               for f in dataclasses.fields(ImmParams) if 'rfi_doc' in f.metadata]
     pairs += [(f.name, f) for f in dataclasses.fields(TrackerParams) if 'rfi_doc' in f.metadata]
-    assert len(pairs) == 20
+    assert len(pairs) == 21
     for name, core in pairs:
         assert node[name].metadata['rfi_doc'] == core.metadata['rfi_doc'], name
         assert node[name].default == core.default, name

@@ -347,3 +347,78 @@ def test_integration_time_range_is_validated():
         TrackerParams(min_integration_time_s=0.0)
     with pytest.raises(ValueError):
         TrackerParams(max_iq_magnitude_ratio=1.0)
+
+
+def _noisy_channel(n, seed):
+    """I/Q, predicted changes of one channel at 45 dB-Hz, T = 20 ms, unit amplitude (seeded)."""
+    rng = np.random.default_rng(seed)
+    dphi = rng.uniform(-3, 3, n)
+    theta = np.cumsum(dphi) + 0.4
+    sigma = 1.0 / math.sqrt(2 * T * 10 ** 4.5)
+    zi = np.cos(theta) + sigma * rng.standard_normal(n)
+    zq = np.sin(theta) + sigma * rng.standard_normal(n)
+    return zi, zq, dphi
+
+
+@pytest.mark.parametrize("method", ["imm", "pll"])
+def test_correlator_lock_is_counted_and_tracked_through_by_default(method):
+    """carrier_lock LOST (the correlator's own loop unlocked) changes no estimate with the default 'track': the
+    same outputs as HELD or UNKNOWN, bit for bit; each code counted, and the locked outputs and slips on the
+    unlocked intervals counted apart."""
+    n = 200
+    zi, zq, dphi = _noisy_channel(n, 3)
+    codes = np.where(np.arange(n) % 3 == 0, 1, 2)  # LOST every third interval, HELD otherwise
+    codes[:10] = 0  # UNKNOWN (e.g. the correlator's lock window not full yet)
+    runs = {}
+    for name, lock in (("codes", codes), ("none", None), ("held", np.full(n, 2))):
+        tr = CarrierTracker(TrackerParams(method=method))
+        rows = [tr.process_arrays((k + 1) * T_NS, [1], [5], [T], [zi[k]], [zq[k]], [45.0], [dphi[k]],
+                                  None if lock is None else lock[k:k + 1]).values[0] for k in range(n)]
+        runs[name] = (np.array(rows), tr.counters)
+    np.testing.assert_array_equal(runs["codes"][0], runs["none"][0])
+    np.testing.assert_array_equal(runs["codes"][0], runs["held"][0])
+    values, c = runs["codes"]
+    lost = codes == 1
+    assert c["correlator_unlocked"] == lost.sum() and c["correlator_lock_unknown"] == 10
+    assert runs["none"][1]["correlator_lock_unknown"] == n and runs["held"][1]["correlator_unlocked"] == 0
+    locked = values[:, 10] > 0.5
+    assert c["locked_on_correlator_unlocked"] == np.count_nonzero(locked & lost) > 0
+    assert c["slips_on_correlator_unlocked"] == 0 and c["coasted_correlator_unlocked"] == 0
+
+
+def test_imm_coasts_over_unlocked_correlators_when_asked():
+    """correlator_unlocked 'coast': on a LOST correlator the IMM only predicts (its I/Q unused: any I/Q gives the
+    same estimate, the phase std grows by the clock model's process noise); HELD and UNKNOWN ones update."""
+    n = 60
+    zi, zq, dphi = _noisy_channel(n, 4)
+    outs = []
+    for garbage in (0.0, 1.0):
+        tr = CarrierTracker(TrackerParams(correlator_unlocked="coast"))
+        rows = []
+        for k in range(n):
+            lost = k >= 50
+            i, q = (zi[k] + garbage * 5.0, zq[k] - garbage * 3.0) if lost else (zi[k], zq[k])
+            rows.append(tr.process_arrays((k + 1) * T_NS, [1], [5], [T], [i], [q], [45.0], [dphi[k]],
+                                          [1 if lost else 2]).values[0])
+        outs.append((np.array(rows), tr.counters))
+    (a, ca), (b, _) = outs
+    np.testing.assert_array_equal(a, b)
+    assert ca["coasted_correlator_unlocked"] == 10 and ca["correlator_unlocked"] == 10
+    std = a[:, 3]
+    assert np.all(np.diff(std[50:]) > 0) and std[49] < std[50]  # prediction only: the covariance grows
+    tracked = CarrierTracker(TrackerParams())  # 'track' uses the garbage and moves away
+    rows = [tracked.process_arrays((k + 1) * T_NS, [1], [5], [T], [zi[k] + (5.0 if k >= 50 else 0.0)], [zq[k]],
+                                   [45.0], [dphi[k]], [1 if k >= 50 else 2]).values[0] for k in range(n)]
+    assert not np.array_equal(np.array(rows)[50:, 2], a[50:, 2])
+    with pytest.raises(ValueError, match="correlator_unlocked"):
+        TrackerParams(correlator_unlocked="reset")
+    with pytest.raises(ValueError, match="equal length"):
+        tracked.process_arrays(0, [1], [5], [T], [1.0], [0.0], [45.0], [0.1], [1, 2])
+
+
+def test_correlator_sample_carries_the_lock():
+    tr = CarrierTracker(TrackerParams())
+    for k in range(3):
+        s = CorrelatorSample(1, 5, T, 1.0, 0.0, 45.0, 0.1, carrier_lock=1)
+        tr.process((k + 1) * T_NS, [s])
+    assert tr.counters["correlator_unlocked"] == 3

@@ -212,7 +212,8 @@ def _generate(sim_scenario: CorrelatorScenario, s: Mapping[str, Any], seed: int)
         for svid, zi, zq, cn0, dphi, phase, freq, bits in sats:
             arr.correlators.append(Correlator(
                 constellation=constellation, svid=svid, integration_time_s=t_s, in_phase=zi[k], quadrature=zq[k],
-                cn0_dbhz=cn0[k], predicted_phase_change_rad=dphi[k]))
+                cn0_dbhz=cn0[k], predicted_phase_change_rad=dphi[k],
+                carrier_lock=Correlator.CARRIER_LOCK_UNKNOWN))  # open-loop replica: no carrier loop, no lock
             truth.estimates.append(CarrierPhase(
                 constellation=constellation, svid=svid, method=TRUTH_METHOD, phase_rad=phase[k], phase_std_rad=0.0,
                 frequency_hz=freq[k], frequency_std_hz=0.0, data_bit=int(bits[k]), data_bit_probability=1.0,
