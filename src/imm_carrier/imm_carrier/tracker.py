@@ -285,31 +285,8 @@ def _drop_timed_out(stamp_ns, timeout_ns, slot_of_key, key_of_slot, last_stamp, 
 
 
 @njit(cache=True)
-def _track_epoch(
-    method,
-    stamp_ns,
-    timeout_ns,
-    const,
-    svid,
-    t,
-    zi,
-    zq,
-    cn0,
-    dphi,
-    lock,
-    cfg,
-    slot_of_key,
-    key_of_slot,
-    state,
-    last_stamp,
-    last_cn0,
-    slips,
-    was_locked,
-    seen,
-    call_id,
-    counters,
-    values,
-):
+def _track_epoch(method, stamp_ns, timeout_ns, const, svid, t, zi, zq, cn0, dphi, lock, cfg, slot_of_key,
+                 key_of_slot, state, last_stamp, last_cn0, slips, was_locked, seen, call_id, counters, values):
     """All channels of one interval: life cycle, input checks, counters, filter steps (see CarrierTracker).
 
     Returns the number of rows written into values (one per accepted correlator, input order).

@@ -21,11 +21,10 @@ Input checks. Every input is subscribed raw by :func:`rfi_node_common.inputs.sub
 lost messages counted as ``input.<topic>.*``; a handler that raises is counted, not fatal). The node
 rejects and counts bytes that rclpy cannot deserialise (``malformed_message``), a frame_id that is not
 the earth / map frame (``gnss_frame_id``, ``uwb_frame_id``), an epoch whose satellites have no state
-(``no_satellite_states``), and what :mod:`rfi_node_common.message_checks` finds implausible (a UWB range is
-rejected: a corrupt 1-sigma, a non-finite or impossible anchor, a range that is not finite, negative or outside
-1 mm - 10 km, each under its reason; a satellite is dropped from its epoch); /rfi/jammer_state by
-:func:`.input_admission.admit_jammer_state` (``type`` NONE clears the J/S; a NaN, non-finite or out-of-range J/S
-is counted and ignored); stamps, duplicates and lateness by :class:`.input_admission.InputAdmission`.
+(``no_satellite_states``), and what :mod:`rfi_node_common.message_checks` finds implausible (a UWB range with
+a bad 1-sigma or anchor, not finite, negative or outside 1 mm - 10 km is rejected by reason; a satellite dropped
+from its epoch); /rfi/jammer_state by :func:`.input_admission.admit_jammer_state` (``type`` NONE clears the J/S;
+a bad J/S is counted and ignored); stamps, duplicates and lateness by :class:`.input_admission.InputAdmission`.
 
 Outputs (contents: :mod:`.output_messages`): /fusion/status (one per processed GNSS epoch or UWB
 range), /fusion/odometry and /fusion/fix (only while the filter is initialised and its state finite),
