@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from rfi_monitor.constant_envelope import constant_envelope_noise
 from rfi_monitor.monitor import RfiMonitor, RfiMonitorParams
 from rfi_monitor.spectral_step import warm_up as spectral_step_warm_up
 
@@ -31,5 +32,9 @@ def warm_up(params: RfiMonitorParams) -> None:
             else:
                 x = rng.standard_normal(n) + jam * np.cos(phase)
             mon.process(x, fs, fif, k * n, 1 + k * int(n / fs * 1e9), is_complex=cplx, full_scale=64.0)
+    # the constant-envelope J/N runs only on a strong CW or chirp at >= 4 bits, which the blocks above are not
+    # (test_warm_up.py found its real-sample kernels compiled on the first such block of a live stream)
+    constant_envelope_noise(rng.standard_normal(n), False)
+    constant_envelope_noise(rng.standard_normal(n) + 1j * rng.standard_normal(n), True)
     if params.spectral_step.enabled:
         spectral_step_warm_up(params.classifier.nfft)
