@@ -267,10 +267,10 @@ class _Sweep:
     inband: np.ndarray | None = None
     se: np.ndarray | None = None
     phase_mean: np.ndarray | None = None
-    used: np.ndarray | None = None
-    """the frames whose ridge entered prof (bool, shape (frames,))"""
     """the mean phase of the frames in each bin of prof (``sweep_law.bin_mean_phase``): where the law is fitted and the
     profile read"""
+    used: np.ndarray | None = None
+    """the frames whose ridge entered prof (bool, shape (frames,))"""
 
 
 def analyse(x: np.ndarray, cplx: bool, fs: float, par: RidgeParams, frame_length: int = 0,
