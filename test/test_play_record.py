@@ -53,8 +53,14 @@ def test_play_into_record_across_processes_is_complete_in_order_and_identical(sa
         assert f'{topic}' in player.stdout and str(n) in player.stdout
     with BagReader(out) as reader:
         got = {t: [m.raw for m in reader.messages([t])] for t in reader.topics}
-    # per topic: complete, in order, byte-identical (across topics, DDS gives no global order)
-    assert got == expected
+    # per topic: complete, in order, byte-identical (across topics, DDS gives no global order) up to the zero padding
+    # that the middleware adds to a serialized message whose length is not a multiple of 4 (rclpy's serialisation,
+    # which wrote the sample bag, adds none: a CorrelatorArray ends with a uint8 since Correlator.carrier_lock)
+    assert got.keys() == expected.keys()
+    for topic, sent in expected.items():
+        assert len(got[topic]) == len(sent), topic
+        for g, e in zip(got[topic], sent, strict=True):
+            assert g[:len(e)] == e and len(g) == len(e) + (-len(e)) % 4 and not any(g[len(e):]), topic
 
 
 def run_play(*args):
