@@ -259,3 +259,71 @@ def troposphere_delay_m(
     """
     zhd, zwd = saastamoinen_zenith_delays_m(lat_rad, height_m, relative_humidity)
     return (zhd + zwd) * black_eisner_mapping(elevation_rad)
+
+
+GEOMETRY_FREE_SLIP_M = 0.5
+"""Jump of the geometry-free carrier combination between consecutive epochs, m, taken as a cycle
+slip (a new arc): one L1 or L2 cycle moves it by 0.19 / 0.24 m, the ionosphere by about 0.1 m in
+30 s (a disturbed-day rate of change of 2 TECU/min); the usual geometry-free slip test
+(Hofmann-Wellenhof et al. 2008, sec. 7.2.1)."""
+
+
+def carrier_levelled_ionosphere_m(
+    epoch_index: np.ndarray,
+    geometry_free_phase_m: np.ndarray,
+    model_delay_m: np.ndarray,
+    f1_hz: float,
+    f2_hz: float,
+    slip_threshold_m: float = GEOMETRY_FREE_SLIP_M,
+) -> np.ndarray:
+    """One satellite's f1 ionospheric group delay: its changes measured by the dual-frequency carrier,
+    its level per arc that of a model (the broadcast Klobuchar) averaged over the arc.
+
+    Args:
+        epoch_index: the satellite's epochs (index in the file, increasing), shape (N,); a missing
+            index (a gap) starts a new arc.
+        geometry_free_phase_m: ``lambda1 L1 - lambda2 L2`` at those epochs, m (carrier phases in
+            cycles times their wavelengths), shape (N,); NaN where a carrier is missing.
+        model_delay_m: the model's f1 delay at those epochs, m, shape (N,) (NaN: none).
+        f1_hz / f2_hz: the two carrier frequencies, Hz.
+        slip_threshold_m: geometry-free jump, m, taken as a cycle slip (a new arc).
+
+    Returns:
+        f1 delay, m, shape (N,): NaN where the phase is missing or an arc has no model value.
+
+    Notes:
+        The carrier phases advance by the ionosphere, ``Phi_i = rho - I_i + lambda_i N_i`` with
+        ``I_2 = gamma I_1``, ``gamma = (f1 / f2)^2``, so ``Phi_1 - Phi_2 = (gamma - 1) I_1 + const``
+        over an arc without slips (Hofmann-Wellenhof et al. 2008, eqs. 5.57-5.59): the carrier
+        measures the delay's changes to millimetres but not its level. Levelling the arc to the
+        dual-frequency code (Ciraolo et al. 2007, J. Geodesy 81, eq. 3) needs the satellites' P1-C1
+        code biases when the L1 code is C/A (receivers of the C1/P2 type), which no broadcast message
+        carries; here the arc's level is the model's mean over the arc instead. The result keeps the
+        model's error averaged over the arc (a constant per arc) and removes the part of it that
+        varies within the arc. Non-causal: each value depends on the whole arc (a file converter's
+        post-processing, not a live receiver's).
+    """
+    k = np.asarray(epoch_index, dtype=np.int64).reshape(-1)
+    gf = np.asarray(geometry_free_phase_m, dtype=float).reshape(-1)
+    model = np.asarray(model_delay_m, dtype=float).reshape(-1)
+    if not (k.shape == gf.shape == model.shape):
+        raise ValueError(f"epoch_index, geometry_free_phase_m and model_delay_m differ in shape: "
+                         f"{k.shape}, {gf.shape}, {model.shape}")
+    if not (math.isfinite(f1_hz) and math.isfinite(f2_hz) and f1_hz > f2_hz > 0.0):
+        raise ValueError(f"need f1_hz > f2_hz > 0, got {f1_hz!r}, {f2_hz!r}")
+    if np.any(np.diff(k) <= 0):
+        raise ValueError("epoch_index must be strictly increasing")
+    out = np.full(k.shape, math.nan)
+    scale = 1.0 / ((f1_hz / f2_hz) ** 2 - 1.0)
+    ok = np.isfinite(gf)
+    # arc boundaries: a missing phase, a gap in the epochs, or a slip
+    start = np.ones(k.shape, dtype=bool)
+    start[1:] = ~ok[:-1] | (np.diff(k) != 1) | ~(np.abs(np.diff(gf)) <= slip_threshold_m)
+    arc = np.cumsum(start)
+    for a in np.unique(arc[ok]):
+        sel = ok & (arc == a)
+        delay = gf[sel] * scale
+        have = np.isfinite(model[sel])
+        if have.any():
+            out[sel] = delay + float(np.mean(model[sel][have] - delay[have]))
+    return out

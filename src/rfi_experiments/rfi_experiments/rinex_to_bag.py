@@ -27,6 +27,15 @@ not combined (each satellite's P1-C1 code bias, times 2.55, is in no broadcast m
 metadata says which (:data:`IONOSPHERE_FREE_METADATA_KEY`). The filter weighs these ranges as L1
 ranges (their code noise is about 3x larger; on a static station the averaging absorbs it).
 
+``--ionosphere carrier-levelled``: each GPS satellite's ``ionosphere_delay_m`` follows the
+geometry-free combination of its L1 and L2 carrier phases (RINEX 2 ``L1``/``L2``, RINEX 3/4 the
+first of :data:`GPS_PHASE_CODES` in the header), levelled per arc to the mean of the broadcast
+Klobuchar delay over the arc (:func:`gnss_common.corrections.carrier_levelled_ionosphere_m`;
+cycle slips and gaps start a new arc). A satellite or epoch without both carriers keeps Klobuchar;
+both are counted (``levelled`` / ``model``), printed in the summary and the choice is stored in the
+bag's metadata (:data:`IONOSPHERE_METADATA_KEY`). It uses each whole arc, i.e. future epochs: a
+file converter's post-processing. Default ``klobuchar``: the broadcast model alone.
+
 Time base: header stamps and bag log times are ROS time (UTC-based Unix time, integer ns), converted
 from each epoch's GPS time by :func:`gnss_common.gps_time.gps_to_ros_stamp_ns` (leap seconds from
 its one table); the exact GPS week and time of week are in the message's ``gps_week`` and
@@ -56,7 +65,9 @@ from pathlib import Path
 
 import numpy as np
 
+from gnss_common.constants import GPS_L1_FREQUENCY_HZ, GPS_L2_FREQUENCY_HZ, SPEED_OF_LIGHT_MPS
 from gnss_common.coordinates import azimuth_elevation
+from gnss_common.corrections import carrier_levelled_ionosphere_m
 from gnss_common.ephemeris import earth_rotation_correction
 from gnss_common.measurements import (
     CONSTELLATION_CODES,
@@ -67,7 +78,7 @@ from gnss_common.measurements import (
     MeasurementBuilderParams,
 )
 from gnss_common.observations import GnssEpoch
-from gnss_common.rinex import SYSTEM_NAMES, RinexFormatError, read_rinex_navs, read_rinex_obs
+from gnss_common.rinex import SYSTEM_NAMES, RinexFormatError, RinexObs, read_rinex_navs, read_rinex_obs
 from gnss_common.rinex_format import add_counts, add_counts_by_group
 from rfi_experiments import cli
 from rfi_experiments.bag_io import BagError, BagWriter
@@ -87,6 +98,14 @@ CODES_METADATA_KEY = "gnss_observation_codes"
 PRIORITY_METADATA_KEY = "gnss_observation_code_priority"
 """Bag ``custom_data`` key: JSON ``{constellation: [pseudorange observables in the order tried]}``
 for the file's RINEX version (:data:`gnss_common.observation_codes.DEFAULT_SIGNALS`)."""
+IONOSPHERE_METADATA_KEY = "gnss_ionosphere"
+"""Bag ``custom_data`` key: where ``ionosphere_delay_m`` comes from, one of :data:`IONOSPHERE_SOURCES`,
+plus the counts, as JSON (``{"source": ..., "levelled": n, "model": n}``)."""
+IONOSPHERE_SOURCES = ("klobuchar", "carrier-levelled")
+"""``--ionosphere`` choices: the broadcast Klobuchar model alone (default); or GPS delays from the
+L1/L2 carrier, levelled per arc to Klobuchar's mean (module docstring)."""
+GPS_PHASE_CODES = (("L1", "L1C", "L1W", "L1P", "L1X"), ("L2", "L2W", "L2P", "L2L", "L2X", "L2S", "L2D", "L2C"))
+"""GPS L1 and L2 carrier-phase observables, first present in the header used (RINEX 2, then 3/4)."""
 IONOSPHERE_FREE_METADATA_KEY = "gnss_ionosphere_free"
 """Bag ``custom_data`` key: ``"true"`` when the GPS pseudoranges are the ionosphere-free L1/L2 P(Y)
 combination (``--ionosphere-free``; ``ionosphere_delay_m`` 0, clock without T_GD), else ``"false"``."""
@@ -114,6 +133,9 @@ class RinexConversion:
             (for the file's RINEX version), for the constellations converted.
         ionosphere_free: the GPS pseudoranges are the ionosphere-free P1/P2 combination
             (:attr:`gnss_common.measurements.MeasurementBuilderParams.ionosphere_free`).
+        ionosphere: source of ``ionosphere_delay_m``, one of :data:`IONOSPHERE_SOURCES`;
+            ``ionosphere_counts``: GPS measurements with a ``levelled`` delay and with the ``model``'s
+            (``carrier-levelled`` only).
     """
 
     epochs: tuple[GnssEpoch, ...]
@@ -126,6 +148,8 @@ class RinexConversion:
     codes_by_constellation: dict[str, dict[str, int]] = field(default_factory=dict)
     code_priority: dict[str, tuple[str, ...]] = field(default_factory=dict)
     ionosphere_free: bool = False
+    ionosphere: str = "klobuchar"
+    ionosphere_counts: dict[str, int] = field(default_factory=dict)
 
     @property
     def measurement_count(self) -> int:
@@ -180,6 +204,7 @@ def convert_rinex(
     constellations: Sequence[str] = SUPPORTED_SYSTEMS,
     progress: ProgressLine | None = None,
     ionosphere_free: bool = False,
+    ionosphere: str = "klobuchar",
 ) -> RinexConversion:
     """Read a RINEX observation file and its navigation file(s) and build every epoch.
 
@@ -195,6 +220,8 @@ def convert_rinex(
             codes (RINEX 2 ``P1``/``P2``, RINEX 3/4 ``C1W``/``C2W``), without ionospheric model and
             T_GD; GPS satellites without both are skipped as ``missing_dual_frequency``
             (:attr:`gnss_common.measurements.MeasurementBuilderParams.ionosphere_free`).
+        ionosphere: ``"klobuchar"`` (broadcast model) or ``"carrier-levelled"`` (GPS delays from the
+            L1/L2 carriers levelled to Klobuchar per arc, :func:`level_gps_ionosphere`).
 
     Returns:
         :class:`RinexConversion`.
@@ -206,6 +233,10 @@ def convert_rinex(
     """
     if not (math.isfinite(elevation_mask_deg) and -90.0 <= elevation_mask_deg <= 90.0):
         raise ValueError(f"--elevation-mask-deg must be in [-90, 90], got {elevation_mask_deg}")
+    if ionosphere not in IONOSPHERE_SOURCES:
+        raise ValueError(f"--ionosphere must be one of {', '.join(IONOSPHERE_SOURCES)}, got {ionosphere!r}")
+    if ionosphere != "klobuchar" and ionosphere_free:
+        raise ValueError("--ionosphere carrier-levelled and --ionosphere-free exclude each other")
     params = MeasurementBuilderParams(constellations=tuple(constellations), ionosphere_free=ionosphere_free)
     obs = read_rinex_obs(obs_path)
     navs = [nav_path] if isinstance(nav_path, (str, Path)) else list(nav_path)
@@ -241,6 +272,9 @@ def convert_rinex(
             dst = codes.setdefault(names[o.constellation], {})
             dst[used] = dst.get(used, 0) + 1
         epochs.append(epoch)
+    iono_counts: dict[str, int] = {}
+    if ionosphere == "carrier-levelled":
+        epochs, iono_counts = level_gps_ionosphere(obs, epochs)
     truth = obs.header.approx_position_ecef_m
     return RinexConversion(
         epochs=tuple(epochs),
@@ -256,7 +290,50 @@ def convert_rinex(
             for letter in params.constellations
         },
         ionosphere_free=ionosphere_free,
+        ionosphere=ionosphere,
+        ionosphere_counts=iono_counts,
     )
+
+
+def level_gps_ionosphere(obs: RinexObs, epochs: Sequence[GnssEpoch]) -> tuple[list[GnssEpoch], dict[str, int]]:
+    """The GPS ``ionosphere_delay_m`` of ``epochs`` (one per ``obs.epochs``, in order, with the
+    Klobuchar delays) replaced by the carrier-levelled delay where both carriers are there.
+
+    Returns:
+        (epochs, counts): ``levelled`` and ``model`` (kept Klobuchar) GPS measurements.
+    """
+    gps = CONSTELLATION_CODES["G"]
+    header_codes = obs.header.obs_types.get("G", ())
+    l1 = next((c for c in GPS_PHASE_CODES[0] if c in header_codes), None)
+    l2 = next((c for c in GPS_PHASE_CODES[1] if c in header_codes), None)
+    counts = {"levelled": 0, "model": 0}
+    if l1 is None or l2 is None:
+        counts["model"] = sum(o.constellation == gps for e in epochs for o in e.observations)
+        return list(epochs), counts
+    lam1, lam2 = SPEED_OF_LIGHT_MPS / GPS_L1_FREQUENCY_HZ, SPEED_OF_LIGHT_MPS / GPS_L2_FREQUENCY_HZ
+    series: dict[int, list[tuple[int, float, float]]] = {}
+    for k, (rinex_epoch, epoch) in enumerate(zip(obs.epochs, epochs, strict=True)):
+        for o in epoch.observations:
+            if o.constellation == gps:
+                values = rinex_epoch.observations.get(f"G{o.svid:02d}", {})
+                gf = lam1 * values.get(l1, math.nan) - lam2 * values.get(l2, math.nan)
+                series.setdefault(o.svid, []).append((k, gf, o.ionosphere_delay_m))
+    levelled: dict[tuple[int, int], float] = {}
+    for svid, rows in series.items():
+        arr = np.array(rows)
+        delay = carrier_levelled_ionosphere_m(arr[:, 0].astype(np.int64), arr[:, 1], arr[:, 2],
+                                              GPS_L1_FREQUENCY_HZ, GPS_L2_FREQUENCY_HZ)
+        levelled.update({(int(k), svid): float(d) for k, d in zip(arr[:, 0], delay) if math.isfinite(d)})
+    out = []
+    for k, epoch in enumerate(epochs):
+        obs_out = []
+        for o in epoch.observations:
+            d = levelled.get((k, o.svid)) if o.constellation == gps else None
+            if o.constellation == gps:
+                counts["levelled" if d is not None else "model"] += 1
+            obs_out.append(o if d is None else replace(o, ionosphere_delay_m=d))
+        out.append(replace(epoch, observations=tuple(obs_out)))
+    return out, counts
 
 
 def write_bag(conversion: RinexConversion, out: str | Path, *, overwrite: bool = False) -> dict[str, int]:
@@ -280,6 +357,8 @@ def write_bag(conversion: RinexConversion, out: str | Path, *, overwrite: bool =
         bag.set_custom_data(PRIORITY_METADATA_KEY, json.dumps(
             {k: list(v) for k, v in conversion.code_priority.items()}, sort_keys=True))
         bag.set_custom_data(IONOSPHERE_FREE_METADATA_KEY, "true" if conversion.ionosphere_free else "false")
+        bag.set_custom_data(IONOSPHERE_METADATA_KEY, json.dumps(
+            {"source": conversion.ionosphere, **conversion.ionosphere_counts}, sort_keys=True))
         for epoch in conversion.epochs:
             bag.write(MEASUREMENTS_TOPIC, epoch_to_msg(epoch, EARTH_FRAME_ID), epoch.stamp_ns)
             if conversion.truth_position_ecef_m is not None:
@@ -318,6 +397,11 @@ def build_parser() -> argparse.ArgumentParser:
                              "(RINEX 2 P1/P2, RINEX 3/4 C1W/C2W), no ionospheric model, clock without T_GD; GPS "
                              "satellites without both codes are skipped (missing_dual_frequency). C/A with P2 "
                              "is not combined (it needs the P1-C1 code biases, which no broadcast message has)")
+    parser.add_argument("--ionosphere", choices=IONOSPHERE_SOURCES, default="klobuchar",
+                        help="source of ionosphere_delay_m: the broadcast Klobuchar model (default), or for GPS "
+                             "the L1/L2 carrier phases' geometry-free combination levelled per arc to Klobuchar's "
+                             "mean over the arc (uses the whole arc: post-processing; Klobuchar where a "
+                             "satellite lacks a carrier)")
     return parser
 
 
@@ -343,7 +427,7 @@ def _convert(args: argparse.Namespace, out: Path) -> tuple[RinexConversion, dict
     conversion = convert_rinex(args.obs, args.nav, args.elevation_mask_deg, args.constellations,
                                progress=ProgressLine(f'rinex_to_bag {Path(args.obs).name}', unit='epoch',
                                                      enabled=not args.quiet),
-                               ionosphere_free=args.ionosphere_free)
+                               ionosphere_free=args.ionosphere_free, ionosphere=args.ionosphere)
     return conversion, write_bag(conversion, out, overwrite=args.overwrite)
 
 
@@ -358,6 +442,10 @@ def _summary(args: argparse.Namespace, result: tuple[RinexConversion, dict[str, 
     lines.append(f"  truth         {truth}")
     if conversion.ionosphere_free:
         lines.append("  GPS pseudoranges  ionosphere-free L1/L2 P(Y) combination (no ionospheric model)")
+    if conversion.ionosphere != "klobuchar":
+        c = conversion.ionosphere_counts
+        lines.append(f"  ionosphere    {conversion.ionosphere}: GPS {c.get('levelled', 0)} levelled from L1/L2 carrier, "
+                     f"{c.get('model', 0)} Klobuchar (no dual-frequency carrier); other systems Klobuchar")
     for topic, n in sorted(counts.items()):
         lines.append(f"  {topic}  {n}")
     lines.append("  measurements by constellation:")
