@@ -261,11 +261,12 @@ def troposphere_delay_m(
     return (zhd + zwd) * black_eisner_mapping(elevation_rad)
 
 
-GEOMETRY_FREE_SLIP_M = 0.5
-"""Jump of the geometry-free carrier combination between consecutive epochs, m, taken as a cycle
-slip (a new arc): one L1 or L2 cycle moves it by 0.19 / 0.24 m, the ionosphere by about 0.1 m in
-30 s (a disturbed-day rate of change of 2 TECU/min); the usual geometry-free slip test
-(Hofmann-Wellenhof et al. 2008, sec. 7.2.1)."""
+GEOMETRY_FREE_SLIP_M = 0.15
+"""Jump of the geometry-free carrier combination, m, beyond its extrapolation from the two epochs
+before (beyond the epoch before, at an arc's second epoch), taken as a cycle slip (a new arc): one
+L1 or L2 cycle moves the combination by 0.19 / 0.24 m, while the ionosphere's rate of change varies
+by centimetres over 30 s (the usual geometry-free slip test, Hofmann-Wellenhof et al. 2008, sec.
+7.2.1; a slip of 1 cycle on both carriers at once, 0.05 m, goes undetected)."""
 
 
 def carrier_levelled_ionosphere_m(
@@ -286,7 +287,8 @@ def carrier_levelled_ionosphere_m(
             cycles times their wavelengths), shape (N,); NaN where a carrier is missing.
         model_delay_m: the model's f1 delay at those epochs, m, shape (N,) (NaN: none).
         f1_hz / f2_hz: the two carrier frequencies, Hz.
-        slip_threshold_m: geometry-free jump, m, taken as a cycle slip (a new arc).
+        slip_threshold_m: geometry-free jump, m, beyond the extrapolation taken as a cycle slip (a
+            new arc; :data:`GEOMETRY_FREE_SLIP_M`).
 
     Returns:
         f1 delay, m, shape (N,): NaN where the phase is missing or an arc has no model value.
@@ -316,10 +318,17 @@ def carrier_levelled_ionosphere_m(
     out = np.full(k.shape, math.nan)
     scale = 1.0 / ((f1_hz / f2_hz) ** 2 - 1.0)
     ok = np.isfinite(gf)
-    # arc boundaries: a missing phase, a gap in the epochs, or a slip
-    start = np.ones(k.shape, dtype=bool)
-    start[1:] = ~ok[:-1] | (np.diff(k) != 1) | ~(np.abs(np.diff(gf)) <= slip_threshold_m)
-    arc = np.cumsum(start)
+    # arcs: a missing phase, a gap in the epochs or a slip starts a new one
+    arc = np.zeros(k.shape, dtype=np.int64)
+    n_arc, length = 0, 0
+    for i in range(k.size):
+        if length and ok[i] and k[i] == k[i - 1] + 1:
+            predicted = gf[i - 1] if length == 1 else 2.0 * gf[i - 1] - gf[i - 2]
+            if abs(gf[i] - predicted) <= slip_threshold_m:
+                arc[i], length = n_arc, length + 1
+                continue
+        n_arc += 1
+        arc[i], length = n_arc, (1 if ok[i] else 0)
     for a in np.unique(arc[ok]):
         sel = ok & (arc == a)
         delay = gf[sel] * scale

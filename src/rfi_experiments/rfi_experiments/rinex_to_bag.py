@@ -29,8 +29,8 @@ ranges (their code noise is about 3x larger; on a static station the averaging a
 
 ``--ionosphere carrier-levelled``: each GPS satellite's ``ionosphere_delay_m`` follows the
 geometry-free combination of its L1 and L2 carrier phases (RINEX 2 ``L1``/``L2``, RINEX 3/4 the
-first of :data:`GPS_PHASE_CODES` in the header), levelled per arc to the mean of the broadcast
-Klobuchar delay over the arc (:func:`gnss_common.corrections.carrier_levelled_ionosphere_m`;
+first of :data:`gnss_common.rinex_ionosphere.GPS_PHASE_CODES` in the header), levelled per arc to
+the mean of the broadcast Klobuchar delay over the arc (:func:`gnss_common.corrections.carrier_levelled_ionosphere_m`;
 cycle slips and gaps start a new arc). A satellite or epoch without both carriers keeps Klobuchar;
 both are counted (``levelled`` / ``model``), printed in the summary and the choice is stored in the
 bag's metadata (:data:`IONOSPHERE_METADATA_KEY`). It uses each whole arc, i.e. future epochs: a
@@ -65,9 +65,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gnss_common.constants import GPS_L1_FREQUENCY_HZ, GPS_L2_FREQUENCY_HZ, SPEED_OF_LIGHT_MPS
 from gnss_common.coordinates import azimuth_elevation
-from gnss_common.corrections import carrier_levelled_ionosphere_m
 from gnss_common.ephemeris import earth_rotation_correction
 from gnss_common.measurements import (
     CONSTELLATION_CODES,
@@ -78,8 +76,9 @@ from gnss_common.measurements import (
     MeasurementBuilderParams,
 )
 from gnss_common.observations import GnssEpoch
-from gnss_common.rinex import SYSTEM_NAMES, RinexFormatError, RinexObs, read_rinex_navs, read_rinex_obs
+from gnss_common.rinex import SYSTEM_NAMES, RinexFormatError, read_rinex_navs, read_rinex_obs
 from gnss_common.rinex_format import add_counts, add_counts_by_group
+from gnss_common.rinex_ionosphere import level_gps_ionosphere
 from rfi_experiments import cli
 from rfi_experiments.bag_io import BagError, BagWriter
 from rfi_experiments.cli import error_reporter
@@ -104,8 +103,6 @@ plus the counts, as JSON (``{"source": ..., "levelled": n, "model": n}``)."""
 IONOSPHERE_SOURCES = ("klobuchar", "carrier-levelled")
 """``--ionosphere`` choices: the broadcast Klobuchar model alone (default); or GPS delays from the
 L1/L2 carrier, levelled per arc to Klobuchar's mean (module docstring)."""
-GPS_PHASE_CODES = (("L1", "L1C", "L1W", "L1P", "L1X"), ("L2", "L2W", "L2P", "L2L", "L2X", "L2S", "L2D", "L2C"))
-"""GPS L1 and L2 carrier-phase observables, first present in the header used (RINEX 2, then 3/4)."""
 IONOSPHERE_FREE_METADATA_KEY = "gnss_ionosphere_free"
 """Bag ``custom_data`` key: ``"true"`` when the GPS pseudoranges are the ionosphere-free L1/L2 P(Y)
 combination (``--ionosphere-free``; ``ionosphere_delay_m`` 0, clock without T_GD), else ``"false"``."""
@@ -221,7 +218,8 @@ def convert_rinex(
             T_GD; GPS satellites without both are skipped as ``missing_dual_frequency``
             (:attr:`gnss_common.measurements.MeasurementBuilderParams.ionosphere_free`).
         ionosphere: ``"klobuchar"`` (broadcast model) or ``"carrier-levelled"`` (GPS delays from the
-            L1/L2 carriers levelled to Klobuchar per arc, :func:`level_gps_ionosphere`).
+            L1/L2 carriers levelled to Klobuchar per arc,
+            :func:`gnss_common.rinex_ionosphere.level_gps_ionosphere`).
 
     Returns:
         :class:`RinexConversion`.
@@ -293,47 +291,6 @@ def convert_rinex(
         ionosphere=ionosphere,
         ionosphere_counts=iono_counts,
     )
-
-
-def level_gps_ionosphere(obs: RinexObs, epochs: Sequence[GnssEpoch]) -> tuple[list[GnssEpoch], dict[str, int]]:
-    """The GPS ``ionosphere_delay_m`` of ``epochs`` (one per ``obs.epochs``, in order, with the
-    Klobuchar delays) replaced by the carrier-levelled delay where both carriers are there.
-
-    Returns:
-        (epochs, counts): ``levelled`` and ``model`` (kept Klobuchar) GPS measurements.
-    """
-    gps = CONSTELLATION_CODES["G"]
-    header_codes = obs.header.obs_types.get("G", ())
-    l1 = next((c for c in GPS_PHASE_CODES[0] if c in header_codes), None)
-    l2 = next((c for c in GPS_PHASE_CODES[1] if c in header_codes), None)
-    counts = {"levelled": 0, "model": 0}
-    if l1 is None or l2 is None:
-        counts["model"] = sum(o.constellation == gps for e in epochs for o in e.observations)
-        return list(epochs), counts
-    lam1, lam2 = SPEED_OF_LIGHT_MPS / GPS_L1_FREQUENCY_HZ, SPEED_OF_LIGHT_MPS / GPS_L2_FREQUENCY_HZ
-    series: dict[int, list[tuple[int, float, float]]] = {}
-    for k, (rinex_epoch, epoch) in enumerate(zip(obs.epochs, epochs, strict=True)):
-        for o in epoch.observations:
-            if o.constellation == gps:
-                values = rinex_epoch.observations.get(f"G{o.svid:02d}", {})
-                gf = lam1 * values.get(l1, math.nan) - lam2 * values.get(l2, math.nan)
-                series.setdefault(o.svid, []).append((k, gf, o.ionosphere_delay_m))
-    levelled: dict[tuple[int, int], float] = {}
-    for svid, rows in series.items():
-        arr = np.array(rows)
-        delay = carrier_levelled_ionosphere_m(arr[:, 0].astype(np.int64), arr[:, 1], arr[:, 2],
-                                              GPS_L1_FREQUENCY_HZ, GPS_L2_FREQUENCY_HZ)
-        levelled.update({(int(k), svid): float(d) for k, d in zip(arr[:, 0], delay) if math.isfinite(d)})
-    out = []
-    for k, epoch in enumerate(epochs):
-        obs_out = []
-        for o in epoch.observations:
-            d = levelled.get((k, o.svid)) if o.constellation == gps else None
-            if o.constellation == gps:
-                counts["levelled" if d is not None else "model"] += 1
-            obs_out.append(o if d is None else replace(o, ionosphere_delay_m=d))
-        out.append(replace(epoch, observations=tuple(obs_out)))
-    return out, counts
 
 
 def write_bag(conversion: RinexConversion, out: str | Path, *, overwrite: bool = False) -> dict[str, int]:
@@ -444,8 +401,8 @@ def _summary(args: argparse.Namespace, result: tuple[RinexConversion, dict[str, 
         lines.append("  GPS pseudoranges  ionosphere-free L1/L2 P(Y) combination (no ionospheric model)")
     if conversion.ionosphere != "klobuchar":
         c = conversion.ionosphere_counts
-        lines.append(f"  ionosphere    {conversion.ionosphere}: GPS {c.get('levelled', 0)} levelled from L1/L2 carrier, "
-                     f"{c.get('model', 0)} Klobuchar (no dual-frequency carrier); other systems Klobuchar")
+        lines.append(f"  ionosphere    {conversion.ionosphere}: GPS {c.get('levelled', 0)} levelled from L1/L2 "
+                     f"carrier, {c.get('model', 0)} Klobuchar (no dual-frequency carrier); other systems Klobuchar")
     for topic, n in sorted(counts.items()):
         lines.append(f"  {topic}  {n}")
     lines.append("  measurements by constellation:")

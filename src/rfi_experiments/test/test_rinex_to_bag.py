@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import shutil
 from pathlib import Path
@@ -17,6 +18,7 @@ from gnss_common.rinex import read_rinex_nav, read_rinex_obs
 from rfi_experiments.bag_io import BagReader
 from rfi_experiments.rinex_to_bag import (
     IONOSPHERE_FREE_METADATA_KEY,
+    IONOSPHERE_METADATA_KEY,
     MEASUREMENTS_TOPIC,
     TRUTH_TOPIC,
     convert_rinex,
@@ -200,3 +202,44 @@ def test_ionosphere_free_option(arl1_bag: Path, tmp_path: Path, capsys: pytest.C
         assert all(o.ionosphere_delay_m == 0.0 for o in got.observations)
     with BagReader(arl1_bag) as bag:
         assert bag.custom_data[IONOSPHERE_FREE_METADATA_KEY] == "false"
+
+
+GEONET = DATA / "07590920.05o", DATA / "07590920.05n"
+
+
+def test_ionosphere_carrier_levelled_option(arl1_bag: Path, tmp_path: Path,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """--ionosphere carrier-levelled (GEONET 0759, C1/P2 with L1/L2 carriers): GPS delays from the
+    carrier, Klobuchar where a carrier is missing, counted in the summary and the metadata; the
+    pseudoranges and every other field are unchanged."""
+    out = tmp_path / "geonet_lev"
+    assert _run(*GEONET, out, "--ionosphere", "carrier-levelled") == 0
+    summary = capsys.readouterr().out
+    levelled = convert_rinex(*GEONET, ionosphere="carrier-levelled")
+    plain = convert_rinex(*GEONET)
+    counts = levelled.ionosphere_counts
+    assert counts["levelled"] + counts["model"] == plain.measurement_count
+    assert counts["levelled"] > 0.9 * plain.measurement_count
+    assert f"carrier-levelled: GPS {counts['levelled']} levelled" in summary
+    with BagReader(out) as bag:
+        assert json.loads(bag.custom_data[IONOSPHERE_METADATA_KEY]) == {"source": "carrier-levelled", **counts}
+        msgs = [msg_to_epoch(m.decode()) for m in bag.messages([MEASUREMENTS_TOPIC])]
+    with BagReader(arl1_bag) as bag:
+        assert json.loads(bag.custom_data[IONOSPHERE_METADATA_KEY]) == {"source": "klobuchar"}
+    changed = 0
+    for got, lev, ref in zip(msgs, levelled.epochs, plain.epochs, strict=True):
+        assert [o.ionosphere_delay_m for o in got.observations] == [o.ionosphere_delay_m for o in lev.observations]
+        for a, b in zip(lev.observations, ref.observations, strict=True):
+            assert a.pseudorange_m == b.pseudorange_m and a.svid == b.svid
+            changed += a.ionosphere_delay_m != b.ionosphere_delay_m
+    assert changed == counts["levelled"]
+    # the per-arc level is Klobuchar's: over the file the two agree on average
+    d = np.array([a.ionosphere_delay_m - b.ionosphere_delay_m
+                  for e, r in zip(levelled.epochs, plain.epochs, strict=True)
+                  for a, b in zip(e.observations, r.observations, strict=True)])
+    assert abs(d.mean()) < 0.1
+
+
+def test_ionosphere_options_exclude_each_other(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    assert _run(OBS, NAV, tmp_path / "x", "--ionosphere", "carrier-levelled", "--ionosphere-free") == 2
+    assert "exclude each other" in capsys.readouterr().err
