@@ -42,6 +42,8 @@ from gnss_integrity.outcome import (
     unknown,
 )
 
+from .outcome import check_false_alarm_probabilities
+
 AGC_TEST = "receiver_agc"
 FLAG_TEST = "receiver_jam_flag"
 
@@ -121,8 +123,7 @@ class ReceiverAgcParams:
     learn_max_z: float = 2.0
 
     def __post_init__(self) -> None:
-        if not (0 < self.alarm_false_alarm_probability <= self.false_alarm_probability < 0.5):
-            raise ValueError("need 0 < alarm_false_alarm_probability <= false_alarm_probability < 0.5")
+        check_false_alarm_probabilities(self)
         for name in ("agc_min_std_counts", "cw_min_std", "memory_reports", "max_report_age_s"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) > 0):
                 raise ValueError(f"{name} must be finite and > 0")
