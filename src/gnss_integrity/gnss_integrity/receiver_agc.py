@@ -41,6 +41,7 @@ from gnss_integrity.outcome import (
     normal_threshold,
     unknown,
 )
+from rfi_node_common.params import check_positive_finite
 
 from .outcome import check_false_alarm_probabilities
 
@@ -124,9 +125,7 @@ class ReceiverAgcParams:
 
     def __post_init__(self) -> None:
         check_false_alarm_probabilities(self)
-        for name in ("agc_min_std_counts", "cw_min_std", "memory_reports", "max_report_age_s"):
-            if not (math.isfinite(getattr(self, name)) and getattr(self, name) > 0):
-                raise ValueError(f"{name} must be finite and > 0")
+        check_positive_finite(self, ("agc_min_std_counts", "cw_min_std", "memory_reports", "max_report_age_s"))
         if not (self.min_reports >= 1 and self.agc_max_fall_counts_per_s >= 0 and self.cw_max_rise_per_s >= 0):
             raise ValueError("min_reports >= 1, agc_max_fall_counts_per_s and cw_max_rise_per_s >= 0")
 
