@@ -3,6 +3,14 @@
 This is the one place constants live; every package imports them from here.
 """
 
+import math
+
+NS_PER_S = 1_000_000_000
+"""Nanoseconds per second (ROS stamps are integer ns)."""
+
+TWO_PI = 2.0 * math.pi
+"""One cycle, rad."""
+
 SPEED_OF_LIGHT_MPS = 299_792_458.0
 """Speed of light in vacuum, m/s (IS-GPS-200, 20.3.4.3)."""
 

@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from gnss_common.constants import GPS_L1_FREQUENCY_HZ, SPEED_OF_LIGHT_MPS
+from gnss_common.constants import GPS_L1_FREQUENCY_HZ
 
 KLOBUCHAR_NIGHT_DELAY_S = 5.0e-9
 """Klobuchar constant night-time vertical delay DC term, s (IS-GPS-200, Figure 20-4)."""
@@ -101,21 +101,6 @@ def klobuchar_delay_s(
     x = 2.0 * math.pi * (t - KLOBUCHAR_PEAK_LOCAL_TIME_S) / per
     day = amp * (1.0 - x * x / 2.0 + x**4 / 24.0)
     return f * (KLOBUCHAR_NIGHT_DELAY_S + np.where(np.abs(x) < 1.57, day, 0.0))
-
-
-def klobuchar_delay_m(
-    alpha: np.ndarray,
-    beta: np.ndarray,
-    lat_rad: float,
-    lon_rad: float,
-    azimuth_rad: np.ndarray | float,
-    elevation_rad: np.ndarray | float,
-    gps_tow_s: float,
-) -> np.ndarray:
-    """:func:`klobuchar_delay_s` times the speed of light: L1 slant delay, m (>= 0)."""
-    return SPEED_OF_LIGHT_MPS * klobuchar_delay_s(
-        alpha, beta, lat_rad, lon_rad, azimuth_rad, elevation_rad, gps_tow_s
-    )
 
 
 def ionosphere_frequency_scale(carrier_frequency_hz: np.ndarray | float) -> np.ndarray:

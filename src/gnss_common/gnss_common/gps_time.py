@@ -51,10 +51,7 @@ import warnings
 
 import numpy as np
 
-from gnss_common.constants import GPS_EPOCH_UNIX_S, SECONDS_PER_WEEK
-
-NS_PER_S = 1_000_000_000
-"""Nanoseconds per second."""
+from gnss_common.constants import GPS_EPOCH_UNIX_S, NS_PER_S, SECONDS_PER_WEEK
 
 _WEEK_NS = int(SECONDS_PER_WEEK) * NS_PER_S
 _GPS_EPOCH_NS = GPS_EPOCH_UNIX_S * NS_PER_S

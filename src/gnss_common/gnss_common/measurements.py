@@ -42,7 +42,7 @@ from gnss_common.coordinates import azimuth_elevation, ecef_to_geodetic
 from gnss_common.corrections import (
     ionosphere_free_pseudorange_m,
     ionosphere_frequency_scale,
-    klobuchar_delay_m,
+    klobuchar_delay_s,
     troposphere_delay_m,
 )
 from gnss_common.ephemeris import (
@@ -451,7 +451,7 @@ class GnssEpochBuilder:
         az, el = azimuth_elevation(ref, rot_pos)
         if p.apply_ionosphere:
             if self._alpha is not None and self._beta is not None:
-                iono = klobuchar_delay_m(self._alpha, self._beta, lat, lon, az, el, tow) * (
+                iono = SPEED_OF_LIGHT_MPS * klobuchar_delay_s(self._alpha, self._beta, lat, lon, az, el, tow) * (
                     ionosphere_frequency_scale(freq)
                 )
             else:

@@ -39,8 +39,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gnss_common.clock_model import PRESETS, ClockHCoefficients, clock_process_noise_m, transition_matrix
-from gnss_common.constants import SPEED_OF_LIGHT_MPS
-from rfi_node_common.params import USER, parameter
+from gnss_common.constants import NS_PER_S, SPEED_OF_LIGHT_MPS
+from rfi_node_common.params import USER, check_positive_finite, parameter
 
 from .kernels import RunningMedian, clock_kalman_step
 from .outcome import (
@@ -56,7 +56,6 @@ from .outcome import (
 
 MILLISECOND_M = SPEED_OF_LIGHT_MPS * 1e-3
 """A receiver clock step of 1 ms as a pseudorange (clock bias) step, m."""
-NS_PER_S = 1_000_000_000
 MAX_NOISE_SCALE = 4.0
 """Largest learned NIS scale: a slow push just below the threshold must not teach the scale away."""
 
@@ -113,11 +112,8 @@ class ClockTestParams:
                              f"got {self.oscillator!r}")
         if not self.drift_lags_s or any(not (math.isfinite(v) and v >= 1.0) for v in self.drift_lags_s):
             raise ValueError(f"ClockTestParams.drift_lags_s must be non-empty, each >= 1 s, got {self.drift_lags_s}")
-        for name in ("h0", "h_minus2", "bias_floor_m", "drift_floor_mps", "max_gap_s",
-                     "millisecond_tolerance_m"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
-                raise ValueError(f"ClockTestParams.{name} must be a finite number > 0, got {value!r}")
+        check_positive_finite(self, ("h0", "h_minus2", "bias_floor_m", "drift_floor_mps", "max_gap_s",
+                                     "millisecond_tolerance_m"))
         if not (math.isfinite(self.process_noise_factor) and self.process_noise_factor >= 1.0):
             raise ValueError(f"ClockTestParams.process_noise_factor must be >= 1, got {self.process_noise_factor}")
         for name in ("step_false_alarm_probability", "rate_false_alarm_probability",

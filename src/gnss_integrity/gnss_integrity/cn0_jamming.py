@@ -59,6 +59,8 @@ from gnss_integrity.outcome import (
     unknown,
 )
 
+from .outcome import check_false_alarm_probabilities
+
 TEST_NAME = "cn0_drop"
 MEDIAN_EFFICIENCY = 1.2533  # std of the median of n normal samples = 1.2533 sigma / sqrt(n)
 
@@ -179,8 +181,7 @@ class Cn0JammingParams:
     jsr_std_floor_db: float = 0.5
 
     def __post_init__(self) -> None:
-        if not (0 < self.alarm_false_alarm_probability <= self.false_alarm_probability < 0.5):
-            raise ValueError("need 0 < alarm_false_alarm_probability <= false_alarm_probability < 0.5")
+        check_false_alarm_probabilities(self)
         if not (0 <= self.min_drop_suspect_db <= self.min_drop_alarm_db):
             raise ValueError("need 0 <= min_drop_suspect_db <= min_drop_alarm_db")
         for name in ("common_std_floor_db", "persistence_s", "lost_min_margin_db", "jsr_min_drop_db",

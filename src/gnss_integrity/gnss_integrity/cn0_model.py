@@ -59,6 +59,7 @@ from gnss_integrity.cn0_epoch import (
     signal_band,
 )
 from gnss_integrity.kernels import cn0_reference_rows
+from rfi_node_common.params import check_positive_finite
 
 MODEL_FORMAT = "gnss_integrity.cn0_model"
 MODEL_FORMAT_VERSION = 1
@@ -123,12 +124,9 @@ class Cn0ModelParams:
         n = 90.0 / self.bin_width_deg if self.bin_width_deg > 0 else math.nan
         if not (math.isfinite(n) and abs(n - round(n)) < 1e-9 and n >= 1):
             raise ValueError(f"bin_width_deg must divide 90, got {self.bin_width_deg}")
-        positive = ("min_node_weight", "memory_samples", "decorrelation_s", "huber_k", "min_std_db",
-                    "offset_memory_samples", "level_time_constant_s", "level_min_weight", "level_max_age_s")
-        for name in positive:
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0):
-                raise ValueError(f"{name} must be finite and > 0, got {v}")
+        check_positive_finite(self, ("min_node_weight", "memory_samples", "decorrelation_s", "huber_k", "min_std_db",
+                                     "offset_memory_samples", "level_time_constant_s", "level_min_weight",
+                                     "level_max_age_s"))
         if not (self.max_fall_db_per_s >= 0 and self.offset_prior_samples >= 0 and self.learn_interval_s >= 0):
             raise ValueError("max_fall_db_per_s, offset_prior_samples and learn_interval_s must be >= 0")
         if not self.min_node_weight <= self.memory_samples:

@@ -65,6 +65,8 @@ from gnss_integrity.outcome import (
     unknown,
 )
 
+from .outcome import check_false_alarm_probabilities
+
 TOO_HIGH = "cn0_too_high"
 ELEVATION_DEPENDENCE = "cn0_elevation_dependence"
 COMMON_FLUCTUATION = "cn0_common_fluctuation"
@@ -120,8 +122,7 @@ class Cn0SpoofingParams:
     too_high_learning_block_s: float = 300.0
 
     def __post_init__(self) -> None:
-        if not (0 < self.alarm_false_alarm_probability <= self.false_alarm_probability < 0.5):
-            raise ValueError("need 0 < alarm_false_alarm_probability <= false_alarm_probability < 0.5")
+        check_false_alarm_probabilities(self)
         if not 0 < self.satellite_false_alarm_probability < 0.5:
             raise ValueError("satellite_false_alarm_probability must be in (0, 0.5)")
         if not (self.min_group_satellites >= 3 and self.persistence_epochs >= 1 and self.slope_window_epochs >= 1

@@ -48,11 +48,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gnss_common.constants import NS_PER_S
 from gnss_common.multi_gnss_fix import MultiGnssFix, subset_solution
 from gnss_common.observations import GnssEpoch
 
 from .consistency_common import (
-    NS_PER_S,
     ConsistencyParams,
     Sat,
     consistency_outcome,

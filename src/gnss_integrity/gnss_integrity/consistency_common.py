@@ -23,7 +23,6 @@ from .outcome import (
     decide,
 )
 
-NS_PER_S = 1_000_000_000
 Sat = tuple[int, int]
 
 

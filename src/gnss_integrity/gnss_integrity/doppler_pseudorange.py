@@ -20,10 +20,11 @@ from typing import NamedTuple
 
 import numpy as np
 
+from gnss_common.constants import NS_PER_S
 from gnss_common.multi_gnss_fix import MultiGnssFix
 from gnss_common.observations import GnssEpoch
 
-from .consistency_common import NS_PER_S, ConsistencyParams, Sat, consistency_outcome, exclude_largest, implicated_scope
+from .consistency_common import ConsistencyParams, Sat, consistency_outcome, exclude_largest, implicated_scope
 from .kernels import RunningMedian, doppler_add_pairs
 from .outcome import CATEGORY_CONSISTENCY, TestOutcome, chi2_threshold, unknown
 

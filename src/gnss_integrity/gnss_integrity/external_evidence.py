@@ -20,6 +20,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from gnss_common.constants import NS_PER_S
+from rfi_node_common.params import check_positive_finite
+
 from .outcome import (
     CATEGORY_EXTERNAL,
     DECISION_ALARM,
@@ -30,8 +33,6 @@ from .outcome import (
     decide,
     unknown,
 )
-
-NS_PER_S = 1_000_000_000
 
 SPOOFING_UNKNOWN = 0
 SPOOFING_NONE = 1
@@ -60,10 +61,7 @@ class ExternalEvidenceParams:
     max_cn0_drop_db: float = 1.0
 
     def __post_init__(self) -> None:
-        for name in ("max_report_age_s", "min_rise_db", "max_spoofer_jn_db", "max_cn0_drop_db"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
-                raise ValueError(f"ExternalEvidenceParams.{name} must be a finite number > 0, got {value!r}")
+        check_positive_finite(self, ("max_report_age_s", "min_rise_db", "max_spoofer_jn_db", "max_cn0_drop_db"))
         if self.max_spoofer_jn_db <= self.min_rise_db:
             raise ValueError("ExternalEvidenceParams.max_spoofer_jn_db must exceed min_rise_db")
 

@@ -17,11 +17,11 @@ first-detection stamps belong to the episode.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from rfi_node_common.params import parameter
+from gnss_common.constants import NS_PER_S
+from rfi_node_common.params import check_positive_finite, parameter
 
 from .outcome import (
     DECISION_ALARM,
@@ -37,8 +37,6 @@ from .outcome import (
     STATE_UNKNOWN,
     TestOutcome,
 )
-
-NS_PER_S = 1_000_000_000
 
 
 @dataclass(frozen=True)
@@ -61,10 +59,7 @@ class StateParams:
     def __post_init__(self) -> None:
         if int(self.min_categories_for_detection) < 2:
             raise ValueError("StateParams.min_categories_for_detection must be >= 2")
-        for name in ("persistence_s", "clean_period_s"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f"StateParams.{name} must be a finite number > 0, got {value!r}")
+        check_positive_finite(self, ("persistence_s", "clean_period_s"))
 
 
 @dataclass(frozen=True)

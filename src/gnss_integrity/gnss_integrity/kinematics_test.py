@@ -36,9 +36,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gnss_common.constants import NS_PER_S
 from gnss_common.coordinates import ecef_to_enu_rotation, ecef_to_geodetic_scalar
 from gnss_common.multilateration import multilaterate
-from rfi_node_common.params import USER, parameter
+from rfi_node_common.params import USER, check_positive_finite, parameter
 
 from .kernels import RunningMedian, chi2_form, lagged_chi2
 from .outcome import (
@@ -46,12 +47,12 @@ from .outcome import (
     DECISION_PASS,
     SCOPE_ALL,
     TestOutcome,
+    check_false_alarm_probabilities,
     chi2_threshold,
     decide,
     unknown,
 )
 
-NS_PER_S = 1_000_000_000
 MAX_NOISE_SCALE = 4.0
 """Largest learned noise scale (a receiver twice as noisy as the prior): without a bound, a drag just
 below the threshold raised the scale with the statistic (0.3 m/s with one anchor: scale 114, never
@@ -110,18 +111,13 @@ class KinematicsTestParams:
     scale_history: int = 600
 
     def __post_init__(self) -> None:
-        for name in ("error_std_m", "vertical_factor", "error_tau_s", "white_std_m", "uwb_std_m",
-                     "max_range_age_s", "bin_s", "level_std_m", "velocity_std_mps", "max_gap_s"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
-                raise ValueError(f"KinematicsTestParams.{name} must be a finite number > 0, got {value!r}")
+        check_positive_finite(self, ("error_std_m", "vertical_factor", "error_tau_s", "white_std_m", "uwb_std_m",
+                                     "max_range_age_s", "bin_s", "level_std_m", "velocity_std_mps", "max_gap_s"))
         if not (math.isfinite(self.tag_speed_allowance_mps) and self.tag_speed_allowance_mps >= 0.0):
             raise ValueError("KinematicsTestParams.tag_speed_allowance_mps must be >= 0")
         if not self.lags_s or any(not (math.isfinite(v) and v >= self.bin_s) for v in self.lags_s):
             raise ValueError(f"KinematicsTestParams.lags_s must be non-empty, each >= bin_s, got {self.lags_s}")
-        if not 0.0 < self.alarm_false_alarm_probability <= self.false_alarm_probability < 0.5:
-            raise ValueError("KinematicsTestParams: need 0 < alarm_false_alarm_probability <= "
-                             "false_alarm_probability < 0.5")
+        check_false_alarm_probabilities(self)
         if int(self.scale_history) < 10:
             raise ValueError("KinematicsTestParams.scale_history must be >= 10")
 

@@ -40,6 +40,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from gnss_common.constants import NS_PER_S
 from gnss_common.multi_gnss_fix import MultiGnssFix, MultiGnssFixParams, solve_multi_gnss
 from gnss_common.observations import GPS, GnssEpoch, UwbRangeMeasurement
 
@@ -72,7 +73,6 @@ from .receiver_agc import ReceiverAgcMonitor, ReceiverAgcParams, ReceiverInterfe
 from .receiver_spectrum import ReceiverSpectrumMonitor, SpectrumDetection, SpectrumInput, SpectrumParams
 from .uwb_range_rate import UwbRangeRateParams, UwbRangeRateTest
 
-NS_PER_S = 1_000_000_000
 JAMMER_NONE = 0
 JAMMER_UNKNOWN = 4
 _KIND_UWB, _KIND_RECEIVER, _KIND_SPECTRUM, _KIND_SDR = range(4)

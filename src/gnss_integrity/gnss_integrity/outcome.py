@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 from scipy.special import chdtri, ndtri
 
@@ -113,3 +114,17 @@ def chi2_threshold(false_alarm_probability: float, dof: int) -> float:
     """Threshold of a chi-square statistic with ``dof`` degrees of freedom exceeded with that probability
     (memoised as :func:`normal_threshold`)."""
     return float(chdtri(dof, false_alarm_probability))
+
+
+def check_false_alarm_probabilities(params: Any) -> None:
+    """Refuse a test's parameters unless 0 < ``alarm_false_alarm_probability`` <= ``false_alarm_probability``
+    < 0.5 (the alarm threshold at or beyond the suspect one, both beyond the median).
+
+    Raises:
+        ValueError: naming the parameter class and both values.
+    """
+    alarm = params.alarm_false_alarm_probability
+    suspect = params.false_alarm_probability
+    if not 0.0 < alarm <= suspect < 0.5:
+        raise ValueError(f"{type(params).__name__}: need 0 < alarm_false_alarm_probability ({alarm!r}) <= "
+                         f"false_alarm_probability ({suspect!r}) < 0.5")

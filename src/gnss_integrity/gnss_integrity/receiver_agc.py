@@ -41,6 +41,9 @@ from gnss_integrity.outcome import (
     normal_threshold,
     unknown,
 )
+from rfi_node_common.params import check_positive_finite
+
+from .outcome import check_false_alarm_probabilities
 
 AGC_TEST = "receiver_agc"
 FLAG_TEST = "receiver_jam_flag"
@@ -121,11 +124,8 @@ class ReceiverAgcParams:
     learn_max_z: float = 2.0
 
     def __post_init__(self) -> None:
-        if not (0 < self.alarm_false_alarm_probability <= self.false_alarm_probability < 0.5):
-            raise ValueError("need 0 < alarm_false_alarm_probability <= false_alarm_probability < 0.5")
-        for name in ("agc_min_std_counts", "cw_min_std", "memory_reports", "max_report_age_s"):
-            if not (math.isfinite(getattr(self, name)) and getattr(self, name) > 0):
-                raise ValueError(f"{name} must be finite and > 0")
+        check_false_alarm_probabilities(self)
+        check_positive_finite(self, ("agc_min_std_counts", "cw_min_std", "memory_reports", "max_report_age_s"))
         if not (self.min_reports >= 1 and self.agc_max_fall_counts_per_s >= 0 and self.cw_max_rise_per_s >= 0):
             raise ValueError("min_reports >= 1, agc_max_fall_counts_per_s and cw_max_rise_per_s >= 0")
 

@@ -45,6 +45,7 @@ import numpy as np
 from numba import njit
 
 from gnss_common.multilateration import multilaterate
+from rfi_node_common.params import check_positive_finite
 
 from .kernels import RunningMedian
 from .kinematics_test import AnchorRange, KinematicsTestParams
@@ -53,6 +54,7 @@ from .outcome import (
     DECISION_PASS,
     SCOPE_ALL,
     TestOutcome,
+    check_false_alarm_probabilities,
     chi2_threshold,
     decide,
     unknown,
@@ -106,17 +108,11 @@ class UwbRangeRateParams:
     scale_history: int = 600
 
     def __post_init__(self) -> None:
-        for name in ("window_s", "uwb_std_m", "velocity_std_floor_mps", "model_std_mps", "position_std_m",
-                     "uwb_position_std_m",
-                     "max_fit_rms_factor", "max_gap_s"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
-                raise ValueError(f"UwbRangeRateParams.{name} must be a finite number > 0, got {value!r}")
+        check_positive_finite(self, ("window_s", "uwb_std_m", "velocity_std_floor_mps", "model_std_mps",
+                                     "position_std_m", "uwb_position_std_m", "max_fit_rms_factor", "max_gap_s"))
         if int(self.min_ranges) < 3:
             raise ValueError("UwbRangeRateParams.min_ranges must be >= 3")
-        if not 0.0 < self.alarm_false_alarm_probability <= self.false_alarm_probability < 0.5:
-            raise ValueError("UwbRangeRateParams: need 0 < alarm_false_alarm_probability <= "
-                             "false_alarm_probability < 0.5")
+        check_false_alarm_probabilities(self)
         if int(self.scale_history) < 10:
             raise ValueError("UwbRangeRateParams.scale_history must be >= 10")
 

@@ -8,10 +8,7 @@ from pathlib import Path
 
 import pytest
 import rclpy
-import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rclpy.context import Context
-from rclpy.parameter import Parameter
 
 from gnss_integrity import outcome
 from gnss_integrity.gnss_integrity_node import GnssIntegrityNode, IntegrityNodeParams
@@ -146,19 +143,11 @@ def test_bad_inputs_are_counted_and_never_kill_the_node(rig_factory):
     assert len(rig.out['/gnss/integrity']) == 1
 
 
-def test_config_file_values_equal_the_dataclass_defaults(rig_factory):
-    fields = IntegrityNodeParams.__dataclass_fields__
-    data = yaml.safe_load(CONFIG.read_text())['gnss_integrity']['ros__parameters']
-    assert set(data) == set(fields)
-    rig = rig_factory(args=['gnss_integrity_node', '--ros-args', '--params-file', str(CONFIG)])
-    assert rig.node.params == IntegrityNodeParams()
-
-
-def test_config_file_is_the_one_generated_from_the_parameter_definitions():
+def test_config_file_is_generated_and_gives_the_defaults(rig_factory):
     """config/gnss_integrity.yaml is written by tools/generate_config.py from the parameter definitions."""
     from gnss_integrity.node_params import CONFIG_FILE
 
-    assert CONFIG.read_text() == CONFIG_FILE.text(), 'run python tools/generate_config.py'
+    testing.check_config_file(rig_factory, CONFIG_FILE, CONFIG, 'gnss_integrity_node')
 
 
 def test_test_parameters_are_defined_once_in_the_core():
@@ -219,14 +208,9 @@ def test_diagnostics_parameters_are_settable_while_running(rig_factory):
     ({'gnss_error_std_m': 0.0}, 'gnss_error_std_m'),
 ])
 def test_invalid_parameters_give_one_line_errors(params, words):
-    context = Context()
-    rclpy.init(context=context)
-    try:
-        with pytest.raises(ValueError) as err:
-            GnssIntegrityNode(context=context, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
-        assert words in str(err.value) and '\n' not in str(err.value)
-    finally:
-        rclpy.shutdown(context=context)
+    error = testing.start_error(
+        lambda context, overrides: GnssIntegrityNode(context=context, parameter_overrides=overrides), params)
+    assert words in error and '\n' not in error
 
 
 def test_cn0_model_file_round_trip(rig_factory, tmp_path):

@@ -23,18 +23,15 @@ from gnss_common.clock_model import (
     RUBIDIUM_LPFRS,
     ClockHCoefficients,
 )
-from gnss_common.constants import GPS_L1_FREQUENCY_HZ
+from gnss_common.constants import GPS_L1_FREQUENCY_HZ, TWO_PI
 from imm_carrier.layout import IMM_OUT_LEN, IMM_STATE_LEN, ImmOut, ImmState
 from imm_carrier.measurement_model import (
     IQ_SCALINGS,
     CompiledChannelLoop,
     amp_sigma,
-    check_positive_finite,
     check_step_inputs,
 )
-from rfi_node_common.params import USER, parameter
-
-TWO_PI = 2.0 * math.pi
+from rfi_node_common.params import USER, check_positive_finite, parameter
 
 # The state and output layouts of the compiled step: imm_carrier.layout (ImmState, ImmOut).
 

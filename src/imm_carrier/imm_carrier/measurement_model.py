@@ -172,18 +172,6 @@ class CarrierPhaseEstimate:
     cycle_slips: int
 
 
-def check_positive_finite(params: object, keys: tuple[str, ...]) -> None:
-    """Refuse a parameter set whose fields ``keys`` are not all finite numbers > 0.
-
-    Raises:
-        ValueError: naming the first such field as ``<class>.<key>``, with its value.
-    """
-    for key in keys:
-        value = getattr(params, key)
-        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
-            raise ValueError(f"{type(params).__name__}.{key} must be finite and > 0, got {value!r}")
-
-
 def check_step_inputs(cn0_dbhz: float, integration_time_s: float, predicted_phase_change_rad: float) -> None:
     """Refuse a scalar tracker step's invalid T, C/N0 or phase change (the tracker counts these before).
 

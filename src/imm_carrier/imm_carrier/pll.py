@@ -13,17 +13,15 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+from gnss_common.constants import TWO_PI
 from imm_carrier.layout import PLL_OUT_LEN, PLL_STATE_LEN, PllOut, PllState
 from imm_carrier.measurement_model import (
     IQ_SCALINGS,
     CompiledChannelLoop,
     amp_sigma,
-    check_positive_finite,
     check_step_inputs,
 )
-from rfi_node_common.params import parameter
-
-TWO_PI = 2.0 * math.pi
+from rfi_node_common.params import check_positive_finite, parameter
 
 # Third-order loop constants (Kaplan & Hegarty, "Understanding GPS", loop filter table):
 # omega0 = Bn / 0.7845, F(s) = b3 w0 + a3 w0^2 / s + w0^3 / s^2.

@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rclpy
-import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.context import Context
 from rclpy.parameter import Parameter
@@ -225,21 +224,11 @@ def test_a_satellite_that_disappears_is_dropped_after_the_timeout(rig_factory):
     assert not any(e.locked for e in rig.estimates[-1].estimates if e.svid == 7)
 
 
-def test_config_file_values_equal_the_dataclass_defaults(rig_factory):
-    fields = CarrierNodeParams.__dataclass_fields__
-    data = yaml.safe_load(CONFIG.read_text())['imm_carrier']['ros__parameters']
-    assert set(data) == set(fields)
-    rig = rig_factory(args=['imm_carrier_node', '--ros-args', '--params-file', str(CONFIG)])
-    assert rig.node.params == CarrierNodeParams()
-    for name in fields:
-        assert rig.node.get_parameter(name).value == getattr(CarrierNodeParams(), name), name
-
-
-def test_config_file_is_the_one_generated_from_the_parameter_definitions():
+def test_config_file_is_generated_and_gives_the_defaults(rig_factory):
     """config/imm_carrier.yaml is written by tools/generate_config.py from the parameter definitions."""
     from imm_carrier.node_params import CONFIG_FILE
 
-    assert CONFIG.read_text() == CONFIG_FILE.text(), 'run python tools/generate_config.py'
+    testing.check_config_file(rig_factory, CONFIG_FILE, CONFIG, 'imm_carrier_node')
 
 
 def test_tracker_parameters_are_defined_once_in_the_core():
@@ -272,14 +261,9 @@ def test_tracker_parameters_are_defined_once_in_the_core():
     ({'bit_transition_probability': 1.5}, 'bit_transition_probability'),
 ])
 def test_invalid_parameters_give_one_line_errors(params, words):
-    context = Context()
-    rclpy.init(context=context)
-    try:
-        with pytest.raises(ValueError) as err:
-            ImmCarrierNode(context=context, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
-        assert words in str(err.value) and '\n' not in str(err.value)
-    finally:
-        rclpy.shutdown(context=context)
+    error = testing.start_error(
+        lambda context, overrides: ImmCarrierNode(context=context, parameter_overrides=overrides), params)
+    assert words in error and '\n' not in error
 
 
 def test_custom_clock_is_used(rig_factory):

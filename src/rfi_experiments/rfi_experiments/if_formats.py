@@ -76,6 +76,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gnss_common.constants import NS_PER_S
 from rfi_node_common.params import USER, parameter
 
 INT8 = 0
@@ -83,7 +84,6 @@ INT8 = 0
 INT16 = 1
 """IfSamples.INT16 (samples holds little-endian int16 values)."""
 
-NS_PER_S = 1_000_000_000
 SAMPLE_RATE_MIN_HZ = 1.0e5
 """Lowest sampling_frequency_hz accepted (what rfi_monitor accepts; a GNSS band needs >= ~1 MS/s)."""
 SAMPLE_RATE_MAX_HZ = 1.0e11

@@ -76,8 +76,15 @@ from rfi_experiments.if_formats import (
     is_live,
     parse_start_time,
 )
+from rfi_experiments.source_start import SubscriberWaitParams, wait_for_subscribers
 from rfi_msgs.msg import IfSamples
-from rfi_node_common.diagnostics import StampTimer, counted_level, publish_status
+from rfi_node_common.diagnostics import (
+    StampTimer,
+    counted_level,
+    diagnostics_period_parameter,
+    hardware_id_parameter,
+    publish_status,
+)
 from rfi_node_common.main import run_node
 from rfi_node_common.params import USER, ConfigFile, declare, parameter, parameter_from, validate_ranges
 from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS
@@ -152,9 +159,7 @@ class IfSourceParams:
     wait_for_subscribers: int = parameter(
         0, 'Hold the input until this many subscribers of /rfi/if_samples have matched (1: wait for the '
         'monitor), for at most wait_timeout_s.', minimum=0, maximum=1000)
-    wait_timeout_s: float = parameter(
-        30.0, 'Longest wait for wait_for_subscribers, s; then reading starts anyway (with a warning).',
-        minimum=0.0, maximum=86400.0)
+    wait_timeout_s: float = parameter_from(SubscriberWaitParams, 'wait_timeout_s')
     gap_tolerance_s: float = parameter(
         0.5, 'Live streams: a lag of the samples received behind the sample rate of more than this is declared a '
         'gap (first_sample_index jumps, gaps and samples_lost counted), s; 0: no gap detection. It must cover the '
@@ -162,11 +167,8 @@ class IfSourceParams:
         minimum=0.0, maximum=3600.0)
     frame_id: str = parameter(
         'gnss_front_end', 'header.frame_id of the blocks (the front end / antenna).', group=USER)
-    hardware_id: str = parameter(
-        'rf_front_end', 'DiagnosticStatus.hardware_id of the node\'s reports: the device behind its input '
-        '(model and serial number); diagnostic aggregators group statuses by it.')
-    diagnostics_period_s: float = parameter(
-        1.0, 'Period of /diagnostics in stamp time, s.', minimum=0.001, maximum=3600.0)
+    hardware_id: str = hardware_id_parameter('rf_front_end', read_only=True)
+    diagnostics_period_s: float = diagnostics_period_parameter()
     exit_at_end: bool = parameter(True, 'Shut the node down at the end of the input (exit code 0).')
 
     def __post_init__(self) -> None:
@@ -284,7 +286,8 @@ class IfSourceNode(Node):
     # --------------------------------------------------------------------------------------------- reading
     def _run(self) -> None:
         try:
-            self._wait_for_subscribers()
+            wait_for_subscribers(self.pub, self.params.wait_for_subscribers, self.params.wait_timeout_s, self.stop,
+                                 self.get_logger(), settle_s=SUBSCRIBER_SETTLE_S)
             if not self.stop.is_set():
                 self._read_loop()
         except Exception as err:  # noqa: BLE001 - a read or publish failure ends the input, reported
@@ -317,19 +320,6 @@ class IfSourceNode(Node):
             pub = self.pub
         if pub.get_subscription_count() > 0 and not pub.wait_for_all_acked(_duration(ACK_TIMEOUT_S)):
             self.counts['unacknowledged_waits'] += 1
-
-    def _wait_for_subscribers(self) -> None:
-        want = self.params.wait_for_subscribers
-        if not want:
-            return
-        deadline = time.monotonic() + self.params.wait_timeout_s
-        while self.pub.get_subscription_count() < want and not self.stop.is_set():
-            if time.monotonic() >= deadline:
-                self.get_logger().warn(f'{self.pub.get_subscription_count()} of {want} subscribers after '
-                                       f'{self.params.wait_timeout_s} s: starting anyway')
-                return
-            self.stop.wait(0.02)
-        self.stop.wait(SUBSCRIBER_SETTLE_S)
 
     def _read_loop(self) -> None:
         if self._fd is None:  # a named pipe

@@ -45,9 +45,16 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 
+from rfi_experiments.source_start import SubscriberWaitParams, wait_for_subscribers
 from rfi_experiments.ubx_decode import EpochOutput, SpectrumReport, UbxDecoder, UbxDecoderParams
 from rfi_msgs.msg import GnssMeasurementArray, ReceiverInterference, ReceiverSpectrum
-from rfi_node_common.diagnostics import StampTimer, counted_level, publish_status
+from rfi_node_common.diagnostics import (
+    StampTimer,
+    counted_level,
+    diagnostics_period_parameter,
+    hardware_id_parameter,
+    publish_status,
+)
 from rfi_node_common.main import run_node
 from rfi_node_common.params import USER, ConfigFile, declare, parameter, parameter_from, validate_ranges
 from rfi_node_common.qos import DATA_QOS, DATA_QOS_DEPTH, DIAGNOSTICS_QOS
@@ -116,18 +123,13 @@ class UbxSourceParams:
     max_reconnect_attempts: int = parameter(
         30, 'Serial only: failed reopen attempts in a row before the node exits with code 1 and the reason; 0: '
         'exit at the first loss (let a supervisor restart it).', minimum=0, maximum=1_000_000)
-    hardware_id: str = parameter(
-        'gnss_receiver', 'DiagnosticStatus.hardware_id of the node\'s reports: the device behind its input '
-        '(model and serial number); diagnostic aggregators group statuses by it.')
-    diagnostics_period_s: float = parameter(
-        1.0, 'Period of /diagnostics in stamp (receiver) time, s.', minimum=0.001, maximum=3600.0)
+    hardware_id: str = hardware_id_parameter('gnss_receiver', read_only=True)
+    diagnostics_period_s: float = diagnostics_period_parameter()
     exit_at_end: bool = parameter(True, 'Files only: shut the node down (exit code 0) at the end of the file.')
     wait_for_subscribers: int = parameter(
         0, 'Hold the input until this many subscribers of gnss/measurements have matched (a log replayed into a '
         'fusion node started at the same moment loses nothing); 0: start at once.', minimum=0, maximum=1000)
-    wait_timeout_s: float = parameter(
-        30.0, 'Longest wait for wait_for_subscribers, s; then reading starts anyway (with a warning).',
-        minimum=0.0, maximum=86400.0)
+    wait_timeout_s: float = parameter_from(SubscriberWaitParams, 'wait_timeout_s')
 
     def __post_init__(self) -> None:
         validate_ranges(self)
@@ -255,7 +257,8 @@ class UbxSourceNode(Node):
 
     def _run(self) -> None:
         try:
-            self._wait_for_subscribers()
+            wait_for_subscribers(self.pub, self.params.wait_for_subscribers, self.params.wait_timeout_s, self.stop,
+                                 self.get_logger())
             if self.stop.is_set():
                 return
             if self.is_file:
@@ -279,16 +282,6 @@ class UbxSourceNode(Node):
             stop_now = self.exit_code != 0 or (self.is_file and self.params.exit_at_end)
             if stop_now and not self.stop.is_set() and self.context.ok():
                 self.context.try_shutdown()
-
-    def _wait_for_subscribers(self) -> None:
-        want = self.params.wait_for_subscribers
-        deadline = time.monotonic() + self.params.wait_timeout_s
-        while want and self.pub.get_subscription_count() < want and not self.stop.is_set():
-            if time.monotonic() >= deadline:
-                self.get_logger().warn(f'{self.pub.get_subscription_count()} of {want} subscribers after '
-                                       f'{self.params.wait_timeout_s} s: starting anyway')
-                return
-            self.stop.wait(0.02)
 
     def _close(self) -> None:
         stream, self._stream = self._stream, None

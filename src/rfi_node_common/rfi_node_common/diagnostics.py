@@ -137,12 +137,13 @@ def diagnostics_period_parameter(minimum_s: float = 0.001) -> Any:
         1.0, 'Period of /diagnostics in message (stamp) time, s.', minimum=minimum_s, maximum=3600.0)
 
 
-def hardware_id_parameter(default: str) -> Any:
-    """The ``hardware_id`` parameter field (DiagnosticStatus.hardware_id of every report of the node)."""
+def hardware_id_parameter(default: str, read_only: bool = False) -> Any:
+    """The ``hardware_id`` parameter field (DiagnosticStatus.hardware_id of every report of the node);
+    ``read_only``: for a node that takes no parameter change while running (the input nodes)."""
     return parameter(
         default, 'DiagnosticStatus.hardware_id of the node\'s reports: the device behind its input (model and '
         'serial number of the front end, receiver or UWB tag); diagnostic aggregators group statuses by it.',
-        read_only=False)
+        read_only=read_only)
 
 
 def diagnostics_window_parameter(default_s: float = 10.0) -> Any:

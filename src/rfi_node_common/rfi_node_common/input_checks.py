@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-NS_PER_S = 1_000_000_000
+from gnss_common.constants import NS_PER_S
 
 STAMP_NOT_POSITIVE = 'stamp_not_positive'
 STAMP_NOT_INCREASING = 'stamp_not_increasing'

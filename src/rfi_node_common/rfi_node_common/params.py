@@ -126,6 +126,19 @@ def _default(field: dataclasses.Field) -> Any:
     raise TypeError(f'parameter {field.name} has no default')
 
 
+def check_positive_finite(params: object, keys: tuple[str, ...]) -> None:
+    """Refuse a parameter set whose fields ``keys`` are not all finite numbers > 0 (the check of a core's
+    frozen parameter dataclass in its ``__post_init__``, with or without :func:`parameter` metadata).
+
+    Raises:
+        ValueError: naming the first such field as ``<class>.<key>``, with its value.
+    """
+    for key in keys:
+        value = getattr(params, key)
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
+            raise ValueError(f'{type(params).__name__}.{key} must be finite and > 0, got {value!r}')
+
+
 def validate_ranges(params: Any) -> None:
     """Check every field against its declared range and choices.
 

@@ -29,6 +29,7 @@ import time
 from collections import Counter
 from collections.abc import Callable, Hashable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any, TypeVar
 
 import rclpy
@@ -39,6 +40,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 from rclpy.subscription import Subscription
 
+from rfi_node_common.params import ConfigFile, parameter_fields
 from rfi_node_common.qos import DATA_QOS
 
 STALL_S = 60.0
@@ -339,3 +341,42 @@ def rig_factory(make: Callable[..., R]) -> Iterator[Callable[..., R]]:
     finally:
         for rig in rigs:
             rig.close()
+
+
+def start_error(make_node: NodeFactory, params: Mapping[str, Any]) -> str:
+    """The message of the ``ValueError`` a node built with these parameter overrides stops with.
+
+    The node is built in a context of its own, shut down afterwards; a node that starts instead fails the
+    test (``AssertionError``). ``make_node`` as for :class:`NodeRig`, e.g.
+    ``lambda context, overrides: MyNode(context=context, parameter_overrides=overrides)``.
+    """
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        try:
+            node = make_node(context, [Parameter(k, value=v) for k, v in params.items()])
+        except ValueError as err:
+            return str(err)
+        node.destroy_node()
+        raise AssertionError(f'the node started with {dict(params)}')
+    finally:
+        rclpy.try_shutdown(context=context)
+
+
+def check_config_file(make_rig: Callable[..., NodeRig], config: ConfigFile, path: Path, executable: str) -> None:
+    """A node's shipped config file is the one generated from its parameter definitions (``tools/generate_config.py``),
+    and the node started with it as ``--params-file`` has every parameter at its dataclass default.
+
+    Args:
+        make_rig: builds the node's rig; called as ``make_rig(args=[...])`` (rclpy's command line).
+        config: the node's :class:`rfi_node_common.params.ConfigFile`.
+        path: the shipped file in the source tree (``src/<package>/config/<node>.yaml``).
+        executable: the node's executable name (``argv[0]``).
+    """
+    assert path.read_text() == config.text(), 'run python tools/generate_config.py'
+    rig = make_rig(args=[executable, '--ros-args', '--params-file', str(path)])
+    defaults = config.params_cls()
+    node: Any = rig.node  # the suite's nodes keep their parameter dataclass in .params
+    assert node.params == defaults
+    for field in parameter_fields(defaults):
+        assert node.get_parameter(field.name).value == getattr(defaults, field.name), field.name

@@ -12,6 +12,7 @@ from rfi_node_common.params import (
     TUNING,
     USER,
     build,
+    check_positive_finite,
     config_yaml,
     describe,
     internal,
@@ -117,3 +118,18 @@ def test_parameter_from_copies_the_core_definition_and_may_narrow_its_choices():
         parameter_from(Node, 'count', default=3)
     with pytest.raises(TypeError, match='not a field defined with parameter'):
         parameter_from(Node, 'registry')
+
+
+def test_check_positive_finite_names_the_first_bad_field():
+    @dataclass(frozen=True)
+    class Limits:
+        gain: float = 2.0
+        window_s: float = 1.0
+        label: str = 'x'
+
+    check_positive_finite(Limits(), ('gain', 'window_s'))
+    for bad in (0.0, -1.0, math.inf, math.nan):
+        with pytest.raises(ValueError, match=r'^Limits.window_s must be finite and > 0, got'):
+            check_positive_finite(Limits(window_s=bad), ('gain', 'window_s'))
+    with pytest.raises(ValueError, match='Limits.label'):
+        check_positive_finite(Limits(), ('label',))

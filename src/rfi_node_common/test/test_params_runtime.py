@@ -10,8 +10,8 @@ import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 
+from rfi_node_common import testing
 from rfi_node_common.params import (
     RuntimeParameters,
     build,
@@ -71,14 +71,8 @@ def set_remote(setup, **values):
 
 def start_error(**values) -> str:
     """The error a node started with these values stops with."""
-    context = Context()
-    rclpy.init(context=context)
-    try:
-        with pytest.raises(ValueError) as err:
-            Target(context=context, parameter_overrides=[Parameter(k, value=v) for k, v in values.items()])
-        return str(err.value)
-    finally:
-        rclpy.shutdown(context=context)
+    return testing.start_error(lambda context, overrides: Target(context=context, parameter_overrides=overrides),
+                               values)
 
 
 def test_runtime_names_and_descriptors(setup):
@@ -142,3 +136,9 @@ def test_build_is_the_validation_of_declare():
     with pytest.raises(ValueError, match='no_such'):
         build(Params, {'no_such': 1})
     assert build(Params, {'gate': 2.0}).gate == 2.0
+
+
+def test_start_error_fails_a_node_that_starts():
+    with pytest.raises(AssertionError, match='started'):
+        testing.start_error(lambda context, overrides: Target(context=context, parameter_overrides=overrides),
+                            {'gate': 4.0})

@@ -20,9 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gnss_common.clock_model import RUBIDIUM_LPFRS, ClockHCoefficients, simulate_clock
-from gnss_common.constants import GPS_L1_FREQUENCY_HZ, GPS_NAV_BIT_RATE_HZ
-
-TWO_PI = 2.0 * math.pi
+from gnss_common.constants import GPS_L1_FREQUENCY_HZ, GPS_NAV_BIT_RATE_HZ, TWO_PI
 
 
 @dataclass(frozen=True)

@@ -269,7 +269,7 @@ def _epoch_sky(sc: GnssUwbScenario, geometry: GeometrySource, week: int, tow: fl
                iono_alpha: np.ndarray | None, iono_beta: np.ndarray | None) -> _EpochSky:
     """The satellites seen at receive time ``(week, tow)`` from ``rx`` (ECEF, m): light-time
     iteration with the Earth rotating during the flight, transmit-time ECEF positions."""
-    from gnss_common.corrections import klobuchar_delay_m, troposphere_delay_m
+    from gnss_common.corrections import klobuchar_delay_s, troposphere_delay_m
 
     lat, lon, h = ecef_to_geodetic(rx)
     snap = geometry(week, tow - 0.075)
@@ -289,7 +289,7 @@ def _epoch_sky(sc: GnssUwbScenario, geometry: GeometrySource, week: int, tow: fl
     el = np.atleast_1d(el)
     sat_clk_m = SPEED_OF_LIGHT_MPS * (snap.clock_bias_s + snap.clock_drift_s_per_s * (0.075 - tau))
     if iono_alpha is not None and iono_beta is not None:
-        iono = klobuchar_delay_m(iono_alpha, iono_beta, lat, lon, az, el, tow)
+        iono = SPEED_OF_LIGHT_MPS * klobuchar_delay_s(iono_alpha, iono_beta, lat, lon, az, el, tow)
     else:
         iono = np.zeros_like(geom)
     cn0_clean = sc.cn0_horizon_dbhz + (sc.cn0_zenith_dbhz - sc.cn0_horizon_dbhz) * np.sin(np.clip(el, 0.0, None))
