@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import MISSING, dataclass, field, fields
 from types import MappingProxyType
 from typing import Protocol
 
@@ -99,6 +99,22 @@ class JammerEstimate:
     sweep_shape: int = 0
     in_band_fraction: float = math.nan
     light: bool = False
+
+
+_ESTIMATE_FIELDS = tuple(f.name for f in fields(JammerEstimate))
+_ESTIMATE_DEFAULTS = tuple(f.default for f in fields(JammerEstimate) if f.default is not MISSING)
+
+
+def make_estimate(*values) -> JammerEstimate:
+    """``JammerEstimate(*values)`` (positional, in field order; the trailing fields with defaults may be left out)
+    without the frozen dataclass's ``__init__``, which sets each of its 24 fields through ``object.__setattr__``
+    (~9 us against ~2 us: every analysed block builds one). The same object: same fields, equality, frozen."""
+    n_req = len(_ESTIMATE_FIELDS) - len(_ESTIMATE_DEFAULTS)
+    if not n_req <= len(values) <= len(_ESTIMATE_FIELDS):
+        raise TypeError(f"make_estimate takes {n_req}..{len(_ESTIMATE_FIELDS)} values, got {len(values)}")
+    e = object.__new__(JammerEstimate)
+    e.__dict__.update(zip(_ESTIMATE_FIELDS, values + _ESTIMATE_DEFAULTS[len(values) - n_req:], strict=True))
+    return e
 
 
 @dataclass(frozen=True)
@@ -251,7 +267,7 @@ class BlockCounters:
         """The result of a block that is not analysed: valid False, UNKNOWN, confidence 0, NaN fields; counted."""
         self.values["blocks_rejected"] += 1
         nan = math.nan
-        return JammerEstimate(block.stamp_ns, UNKNOWN, 0.0, nan, nan, nan, nan, nan, nan, nan, nan, block.fs,
+        return make_estimate(block.stamp_ns, UNKNOWN, 0.0, nan, nan, nan, nan, nan, nan, nan, nan, block.fs,
                               block.first, block.n, False, self.snapshot(), traces, reason)
 
 

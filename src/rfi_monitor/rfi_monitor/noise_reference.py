@@ -53,13 +53,30 @@ class NoiseReference:
         running median across bins: ~0.15 ms, more than the rest of a quiet block's bookkeeping) is formed again
         once every k blocks learned, from the last k (the front end's shape drifts over seconds, not blocks)."""
         k = int(self.params.calibration_blocks)
-        self._learn_pow = (self._learn_pow + [power])[-k:]
-        self._learn_psd = (self._learn_psd + [norm_psd])[-k:]
+        self._learn_pow.append(power)
+        self._learn_psd.append(norm_psd)
+        if len(self._learn_pow) > k:
+            del self._learn_pow[:-k], self._learn_psd[:-k]
         self._learn_since_tpl += 1
         if len(self._learn_pow) >= k:
-            self.floor = float(np.median(self._learn_pow))
+            self.floor = _median(self._learn_pow)
             if self.template is None or self._learn_since_tpl >= k:
-                med = np.median(np.stack(self._learn_psd), axis=0)
+                med = _median_rows(np.stack(self._learn_psd))
                 self.template = smooth_template(med, self.params.classifier.template_smooth_bins)
                 self._learn_since_tpl = 0
 
+
+def _median(values: list[float]) -> float:
+    """``float(np.median(values))`` of a few finite numbers, to the bit (the middle one, or the mean of the two
+    middle ones as (a + b) / 2), without numpy's per-call overhead (~12 us; this runs on every quiet block)."""
+    s = sorted(values)
+    h = len(s) // 2
+    return float(s[h]) if len(s) % 2 else (s[h - 1] + s[h]) / 2
+
+
+def _median_rows(a: np.ndarray) -> np.ndarray:
+    """``np.median(a, axis=0)`` of finite values, to the bit (each column sorted: its middle value, or the mean of
+    the two middle ones), at a fraction of its cost on a few rows."""
+    s = np.sort(a, axis=0)
+    h = s.shape[0] // 2
+    return s[h].copy() if s.shape[0] % 2 else (s[h - 1] + s[h]) / 2

@@ -446,12 +446,26 @@ def warm_up(nfft: int = 256) -> None:
 
 def _add_block(p: np.ndarray, cplx: bool, first: int, g: int, frames: float, cum: np.ndarray, kcum: np.ndarray,
                head: int) -> np.ndarray | None:
-    """The block's group powers (step 1), written as the ring's next cumulative row; None if not finite."""
-    v = _group_powers(p, cplx, first, g, cum.shape[1])
-    if not np.all(np.isfinite(v)):
-        return None
+    """The block's group powers (step 1), written as the ring's next cumulative row; None if not finite (the ring
+    untouched). One compiled pass (:func:`_add_block_kernel`)."""
+    v = _add_block_kernel(p, cplx, first, g, frames, cum, kcum, head)
+    return v if v.size else None
+
+
+@njit(cache=True)
+def _add_block_kernel(p: np.ndarray, cplx: bool, first: int, g: int, frames: float, cum: np.ndarray,
+                      kcum: np.ndarray, head: int) -> np.ndarray:
+    """:func:`_add_block`: the group powers (:func:`_group_powers`), an empty array if one is not finite, else the
+    ring's next row ``cum[head] + v * frames`` and ``kcum[head] + frames`` written (numpy's element-wise
+    arithmetic, the same values)."""
+    n_groups = cum.shape[1]
+    v = _group_powers(p, cplx, first, g, n_groups)
+    for i in range(n_groups):
+        if not np.isfinite(v[i]):
+            return np.empty(0)
     nxt = (head + 1) % cum.shape[0]
-    cum[nxt] = cum[head] + v * frames
+    for i in range(n_groups):
+        cum[nxt, i] = cum[head, i] + v[i] * frames
     kcum[nxt] = kcum[head] + frames
     return v
 
@@ -521,9 +535,10 @@ def _line(n: float, sy: float, sx: float, sxx: float, sxy: float) -> tuple[float
 
 
 @njit(cache=True)
-def _band(pre: np.ndarray, lo: int, hi: int, var_group: float) -> tuple[float, float, float]:
+def _band(pre: np.ndarray, lo: int, hi: int, var_group: float, with_sse: bool) -> tuple[float, float, float]:
     """(z, rise ratio - 1, sum of squares left by the two-part model / group variance) of band [lo, hi): the rest
-    fitted by a + b x (step 2), the band's mean against that line's mean over the band."""
+    fitted by a + b x (step 2), the band's mean against that line's mean over the band. Without ``with_sse`` the
+    third is 0 (not computed: the scan needs it only for a band that would be the best reportable one)."""
     n = pre.shape[1] - 1
     length = hi - lo
     no = n - length
@@ -552,6 +567,8 @@ def _band(pre: np.ndarray, lo: int, hi: int, var_group: float) -> tuple[float, f
     sxxc = sxx_o - sx_o * sx_o / no
     lever = (sx_i / length - sx_o / no) ** 2 / sxxc if b != 0.0 and sxxc > 0 else 0.0
     z = e / math.sqrt(var_group * (level_i * level_i / length + level_o * level_o * (1.0 / no + lever)))
+    if not with_sse:
+        return z, e / model, 0.0
     # what the two lines (outside, inside: a jammer filtered like the noise adds to a, an unfiltered one to b)
     # leave
     sxx_i = pre[2, hi] - pre[2, lo]
@@ -575,13 +592,15 @@ def _scan(pre: np.ndarray, lengths: np.ndarray, var_group: float, frames: float,
     for length in lengths:
         shift = 2.0 / math.sqrt(length * frames / c_g) / 6.0 * (thr * thr - 1.0)
         for i in range(n - length + 1):
-            z, rise, sse = _band(pre, i, i + length, var_group)
+            z, rise, _ = _band(pre, i, i + length, var_group, False)
             z -= shift
             if z > best[0]:
                 best[0] = z
-            if z > best[1] and rise >= min_rise and (sse <= flat_sse or sse <= FLAT_SHARE * z * z):
-                best[1], best[2], best[3], best[4] = z, rise, i, i + length
-                improved = True
+            if z > best[1] and rise >= min_rise:
+                sse = _band(pre, i, i + length, var_group, True)[2]
+                if sse <= flat_sse or sse <= FLAT_SHARE * z * z:
+                    best[1], best[2], best[3], best[4] = z, rise, i, i + length
+                    improved = True
     return improved
 
 
@@ -622,6 +641,6 @@ def _best_band(cum: np.ndarray, kcum: np.ndarray, head: int, count: int, ref: np
     # the newest block's own rise in that band (its J/N: a sum over m blocks holds those before a switch-on)
     rise1 = np.nan
     if _prefix(cum, kcum, head, 1, ref, pre) > 0:
-        _, r1, _ = _band(pre, lo, hi, c_g * (1.0 / frames + 1.0 / ref_frames))
+        _, r1, _ = _band(pre, lo, hi, c_g * (1.0 / frames + 1.0 / ref_frames), False)
         rise1 = r1
     return best[0], best[1], math.log1p(best[2]), lo, hi, best_m, rise1

@@ -52,6 +52,7 @@ from rfi_monitor.estimate import (
     BlockSpectrum,
     JammerEstimate,
     jammer_to_signal_db,
+    make_estimate,
     off_floor,
     relative_frequency_hz,
 )
@@ -465,7 +466,7 @@ class StftEstimator:
         self._tracking = v.jtype in (CW, CHIRP)
         self._chirp = v.jtype == CHIRP
         lower = (block.clipped > p.clip_lower_bound_fraction or block.coarse) and v.jtype != NONE
-        return JammerEstimate(block.stamp_ns, int(v.jtype), float(v.conf), float(v.jn), float(js), freq, fstd, rate,
+        return make_estimate(block.stamp_ns, int(v.jtype), float(v.conf), float(v.jn), float(js), freq, fstd, rate,
                               per, f0, bw, fs, block.first, block.n, True, self._counts.snapshot(), None, "", v.ref,
                               bool(lower), float(block.clipped), int(shape), inb)
 
@@ -572,7 +573,7 @@ class StftEstimator:
         js = jammer_to_signal_db(d.type, jn, fs, cplx, p)
         self._tracking = False
         self._chirp = False
-        return JammerEstimate(block.stamp_ns, int(d.type), float(conf), float(jn), float(js), freq, fstd, rate, per,
+        return make_estimate(block.stamp_ns, int(d.type), float(conf), float(jn), float(js), freq, fstd, rate, per,
                               nan, nan, fs, block.first, block.n, True, self._counts.snapshot(), None, "", ref, True,
                               float(block.clipped), int(shape), float(inb))
 

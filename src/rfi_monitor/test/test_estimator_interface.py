@@ -88,3 +88,25 @@ def test_the_monitor_hands_checked_blocks_to_the_estimator_passed_in():
 def test_an_estimator_choice_the_params_do_not_know_is_refused():
     with pytest.raises(ValueError, match="estimator"):
         RfiMonitorParams(estimator="ml")
+
+
+def test_make_estimate_is_the_dataclass() -> None:
+    """``estimate.make_estimate`` (the fast constructor the estimators use on every block) builds the same frozen
+    JammerEstimate as its ``__init__``: every field, the defaults of those left out, equality, immutability."""
+    import dataclasses
+
+    from rfi_monitor.estimate import make_estimate
+    counts = {"blocks": 3}
+    full = (7, 2, 0.5, 12.0, 40.0, 1e6, 2e3, 1e12, 1e-5, -4e6, 8e6, 10e6, 100, 10000, True, counts, None, "", 1,
+            True, 0.25, 1, 0.75, True)
+    for k in range(16, len(full) + 1):
+        a, b = make_estimate(*full[:k]), JammerEstimate(*full[:k])
+        assert a == b
+        names = [f.name for f in dataclasses.fields(JammerEstimate)]
+        assert [getattr(a, n) for n in names] == [getattr(b, n) for n in names]
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            a.type = 0  # type: ignore[misc]
+    with pytest.raises(TypeError):
+        make_estimate(*full[:15])
+    with pytest.raises(TypeError):
+        make_estimate(*full, 1)

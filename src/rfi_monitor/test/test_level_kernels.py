@@ -114,6 +114,24 @@ def test_smooth_template_is_scipys_median_filter(width: int) -> None:
         t = median_filter(p, size=width, mode="nearest")
         t = np.maximum(t, 1e-6 * np.max(t))
         np.testing.assert_array_equal(smooth_template(p, width), t / t.sum())
+        q = np.round(p * 2)                                # ties (and zeros) in the sliding window
+        t = median_filter(q, size=width, mode="nearest")
+        t = np.maximum(t, 1e-6 * np.max(t))
+        np.testing.assert_array_equal(smooth_template(q, width), t / t.sum())
+
+
+def test_noise_reference_medians_are_numpys() -> None:
+    """The learned floor's and shape's medians (noise_reference: every quiet block) equal np.median's to the bit, odd
+    and even counts, ties included."""
+    from rfi_monitor.noise_reference import _median, _median_rows
+    rng = np.random.default_rng(3)
+    for k in range(1, 12):
+        for _ in range(50):
+            v = (rng.exponential(size=k) * 10.0 ** rng.integers(-6, 6)).tolist()
+            assert _median(v) == float(np.median(v))
+            a = rng.exponential(size=(k, 129))
+            a[:, ::7] = np.round(a[:, ::7])
+            np.testing.assert_array_equal(_median_rows(a), np.median(a, axis=0))
 
 
 @pytest.mark.parametrize("cplx", [False, True])

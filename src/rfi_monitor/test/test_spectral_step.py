@@ -227,5 +227,5 @@ def test_warm_up_compiles_the_kernels():
     ss.warm_up(NFFT)
     # the kernels called from Python (those they call are compiled into them, and have no signatures of their own
     # when loaded from numba's cache)
-    for kernel in (ss._best_band, ss._group_powers):
+    for kernel in (ss._best_band, ss._add_block_kernel):
         assert kernel.signatures, kernel.__name__
