@@ -28,8 +28,18 @@ gathered ones (a gap, a format change, a stamp-gate restart) first has them proc
 First acquisition: it runs in the receiver's worker thread (:mod:`gnss_correlator.receiver`), so the callback
 returns and the input keeps being taken; the receiver holds the blocks meanwhile (up to ``acquisition_hold_s`` of
 stream; ``blocks_held_for_acquisition``) and, when the worker triggers a guard condition, answers them all, the same
-intervals as a search in the callback would have given, ``REPLAY_BLOCKS_PER_CALLBACK`` receiver calls per callback.
-The end-of-stream report waits for it.
+intervals as a search in the callback would have given, ``REPLAY_BLOCKS_PER_CALLBACK`` held blocks per callback.
+Input first: each such callback takes every block waiting in the subscription before it replays
+(``blocks_taken_before_replay``; they join the hold), and blocks handed in meanwhile are held, not replayed (the
+receiver's ``replay_per_block`` 0). A single-threaded executor takes one message per subscription per turn, so a
+replay of 100 ms of stream per turn used to take one 1-ms block per turn: the input queue (1000 messages, 1 s of
+1-ms blocks) filled and the middleware dropped blocks. The backlog is now held in the node, bounded by
+``acquisition_hold_s`` (at the bound each block handed in replays two held ones: ``core.hold_bound_replays``, the
+input then waits in the subscription's queue, and what it loses is counted as input lost). The end-of-stream
+report waits for the replay.
+
+Output: each CorrelatorArray is published serialised, written from the interval's arrays
+(:mod:`gnss_correlator.correlator_cdr`, the bytes of :func:`correlator_array`), not built field by field.
 
 Diagnostics (every ``diagnostics_period_s`` of accepted stamp time): the counters, the tracked PRNs;
 ERROR after a core error since the last report, WARN when more than ``warn_rejected_fraction`` of the
@@ -51,6 +61,7 @@ from rclpy.serialization import deserialize_message
 
 from gnss_correlator import tracking
 from gnss_correlator.acquisition import MIN_SAMPLE_RATE_HZ
+from gnss_correlator.correlator_cdr import CorrelatorArrayWriter
 from gnss_correlator.node_params import CorrelatorNodeParams
 from gnss_correlator.receiver import CorrelatorInterval, IfBlock, Receiver
 from rfi_msgs.msg import Correlator, CorrelatorArray, GnssMeasurement, IfSamples
@@ -141,6 +152,16 @@ def correlator_array(interval: CorrelatorInterval, frame_id: str) -> CorrelatorA
     return msg
 
 
+def correlator_array_bytes(interval: CorrelatorInterval, writer: CorrelatorArrayWriter) -> bytes:
+    """:func:`correlator_array` serialised (the bytes rclpy's ``serialize_message`` gives for it), written from the
+    interval's arrays by :class:`gnss_correlator.correlator_cdr.CorrelatorArrayWriter` without building the message
+    objects: what the node publishes."""
+    floats = np.column_stack((interval.integration_time_s, interval.in_phase, interval.quadrature,
+                              interval.cn0_dbhz, interval.predicted_phase_change_rad))
+    return writer.serialize(interval.stamp_ns, GnssMeasurement.GPS, interval.svid, floats,
+                            carrier_lock_codes(interval))
+
+
 class GnssCorrelatorNode(Node):
     """Thin node around the receiver (module docstring)."""
 
@@ -152,7 +173,8 @@ class GnssCorrelatorNode(Node):
         self._search_done = self.create_guard_condition(self._poll_receiver)
         self.receiver = self._new_receiver()
         self.counts: Counter[str] = Counter()
-        for key in ('blocks_received', 'blocks_processed', 'core_errors', 'stamp_restarts', 'arrays_published'):
+        for key in ('blocks_received', 'blocks_processed', 'core_errors', 'stamp_restarts', 'arrays_published',
+                    'blocks_taken_before_replay'):
             self.counts[key] += 0
         for reason in BLOCK_REASONS:
             self.counts[f'rejected_{reason}'] += 0
@@ -163,6 +185,7 @@ class GnssCorrelatorNode(Node):
         self._errors_at_report = 0
         self.health = InputHealth()
         self.publisher = self.create_publisher(CorrelatorArray, OUTPUT_TOPIC, DATA_QOS)
+        self._writer = CorrelatorArrayWriter(self.params.frame_id)
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         # raw: bytes that rclpy cannot deserialise are then received and counted (rejected_malformed_message); a
         # typed subscription would lose them unseen
@@ -235,7 +258,9 @@ class GnssCorrelatorNode(Node):
             self.diag_pub.publish(self.diagnostics(stamp_ns))
 
     def _new_receiver(self) -> Receiver:
-        return Receiver(self.params.receiver(), on_search_done=self._search_done.trigger)
+        # the blocks handed in after the first search are held, not replayed: _poll_receiver replays them after
+        # taking the input that waits (module docstring)
+        return Receiver(self.params.receiver(), on_search_done=self._search_done.trigger, replay_per_block=0)
 
     def _flush(self) -> None:
         """Hand the gathered blocks to the receiver as one, publish the completed intervals."""
@@ -257,8 +282,10 @@ class GnssCorrelatorNode(Node):
         self._publish(intervals)
 
     def _poll_receiver(self) -> None:
-        """The receiver's first acquisition ended (its worker triggered the guard condition): the intervals of
-        the blocks it held."""
+        """The receiver's first acquisition ended (its worker triggered the guard condition): first the input
+        waiting in the subscription is taken (held by the receiver), then ``REPLAY_BLOCKS_PER_CALLBACK`` of the
+        blocks it holds are answered (module docstring)."""
+        self.counts['blocks_taken_before_replay'] += self.subscription.take_pending()
         try:
             intervals = self.receiver.poll(max_blocks=REPLAY_BLOCKS_PER_CALLBACK)
         except Exception as err:  # noqa: BLE001 - a core fault must not end the node (module docstring)
@@ -282,8 +309,11 @@ class GnssCorrelatorNode(Node):
         self.receiver = self._new_receiver()
 
     def _publish(self, intervals: list[CorrelatorInterval]) -> None:
+        """Each interval as one CorrelatorArray, published serialised (:func:`correlator_array_bytes`)."""
+        if self._writer.frame_id != self.params.frame_id:
+            self._writer = CorrelatorArrayWriter(self.params.frame_id)
         for interval in intervals:
-            self.publisher.publish(correlator_array(interval, self.params.frame_id))
+            self.publisher.publish(correlator_array_bytes(interval, self._writer))
             self.counts['arrays_published'] += 1
 
     def _flush_when_idle(self) -> None:
