@@ -38,6 +38,10 @@ replay of 100 ms of stream per turn used to take one 1-ms block per turn: the in
 input then waits in the subscription's queue, and what it loses is counted as input lost). The end-of-stream
 report waits for the replay.
 
+Taking the input: after each block the executor hands over, the node takes the blocks already waiting in the
+subscription (up to ``DRAIN_BLOCKS``; ``blocks_taken_in_a_row``) instead of one per executor turn: a node behind
+its input (1000 blocks a second) then spends its time on them rather than on rclpy's wait-set turns.
+
 Output: each CorrelatorArray is published serialised, written from the interval's arrays
 (:mod:`gnss_correlator.correlator_cdr`, the bytes of :func:`correlator_array`), not built field by field.
 
@@ -94,6 +98,10 @@ BLOCK_REASONS = ('unknown_sample_format', 'bad_bits_per_sample', 'bad_sample_rat
                  'short_block', 'long_block', 'bad_first_sample_index', 'values_exceed_bits', 'blank_block',
                  'rate_below_2mhz', 'band_outside_nyquist', 'stamp_malformed', *STAMP_REASONS)
 """Why a block is rejected (``rejected_<reason>``, module docstring)."""
+
+DRAIN_BLOCKS = 100
+"""Blocks waiting in the subscription taken after each block the executor hands over, at most (module docstring):
+0.1 s of 1-ms blocks, so the timers and the replay still get their turns."""
 
 REPLAY_BLOCKS_PER_CALLBACK = 10
 """Blocks held during a first acquisition answered per callback after it (module docstring): the executor takes
@@ -174,7 +182,7 @@ class GnssCorrelatorNode(Node):
         self.receiver = self._new_receiver()
         self.counts: Counter[str] = Counter()
         for key in ('blocks_received', 'blocks_processed', 'core_errors', 'stamp_restarts', 'arrays_published',
-                    'blocks_taken_before_replay'):
+                    'blocks_taken_before_replay', 'blocks_taken_in_a_row'):
             self.counts[key] += 0
         for reason in BLOCK_REASONS:
             self.counts[f'rejected_{reason}'] += 0
@@ -192,6 +200,7 @@ class GnssCorrelatorNode(Node):
         self.subscription = subscribe_input(self, IfSamples, IF_TOPIC, self.on_raw_block, self.health, raw=True,
                                             warning_throttle_s=self.params.warning_throttle_s)
         self.stale_watch = StaleInputWatch(self, self.health, self.params.input_timeout_s, self._publish_stale)
+        self._draining = False  # in a take_pending of the subscription (on_raw_block, _poll_receiver)
         self._pending: list[IfBlock] = []  # accepted blocks gathered for the receiver (module docstring)
         self._blocks_in_search = 0  # blocks handed to the receiver while its first acquisition runs (it holds them)
         self._pending_samples = 0
@@ -204,6 +213,17 @@ class GnssCorrelatorNode(Node):
         self.get_logger().warning(f'IF block rejected: {reason}', throttle_duration_sec=self.params.warning_throttle_s)
 
     def on_raw_block(self, raw: bytes | IfSamples) -> None:
+        """A block from the executor: handled (:meth:`_take_block`), then up to ``DRAIN_BLOCKS`` more that wait in
+        the subscription (``blocks_taken_in_a_row``, module docstring)."""
+        self._take_block(raw)
+        if not self._draining:
+            self._draining = True
+            try:
+                self.counts['blocks_taken_in_a_row'] += self.subscription.take_pending(limit=DRAIN_BLOCKS)
+            finally:
+                self._draining = False
+
+    def _take_block(self, raw: bytes | IfSamples) -> None:
         """A serialised block: deserialised by rclpy and handed to :meth:`on_block`, or counted as received and
         ``rejected_malformed_message`` (a message object, as an in-process hand-over may give, goes straight on)."""
         if isinstance(raw, IfSamples):
@@ -285,7 +305,11 @@ class GnssCorrelatorNode(Node):
         """The receiver's first acquisition ended (its worker triggered the guard condition): first the input
         waiting in the subscription is taken (held by the receiver), then ``REPLAY_BLOCKS_PER_CALLBACK`` of the
         blocks it holds are answered (module docstring)."""
-        self.counts['blocks_taken_before_replay'] += self.subscription.take_pending()
+        self._draining = True  # each block taken here is held: no drain after each
+        try:
+            self.counts['blocks_taken_before_replay'] += self.subscription.take_pending()
+        finally:
+            self._draining = False
         try:
             intervals = self.receiver.poll(max_blocks=REPLAY_BLOCKS_PER_CALLBACK)
         except Exception as err:  # noqa: BLE001 - a core fault must not end the node (module docstring)
