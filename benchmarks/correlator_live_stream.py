@@ -478,9 +478,9 @@ with the stream (this Python probe's own lag included). The node's counters (its
 the first search (receiver calls: 10 ms of stream each), the replays at the hold's bound (acquisition_hold_s, 4 s)
 and the waits for a search still running there; the blocks the node took from its subscription itself.
 
-**Every block answered: 11 of 12 runs, and 5 of 6 in 1-ms blocks (before: 1 of 6, 0-268 and 158-162 of 5,000
-lost). Keeping up at 1x: not on this machine during these runs** (load average 8.3-10.9 on 2 shared vCPUs: 7 workers'
-jobs; the previous document's runs had 3.4-7.7):
+**Every block answered: 12 of 12 runs, 6 of 6 in 1-ms blocks (before: 1 of 6, 0-268 and 158-162 of 5,000 lost).
+Keeping up at 1x in wall time: not on this machine during these runs** (load average 8.1-9.9 on 2 shared vCPUs: 7
+workers' jobs; the previous document's runs had 3.4-7.7):
 
 - Where the 1-ms blocks were lost: after the first acquisition, the node answered the blocks held meanwhile from a
   guard condition, 100 ms of stream per callback, and rclpy's single-threaded executor takes one message per
@@ -488,34 +488,38 @@ jobs; the previous document's runs had 3.4-7.7):
   of 1-ms blocks) overflowed while the hold was replayed, and a hold that reached its bound was replayed whole in one
   call. Not the GIL: the search is numpy/scipy (large array operations release it) and the tracking kernel is numba
   with nogil. Now each replay callback first takes every block waiting in the subscription (they join the hold:
-  "before a replay" above, up to 2,632 per run), blocks handed in after the search are held rather than answered
+  "before a replay" above, up to 3,082 per run), blocks handed in after the search are held rather than answered
   (the receiver's replay_per_block 0), each block the executor hands over is followed by up to 100 waiting ones
-  taken at once ("after a block", 934-3,150 per run in 1-ms blocks), and at the hold's bound each block handed in
-  answers two held ones (40-49 times in 5 of the 6 runs at 16.368 MS/s, 35 in one at 4 MS/s: the backlog then
-  waits in the subscription's queue). The same arrays as the synchronous path (tested, test_gnss_correlator_node.py),
-  the bound and counters tested in the receiver (test_receiver.py).
-- The one loss left (16 of 5,000, 4 MS/s 1-ms, load 10.3-10.9, counted as input lost by the publisher's sequence
-  numbers): the hold had been emptied (342 receiver calls held, the bound never reached), so the node was more than
-  1000 messages behind in steady state, where the subscription's queue is the only buffer. A node that gets less
-  CPU than the stream needs loses blocks there whatever the replay does; the queue's depth is the parameter
-  qos_overrides./rfi/if_samples.subscription.depth (not measured here), or use 10-ms blocks (10 s per 1000 messages).
-- CPU per second of stream, executor thread: 4 MS/s complex 12 ch 0.50-0.53 (10-ms blocks; 0.58-0.63 before) and
-  0.60-0.71 (1-ms; 0.77-0.82 before); 16.368 MS/s real 8 ch 0.80-0.81 (10-ms; 0.75-0.87 before) and 0.90-1.05 (1-ms;
-  0.68-0.85 before, at lower load and with 158-162 blocks fewer answered). The acquisition worker took 0.30-0.90 and
-  1.52-1.60 s once. So 12 channels at 4 MS/s fit in half a core; 8 channels at 16.368 MS/s real need 0.8 of a core
-  in 10-ms blocks and all of one in 1-ms blocks, and this probe saw the node 6.8-12.3 s behind at the end (second
-  half medians): with 7 workers on 2 vCPUs it got less than that (its hold reached the 4-s bound in 5 of 6 runs,
-  and in 4 the search, 1.5 s of CPU, was still running there: more than 4 s of wall time). The 4 MS/s stream
-  kept up in 2 of 6 runs (10.5 and 11.7 ms behind over the second half) and was 0.5-7.4 s behind in the others.
-- The publish path: each CorrelatorArray is now serialised from the interval's arrays with numpy (correlator_cdr.py,
-  the bytes of rclpy's serialisation of the message built field by field, tested field byte by field byte) and
-  published as bytes. In one process ([live_stream_in_process.md](live_stream_in_process.md), load 9.5) writing
-  the arrays takes 27-31 us per ms of stream against 59-72 for building the message objects (33-41) and rclpy's
-  serialisation of them (26-31). Under the profiler in the node (GNSS_CORRELATOR_PROFILE, executor thread CPU time,
-  8 ch at 16.368 MS/s, 10-ms blocks, 3 s, load 9) writing and publishing took 0.17 s per second of stream (0.13 the
-  bytes, 0.04 rclpy's publish_raw), against 0.32 + 0.19 in the previous document's profile (load 14). What remains
-  is the tracking (350-600 us per ms of stream in one process) and, in 1-ms blocks, taking 1000 messages a second
-  (deserialise, check, decode: 60-66 us per ms in one process; the executor's turns on top).
+  taken at once ("after a block", 1,593-4,426 per run in 1-ms blocks), and at the hold's bound each block handed in
+  answers two held ones (10-49 times in 3 of the 6 runs at 16.368 MS/s: the backlog then waits in the
+  subscription's queue). The same arrays as the synchronous path (tested, test_gnss_correlator_node.py), the bound
+  and counters tested in the receiver (test_receiver.py).
+- The loss left: in a first full run of this change (load 8.3-10.9; the arrays then written with hand-counted
+  offsets, the same bytes) 11 of 12 runs answered every block; one 4 MS/s 1-ms run lost 16 of 5,000 (counted as
+  input lost, from the publisher's sequence numbers) after its hold had emptied (342 calls held, the bound never
+  reached): the node was then more than 1000 messages behind in steady state, where the subscription's queue is the
+  only buffer. A node that gets less CPU than the stream needs loses blocks there; the queue's depth is the
+  parameter qos_overrides./rfi/if_samples.subscription.depth (not measured here), or use 10-ms blocks (10 s per 1000
+  messages).
+- CPU per second of stream, executor thread: 4 MS/s complex 12 ch 0.49-0.53 (10-ms blocks; 0.58-0.63 before) and
+  0.59-0.61 (1-ms; 0.77-0.82 before); 16.368 MS/s real 8 ch 0.77-0.80 (10-ms; 0.75-0.87 before) and 0.92-0.94 (1-ms;
+  0.68-0.85 before, at lower load and with 158-162 blocks fewer answered). The acquisition worker took 0.28-0.33 and
+  1.45-1.57 s once. So 12 channels at 4 MS/s fit in 0.6 of a core; 8 channels at 16.368 MS/s real need 0.8 of a
+  core in 10-ms blocks and 0.93 in 1-ms blocks, and this probe saw the node 4.0-11.1 s behind over the second half
+  (medians): with 7 workers on 2 vCPUs it got less than that (its hold reached the 4-s bound in 3 of 6 runs, and in
+  one the search, 1.5 s of CPU, was still running there: more than 4 s of wall time). The 4 MS/s stream kept up in
+  4 of 6 runs (12.5-300 ms behind over the second half) and was 2.6 and 5.2 s behind in the others.
+- The publish path: each CorrelatorArray is now written as bytes from the interval's arrays through the suite's CDR
+  codec (correlator_cdr.py on rfi_node_common.cdr; rclpy's serialisation of the message built field by field gives
+  the same length and every field's value bit for bit, tested; only the padding differs, zero here, Fast CDR's
+  buffer's old bytes there) and published as bytes. In one process
+  ([live_stream_in_process.md](live_stream_in_process.md), load 7.3) writing the arrays takes 31-35 us per ms of
+  stream against 64-76 for building the message objects (35-43) and rclpy's serialisation of them (29-34). Under the
+  profiler in the node (GNSS_CORRELATOR_PROFILE, executor thread CPU time, 8 ch at 16.368 MS/s, 10-ms blocks, 3 s,
+  load 9; the hand-counted writer) writing and publishing took 0.17 s per second of stream (0.13 the bytes, 0.04
+  rclpy's publish_raw), against 0.32 + 0.19 in the previous document's profile (load 14). What remains is the
+  tracking (360-620 us per ms of stream in one process) and, in 1-ms blocks, taking 1000 messages a second
+  (deserialise, check, decode: 61-64 us per ms in one process; the executor's turns on top).
 
 Changed for this document: the replay of the hold no longer starves the input (above); the arrays are published
 serialised; the table gives the node's hold and take counters. The previous document's changes stand (the first
