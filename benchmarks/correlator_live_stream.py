@@ -263,6 +263,11 @@ def run_once(case: Case, data: Path, n: int, tmp: Path, node_params: tuple[str, 
         "lost before the node (input lost)": lost,
         "every block answered": "yes" if answered else "no",
         "channels tracked at the end": len(last.get("tracked_prns", "").split()),
+        "blocks held during the first search (core.blocks_held) / replays at the hold's bound / waits for the search":
+            f"{last.get('core.blocks_held', '?')} / {last.get('core.hold_bound_replays', '?')} / "
+            f"{last.get('core.acquisition_waits', '?')}",
+        "blocks the node took itself: after a block (in a row) / before a replay":
+            f"{last.get('blocks_taken_in_a_row', '?')} / {last.get('blocks_taken_before_replay', '?')}",
         "arrays received here / published (arrays_published)": f"{len(arrivals)} / {last.get('arrays_published', '?')}",
         "arrays' stamps 1 ms apart, no gap": "yes" if steps.size and np.all(steps == 1_000_000) else "no",
         "latency median / 95 % / max, ms (whole stream)":
@@ -294,10 +299,13 @@ def in_process_costs(case: Case, seconds: float = 1.5, skip_s: float = 0.5) -> d
     source sends them, then as the node treats them (deserialise, check, decode, Receiver.process, build the
     CorrelatorArray, serialise it: what rclpy's publish does), gathered to batch_ms as the node does (its
     default); CPU time (this process) per ms of stream after the first ``skip_s`` (acquisition, kernel load), us
-    per step."""
+    per step. The arrays are written as the node publishes them (serialised from the interval's arrays,
+    ``correlator_array_bytes``); the path it replaced (message objects built field by field, then serialised by
+    rclpy) is timed beside it, outside the total (``_old``)."""
     from rclpy.serialization import deserialize_message, serialize_message
 
-    from gnss_correlator.gnss_correlator_node import block_problem, correlator_array
+    from gnss_correlator.correlator_cdr import CorrelatorArrayWriter
+    from gnss_correlator.gnss_correlator_node import block_problem, correlator_array, correlator_array_bytes
     from gnss_correlator.node_params import CorrelatorNodeParams
     from gnss_correlator.receiver import IfBlock, Receiver, ReceiverConfig
     from rfi_msgs.msg import IfSamples
@@ -319,9 +327,13 @@ def in_process_costs(case: Case, seconds: float = 1.5, skip_s: float = 0.5) -> d
         m.sample_format = IfSamples.INT8
         m.samples = raw[k * per * width:(k + 1) * per * width].tobytes()
         messages.append(serialize_message(m))
-    rx = Receiver(ReceiverConfig())
+    # the first search in this thread (in the skipped part): held in the worker, a stream handed in faster than
+    # real time would be held whole, and nothing measured
+    rx = Receiver(ReceiverConfig(acquisition_hold_s=0.0))
     gather = max(1, int(round(CorrelatorNodeParams.batch_ms * 1e-3 / case.block_s)))
-    steps = dict.fromkeys(("deserialise", "check", "decode", "receiver", "build arrays", "serialise arrays"), 0.0)
+    writer = CorrelatorArrayWriter("gnss_receiver")
+    steps = dict.fromkeys(("deserialise", "check", "decode", "receiver", "arrays as bytes (CDR codec)",
+                           "_old: arrays built field by field", "_old: serialised by rclpy"), 0.0)
     pending: list[np.ndarray] = []
     for k, data in enumerate(messages):
         counted = k * case.block_s >= skip_s
@@ -342,11 +354,16 @@ def in_process_costs(case: Case, seconds: float = 1.5, skip_s: float = 0.5) -> d
                                      samples=np.concatenate(pending)))
             pending = []
             t.append(time.process_time())
+            fast = [correlator_array_bytes(o, writer) for o in out]
+            t.append(time.process_time())
             arrays = [correlator_array(o, "gnss_receiver") for o in out]
             t.append(time.process_time())
-            for a in arrays:
-                serialize_message(a)
+            reference = [serialize_message(a) for a in arrays]
             t.append(time.process_time())
+            for a, b in zip(fast, reference, strict=True):  # the same bytes but the padding (Fast CDR's are
+                x, y = np.frombuffer(a, np.uint8), np.frombuffer(b, np.uint8)  # left uninitialised, ours zero)
+                if x.size != y.size or x[x != y].any():
+                    raise AssertionError("the two publish paths differ")
         if counted:
             for name, t0, t1 in zip(steps, t[:-1], t[1:], strict=False):
                 steps[name] += t1 - t0
@@ -357,15 +374,20 @@ def in_process_costs(case: Case, seconds: float = 1.5, skip_s: float = 0.5) -> d
 def write_in_process(out: Path) -> None:
     rows = [(case, in_process_costs(case)) for case in CASES]
     names = list(rows[0][1])
-    table = ("| case | " + " | ".join(names) + " | total, us per ms of stream |\n|---|" + "---|" * (len(names) + 1)
+    table = ("| case | " + " | ".join(n.replace("_old: ", "") + (" (replaced)" if n.startswith("_") else "")
+                                      for n in names)
+             + " | total (the node's path), us per ms of stream |\n|---|" + "---|" * (len(names) + 1)
              + "\n" + "\n".join(f"| {c.label} | " + " | ".join(f"{v[n]:.0f}" for n in names)
-                                 + f" | {sum(v.values()):.0f} |" for c, v in rows))
+                                 + f" | {sum(x for n, x in v.items() if not n.startswith('_')):.0f} |"
+                                 for c, v in rows))
     out.write_text(
         "# gnss_correlator_node's own work per ms of stream, without the middleware\n\n"
         "Generated by `python benchmarks/correlator_live_stream.py --in-process`: the streams of "
         "[live_stream.md](live_stream.md) (1.5 s, the first 0.5 s left out: acquisition, kernel load), each block "
         "serialised as if_source sends it, then treated as the node does (deserialised, checked, decoded, gathered "
-        "to 10 ms for Receiver.process, the CorrelatorArrays built and serialised as rclpy's publish does), CPU "
+        "to 10 ms for Receiver.process, the CorrelatorArrays serialised from the intervals' arrays as the node "
+        "publishes them; beside it, outside the total, the path this replaced: the message objects built field by "
+        "field, then serialised by rclpy as its publish does, the same bytes, checked), CPU "
         f"time of one process, us per ms of stream (1000: one core). Load average {os.getloadavg()[0]:.1f} on "
         f"{os.cpu_count()} shared logical CPUs at the end.\n\n" + table + "\n\nWhat the node process spends "
         "beyond this over DDS (live_stream.md's CPU per second answered) is the middleware's: receiving the "
@@ -445,45 +467,63 @@ def main() -> None:
 
 NOTES = """Reading it: the node's CPU time is that of its process (all threads) from the moment its subscription was in
 the graph to its last report; its split by thread (/proc/<pid>/task): "main" is the executor (taking and
-deserialising each block, the checks and decoding, the tracking, building and publishing one CorrelatorArray per ms),
+deserialising each block, the checks and decoding, the tracking, writing and publishing one CorrelatorArray per ms),
 "gnss_correlator" the acquisition worker (Python threads keep the process's name; the first acquisition of the
 stream, 32 PRNs on 10 ms), "dds.*" the middleware's own threads. The robust figure is the executor thread's CPU per
-second of stream: it does not depend on when the first array arrived. "Every block answered": the node's final
-report seen, every block received and processed (none lost before it, none rejected, none still held for the first
-acquisition), and the arrays' stamps 1 ms apart without a gap from the first channel's first C/N0 to the end. The
-latency (arrival here minus the stamp) over the second half shows whether the node had caught up with the stream.
+second of stream: it does not depend on when the first array arrived nor much on the load. "Every block answered":
+the node's final report seen, every block received and processed (none lost before it, none rejected, none still
+held for the first acquisition), and the arrays' stamps 1 ms apart without a gap from the first channel's first C/N0
+to the end. The latency (arrival here minus the stamp) over the second half shows whether the node had caught up
+with the stream (this Python probe's own lag included). The node's counters (its final report): blocks held during
+the first search (receiver calls: 10 ms of stream each), the replays at the hold's bound (acquisition_hold_s, 4 s)
+and the waits for a search still running there; the blocks the node took from its subscription itself.
 
-**The done-when ("keeps up at 1x over DDS, every block answered") is met in 10-ms blocks and not in 1-ms blocks on
-this machine** (load average 3.4-7.7 on 2 shared vCPUs during these runs: other workers' jobs):
+**Every block answered: 12 of 12 runs, 6 of 6 in 1-ms blocks (before: 1 of 6, 0-268 and 158-162 of 5,000 lost).
+Keeping up at 1x in wall time: not on this machine during these runs** (load average 8.1-9.9 on 2 shared vCPUs: 7
+workers' jobs; the previous document's runs had 3.4-7.7):
 
-- In 10-ms blocks every block of both streams was answered in 3 of 3 runs, and every array reached this probe with
-  the stamps 1 ms apart. The executor thread took 0.58-0.63 s of CPU per second of stream (12 channels at 4 MS/s
-  complex) and 0.75-0.87 (8 channels at 16.368 MS/s real), under one core; the acquisition worker 0.28-0.41 and
-  1.48-1.76 s once, while the blocks were taken and held. The 4 MS/s stream kept up (13-279 ms behind over the
-  second half); the 16.368 MS/s one was still catching up after 5 s (0.5-4.0 s behind): the search's 1.5-1.8 s of
-  CPU is won back at the 0.13-0.25 s per second the core has left.
-- In 1-ms blocks (1000 messages a second) blocks were still lost before the node in 5 of 6 runs (0-268 of 5,000
-  at 4 MS/s, 158-162 at 16.368 MS/s): while the acquisition worker runs, the executor thread shares the core and the
-  GIL with it and the 1000-message queue (1 s) overflows. The node's process now switches the GIL every 0.5 ms
-  instead of 5 (GIL_SWITCH_INTERVAL_S); in 2 runs per stream before this document (load 9-10) 27-1,613 blocks were
-  lost with it, against 0-2,841 in 3 runs without it at load 10-13: not separable from the load. From a live SDR
-  use 10-ms blocks.
-- Where the CPU went (issue: 1.6-1.8 s per second over DDS against 0.5-0.7 in one process): the middleware's
-  threads took 0.03-0.06 s per second of stream; the executor thread 0.6-0.9, against the node's own work of 0.5-0.7
-  measured in one process ([live_stream_in_process.md](live_stream_in_process.md), load 12). The 1.6-1.8 of the
-  earlier runs (load 13-22, the first acquisition in the callback) was not reproduced: with the search in the callback
-  again (`--node-param acquisition_hold_s:=0.0`, 10-ms blocks, 2 runs each, load 17-20) the CPU after the first array
-  was 0.65-0.72 and 0.81-0.85 s per second answered, the middleware's threads 0.03-0.04. What the profile of the
-  executor thread (GNSS_CORRELATOR_PROFILE, thread CPU time, 8 ch at 16.368 MS/s, 3 s, load 14) still shows beyond
-  the tracking kernel (0.50 s/s): the CorrelatorArray objects built per ms (0.32 s/s under the profiler) and rclpy's
-  publish (0.19 s/s), then the executor's own turns; the tracking kernel's first load (1.2 s of CPU) now happens when
-  the node starts (tracking.warm_up), not in the stream.
+- Where the 1-ms blocks were lost: after the first acquisition, the node answered the blocks held meanwhile from a
+  guard condition, 100 ms of stream per callback, and rclpy's single-threaded executor takes one message per
+  subscription per turn: one 1-ms block taken per ~80 ms of replay, so the subscription's queue (1000 messages, 1 s
+  of 1-ms blocks) overflowed while the hold was replayed, and a hold that reached its bound was replayed whole in one
+  call. Not the GIL: the search is numpy/scipy (large array operations release it) and the tracking kernel is numba
+  with nogil. Now each replay callback first takes every block waiting in the subscription (they join the hold:
+  "before a replay" above, up to 3,082 per run), blocks handed in after the search are held rather than answered
+  (the receiver's replay_per_block 0), each block the executor hands over is followed by up to 100 waiting ones
+  taken at once ("after a block", 1,593-4,426 per run in 1-ms blocks), and at the hold's bound each block handed in
+  answers two held ones (10-49 times in 3 of the 6 runs at 16.368 MS/s: the backlog then waits in the
+  subscription's queue). The same arrays as the synchronous path (tested, test_gnss_correlator_node.py), the bound
+  and counters tested in the receiver (test_receiver.py).
+- The loss left: in a first full run of this change (load 8.3-10.9; the arrays then written with hand-counted
+  offsets, the same bytes) 11 of 12 runs answered every block; one 4 MS/s 1-ms run lost 16 of 5,000 (counted as
+  input lost, from the publisher's sequence numbers) after its hold had emptied (342 calls held, the bound never
+  reached): the node was then more than 1000 messages behind in steady state, where the subscription's queue is the
+  only buffer. A node that gets less CPU than the stream needs loses blocks there; the queue's depth is the
+  parameter qos_overrides./rfi/if_samples.subscription.depth (not measured here), or use 10-ms blocks (10 s per 1000
+  messages).
+- CPU per second of stream, executor thread: 4 MS/s complex 12 ch 0.49-0.53 (10-ms blocks; 0.58-0.63 before) and
+  0.59-0.61 (1-ms; 0.77-0.82 before); 16.368 MS/s real 8 ch 0.77-0.80 (10-ms; 0.75-0.87 before) and 0.92-0.94 (1-ms;
+  0.68-0.85 before, at lower load and with 158-162 blocks fewer answered). The acquisition worker took 0.28-0.33 and
+  1.45-1.57 s once. So 12 channels at 4 MS/s fit in 0.6 of a core; 8 channels at 16.368 MS/s real need 0.8 of a
+  core in 10-ms blocks and 0.93 in 1-ms blocks, and this probe saw the node 4.0-11.1 s behind over the second half
+  (medians): with 7 workers on 2 vCPUs it got less than that (its hold reached the 4-s bound in 3 of 6 runs, and in
+  one the search, 1.5 s of CPU, was still running there: more than 4 s of wall time). The 4 MS/s stream kept up in
+  4 of 6 runs (12.5-300 ms behind over the second half) and was 2.6 and 5.2 s behind in the others.
+- The publish path: each CorrelatorArray is now written as bytes from the interval's arrays through the suite's CDR
+  codec (correlator_cdr.py on rfi_node_common.cdr; rclpy's serialisation of the message built field by field gives
+  the same length and every field's value bit for bit, tested; only the padding differs, zero here, Fast CDR's
+  buffer's old bytes there) and published as bytes. In one process
+  ([live_stream_in_process.md](live_stream_in_process.md), load 7.3) writing the arrays takes 31-35 us per ms of
+  stream against 64-76 for building the message objects (35-43) and rclpy's serialisation of them (29-34). Under the
+  profiler in the node (GNSS_CORRELATOR_PROFILE, executor thread CPU time, 8 ch at 16.368 MS/s, 10-ms blocks, 3 s,
+  load 9; the hand-counted writer) writing and publishing took 0.17 s per second of stream (0.13 the bytes, 0.04
+  rclpy's publish_raw), against 0.32 + 0.19 in the previous document's profile (load 14). What remains is the
+  tracking (360-620 us per ms of stream in one process) and, in 1-ms blocks, taking 1000 messages a second
+  (deserialise, check, decode: 61-64 us per ms in one process; the executor's turns on top).
 
-Changed for this document: the first acquisition runs in the receiver's worker thread while the node keeps taking
-blocks (held, bounded by acquisition_hold_s, answered 10 receiver calls per callback after the search: the same
-arrays as the synchronous path, tested); the tracking kernel is loaded at start-up; this probe waits for the node's
-final report correctly (the level of a DiagnosticStatus is bytes in rclpy: each run used to wait out its 120-s
-bound, which made a full run take half an hour), and its queue of arrays holds 20 s.
+Changed for this document: the replay of the hold no longer starves the input (above); the arrays are published
+serialised; the table gives the node's hold and take counters. The previous document's changes stand (the first
+acquisition in the worker thread, the tracking kernel loaded at start-up, the final report recognised).
 """
 
 

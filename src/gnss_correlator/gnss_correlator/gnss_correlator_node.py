@@ -28,8 +28,22 @@ gathered ones (a gap, a format change, a stamp-gate restart) first has them proc
 First acquisition: it runs in the receiver's worker thread (:mod:`gnss_correlator.receiver`), so the callback
 returns and the input keeps being taken; the receiver holds the blocks meanwhile (up to ``acquisition_hold_s`` of
 stream; ``blocks_held_for_acquisition``) and, when the worker triggers a guard condition, answers them all, the same
-intervals as a search in the callback would have given, ``REPLAY_BLOCKS_PER_CALLBACK`` receiver calls per callback.
-The end-of-stream report waits for it.
+intervals as a search in the callback would have given, ``REPLAY_BLOCKS_PER_CALLBACK`` held blocks per callback.
+Input first: each such callback takes every block waiting in the subscription before it replays
+(``blocks_taken_before_replay``; they join the hold), and blocks handed in meanwhile are held, not replayed (the
+receiver's ``replay_per_block`` 0). A single-threaded executor takes one message per subscription per turn, so a
+replay of 100 ms of stream per turn used to take one 1-ms block per turn: the input queue (1000 messages, 1 s of
+1-ms blocks) filled and the middleware dropped blocks. The backlog is now held in the node, bounded by
+``acquisition_hold_s`` (at the bound each block handed in replays two held ones: ``core.hold_bound_replays``, the
+input then waits in the subscription's queue, and what it loses is counted as input lost). The end-of-stream
+report waits for the replay.
+
+Taking the input: after each block the executor hands over, the node takes the blocks already waiting in the
+subscription (up to ``DRAIN_BLOCKS``; ``blocks_taken_in_a_row``) instead of one per executor turn: a node behind
+its input (1000 blocks a second) then spends its time on them rather than on rclpy's wait-set turns.
+
+Output: each CorrelatorArray is published serialised, written from the interval's arrays
+(:mod:`gnss_correlator.correlator_cdr`, the bytes of :func:`correlator_array`), not built field by field.
 
 Diagnostics (every ``diagnostics_period_s`` of accepted stamp time): the counters, the tracked PRNs;
 ERROR after a core error since the last report, WARN when more than ``warn_rejected_fraction`` of the
@@ -51,6 +65,7 @@ from rclpy.serialization import deserialize_message
 
 from gnss_correlator import tracking
 from gnss_correlator.acquisition import MIN_SAMPLE_RATE_HZ
+from gnss_correlator.correlator_cdr import CorrelatorArrayWriter
 from gnss_correlator.node_params import CorrelatorNodeParams
 from gnss_correlator.receiver import CorrelatorInterval, IfBlock, Receiver
 from rfi_msgs.msg import Correlator, CorrelatorArray, GnssMeasurement, IfSamples
@@ -83,6 +98,10 @@ BLOCK_REASONS = ('unknown_sample_format', 'bad_bits_per_sample', 'bad_sample_rat
                  'short_block', 'long_block', 'bad_first_sample_index', 'values_exceed_bits', 'blank_block',
                  'rate_below_2mhz', 'band_outside_nyquist', 'stamp_malformed', *STAMP_REASONS)
 """Why a block is rejected (``rejected_<reason>``, module docstring)."""
+
+DRAIN_BLOCKS = 100
+"""Blocks waiting in the subscription taken after each block the executor hands over, at most (module docstring):
+0.1 s of 1-ms blocks, so the timers and the replay still get their turns."""
 
 REPLAY_BLOCKS_PER_CALLBACK = 10
 """Blocks held during a first acquisition answered per callback after it (module docstring): the executor takes
@@ -141,6 +160,16 @@ def correlator_array(interval: CorrelatorInterval, frame_id: str) -> CorrelatorA
     return msg
 
 
+def correlator_array_bytes(interval: CorrelatorInterval, writer: CorrelatorArrayWriter) -> bytes:
+    """:func:`correlator_array` serialised (the bytes rclpy's ``serialize_message`` gives for it), written from the
+    interval's arrays by :class:`gnss_correlator.correlator_cdr.CorrelatorArrayWriter` without building the message
+    objects: what the node publishes."""
+    floats = np.column_stack((interval.integration_time_s, interval.in_phase, interval.quadrature,
+                              interval.cn0_dbhz, interval.predicted_phase_change_rad))
+    return writer.serialize(interval.stamp_ns, GnssMeasurement.GPS, interval.svid, floats,
+                            carrier_lock_codes(interval))
+
+
 class GnssCorrelatorNode(Node):
     """Thin node around the receiver (module docstring)."""
 
@@ -152,7 +181,8 @@ class GnssCorrelatorNode(Node):
         self._search_done = self.create_guard_condition(self._poll_receiver)
         self.receiver = self._new_receiver()
         self.counts: Counter[str] = Counter()
-        for key in ('blocks_received', 'blocks_processed', 'core_errors', 'stamp_restarts', 'arrays_published'):
+        for key in ('blocks_received', 'blocks_processed', 'core_errors', 'stamp_restarts', 'arrays_published',
+                    'blocks_taken_before_replay', 'blocks_taken_in_a_row'):
             self.counts[key] += 0
         for reason in BLOCK_REASONS:
             self.counts[f'rejected_{reason}'] += 0
@@ -163,12 +193,14 @@ class GnssCorrelatorNode(Node):
         self._errors_at_report = 0
         self.health = InputHealth()
         self.publisher = self.create_publisher(CorrelatorArray, OUTPUT_TOPIC, DATA_QOS)
+        self._writer = CorrelatorArrayWriter(self.params.frame_id)
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         # raw: bytes that rclpy cannot deserialise are then received and counted (rejected_malformed_message); a
         # typed subscription would lose them unseen
         self.subscription = subscribe_input(self, IfSamples, IF_TOPIC, self.on_raw_block, self.health, raw=True,
                                             warning_throttle_s=self.params.warning_throttle_s)
         self.stale_watch = StaleInputWatch(self, self.health, self.params.input_timeout_s, self._publish_stale)
+        self._draining = False  # in a take_pending of the subscription (on_raw_block, _poll_receiver)
         self._pending: list[IfBlock] = []  # accepted blocks gathered for the receiver (module docstring)
         self._blocks_in_search = 0  # blocks handed to the receiver while its first acquisition runs (it holds them)
         self._pending_samples = 0
@@ -181,6 +213,17 @@ class GnssCorrelatorNode(Node):
         self.get_logger().warning(f'IF block rejected: {reason}', throttle_duration_sec=self.params.warning_throttle_s)
 
     def on_raw_block(self, raw: bytes | IfSamples) -> None:
+        """A block from the executor: handled (:meth:`_take_block`), then up to ``DRAIN_BLOCKS`` more that wait in
+        the subscription (``blocks_taken_in_a_row``, module docstring)."""
+        self._take_block(raw)
+        if not self._draining:
+            self._draining = True
+            try:
+                self.counts['blocks_taken_in_a_row'] += self.subscription.take_pending(limit=DRAIN_BLOCKS)
+            finally:
+                self._draining = False
+
+    def _take_block(self, raw: bytes | IfSamples) -> None:
         """A serialised block: deserialised by rclpy and handed to :meth:`on_block`, or counted as received and
         ``rejected_malformed_message`` (a message object, as an in-process hand-over may give, goes straight on)."""
         if isinstance(raw, IfSamples):
@@ -235,7 +278,9 @@ class GnssCorrelatorNode(Node):
             self.diag_pub.publish(self.diagnostics(stamp_ns))
 
     def _new_receiver(self) -> Receiver:
-        return Receiver(self.params.receiver(), on_search_done=self._search_done.trigger)
+        # the blocks handed in after the first search are held, not replayed: _poll_receiver replays them after
+        # taking the input that waits (module docstring)
+        return Receiver(self.params.receiver(), on_search_done=self._search_done.trigger, replay_per_block=0)
 
     def _flush(self) -> None:
         """Hand the gathered blocks to the receiver as one, publish the completed intervals."""
@@ -257,8 +302,14 @@ class GnssCorrelatorNode(Node):
         self._publish(intervals)
 
     def _poll_receiver(self) -> None:
-        """The receiver's first acquisition ended (its worker triggered the guard condition): the intervals of
-        the blocks it held."""
+        """The receiver's first acquisition ended (its worker triggered the guard condition): first the input
+        waiting in the subscription is taken (held by the receiver), then ``REPLAY_BLOCKS_PER_CALLBACK`` of the
+        blocks it holds are answered (module docstring)."""
+        self._draining = True  # each block taken here is held: no drain after each
+        try:
+            self.counts['blocks_taken_before_replay'] += self.subscription.take_pending()
+        finally:
+            self._draining = False
         try:
             intervals = self.receiver.poll(max_blocks=REPLAY_BLOCKS_PER_CALLBACK)
         except Exception as err:  # noqa: BLE001 - a core fault must not end the node (module docstring)
@@ -282,8 +333,11 @@ class GnssCorrelatorNode(Node):
         self.receiver = self._new_receiver()
 
     def _publish(self, intervals: list[CorrelatorInterval]) -> None:
+        """Each interval as one CorrelatorArray, published serialised (:func:`correlator_array_bytes`)."""
+        if self._writer.frame_id != self.params.frame_id:
+            self._writer = CorrelatorArrayWriter(self.params.frame_id)
         for interval in intervals:
-            self.publisher.publish(correlator_array(interval, self.params.frame_id))
+            self.publisher.publish(correlator_array_bytes(interval, self._writer))
             self.counts['arrays_published'] += 1
 
     def _flush_when_idle(self) -> None:

@@ -23,11 +23,14 @@ while the caller goes on handing in blocks: they are checked (format, gap) and h
 ``acquisition_hold_s`` of stream, without being tracked (``blocks_held``); when the search is done, the next
 :meth:`Receiver.process` or :meth:`Receiver.poll` starts its channels on the window's first sample and replays the
 window and the held blocks one by one through the path a synchronous search would have taken (``max_blocks`` per
-poll, two per block handed in meanwhile, so that the caller takes new input between the calls and its outputs do
-not leave in one burst), so the intervals
-are the same, whatever the search's duration (the node polls when the worker says it is done). Should the held
-blocks reach ``acquisition_hold_s``, the caller waits for the search there (``acquisition_waits``); with
-``acquisition_hold_s`` 0 the search runs in the caller's thread (the synchronous path). Held samples are kept in
+poll, ``replay_per_block`` per block handed in meanwhile, so that the caller takes new input between the calls and
+its outputs do not leave in one burst), so the intervals are the same, whatever the search's duration and however
+the replay is sliced (the node polls when the worker says it is done, and hands in new blocks without replaying:
+``replay_per_block`` 0). The hold is bounded: a block handed in while the held blocks reach ``acquisition_hold_s``
+of stream makes the caller wait for the search if it is still running (``acquisition_waits``), or count the bound
+reached after it (``hold_bound_replays``), and replays two held blocks, one more than came in, so the hold never
+grows past the bound by more than a block; with ``acquisition_hold_s`` 0 the search runs in the caller's thread
+(the synchronous path). Held samples are kept in
 single precision when that is exact (2- to 16-bit counts times a power-of-two scale always are).
 :meth:`Receiver.close` stops the worker.
 
@@ -236,15 +239,20 @@ class Receiver:
     """Acquisition, tracking and the 1-ms output grid of one stream (module docstring)."""
 
     def __init__(self, config: ReceiverConfig = ReceiverConfig(),
-                 on_search_done: Callable[[], None] | None = None) -> None:
+                 on_search_done: Callable[[], None] | None = None, replay_per_block: int = 2) -> None:
         """``on_search_done``: called (in the worker thread) when a first acquisition running in the worker
-        ends, so that the caller can :meth:`poll` (the node triggers a guard condition)."""
+        ends, so that the caller can :meth:`poll` (the node triggers a guard condition). ``replay_per_block``:
+        held blocks replayed by each :meth:`process` call once that search is done (>= 0; 0: only :meth:`poll`
+        replays them, and :meth:`process` only when the hold is at its bound), module docstring."""
+        if replay_per_block < 0:
+            raise ValueError(f'replay_per_block must be >= 0, got {replay_per_block}')
         self.config = config
         self.on_search_done = on_search_done
+        self.replay_per_block = replay_per_block
         self.counts: Counter[str] = Counter()
         for key in ('blocks', 'samples', 'restarts_format', 'restarts_gap', 'acquisitions', 'channels_started',
                     'channels_dropped', 'intervals', 'correlators', 'correlators_withheld', 'bit_syncs',
-                    'correlators_20ms', 'blocks_held', 'acquisition_waits'):
+                    'correlators_20ms', 'blocks_held', 'acquisition_waits', 'hold_bound_replays'):
             self.counts[key] += 0
         self._format: tuple[float, float, bool] | None = None
         self.tracker: Tracker | None = None
@@ -340,11 +348,14 @@ class Receiver:
         first.held.append((_compact(x), int(block.first_sample_index), int(block.stamp_ns)))
         first.held_samples += x.size
         self.counts['blocks_held'] += 1
-        if first.future.done():  # the hold shrinks by one block more than came in
+        if first.held_samples >= self.config.acquisition_hold_s * fs:  # the bound: the hold shrinks by one block
+            if first.future.done():                                   # more than came in
+                self.counts['hold_bound_replays'] += 1
+            else:
+                self.counts['acquisition_waits'] += 1
             return self._finish_first_search(2)
-        if first.held_samples >= self.config.acquisition_hold_s * fs:
-            self.counts['acquisition_waits'] += 1
-            return self._finish_first_search()
+        if first.future.done() and self.replay_per_block:
+            return self._finish_first_search(self.replay_per_block)
         return []
 
     def poll(self, wait: bool = False, max_blocks: int | None = None) -> list[CorrelatorInterval]:

@@ -200,3 +200,69 @@ def test_replay_equals_the_core_while_the_first_acquisition_runs_in_the_worker(c
     finally:
         release.set()
         rig.close()
+
+
+def test_after_the_search_the_input_is_taken_before_the_held_blocks_are_answered(capture, monkeypatch):
+    """Once the first search is done, blocks handed in are held, not answered (the receiver's replay_per_block 0),
+    and each replay callback first takes every block waiting in the subscription (blocks_taken_before_replay), then
+    answers REPLAY_BLOCKS_PER_CALLBACK held ones: the replay no longer starves the input (one message taken per
+    executor turn against 100 ms of stream replayed lost 1-ms blocks, docs/gnss_correlator/live_stream.md). The
+    arrays are those of the core with the search in the caller's thread."""
+    n = BLOCK // 2
+    n_blocks = capture.size // 2 // n
+    counts = capture[:2 * n * n_blocks].astype(np.float64)
+    x = counts[0::2] + 1j * counts[1::2]
+    core = Receiver(replace(CorrelatorNodeParams(spectrum_inverted=True).receiver(), acquisition_hold_s=0.0))
+    expected = []
+    for k in range(0, n_blocks, 2):  # the node's batch_ms: 10 ms
+        expected += core.process(IfBlock(T0_NS + round(k * n / FS * NS_PER_S), FS, 0.0, True, k * n,
+                                         x[k * n:(k + 2) * n]))
+    core.close()
+    release = threading.Event()
+    original = receiver_module.acquire
+
+    def held(*args, **kwargs):
+        assert release.wait(timeout=120), 'the test never released the search'
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(receiver_module, 'acquire', held)
+    rig = CorrelatorRig()
+    try:
+        first = 6
+        for k in range(first):
+            rig.send(block(capture, k * n, n=n))
+        release.set()
+        assert rig.cn.receiver._first is not None
+        rig.cn.receiver._first.future.result(timeout=120)  # done; its guard condition not served yet
+        before = rig.cn.receiver.blocks_held
+        for k in range(first, first + 4):  # handed in directly, as the executor would: held, none answered
+            rig.cn.on_raw_block(block(capture, k * n, n=n))
+        assert rig.cn.receiver.blocks_held == before + 2 and rig.cn.counts['arrays_published'] == 0
+        events: list[tuple[str, int]] = []
+        take, poll = rig.cn.subscription.take_pending, rig.cn.receiver.poll
+
+        def spy_take(*args, **kwargs) -> int:
+            taken = take(*args, **kwargs)
+            if 'limit' not in kwargs:  # the replay's take (the one after each block has a limit: DRAIN_BLOCKS)
+                events.append(('take', taken))
+            return taken
+
+        def spy_poll(*args, **kwargs):
+            events.append(('poll', kwargs['max_blocks']))
+            return poll(*args, **kwargs)
+
+        monkeypatch.setattr(rig.cn.subscription, 'take_pending', spy_take)
+        monkeypatch.setattr(rig.cn.receiver, 'poll', spy_poll)
+        for k in range(first + 4, n_blocks):  # the rest published at once, served with the replay
+            rig.pubs['/rfi/if_samples'].publish(block(capture, k * n, n=n))
+        rig.spin_until(lambda: rig.cn.counts['blocks_received'] == n_blocks and not rig.cn.receiver.acquiring
+                       and not rig.cn._pending and rig.outputs_arrived(), 'the blocks held')
+        assert events and all(e == 'take' for e, _ in events[0::2]) and all(e == 'poll' for e, _ in events[1::2])
+        assert all(v == 10 for e, v in events if e == 'poll')
+        assert rig.cn.counts['blocks_taken_before_replay'] == sum(v for e, v in events if e == 'take')
+        assert rig.cn.counts['blocks_processed'] == n_blocks and rig.cn.counts['core_errors'] == 0
+        got = rig.out['/gnss/correlators']
+        assert len(expected) >= 95 and got == [correlator_array(iv, 'gnss_receiver') for iv in expected]
+    finally:
+        release.set()
+        rig.close()

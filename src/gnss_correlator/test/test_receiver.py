@@ -225,8 +225,9 @@ def test_first_acquisition_in_the_worker_holds_blocks_and_gives_the_synchronous_
 
 
 def test_a_full_hold_waits_for_the_search_and_a_gap_drops_it(samples, monkeypatch):
-    """Held blocks are bounded: at acquisition_hold_s of stream the caller waits for the search (counted), with
-    the synchronous outputs still; a gap while searching restarts the stream and drops what was held."""
+    """Held blocks are bounded: at acquisition_hold_s of stream the caller waits for the search (counted) and two
+    held blocks are answered (one more than came in, not the whole hold at once), with the synchronous outputs
+    still; a gap while searching restarts the stream and drops what was held."""
     block = 10_000
     _, sync = run(samples[:12 * block], ReceiverConfig(prns=(7, 21), acquisition_ms=4, acquisition_hold_s=0.0),
                   block=block)
@@ -249,8 +250,11 @@ def test_a_full_hold_waits_for_the_search_and_a_gap_drops_it(samples, monkeypatc
             assert rx.acquiring and rx.blocks_held == 7 and out == []
     helper.join(timeout=60)
     search.release.set()
-    assert rx.counts['acquisition_waits'] == 1 and rx.counts['blocks_held'] == 8 and not rx.acquiring
-    assert table(out) == table(sync)
+    # blocks 2-9 held, the bound at block 9: the wait, blocks 2 and 3 answered; blocks 10 and 11 two each
+    assert rx.counts['acquisition_waits'] == 1 and rx.counts['hold_bound_replays'] == 0
+    assert rx.counts['blocks_held'] == 10 and rx.acquiring and rx.blocks_held == 4
+    out += rx.poll(wait=True)
+    assert not rx.acquiring and table(out) == table(sync)
     rx.close()
 
     search.release.clear()
@@ -263,3 +267,40 @@ def test_a_full_hold_waits_for_the_search_and_a_gap_drops_it(samples, monkeypatc
     search.release.set()
     assert rx.poll(wait=True) == []
     rx.close()
+
+
+def test_without_replay_per_block_the_hold_is_answered_by_poll_and_stays_bounded(samples, monkeypatch):
+    """The node's mode (replay_per_block 0): once the search is done, blocks handed in are held, not answered
+    (the caller takes its input first and polls when it has time); at the bound each block handed in answers two
+    held ones (hold_bound_replays), so the hold never exceeds it; poll in slices gives the synchronous outputs."""
+    block = 10_000
+    n_blocks = 40  # 400 ms: past the first C/N0 window, so there are correlators to compare
+    _, sync = run(samples[:n_blocks * block], ReceiverConfig(prns=(7, 21), acquisition_ms=4,
+                                                             acquisition_hold_s=0.0), block=block)
+    search = HeldSearch(monkeypatch)
+    notified = threading.Event()
+    bound = 8  # blocks of 10,000 samples in acquisition_hold_s 0.02 at 4 MS/s
+    rx = Receiver(ReceiverConfig(prns=(7, 21), acquisition_ms=4, acquisition_hold_s=0.02),
+                  on_search_done=notified.set, replay_per_block=0)
+    out: list[CorrelatorInterval] = []
+    held = []
+    for k in range(n_blocks):
+        i = k * block
+        out += rx.process(IfBlock(T0_NS + round(i / FS * 1e9), FS, 0.0, True, i, samples[i:i + block]))
+        held.append(rx.blocks_held)
+        if k == 1:  # the window is full: the search runs; let it end at once
+            search.release.set()
+            assert notified.wait(timeout=60)
+    # done from block 2 on, yet nothing answered until the bound (block 9); then 8 -> 6, 7, 8 -> 6, ...
+    assert held == ([0, 0, 1, 2, 3, 4, 5, 6, 7] + [6, 7] * n_blocks)[:n_blocks] and max(held) < bound
+    assert rx.counts['acquisition_waits'] == 0 and rx.counts['hold_bound_replays'] == held[9:].count(6)
+    assert rx.counts['blocks_held'] == n_blocks - 2
+    assert set(rx.tracked_prns) == {7, 21} and rx.acquiring and rx.poll_ready  # started at the bound
+    out += rx.poll(max_blocks=4)
+    assert rx.blocks_held == held[-1] - 4
+    out += rx.poll(max_blocks=4)
+    assert not rx.acquiring and not rx.poll_ready and rx.poll() == []
+    assert len(sync) > 20 and table(out) == table(sync)
+    rx.close()
+    with pytest.raises(ValueError, match='replay_per_block'):
+        Receiver(ReceiverConfig(), replay_per_block=-1)
