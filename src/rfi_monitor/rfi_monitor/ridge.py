@@ -65,7 +65,7 @@ from rfi_monitor.frame_length import MIN_SELECT_EXCESS, SELECT_Z, choose_frame_l
 from rfi_monitor.ridge_extraction import FrameRidges, frame_ridges, joined_span
 from rfi_monitor.ridge_periodicity import _periodicity
 from rfi_monitor.stft import _noise_power, estimator_gain, noise_levels, stft_power
-from rfi_monitor.sweep_law import _sawtooth_law, bin_mean_phase, phase_drift, profile_abscissa_bias, read_law
+from rfi_monitor.sweep_law import bin_mean_phase, law_at_block_end, profile_abscissa_bias
 from rfi_monitor.sweep_shape import (
     HOOKED_SAWTOOTH,
     MIN_RETURN_BINS,
@@ -447,17 +447,12 @@ def _block_end_frequency(n: int, sw: _Sweep, rd: FrameRidges, periodic: bool, pe
     prof_k, inband_k = sw.prof, sw.inband
     if periodic and prof_k is not None and inband_k is not None and sw.shape in (SAWTOOTH_UP, SAWTOOTH_DOWN,
                                                                                  HOOKED_SAWTOOTH):
-        law = _sawtooth_law(prof_k, inband_k, per_fr * hop, L, sw.high - sw.low, sw.phase_mean)
-    if law is not None and inband_k is not None:
-        # saw-tooth: the sweep law fitted away from the flyback (where frames straddle it) gives the
-        # swept band's ends, the mean rate and the frequency at the block end
-        sw.low, sw.high, sw.start, sw.rate, freq, fstd = read_law(law, inband_k, per_fr, L, t_end, cplx)
-        if math.isfinite(freq) and sw.used is not None and prof_k is not None:
-            # the period's own error moves the block end's phase (sweep_law.phase_drift): corrected, and its standard
-            # error added
-            dfreq, dstd = phase_drift(law, f, sw.used, per_fr, L, prof_k.size, t_end)
-            freq += dfreq
-            fstd = math.hypot(fstd, dstd)
+        # saw-tooth: the sweep law fitted away from the flyback (where frames straddle it) gives the swept band's
+        # ends, the mean rate and the frequency at the block end, corrected for the period's own error (it moves the
+        # block end's phase), with its prediction interval there (sweep_law.law_at_block_end)
+        law = law_at_block_end(prof_k, inband_k, per_fr, L, sw.high - sw.low, sw.phase_mean, f, sw.used, t_end, cplx)
+    if law is not None:
+        sw.low, sw.high, sw.start, sw.rate, freq, fstd = law
     elif periodic and prof_k is not None and inband_k is not None and sw.se is not None:
         # read from one or two profile bins; the 1-sigma stays the frames' scatter around the profile (the sweep at
         # the block end deviates from a bin's median as its frames do; the bins' standard errors alone, tried for

@@ -98,19 +98,6 @@ def _sawtooth_law_kernel(prof: np.ndarray, inband: np.ndarray, period_samples: f
     return True, phi_j, coef, rms, ee[:m].copy()
 
 
-def prediction_std(ee: np.ndarray, deg: int, e: float, rms: float) -> float:
-    """1-sigma of what a least-squares polynomial (degree deg, fitted at abscissae ee with residual RMS rms) predicts
-    at e for a new point: ``rms sqrt(1 + x^T (A^T A)^-1 x)``, A the fit's Vandermonde matrix and x that of e (the
-    residual scatter, which a smooth law does not follow, plus the law's own standard error at e: its leverage)."""
-    A = np.vander(ee, deg + 1)
-    xv = np.vander(np.asarray([e]), deg + 1)[0]
-    try:
-        lev = float(xv @ np.linalg.solve(A.T @ A, xv))
-    except np.linalg.LinAlgError:
-        return math.inf
-    return rms * math.sqrt(1.0 + max(lev, 0.0))
-
-
 INTERP_OFFSETS = 16
 """Sub-bin offsets (uniform over one bin) at which ``interpolation_error_rms`` evaluates the ridge's interpolation."""
 
@@ -211,10 +198,95 @@ def profile_abscissa_bias(prof: np.ndarray, inband: np.ndarray, phase_mean: np.n
     return float(slope * min(max(x - ak, -2.0 / K), 2.0 / K))
 
 
-def phase_drift(law: tuple[float, np.ndarray, float, np.ndarray], f: np.ndarray, used: np.ndarray, period_frames: float,
-                L: int, K: int, t_end: float) -> tuple[float, float]:
-    """The error of the law at the block end that an error in the period makes, and its 1-sigma, cycles/sample: (the
-    correction to add to the law's frequency there, its standard error).
+def law_at_block_end(prof: np.ndarray, inband: np.ndarray, period_frames: float, L: int, span: float,
+                     phase_mean: np.ndarray | None, f: np.ndarray, used: np.ndarray | None, t_end: float,
+                     cplx: bool = True) -> tuple[float, float, float, float, float, float] | None:
+    """A saw-tooth's sweep law (``_sawtooth_law`` of its fine profile prof, whose in-band bins are inband, fitted
+    away from the flyback, where frames straddle it, with each bin at the mean phase of its frames phase_mean) read
+    at the block end, or None when no law fits: (low, high: the swept band; the frequency at the sweep start; the
+    mean rate, cycles/sample^2; the frequency at the block's last sample, NaN when the jammer is out of band there;
+    its 1-sigma), cycles/sample. period_frames: the period in frames of L samples at hop L / 2; span: the swept
+    band's width; f: the frames' ridge, cycles/sample; used: the frames whose ridge entered the profile (None: no
+    period-drift correction); t_end: the block's last sample in frame units; cplx: complex samples.
+
+    The 1-sigma is the law's prediction interval at the block end's phase: ``scatter sqrt(1 + x^T (A^T A)^-1 x)``,
+    A the fit's Vandermonde matrix and x that of the block end's elapsed fraction (the residual scatter, which a
+    smooth law does not follow, plus the law's own standard error there: its leverage); the scatter is the residual
+    RMS of the profile around the law, which the sweep at that moment may deviate by as any profile bin does, and at
+    least the ridge's interpolation error at the law's rate there (``interpolation_error_rms``): a profile whose bins
+    carry that error coherently (smooth along the sweep) fits the law with a residual that does not show it, and the
+    law carries it to the block end (issue 26 item 3: the 8 MHz / 20 us rows at 10 MS/s complex, 0-7 % within 2
+    sigma before); at least 1e-4 / L. The period's own error moves the block end's phase (``_phase_drift``): the
+    frequency is corrected and the correction's standard error added in quadrature. No abscissa bias is added: the
+    law is fitted where the frames are (module docstring). Issue 26 item 3: twice the RMS, before, covered 89 % of
+    the errors over the rows of docs/rfi_monitor/real_jammers.md (median |error| / std 0.14 on the simulated ones);
+    the law's standard error alone covered 52 % (0-17 % on the 2-bit real captures); docs/rfi_monitor/
+    frequency_std.md gives the coverage now.
+
+    Compiled in one pass (``_law_at_block_end_kernel``: the fit, its read at the block end, the leverage with
+    numba's np.linalg.solve, the LAPACK call numpy makes, and the period drift); the same floating-point operations
+    as the numpy expressions it replaced."""
+    K = prof.size
+    pm = (np.arange(K) + 0.5) / K if phase_mean is None else np.ascontiguousarray(phase_mean, dtype=np.float64)
+    args = (np.ascontiguousarray(prof, dtype=np.float64), np.ascontiguousarray(inband, dtype=np.bool_),
+            float(period_frames), int(L), float(span), pm, np.ascontiguousarray(f, dtype=np.float64),
+            np.zeros(0, dtype=np.bool_) if used is None else np.ascontiguousarray(used, dtype=np.bool_),
+            float(t_end), used is not None)
+    try:
+        ok, f0, f1, rate, freq, slope_rate, rms, lev, dfreq, dstd = _law_at_block_end_kernel(*args, True)
+    except np.linalg.LinAlgError:        # A^T A singular: no leverage, an infinite 1-sigma
+        ok, f0, f1, rate, freq, slope_rate, rms, lev, dfreq, dstd = _law_at_block_end_kernel(*args, False)
+    if not ok:
+        return None
+    scatter = max(rms, interpolation_error_rms(L, slope_rate, cplx))
+    fstd = max(scatter * math.sqrt(1.0 + max(lev, 0.0)), 1e-4 / L)
+    if math.isfinite(freq) and used is not None:
+        freq += dfreq
+        fstd = math.hypot(fstd, dstd)
+    return min(f0, f1), max(f0, f1), f0, rate, freq, fstd
+
+
+@njit(cache=True)
+def _law_at_block_end_kernel(prof: np.ndarray, inband: np.ndarray, period_frames: float, L: int, span: float,
+                             phase_mean: np.ndarray, f: np.ndarray, used: np.ndarray, t_end: float, drift: bool,
+                             solve: bool) -> tuple[bool, float, float, float, float, float, float, float, float,
+                                                   float]:
+    """law_at_block_end, compiled: (a law fitted, f0 = the law at the sweep start, f1 = at its end, the mean rate,
+    the frequency at the block end (NaN out of band), the law's rate there (cycles/sample^2), the fit's residual
+    RMS, the leverage x^T (A^T A)^-1 x (inf when not solve), the period drift's correction and its standard error
+    (0, 0 when not drift or out of band))."""
+    hop = L // 2
+    ok, phi_j, coef, rms, ee = _sawtooth_law_kernel(prof, inband, period_frames * hop, L, span, phase_mean)
+    if not ok:
+        return False, np.nan, np.nan, np.nan, np.nan, np.nan, np.nan, np.nan, 0.0, 0.0
+    f0, f1 = polyval(coef, 0.0), polyval(coef, 1.0)
+    rate = (f1 - f0) / (period_frames * hop)
+    ph_end = (t_end / period_frames) % 1.0
+    e_end = (ph_end - phi_j) % 1.0
+    deg = coef.size - 1
+    slope = 0.0                              # d frequency / d e at the block end
+    for i in range(deg):
+        slope += (deg - i) * coef[i] * e_end ** (deg - i - 1)
+    lev = np.inf
+    if solve:
+        A = np.vander(ee, deg + 1)
+        xv = np.vander(np.array([e_end]), deg + 1)[0]
+        lev = xv @ np.linalg.solve(A.T @ A, xv)
+    freq = np.nan
+    dfreq, dstd = 0.0, 0.0
+    if inband[min(int(ph_end * inband.size), inband.size - 1)]:
+        freq = polyval(coef, e_end)
+        if drift:
+            dfreq, dstd = _phase_drift(phi_j, coef, f, used, period_frames, L, prof.size, t_end)
+    return True, f0, f1, rate, freq, slope / (period_frames * hop), rms, lev, dfreq, dstd
+
+
+@njit(cache=True)
+def _phase_drift(phi_j: float, coef: np.ndarray, f: np.ndarray, used: np.ndarray, period_frames: float, L: int,
+                 K: int, t_end: float) -> tuple[float, float]:
+    """The error of the law (flyback phase phi_j, polynomial coef in the elapsed sweep fraction) at the block end
+    that an error in the period makes, and its 1-sigma, cycles/sample: (the correction to add to the law's frequency
+    there, its standard error).
 
     The frames are folded at t / period_frames; a period off by a small relative error eps puts frame t at a phase off
     by eps t / period_frames. The law, fitted to frames spread over the block, absorbs the mean of that shift, so at a
@@ -225,64 +297,92 @@ def phase_drift(law: tuple[float, np.ndarray, float, np.ndarray], f: np.ndarray,
     slope(e_t) (t - t_mean) / period_frames over the frames the law was fitted on (their elapsed fraction outside the
     flyback guard; residuals beyond 5 scaled MADs left out); its standard error from their scatter. f: the frames'
     ridge, cycles/sample; used: the frames whose ridge entered the profile; K: the profile's bins; t_end: the block's
-    last sample in frame units. (0, 0) when fewer than 8 frames remain."""
-    phi_j, coef, _, _ = law
+    last sample in frame units. (0, 0) when fewer than 8 frames remain. Compiled: the numpy expressions it replaced
+    (np.mod, np.polyval, np.polyder, the mean in numpy's pairwise order, np.median as ``_median``, np.dot),
+    operation for operation."""
     deg = coef.size - 1
-    t = np.flatnonzero(used).astype(np.float64)
-    e = np.mod(t / period_frames - phi_j, 1.0)
+    dcoef = np.zeros(max(deg, 1))            # np.polyder(coef)
+    for i in range(deg):
+        dcoef[i] = coef[i] * (deg - i)
     guard = 0.5 * L / (period_frames * (L // 2)) + 1.0 / K
-    keep = (e > guard) & (e < 1.0 - guard)
-    t, e = t[keep], e[keep]
-    if t.size < 8:
+    n = used.size
+    t = np.empty(n)
+    e = np.empty(n)
+    m = 0
+    for i in range(n):
+        if used[i]:
+            ei = (i / period_frames - phi_j) % 1.0
+            if ei > guard and ei < 1.0 - guard:
+                t[m] = i
+                e[m] = ei
+                m += 1
+    if m < 8:
         return 0.0, 0.0
-    r = f[t.astype(np.int64)] - np.polyval(coef, e)
-    dcoef = np.polyder(coef) if deg > 0 else np.zeros(1)
-    tm = float(t.mean())
-    x = np.polyval(dcoef, e) * (t - tm) / period_frames
-    med = float(np.median(r))
-    mad = 1.4826 * float(np.median(np.abs(r - med)))
-    ok = np.abs(r - med) <= 5.0 * mad if mad > 0 else np.ones(r.size, dtype=bool)
-    x, r = x[ok], r[ok] - med
-    sxx = float(np.dot(x, x))
-    if x.size < 8 or not sxx > 0:
+    tm = pairwise_sum(t[:m], 0.0) / m
+    r = np.empty(m)
+    x = np.empty(m)
+    for i in range(m):
+        r[i] = f[int(t[i])] - polyval(coef, e[i])
+        x[i] = polyval(dcoef, e[i]) * (t[i] - tm) / period_frames
+    med = _median(r)
+    ad = np.abs(r - med)
+    mad = 1.4826 * _median(ad)
+    keep = ad <= 5.0 * mad if mad > 0 else np.ones(m, dtype=np.bool_)
+    xk = x[keep]
+    rk = r[keep] - med
+    sxx = np.dot(xk, xk)
+    if xk.size < 8 or not sxx > 0:
         return 0.0, 0.0
-    eps = float(np.dot(x, r)) / sxx
-    res = r - eps * x
-    se = math.sqrt(float(np.dot(res, res)) / (x.size - 2) / sxx)
-    e_end = (float(np.mod(t_end / period_frames, 1.0)) - phi_j) % 1.0
-    lever = float(np.polyval(dcoef, e_end)) * (t_end - tm) / period_frames
+    eps = np.dot(xk, rk) / sxx
+    res = rk - eps * xk
+    se = math.sqrt(np.dot(res, res) / (xk.size - 2) / sxx)
+    e_end = ((t_end / period_frames) % 1.0 - phi_j) % 1.0
+    lever = polyval(dcoef, e_end) * (t_end - tm) / period_frames
     return eps * lever, abs(se * lever)
 
 
-def read_law(law: tuple[float, np.ndarray, float, np.ndarray], inband: np.ndarray, period_frames: float, L: int,
-             t_end: float, cplx: bool = True) -> tuple[float, float, float, float, float, float]:
-    """What a saw-tooth's law (``_sawtooth_law`` of the fine profile whose in-band bins are inband, fitted away from
-    the flyback, where frames straddle it, with each bin at the mean phase of its frames) gives: (low, high: the swept
-    band; the frequency at the sweep start; the mean rate, cycles/sample^2; the frequency at the block's last sample,
-    NaN when the jammer is out of band there; its 1-sigma), cycles/sample. period_frames: the period in frames of L
-    samples at hop L / 2; t_end: the block's last sample in frame units.
-
-    The 1-sigma is the law's prediction interval at the block end's phase (``prediction_std``: the residual RMS of
-    the profile around the law, which the sweep at that moment may deviate by as any profile bin does, with the law's
-    own standard error there). The scatter of a bin about the law is at least the ridge's interpolation error at the
-    law's rate there (``interpolation_error_rms``; cplx: complex samples): a profile whose bins carry that error
-    coherently (smooth along the sweep) fits the law with a residual that does not show it, and the law carries it to
-    the block end (issue 26 item 3: the 8 MHz / 20 us rows at 10 MS/s complex, 0-7 % within 2 sigma before).
-    No abscissa bias is added: the law is fitted where the frames are (module docstring).
-    Issue 26 item 3: twice the RMS, before, covered 89 % of the errors over the rows of
-    docs/rfi_monitor/real_jammers.md (median |error| / std 0.14 on the simulated ones); the law's standard error alone
-    covered 52 % (0-17 % on the 2-bit real captures); docs/rfi_monitor/frequency_std.md gives the coverage now."""
-    phi_j, coef, rms, ee = law
-    hop = L // 2
-    f0, f1 = polyval(coef, 0.0), polyval(coef, 1.0)
-    rate = (f1 - f0) / (period_frames * hop)
-    ph_end = float(np.mod(t_end / period_frames, 1.0))
-    e_end = (ph_end - phi_j) % 1.0
-    deg = coef.size - 1
-    slope = sum((deg - i) * float(coef[i]) * e_end ** (deg - i - 1) for i in range(deg))   # d frequency / d e
-    scatter = max(rms, interpolation_error_rms(L, slope / (period_frames * hop), cplx))
-    fstd = max(prediction_std(ee, deg, e_end, scatter), 1e-4 / L)
-    freq = math.nan
-    if inband[min(int(ph_end * inband.size), inband.size - 1)]:
-        freq = polyval(coef, e_end)
-    return min(f0, f1), max(f0, f1), f0, rate, freq, fstd
+@njit(cache=True)
+def _median(a: np.ndarray) -> float:
+    """np.median of a 1-D float64 array (NaN when one is NaN; the mean of the two middle values when the size is even,
+    as numpy's (a + b) / 2), by selection on a copy: Hoare's FIND with a pseudo-random pivot (a deterministic LCG),
+    the rest sorted after 64 rounds. numba's own np.median (median-of-three quickselect) took 8 ms instead of
+    microseconds on the residuals of a saw-tooth's 1249 frames (a pattern that defeats its pivot)."""
+    n = a.size
+    if n == 0:
+        return np.nan
+    w = a.copy()
+    for i in range(n):
+        if np.isnan(w[i]):
+            return np.nan
+    h = n // 2
+    lo, hi, state, rounds = 0, n - 1, 12345 + n, 0
+    while hi > lo:
+        rounds += 1
+        if rounds > 64:
+            w[lo:hi + 1] = np.sort(w[lo:hi + 1])
+            break
+        state = (state * 1103515245 + 12345) % 2147483648
+        pivot = w[lo + state % (hi - lo + 1)]
+        i, j = lo, hi
+        while i <= j:
+            while w[i] < pivot:
+                i += 1
+            while w[j] > pivot:
+                j -= 1
+            if i <= j:
+                w[i], w[j] = w[j], w[i]
+                i += 1
+                j -= 1
+        if h <= j:
+            hi = j
+        elif h >= i:
+            lo = i
+        else:
+            break
+    if n % 2:
+        return w[h]
+    below = w[0]                             # the largest of the h smallest: all of w[:h] are <= w[h]
+    for i in range(1, h):
+        if w[i] > below:
+            below = w[i]
+    return (below + w[h]) / 2
