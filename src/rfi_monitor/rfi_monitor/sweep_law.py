@@ -313,8 +313,8 @@ def _phase_drift(phi_j: float, coef: np.ndarray, f: np.ndarray, used: np.ndarray
     flyback guard; residuals beyond 5 scaled MADs left out); its standard error from their scatter. f: the frames'
     ridge, cycles/sample; used: the frames whose ridge entered the profile; K: the profile's bins; t_end: the block's
     last sample in frame units. (0, 0) when fewer than 8 frames remain. Compiled: the numpy expressions it replaced
-    (np.mod, np.polyval, np.polyder, the mean in numpy's pairwise order, np.median as ``_median``, np.dot),
-    operation for operation."""
+    (np.mod, np.polyval, np.polyder, the mean in numpy's pairwise order, np.median, np.dot), operation for
+    operation (numba's np.median selects the same element(s); its np.dot calls the same BLAS ddot)."""
     deg = coef.size - 1
     dcoef = np.zeros(max(deg, 1))            # np.polyder(coef)
     for i in range(deg):
@@ -339,9 +339,9 @@ def _phase_drift(phi_j: float, coef: np.ndarray, f: np.ndarray, used: np.ndarray
     for i in range(m):
         r[i] = f[int(t[i])] - polyval(coef, e[i])
         x[i] = polyval(dcoef, e[i]) * (t[i] - tm) / period_frames
-    med = _median(r)
+    med = np.median(r)
     ad = np.abs(r - med)
-    mad = 1.4826 * _median(ad)
+    mad = 1.4826 * np.median(ad)
     keep = ad <= 5.0 * mad if mad > 0 else np.ones(m, dtype=np.bool_)
     xk = x[keep]
     rk = r[keep] - med
@@ -354,51 +354,4 @@ def _phase_drift(phi_j: float, coef: np.ndarray, f: np.ndarray, used: np.ndarray
     e_end = ((t_end / period_frames) % 1.0 - phi_j) % 1.0
     lever = polyval(dcoef, e_end) * (t_end - tm) / period_frames
     return eps * lever, abs(se * lever)
-
-
-@njit(cache=True)
-def _median(a: np.ndarray) -> float:
-    """np.median of a 1-D float64 array (NaN when one is NaN; the mean of the two middle values when the size is even,
-    as numpy's (a + b) / 2), by selection on a copy: Hoare's FIND with a pseudo-random pivot (a deterministic LCG),
-    the rest sorted after 64 rounds. numba's own np.median (median-of-three quickselect) took 8 ms instead of
-    microseconds on the residuals of a saw-tooth's 1249 frames (a pattern that defeats its pivot)."""
-    n = a.size
-    if n == 0:
-        return np.nan
-    w = a.copy()
-    for i in range(n):
-        if np.isnan(w[i]):
-            return np.nan
-    h = n // 2
-    lo, hi, state, rounds = 0, n - 1, 12345 + n, 0
-    while hi > lo:
-        rounds += 1
-        if rounds > 64:
-            w[lo:hi + 1] = np.sort(w[lo:hi + 1])
-            break
-        state = (state * 1103515245 + 12345) % 2147483648
-        pivot = w[lo + state % (hi - lo + 1)]
-        i, j = lo, hi
-        while i <= j:
-            while w[i] < pivot:
-                i += 1
-            while w[j] > pivot:
-                j -= 1
-            if i <= j:
-                w[i], w[j] = w[j], w[i]
-                i += 1
-                j -= 1
-        if h <= j:
-            hi = j
-        elif h >= i:
-            lo = i
-        else:
-            break
-    if n % 2:
-        return w[h]
-    below = w[0]                             # the largest of the h smallest: all of w[:h] are <= w[h]
-    for i in range(1, h):
-        if w[i] > below:
-            below = w[i]
-    return (below + w[h]) / 2
 
