@@ -24,11 +24,12 @@ Stages (``analyse``), each described in its module's docstring:
    from the spectrum folded on the period (``rfi_monitor.folded_spectrum``).
 6. Current frequency: at the block's last sample, from a saw-tooth's sweep law (``rfi_monitor.sweep_law``), else
    from the folded profile at the last sample's phase, else the ridge of the last frame moved on by the rate; NaN
-   when the jammer is out of the band at the block end. Its 1-sigma: the law's prediction interval, else the RMS
-   deviation of the present frames' ridge from the profile (periodic), else from the local straight line through
-   three consecutive frames, but at least one bin / sqrt(12). The law is fitted, and the profile read, with each
-   profile bin at the mean phase of its frames, not at its centre (``rfi_monitor.sweep_law``'s module docstring: a
-   period of a whole number of frames puts every frame of a bin at its start).
+   when the jammer is out of the band at the block end. Its 1-sigma: the law's error at the block end (its lack of
+   fit and its standard error there), else the RMS deviation of the present frames' ridge from the profile
+   (periodic) or from the local straight line through three consecutive frames, at least one bin / sqrt(12). The
+   law is fitted, and the profile read, with each profile bin at the mean phase of its frames, not at its centre
+   (``rfi_monitor.sweep_law``'s module docstring: a period of a whole number of frames puts every frame of a bin
+   at its start).
 
 A frequency track that is coherent but not periodic inside the block (a single slow sweep, a period
 longer than ``max_period_s``) is reported as ``sweeping`` without a period: present in at least
@@ -65,7 +66,7 @@ from rfi_monitor.frame_length import MIN_SELECT_EXCESS, SELECT_Z, choose_frame_l
 from rfi_monitor.ridge_extraction import FrameRidges, frame_ridges, joined_span
 from rfi_monitor.ridge_periodicity import _periodicity
 from rfi_monitor.stft import _noise_power, estimator_gain, noise_levels, stft_power
-from rfi_monitor.sweep_law import _sawtooth_law, bin_mean_phase, phase_drift, profile_abscissa_bias, read_law
+from rfi_monitor.sweep_law import bin_mean_phase, law_at_block_end, profile_abscissa_bias
 from rfi_monitor.sweep_shape import (
     HOOKED_SAWTOOTH,
     MIN_RETURN_BINS,
@@ -447,22 +448,21 @@ def _block_end_frequency(n: int, sw: _Sweep, rd: FrameRidges, periodic: bool, pe
     prof_k, inband_k = sw.prof, sw.inband
     if periodic and prof_k is not None and inband_k is not None and sw.shape in (SAWTOOTH_UP, SAWTOOTH_DOWN,
                                                                                  HOOKED_SAWTOOTH):
-        law = _sawtooth_law(prof_k, inband_k, per_fr * hop, L, sw.high - sw.low, sw.phase_mean)
-    if law is not None and inband_k is not None:
-        # saw-tooth: the sweep law fitted away from the flyback (where frames straddle it) gives the
-        # swept band's ends, the mean rate and the frequency at the block end
-        sw.low, sw.high, sw.start, sw.rate, freq, fstd = read_law(law, inband_k, per_fr, L, t_end, cplx)
-        if math.isfinite(freq) and sw.used is not None and prof_k is not None:
-            # the period's own error moves the block end's phase (sweep_law.phase_drift): corrected, and its standard
-            # error added
-            dfreq, dstd = phase_drift(law, f, sw.used, per_fr, L, prof_k.size, t_end)
-            freq += dfreq
-            fstd = math.hypot(fstd, dstd)
+        # saw-tooth: the sweep law fitted away from the flyback (where frames straddle it) gives the swept band's
+        # ends, the mean rate and the frequency at the block end, corrected for the period's own error (it moves the
+        # block end's phase), with its error there (sweep_law.law_at_block_end)
+        law = law_at_block_end(prof_k, inband_k, per_fr, L, sw.high - sw.low, sw.phase_mean, f, sw.used, t_end, cplx,
+                               sw.se)
+    if law is not None:
+        sw.low, sw.high, sw.start, sw.rate, freq, fstd = law
     elif periodic and prof_k is not None and inband_k is not None and sw.se is not None:
         # read from one or two profile bins; the 1-sigma stays the frames' scatter around the profile (the sweep at
         # the block end deviates from a bin's median as its frames do; the bins' standard errors alone, tried for
-        # issue 26 item 3, covered 0-65 % of the errors where the sweep is not smooth); read with the bins at their
-        # frames' mean phases (sweep_law.profile_abscissa_bias: the correction to the read at the bins' centres)
+        # issue 26 item 3, covered 0-65 % of the errors where the sweep is not smooth, and with the ridge's
+        # interpolation error added, in its second round, 71 % / 84 % within 1 / 2 sigma, 9-36 % within 1 sigma on
+        # the hooked saw-tooth, the 4 MS/s 12 us capture row and the real triangle: docs/rfi_monitor/
+        # frequency_std.md); read with the bins at their frames' mean phases (sweep_law.profile_abscissa_bias: the
+        # correction to the read at the bins' centres)
         freq = _profile_frequency(prof_k, inband_k, sw.se, t_end / per_fr, sw.high - sw.low)[0]
         if math.isfinite(freq) and sw.phase_mean is not None:
             freq += profile_abscissa_bias(prof_k, inband_k, sw.phase_mean, t_end / per_fr, sw.high - sw.low)

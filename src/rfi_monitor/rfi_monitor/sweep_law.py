@@ -47,7 +47,7 @@ def _sawtooth_law(prof: np.ndarray, inband: np.ndarray, period_samples: float, L
     pm = (np.arange(K) + 0.5) / K if phase_mean is None else np.ascontiguousarray(phase_mean, dtype=np.float64)
     if pm.shape != (K,):
         raise ValueError("phase_mean must have one phase per profile bin")
-    ok, phi_j, coef, rms, ee = _sawtooth_law_kernel(np.ascontiguousarray(prof, dtype=np.float64),
+    ok, phi_j, coef, rms, ee, _ = _sawtooth_law_kernel(np.ascontiguousarray(prof, dtype=np.float64),
                                                     np.ascontiguousarray(inband, dtype=np.bool_),
                                                     float(period_samples), int(L), float(span), pm)
     return (phi_j, coef, rms, ee) if ok else None
@@ -55,10 +55,10 @@ def _sawtooth_law(prof: np.ndarray, inband: np.ndarray, period_samples: float, L
 
 @njit(cache=True)
 def _sawtooth_law_kernel(prof: np.ndarray, inband: np.ndarray, period_samples: float, L: int, span: float,
-                         phase_mean: np.ndarray) -> tuple[bool, float, np.ndarray, float, np.ndarray]:
-    """_sawtooth_law, compiled: (found, flyback phase, coefficients, RMS, elapsed fractions fitted)."""
+                         phase_mean: np.ndarray) -> tuple[bool, float, np.ndarray, float, np.ndarray, np.ndarray]:
+    """_sawtooth_law, compiled: (found, flyback phase, coefficients, RMS, elapsed fractions fitted, the bins fitted)."""
     K = prof.size
-    none = (False, np.nan, np.zeros(3), np.nan, np.zeros(0))
+    none = (False, np.nan, np.zeros(3), np.nan, np.zeros(0), np.zeros(0, dtype=np.int64))
     j, best, any_both = 0, -np.inf, False
     for k in range(K):
         nx = (k + 1) % K
@@ -76,6 +76,7 @@ def _sawtooth_law_kernel(prof: np.ndarray, inband: np.ndarray, period_samples: f
     guard = 0.5 * L / period_samples + 1.0 / K
     ee = np.empty(K)
     pp = np.empty(K)
+    kk = np.empty(K, dtype=np.int64)
     m = 0
     for k in range(K):
         c = (k + 0.5) / K
@@ -83,6 +84,7 @@ def _sawtooth_law_kernel(prof: np.ndarray, inband: np.ndarray, period_samples: f
         if inband[k] and np.isfinite(prof[k]) and e > guard and e < 1.0 - guard:
             ee[m] = (phase_mean[k] - phi_j) % 1.0    # the bin at its frames' mean phase, in the same bin as c
             pp[m] = prof[k]
+            kk[m] = k
             m += 1
     if m < 4:
         return none
@@ -95,20 +97,7 @@ def _sawtooth_law_kernel(prof: np.ndarray, inband: np.ndarray, period_samples: f
     rms = math.sqrt(pairwise_sum(r2, 0.0) / m * m / max(m - deg - 1, 1))
     if rms > 0.1 * span:
         return none
-    return True, phi_j, coef, rms, ee[:m].copy()
-
-
-def prediction_std(ee: np.ndarray, deg: int, e: float, rms: float) -> float:
-    """1-sigma of what a least-squares polynomial (degree deg, fitted at abscissae ee with residual RMS rms) predicts
-    at e for a new point: ``rms sqrt(1 + x^T (A^T A)^-1 x)``, A the fit's Vandermonde matrix and x that of e (the
-    residual scatter, which a smooth law does not follow, plus the law's own standard error at e: its leverage)."""
-    A = np.vander(ee, deg + 1)
-    xv = np.vander(np.asarray([e]), deg + 1)[0]
-    try:
-        lev = float(xv @ np.linalg.solve(A.T @ A, xv))
-    except np.linalg.LinAlgError:
-        return math.inf
-    return rms * math.sqrt(1.0 + max(lev, 0.0))
+    return True, phi_j, coef, rms, ee[:m].copy(), kk[:m].copy()
 
 
 INTERP_OFFSETS = 16
@@ -211,10 +200,108 @@ def profile_abscissa_bias(prof: np.ndarray, inband: np.ndarray, phase_mean: np.n
     return float(slope * min(max(x - ak, -2.0 / K), 2.0 / K))
 
 
-def phase_drift(law: tuple[float, np.ndarray, float, np.ndarray], f: np.ndarray, used: np.ndarray, period_frames: float,
-                L: int, K: int, t_end: float) -> tuple[float, float]:
-    """The error of the law at the block end that an error in the period makes, and its 1-sigma, cycles/sample: (the
-    correction to add to the law's frequency there, its standard error).
+def law_at_block_end(prof: np.ndarray, inband: np.ndarray, period_frames: float, L: int, span: float,
+                     phase_mean: np.ndarray | None, f: np.ndarray, used: np.ndarray | None, t_end: float,
+                     cplx: bool = True, se: np.ndarray | None = None
+                     ) -> tuple[float, float, float, float, float, float] | None:
+    """A saw-tooth's sweep law (``_sawtooth_law`` of its fine profile prof, whose in-band bins are inband, fitted
+    away from the flyback, where frames straddle it, with each bin at the mean phase of its frames phase_mean) read
+    at the block end, or None when no law fits: (low, high: the swept band; the frequency at the sweep start; the
+    mean rate, cycles/sample^2; the frequency at the block's last sample, NaN when the jammer is out of band there;
+    its 1-sigma), cycles/sample. period_frames: the period in frames of L samples at hop L / 2; span: the swept
+    band's width; f: the frames' ridge, cycles/sample; used: the frames whose ridge entered the profile (None: no
+    period-drift correction); t_end: the block's last sample in frame units; cplx: complex samples; se: the bins'
+    standard errors (their medians' noise; None: 0).
+
+    The 1-sigma is the error of the law at the block end, ``sqrt(model^2 + rms^2 x^T (A^T A)^-1 x)`` (A the fit's
+    Vandermonde matrix, x that of the block end's elapsed fraction, rms the bins' residual RMS about the law): the
+    law's own standard error there (its leverage), and what the law misses of the sweep (model). A bin's residual
+    about the law is its median's noise (se, from its frames' spread: independent from bin to bin, and averaged
+    out by the law) plus what the law misses; the law at the block end carries only the second, so the model term is
+    the lack of fit, ``sqrt(rms^2 - mean se^2)`` over the bins fitted, and at least the ridge's interpolation error at
+    the law's rate there (``interpolation_error_rms``): a profile whose bins carry that error coherently (smooth along
+    the sweep) fits the law with a residual that does not show it, and the law carries it to the block end (issue 26
+    item 3: the 8 MHz / 20 us rows at 10 MS/s complex, 0-7 % within 2 sigma before); at least 1e-4 / L. Until issue
+    26 item 3's second round the whole residual RMS stood in the model term (``rms sqrt(1 + x^T (A^T A)^-1 x)``, a
+    prediction interval for a new bin, not for the sweep): 85 % of the law's errors within 1 sigma. The period's own
+    error moves the block end's phase (``_phase_drift``): the frequency is corrected and the correction's standard
+    error added in quadrature. No abscissa bias is added: the law is fitted where the frames are (module docstring).
+    docs/rfi_monitor/frequency_std.md gives the coverage.
+
+    Compiled in one pass (``_law_at_block_end_kernel``: the fit, its read at the block end, the leverage with
+    numba's np.linalg.solve, the LAPACK call numpy makes, and the period drift); the same floating-point operations
+    as the numpy expressions it replaced."""
+    K = prof.size
+    pm = (np.arange(K) + 0.5) / K if phase_mean is None else np.ascontiguousarray(phase_mean, dtype=np.float64)
+    se_k = np.zeros(K) if se is None else np.ascontiguousarray(se, dtype=np.float64)
+    if se_k.shape != (K,):
+        raise ValueError("se must have one standard error per profile bin")
+    args = (np.ascontiguousarray(prof, dtype=np.float64), np.ascontiguousarray(inband, dtype=np.bool_),
+            float(period_frames), int(L), float(span), pm, np.ascontiguousarray(f, dtype=np.float64),
+            np.zeros(0, dtype=np.bool_) if used is None else np.ascontiguousarray(used, dtype=np.bool_),
+            float(t_end), used is not None, se_k)
+    try:
+        ok, f0, f1, rate, freq, slope_rate, rms, lev, dfreq, dstd, lof2 = _law_at_block_end_kernel(*args, True)
+    except np.linalg.LinAlgError:        # A^T A singular: no leverage, an infinite 1-sigma
+        ok, f0, f1, rate, freq, slope_rate, rms, lev, dfreq, dstd, lof2 = _law_at_block_end_kernel(*args, False)
+    if not ok:
+        return None
+    lack_of_fit = math.sqrt(lof2)
+    model = max(lack_of_fit, interpolation_error_rms(L, slope_rate, cplx))
+    fstd = max(math.sqrt(model * model + rms * rms * max(lev, 0.0)), 1e-4 / L)
+    if math.isfinite(freq) and used is not None:
+        freq += dfreq
+        fstd = math.hypot(fstd, dstd)
+    return min(f0, f1), max(f0, f1), f0, rate, freq, fstd
+
+
+@njit(cache=True)
+def _law_at_block_end_kernel(prof: np.ndarray, inband: np.ndarray, period_frames: float, L: int, span: float,
+                             phase_mean: np.ndarray, f: np.ndarray, used: np.ndarray, t_end: float, drift: bool,
+                             se: np.ndarray, solve: bool) -> tuple[bool, float, float, float, float, float, float,
+                                                                   float, float, float, float]:
+    """law_at_block_end, compiled: (a law fitted, f0 = the law at the sweep start, f1 = at its end, the mean rate,
+    the frequency at the block end (NaN out of band), the law's rate there (cycles/sample^2), the fit's residual
+    RMS, the leverage x^T (A^T A)^-1 x (inf when not solve), the period drift's correction and its standard error
+    (0, 0 when not drift or out of band), the law's lack of fit squared: rms^2 less the fitted bins' mean
+    squared standard error se, at least 0)."""
+    hop = L // 2
+    ok, phi_j, coef, rms, ee, kk = _sawtooth_law_kernel(prof, inband, period_frames * hop, L, span, phase_mean)
+    if not ok:
+        return False, np.nan, np.nan, np.nan, np.nan, np.nan, np.nan, np.nan, 0.0, 0.0, 0.0
+
+    f0, f1 = polyval(coef, 0.0), polyval(coef, 1.0)
+    rate = (f1 - f0) / (period_frames * hop)
+    ph_end = (t_end / period_frames) % 1.0
+    e_end = (ph_end - phi_j) % 1.0
+    deg = coef.size - 1
+    slope = 0.0                              # d frequency / d e at the block end
+    for i in range(deg):
+        slope += (deg - i) * coef[i] * e_end ** (deg - i - 1)
+    noise2 = 0.0                             # the fitted bins' mean squared standard error
+    for k in kk:
+        noise2 += se[k] * se[k]
+    lof2 = max(rms * rms - noise2 / kk.size, 0.0)
+    lev = np.inf
+    if solve:
+        A = np.vander(ee, deg + 1)
+        xv = np.vander(np.array([e_end]), deg + 1)[0]
+        lev = xv @ np.linalg.solve(A.T @ A, xv)
+    freq = np.nan
+    dfreq, dstd = 0.0, 0.0
+    if inband[min(int(ph_end * inband.size), inband.size - 1)]:
+        freq = polyval(coef, e_end)
+        if drift:
+            dfreq, dstd = _phase_drift(phi_j, coef, f, used, period_frames, L, prof.size, t_end)
+    return True, f0, f1, rate, freq, slope / (period_frames * hop), rms, lev, dfreq, dstd, lof2
+
+
+@njit(cache=True)
+def _phase_drift(phi_j: float, coef: np.ndarray, f: np.ndarray, used: np.ndarray, period_frames: float, L: int,
+                 K: int, t_end: float) -> tuple[float, float]:
+    """The error of the law (flyback phase phi_j, polynomial coef in the elapsed sweep fraction) at the block end
+    that an error in the period makes, and its 1-sigma, cycles/sample: (the correction to add to the law's frequency
+    there, its standard error).
 
     The frames are folded at t / period_frames; a period off by a small relative error eps puts frame t at a phase off
     by eps t / period_frames. The law, fitted to frames spread over the block, absorbs the mean of that shift, so at a
@@ -225,64 +312,46 @@ def phase_drift(law: tuple[float, np.ndarray, float, np.ndarray], f: np.ndarray,
     slope(e_t) (t - t_mean) / period_frames over the frames the law was fitted on (their elapsed fraction outside the
     flyback guard; residuals beyond 5 scaled MADs left out); its standard error from their scatter. f: the frames'
     ridge, cycles/sample; used: the frames whose ridge entered the profile; K: the profile's bins; t_end: the block's
-    last sample in frame units. (0, 0) when fewer than 8 frames remain."""
-    phi_j, coef, _, _ = law
+    last sample in frame units. (0, 0) when fewer than 8 frames remain. Compiled: the numpy expressions it replaced
+    (np.mod, np.polyval, np.polyder, the mean in numpy's pairwise order, np.median, np.dot), operation for
+    operation (numba's np.median selects the same element(s); its np.dot calls the same BLAS ddot)."""
     deg = coef.size - 1
-    t = np.flatnonzero(used).astype(np.float64)
-    e = np.mod(t / period_frames - phi_j, 1.0)
+    dcoef = np.zeros(max(deg, 1))            # np.polyder(coef)
+    for i in range(deg):
+        dcoef[i] = coef[i] * (deg - i)
     guard = 0.5 * L / (period_frames * (L // 2)) + 1.0 / K
-    keep = (e > guard) & (e < 1.0 - guard)
-    t, e = t[keep], e[keep]
-    if t.size < 8:
+    n = used.size
+    t = np.empty(n)
+    e = np.empty(n)
+    m = 0
+    for i in range(n):
+        if used[i]:
+            ei = (i / period_frames - phi_j) % 1.0
+            if ei > guard and ei < 1.0 - guard:
+                t[m] = i
+                e[m] = ei
+                m += 1
+    if m < 8:
         return 0.0, 0.0
-    r = f[t.astype(np.int64)] - np.polyval(coef, e)
-    dcoef = np.polyder(coef) if deg > 0 else np.zeros(1)
-    tm = float(t.mean())
-    x = np.polyval(dcoef, e) * (t - tm) / period_frames
-    med = float(np.median(r))
-    mad = 1.4826 * float(np.median(np.abs(r - med)))
-    ok = np.abs(r - med) <= 5.0 * mad if mad > 0 else np.ones(r.size, dtype=bool)
-    x, r = x[ok], r[ok] - med
-    sxx = float(np.dot(x, x))
-    if x.size < 8 or not sxx > 0:
+    tm = pairwise_sum(t[:m], 0.0) / m
+    r = np.empty(m)
+    x = np.empty(m)
+    for i in range(m):
+        r[i] = f[int(t[i])] - polyval(coef, e[i])
+        x[i] = polyval(dcoef, e[i]) * (t[i] - tm) / period_frames
+    med = np.median(r)
+    ad = np.abs(r - med)
+    mad = 1.4826 * np.median(ad)
+    keep = ad <= 5.0 * mad if mad > 0 else np.ones(m, dtype=np.bool_)
+    xk = x[keep]
+    rk = r[keep] - med
+    sxx = np.dot(xk, xk)
+    if xk.size < 8 or not sxx > 0:
         return 0.0, 0.0
-    eps = float(np.dot(x, r)) / sxx
-    res = r - eps * x
-    se = math.sqrt(float(np.dot(res, res)) / (x.size - 2) / sxx)
-    e_end = (float(np.mod(t_end / period_frames, 1.0)) - phi_j) % 1.0
-    lever = float(np.polyval(dcoef, e_end)) * (t_end - tm) / period_frames
+    eps = np.dot(xk, rk) / sxx
+    res = rk - eps * xk
+    se = math.sqrt(np.dot(res, res) / (xk.size - 2) / sxx)
+    e_end = ((t_end / period_frames) % 1.0 - phi_j) % 1.0
+    lever = polyval(dcoef, e_end) * (t_end - tm) / period_frames
     return eps * lever, abs(se * lever)
 
-
-def read_law(law: tuple[float, np.ndarray, float, np.ndarray], inband: np.ndarray, period_frames: float, L: int,
-             t_end: float, cplx: bool = True) -> tuple[float, float, float, float, float, float]:
-    """What a saw-tooth's law (``_sawtooth_law`` of the fine profile whose in-band bins are inband, fitted away from
-    the flyback, where frames straddle it, with each bin at the mean phase of its frames) gives: (low, high: the swept
-    band; the frequency at the sweep start; the mean rate, cycles/sample^2; the frequency at the block's last sample,
-    NaN when the jammer is out of band there; its 1-sigma), cycles/sample. period_frames: the period in frames of L
-    samples at hop L / 2; t_end: the block's last sample in frame units.
-
-    The 1-sigma is the law's prediction interval at the block end's phase (``prediction_std``: the residual RMS of
-    the profile around the law, which the sweep at that moment may deviate by as any profile bin does, with the law's
-    own standard error there). The scatter of a bin about the law is at least the ridge's interpolation error at the
-    law's rate there (``interpolation_error_rms``; cplx: complex samples): a profile whose bins carry that error
-    coherently (smooth along the sweep) fits the law with a residual that does not show it, and the law carries it to
-    the block end (issue 26 item 3: the 8 MHz / 20 us rows at 10 MS/s complex, 0-7 % within 2 sigma before).
-    No abscissa bias is added: the law is fitted where the frames are (module docstring).
-    Issue 26 item 3: twice the RMS, before, covered 89 % of the errors over the rows of
-    docs/rfi_monitor/real_jammers.md (median |error| / std 0.14 on the simulated ones); the law's standard error alone
-    covered 52 % (0-17 % on the 2-bit real captures); docs/rfi_monitor/frequency_std.md gives the coverage now."""
-    phi_j, coef, rms, ee = law
-    hop = L // 2
-    f0, f1 = polyval(coef, 0.0), polyval(coef, 1.0)
-    rate = (f1 - f0) / (period_frames * hop)
-    ph_end = float(np.mod(t_end / period_frames, 1.0))
-    e_end = (ph_end - phi_j) % 1.0
-    deg = coef.size - 1
-    slope = sum((deg - i) * float(coef[i]) * e_end ** (deg - i - 1) for i in range(deg))   # d frequency / d e
-    scatter = max(rms, interpolation_error_rms(L, slope / (period_frames * hop), cplx))
-    fstd = max(prediction_std(ee, deg, e_end, scatter), 1e-4 / L)
-    freq = math.nan
-    if inband[min(int(ph_end * inband.size), inband.size - 1)]:
-        freq = polyval(coef, e_end)
-    return min(f0, f1), max(f0, f1), f0, rate, freq, fstd

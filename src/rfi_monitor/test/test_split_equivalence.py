@@ -46,6 +46,12 @@ still equal to 6657d8c's then, checked with ``split_reference.py --check`` befor
   ``constant_envelope.ENVELOPE_MAX_SAMPLES_REAL``): ``jammer_to_noise_db`` and ``jammer_to_signal_db`` of the
   38.192 and 24 MS/s chirp streams moved by a median -0.003 / +0.002 dB (at most 0.31 / 0.32 dB); every other field
   bit-identical.
+- issue 26 item 3, second round: a saw-tooth law's 1-sigma is its lack of fit (the bins' residual RMS less their
+  medians' standard errors) with its standard error at the block end, not the whole residual RMS
+  (``sweep_law.law_at_block_end``): ``estimate.frequency_std_hz`` of the chirp streams by a median factor 0.47 /
+  0.94 / 0.52 (0.30-0.98 over all) at 38.192 MS/s real / 10 MS/s complex / 24 MS/s real, of the switch streams'
+  chirp blocks 0.54 / 0.95 / 0.57, ``ridge.frequency_std`` with it. Every other field bit-identical (the law's fit,
+  read and period drift compiled into one kernel before that, bit-identical).
 """
 
 import importlib.util
