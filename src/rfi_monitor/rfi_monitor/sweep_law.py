@@ -247,8 +247,10 @@ def law_at_block_end(prof: np.ndarray, inband: np.ndarray, period_frames: float,
     if not ok:
         return None
     lack_of_fit = math.sqrt(lof2)
-    model = max(lack_of_fit, interpolation_error_rms(L, slope_rate, cplx))
-    fstd = max(math.sqrt(model * model + rms * rms * max(lev, 0.0)), 1e-4 / L)
+    interpolation = interpolation_error_rms(L, slope_rate, cplx)
+    model = max(lack_of_fit, interpolation)
+    scatter = max(rms, interpolation)        # a bin's error is at least the interpolation error its residual hides
+    fstd = max(math.sqrt(model * model + scatter * scatter * max(lev, 0.0)), 1e-4 / L)
     if math.isfinite(freq) and used is not None:
         freq += dfreq
         fstd = math.hypot(fstd, dstd)
