@@ -163,29 +163,30 @@ def main() -> None:
         a, s, f = slow_gain(series["our SPP"], w)
         text.append(f"| {w:g} min | {a:.3f} | {s:.3f} | {f:.3f} | {100.0 * (1.0 - s / a):.1f} % |")
     slow10 = slow_gain(series["our SPP"], 10.0)
-    h = {n: rms(series[n])[0] for n in names}
+    h_rms = {n: rms(series[n])[0] for n in names}
     text += ["", "## Reading", "",
-             "Neither a rise or set of satellites, a data gap, the gate nor the motion model makes the difference:",
-             f"the moving model alone gives {h[names[2]]:.3f} m against the shipped {h[names[1]]:.3f} m (the",
+             "The motion model does not make the difference (nor its stationarity detector):",
+             f"the moving model alone gives {h_rms[names[2]]:.3f} m against the shipped {h_rms[names[1]]:.3f} m (the",
              "detector's static model averages almost nothing here), because the SPP error of this receiver is",
              f"nearly all slow: its part faster than 10 minutes is {slow10[2]:.2f} m RMS of {slow10[0]:.2f} m, so",
              f"even a non-causal 10-minute average could gain only {100.0 * (1.0 - slow10[1] / slow10[0]):.1f} %",
              "(GEONET: 17 %, ARL1: 27 %, docs/uwb_gnss_fusion/fusion_real_gnss.md section 1). The hours the filter",
              "loses are those where its weights and the SPP's disagree: with the SPP's weights the same filter",
-             f"gives {h[names[3]]:.3f} m (SPP {h[names[0]]:.3f} m). The filter weighs each pseudorange by its",
-             "tracking noise from C/N0 alone (Cao et al., eq. 12), which spans a factor of about 5 between 50 and",
+             f"gives {h_rms[names[3]]:.3f} m (SPP {h_rms[names[0]]:.3f} m). The filter weighs each pseudorange by its",
+             "tracking noise from C/N0 alone (Cao et al., eq. 12), which spans a factor of about 4 between 50 and",
              "35 dB-Hz; the errors that dominate a 30 s static station (broadcast orbit and clock, residual",
              "atmosphere) do not follow C/N0. Adding the broadcast error to each variance",
-             f"({BROADCAST_STD_M:g} m, the SPP's) gives {h[names[4]]:.3f} m here, but worsens the multi-GNSS",
+             f"({BROADCAST_STD_M:g} m, the SPP's) gives {h_rms[names[4]]:.3f} m here, but worsens the multi-GNSS",
              "filter (table below) and the simulated receivers' horizontal error, so it stays opt-in",
              "(`pseudorange_broadcast_std_m`, design note in `fusion_param_groups.py`)."]
     label, systems = LADDER[2]
     multi = only(every, systems)
     text += ["", f"## The broadcast error in the weights with more systems ({label})", "",
              "| filter | horiz. RMS m | 3D RMS m |", "|---|---|---|"]
-    for name, params in (("shipped", {}), (f"+ broadcast error {BROADCAST_STD_M:g} m",
-                                           {"pseudorange_broadcast_std_m": BROADCAST_STD_M})):
-        h, d = rms(filter_enu(multi, True, params))
+    multi_configs: tuple[tuple[str, dict[str, object]], ...] = (
+        ("shipped", {}), (f"+ broadcast error {BROADCAST_STD_M:g} m", {"pseudorange_broadcast_std_m": BROADCAST_STD_M}))
+    for name, extra in multi_configs:
+        h, d = rms(filter_enu(multi, True, extra))
         text.append(f"| {name} | {h:.3f} | {d:.3f} |")
         log.done(f"{label}: {name}")
         log.say(text[-1])
