@@ -416,3 +416,22 @@ def test_adding_biased_glonass_never_worsens():
     assert with_glo[0] <= without[0] and with_glo[1] <= without[1]
     before = _pooled_rms((*base, GLONASS), glonass_satellite_bias_std_m=0.0, glonass_pseudorange_error_factor=1.0)
     assert before[1] > without[1] and before[1] > with_glo[1]
+
+
+def test_broadcast_error_is_added_in_quadrature_to_the_tracking_sigma():
+    """Each pseudorange's 1-sigma: the tracking noise from C/N0 (eq. 12) and the broadcast orbit and
+    clock error ``pseudorange_broadcast_std_m``, independent, in quadrature; GLONASS's error factor
+    scales both; a receiver-reported std replaces the model (as in gnss_common.spp)."""
+    ep = _epoch(0)
+    tracking = prepare_epoch(ep, RX, math.nan, _params(pseudorange_broadcast_std_m=0.0), lambda *_: None)
+    both = prepare_epoch(ep, RX, math.nan, _params(pseudorange_broadcast_std_m=0.8), lambda *_: None)
+    assert tracking is not None and both is not None and tracking.system is not None
+    glo = np.where(tracking.system == GLONASS, _params().glonass_pseudorange_error_factor, 1.0)
+    np.testing.assert_allclose(both.sigma_pr, glo * np.hypot(tracking.sigma_pr / glo, 0.8), rtol=1e-12)
+    np.testing.assert_array_equal(both.sigma_rate, tracking.sigma_rate)
+    given = replace(ep, observations=tuple(replace(o, pseudorange_std_m=2.5) for o in ep.observations))
+    told = prepare_epoch(given, RX, math.nan, _params(pseudorange_broadcast_std_m=0.8), lambda *_: None)
+    assert told is not None
+    np.testing.assert_allclose(told.sigma_pr, glo * 2.5, rtol=1e-12)
+    with pytest.raises(ValueError, match="pseudorange_broadcast_std_m"):
+        _params(pseudorange_broadcast_std_m=-0.1)

@@ -28,6 +28,17 @@ class SensorModelParams:
             1.5 is RTKLIB's convention (``EFACT_GLO`` in ``pntpos.c``, ``varerr``; SBAS 3.0, which the
             filter skips), not a value fitted here; the constant part of the GLONASS error is the
             per-satellite bias state's (``glonass_satellite_bias_std_m``).
+        pseudorange_broadcast_std_m: the sigma from C/N0 (Cao et al., eq. 12) is the tracking noise
+            alone; a real pseudorange also carries its satellite's broadcast orbit and clock error
+            (SISRE), independent of C/N0 and elevation, which the project's SPP puts in its weights
+            (``gnss_common.spp.SppParams.sigma_broadcast_m`` = 1 m; Montenbruck et al. 2018 give GPS
+            broadcast SISREs of a few decimetres to 1 m). With 1 m the weights are flatter: on
+            ESBC00DNK's whole day, GPS alone, the filter goes from 1.47 m to 1.37 m horizontal RMS (our
+            SPP 1.44 m), on ARL1 / GEONET 0759 / 3040 from 25 / 15 / 18 % to 21 / 22 / 21 % better than
+            SPP; but ESBC00DNK with GPS + Galileo + BeiDou gets worse (1.045 -> 1.10 m horizontal), and
+            so do the simulated receivers of docs/uwb_gnss_fusion/motion_model.md horizontally (static
+            0.58 -> 0.63 m; 3D 1.07 -> 0.99 m; 30 dB J/S mean 3D 2.18 -> 2.24 m), so it is off (0) by
+            default: docs/uwb_gnss_fusion/fusion_esbc_diagnosis.md.
     """
 
     use_gnss: bool = parameter(
@@ -135,6 +146,12 @@ class StaticModelParams:
         45.0,
         'Jammer-free C/N0 to which eq. 4 applies the received J/S, dB-Hz (typical open sky: 45).',
         minimum=0.0, maximum=70.0, read_only=False, group=USER,
+    )
+    pseudorange_broadcast_std_m: float = parameter(
+        0.0,
+        "1-sigma of each pseudorange's broadcast orbit and clock error (signal-in-space range error), m, added "
+        'in quadrature to the sigma from C/N0 or elevation (not to a receiver-reported std). 0: tracking noise only.',
+        minimum=0.0, maximum=100.0,
     )
     glonass_pseudorange_error_factor: float = parameter(
         1.5,

@@ -126,6 +126,10 @@ class FusionParams(RangeNoiseParams, MirrorAmbiguityParams, CorrelatedErrorParam
             raise ValueError(
                 f"FusionParams.pseudorange_correlated_std_m must be >= 0, got {self.pseudorange_correlated_std_m!r}"
             )
+        if not (math.isfinite(self.pseudorange_broadcast_std_m) and self.pseudorange_broadcast_std_m >= 0.0):
+            raise ValueError(
+                f"FusionParams.pseudorange_broadcast_std_m must be >= 0, got {self.pseudorange_broadcast_std_m!r}"
+            )
         if not (math.isfinite(self.glonass_satellite_bias_std_m) and self.glonass_satellite_bias_std_m >= 0.0):
             raise ValueError(
                 f"FusionParams.glonass_satellite_bias_std_m must be >= 0, got {self.glonass_satellite_bias_std_m!r}"

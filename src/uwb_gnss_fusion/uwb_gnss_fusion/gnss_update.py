@@ -176,6 +176,11 @@ def prepare_epoch(
         s_pr_j, s_rate_j = signal_sigmas(np.full(n, p.nominal_cn0_dbhz), js_db, p, chip, lam)
         s_pr = np.maximum(s_pr, s_pr_j)
         s_rate = np.maximum(s_rate, s_rate_j)
+    if p.pseudorange_broadcast_std_m > 0.0:
+        # The C/N0 (eq. 12) gives the tracking noise only; each satellite's broadcast orbit and clock
+        # error (SISRE) is independent of it and of the elevation: added in quadrature, as the
+        # project's SPP does (gnss_common.spp.code_variance_m2, ``sigma_broadcast_m``).
+        s_pr = np.hypot(s_pr, p.pseudorange_broadcast_std_m)
     given_pr = np.array([r[0].pseudorange_std_m for r in rows])
     given_rate = np.array([r[0].pseudorange_rate_std_mps for r in rows])
     ok_pr = np.isfinite(given_pr) & (given_pr > 0.0)
