@@ -31,8 +31,7 @@ class SensorModelParams:
         pseudorange_broadcast_std_m: the sigma from C/N0 (Cao et al., eq. 12) is the tracking noise
             alone; a real pseudorange also carries its satellite's broadcast orbit and clock error
             (SISRE), independent of C/N0 and elevation, which the project's SPP puts in its weights
-            (``gnss_common.spp.SppParams.sigma_broadcast_m`` = 1 m; Montenbruck et al. 2018 give GPS
-            broadcast SISREs of a few decimetres to 1 m). With 1 m the weights are flatter: on
+            (``gnss_common.spp.SppParams.sigma_broadcast_m`` = 1 m). With 1 m the weights are flatter: on
             ESBC00DNK's whole day, GPS alone, the filter goes from 1.47 m to 1.37 m horizontal RMS (our
             SPP 1.44 m), on ARL1 / GEONET 0759 / 3040 from 25 / 15 / 18 % to 21 / 22 / 21 % better than
             SPP; but ESBC00DNK with GPS + Galileo + BeiDou gets worse (1.045 -> 1.10 m horizontal), and
