@@ -73,19 +73,45 @@ def test_fft_inplace_is_numpys_fft():
 
 
 def test_column_order_statistic_is_numpys_partition():
-    """noise_levels' compiled selection (long columns) gives np.partition's k-th value of each column to the bit: on
-    exponential powers, on values with many ties, with NaN (numpy orders it last), for every kind of k."""
+    """noise_levels' compiled histogram select (long columns) gives np.partition's k-th value of each column of a
+    float32 matrix to the bit: on exponential powers, on values with many ties, with zeros, with negative and infinite
+    values, with NaN (numpy orders it last; a column all NaN), on a constant matrix, for every kind of k."""
     rng = np.random.default_rng(8)
     for n in (1, 2, 9, 64, 255, 768, 1249, 3000):
-        for trial in range(6):
-            S = rng.exponential(size=(n, 5)).astype(np.float32 if trial % 2 else np.float64)
+        for trial in range(8):
+            S = rng.exponential(size=(n, 5)).astype(np.float32)
             if trial in (2, 3):
-                S = np.round(S * 3).astype(S.dtype)                 # ties
+                S = np.round(S * 3).astype(np.float32)              # ties and zeros
             if trial >= 4 and n > 2:
                 S[rng.integers(0, n, size=max(1, n // 3)), rng.integers(0, 5, size=max(1, n // 3))] = np.nan
+            if trial == 5:
+                S[:, 2] = np.nan
+            if trial == 6:
+                S = (S - 1.0) * np.float32(1e3)                    # negative values, a wide range
+                S[rng.integers(0, n, size=max(1, n // 20)), 1] = np.inf
+                S[rng.integers(0, n, size=max(1, n // 20)), 3] = -np.inf
+            if trial == 7:
+                S = np.full((n, 5), 0.25, dtype=np.float32)
+                S[::7, 4] = np.float32(1e-30)                      # two values far apart, one of them 1/7 of a column
             for k in sorted({0, n // 10, n // 2, n - 2, n - 1} - {-1}):
                 got = numpy_kernels.column_order_statistic(S, k)
                 np.testing.assert_array_equal(got, np.partition(np.ascontiguousarray(S.T), k, axis=1)[:, k])
+
+
+def test_noise_levels_quantile_paths_agree():
+    """noise_levels takes its lower quantile by numpy's sort below LONG_COLUMN_FRAMES frames and by the compiled
+    select from there on: on the same matrix both give the same levels to the bit."""
+    rng = np.random.default_rng(9)
+    for nfr, B in ((300, 33), (900, 17), (1249, 16)):
+        S = (rng.exponential(size=(nfr, B)) * np.linspace(1.0, 3.0, B)).astype(np.float32)
+        S[nfr // 3: nfr // 2, B // 2] *= 1e3                      # a jammer in one bin
+        ref = stft.noise_levels(S, 5, False)
+        saved = stft.LONG_COLUMN_FRAMES
+        try:
+            stft.LONG_COLUMN_FRAMES = 1 if nfr < saved else 10 ** 9
+            np.testing.assert_array_equal(stft.noise_levels(S, 5, False), ref)
+        finally:
+            stft.LONG_COLUMN_FRAMES = saved
 
 
 @pytest.mark.parametrize("cplx", [False, True])
