@@ -138,9 +138,10 @@ def _kth_of_few(a: np.ndarray, m: int, r: int) -> Any:
     for i in range(m):
         ai = a[i]
         c = 0
-        for j in range(m):
-            aj = a[j]
-            c += 1 if (aj < ai) or (aj == ai and j < i) else 0
+        for j in range(i):
+            c += a[j] <= ai
+        for j in range(i + 1, m):
+            c += a[j] < ai
         res = ai if c == r else res
     return res
 

@@ -96,6 +96,27 @@ def _phase_bins(nfr: int, period_frames: float, K: int) -> np.ndarray:
 
 
 @njit(cache=True)
+def _sort_run(buf: np.ndarray, s: int, c: int, tmp: np.ndarray) -> None:
+    """Sort buf[s:s + c] (NaN-free) in place. A run of up to 32 values (a phase bin's few frames) by counting each
+    value's rank (ties by place) and placing it there, with no branch that depends on the values: numba's sort,
+    whose branches on the values mispredict, cost 1.6 times as much on the blocks of a stream (34 vs 21 us a
+    profile at 38.192 MS/s tracking) as on one block timed again and again."""
+    if c > 32:
+        buf[s:s + c] = np.sort(buf[s:s + c])
+        return
+    for i in range(c):
+        vi = buf[s + i]
+        r = 0
+        for j in range(i):
+            r += buf[s + j] <= vi
+        for j in range(i + 1, c):
+            r += buf[s + j] < vi
+        tmp[r] = vi
+    for i in range(c):
+        buf[s + i] = tmp[i]
+
+
+@njit(cache=True)
 def _profile_kernel(f: np.ndarray, present: np.ndarray, use: np.ndarray, period_frames: float, K: int,
                     resolution: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """_profile, compiled: phase bins, frame counts and present shares, the used frequencies gathered per bin and
@@ -133,9 +154,9 @@ def _profile_kernel(f: np.ndarray, present: np.ndarray, use: np.ndarray, period_
             b = kb[t]
             buf[pos[b]] = f[t]
             pos[b] += 1
+    tmp = np.empty(m)
     for b in range(K):
-        if cnt[b] > 1:
-            buf[start[b]:start[b] + cnt[b]] = np.sort(buf[start[b]:start[b] + cnt[b]])
+        _sort_run(buf, start[b], cnt[b], tmp)
     prof, se = _bin_stats(buf, cnt, resolution)
     return prof, share, se
 

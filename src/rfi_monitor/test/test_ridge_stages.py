@@ -98,6 +98,21 @@ def test_column_order_statistic_is_numpys_partition():
                 np.testing.assert_array_equal(got, np.partition(np.ascontiguousarray(S.T), k, axis=1)[:, k])
 
 
+def test_sort_run_is_numpys_sort():
+    """The phase profile's run sort (``sweep_shape._sort_run``: ranks counted up to 32 values, numba's sort above)
+    sorts a run of a buffer in place as np.sort does, with ties, and leaves the rest of the buffer alone."""
+    rng = np.random.default_rng(10)
+    for c in (0, 1, 2, 3, 16, 31, 32, 33, 60):
+        for ties in (False, True):
+            buf = rng.standard_normal(c + 10)
+            if ties:
+                buf = np.round(buf * 2) / 2
+            want = buf.copy()
+            want[4:4 + c] = np.sort(want[4:4 + c])
+            sweep_shape._sort_run(buf, 4, c, np.empty(c + 10))
+            np.testing.assert_array_equal(buf, want)
+
+
 def test_noise_levels_quantile_paths_agree():
     """noise_levels takes its lower quantile by numpy's sort below LONG_COLUMN_FRAMES frames and by the compiled
     select from there on: on the same matrix both give the same levels to the bit."""
