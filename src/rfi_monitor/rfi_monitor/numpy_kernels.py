@@ -1,8 +1,8 @@
 """Compiled (numba) versions of the numpy reductions the ridge analysis (``rfi_monitor.ridge``) uses inside its
 compiled stages, in numpy's own arithmetic order, so that a compiled stage gives to the bit what the numpy expression
 it replaced gave (issue 14 item 6, issue 26 item 2): the pairwise sum, the first argmax, the linearly interpolated
-quantile and the median of a sorted vector, np.polyfit and np.polyval, and the k-th smallest value of each column of a
-float32 matrix (np.partition).
+quantile and the median of a sorted vector, a low and a high quantile of an unsorted one, np.polyfit and np.polyval,
+and the k-th smallest value of each column of a float32 matrix (np.partition).
 """
 
 from __future__ import annotations
@@ -78,6 +78,48 @@ def quantile_sorted(v: np.ndarray, q: float) -> float:
         return float(v[n - 1])
     i = int(math.floor(vi))
     return lerp(float(v[i]), float(v[i + 1]), vi - i)
+
+
+@njit(cache=True)
+def _smallest_sorted(v: np.ndarray, n: int, m: int, sign: float) -> np.ndarray:
+    """The m smallest of sign * v[:n] (NaN-free, 1 <= m <= n), in ascending order: a sorted buffer that a value
+    enters only when it is below the buffer's largest (after the first m values, rarely: a well predicted branch)."""
+    buf = np.empty(m)
+    for i in range(m):
+        x = sign * v[i]
+        j = i
+        while j > 0 and buf[j - 1] > x:
+            buf[j] = buf[j - 1]
+            j -= 1
+        buf[j] = x
+    for i in range(m, n):
+        x = sign * v[i]
+        if x < buf[m - 1]:
+            j = m - 1
+            while j > 0 and buf[j - 1] > x:
+                buf[j] = buf[j - 1]
+                j -= 1
+            buf[j] = x
+    return buf
+
+
+@njit(cache=True)
+def quantile_pair(v: np.ndarray, n: int, q_lo: float, q_hi: float) -> tuple[float, float]:
+    """(np.percentile(v[:n], 100 q_lo), np.percentile(v[:n], 100 q_hi)) (method "linear") of a NaN-free vector,
+    n >= 1, q_lo <= 0.5 <= q_hi: ``quantile_sorted`` of the sorted vector, each from the two order statistics it
+    interpolates, found among the few smallest (largest) values (``_smallest_sorted``) instead of by a sort of all
+    n (whose branches on the values mispredict). The same values, so the same result to the bit."""
+    lo_i = min(int(math.floor((n - 1) * q_lo)), n - 1)
+    lo_m = min(lo_i + 2, n)
+    s = _smallest_sorted(v, n, lo_m, 1.0)
+    vi = (n - 1) * q_lo
+    lo = float(s[n - 1]) if vi >= n - 1 else lerp(float(s[lo_i]), float(s[lo_i + 1]), vi - lo_i)
+    vi = (n - 1) * q_hi
+    hi_i = min(int(math.floor(vi)), n - 1)
+    # ascending place p is the (n - 1 - p)-th largest: the largest values, negated, in ascending order
+    g = _smallest_sorted(v, n, n - hi_i, -1.0)
+    hi = -float(g[0]) if vi >= n - 1 else lerp(-float(g[n - 1 - hi_i]), -float(g[n - 2 - hi_i]), vi - hi_i)
+    return lo, hi
 
 
 @njit(cache=True)

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from rfi_monitor.numpy_kernels import median_sorted, pairwise_sum, quantile_sorted
+from rfi_monitor.numpy_kernels import median_sorted, pairwise_sum, quantile_pair
 
 SHAPE_UNKNOWN, SAWTOOTH_UP, SAWTOOTH_DOWN, TRIANGLE, HOOKED_SAWTOOTH = 0, 1, 2, 3, 4
 """Sweep shape codes, identical to rfi_msgs/JammerState.SHAPE_*."""
@@ -186,8 +186,7 @@ def _fold_residuals(f: np.ndarray, present: np.ndarray, inband: np.ndarray, prof
     rms = math.sqrt(pairwise_sum(r2[:nres], 0.0) / nres) if nres else np.nan
     lo = hi = np.nan
     if nsel >= 20:
-        v = np.sort(fsel[:nsel])
-        lo, hi = quantile_sorted(v, q_lo), quantile_sorted(v, q_hi)
+        lo, hi = quantile_pair(fsel, nsel, q_lo, q_hi)
     return rms, nsel, lo, hi
 
 

@@ -98,6 +98,21 @@ def test_column_order_statistic_is_numpys_partition():
                 np.testing.assert_array_equal(got, np.partition(np.ascontiguousarray(S.T), k, axis=1)[:, k])
 
 
+def test_quantile_pair_is_numpys_percentile():
+    """The ridge's band edges (``numpy_kernels.quantile_pair``: the 2 % and 98 % points from the few smallest and
+    largest values) equal np.percentile's to the bit, on the first n values of a longer buffer, with ties, for short
+    and long vectors and for the extreme quantiles."""
+    rng = np.random.default_rng(11)
+    for n in (1, 2, 3, 19, 20, 21, 100, 511, 1249):
+        for ties in (False, True):
+            v = rng.standard_normal(n + 5) * 0.01
+            if ties:
+                v = np.round(v * 300) / 300
+            for q_lo, q_hi in ((0.02, 0.98), (0.0, 1.0), (0.1, 0.9), (0.5, 0.5)):
+                lo, hi = numpy_kernels.quantile_pair(v, n, q_lo, q_hi)
+                assert lo == np.percentile(v[:n], 100 * q_lo) and hi == np.percentile(v[:n], 100 * q_hi), (n, q_lo)
+
+
 def test_sort_run_is_numpys_sort():
     """The phase profile's run sort (``sweep_shape._sort_run``: ranks counted up to 32 values, numba's sort above)
     sorts a run of a buffer in place as np.sort does, with ties, and leaves the rest of the buffer alone."""
