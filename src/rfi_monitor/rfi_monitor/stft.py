@@ -218,18 +218,40 @@ def _neighbour(q: int, n: int, wrap: bool) -> int:
 
 @njit(cache=True)
 def _median_filter_1d(a: np.ndarray, w: int, wrap: bool) -> np.ndarray:
-    """scipy.ndimage.median_filter(a, size=w, mode="wrap" if wrap else "nearest") of a 1-D array, w odd."""
+    """scipy.ndimage.median_filter(a, size=w, mode="wrap" if wrap else "nearest") of a 1-D array, w odd. Each
+    window's middle value found by counting ranks (ties by place: the value a sort puts in the middle) for w up to
+    ``_RANK_MEDIAN_MAX`` and a NaN-free a: no branch on the values and no sort call (numba's sort of 5 values cost
+    ~180 ns, 6 us a filter of 33 bins); else by sorting the window."""
     n = a.size
     h = w // 2
     out = np.empty_like(a)
     buf = np.empty(w, dtype=a.dtype)
+    by_rank = w <= _RANK_MEDIAN_MAX
+    for i in range(n):
+        by_rank = by_rank and a[i] == a[i]
     for i in range(n):
         for j in range(w):
             q = _neighbour(i + j - h, n, wrap)
             buf[j] = a[q]
-        buf.sort()
-        out[i] = buf[h]
+        if by_rank:
+            res = buf[0]
+            for j in range(w):
+                v = buf[j]
+                r = 0
+                for m in range(j):
+                    r += buf[m] <= v
+                for m in range(j + 1, w):
+                    r += buf[m] < v
+                res = v if r == h else res
+            out[i] = res
+        else:
+            buf.sort()
+            out[i] = buf[h]
     return out
+
+
+_RANK_MEDIAN_MAX = 31
+"""_median_filter_1d: the largest window whose median is found by counting ranks."""
 
 
 @njit(cache=True)

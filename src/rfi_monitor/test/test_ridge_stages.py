@@ -113,6 +113,30 @@ def test_quantile_pair_is_numpys_percentile():
                 assert lo == np.percentile(v[:n], 100 * q_lo) and hi == np.percentile(v[:n], 100 * q_hi), (n, q_lo)
 
 
+def test_median_filter_is_scipys():
+    """noise_levels' median across bins (``stft._median_filter_1d``: ranks counted up to 31 values, a sort of the
+    window above or with NaN) is scipy.ndimage.median_filter's, modes wrap and nearest, with ties and NaN."""
+    from scipy import ndimage
+    rng = np.random.default_rng(12)
+    for n in (1, 2, 5, 33, 129):
+        for w in (1, 3, 5, 9, 31, 33):
+            for wrap in (False, True):
+                for kind in ("plain", "ties", "nan"):
+                    a = rng.standard_normal(n).astype(np.float32)
+                    if kind == "ties":
+                        a = np.round(a)
+                    if kind == "nan":
+                        a[rng.integers(0, n)] = np.nan
+                    got = stft._median_filter_1d(a, w, wrap)
+                    ref = ndimage.median_filter(a, size=w, mode="wrap" if wrap else "nearest")
+                    if kind != "nan":
+                        np.testing.assert_array_equal(got, ref)
+                    else:           # scipy's NaN order is its own; the sort path orders NaN last, as numpy
+                        s = np.sort(np.lib.stride_tricks.sliding_window_view(
+                            np.pad(a, w // 2, mode="wrap" if wrap else "edge"), w), axis=1)[:, w // 2]
+                        np.testing.assert_array_equal(got, s)
+
+
 def test_sort_run_is_numpys_sort():
     """The phase profile's run sort (``sweep_shape._sort_run``: ranks counted up to 32 values, numba's sort above)
     sorts a run of a buffer in place as np.sort does, with ties, and leaves the rest of the buffer alone."""
