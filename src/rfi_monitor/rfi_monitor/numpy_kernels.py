@@ -50,6 +50,35 @@ def pairwise_sum(a: np.ndarray, zero: Any) -> Any:
     return res
 
 
+@njit(cache=True, inline="always")
+def pairwise_sum_short(a: np.ndarray, zero: Any) -> Any:
+    """``pairwise_sum`` of a vector of at most 128 values (no halving: numpy's 8 partial sums, then the rest in
+    order), inlined where it is called: the same sum to the bit, without a call per short row."""
+    n = a.size
+    if n < 8:
+        res = zero
+        for i in range(n):
+            res += a[i]
+        return res
+    r0, r1, r2, r3, r4, r5, r6, r7 = a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]
+    i = 8
+    while i < n - (n % 8):
+        r0 += a[i]
+        r1 += a[i + 1]
+        r2 += a[i + 2]
+        r3 += a[i + 3]
+        r4 += a[i + 4]
+        r5 += a[i + 5]
+        r6 += a[i + 6]
+        r7 += a[i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[i]
+        i += 1
+    return res
+
+
 @njit(cache=True)
 def first_argmax(r: np.ndarray, lo: int, hi: int) -> int:
     """Index of the first largest of r[lo .. hi] (np.argmax)."""
