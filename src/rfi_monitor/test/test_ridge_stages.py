@@ -138,14 +138,17 @@ def test_median_filter_is_scipys():
 
 
 def test_sort_run_is_numpys_sort():
-    """The phase profile's run sort (``sweep_shape._sort_run``: ranks counted up to 32 values, numba's sort above)
-    sorts a run of a buffer in place as np.sort does, with ties, and leaves the rest of the buffer alone."""
+    """The phase profile's run sort (``sweep_shape._sort_run``: ranks counted up to 16 values, insertion up to 64,
+    numba's sort above or with NaN) sorts a run of a buffer in place as np.sort does, with ties and NaN (last), and
+    leaves the rest of the buffer alone."""
     rng = np.random.default_rng(10)
-    for c in (0, 1, 2, 3, 16, 31, 32, 33, 60):
-        for ties in (False, True):
+    for c in (0, 1, 2, 3, 16, 17, 31, 32, 33, 60, 64, 65, 100):
+        for kind in ("plain", "ties", "nan"):
             buf = rng.standard_normal(c + 10)
-            if ties:
+            if kind == "ties":
                 buf = np.round(buf * 2) / 2
+            if kind == "nan" and c > 0:
+                buf[4 + rng.integers(0, c)] = np.nan
             want = buf.copy()
             want[4:4 + c] = np.sort(want[4:4 + c])
             sweep_shape._sort_run(buf, 4, c, np.empty(c + 10))
