@@ -1,8 +1,8 @@
 """Compiled (numba) versions of the numpy reductions the ridge analysis (``rfi_monitor.ridge``) uses inside its
 compiled stages, in numpy's own arithmetic order, so that a compiled stage gives to the bit what the numpy expression
 it replaced gave (issue 14 item 6, issue 26 item 2): the pairwise sum, the first argmax, the linearly interpolated
-quantile and the median of a sorted vector, np.polyfit and np.polyval, and the k-th smallest value of each column of a
-matrix (np.partition).
+quantile and the median of a sorted vector, a low and a high quantile of an unsorted one, np.polyfit and np.polyval,
+and the k-th smallest value of each column of a float32 matrix (np.partition).
 """
 
 from __future__ import annotations
@@ -31,6 +31,35 @@ def pairwise_sum(a: np.ndarray, zero: Any) -> Any:
         n2 = n // 2
         n2 -= n2 % 8
         return pairwise_sum(a[:n2], zero) + pairwise_sum(a[n2:], zero)
+    r0, r1, r2, r3, r4, r5, r6, r7 = a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]
+    i = 8
+    while i < n - (n % 8):
+        r0 += a[i]
+        r1 += a[i + 1]
+        r2 += a[i + 2]
+        r3 += a[i + 3]
+        r4 += a[i + 4]
+        r5 += a[i + 5]
+        r6 += a[i + 6]
+        r7 += a[i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[i]
+        i += 1
+    return res
+
+
+@njit(cache=True, inline="always")
+def pairwise_sum_short(a: np.ndarray, zero: Any) -> Any:
+    """``pairwise_sum`` of a vector of at most 128 values (no halving: numpy's 8 partial sums, then the rest in
+    order), inlined where it is called: the same sum to the bit, without a call per short row."""
+    n = a.size
+    if n < 8:
+        res = zero
+        for i in range(n):
+            res += a[i]
+        return res
     r0, r1, r2, r3, r4, r5, r6, r7 = a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]
     i = 8
     while i < n - (n % 8):
@@ -81,6 +110,48 @@ def quantile_sorted(v: np.ndarray, q: float) -> float:
 
 
 @njit(cache=True)
+def _smallest_sorted(v: np.ndarray, n: int, m: int, sign: float) -> np.ndarray:
+    """The m smallest of sign * v[:n] (NaN-free, 1 <= m <= n), in ascending order: a sorted buffer that a value
+    enters only when it is below the buffer's largest (after the first m values, rarely: a well predicted branch)."""
+    buf = np.empty(m)
+    for i in range(m):
+        x = sign * v[i]
+        j = i
+        while j > 0 and buf[j - 1] > x:
+            buf[j] = buf[j - 1]
+            j -= 1
+        buf[j] = x
+    for i in range(m, n):
+        x = sign * v[i]
+        if x < buf[m - 1]:
+            j = m - 1
+            while j > 0 and buf[j - 1] > x:
+                buf[j] = buf[j - 1]
+                j -= 1
+            buf[j] = x
+    return buf
+
+
+@njit(cache=True)
+def quantile_pair(v: np.ndarray, n: int, q_lo: float, q_hi: float) -> tuple[float, float]:
+    """(np.percentile(v[:n], 100 q_lo), np.percentile(v[:n], 100 q_hi)) (method "linear") of a NaN-free vector,
+    n >= 1, q_lo <= 0.5 <= q_hi: ``quantile_sorted`` of the sorted vector, each from the two order statistics it
+    interpolates, found among the few smallest (largest) values (``_smallest_sorted``) instead of by a sort of all
+    n (whose branches on the values mispredict). The same values, so the same result to the bit."""
+    lo_i = min(int(math.floor((n - 1) * q_lo)), n - 1)
+    lo_m = min(lo_i + 2, n)
+    s = _smallest_sorted(v, n, lo_m, 1.0)
+    vi = (n - 1) * q_lo
+    lo = float(s[n - 1]) if vi >= n - 1 else lerp(float(s[lo_i]), float(s[lo_i + 1]), vi - lo_i)
+    vi = (n - 1) * q_hi
+    hi_i = min(int(math.floor(vi)), n - 1)
+    # ascending place p is the (n - 1 - p)-th largest: the largest values, negated, in ascending order
+    g = _smallest_sorted(v, n, n - hi_i, -1.0)
+    hi = -float(g[0]) if vi >= n - 1 else lerp(-float(g[n - 1 - hi_i]), -float(g[n - 2 - hi_i]), vi - hi_i)
+    return lo, hi
+
+
+@njit(cache=True)
 def median_sorted(v: np.ndarray) -> float:
     """np.median of a non-empty, NaN-free vector (sorted here: the middle value, or the mean of the two)."""
     s = np.sort(v)
@@ -124,72 +195,86 @@ def polyfit(x: np.ndarray, y: np.ndarray, deg: int) -> np.ndarray:
 
 
 @njit(cache=True, inline="always")
-def _partition_at(a: np.ndarray, left: int, right: int, k: int) -> int:
-    """Floyd and Rivest's partition step: a[left .. right] split about t = a[k] (Hoare's scheme); returns t's place j
-    (a[left .. j - 1] <= t <= a[j + 1 .. right])."""
-    t = a[k]
-    a[left], a[k] = a[k], a[left]
-    if a[right] > t:
-        a[right], a[left] = a[left], a[right]
-    i, j = left, right
-    while i < j:
-        a[i], a[j] = a[j], a[i]
-        i += 1
-        j -= 1
-        while a[i] < t:
-            i += 1
-        while a[j] > t:
-            j -= 1
-    if a[left] == t:
-        a[left], a[j] = a[j], a[left]
-    else:
-        j += 1
-        a[j], a[right] = a[right], a[j]
-    return j
+def _order_key(x: Any) -> Any:
+    """The bits of a float32 (given as its uint32 view) mapped to an integer of the same order as the values
+    (negative values' bits inverted, positive values' sign bit set): the radix-sort key of a float."""
+    return np.int64(x ^ (np.uint32(0xFFFFFFFF) if (x >> np.uint32(31)) else np.uint32(0x80000000)))
 
 
 @njit(cache=True)
-def _select(a: np.ndarray, k: int) -> Any:
-    """The k-th smallest value (0-based) of a NaN-free vector, which it reorders: Floyd and Rivest's SELECT (1975),
-    its sample step (ranges over 200 values) done by a plain selection instead of a recursion."""
-    left, right = 0, a.size - 1
-    while right > left:
-        if right - left > 200:
-            n = right - left + 1
-            i = k - left + 1
-            z = math.log(n)
-            s = 0.5 * math.exp(2.0 * z / 3.0)
-            sd = 0.5 * math.sqrt(z * s * (n - s) / n) * (1.0 if i - n / 2 >= 0 else -1.0)
-            lo2 = max(left, int(k - i * s / n + sd))
-            hi2 = min(right, int(k + (n - i) * s / n + sd))
-            while hi2 > lo2:
-                j = _partition_at(a, lo2, hi2, k)
-                if j <= k:
-                    lo2 = j + 1
-                if k <= j:
-                    hi2 = j - 1
-        j = _partition_at(a, left, right, k)
-        if j <= k:
-            left = j + 1
-        if k <= j:
-            right = j - 1
-    return a[k]
+def _kth_of_few(a: np.ndarray, m: int, r: int) -> Any:
+    """The r-th smallest (0-based) of a[:m], NaN-free, by counting each value's rank (ties ranked by place): no
+    branch that depends on the data, for the few values of a histogram bucket."""
+    res = a[0]
+    for i in range(m):
+        ai = a[i]
+        c = 0
+        for j in range(i):
+            c += a[j] <= ai
+        for j in range(i + 1, m):
+            c += a[j] < ai
+        res = ai if c == r else res
+    return res
+
+
+_SELECT_BUCKETS = 512
+"""column_order_statistic: at most this many histogram buckets over the matrix's range of keys."""
 
 
 @njit(cache=True)
 def column_order_statistic(S: np.ndarray, k: int) -> np.ndarray:
-    """``np.partition(S.T, k, axis=1)[:, k]`` of a 2-D float array (the k-th smallest value of each column, 0-based;
+    """``np.partition(S.T, k, axis=1)[:, k]`` of a 2-D float32 array (the k-th smallest value of each column, 0-based;
     NaN where fewer than k + 1 values of the column are not NaN, as numpy's NaN-last order gives). The value is unique
-    whatever the algorithm (a selection by Floyd and Rivest's SELECT here), so the result is numpy's to the bit."""
+    whatever the algorithm, so the result is numpy's to the bit (a zero's sign aside).
+
+    A histogram select, whose passes run along the rows with no branch that depends on the data (a selection by
+    partitioning, Floyd and Rivest's, cost 3-4 times its time on data it had not seen, its branches mispredicted;
+    issue 26 item 2): each value's order key (``_order_key``); the matrix's range of keys cut into at most
+    ``_SELECT_BUCKETS`` buckets; a histogram per column, whose cumulative count gives the bucket that holds the k-th
+    value and how many lie below it; the values of that bucket (a few: the bucket spans ~1/30 of the range) gathered
+    and the right one picked among them."""
     nfr, B = S.shape
     q = np.empty(B, dtype=S.dtype)
-    col = np.empty(nfr, dtype=S.dtype)
+    u = S.view(np.uint32)
+    kmin = np.int64(0xFFFFFFFF)
+    kmax = np.int64(0)
+    for t in range(nfr):
+        for b in range(B):
+            v = S[t, b]
+            key = _order_key(u[t, b])
+            kmin = min(kmin, key if v == v else np.int64(0xFFFFFFFF))
+            kmax = max(kmax, key if v == v else np.int64(0))
+    if kmin > kmax or k >= nfr:
+        q[:] = np.nan
+        return q
+    sh = 0
+    while ((kmax - kmin) >> sh) >= _SELECT_BUCKETS:
+        sh += 1
+    nb = ((kmax - kmin) >> sh) + 1                       # NaN: bucket nb, after all others
+    hist = np.zeros((nb + 1, B), dtype=np.int32)
+    for t in range(nfr):
+        for b in range(B):
+            v = S[t, b]
+            hist[((_order_key(u[t, b]) - kmin) >> sh) if v == v else nb, b] += 1
+    cum = np.zeros(B, dtype=np.int64)
+    bucket = np.zeros(B, dtype=np.int64)
+    below = np.zeros(B, dtype=np.int64)
+    for j in range(nb + 1):
+        for b in range(B):
+            c = cum[b] + hist[j, b]
+            bucket[b] += 1 if c <= k else 0
+            below[b] = c if c <= k else below[b]
+            cum[b] = c
+    buf = np.empty(nfr, dtype=S.dtype)
     for b in range(B):
+        if bucket[b] >= nb:
+            q[b] = np.nan
+            continue
         m = 0
         for t in range(nfr):
             v = S[t, b]
-            if v == v:
-                col[m] = v
-                m += 1
-        q[b] = _select(col[:m], k) if k < m else np.nan
+            buf[m] = v
+            m += 1 if (v == v and ((_order_key(u[t, b]) - kmin) >> sh) == bucket[b]) else 0
+        r = k - below[b]
+        q[b] = _kth_of_few(buf, m, r) if m <= 40 else np.sort(buf[:m])[r]
     return q

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from rfi_monitor.numpy_kernels import pairwise_sum
+from rfi_monitor.numpy_kernels import pairwise_sum, pairwise_sum_short
 
 
 @njit(cache=True)
@@ -65,7 +65,10 @@ def _excess_kernel(S: np.ndarray, lvl: np.ndarray, edges_out: bool, cos32: np.nd
                 v = zero
             tc[b] = v * cos32[b]
             ts[b] = v * sin32[b]
-        u[t] = complex(np.float64(pairwise_sum(tc, zero)), np.float64(pairwise_sum(ts, zero)))
+        if B <= 128:
+            u[t] = complex(np.float64(pairwise_sum_short(tc, zero)), np.float64(pairwise_sum_short(ts, zero)))
+        else:
+            u[t] = complex(np.float64(pairwise_sum(tc, zero)), np.float64(pairwise_sum(ts, zero)))
         nb[0, t] = S[t, max(kb - 1, 0)] + tiny
         nb[1, t] = S[t, kb] + tiny
         nb[2, t] = S[t, min(kb + 1, B - 1)] + tiny

@@ -31,7 +31,8 @@ def _periodicity(u: np.ndarray, lmin: int, lmax: int, min_strength: float, detec
         return math.nan, 0.0
     nf = 1 << int(math.ceil(math.log2(2 * T)))
     V = np.zeros(nf, dtype=np.complex128)
-    np.subtract(u, u.mean(), out=V[:T])
+    # u.mean() without its Python wrapper: the sum divided by the count, numpy's own scalar arithmetic
+    np.subtract(u, np.add.reduce(u) / np.intp(T), out=V[:T])
     fft_inplace(V, True)                                 # np.fft.fft(u - u.mean(), nf), to the bit
     R = fft_inplace(V * np.conj(V), False)[:T].real     # np.fft.ifft(V * np.conj(V))[:T].real
     if not R[0] > 0:

@@ -45,13 +45,13 @@ _TRUNC_MEAN = 1.0 - _CUT * math.exp(-_CUT) / (1.0 - math.exp(-_CUT))
 
 
 LONG_COLUMN_FRAMES = 768
-"""noise_levels: from this many frames on, the lower quantile of each bin is taken by the compiled selection
-(``numpy_kernels.column_order_statistic``) whatever the bins; below it, by the compiled selection up to
-``COMPILED_SELECT_CELLS`` values, else by np.partition (speed only: the same value)."""
-COMPILED_SELECT_CELLS = 1 << 15
-"""noise_levels: the compiled selection below LONG_COLUMN_FRAMES frames for up to this many frames x bins (measured,
-thread time, loaded machine, median of 9 x 50 calls: 155 x 128 60 vs 110 us for np.partition of the transposed copy,
-255 x 65 57 vs 77, 511 x 33 49 vs 82, 31 x 128 17 vs 19; at 255 x 129 it lost, 310 vs 154)."""
+"""noise_levels: from this many frames on, the lower quantile of each bin is taken by the compiled histogram select
+(``numpy_kernels.column_order_statistic``), below it by numpy's sort of each bin's frames (speed only: the same
+value). Measured on the arrays the monitor's blocks give (cycling through 40-120 different ones, thread time, loaded
+machine; numpy 2.4's SIMD sort, us a call): 511 x 33 frames x bins sort 38, histogram 55, np.partition 48; 255 x 65
+38 / 54 / 48; 155 x 128 53 / 67 / 62; 1023 x 17 115 / 57 / 101; 1249 x 16 163 / 62 / 121; 2047 x 5 92 / 41 / 63.
+(The earlier choice of a compiled Floyd-Rivest selection, 160-220 us on these, had been timed on one array called
+again and again, its branches predicted.)"""
 
 _WIN: dict[int, np.ndarray] = {}
 
@@ -195,11 +195,14 @@ def noise_levels(S: np.ndarray, smooth_bins: int, cplx: bool) -> np.ndarray:
     S = np.ascontiguousarray(S, dtype=np.float32)
     nfr, B = S.shape
     k = max(0, min(nfr - 1, int(_Q_LOW * nfr)))
-    # the same quantile either way; which is faster depends on the shape (LONG_COLUMN_FRAMES, COMPILED_SELECT_CELLS);
-    # contiguous either way, so that _noise_levels_kernel has one compiled version, the one warm_up compiles (a
-    # strided q from np.partition compiled a second one, 1.1-1.6 s, on the first block that took that path)
-    q = (column_order_statistic(S, k) if nfr >= LONG_COLUMN_FRAMES or nfr * B <= COMPILED_SELECT_CELLS
-         else np.ascontiguousarray(np.partition(np.ascontiguousarray(S.T), k, axis=1)[:, k]))
+    # the same quantile either way (LONG_COLUMN_FRAMES); contiguous either way, so that _noise_levels_kernel has one
+    # compiled version, the one warm_up compiles (a strided q compiled a second one, 1.1-1.6 s, on its first block)
+    if nfr >= LONG_COLUMN_FRAMES:
+        q = column_order_statistic(S, k)
+    else:
+        St = np.ascontiguousarray(S.T)
+        St.sort(axis=1)
+        q = np.ascontiguousarray(St[:, k])
     w = min(int(smooth_bins), B - (1 - B % 2))
     return _noise_levels_kernel(S, q, w, bool(cplx), bool(cplx), (B // 3) | 1)
 
@@ -215,18 +218,40 @@ def _neighbour(q: int, n: int, wrap: bool) -> int:
 
 @njit(cache=True)
 def _median_filter_1d(a: np.ndarray, w: int, wrap: bool) -> np.ndarray:
-    """scipy.ndimage.median_filter(a, size=w, mode="wrap" if wrap else "nearest") of a 1-D array, w odd."""
+    """scipy.ndimage.median_filter(a, size=w, mode="wrap" if wrap else "nearest") of a 1-D array, w odd. Each
+    window's middle value found by counting ranks (ties by place: the value a sort puts in the middle) for w up to
+    ``_RANK_MEDIAN_MAX`` and a NaN-free a: no branch on the values and no sort call (numba's sort of 5 values cost
+    ~180 ns, 6 us a filter of 33 bins); else by sorting the window."""
     n = a.size
     h = w // 2
     out = np.empty_like(a)
     buf = np.empty(w, dtype=a.dtype)
+    by_rank = w <= _RANK_MEDIAN_MAX
+    for i in range(n):
+        by_rank = by_rank and a[i] == a[i]
     for i in range(n):
         for j in range(w):
             q = _neighbour(i + j - h, n, wrap)
             buf[j] = a[q]
-        buf.sort()
-        out[i] = buf[h]
+        if by_rank:
+            res = buf[0]
+            for j in range(w):
+                v = buf[j]
+                r = 0
+                for m in range(j):
+                    r += buf[m] <= v
+                for m in range(j + 1, w):
+                    r += buf[m] < v
+                res = v if r == h else res
+            out[i] = res
+        else:
+            buf.sort()
+            out[i] = buf[h]
     return out
+
+
+_RANK_MEDIAN_MAX = 31
+"""_median_filter_1d: the largest window whose median is found by counting ranks."""
 
 
 @njit(cache=True)

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from rfi_monitor.numpy_kernels import median_sorted, pairwise_sum, quantile_sorted
+from rfi_monitor.numpy_kernels import median_sorted, pairwise_sum, quantile_pair
 
 SHAPE_UNKNOWN, SAWTOOTH_UP, SAWTOOTH_DOWN, TRIANGLE, HOOKED_SAWTOOTH = 0, 1, 2, 3, 4
 """Sweep shape codes, identical to rfi_msgs/JammerState.SHAPE_*."""
@@ -96,6 +96,39 @@ def _phase_bins(nfr: int, period_frames: float, K: int) -> np.ndarray:
 
 
 @njit(cache=True)
+def _sort_run(buf: np.ndarray, s: int, c: int, tmp: np.ndarray) -> None:
+    """Sort buf[s:s + c] in place (as np.sort). A phase bin's few frames: up to 16 values by counting each value's
+    rank (ties by place) and placing it there, with no branch that depends on the values; up to 64 by insertion; more,
+    or with a NaN, by numba's sort. Timed on the blocks of a stream (its branches on the values mispredict, unlike
+    on one block timed again and again: 34 vs 21 us a profile at 38.192 MS/s tracking), per run of random values:
+    8 values 49 / 96 / - ns (ranks / insertion / sort), 16 230 / 235 / -, 32 958 / 618 / 970, 64 3550 / 1902 / 2055."""
+    nan = False
+    for i in range(c):
+        nan |= buf[s + i] != buf[s + i]
+    if c > 64 or nan:
+        buf[s:s + c] = np.sort(buf[s:s + c])
+    elif c > 16:
+        for i in range(1, c):
+            x = buf[s + i]
+            j = i
+            while j > 0 and buf[s + j - 1] > x:
+                buf[s + j] = buf[s + j - 1]
+                j -= 1
+            buf[s + j] = x
+    else:
+        for i in range(c):
+            vi = buf[s + i]
+            r = 0
+            for j in range(i):
+                r += buf[s + j] <= vi
+            for j in range(i + 1, c):
+                r += buf[s + j] < vi
+            tmp[r] = vi
+        for i in range(c):
+            buf[s + i] = tmp[i]
+
+
+@njit(cache=True)
 def _profile_kernel(f: np.ndarray, present: np.ndarray, use: np.ndarray, period_frames: float, K: int,
                     resolution: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """_profile, compiled: phase bins, frame counts and present shares, the used frequencies gathered per bin and
@@ -133,9 +166,9 @@ def _profile_kernel(f: np.ndarray, present: np.ndarray, use: np.ndarray, period_
             b = kb[t]
             buf[pos[b]] = f[t]
             pos[b] += 1
+    tmp = np.empty(m)
     for b in range(K):
-        if cnt[b] > 1:
-            buf[start[b]:start[b] + cnt[b]] = np.sort(buf[start[b]:start[b] + cnt[b]])
+        _sort_run(buf, start[b], cnt[b], tmp)
     prof, se = _bin_stats(buf, cnt, resolution)
     return prof, share, se
 
@@ -165,8 +198,7 @@ def _fold_residuals(f: np.ndarray, present: np.ndarray, inband: np.ndarray, prof
     rms = math.sqrt(pairwise_sum(r2[:nres], 0.0) / nres) if nres else np.nan
     lo = hi = np.nan
     if nsel >= 20:
-        v = np.sort(fsel[:nsel])
-        lo, hi = quantile_sorted(v, q_lo), quantile_sorted(v, q_hi)
+        lo, hi = quantile_pair(fsel, nsel, q_lo, q_hi)
     return rms, nsel, lo, hi
 
 

@@ -73,19 +73,102 @@ def test_fft_inplace_is_numpys_fft():
 
 
 def test_column_order_statistic_is_numpys_partition():
-    """noise_levels' compiled selection (long columns) gives np.partition's k-th value of each column to the bit: on
-    exponential powers, on values with many ties, with NaN (numpy orders it last), for every kind of k."""
+    """noise_levels' compiled histogram select (long columns) gives np.partition's k-th value of each column of a
+    float32 matrix to the bit: on exponential powers, on values with many ties, with zeros, with negative and infinite
+    values, with NaN (numpy orders it last; a column all NaN), on a constant matrix, for every kind of k."""
     rng = np.random.default_rng(8)
     for n in (1, 2, 9, 64, 255, 768, 1249, 3000):
-        for trial in range(6):
-            S = rng.exponential(size=(n, 5)).astype(np.float32 if trial % 2 else np.float64)
+        for trial in range(8):
+            S = rng.exponential(size=(n, 5)).astype(np.float32)
             if trial in (2, 3):
-                S = np.round(S * 3).astype(S.dtype)                 # ties
+                S = np.round(S * 3).astype(np.float32)              # ties and zeros
             if trial >= 4 and n > 2:
                 S[rng.integers(0, n, size=max(1, n // 3)), rng.integers(0, 5, size=max(1, n // 3))] = np.nan
+            if trial == 5:
+                S[:, 2] = np.nan
+            if trial == 6:
+                S = (S - 1.0) * np.float32(1e3)                    # negative values, a wide range
+                S[rng.integers(0, n, size=max(1, n // 20)), 1] = np.inf
+                S[rng.integers(0, n, size=max(1, n // 20)), 3] = -np.inf
+            if trial == 7:
+                S = np.full((n, 5), 0.25, dtype=np.float32)
+                S[::7, 4] = np.float32(1e-30)                      # two values far apart, one of them 1/7 of a column
             for k in sorted({0, n // 10, n // 2, n - 2, n - 1} - {-1}):
                 got = numpy_kernels.column_order_statistic(S, k)
                 np.testing.assert_array_equal(got, np.partition(np.ascontiguousarray(S.T), k, axis=1)[:, k])
+
+
+def test_quantile_pair_is_numpys_percentile():
+    """The ridge's band edges (``numpy_kernels.quantile_pair``: the 2 % and 98 % points from the few smallest and
+    largest values) equal np.percentile's to the bit, on the first n values of a longer buffer, with ties, for short
+    and long vectors and for the extreme quantiles."""
+    rng = np.random.default_rng(11)
+    for n in (1, 2, 3, 19, 20, 21, 100, 511, 1249):
+        for ties in (False, True):
+            v = rng.standard_normal(n + 5) * 0.01
+            if ties:
+                v = np.round(v * 300) / 300
+            for q_lo, q_hi in ((0.02, 0.98), (0.0, 1.0), (0.1, 0.9), (0.5, 0.5)):
+                lo, hi = numpy_kernels.quantile_pair(v, n, q_lo, q_hi)
+                assert lo == np.percentile(v[:n], 100 * q_lo) and hi == np.percentile(v[:n], 100 * q_hi), (n, q_lo)
+
+
+def test_median_filter_is_scipys():
+    """noise_levels' median across bins (``stft._median_filter_1d``: ranks counted up to 31 values, a sort of the
+    window above or with NaN) is scipy.ndimage.median_filter's, modes wrap and nearest, with ties and NaN."""
+    from scipy import ndimage
+    rng = np.random.default_rng(12)
+    for n in (1, 2, 5, 33, 129):
+        for w in (1, 3, 5, 9, 31, 33):
+            for wrap in (False, True):
+                for kind in ("plain", "ties", "nan"):
+                    a = rng.standard_normal(n).astype(np.float32)
+                    if kind == "ties":
+                        a = np.round(a)
+                    if kind == "nan":
+                        a[rng.integers(0, n)] = np.nan
+                    got = stft._median_filter_1d(a, w, wrap)
+                    ref = ndimage.median_filter(a, size=w, mode="wrap" if wrap else "nearest")
+                    if kind != "nan":
+                        np.testing.assert_array_equal(got, ref)
+                    else:           # scipy's NaN order is its own; the sort path orders NaN last, as numpy
+                        s = np.sort(np.lib.stride_tricks.sliding_window_view(
+                            np.pad(a, w // 2, mode="wrap" if wrap else "edge"), w), axis=1)[:, w // 2]
+                        np.testing.assert_array_equal(got, s)
+
+
+def test_sort_run_is_numpys_sort():
+    """The phase profile's run sort (``sweep_shape._sort_run``: ranks counted up to 16 values, insertion up to 64,
+    numba's sort above or with NaN) sorts a run of a buffer in place as np.sort does, with ties and NaN (last), and
+    leaves the rest of the buffer alone."""
+    rng = np.random.default_rng(10)
+    for c in (0, 1, 2, 3, 16, 17, 31, 32, 33, 60, 64, 65, 100):
+        for kind in ("plain", "ties", "nan"):
+            buf = rng.standard_normal(c + 10)
+            if kind == "ties":
+                buf = np.round(buf * 2) / 2
+            if kind == "nan" and c > 0:
+                buf[4 + rng.integers(0, c)] = np.nan
+            want = buf.copy()
+            want[4:4 + c] = np.sort(want[4:4 + c])
+            sweep_shape._sort_run(buf, 4, c, np.empty(c + 10))
+            np.testing.assert_array_equal(buf, want)
+
+
+def test_noise_levels_quantile_paths_agree():
+    """noise_levels takes its lower quantile by numpy's sort below LONG_COLUMN_FRAMES frames and by the compiled
+    select from there on: on the same matrix both give the same levels to the bit."""
+    rng = np.random.default_rng(9)
+    for nfr, B in ((300, 33), (900, 17), (1249, 16)):
+        S = (rng.exponential(size=(nfr, B)) * np.linspace(1.0, 3.0, B)).astype(np.float32)
+        S[nfr // 3: nfr // 2, B // 2] *= 1e3                      # a jammer in one bin
+        ref = stft.noise_levels(S, 5, False)
+        saved = stft.LONG_COLUMN_FRAMES
+        try:
+            stft.LONG_COLUMN_FRAMES = 1 if nfr < saved else 10 ** 9
+            np.testing.assert_array_equal(stft.noise_levels(S, 5, False), ref)
+        finally:
+            stft.LONG_COLUMN_FRAMES = saved
 
 
 @pytest.mark.parametrize("cplx", [False, True])
