@@ -210,7 +210,7 @@ def test_coarse_top_is_the_numpy_selection() -> None:
     """The comb's compiled coarse selection: the same largest combs as numpy's argpartition, ordered best first with
     equal combs (common: neighbouring candidates with the same rounded lags) to the shorter period, then the
     separation rule."""
-    from rfi_monitor.chirp_comb import _coarse_top, _comb_z, _separated, comb_lags
+    from rfi_monitor.chirp_comb import _coarse_top, _comb_z, _comb_z_prefix, _separated, comb_lags, compact_lags
     rng = np.random.default_rng(3)
     lag_limit = 900
     periods = np.arange(4.0, 200.0, 1.0 / 32)
@@ -222,6 +222,16 @@ def test_coarse_top_is_the_numpy_selection() -> None:
     ranked = np.lexsort((np.arange(z.size), -z))[:240]          # best first, ties to the lower index
     assert np.array_equal(np.sort(z[ranked]), np.sort(z[numpy_top]))
     assert np.unique(z[ranked]).size < ranked.size               # ties present: the rule is exercised
-    got = _coarse_top(r, v, idx, mask, periods, 240, 12)
+    lags, counts = compact_lags(idx, mask, lag_limit)
+    assert lags.dtype == np.int16 and np.array_equal(_comb_z_prefix(r, v, lags, counts), z)
+    got = _coarse_top(r, v, lags, counts, periods, 240, 12)
     assert np.array_equal(got, _separated(ranked, periods, 12))
     assert got.size == 12
+    # ties across the n_top-th value (r zero on most lags: many equal combs), and more wanted than there are
+    r0 = np.where(rng.random(lag_limit + 1) < 0.97, 0.0, r)
+    z0 = _comb_z(r0, v, idx, mask)
+    for n_top in (240, 3, z0.size + 5):
+        ranked0 = np.lexsort((np.arange(z0.size), -z0))[:n_top]
+        assert z0[ranked0[-1]] == z0[ranked0[-1] + 1] or n_top > z0.size or n_top == 3
+        got0 = _coarse_top(r0, v, lags, counts, periods, n_top, 12)
+        assert np.array_equal(got0, _separated(ranked0, periods, 12))
