@@ -272,9 +272,11 @@ def _close_period(st: np.ndarray, out: np.ndarray, ring: np.ndarray, noise_ring:
 
 
 CHUNK = 256
-"""Samples per chunk of the carrier replica: at each chunk's start the carrier phasor is computed exactly (cos and
-sin of the NCO's float64 phase), inside it as that phasor times a table of exp(-j 2 pi k cstep), k < CHUNK, built
-once per segment by a complex rotation recurrence (relative error ~k x 1e-16, below 3e-14)."""
+"""Samples per chunk of the carrier wipe-off: inside a chunk the samples are multiplied by a table of
+exp(-j 2 pi k cstep), k < CHUNK, built once per segment by a complex rotation recurrence (relative error ~k x 1e-16,
+below 3e-14), and the chunk's correlator sums are then rotated by its base phasor exp(-j 2 pi phase at the chunk's
+start), computed exactly (cos and sin of the NCO's float64 phase): sum_k x_k b t_k c_k = b sum_k x_k t_k c_k, four
+fewer multiplications per sample than forming b t_k per sample."""
 
 
 @njit(cache=True, nogil=True)
@@ -319,9 +321,9 @@ def _segment(xr: np.ndarray, xi: np.ndarray | None, i0: int, m: int, cyc0: float
         b_im = -math.sin(ph)
         n = min(CHUNK, m - k0)
         cer = cei = cpr = cpi = clr = cli = cnr = cni = 0.0
-        for k in range(n):
-            c_re = b_re * tr[k] - b_im * ti[k]
-            c_im = b_re * ti[k] + b_im * tr[k]
+        for k in range(n):  # sums of x_k exp(-j 2 pi (k - k0) cstep) c_k: the chunk's base phasor applied after
+            c_re = tr[k]
+            c_im = ti[k]
             a = xr[i0 + k0 + k]
             if xi is None:
                 yr = a * c_re
@@ -346,14 +348,15 @@ def _segment(xr: np.ndarray, xi: np.ndarray | None, i0: int, m: int, cyc0: float
             cei += yi * cev
             clr += yr * clv
             cli += yi * clv
-        er += cer
-        ei += cei
-        pr += cpr
-        pi += cpi
-        lr += clr
-        li += cli
-        nr += cnr
-        ni += cni
+        # rotate the chunk's sums by its base phasor b = exp(-j 2 pi (cyc0 + k0 cstep))
+        er += b_re * cer - b_im * cei
+        ei += b_re * cei + b_im * cer
+        pr += b_re * cpr - b_im * cpi
+        pi += b_re * cpi + b_im * cpr
+        lr += b_re * clr - b_im * cli
+        li += b_re * cli + b_im * clr
+        nr += b_re * cnr - b_im * cni
+        ni += b_re * cni + b_im * cnr
     return er, ei, pr, pi, lr, li, nr, ni
 
 
