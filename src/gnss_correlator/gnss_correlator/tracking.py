@@ -8,10 +8,12 @@ Each channel holds two numerically controlled oscillators (NCOs):
   IF); its Doppler phase ``phi_nco = 2 pi int f_d dt`` (rad, from the channel's start) is reported;
 * the **code NCO**, at ``f_chip (1 + f_d / f_L1)`` (carrier aiding) plus the DLL's correction.
 
-Per sample: ``y_n = x_n exp(-j 2 pi phi_c(n))`` (carrier wipe-off, the exponential from a 1024-entry table),
-then ``E, P, L += y_n c(chip_n +- d)``, ``c(chip_n)`` with ``d`` = ``early_late_offset_chips`` (0.5: one chip
-between early and late). Inside a code period both phases of sample k are computed from k (no running
-sum, no test per sample); the kernel cuts the block at the period ends and closes the loops there. The
+Per sample: ``y_n = x_n exp(-j 2 pi phi_c(n))`` (carrier wipe-off: a rotation table per 256-sample chunk, the
+chunk's exact base phasor applied to its sums, ``CHUNK``), then ``E, P, L += y_n c(chip_n +- d)``, ``c(chip_n)``
+with ``d`` = ``early_late_offset_chips`` (0.5: one chip between early and late), the four replicas of a sample from
+one packed table entry (``_code_bits``). Inside a code period both phases of sample k are computed from k (no
+running sum, no test per sample, so the inner loop vectorises); the kernel cuts the block at the period ends and
+closes the loops there. The
 prompts of one code period (1 ms, chip 0 to chip 1022, so a period never straddles a data bit edge)
 close the loops at the period's end (T = that period's duration):
 
