@@ -478,9 +478,25 @@ with the stream (this Python probe's own lag included). The node's counters (its
 the first search (receiver calls: 10 ms of stream each), the replays at the hold's bound (acquisition_hold_s, 4 s)
 and the waits for a search still running there; the blocks the node took from its subscription itself.
 
-**Every block answered: 12 of 12 runs, 6 of 6 in 1-ms blocks (before: 1 of 6, 0-268 and 158-162 of 5,000 lost).
-Keeping up at 1x in wall time: not on this machine during these runs** (load average 8.1-9.9 on 2 shared vCPUs: 7
-workers' jobs; the previous document's runs had 3.4-7.7):
+**This document: the tracking kernel made 1.3-1.6 times cheaper (docs/gnss_correlator/tracking_speed.md; a rotation
+table per 256-sample chunk for the carrier, one packed table entry per sample for the four code replicas). Every
+block answered in 11 of 12 runs; keeping up at 1x in wall time: the 4 MS/s stream in 10-ms blocks yes, the 16.368
+MS/s stream not** (load average 4.3-5.6 on 2 shared vCPUs; the previous document's runs had 8.1-9.9):
+
+- CPU per second of stream, executor thread, against the previous document: 16.368 MS/s real 8 ch 0.57-0.59 in
+  10-ms blocks (0.77-0.80 before) and 0.80-0.96 in 1-ms blocks (0.92-0.94: taking 1000 messages a second and the
+  executor's turns dominate there); 4 MS/s complex 12 ch 0.49-0.54 (10-ms; 0.49-0.53) and 0.60-0.81 (1-ms;
+  0.59-0.61): at 4 MS/s the tracking is a small part of the node's work, and no gain shows. The 16.368 MS/s stream
+  was still 0.8-7.3 s behind over the second half (medians): its first search (1.5-1.7 s of CPU in the worker) held
+  the blocks to the 4-s bound in the 1-ms runs, and a node that gets well under a core on this machine does not
+  catch up from there within 5 s of stream. The 4 MS/s stream in 10-ms blocks kept up (11-15 ms behind), in 1-ms
+  blocks 16 and 375 ms behind in two runs.
+- The lost run: the first run of the series (4 MS/s, 1-ms blocks) lost 2,666 of 5,000 blocks before the node
+  (input lost, from the publisher's sequence numbers) and spent 3.7 s of CPU to its first array against 0.8 in the
+  other two: not investigated in this session (a kernel load slower than the warm cache's, then the subscription's
+  queue overflowing, is the likely reading; the previous document's first run also lost 16 blocks).
+
+From the previous document (not re-measured for this one):
 
 - Where the 1-ms blocks were lost: after the first acquisition, the node answered the blocks held meanwhile from a
   guard condition, 100 ms of stream per callback, and rclpy's single-threaded executor takes one message per
@@ -521,9 +537,9 @@ workers' jobs; the previous document's runs had 3.4-7.7):
   tracking (360-620 us per ms of stream in one process) and, in 1-ms blocks, taking 1000 messages a second
   (deserialise, check, decode: 61-64 us per ms in one process; the executor's turns on top).
 
-Changed for this document: the replay of the hold no longer starves the input (above); the arrays are published
-serialised; the table gives the node's hold and take counters. The previous document's changes stand (the first
-acquisition in the worker thread, the tracking kernel loaded at start-up, the final report recognised).
+Changed for this document: the tracking kernel (above). The previous documents' changes stand (the replay of the
+hold not starving the input, the arrays published serialised, the first acquisition in the worker thread, the
+tracking kernel loaded at start-up, the final report recognised).
 """
 
 

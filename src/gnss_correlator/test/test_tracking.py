@@ -347,3 +347,35 @@ def test_real_capture_satellites_stay_locked(name):
         assert o.lock_indicator[-1] < 0.5, o.lock_indicator[-1]
         assert not np.any(o.locked)
         assert not np.any(o.cn0_dbhz[-20:] > 35.0)
+
+
+@pytest.mark.parametrize('cplx', [True, False])
+@pytest.mark.parametrize('d_chips', [0.5, 0.3, 0.1])
+def test_kernel_segment_matches_the_direct_sums(cplx: bool, d_chips: float):
+    """The kernel's correlator sums of one code period (rotation table per chunk, the chunk's base phasor applied to
+    its sums, the four replicas from one packed table entry) against the sums written out per sample in numpy:
+    exact cos/sin of the NCO phase, each replica looked up in the code tables by its own index."""
+    from gnss_correlator.tracking import CHUNK, _code_bits, _segment
+    rng = np.random.default_rng(11)
+    code = ca_code(5).astype(np.float64)
+    ncode_raw = np.roll(code, -noise_offset_chips(5))
+    table = np.concatenate([code[-1:], code, code[:1]])
+    ntable = np.concatenate([ncode_raw[-1:], ncode_raw, ncode_raw[:1]])
+    cstep, cp0, code_step, cyc0 = 0.2537, 3.7, 1.0231e6 / 16.368e6, 0.377  # 16.368 MS/s, IF near 4.15 MHz
+    m = int(math.ceil((CHIPS - cp0) / code_step))  # the whole rest of the period, many chunks and a partial one
+    assert m > 3 * CHUNK and m % CHUNK
+    xr = rng.integers(-3, 4, m + 10).astype(np.float64)
+    xi = rng.integers(-3, 4, m + 10).astype(np.float64) if cplx else None
+    i0 = 7
+    got = _segment(xr, xi, i0, m, cyc0, cstep, cp0, code_step, _code_bits(table, ntable), 1.0 + d_chips,
+                   1.0 - d_chips, np.empty(CHUNK), np.empty(CHUNK))
+    k = np.arange(m)
+    x = xr[i0:i0 + m] + (1j * xi[i0:i0 + m] if cplx else 0.0)
+    y = x * np.exp(-2j * np.pi * (cyc0 + k * cstep))
+    chips = cp0 + k * code_step
+    sums = [np.sum(y * table[(chips + off).astype(np.int64)]) for off in (1.0 + d_chips, 1.0, 1.0 - d_chips)]
+    sums.append(np.sum(y * ntable[chips.astype(np.int64) + 1]))
+    want = [v for s in sums for v in (s.real, s.imag)]
+    scale = float(np.sum(np.abs(x)))
+    np.testing.assert_allclose(got, want, rtol=0.0, atol=1e-12 * scale)
+    assert max(abs(v) for v in want) > 1e-3 * scale  # not a comparison of zeros
