@@ -2,7 +2,56 @@
 round of speed work did and measured, written below the regenerated tables (kept apart: the script stays under
 700 lines)."""
 
-ISSUE26_NOTES = """Issue 26 item 2, fourth round (2026-12-07, night: fewer calls at the small blocks, no behaviour
+ISSUE26_NOTES = """Issue 26 item 2, fifth round (2026-12-08: the ridge stages, the block-end law, the other stages and
+the integration, by four workers in parallel; one behaviour change): **the goal is not met; the full analysis went from
+0.6-1.0x to 0.9-1.7x real time.** The run above: 1 run of all 9 cases (``--runs 1``), the machine otherwise nearly
+idle (load average 0.3-1.2 on 2 cores). At 38.192 MS/s the full analysis costs 8.8 (acquisition), 5.3 (tracking) and
+6.8 (switch) bare STFTs of its block against 11.4, 10.1 and 9.5 for 93ea8b7 in the same run (goal: about 3-4),
+0.92 / 1.69 / 1.33x real time, p99 at most 2.8 ms; at 10 MS/s complex 14.7 / 11.8 / 13.4 (25.1 / 18.8 / 21.4 before),
+0.96-1.17x; at 24 MS/s real 11.0 / 8.5 / 9.7 (16.5 / 13.2 / 14.3 before), 1.11-1.47x. Now over before in the same
+run (mean ms): 0.76 / 0.48 / 0.72 at 38.192 MS/s, 0.58 / 0.65 / 0.57 at 10 MS/s complex, 0.60 / 0.58 / 0.68 at
+24 MS/s real (the fourth round's run: 0.79 / 0.90 / 0.86, 0.71 / 0.73 / 0.77, 0.79 / 0.87 / 0.92). A run of the same
+tree a minute earlier read 7.6 / 5.3 / 6.9 at 38.192 MS/s (1.20 / 1.67 / 1.32x), 14.9 / 11.0 / 13.0 and
+10.2 / 8.0 / 9.5: the acquisition's figure moves most between runs (its integration decisions land on few blocks).
+
+Found: the earlier rounds timed compiled kernels repeatedly on ONE array, which trains the branch predictor on that
+array's comparisons: a selection whose branches depend on the data read 3-4x faster than inside the pipeline (the
+noise level's Floyd-Rivest selection of the fourth round: 40 us on one 511 x 33 spectrogram timed again and again,
+170-190 us a call on the pipeline's successive blocks, 1.3-1.8 bare STFTs of a 38.192 MS/s tracking block). Timed
+over 40-120 different arrays captured from the pipeline, numpy's SIMD sort beat it on every shape the monitor uses.
+Every figure of this round is timed that way or inside the pipeline.
+
+Done this round (src/rfi_monitor):
+
+* Ridge stages (bit-identical: split_reference.py --check): the noise level's lower quantile by numpy's sort of the
+  transposed copy below 768 frames and, from 768 frames on, a compiled histogram selection (order keys of the float32
+  bits, passes along the rows without branches on the data, the k-th value among the few of its bucket by rank
+  counting); per call 511 x 33 185 -> 38 us, 255 x 65 209 -> 38, 155 x 128 217 -> 53, 1249 x 16 170 -> 62, 2047 x 5
+  80 -> 41. The same bias in the smaller sorts: the 3-bin median across bins, the band edges' 2 % / 98 % points
+  (``numpy_kernels.quantile_pair``: only the few smallest and largest values kept) and the phase profiles' per-bin
+  sorts (rank counting up to 16 values, insertion sort to 64), each replaced.
+* The block-end law (bit-identical): its fit, read at the block end, leverage and period drift in one compiled kernel
+  (``sweep_law.law_at_block_end``): ``ridge._block_end_frequency`` 0.17-0.20 -> 0.03-0.05 ms a block.
+* The other stages: the constant-envelope J/N of a real block over its last 4,096 samples instead of 8,192 (the one
+  behaviour change: the Hilbert transform's two FFTs halve; J/N of the split reference's real chirp streams moved by
+  a median 0.06 dB, at most 0.32 dB on a block; real_jammers.md's J/N medians unchanged, the 38.192 MS/s CW row's
+  spread 0.1 dB wider; complex blocks keep 8,192: their moments need no FFT); the noise template's running median kept
+  sorted as it slides (25 -> 5 us), the learned floor's medians without np.median (62 -> 15 us a quiet block), the
+  estimate built without the frozen dataclass's per-field __init__, the spectral step's group powers in one kernel.
+* The integration (bit-identical): the coarse comb's candidate lags as a compact int16 grid (0.2 instead of 0.9 MB
+  read per tested sum) and its 240 best by a selection and a stable sort (per tested sum 170-210 -> 110-140 us); a
+  block with a decision 11.9 -> 10.7 bare STFTs at 38.192 MS/s.
+
+What is left (38.192 MS/s, bare STFTs, the table above): tracking: the ridge 3.1 (its STFT, frame ridges, noise
+levels, period search, profiles), the Welch PSD and features 0.85, the envelope 0.5, the rest 0.7; acquisition: the
+integration 3.4 (an added block costs about 6, measured without a cheaper exact form: the framing and FFT of its
+2,386-frame 32-point STFT 1.3, the amplitudes' FFT 0.7 at the 4,320 points the comb's 1,789 lags need, the
+1024-point Welch PSD 0.7, amplitudes and covariances 0.8), the ridge 2.1, Welch 0.85, the rest 1.2. The goal still
+needs the behaviour changes measured in the rounds below (integration at hop L, one spectrum for the classifier's features and
+the CW test, fewer window lengths per decision) or a lower ``integration_max_samples_per_s``, each a loss of
+sensitivity or latency to weigh against sensitivity.md.
+
+Issue 26 item 2, fourth round (2026-12-07, night: fewer calls at the small blocks, no behaviour
 change): **the goal is not met, and the totals did not move beyond this machine's noise.** The run above: 1 run of all
 9 cases (``--runs 1``), 8 workers sharing the 2 cores (load average 13 falling to 5 during the run, 16-18 during the
 work). At 38.192 MS/s the full analysis costs 9.8 (acquisition), 8.6 (tracking) and 8.7 (switch) bare STFTs of its block
