@@ -48,8 +48,8 @@ integration 3.4 (an added block costs about 6, measured without a cheaper exact 
 2,386-frame 32-point STFT 1.3, the amplitudes' FFT 0.7 at the 4,320 points the comb's 1,789 lags need, the
 1024-point Welch PSD 0.7, amplitudes and covariances 0.8), the ridge 2.1, Welch 0.85, the rest 1.2. The goal still
 needs the behaviour changes measured in the rounds below (integration at hop L, one spectrum for the classifier's
-features and the CW test, fewer window lengths per decision) or a lower ``integration_max_samples_per_s``, each a loss of
-sensitivity or latency to weigh against sensitivity.md.
+features and the CW test, fewer window lengths per decision) or a lower ``integration_max_samples_per_s``, each a
+loss of sensitivity or latency to weigh against sensitivity.md.
 
 Issue 26 item 2, fourth round (2026-12-07, night: fewer calls at the small blocks, no behaviour
 change): **the goal is not met, and the totals did not move beyond this machine's noise.** The run above: 1 run of all
