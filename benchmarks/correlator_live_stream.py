@@ -304,8 +304,8 @@ def in_process_costs(case: Case, seconds: float = 1.5, skip_s: float = 0.5) -> d
     rclpy) is timed beside it, outside the total (``_old``)."""
     from rclpy.serialization import deserialize_message, serialize_message
 
-    from gnss_correlator.correlator_cdr import CorrelatorArrayWriter
-    from gnss_correlator.gnss_correlator_node import block_problem, correlator_array, correlator_array_bytes
+    from gnss_correlator.correlator_cdr import CorrelatorArrayWriter, correlator_array, correlator_array_bytes
+    from gnss_correlator.gnss_correlator_node import block_problem
     from gnss_correlator.node_params import CorrelatorNodeParams
     from gnss_correlator.receiver import IfBlock, Receiver, ReceiverConfig
     from rfi_msgs.msg import IfSamples

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 from correlator_imm_real import FS, GPS, against_clean, chirp, correlators, load
 
-from gnss_correlator.gnss_correlator_node import carrier_lock_codes
+from gnss_correlator.correlator_cdr import carrier_lock_codes
 from gnss_correlator.receiver import CorrelatorInterval
 from imm_carrier.layout import BatchColumn
 from imm_carrier.node_params import CarrierNodeParams

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gnss_correlator.tracking import TrackedPeriods
+from gnss_correlator.tracked_periods import TrackedPeriods
 
 PERIODS_PER_BIT = 20
 """C/A code periods per navigation data bit (IS-GPS-200: 50 bit/s, 1 ms code)."""
@@ -59,7 +59,7 @@ class BitSync:
 
     Example:
         >>> import numpy as np
-        >>> from gnss_correlator.tracking import TrackedPeriods
+        >>> from gnss_correlator.tracked_periods import TrackedPeriods
         >>> k = np.arange(1, 201)
         >>> bits = np.where((k - 3) // 20 % 2 == 0, 1.0, -1.0)  # a bit edge at every k = 3 mod 20, alternating
         >>> nan = np.full(k.size, np.nan)

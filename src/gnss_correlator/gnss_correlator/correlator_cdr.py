@@ -1,5 +1,6 @@
-"""rfi_msgs/CorrelatorArray written as bytes through the suite's CDR codec (:mod:`rfi_node_common.cdr`), for the
-node's publish path (no rclpy).
+"""rfi_msgs/CorrelatorArray from a :class:`gnss_correlator.receiver.CorrelatorInterval`: built field by field
+(:func:`correlator_array`, the reference) and written as bytes through the suite's CDR codec
+(:mod:`rfi_node_common.cdr`; :func:`correlator_array_bytes`), the node's publish path (no rclpy).
 
 Building one ``Correlator`` message object per channel per millisecond (each field set through the generated
 class's checked setters) and having rclpy convert them back cost the node ~0.3 s of CPU per second of a 12-channel
@@ -8,15 +9,17 @@ serialised message as bytes. This module only names the codec's value streams (w
 by field name in the layout derived from the generated class, as :mod:`imm_carrier.cdr` does for the same message
 on its input side); no byte offset is written here. The codec writes zeros where Fast CDR leaves its buffer's old
 bytes in the padding, so the bytes equal rclpy's serialisation of the message built field by field
-(:func:`gnss_correlator.gnss_correlator_node.correlator_array`) in every field and in length (tested).
+(:func:`correlator_array`, below) in every field and in length (tested).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from rfi_msgs.msg import CorrelatorArray
+from gnss_correlator.receiver import CorrelatorInterval
+from rfi_msgs.msg import Correlator, CorrelatorArray, GnssMeasurement
 from rfi_node_common.cdr import layout
+from rfi_node_common.stamps import ns_to_stamp
 
 _LAYOUT = layout(CorrelatorArray)
 _SEC, _ = _LAYOUT.position('header.stamp.sec')
@@ -89,3 +92,36 @@ class CorrelatorArrayWriter:
         stream = np.empty((n, _FLOATS_PER_ELEMENT), dtype=np.float64)
         stream[:, _FLOAT_AT] = floats
         return _LAYOUT.encode(ints, stream.ravel(), self._text)
+
+
+def carrier_lock_codes(interval: CorrelatorInterval) -> np.ndarray:
+    """Correlator.carrier_lock of each channel of an interval: CARRIER_LOCK_HELD / _LOST by the lock rule
+    (``interval.locked``), CARRIER_LOCK_UNKNOWN while the rule's window is not full yet (its discriminator std
+    NaN: the first ``lock_window_ms`` of a channel), shape (n,), int."""
+    return np.where(~np.isfinite(interval.phase_error_std_rad), Correlator.CARRIER_LOCK_UNKNOWN,
+                    np.where(interval.locked, Correlator.CARRIER_LOCK_HELD, Correlator.CARRIER_LOCK_LOST))
+
+
+def correlator_array(interval: CorrelatorInterval, frame_id: str) -> CorrelatorArray:
+    """CorrelatorInterval -> rfi_msgs/CorrelatorArray (GPS, one Correlator per channel, its carrier lock from
+    :func:`carrier_lock_codes`)."""
+    msg = CorrelatorArray()
+    msg.header.stamp = ns_to_stamp(interval.stamp_ns)
+    msg.header.frame_id = frame_id
+    msg.correlators = [
+        Correlator(constellation=GnssMeasurement.GPS, svid=int(s), integration_time_s=float(t), in_phase=float(i),
+                   quadrature=float(q), cn0_dbhz=float(c), predicted_phase_change_rad=float(d), carrier_lock=int(k))
+        for s, i, q, c, d, t, k in zip(interval.svid, interval.in_phase, interval.quadrature, interval.cn0_dbhz,
+                                       interval.predicted_phase_change_rad, interval.integration_time_s,
+                                       carrier_lock_codes(interval), strict=True)]
+    return msg
+
+
+def correlator_array_bytes(interval: CorrelatorInterval, writer: CorrelatorArrayWriter) -> bytes:
+    """:func:`correlator_array` serialised (the bytes rclpy's ``serialize_message`` gives for it), written from the
+    interval's arrays by :class:`gnss_correlator.correlator_cdr.CorrelatorArrayWriter` without building the message
+    objects: what the node publishes."""
+    floats = np.column_stack((interval.integration_time_s, interval.in_phase, interval.quadrature,
+                              interval.cn0_dbhz, interval.predicted_phase_change_rad))
+    return writer.serialize(interval.stamp_ns, GnssMeasurement.GPS, interval.svid, floats,
+                            carrier_lock_codes(interval))

@@ -43,7 +43,7 @@ subscription (up to ``DRAIN_BLOCKS``; ``blocks_taken_in_a_row``) instead of one 
 its input (1000 blocks a second) then spends its time on them rather than on rclpy's wait-set turns.
 
 Output: each CorrelatorArray is published serialised, written from the interval's arrays
-(:mod:`gnss_correlator.correlator_cdr`, the bytes of :func:`correlator_array`), not built field by field.
+(:mod:`gnss_correlator.correlator_cdr`: the bytes of its ``correlator_array``), not built field by field.
 
 Diagnostics (every ``diagnostics_period_s`` of accepted stamp time): the counters, the tracked PRNs;
 ERROR after a core error since the last report, WARN when more than ``warn_rejected_fraction`` of the
@@ -65,10 +65,10 @@ from rclpy.serialization import deserialize_message
 
 from gnss_correlator import tracking
 from gnss_correlator.acquisition import MIN_SAMPLE_RATE_HZ
-from gnss_correlator.correlator_cdr import CorrelatorArrayWriter
+from gnss_correlator.correlator_cdr import CorrelatorArrayWriter, correlator_array_bytes
 from gnss_correlator.node_params import CorrelatorNodeParams
-from gnss_correlator.receiver import CorrelatorInterval, IfBlock, Receiver
-from rfi_msgs.msg import Correlator, CorrelatorArray, GnssMeasurement, IfSamples
+from gnss_correlator.receiver import CorrelatorInterval, IfBlock, Receiver, continues
+from rfi_msgs.msg import CorrelatorArray, IfSamples
 from rfi_node_common.diagnostics import (
     ERROR,
     OK,
@@ -85,7 +85,7 @@ from rfi_node_common.inputs import InputHealth, StaleInputWatch, subscribe_input
 from rfi_node_common.main import run_node
 from rfi_node_common.params import RuntimeParameters, changed_names, declare
 from rfi_node_common.qos import DATA_QOS, DIAGNOSTICS_QOS
-from rfi_node_common.stamps import NS_PER_S, ns_to_stamp
+from rfi_node_common.stamps import NS_PER_S
 
 TOPICS = """topics:
   subscribes /rfi/if_samples (rfi_msgs/IfSamples)
@@ -128,46 +128,6 @@ def block_problem(msg: IfSamples, doppler_max_hz: float, max_block_samples: int)
     if is_blank(counts, msg.is_complex):
         return 'blank_block'
     return None
-
-
-def continues(previous: IfBlock, block: IfBlock) -> bool:
-    """Whether ``block`` follows ``previous`` in one stream: the next sample index, the same rate, IF and type."""
-    return (block.first_sample_index == previous.first_sample_index + previous.samples.size
-            and block.sample_rate_hz == previous.sample_rate_hz and block.is_complex == previous.is_complex
-            and block.intermediate_frequency_hz == previous.intermediate_frequency_hz)
-
-
-def carrier_lock_codes(interval: CorrelatorInterval) -> np.ndarray:
-    """Correlator.carrier_lock of each channel of an interval: CARRIER_LOCK_HELD / _LOST by the lock rule
-    (``interval.locked``), CARRIER_LOCK_UNKNOWN while the rule's window is not full yet (its discriminator std
-    NaN: the first ``lock_window_ms`` of a channel), shape (n,), int."""
-    return np.where(~np.isfinite(interval.phase_error_std_rad), Correlator.CARRIER_LOCK_UNKNOWN,
-                    np.where(interval.locked, Correlator.CARRIER_LOCK_HELD, Correlator.CARRIER_LOCK_LOST))
-
-
-def correlator_array(interval: CorrelatorInterval, frame_id: str) -> CorrelatorArray:
-    """CorrelatorInterval -> rfi_msgs/CorrelatorArray (GPS, one Correlator per channel, its carrier lock from
-    :func:`carrier_lock_codes`)."""
-    msg = CorrelatorArray()
-    msg.header.stamp = ns_to_stamp(interval.stamp_ns)
-    msg.header.frame_id = frame_id
-    msg.correlators = [
-        Correlator(constellation=GnssMeasurement.GPS, svid=int(s), integration_time_s=float(t), in_phase=float(i),
-                   quadrature=float(q), cn0_dbhz=float(c), predicted_phase_change_rad=float(d), carrier_lock=int(k))
-        for s, i, q, c, d, t, k in zip(interval.svid, interval.in_phase, interval.quadrature, interval.cn0_dbhz,
-                                       interval.predicted_phase_change_rad, interval.integration_time_s,
-                                       carrier_lock_codes(interval), strict=True)]
-    return msg
-
-
-def correlator_array_bytes(interval: CorrelatorInterval, writer: CorrelatorArrayWriter) -> bytes:
-    """:func:`correlator_array` serialised (the bytes rclpy's ``serialize_message`` gives for it), written from the
-    interval's arrays by :class:`gnss_correlator.correlator_cdr.CorrelatorArrayWriter` without building the message
-    objects: what the node publishes."""
-    floats = np.column_stack((interval.integration_time_s, interval.in_phase, interval.quadrature,
-                              interval.cn0_dbhz, interval.predicted_phase_change_rad))
-    return writer.serialize(interval.stamp_ns, GnssMeasurement.GPS, interval.svid, floats,
-                            carrier_lock_codes(interval))
 
 
 class GnssCorrelatorNode(Node):

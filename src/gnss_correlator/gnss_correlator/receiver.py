@@ -86,7 +86,8 @@ import numpy as np
 
 from gnss_correlator.acquisition import AcquisitionConfig, AcquisitionResult, acquire
 from gnss_correlator.bit_sync import PERIODS_PER_BIT, BitSync, BitSyncConfig
-from gnss_correlator.tracking import TrackedPeriods, Tracker, TrackingConfig
+from gnss_correlator.tracked_periods import TrackedPeriods
+from gnss_correlator.tracking import Tracker, TrackingConfig
 
 NS_PER_S = 1_000_000_000
 GRID_S = 1e-3
@@ -217,7 +218,7 @@ class CorrelatorInterval:
         pll_error_rad: the period's Costas discriminator atan(Q/I), rad, shape (n,): the correlator's own carrier
             phase estimate is the accumulated predicted change plus this (modulo pi).
         cn0_m2m4_dbhz: the moments estimator's C/N0 of the same window, dB-Hz, shape (n,) (for comparison).
-    ``locked`` is published as Correlator.carrier_lock (gnss_correlator_node.carrier_lock_codes: UNKNOWN while
+    ``locked`` is published as Correlator.carrier_lock (correlator_cdr.carrier_lock_codes: UNKNOWN while
     the window is not full); the other lock fields are not published: read by the core's users and the benchmarks.
     """
 
@@ -577,3 +578,10 @@ class Receiver:
         for prn in [p for p in self._pending if p not in tracked and not self._pending[p]]:
             del self._pending[prn]
         return out
+
+
+def continues(previous: IfBlock, block: IfBlock) -> bool:
+    """Whether ``block`` follows ``previous`` in one stream: the next sample index, the same rate, IF and type."""
+    return (block.first_sample_index == previous.first_sample_index + previous.samples.size
+            and block.sample_rate_hz == previous.sample_rate_hz and block.is_complex == previous.is_complex
+            and block.intermediate_frequency_hz == previous.intermediate_frequency_hz)

@@ -11,7 +11,8 @@ import pytest
 from gnss_common.constants import GPS_CA_CHIP_RATE_HZ, GPS_L1_FREQUENCY_HZ
 from gnss_correlator.acquisition import AcquisitionConfig, acquire
 from gnss_correlator.bit_sync import PERIODS_PER_BIT, BitSync, BitSyncConfig
-from gnss_correlator.tracking import TrackedPeriods, Tracker
+from gnss_correlator.tracked_periods import TrackedPeriods
+from gnss_correlator.tracking import Tracker
 from rfi_sim.if_signal import FrontEndConfig, GpsSatellite, IfSimulator
 
 FS = 4e6

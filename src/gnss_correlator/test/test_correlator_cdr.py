@@ -1,5 +1,5 @@
 """The node's publish path: CorrelatorArrays serialised with numpy (gnss_correlator.correlator_cdr) are, byte for
-byte, what rclpy serialises from the message built field by field (gnss_correlator_node.correlator_array), for
+byte, what rclpy serialises from the message built field by field (gnss_correlator.correlator_cdr.correlator_array), for
 every alignment of the frame id, 0 to 14 channels, NaN / infinite / extreme values and every carrier-lock code:
 the same length, every field's value equal bit for bit (Fast CDR leaves its buffer's old bytes in the padding,
 the codec zeros), and rclpy decodes the bytes to the message."""
@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 
-from gnss_correlator.correlator_cdr import CorrelatorArrayWriter
-from gnss_correlator.gnss_correlator_node import correlator_array, correlator_array_bytes
+from gnss_correlator.correlator_cdr import CorrelatorArrayWriter, correlator_array, correlator_array_bytes
 from gnss_correlator.receiver import CorrelatorInterval
 from rfi_msgs.msg import CorrelatorArray, GnssMeasurement
 from rfi_node_common.cdr import layout

@@ -16,7 +16,8 @@ from rclpy.context import Context
 from rclpy.parameter import Parameter
 
 from gnss_correlator import receiver as receiver_module
-from gnss_correlator.gnss_correlator_node import GnssCorrelatorNode, correlator_array
+from gnss_correlator.correlator_cdr import correlator_array
+from gnss_correlator.gnss_correlator_node import GnssCorrelatorNode
 from gnss_correlator.node_params import CorrelatorNodeParams
 from gnss_correlator.receiver import IfBlock, Receiver
 from rfi_msgs.msg import Correlator, CorrelatorArray, IfSamples

@@ -14,7 +14,8 @@ from gnss_common.constants import GPS_CA_CHIP_RATE_HZ, GPS_L1_FREQUENCY_HZ
 from gnss_common.gps_ca import ca_code
 from gnss_correlator.acquisition import AcquisitionConfig, acquire
 from gnss_correlator.channel_quality import CN0_FLOOR_SIGMAS, NOISE_MIN_OFFSET_CHIPS, m2m4_cn0_dbhz, noise_offset_chips
-from gnss_correlator.tracking import TrackedPeriods, Tracker, TrackingConfig
+from gnss_correlator.tracked_periods import TrackedPeriods
+from gnss_correlator.tracking import Tracker, TrackingConfig
 from rfi_sim.if_scene import ChirpJammer, CwJammer, NoiseJammer
 from rfi_sim.if_signal import FrontEndConfig, GpsSatellite, IfSimulator
 

@@ -118,22 +118,12 @@ class FusionParams(RangeNoiseParams, MirrorAmbiguityParams, CorrelatedErrorParam
         for name, value in pos.items():
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
                 raise ValueError(f"FusionParams.{name} must be a finite number > 0, got {value!r}")
-        if not (math.isfinite(self.static_enter_s) and self.static_enter_s >= 0.0):
-            raise ValueError(f"FusionParams.static_enter_s must be >= 0, got {self.static_enter_s!r}")
-        if not (math.isfinite(self.clock_h_minus2_hz) and self.clock_h_minus2_hz >= 0.0):
-            raise ValueError(f"FusionParams.clock_h_minus2_hz must be >= 0, got {self.clock_h_minus2_hz!r}")
-        if not (math.isfinite(self.pseudorange_correlated_std_m) and self.pseudorange_correlated_std_m >= 0.0):
-            raise ValueError(
-                f"FusionParams.pseudorange_correlated_std_m must be >= 0, got {self.pseudorange_correlated_std_m!r}"
-            )
-        if not (math.isfinite(self.pseudorange_broadcast_std_m) and self.pseudorange_broadcast_std_m >= 0.0):
-            raise ValueError(
-                f"FusionParams.pseudorange_broadcast_std_m must be >= 0, got {self.pseudorange_broadcast_std_m!r}"
-            )
-        if not (math.isfinite(self.glonass_satellite_bias_std_m) and self.glonass_satellite_bias_std_m >= 0.0):
-            raise ValueError(
-                f"FusionParams.glonass_satellite_bias_std_m must be >= 0, got {self.glonass_satellite_bias_std_m!r}"
-            )
+        for name in ("static_enter_s", "clock_h_minus2_hz", "pseudorange_correlated_std_m",
+                     "pseudorange_broadcast_std_m", "glonass_satellite_bias_std_m", "divergence_fix_confirm_s",
+                     "uwb_range_bias_std_m"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"FusionParams.{name} must be finite and >= 0, got {value!r}")
         if not (math.isfinite(self.glonass_pseudorange_error_factor) and self.glonass_pseudorange_error_factor >= 1.0):
             raise ValueError(
                 "FusionParams.glonass_pseudorange_error_factor must be finite and >= 1, "
@@ -171,14 +161,6 @@ class FusionParams(RangeNoiseParams, MirrorAmbiguityParams, CorrelatedErrorParam
             raise ValueError(
                 "FusionParams.divergence_uwb_gated_fraction must be in (0, 1], "
                 f"got {self.divergence_uwb_gated_fraction!r}"
-            )
-        if not (math.isfinite(self.divergence_fix_confirm_s) and self.divergence_fix_confirm_s >= 0.0):
-            raise ValueError(
-                f"FusionParams.divergence_fix_confirm_s must be finite and >= 0, got {self.divergence_fix_confirm_s!r}"
-            )
-        if not (math.isfinite(self.uwb_range_bias_std_m) and self.uwb_range_bias_std_m >= 0.0):
-            raise ValueError(
-                f"FusionParams.uwb_range_bias_std_m must be finite and >= 0, got {self.uwb_range_bias_std_m!r}"
             )
         if not (math.isfinite(self.uwb_range_bias_time_s) and self.uwb_range_bias_time_s > 0.0):
             raise ValueError(
