@@ -47,7 +47,7 @@ import numpy as np
 from numba import njit
 from scipy import fft as sp_fft
 
-from rfi_monitor.numpy_kernels import pairwise_sum
+from rfi_monitor.numpy_kernels import MEDIAN_NEAREST, pairwise_sum, running_median
 from rfi_monitor.stft import _frames_complex, fft_inplace, rfft_rows
 from rfi_node_common.params import parameter
 
@@ -318,37 +318,12 @@ def smooth_template(psd: np.ndarray, width: int) -> np.ndarray:
 def _smooth_template(psd: np.ndarray, width: int) -> np.ndarray:
     """:func:`smooth_template`: the running median over ``width`` bins (bins width // 2 before to width - 1 - width // 2
     after, the edge bins repeated; the element of rank width // 2: scipy's median_filter), the floor, the sum. The
-    PSD is finite (the monitor rejects a block whose power is not). The window is kept sorted as it slides: one bin
-    out, one in (O(width) a bin, not the O(width^2) of sorting each window; the same element of the same rank)."""
-    n = psd.size
-    h = width // 2
-    buf = np.empty(width)
-    t = np.empty(n)
-    for k in range(width):                          # the first window, by insertion
-        v = psd[min(max(k - h, 0), n - 1)]
-        j = k
-        while j > 0 and buf[j - 1] > v:
-            buf[j] = buf[j - 1]
-            j -= 1
-        buf[j] = v
-    t[0] = buf[h]
-    for i in range(1, n):
-        old = psd[min(max(i - 1 - h, 0), n - 1)]     # leaves the window
-        new = psd[min(max(i - 1 - h + width, 0), n - 1)]   # enters it
-        j = 0
-        while buf[j] != old:
-            j += 1
-        # drop buf[j], insert new: shift the values between towards the gap
-        while j > 0 and buf[j - 1] > new:
-            buf[j] = buf[j - 1]
-            j -= 1
-        while j < width - 1 and buf[j + 1] < new:
-            buf[j] = buf[j + 1]
-            j += 1
-        buf[j] = new
-        t[i] = buf[h]
+    PSD is finite (the monitor rejects a block whose power is not). ``numpy_kernels.running_median``: the window kept
+    sorted as it slides (O(width) a bin, not the O(width^2) of sorting each window; the same element of the same
+    rank)."""
+    t = running_median(psd, width, MEDIAN_NEAREST)
     floor = 1e-6 * np.max(t)
-    for i in range(n):
+    for i in range(t.size):
         t[i] = max(t[i], floor)
     return t / pairwise_sum(t, 0.0)
 

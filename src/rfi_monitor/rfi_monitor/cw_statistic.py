@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit
 from scipy import special
 
-from rfi_monitor.numpy_kernels import pairwise_sum
+from rfi_monitor.numpy_kernels import MEDIAN_REFLECT, MEDIAN_WRAP, pairwise_sum, running_median
 
 
 class CwStatistic:
@@ -86,58 +86,16 @@ class CwStatistic:
 
 
 @njit(cache=True, nogil=True)
-def running_median(x: np.ndarray, width: int, wrap: bool) -> np.ndarray:
-    """``scipy.ndimage.median_filter(x, size=width, mode="wrap" if wrap else "reflect")`` of a finite vector, width odd:
-    the element of rank width // 2 of the width values centred on each bin, the ends extended periodically (wrap) or
-    mirrored about the end bins' outer edges (d c b a | a b c d | d c b a). A sorted window slid over the vector (one
-    removal and one insertion per bin): an exact selection, the same values as scipy's."""
-    n = x.size
-    h = width // 2
-    out = np.empty(n)
-    buf = np.empty(width)
-
-    def at(i: int) -> float:
-        if wrap:
-            return x[i % n]
-        while i < 0 or i >= n:                       # mirror about the outer edges (repeatedly for short x)
-            i = -i - 1 if i < 0 else 2 * n - i - 1
-        return x[i]
-
-    for k in range(width):                           # the first window, sorted by insertion
-        v = at(k - h)
-        j = k
-        while j > 0 and buf[j - 1] > v:
-            buf[j] = buf[j - 1]
-            j -= 1
-        buf[j] = v
-    out[0] = buf[h]
-    for i in range(1, n):
-        old = at(i - 1 - h)
-        new = at(i + h)
-        j = 0
-        while buf[j] != old:                         # the outgoing value (present: it entered before)
-            j += 1
-        while j < width - 1 and buf[j + 1] < new:    # shift the larger ones down over it
-            buf[j] = buf[j + 1]
-            j += 1
-        while j > 0 and buf[j - 1] > new:            # or the smaller ones up
-            buf[j] = buf[j - 1]
-            j -= 1
-        buf[j] = new
-        out[i] = buf[h]
-    return out
-
-
-@njit(cache=True, nogil=True)
 def _cw_scores(P: np.ndarray, Pm: np.ndarray, thr: np.ndarray, median_ratio: float, width: int, cplx: bool
                ) -> tuple[float, int, float]:
     """(largest score, its bin, the tone's excess) of ``CwStatistic.test``: the reference N_b, Pm's running median over
-    width bins (:func:`running_median`) over median_ratio, floored at 1e-300; the score (P / N_b) / thr (0 at DC and
-    Nyquist of a real IF: outside any front end's pass band), its first largest bin j; the excess over the reference
+    width bins (``numpy_kernels.running_median``, wrapped for complex samples, mirrored for real) over median_ratio,
+    floored at 1e-300; the score (P / N_b) / thr (0 at DC and Nyquist of a real IF: outside any front end's pass
+    band), its first largest bin j; the excess over the reference
     of bins j - 2 .. j + 2 (a Hann window puts 0.4-0.67 of a tone in its strongest bin) over the reference's sum
     (the noise of the whole band). The numpy expressions it replaced, element by element, numpy's pairwise sums."""
     B = P.size
-    ref = running_median(Pm, width, cplx)
+    ref = running_median(Pm, width, MEDIAN_WRAP if cplx else MEDIAN_REFLECT)
     for i in range(B):
         ref[i] = max(ref[i] / median_ratio, 1e-300)
     j = 0

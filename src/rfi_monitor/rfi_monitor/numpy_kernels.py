@@ -22,32 +22,11 @@ def pairwise_sum(a: np.ndarray, zero: Any) -> Any:
     or ``0.0``), the start of the short sums (one kernel for both precisions, compiled once for each); the sum has
     a's type."""
     n = a.size
-    if n < 8:
-        res = zero
-        for i in range(n):
-            res += a[i]
-        return res
     if n > 128:
         n2 = n // 2
         n2 -= n2 % 8
         return pairwise_sum(a[:n2], zero) + pairwise_sum(a[n2:], zero)
-    r0, r1, r2, r3, r4, r5, r6, r7 = a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]
-    i = 8
-    while i < n - (n % 8):
-        r0 += a[i]
-        r1 += a[i + 1]
-        r2 += a[i + 2]
-        r3 += a[i + 3]
-        r4 += a[i + 4]
-        r5 += a[i + 5]
-        r6 += a[i + 6]
-        r7 += a[i + 7]
-        i += 8
-    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-    while i < n:
-        res += a[i]
-        i += 1
-    return res
+    return pairwise_sum_short(a, zero)
 
 
 @njit(cache=True, inline="always")
@@ -278,3 +257,53 @@ def column_order_statistic(S: np.ndarray, k: int) -> np.ndarray:
         r = k - below[b]
         q[b] = _kth_of_few(buf, m, r) if m <= 40 else np.sort(buf[:m])[r]
     return q
+
+
+MEDIAN_NEAREST, MEDIAN_WRAP, MEDIAN_REFLECT = 0, 1, 2
+"""running_median's modes: scipy.ndimage's "nearest", "wrap" and "reflect"."""
+
+
+@njit(cache=True, nogil=True)
+def running_median(x: np.ndarray, width: int, mode: int) -> np.ndarray:
+    """``scipy.ndimage.median_filter(x, size=width, mode=...)`` of a finite vector: the element of rank width // 2 of
+    the width values from width // 2 before each bin to width - 1 - width // 2 after it, the ends extended by mode:
+    ``MEDIAN_NEAREST`` (the end bins repeated), ``MEDIAN_WRAP`` (periodically) or ``MEDIAN_REFLECT`` (mirrored about
+    the end bins' outer edges: d c b a | a b c d | d c b a). A sorted window slid over the vector (one removal and one
+    insertion per bin, O(width) a bin): an exact selection, the same values as scipy's."""
+    n = x.size
+    h = width // 2
+    out = np.empty(n)
+    buf = np.empty(width)
+
+    def at(i: int) -> float:
+        if mode == MEDIAN_NEAREST:
+            return x[min(max(i, 0), n - 1)]
+        if mode == MEDIAN_WRAP:
+            return x[i % n]
+        while i < 0 or i >= n:                       # mirror about the outer edges (repeatedly for short x)
+            i = -i - 1 if i < 0 else 2 * n - i - 1
+        return x[i]
+
+    for k in range(width):                           # the first window, sorted by insertion
+        v = at(k - h)
+        j = k
+        while j > 0 and buf[j - 1] > v:
+            buf[j] = buf[j - 1]
+            j -= 1
+        buf[j] = v
+    out[0] = buf[h]
+    for i in range(1, n):
+        old = at(i - 1 - h)                          # leaves the window
+        new = at(i - 1 - h + width)                  # enters it
+        j = 0
+        while buf[j] != old:                         # the outgoing value (present: it entered before)
+            j += 1
+        while j < width - 1 and buf[j + 1] < new:    # shift the larger ones down over it
+            buf[j] = buf[j + 1]
+            j += 1
+        while j > 0 and buf[j - 1] > new:            # or the smaller ones up
+            buf[j] = buf[j - 1]
+            j -= 1
+        buf[j] = new
+        out[i] = buf[h]
+    return out

@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit
 from scipy import fft as sp_fft
 
-from rfi_monitor.numpy_kernels import column_order_statistic
+from rfi_monitor.numpy_kernels import _kth_of_few, column_order_statistic
 
 try:
     # scipy.fft's own pocketfft binding, called as scipy.fft calls it (the same transform to the bit) without its
@@ -234,16 +234,7 @@ def _median_filter_1d(a: np.ndarray, w: int, wrap: bool) -> np.ndarray:
             q = _neighbour(i + j - h, n, wrap)
             buf[j] = a[q]
         if by_rank:
-            res = buf[0]
-            for j in range(w):
-                v = buf[j]
-                r = 0
-                for m in range(j):
-                    r += buf[m] <= v
-                for m in range(j + 1, w):
-                    r += buf[m] < v
-                res = v if r == h else res
-            out[i] = res
+            out[i] = _kth_of_few(buf, w, h)
         else:
             buf.sort()
             out[i] = buf[h]

@@ -166,18 +166,20 @@ def test_welch_psd_compiled_path_is_the_numpy_path(cplx: bool) -> None:
             np.testing.assert_allclose(psd, ref, rtol=1e-12)
 
 
-@pytest.mark.parametrize("wrap", [True, False])
-@pytest.mark.parametrize("n,width", [(513, 31), (1024, 31), (129, 7), (20, 31), (5, 7)])
-def test_running_median_is_scipys_median_filter(wrap: bool, n: int, width: int) -> None:
-    """The CW statistic's compiled running median equals scipy.ndimage.median_filter (mode wrap for complex input,
-    reflect for real; windows wider than the vector included), with equal values in the window."""
+@pytest.mark.parametrize("mode", ["nearest", "wrap", "reflect"])
+@pytest.mark.parametrize("n,width", [(513, 31), (1024, 31), (129, 7), (129, 8), (20, 31), (5, 7), (256, 15)])
+def test_running_median_is_scipys_median_filter(mode: str, n: int, width: int) -> None:
+    """The compiled running median (the CW statistic's, mode wrap for complex input and reflect for real; the noise
+    template's, mode nearest) equals scipy.ndimage.median_filter (even widths and windows wider than the vector
+    included), with equal values in the window."""
     from scipy.ndimage import median_filter
 
-    from rfi_monitor.cw_statistic import running_median
+    from rfi_monitor.numpy_kernels import MEDIAN_NEAREST, MEDIAN_REFLECT, MEDIAN_WRAP, running_median
     x = np.random.default_rng(n + width).gamma(3.0, size=n)
     x[1] = x[3]
-    got = running_median(x, width, wrap)
-    assert np.array_equal(got, median_filter(x, size=width, mode="wrap" if wrap else "reflect"))
+    code = {"nearest": MEDIAN_NEAREST, "wrap": MEDIAN_WRAP, "reflect": MEDIAN_REFLECT}[mode]
+    got = running_median(x, width, code)
+    assert np.array_equal(got, median_filter(x, size=width, mode=mode))
 
 
 @pytest.mark.parametrize("cplx", [True, False])
