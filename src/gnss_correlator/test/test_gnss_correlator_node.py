@@ -162,17 +162,14 @@ def test_settable_diagnostics_parameters_are_applied_between_blocks(capture):
         rig.close()
 
 
-def test_replay_equals_the_core_while_the_first_acquisition_runs_in_the_worker(capture, monkeypatch):
-    """Blocks replayed into the node (5 ms each, gathered to 10 ms) while its first acquisition runs in the worker
-    thread, held there until every block has been taken: the node takes them all meanwhile, and its arrays are,
-    value for value, those of the core run in this process on the same blocks with the search in the caller's
-    thread (the synchronous path)."""
+def _core_intervals_and_held_search(capture, monkeypatch):
+    """(block length, blocks, the core's intervals for the capture in 1-ms blocks with the search in the caller's
+    thread, an Event): the node's first search made to wait until the test sets the Event."""
     n = BLOCK // 2
     n_blocks = capture.size // 2 // n
     counts = capture[:2 * n * n_blocks].astype(np.float64)
     x = counts[0::2] + 1j * counts[1::2]
-    config = replace(CorrelatorNodeParams(spectrum_inverted=True).receiver(), acquisition_hold_s=0.0)
-    core = Receiver(config)
+    core = Receiver(replace(CorrelatorNodeParams(spectrum_inverted=True).receiver(), acquisition_hold_s=0.0))
     expected = []
     for k in range(0, n_blocks, 2):  # the node's batch_ms: 10 ms
         expected += core.process(IfBlock(T0_NS + round(k * n / FS * NS_PER_S), FS, 0.0, True, k * n,
@@ -186,6 +183,15 @@ def test_replay_equals_the_core_while_the_first_acquisition_runs_in_the_worker(c
         return original(*args, **kwargs)
 
     monkeypatch.setattr(receiver_module, 'acquire', held)
+    return n, n_blocks, expected, release
+
+
+def test_replay_equals_the_core_while_the_first_acquisition_runs_in_the_worker(capture, monkeypatch):
+    """Blocks replayed into the node (5 ms each, gathered to 10 ms) while its first acquisition runs in the worker
+    thread, held there until every block has been taken: the node takes them all meanwhile, and its arrays are,
+    value for value, those of the core run in this process on the same blocks with the search in the caller's
+    thread (the synchronous path)."""
+    n, n_blocks, expected, release = _core_intervals_and_held_search(capture, monkeypatch)
     rig = CorrelatorRig()
     try:
         for k in range(n_blocks):
@@ -209,24 +215,7 @@ def test_after_the_search_the_input_is_taken_before_the_held_blocks_are_answered
     answers REPLAY_BLOCKS_PER_CALLBACK held ones: the replay no longer starves the input (one message taken per
     executor turn against 100 ms of stream replayed lost 1-ms blocks, docs/gnss_correlator/live_stream.md). The
     arrays are those of the core with the search in the caller's thread."""
-    n = BLOCK // 2
-    n_blocks = capture.size // 2 // n
-    counts = capture[:2 * n * n_blocks].astype(np.float64)
-    x = counts[0::2] + 1j * counts[1::2]
-    core = Receiver(replace(CorrelatorNodeParams(spectrum_inverted=True).receiver(), acquisition_hold_s=0.0))
-    expected = []
-    for k in range(0, n_blocks, 2):  # the node's batch_ms: 10 ms
-        expected += core.process(IfBlock(T0_NS + round(k * n / FS * NS_PER_S), FS, 0.0, True, k * n,
-                                         x[k * n:(k + 2) * n]))
-    core.close()
-    release = threading.Event()
-    original = receiver_module.acquire
-
-    def held(*args, **kwargs):
-        assert release.wait(timeout=120), 'the test never released the search'
-        return original(*args, **kwargs)
-
-    monkeypatch.setattr(receiver_module, 'acquire', held)
+    n, n_blocks, expected, release = _core_intervals_and_held_search(capture, monkeypatch)
     rig = CorrelatorRig()
     try:
         first = 6
